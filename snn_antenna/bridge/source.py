@@ -1,0 +1,289 @@
+"""A sample source on a serial port, in the shape of pyserial's ``serial.threaded``.
+
+transport  :class:`SerialTransport` opens, reads and reopens the port (``serial_for_url``: device
+           paths, ``loop://``, ``socket://``, ``rfc2217://``) and turns pyserial's errors into
+           messages a user can act on.
+framing    :class:`~snn_antenna.bridge.protocol.Decoder`, a pure function of the bytes.
+handling   whoever consumes :class:`Batch` objects from :meth:`SerialSource.get` (the recorder,
+           the online pipeline), on their own thread, through a bounded queue.
+
+The reader thread blocks on a full queue instead of dropping: the kernel's buffer then fills and
+any loss shows up where it belongs, as counted gaps in the sequence numbers.
+"""
+from __future__ import annotations
+
+import errno
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+
+import serial
+
+from ..errors import SpecError
+from .protocol import Decoder, Sample, check_wire_format
+
+DEFAULT_BAUDRATE = 250000
+URL_SCHEMES = ("loop://", "socket://", "rfc2217://", "spy://", "alt://", "hwgrep://")
+ACCEPTED_PORTS = ("an existing serial device path (e.g. /dev/ttyACM0) or a pyserial URL "
+                  "(loop://, socket://HOST:PORT, rfc2217://HOST:PORT)")
+
+
+class PortError(RuntimeError):
+    """The port exists but cannot be used: busy, lost for good, or silent."""
+
+
+@dataclass
+class Batch:
+    """What one read of the port produced, stamped with the host clock when it was read.
+
+    ``event`` marks a change of link state (``"opened"``, ``"lost"``, ``"reconnected"``,
+    ``"failed"``) and then ``raw`` and ``samples`` are empty; ``counts`` is a snapshot of the
+    decoder's and the transport's counters after this batch, so a consumer writing both data and
+    counts stays consistent.
+    """
+    host_time_s: float
+    raw: bytes = b""
+    samples: list[Sample] = field(default_factory=list)
+    counts: dict = field(default_factory=dict)
+    event: str | None = None
+    message: str = ""
+
+
+def describe_open_error(url: str, exc: Exception) -> Exception:
+    """pyserial's open errors, turned into a message that says what to do."""
+    code = getattr(exc, "errno", None)
+    text = str(exc)
+    if code == errno.ENOENT or "No such file" in text:
+        return SpecError("port", url, ACCEPTED_PORTS + "; no such device exists")
+    if code in (errno.EAGAIN, errno.EBUSY) or "exclusively lock" in text:
+        return PortError(f"serial port {url!r} is busy: another program holds it open "
+                         "(close the serial monitor, or find it with `fuser " + url + "`)")
+    if code == errno.EACCES:
+        return PortError(f"permission denied on serial port {url!r}: add your user to the "
+                         "'dialout' group or run with access to the device")
+    if isinstance(exc, ValueError) and ("invalid URL" in text or "unknown URL scheme" in text):
+        return SpecError("port", url, ACCEPTED_PORTS)
+    return PortError(f"cannot open serial port {url!r}: {text}")
+
+
+class SerialTransport:
+    """The port itself. ``exclusive=True`` takes an advisory lock so that two recorders on one
+    device fail loudly instead of each receiving half of the bytes."""
+
+    def __init__(self, url: str, baudrate: int = DEFAULT_BAUDRATE, read_timeout_s: float = 0.05,
+                 port: serial.SerialBase | None = None):
+        if not isinstance(baudrate, int) or baudrate <= 0:
+            raise SpecError("baudrate", baudrate, "a positive integer (the board uses 250000)")
+        self.url, self.baudrate, self.read_timeout_s = url, baudrate, read_timeout_s
+        self.port = port
+        self.reopenable = port is None and not url.startswith("loop://")
+
+    def open(self) -> None:
+        if self.port is not None and self.port.is_open:
+            return
+        try:
+            self.port = serial.serial_for_url(self.url, baudrate=self.baudrate,
+                                              timeout=self.read_timeout_s, exclusive=True)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise describe_open_error(self.url, exc) from exc
+
+    def read(self) -> bytes:
+        """Whatever is waiting, or b"" after the read timeout; ``serial.SerialException`` when the
+        device went away."""
+        try:
+            return self.port.read(self.port.in_waiting or 1)
+        except OSError as exc:          # in_waiting on a vanished pty raises a bare OSError
+            raise serial.SerialException(str(exc)) from exc
+
+    def close(self) -> None:
+        if self.port is not None:
+            try:
+                self.port.close()
+            except (serial.SerialException, OSError):
+                pass
+            if self.reopenable:
+                self.port = None
+
+
+class SerialSource:
+    """Reads a port on a thread, decodes it and hands :class:`Batch` objects to one consumer.
+
+    When the device disappears (USB unplugged, adapter re-enumerated) the source retries the same
+    path with exponential backoff until ``reconnect_timeout_s`` runs out; each success is counted
+    in ``reconnects``. Everything decoded before the loss has already been handed over.
+    """
+
+    def __init__(self, url: str, *, wire_format: str = "binary", baudrate: int = DEFAULT_BAUDRATE,
+                 port: serial.SerialBase | None = None, queue_size: int = 4096,
+                 reconnect_timeout_s: float = 30.0, backoff_initial_s: float = 0.02,
+                 backoff_max_s: float = 1.0):
+        check_wire_format(wire_format)
+        for name, value in (("reconnect_timeout_s", reconnect_timeout_s),
+                            ("backoff_initial_s", backoff_initial_s),
+                            ("backoff_max_s", backoff_max_s)):
+            if not value >= 0:
+                raise SpecError(name, value, "a number of seconds >= 0")
+        self.url = url
+        self.transport = SerialTransport(url, baudrate, port=port)
+        self.decoder = Decoder(wire_format)
+        self.reconnects = 0
+        self.reconnect_timeout_s = reconnect_timeout_s
+        self.backoff_initial_s, self.backoff_max_s = backoff_initial_s, backoff_max_s
+        self._queue: queue.Queue[Batch] = queue.Queue(maxsize=queue_size)
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.bytes_received = 0
+
+    # -- consumer side -------------------------------------------------------------------------
+    def start(self) -> "SerialSource":
+        """Open the port now, so that a missing or busy port fails in the caller's thread."""
+        self.transport.open()
+        self._put(Batch(time.time(), counts=self.counts(), event="opened"))
+        self._thread = threading.Thread(target=self._run, name=f"serial-reader {self.url}",
+                                        daemon=True)
+        self._thread.start()
+        return self
+
+    def get(self, timeout: float | None = None) -> Batch | None:
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            while self._thread.is_alive():
+                try:                    # unblock a reader waiting on a full queue
+                    self._queue.get_nowait()
+                except queue.Empty:
+                    pass
+                self._thread.join(timeout=0.05)
+        self.transport.close()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *exc):
+        self.stop()
+
+    def counts(self) -> dict:
+        stats = self.decoder.stats.as_dict()
+        stats["reconnects"] = self.reconnects
+        stats["bytes"] = self.bytes_received
+        return stats
+
+    # -- reader thread -------------------------------------------------------------------------
+    def _put(self, batch: Batch) -> None:
+        while not self._stop.is_set():
+            try:
+                self._queue.put(batch, timeout=0.1)
+                return
+            except queue.Full:
+                continue
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                raw = self.transport.read()
+            except serial.SerialException as exc:
+                self._put(Batch(time.time(), counts=self.counts(), event="lost", message=str(exc)))
+                self.transport.close()
+                if not self._reconnect():
+                    return
+                continue
+            if raw:
+                now = time.time()
+                self.bytes_received += len(raw)
+                samples = self.decoder.feed(raw)
+                self._put(Batch(now, raw, samples, self.counts()))
+
+    def _reconnect(self) -> bool:
+        if not self.transport.reopenable:
+            self._put(Batch(time.time(), counts=self.counts(), event="failed",
+                            message=f"{self.url} cannot be reopened"))
+            return False
+        deadline = time.monotonic() + self.reconnect_timeout_s
+        delay = self.backoff_initial_s
+        last_error = ""
+        while not self._stop.is_set():
+            try:
+                self.transport.open()
+            except (SpecError, PortError) as exc:
+                last_error = str(exc)
+            else:
+                self.reconnects += 1
+                self.decoder.resync()
+                self._put(Batch(time.time(), counts=self.counts(), event="reconnected"))
+                return True
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                self._put(Batch(time.time(), counts=self.counts(), event="failed",
+                                message=f"serial port {self.url!r} disappeared and did not come "
+                                        f"back within {self.reconnect_timeout_s:g} s "
+                                        f"(last error: {last_error})"))
+                return False
+            self._stop.wait(min(delay, remaining))
+            delay = min(delay * 2, self.backoff_max_s)
+        return False
+
+
+@dataclass
+class RunResult:
+    status: str             # "ok" (duration reached or stopped), "interrupted"
+    message: str = ""
+    counts: dict = field(default_factory=dict)
+
+
+def run_source(source: SerialSource, handlers, *, duration_s: float | None = None,
+               no_data_timeout_s: float = 5.0, idle_interval_s: float = 0.02,
+               stop: threading.Event | None = None) -> RunResult:
+    """Hand every batch of a started source to each handler (``handle(batch)``, ``idle()``) until
+    ``duration_s`` of wall time, ``stop``, or an error.
+
+    Raises :class:`PortError` when the port is lost for good, or when no valid frame arrives for
+    ``no_data_timeout_s`` while the link is up (a board reset by DTR is silent for 1-3 s, hence
+    the 5 s default). Handlers have seen everything received before the error.
+    """
+    if duration_s is not None and not duration_s > 0:
+        raise SpecError("duration", duration_s, "a number of seconds > 0")
+    if not no_data_timeout_s > 0:
+        raise SpecError("no_data_timeout", no_data_timeout_s, "a number of seconds > 0")
+    started = last_valid = time.monotonic()
+    link_up = True
+    while stop is None or not stop.is_set():
+        now = time.monotonic()
+        if duration_s is not None and now - started >= duration_s:
+            break
+        batch = source.get(timeout=idle_interval_s)
+        now = time.monotonic()
+        if batch is not None:
+            for handler in handlers:
+                handler.handle(batch)
+            if batch.samples:
+                last_valid = now
+            if batch.event == "lost":
+                link_up = False
+            elif batch.event == "reconnected":
+                link_up, last_valid = True, now
+            elif batch.event == "failed":
+                raise PortError(batch.message)
+        else:
+            for handler in handlers:
+                handler.idle()
+        if link_up and now - last_valid > no_data_timeout_s:
+            raise PortError(_silence_message(source, now - last_valid))
+    return RunResult("ok", counts=source.counts())
+
+
+def _silence_message(source: SerialSource, silent_s: float) -> str:
+    head = f"no valid frame from {source.url!r} for {silent_s:.1f} s"
+    if source.bytes_received and not source.decoder.stats.frames:
+        return (f"{head}: received {source.bytes_received} bytes that do not decode as "
+                f"{source.decoder.wire_format} frames; check --baudrate (the board uses "
+                f"{DEFAULT_BAUDRATE}) and --format (binary or ascii)")
+    if not source.bytes_received:
+        return (f"{head}: nothing was received; is the board powered and streaming, "
+                "and is this its port?")
+    return f"{head}: the board stopped sending"
