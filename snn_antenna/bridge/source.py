@@ -38,7 +38,7 @@ class Batch:
     """What one read of the port produced, stamped with the host clock when it was read.
 
     ``event`` marks a change of link state (``"opened"``, ``"lost"``, ``"reconnected"``,
-    ``"failed"``) and then ``raw`` and ``samples`` are empty; ``counts`` is a snapshot of the
+    ``"failed"``, or ``"end"`` of a replayed file) and then ``raw`` and ``samples`` are empty; ``counts`` is a snapshot of the
     decoder's and the transport's counters after this batch, so a consumer writing both data and
     counts stays consistent.
     """
@@ -269,6 +269,8 @@ def run_source(source: SerialSource, handlers, *, duration_s: float | None = Non
                 link_up, last_valid = True, now
             elif batch.event == "failed":
                 raise PortError(batch.message)
+            elif batch.event == "end":      # a replayed file is exhausted
+                break
         else:
             for handler in handlers:
                 handler.idle()

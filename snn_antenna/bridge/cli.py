@@ -1,0 +1,263 @@
+"""The bridge's subcommands: ``record``, ``replay``, ``emulate``, ``stream``.
+
+``snn_antenna.cli`` mounts them with :func:`add_subcommands`; ``python -m snn_antenna.bridge.cli``
+runs them on their own. Every command exits non-zero with a one-line message for a port that
+does not exist, is busy, or stays silent, and never waits forever for one.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+from ..errors import SpecError
+from .protocol import WIRE_FORMATS
+from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
+
+EXIT_BAD_INPUT, EXIT_PORT = 2, 1
+
+
+def add_subcommands(subparsers) -> None:
+    """Add ``record``, ``replay``, ``emulate`` and ``stream`` to an argparse subparsers object."""
+    p = subparsers.add_parser("record", help="record a serial stream (raw bytes, samples, counts)",
+                              description="Record every byte and every valid sample from a "
+                                          "serial port; survives kill -9 with at most the last "
+                                          "100 ms missing.")
+    _port_args(p)
+    p.add_argument("--out", required=True, help="recording directory (new or empty)")
+    p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
+    p.set_defaults(func=cmd_record)
+
+    p = subparsers.add_parser("replay", help="replay a recording through the decoder "
+                                             "(and a network)")
+    p.add_argument("recording", help="directory written by `record` or `stream`")
+    p.add_argument("--realtime", action="store_true",
+                   help="pace at the recorded sample rate (default: as fast as possible)")
+    p.add_argument("--network", default=None,
+                   help="networks/NAME.toml: run the online pipeline on the replay")
+    p.add_argument("--window", type=float, default=0.1, help="rate-map window in s")
+    p.set_defaults(func=cmd_replay)
+
+    p = subparsers.add_parser("emulate", help="emulate the sensor board (pty or URL), with faults")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--pty", action="store_true",
+                       help="create a pseudo-terminal and print its path")
+    where.add_argument("--port", help="pyserial URL or device to write to")
+    p.add_argument("--link", default=None,
+                   help="with --pty: a symlink path to the pty that survives disconnect faults")
+    p.add_argument("--stimulus", default=None,
+                   help="stimuli/NAME.toml scene to stream (default: a robot scene with "
+                        "contacts at 19 and 27 cm)")
+    p.add_argument("--frames", type=int, default=None,
+                   help="frames to send (default: the scene's length; the scene loops)")
+    p.add_argument("--faults", default="", help="e.g. garbage=3,drop=2,bitflip=2,range=1,"
+                                                "stall=1,disconnect=1,stall_s=0.2,outage_s=0.5")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--format", choices=WIRE_FORMATS, default="binary")
+    p.add_argument("--fast", action="store_true", help="as fast as the link takes, not 1 kHz")
+    p.add_argument("--peer-timeout", type=float, default=None,
+                   help="give up if nobody opens the pty within this many seconds")
+    p.add_argument("--log", default=None, help="write the injected faults and expected counts "
+                                                "(JSON) to this file")
+    p.set_defaults(func=cmd_emulate)
+
+    p = subparsers.add_parser("stream", help="run the network live on a serial stream")
+    _port_args(p)
+    p.add_argument("--network", required=True, help="networks/NAME.toml")
+    p.add_argument("--out", default=None,
+                   help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
+    p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
+    p.add_argument("--window", type=float, default=0.1, help="rate-map window in s")
+    p.set_defaults(func=cmd_stream)
+
+
+def _port_args(p) -> None:
+    p.add_argument("--port", required=True,
+                   help="device path (/dev/ttyACM0) or pyserial URL (socket://host:port, ...)")
+    p.add_argument("--format", choices=WIRE_FORMATS, default="binary")
+    p.add_argument("--baudrate", type=int, default=DEFAULT_BAUDRATE)
+    p.add_argument("--no-data-timeout", type=float, default=5.0,
+                   help="fail when no valid frame arrives for this many seconds (default 5; a "
+                        "board reset by opening the port is silent for 1-3 s)")
+    p.add_argument("--reconnect-timeout", type=float, default=30.0,
+                   help="how long to retry a port that disappeared (default 30 s)")
+
+
+def _guarded(command):
+    """Run a command; bad input and port trouble become one line on stderr and an exit code."""
+    def run(args) -> int:
+        try:
+            return command(args)
+        except SpecError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
+        except PortError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_PORT
+    run.__name__ = command.__name__
+    run.__doc__ = command.__doc__
+    return run
+
+
+def stop_on_signals() -> threading.Event:
+    """Ctrl-C and SIGTERM end a recording cleanly (data flushed, meta.json complete)."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop
+
+
+def open_source(args) -> SerialSource:
+    return SerialSource(args.port, wire_format=args.format, baudrate=args.baudrate,
+                        reconnect_timeout_s=args.reconnect_timeout).start()
+
+
+def print_counts(counts: dict, file=sys.stderr) -> None:
+    shown = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
+             "reconnects")
+    print("  ".join(f"{k}={counts.get(k, 0)}" for k in shown), file=file, flush=True)
+
+
+def _record_session(args, extra_handlers=(), source=None):
+    """Open the port (or use ``source``), record into ``args.out`` while handlers run, and
+    close the recording with the status the session ended with."""
+    from .recorder import Recorder
+
+    stop = stop_on_signals()
+    source = source or open_source(args)
+    recorder = Recorder(args.out, port=args.port, wire_format=args.format,
+                        baudrate=args.baudrate)
+    status, message = "ok", ""
+    try:
+        result = run_source(source, [recorder, *extra_handlers], duration_s=args.duration,
+                            no_data_timeout_s=args.no_data_timeout, stop=stop)
+        if stop.is_set():
+            status = "stopped"
+        return result
+    except PortError as exc:
+        status, message = "port-error", str(exc)
+        raise
+    finally:
+        source.stop()
+        recorder.close(status, message)
+        print(f"recording in {args.out}: ", end="", file=sys.stderr)
+        print_counts(recorder.counts)
+
+
+@_guarded
+def cmd_record(args) -> int:
+    """Record a serial stream."""
+    _check_duration(args.duration)
+    _record_session(args)
+    return 0
+
+
+@_guarded
+def cmd_replay(args) -> int:
+    """Replay a recording; without --network, check that it decodes to what was recorded."""
+    from .replay import ReplaySource
+
+    source = ReplaySource(args.recording, realtime=args.realtime).start()
+    if args.network:
+        from .online import run_online
+
+        report = run_online(source, args.network, window_s=args.window, handlers=())
+        print(json.dumps(report, indent=1))
+        return 0
+    result = run_source(source, [], no_data_timeout_s=1e9)
+    recording = source.recording
+    recorded = {k: recording.counts.get(k) for k in result.counts if k in recording.counts}
+    replayed = {k: result.counts[k] for k in recorded}
+    same = replayed == recorded
+    print(json.dumps({"replayed": replayed, "recorded": recorded, "match": same}, indent=1))
+    if not same and recording.complete:
+        print("error: the replayed counts differ from meta.json", file=sys.stderr)
+        return EXIT_PORT
+    return 0
+
+
+@_guarded
+def cmd_emulate(args) -> int:
+    """Emulate the board."""
+    from .emulator import Emulator, FaultPlan, PeerGone, PtyLink, SerialLink, stimulus_counts
+
+    plan = FaultPlan.parse(args.faults)
+    if args.link and not args.pty:
+        raise SpecError("link", args.link, "only with --pty")
+    emulator = Emulator(stimulus_counts(args.stimulus, args.seed), faults=plan, seed=args.seed,
+                        wire_format=args.format)
+    if args.pty:
+        link = PtyLink(args.link)
+    else:
+        try:
+            link = SerialLink(args.port)
+        except Exception as exc:       # pyserial's open errors, as for a reader
+            from .source import describe_open_error
+            raise describe_open_error(args.port, exc) from exc
+    print(link.path, flush=True)
+    stop = stop_on_signals()
+    t0 = time.monotonic()
+    try:
+        log = emulator.run(link, args.frames, realtime=not args.fast, stop=stop,
+                           peer_timeout_s=args.peer_timeout)
+    except PeerGone as exc:
+        raise PortError(f"emulator stopped: {exc}") from exc
+    finally:
+        link.close()
+    summary = {"path": link.path, "seconds": round(time.monotonic() - t0, 3),
+               "frames_written": len(log.written), "injected": log.injected(),
+               "expected_counts": log.expected_counts(),
+               "faults": [list(f) for f in log.faults]}
+    if args.log:
+        Path(args.log).write_text(json.dumps(summary, indent=1))
+    print(json.dumps({k: v for k, v in summary.items() if k != "faults"}), flush=True)
+    return 0
+
+
+@_guarded
+def cmd_stream(args) -> int:
+    """Run the online pipeline on a live port, recording while streaming."""
+    from .online import LiveDisplay, run_online
+    from .recorder import Recorder
+
+    _check_duration(args.duration)
+    if args.out is None:
+        args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
+    stop = stop_on_signals()
+    source = open_source(args)
+    recorder = Recorder(args.out, port=args.port, wire_format=args.format,
+                        baudrate=args.baudrate, extra_meta={"network": args.network})
+    status, message = "ok", ""
+    try:
+        report = run_online(source, args.network, window_s=args.window, handlers=[recorder],
+                            duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
+                            stop=stop, display=LiveDisplay(sys.stdout))
+    except PortError as exc:
+        status, message = "port-error", str(exc)
+        raise
+    finally:
+        source.stop()
+        recorder.close(status, message)
+    print(json.dumps(report, indent=1))
+    print(f"recording in {args.out}", file=sys.stderr)
+    return 0
+
+
+def _check_duration(duration) -> None:
+    if duration is not None and not duration > 0:
+        raise SpecError("duration", duration, "a number of seconds > 0")
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="snn-antenna", description="snn-antenna serial bridge")
+    add_subcommands(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
