@@ -1,0 +1,194 @@
+"""Physics of the bionic antenna: an elastic rod with a 2-axis accelerometer at its tip.
+
+A contact at ``distance_cm`` from the base clamps the rod there; the free end beyond it rings
+as a damped oscillation with a low and a high mode. What comes from the paper (Patanè et al.
+2012, Fig. 2C and 5D; see REFERENCE.md) and what is our documented assumption:
+
+- Mode frequencies (paper): ``log10 F_low = 0.0268 d + 0.69``, ``log10 F_high = 0.0305 d + 1.52``,
+  with contact-to-contact scatter of 0.0166 dex (low; 6.2 mm of the law's slope, the paper's
+  single-contact precision) and 0.031 dex (high; what leaves r² = 0.987 over the bench
+  positions). The issue of the bench data set refines these against the paper's signal numbers.
+- Decay (paper, in kind): τ falls almost linearly with distance, wood and aluminium differ.
+  Assumed values: τ_low falls from 0.30 s at 8 cm to 0.10 s at 37.5 cm and τ_high from 60 ms to
+  15 ms, scaled per material by how much the contacted object absorbs (metals least, wood most).
+- Self-motion (paper, in kind): the driving robot shakes the probe at its natural frequency near
+  7.8 Hz. Assumed: its amplitude grows with the square of speed (0.25 g at 12 cm/s), which makes
+  the threshold that hides it at 27 cm/s about five times that at 12 cm/s, as the paper measured.
+- Sensor: ADXL321-like, ±18 g into a 10-bit ADC (35 mg per count), white noise 10 mg; modes
+  above 0.45 × the sample rate are removed, as the sensor's anti-aliasing bandwidth would.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SpecError, check
+
+ROD_LENGTH_CM = 41.3          # total feeler length (paper: 413 mm)
+CALIBRATED_RANGE_CM = (8.0, 37.5)  # where the paper measured the frequency laws
+LOW_LAW = (0.0268, 0.69)      # log10 F_low = slope * d + intercept
+HIGH_LAW = (0.0305, 1.52)
+LOW_SCATTER_DEX = 0.0166
+HIGH_SCATTER_DEX = 0.031
+NATURAL_HZ = 7.8              # free probe's self-oscillation while driving (paper)
+NATURAL_TAU_S = 1.0
+SELF_MOTION_G_AT_12 = 0.25    # self-oscillation amplitude at 12 cm/s (assumed)
+SPEED_LIMIT_CM_S = 60.0
+
+
+@dataclass(frozen=True)
+class Material:
+    """How much a contacted object lets the rod ring (assumed; scales the decay times)."""
+    name: str
+    tau_scale: float          # multiplies τ_low and τ_high
+    high_amplitude: float     # high-mode amplitude relative to the low mode (harder: larger)
+
+
+MATERIALS: dict[str, Material] = {m.name: m for m in (
+    Material("stainless_steel", 1.30, 0.55),
+    Material("brass", 1.20, 0.50),
+    Material("copper", 1.12, 0.48),
+    Material("aluminium", 1.05, 0.45),
+    Material("acrylic_glass", 0.93, 0.38),
+    Material("pvc", 0.88, 0.35),
+    Material("pom", 0.84, 0.33),
+    Material("wood", 0.78, 0.30),
+)}
+
+
+def check_distance(distance_cm) -> np.ndarray:
+    d = np.asarray(distance_cm, dtype=float)
+    if not np.all(np.isfinite(d)) or np.any(d <= 0) or np.any(d >= ROD_LENGTH_CM):
+        raise SpecError("distance_cm", distance_cm,
+                        f"contact distances along the rod in (0, {ROD_LENGTH_CM}) cm "
+                        f"(the frequency law was measured for {CALIBRATED_RANGE_CM[0]}–"
+                        f"{CALIBRATED_RANGE_CM[1]} cm)")
+    return d
+
+
+def check_material(material: str) -> Material:
+    if material not in MATERIALS:
+        raise SpecError("material", material, f"one of {sorted(MATERIALS)}")
+    return MATERIALS[material]
+
+
+def low_mode_hz(distance_cm):
+    d = check_distance(distance_cm)
+    return 10 ** (LOW_LAW[0] * d + LOW_LAW[1])
+
+
+def high_mode_hz(distance_cm):
+    d = check_distance(distance_cm)
+    return 10 ** (HIGH_LAW[0] * d + HIGH_LAW[1])
+
+
+def distance_from_low_hz(freq_hz):
+    """Inverse of the low-mode law: the contact distance (cm) that rings at ``freq_hz``."""
+    f = np.asarray(freq_hz, dtype=float)
+    if not np.all(np.isfinite(f)) or np.any(f <= 0):
+        raise SpecError("freq_hz", freq_hz, "finite frequencies > 0 Hz")
+    return (np.log10(f) - LOW_LAW[1]) / LOW_LAW[0]
+
+
+def decay_times_s(distance_cm, material: str = "wood") -> tuple[np.ndarray, np.ndarray]:
+    """(τ_low, τ_high) in s: linear fall with distance, scaled by the material."""
+    d = check_distance(distance_cm)
+    m = check_material(material)
+    lo, hi = CALIBRATED_RANGE_CM
+    x = (d - lo) / (hi - lo)
+    tau_low = (0.30 - 0.20 * x) * m.tau_scale
+    tau_high = (0.060 - 0.045 * x) * m.tau_scale
+    return np.maximum(tau_low, 0.03), np.maximum(tau_high, 0.005)
+
+
+def contact_ringing(distance_cm: float, material: str, rate_hz: float, n_samples: int,
+                    rng: np.random.Generator, amplitude_g: float = 2.0,
+                    scatter: bool = True) -> np.ndarray:
+    """The free end's damped two-mode oscillation after an impact, in g along the main axis.
+
+    Frequencies scatter from contact to contact by the paper's measured spread; modes above the
+    sensor bandwidth (0.45 × ``rate_hz``) are left out rather than aliased.
+    """
+    m = check_material(material)
+    f_low = float(low_mode_hz(distance_cm))
+    if f_low >= 0.45 * rate_hz:
+        raise SpecError("rate_hz", rate_hz,
+                        f"a sample rate above {f_low / 0.45:.0f} Hz for a contact at "
+                        f"{distance_cm} cm (its low mode rings at {f_low:.1f} Hz)")
+    f_high = float(high_mode_hz(distance_cm))
+    if scatter:
+        f_low *= 10 ** rng.normal(0, LOW_SCATTER_DEX)
+        f_high *= 10 ** rng.normal(0, HIGH_SCATTER_DEX)
+    tau_low, tau_high = (float(x) for x in decay_times_s(distance_cm, material))
+    t = np.arange(n_samples) / rate_hz
+    # Impact: the rod is deflected and released, so both modes start near a peak.
+    out = amplitude_g * np.exp(-t / tau_low) * np.cos(2 * np.pi * f_low * t + rng.normal(0, 0.2))
+    if f_high < 0.45 * rate_hz:
+        out += amplitude_g * m.high_amplitude * np.exp(-t / tau_high) * np.cos(
+            2 * np.pi * f_high * t + rng.uniform(0, 2 * np.pi))
+    return out
+
+
+def resonant_noise(freq_hz: float, tau_s: float, rms_g, rate_hz: float,
+                   rng: np.random.Generator, n_samples: int) -> np.ndarray:
+    """White noise through a mode at ``freq_hz`` with decay ``tau_s``: a driven ringing rod.
+
+    ``rms_g`` may be a scalar or one value per sample (amplitude following the robot's speed);
+    the filter's steady-state gain is normalised so the output has that rms.
+    """
+    from scipy.signal import lfilter
+
+    r = np.exp(-1.0 / (tau_s * rate_hz))
+    w = 2 * np.pi * freq_hz / rate_hz
+    a = [1.0, -2 * r * np.cos(w), r * r]
+    # Unit-variance white noise through the two-pole filter: variance of the output.
+    impulse = lfilter([1.0], a, np.r_[1.0, np.zeros(int(20 * tau_s * rate_hz) + 10)])
+    gain = 1.0 / np.sqrt(np.sum(impulse ** 2))
+    drive = rng.standard_normal(n_samples) * np.broadcast_to(rms_g, (n_samples,))
+    return lfilter([gain], a, drive)
+
+
+def self_motion_rms_g(speed_cm_s) -> np.ndarray:
+    """Self-oscillation amplitude (rms g) of the probe while the robot drives (assumed ∝ v²)."""
+    v = np.asarray(speed_cm_s, dtype=float)
+    if not np.all(np.isfinite(v)) or np.any(v < 0) or np.any(v > SPEED_LIMIT_CM_S):
+        raise SpecError("speed_cm_s", speed_cm_s,
+                        f"finite robot speeds in [0, {SPEED_LIMIT_CM_S}] cm/s")
+    return SELF_MOTION_G_AT_12 * (v / 12.0) ** 2
+
+
+def project(main_axis_g: np.ndarray, orientation_deg: float,
+            gravity_g: tuple[float, float] = (0.0, 1.0)) -> np.ndarray:
+    """Project the tip's oscillation onto the sensor's two axes; gravity adds a DC offset."""
+    th = np.deg2rad(orientation_deg)
+    xy = np.outer(main_axis_g, [np.cos(th), np.sin(th)])
+    return xy + np.asarray(gravity_g)
+
+
+@dataclass(frozen=True)
+class ADC:
+    """An accelerometer into an ADC: counts = round(mid + g / lsb), clipped to the rails."""
+    bits: int = 10
+    full_scale_g: float = 18.0   # ± range of the sensor (ADXL321: ±18 g)
+
+    def __post_init__(self):
+        check(isinstance(self.bits, int) and 4 <= self.bits <= 24, "adc_bits", self.bits,
+              "an integer number of bits in [4, 24]")
+        check(np.isfinite(self.full_scale_g) and self.full_scale_g > 0, "full_scale_g",
+              self.full_scale_g, "a range > 0 g")
+
+    @property
+    def levels(self) -> int:
+        return 2 ** self.bits
+
+    @property
+    def lsb_g(self) -> float:
+        return 2 * self.full_scale_g / self.levels
+
+    def to_counts(self, g: np.ndarray) -> np.ndarray:
+        counts = np.round(self.levels / 2 + np.asarray(g) / self.lsb_g)
+        return np.clip(counts, 0, self.levels - 1).astype(np.int32)
+
+    def to_g(self, counts: np.ndarray) -> np.ndarray:
+        return (np.asarray(counts, dtype=float) - self.levels / 2) * self.lsb_g

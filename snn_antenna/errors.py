@@ -1,0 +1,38 @@
+"""The project's exceptions.
+
+Every error a user can cause names the field, the value and what is accepted, and is raised
+before any long work starts.
+"""
+
+
+class SpecError(ValueError):
+    """A parameter, spec field or input is outside what the toolkit accepts."""
+
+    def __init__(self, field: str, value, accepted: str):
+        self.field, self.value, self.accepted = field, value, accepted
+        super().__init__(f"{field} = {value!r} is not accepted: {accepted}")
+
+
+class NumericalInstabilityError(ArithmeticError):
+    """A simulation produced non-finite or runaway state.
+
+    Raised during the run (Brian2 itself only warns afterwards) with the neuron, its
+    parameters, the integration settings and the largest step that is known to be safe.
+    """
+
+    def __init__(self, neuron: int, params: dict, dt_ms: float, method: str,
+                 t_ms: float, safe_dt_ms: float | None):
+        self.neuron, self.params, self.dt_ms, self.method = neuron, params, dt_ms, method
+        self.t_ms, self.safe_dt_ms = t_ms, safe_dt_ms
+        pretty = ", ".join(f"{k}={v:g}" for k, v in params.items())
+        hint = (f"; a dt of at most {safe_dt_ms:.4g} ms is safe for these parameters"
+                if safe_dt_ms else "")
+        super().__init__(
+            f"neuron {neuron} ({pretty}) became non-finite or ran away at t = {t_ms:.2f} ms "
+            f"with method={method!r}, dt={dt_ms:g} ms{hint}")
+
+
+def check(condition: bool, field: str, value, accepted: str) -> None:
+    """Raise SpecError(field, value, accepted) unless condition holds."""
+    if not condition:
+        raise SpecError(field, value, accepted)

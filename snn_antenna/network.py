@@ -1,0 +1,241 @@
+"""The resonator array in Brian2: offline (whole recordings) and streaming (sample by sample).
+
+One ``NeuronGroup`` of Izhikevich resonators, neuron j tuned to ``neuron_hz[j]`` through its
+time scale k_j. Both forms build the same group from the same equations and drive it with
+the coded signal held constant over each input sample, so they give the same spikes on the
+same data: offline reads the samples from a ``TimedArray``, streaming writes each new sample
+into the array behind ``I_ext`` from a ``NetworkOperation`` (runtime mode only).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+import xarray as xr
+
+from . import neurons
+from .errors import SpecError, check
+from .signals import Recording, validate_samples
+
+MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice
+
+
+@dataclass
+class ResonatorArray:
+    """``n_neurons`` resonators tuned across ``band_hz`` (log or linear spacing).
+
+    ``b`` sets the spike rate (Fig. 8H); the coder's amplitude sets the bandwidth (Fig. 8G);
+    ``hz_per_k`` maps tuning to k (see ``neurons.k_for_frequency``).
+    """
+    n_neurons: int = 24
+    band_hz: tuple[float, float] = (7.0, 30.0)
+    spacing: str = "log"
+    b: float = 0.26
+    dt_ms: float = 0.1
+    method: str = "euler"
+    target: str = "cython"
+    hz_per_k: float = neurons.DRIVEN_HZ_PER_K
+    force: bool = False
+
+    def __post_init__(self):
+        check(isinstance(self.n_neurons, int) and 1 <= self.n_neurons <= 100_000, "n_neurons",
+              self.n_neurons, "an integer in [1, 100000]")
+        lo, hi = (float(x) for x in self.band_hz)
+        check(np.isfinite(lo) and np.isfinite(hi) and 0 < lo <= hi, "band_hz", self.band_hz,
+              "[low, high] in Hz with 0 < low <= high")
+        check(self.spacing in ("log", "linear"), "spacing", self.spacing, "'log' or 'linear'")
+        check(np.isfinite(self.b), "b", self.b, "a finite value")
+        check(self.method in neurons.METHODS, "method", self.method,
+              f"one of {list(neurons.METHODS)}")
+        check(self.target in ("numpy", "cython"), "target", self.target, "'numpy' or 'cython'")
+        check(np.isfinite(self.dt_ms) and 0 < self.dt_ms <= 1.0, "dt_ms", self.dt_ms,
+              "a step in (0, 1] ms")
+        k_dt = float(self.k.max()) * self.dt_ms
+        if not self.force and k_dt > neurons.MAX_STABLE_K_DT[self.method]:
+            raise SpecError("dt_ms", self.dt_ms,
+                            f"at most {neurons.max_stable_dt_ms(self.k, self.method):.4g} ms "
+                            f"for a band up to {hi:g} Hz with method {self.method!r} "
+                            f"(k·dt <= {neurons.MAX_STABLE_K_DT[self.method]}), or force=True")
+
+    @property
+    def neuron_hz(self) -> np.ndarray:
+        lo, hi = (float(x) for x in self.band_hz)
+        space = np.geomspace if self.spacing == "log" else np.linspace
+        return space(lo, hi, self.n_neurons)
+
+    @property
+    def k(self) -> np.ndarray:
+        return np.atleast_1d(neurons.k_for_frequency(self.neuron_hz, self.hz_per_k))
+
+    def check_rate(self, rate_hz: float) -> None:
+        need = MIN_SAMPLES_PER_CYCLE * float(self.band_hz[1])
+        check(rate_hz >= need, "rate_hz", rate_hz,
+              f"an input sample rate of at least {need:g} Hz for a band up to "
+              f"{self.band_hz[1]:g} Hz ({MIN_SAMPLES_PER_CYCLE} samples per cycle)")
+
+    # -- building ---------------------------------------------------------------------------
+    def _build(self, input_expr: str, namespace: dict, first_input: float = 0.0):
+        import brian2 as b2
+
+        b2.prefs.codegen.target = self.target
+        group = b2.NeuronGroup(
+            self.n_neurons,
+            neurons.equations("resonator", input_expr) + "\nspike_count : integer",
+            threshold=f"v >= {neurons.V_PEAK}",
+            reset="v = c; u = u + d; spike_count += 1",
+            method=self.method, namespace=namespace, dt=self.dt_ms * b2.ms,
+            name="resonators")
+        preset = neurons.PRESETS["resonator"]
+        group.k = self.k
+        group.a, group.c, group.d = preset.a, preset.c, preset.d
+        group.b = self.b
+        v0, u0 = neurons.resting_state("resonator", self.b, first_input)
+        group.v, group.u = v0, u0
+        return group
+
+    # -- offline ----------------------------------------------------------------------------
+    def run(self, coded: Recording, window_s: float = 0.1,
+            check_every_ms: float = 10.0) -> "ArrayResult":
+        """Drive the array with a coded recording (one channel); spikes and a rate map."""
+        import brian2 as b2
+
+        samples = np.asarray(validate_samples(coded.samples, "coded.samples"), dtype=float)
+        if samples.ndim != 1:
+            raise SpecError("coded.samples", f"array of shape {samples.shape}",
+                            "one channel (run the preprocessing chain first)")
+        self.check_rate(coded.rate_hz)
+        b2.start_scope()
+        drive = b2.TimedArray(samples, dt=b2.second / coded.rate_hz, name="drive")
+        group = self._build("drive(t) : 1", {"drive": drive}, float(samples[0]))
+        spikes = b2.SpikeMonitor(group, name="spikes")
+        guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method,
+                                          check_every_ms)
+        net = b2.Network(group, spikes, guard)
+        t0 = time.perf_counter()
+        net.run(coded.duration_s * b2.second, namespace={})
+        wall = time.perf_counter() - t0
+        guard.function()
+        return ArrayResult(self.neuron_hz, np.asarray(spikes.i[:], dtype=int),
+                           np.asarray(spikes.t_[:], dtype=float), coded.duration_s,
+                           window_s, wall_s=wall)
+
+    # -- streaming --------------------------------------------------------------------------
+    def stream(self, chunks: Iterable[np.ndarray], rate_hz: float, window_s: float = 0.1,
+               on_window: Callable[[float, np.ndarray], None] | None = None,
+               max_duration_s: float = 365 * 86400.0) -> "StreamStats":
+        """Run the array live on coded samples as they arrive.
+
+        ``chunks`` yields 1-D arrays of coded samples (any length, blocking until data come;
+        the stream ends when it is exhausted). Every ``window_s`` of input, ``on_window(t_s,
+        counts)`` receives the spike counts per neuron of that window: memory stays bounded
+        however long the stream runs. Runtime mode only (NetworkOperation).
+        """
+        import brian2 as b2
+
+        self.check_rate(rate_hz)
+        samples_per_window = int(round(window_s * rate_hz))
+        check(samples_per_window >= 1, "window_s", window_s,
+              f"a window of at least one sample (1/{rate_hz:g} s)")
+        b2.start_scope()
+        group = self._build("I_ext : 1", {})
+        guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method)
+        I_ext = group.variables["I_ext"].get_value()  # the array behind the variable
+        counts = group.variables["spike_count"].get_value()
+        feed = _Feed(chunks)
+        stats = StreamStats()
+
+        # when="start": the new sample is in place before this step's integration, exactly
+        # as the TimedArray of the offline form switches value at the sample boundary.
+        @b2.network_operation(dt=b2.second / rate_hz, when="start")
+        def next_sample(t):
+            x = feed.next()
+            if x is None:
+                net.stop()
+                return
+            I_ext[:] = x
+            stats.samples += 1
+            if stats.samples % samples_per_window == 0:
+                stats.windows += 1
+                if on_window is not None:
+                    on_window(stats.samples / rate_hz - window_s, counts.copy())
+                counts[:] = 0
+
+        net = b2.Network(group, guard, next_sample)
+        t0 = time.perf_counter()
+        net.run(max_duration_s * b2.second, namespace={})
+        stats.wall_s = time.perf_counter() - t0
+        stats.simulated_s = stats.samples / rate_hz
+        return stats
+
+
+class _Feed:
+    """One sample at a time from an iterator of chunks."""
+
+    def __init__(self, chunks: Iterable[np.ndarray]):
+        self._chunks: Iterator = iter(chunks)
+        self._buf = np.empty(0)
+        self._pos = 0
+
+    def next(self):
+        while self._pos >= len(self._buf):
+            try:
+                self._buf = np.asarray(next(self._chunks), dtype=float).ravel()
+            except StopIteration:
+                return None
+            self._pos = 0
+            if len(self._buf) and not np.all(np.isfinite(self._buf)):
+                raise SpecError("stream sample", "non-finite value",
+                                "finite coded samples (the preprocessing chain never "
+                                "produces NaN; check the source)")
+        x = self._buf[self._pos]
+        self._pos += 1
+        return x
+
+
+@dataclass
+class StreamStats:
+    samples: int = 0
+    windows: int = 0
+    wall_s: float = 0.0
+    simulated_s: float = 0.0
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall-clock second (> 1: faster than real time)."""
+        return self.simulated_s / self.wall_s if self.wall_s > 0 else float("inf")
+
+
+@dataclass
+class ArrayResult:
+    neuron_hz: np.ndarray
+    spike_i: np.ndarray
+    spike_t_s: np.ndarray
+    duration_s: float
+    window_s: float = 0.1
+    wall_s: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def rate_map(self) -> xr.DataArray:
+        return rate_map(self.spike_i, self.spike_t_s, self.neuron_hz, self.duration_s,
+                        self.window_s)
+
+
+def rate_map(spike_i, spike_t_s, neuron_hz, duration_s: float,
+             window_s: float = 0.1) -> xr.DataArray:
+    """Spike rates (Hz) per neuron and window: the paper's frequency map (Fig. 10H)."""
+    check(np.isfinite(window_s) and 0 < window_s <= duration_s, "window_s", window_s,
+          f"a window in (0, {duration_s:g}] s")
+    n_windows = int(np.floor(duration_s / window_s + 1e-9))
+    edges = np.arange(n_windows + 1) * window_s
+    counts, _, _ = np.histogram2d(spike_i, spike_t_s,
+                                  bins=[np.arange(len(neuron_hz) + 1) - 0.5, edges])
+    return xr.DataArray(
+        counts / window_s, dims=("neuron_hz", "window_s"),
+        coords={"neuron_hz": ("neuron_hz", np.asarray(neuron_hz, dtype=float),
+                              {"units": "Hz", "long_name": "preferred frequency"}),
+                "window_s": ("window_s", edges[:-1],
+                             {"units": "s", "long_name": "window start"})},
+        name="rate", attrs={"units": "Hz", "window_s": window_s})

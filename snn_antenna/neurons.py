@@ -1,0 +1,296 @@
+"""Izhikevich neurons with a time-scale factor k, in Brian2.
+
+The equations are the documentation (time in ms, v and u dimensionless as in Izhikevich 2003):
+
+    dv/dt = k (0.04 v² + 5 v + 140 − u + I)
+    du/dt = a k (b v − u)
+    if v ≥ 30:  v ← c,  u ← u + d
+
+k scales time, so a neuron with time scale k responds to an input of frequency f exactly as the
+k = 1 neuron responds to f / k: its preferred frequency is proportional to k. That is what
+``k_for_frequency`` uses.
+
+Presets (parameters from the paper, Patanè et al. 2012, and Izhikevich 2003):
+
+- ``resonator``: a = 0.1, b = 0.26, c = −60, d = −1 with 0.04 v² + 5 v + 140.
+- ``class1``: a = 0.02, b = −0.1, c = −55, d = 6 with 0.04 v² + 5 v + 140, as the paper writes
+  it for all its neurons (the default).
+- ``class1_izhikevich``: the same a, b, c, d with 0.04 v² + 4.1 v + 108, as Izhikevich's own
+  code pairs them (a class-I neuron with a lower rheobase).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import NumericalInstabilityError, SpecError, check
+from .signals import validate_samples
+
+
+@dataclass(frozen=True)
+class Preset:
+    a: float
+    b: float
+    c: float
+    d: float
+    quadratic: tuple[float, float, float] = (0.04, 5.0, 140.0)  # p2 v² + p1 v + p0
+    description: str = ""
+
+    def params(self) -> dict:
+        return {"a": self.a, "b": self.b, "c": self.c, "d": self.d}
+
+
+PRESETS: dict[str, Preset] = {
+    "resonator": Preset(0.1, 0.26, -60.0, -1.0, description="resonate-and-fire (paper, Fig. 8)"),
+    "class1": Preset(0.02, -0.1, -55.0, 6.0, description="class I, paper's 5v + 140 (default)"),
+    "class1_izhikevich": Preset(0.02, -0.1, -55.0, 6.0, quadratic=(0.04, 4.1, 108.0),
+                                description="class I, Izhikevich's 4.1v + 108"),
+}
+
+V_PEAK = 30.0  # spike cut-off, the model's threshold
+
+# Integration methods whose results this project has checked. Izhikevich's own update order is
+# not a Brian2 state updater; the speed/accuracy study measures it separately.
+METHODS = ("euler", "rk2", "rk4")
+
+# Largest k·dt (model milliseconds per step) at which each method stays finite for the
+# resonator driven by the coder's amplitudes (REFERENCE.md: rk4 went non-finite from k·dt ≈ 1,
+# rk2 at 16, euler stayed finite). Specs beyond this are refused unless forced.
+MAX_STABLE_K_DT = {"euler": 8.0, "rk2": 8.0, "rk4": 0.5}
+
+# Preferred frequency of the k = 1 resonator. Linearising at rest gives a damped oscillation
+# at 24.5 Hz (τ ≈ 19 ms); the neuron, driven by the square-wave coder's ±0.15 near threshold,
+# responds best somewhat lower because the orbit is slower away from the fixed point. The
+# driven value is measured by ``measure_peak_hz`` and checked in tests; it is what the array
+# uses, because spike rates, not small oscillations, are what the read-out sees.
+LINEAR_HZ_PER_K = 24.52
+DRIVEN_HZ_PER_K = 20.4
+
+
+def equations(preset: str | Preset = "resonator", input_expr: str = "I_ext : 1") -> str:
+    """Brian2 equations of an Izhikevich neuron; ``input_expr`` defines ``I``'s source."""
+    p = PRESETS[preset] if isinstance(preset, str) else preset
+    p2, p1, p0 = p.quadratic
+    return f"""
+    dv/dt = k * ({p2!r}*v**2 + {p1!r}*v + {p0!r} - u + I) / ms : 1
+    du/dt = a * k * (b*v - u) / ms : 1
+    I = {input_expr}
+    k : 1 (constant)
+    a : 1 (constant)
+    b : 1 (constant)
+    c : 1 (constant)
+    d : 1 (constant)
+    """
+
+
+def resting_state(preset: str | Preset = "resonator", b: float | None = None,
+                  current: float = 0.0) -> tuple[float, float]:
+    """The stable fixed point (v, u) for constant input ``current``.
+
+    Where there is none (the neuron fires tonically), the reset point (c, b·c) is returned,
+    so a run starts where the neuron would be right after a spike.
+    """
+    p = PRESETS[preset] if isinstance(preset, str) else preset
+    b = p.b if b is None else b
+    p2, p1, p0 = p.quadratic
+    disc = (p1 - b) ** 2 - 4 * p2 * (p0 + current)
+    if disc < 0:
+        return p.c, b * p.c
+    v = (-(p1 - b) - math.sqrt(disc)) / (2 * p2)  # the lower root is the stable one
+    return v, b * v
+
+
+def k_for_frequency(freq_hz, hz_per_k: float = DRIVEN_HZ_PER_K):
+    """The time-scale factor k whose resonator prefers ``freq_hz``.
+
+    Exact by the model's time-scale invariance, given the k = 1 neuron's preferred frequency
+    (``DRIVEN_HZ_PER_K`` by default; pass ``LINEAR_HZ_PER_K`` for the small-signal value).
+    The paper's 7 Hz neuron has k = 0.3425, i.e. 20.4 Hz per unit k.
+    """
+    f = np.asarray(freq_hz, dtype=float)
+    if not np.all(np.isfinite(f)) or np.any(f <= 0):
+        raise SpecError("freq_hz", freq_hz, "finite frequencies > 0 Hz")
+    k = f / hz_per_k
+    return float(k) if k.ndim == 0 else k
+
+
+def max_stable_dt_ms(k, method: str = "euler") -> float:
+    """Largest dt (ms) the stability limits allow for time scales ``k``."""
+    check(method in MAX_STABLE_K_DT, "method", method, f"one of {sorted(MAX_STABLE_K_DT)}")
+    return MAX_STABLE_K_DT[method] / float(np.max(k))
+
+
+@dataclass
+class SimulationResult:
+    """Spikes (and optionally traces) of a group of neurons.
+
+    ``spike_i`` / ``spike_t_ms`` list every spike (neuron index, time); ``traces`` maps
+    ``"v"`` and ``"u"`` to arrays of shape (n_records, n_neurons) at ``trace_dt_ms``.
+    """
+    n_neurons: int
+    duration_ms: float
+    dt_ms: float
+    spike_i: np.ndarray
+    spike_t_ms: np.ndarray
+    params: dict
+    traces: dict = field(default_factory=dict)
+    trace_dt_ms: float | None = None
+
+    @property
+    def spike_counts(self) -> np.ndarray:
+        return np.bincount(self.spike_i, minlength=self.n_neurons)
+
+    def spike_times_ms(self, neuron: int) -> np.ndarray:
+        return self.spike_t_ms[self.spike_i == neuron]
+
+
+def _broadcast(name: str, value, n: int) -> np.ndarray:
+    arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)) if np.ndim(value) == 0 \
+        else np.asarray(value, dtype=float)
+    if arr.shape != (n,):
+        raise SpecError(name, f"array of shape {np.shape(value)}",
+                        f"a scalar or one value per neuron (shape ({n},))")
+    if not np.all(np.isfinite(arr)):
+        raise SpecError(name, value, "finite values")
+    return arr
+
+
+def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
+             method: str = "euler", *, n_neurons: int | None = None,
+             input_dt_ms: float | None = None, input_index=None, v0=None, u0=None,
+             record_traces: bool | str = False, trace_dt_ms: float | None = None,
+             target: str = "numpy", force: bool = False, check_every_ms: float = 10.0,
+             **params) -> SimulationResult:
+    """Run Izhikevich neurons on an input current; the building block of k/b/I tuning.
+
+    ``current`` is an array of samples every ``input_dt_ms`` (default ``dt_ms``): shape
+    (n_steps,) drives every neuron alike; shape (n_steps, n_inputs) drives neuron i with column
+    ``input_index[i]`` (default: column i), so many events or grid points run as one group.
+    ``k`` and preset parameters (``a``, ``b``, ``c``, ``d``) may be scalars or one value per
+    neuron. Neurons start at their resting state for the first input sample unless ``v0`` /
+    ``u0`` are given. ``record_traces`` records v and u (``True``) or only the named variable.
+
+    Returns spike times in ms (and traces on request). Raises ``NumericalInstabilityError`` as
+    soon as a neuron's state becomes non-finite, and refuses before running a k·dt beyond the
+    method's stable limit unless ``force=True``.
+    """
+    import brian2 as b2
+
+    check(preset in PRESETS, "preset", preset, f"one of {sorted(PRESETS)}")
+    check(method in METHODS, "method", method, f"one of {list(METHODS)}")
+    check(target in ("numpy", "cython"), "target", target,
+          "'numpy' or 'cython' (runtime targets; cpp_standalone is used by the sweep engine)")
+    check(np.isfinite(dt_ms) and 0 < dt_ms <= 10, "dt_ms", dt_ms, "a step in (0, 10] ms")
+    if current is None:
+        raise SpecError("current", None, "an array of input samples")
+    current = validate_samples(current, "current").astype(float)
+    input_dt_ms = dt_ms if input_dt_ms is None else input_dt_ms
+    check(np.isfinite(input_dt_ms) and input_dt_ms >= dt_ms * (1 - 1e-9), "input_dt_ms",
+          input_dt_ms, f"a sample interval >= dt_ms ({dt_ms} ms)")
+    n_inputs = 1 if current.ndim == 1 else current.shape[1]
+    if n_neurons is None:
+        sizes = [np.size(k)] + [np.size(v) for v in params.values()]
+        if input_index is not None:
+            sizes.append(np.size(input_index))
+        elif current.ndim == 2:
+            sizes.append(n_inputs)
+        n_neurons = max(sizes)
+    preset_obj = PRESETS[preset]
+    unknown = set(params) - set(preset_obj.params())
+    if unknown:
+        raise SpecError("params", sorted(unknown), "only a, b, c, d beside k")
+    values = {name: _broadcast(name, params.get(name, default), n_neurons)
+              for name, default in preset_obj.params().items()}
+    values["k"] = _broadcast("k", k, n_neurons)
+    check(np.all(values["k"] > 0), "k", k, "time-scale factors > 0")
+    k_dt = float(values["k"].max()) * dt_ms
+    if not force and k_dt > MAX_STABLE_K_DT[method]:
+        raise SpecError("dt_ms", dt_ms,
+                        f"k·dt <= {MAX_STABLE_K_DT[method]} model-ms for method {method!r} "
+                        f"(k up to {values['k'].max():g}: dt <= "
+                        f"{max_stable_dt_ms(values['k'], method):.4g} ms), or force=True")
+
+    if current.ndim == 1:
+        input_expr = "drive(t) : 1"
+        index = None
+    else:
+        index = np.arange(n_neurons) if input_index is None else np.asarray(input_index)
+        if index.shape != (n_neurons,) or index.min() < 0 or index.max() >= n_inputs:
+            raise SpecError("input_index", f"array of shape {index.shape}",
+                            f"one column index in [0, {n_inputs}) per neuron")
+        input_expr = "drive(t, input_index) : 1\ninput_index : integer (constant)"
+
+    b2.start_scope()
+    b2.prefs.codegen.target = target
+    b2.defaultclock.dt = dt_ms * b2.ms
+    drive = b2.TimedArray(current, dt=input_dt_ms * b2.ms, name="drive")
+    group = b2.NeuronGroup(n_neurons, equations(preset_obj, input_expr),
+                           threshold=f"v >= {V_PEAK}", reset="v = c; u = u + d",
+                           method=method, namespace={"drive": drive}, name="neurons")
+    for name, arr in values.items():
+        setattr(group, name, arr)
+    if index is not None:
+        group.input_index = index
+    first = current[0] if current.ndim == 1 else current[0][index]
+    rest = np.array([resting_state(preset_obj, b_i, float(I0))
+                     for b_i, I0 in zip(values["b"], np.broadcast_to(first, (n_neurons,)))])
+    group.v = rest[:, 0] if v0 is None else _broadcast("v0", v0, n_neurons)
+    group.u = rest[:, 1] if u0 is None else _broadcast("u0", u0, n_neurons)
+
+    spikes = b2.SpikeMonitor(group, name="spikes")
+    objects = [group, spikes]
+    if record_traces:
+        variables = ["v", "u"] if record_traces is True else [record_traces]
+        mon = b2.StateMonitor(group, variables, record=True,
+                              dt=(trace_dt_ms or dt_ms) * b2.ms, name="traces")
+        objects.append(mon)
+    guard = instability_guard(group, preset, dt_ms, method, check_every_ms)
+    objects.append(guard)
+
+    duration_ms = current.shape[0] * input_dt_ms
+    net = b2.Network(*objects)
+    net.run(duration_ms * b2.ms, namespace={})
+    guard.function()  # the last partial interval
+    result = SimulationResult(
+        n_neurons=n_neurons, duration_ms=duration_ms, dt_ms=dt_ms,
+        spike_i=np.asarray(spikes.i[:], dtype=int), spike_t_ms=np.asarray(spikes.t / b2.ms),
+        params={name: arr.copy() for name, arr in values.items()})
+    if record_traces:
+        result.traces = {v: np.asarray(getattr(mon, v)).T for v in variables}
+        result.trace_dt_ms = trace_dt_ms or dt_ms
+    return result
+
+
+RUNAWAY_LIMIT = 1e6  # |v| or |u| beyond this is divergence, not a spike
+
+
+def instability_guard(group, preset: str, dt_ms: float, method: str,
+                      every_ms: float = 10.0):
+    """A NetworkOperation that raises NumericalInstabilityError during the run.
+
+    Brian2 checks for NaN only after a run, as a warning; this stops the run within
+    ``every_ms`` of simulated time and names the neuron. It reads the arrays behind the
+    variables directly (no unit handling), so it costs microseconds per check.
+    """
+    import brian2 as b2
+
+    v_arr = group.variables["v"].get_value
+    u_arr = group.variables["u"].get_value
+
+    def check_state():
+        v, u = v_arr(), u_arr()
+        ok = np.isfinite(v) & np.isfinite(u) & (np.abs(v) < RUNAWAY_LIMIT) \
+            & (np.abs(u) < RUNAWAY_LIMIT)
+        if not ok.all():
+            i = int(np.argmin(ok))
+            params = {name: float(group.variables[name].get_value()[i])
+                      for name in ("k", "a", "b", "c", "d")}
+            raise NumericalInstabilityError(
+                neuron=i, params=params, dt_ms=dt_ms, method=method,
+                t_ms=float(group.t_[:] * 1000) if hasattr(group, "t_") else float("nan"),
+                safe_dt_ms=max_stable_dt_ms(params["k"], method) if method in MAX_STABLE_K_DT
+                else None)
+
+    return b2.NetworkOperation(check_state, dt=every_ms * b2.ms, name="instability_guard")

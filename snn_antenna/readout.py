@@ -1,0 +1,110 @@
+"""Read-out of a rate map: dominant neuron, contact detection and distance decoding.
+
+While the robot drives, its self-motion keeps the neurons near the probe's natural frequency
+(≈ 7.8 Hz) busy. A contact clamps the rod and its free end rings faster, so activity shifts
+to neurons tuned above the self-motion band (the paper's Fig. 10H): that shift is the contact.
+The ringing frequency gives the distance through the inverse of the low-mode law.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import xarray as xr
+
+from . import antenna
+from .errors import check
+
+
+def dominant_hz(rates: xr.DataArray) -> xr.DataArray:
+    """Preferred frequency of the most active neuron per window (0 where all are silent)."""
+    idx = rates.argmax("neuron_hz")
+    out = rates.neuron_hz[idx].where(rates.max("neuron_hz") > 0, 0.0)
+    return out.drop_vars("neuron_hz").rename("dominant_hz").assign_attrs(units="Hz")
+
+
+def centroid_hz(rates: xr.DataArray, dim=("neuron_hz",)) -> xr.DataArray:
+    """Rate-weighted geometric mean of the preferred frequencies (0 where silent).
+
+    With log-spaced neurons this is unbiased: the array's tuning is scale-invariant, and the
+    preferred frequency of each neuron is its own tuning curve's geometric centroid.
+    """
+    w = rates.sum(dim)
+    logf = np.log(rates.neuron_hz)
+    c = np.exp((rates * logf).sum(dim) / w.where(w > 0))
+    return c.fillna(0.0).rename("centroid_hz").assign_attrs(units="Hz")
+
+
+@dataclass
+class ContactEstimate:
+    onset_s: float            # start of the first window of the episode
+    end_s: float
+    frequency_hz: float       # centroid of the above-band activity over the episode
+    distance_cm: float
+
+    def as_dict(self) -> dict:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+
+@dataclass
+class ContactDetector:
+    """Find contacts as windows where activity above the self-motion band dominates.
+
+    A window is a contact window when the summed rate of neurons tuned above
+    ``motion_band_hz[1]`` exceeds ``min_rate_hz`` and the summed rate in and below the band.
+    Contact windows separated by at most ``max_gap_windows`` silent windows form one episode.
+    """
+    motion_band_hz: tuple[float, float] = (7.0, 10.5)
+    min_rate_hz: float = 20.0
+    max_gap_windows: int = 1
+
+    def __post_init__(self):
+        lo, hi = self.motion_band_hz
+        check(0 <= lo <= hi, "motion_band_hz", self.motion_band_hz, "[low, high] Hz, low <= high")
+        check(np.isfinite(self.min_rate_hz) and self.min_rate_hz > 0, "min_rate_hz",
+              self.min_rate_hz, "a rate > 0 Hz")
+        check(isinstance(self.max_gap_windows, int) and self.max_gap_windows >= 0,
+              "max_gap_windows", self.max_gap_windows, "an integer >= 0")
+
+    def contact_windows(self, rates: xr.DataArray) -> xr.DataArray:
+        above = rates.neuron_hz > self.motion_band_hz[1]
+        high = rates.where(above, 0).sum("neuron_hz")
+        low = rates.where(~above, 0).sum("neuron_hz")
+        return (high >= self.min_rate_hz) & (high > low)
+
+    def detect(self, rates: xr.DataArray) -> list[ContactEstimate]:
+        hit = self.contact_windows(rates).values
+        window = float(rates.attrs.get("window_s", np.diff(rates.window_s.values[:2])[0]))
+        starts = rates.window_s.values
+        episodes, current, gap = [], [], 0
+        for j, h in enumerate(hit):
+            if h:
+                current.append(j)
+                gap = 0
+            elif current:
+                gap += 1
+                if gap > self.max_gap_windows:
+                    episodes.append(current)
+                    current, gap = [], 0
+        if current:
+            episodes.append(current)
+        out = []
+        above = rates.neuron_hz > self.motion_band_hz[1]
+        for ep in episodes:
+            sub = rates.isel(window_s=ep).where(above, 0)
+            f = float(centroid_hz(sub, dim=("neuron_hz", "window_s")))
+            out.append(ContactEstimate(onset_s=float(starts[ep[0]]),
+                                       end_s=float(starts[ep[-1]] + window),
+                                       frequency_hz=f,
+                                       distance_cm=float(antenna.distance_from_low_hz(f))))
+        return out
+
+
+def band_activity_hz(rates: xr.DataArray, t0_s: float, t1_s: float,
+                     band_hz: tuple[float, float] | None = None) -> float:
+    """Centroid frequency of the activity between t0_s and t1_s (optionally within a band)."""
+    sub = rates.sel(window_s=slice(t0_s, t1_s - 1e-9))
+    if band_hz is not None:
+        inside = (sub.neuron_hz >= band_hz[0]) & (sub.neuron_hz <= band_hz[1])
+        sub = sub.where(inside, 0)
+    return float(centroid_hz(sub, dim=("neuron_hz", "window_s")))

@@ -1,0 +1,156 @@
+"""Reports: every output folder holds report.html, summary.json and its figures as PNG.
+
+``summary.json`` holds the numbers and the provenance (resolved spec, seed, package and
+library versions, Brian2's code-generation target) so any figure can be regenerated. Files
+are written atomically: a reader never sees half a report.
+"""
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import json
+import os
+import platform
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+
+def atomic_write(path: str | Path, data: bytes | str) -> None:
+    """Write to a temporary file beside ``path`` and rename it into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mode = "wb" if isinstance(data, bytes) else "w"
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def _jsonable(obj: Any):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, (np.floating, float)):
+        value = float(obj)
+        if not np.isfinite(value):
+            raise ValueError(f"refusing to write a non-finite number ({value}) to summary.json")
+        return value
+    if isinstance(obj, (np.bool_,)):
+        return bool(obj)
+    if isinstance(obj, Path):
+        return str(obj)
+    return obj
+
+
+def provenance(spec: dict, target: str | None = None) -> dict:
+    import brian2
+    import scipy
+    import sklearn
+
+    from . import __version__
+    return {
+        "spec": spec,
+        "seed": spec.get("seed", 0),
+        "snn_antenna_version": __version__,
+        "brian2_version": brian2.__version__,
+        "brian2_target": target or str(brian2.prefs.codegen.target),
+        "numpy_version": np.__version__,
+        "scipy_version": scipy.__version__,
+        "sklearn_version": sklearn.__version__,
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "command": " ".join(sys.argv),
+    }
+
+
+class Report:
+    """Collect sections, tables and figures; ``write`` produces the folder."""
+
+    def __init__(self, out_dir: str | Path, title: str):
+        self.out_dir = Path(out_dir)
+        self.title = title
+        self._parts: list[str] = []
+        self.figures: list[str] = []
+
+    def text(self, paragraph: str) -> None:
+        self._parts.append(f"<p>{html.escape(paragraph)}</p>")
+
+    def heading(self, text: str) -> None:
+        self._parts.append(f"<h2>{html.escape(text)}</h2>")
+
+    def table(self, rows: list[dict], caption: str = "") -> None:
+        if not rows:
+            return
+        cols = list(rows[0])
+        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in cols)
+        body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols)
+                       + "</tr>" for r in rows)
+        cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+        self._parts.append(f"<table>{cap}<tr>{head}</tr>{body}</table>")
+
+    def figure(self, fig, name: str, caption: str = "") -> Path:
+        """Save a matplotlib figure as NAME.png and embed it in the page."""
+        import matplotlib.pyplot as plt
+
+        path = self.out_dir / f"{name}.png"
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path.with_suffix(".png.tmp"), dpi=110, bbox_inches="tight", format="png")
+        os.replace(path.with_suffix(".png.tmp"), path)
+        plt.close(fig)
+        data = base64.b64encode(path.read_bytes()).decode()
+        self._parts.append(f'<figure><img alt="{html.escape(name)}" '
+                           f'src="data:image/png;base64,{data}"/>'
+                           f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+        self.figures.append(path.name)
+        return path
+
+    def write(self, summary: dict, spec: dict, target: str | None = None) -> dict:
+        summary = dict(summary)
+        summary["provenance"] = provenance(spec, target)
+        summary["figures"] = list(self.figures)
+        payload = json.dumps(_jsonable(summary), indent=2, allow_nan=False)
+        atomic_write(self.out_dir / "summary.json", payload)
+        spec_html = html.escape(json.dumps(_jsonable(spec), indent=2))
+        prov = summary["provenance"]
+        page = f"""<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>{html.escape(self.title)}</title>
+<style>body{{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
+color:#222}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;
+padding:.25em .6em;text-align:right}} th{{background:#f3f3f3}} img{{max-width:100%}}
+figcaption{{color:#555;font-size:.9em}} pre{{background:#f7f7f7;padding:1em;overflow:auto}}
+</style></head><body>
+<h1>{html.escape(self.title)}</h1>
+{''.join(self._parts)}
+<h2>Provenance</h2>
+<p>snn-antenna {html.escape(prov['snn_antenna_version'])}, Brian2
+{html.escape(prov['brian2_version'])} (target {html.escape(prov['brian2_target'])}),
+seed {prov['seed']}, Python {html.escape(prov['python'])}, created {prov['created']}.</p>
+<details><summary>Resolved spec</summary><pre>{spec_html}</pre></details>
+</body></html>
+"""
+        atomic_write(self.out_dir / "report.html", page)
+        return summary
+
+
+def _fmt(value) -> str:
+    if isinstance(value, (float, np.floating)):
+        return f"{value:.4g}"
+    return "" if value is None else str(value)

@@ -1,0 +1,85 @@
+"""Recordings: sampled signals that carry their sample rate and labelled events.
+
+A Recording is what every source produces (the antenna model, scenes, the serial bridge, a
+replay) and what every stage consumes, so a stage never has to guess the rate or the units.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from .errors import SpecError, check
+
+
+@dataclass(frozen=True)
+class Event:
+    """A labelled moment in a recording, e.g. a contact.
+
+    ``kind`` is ``"contact"`` for contacts; ``t_s`` the onset, ``duration_s`` how long it is
+    held; contacts carry ``distance_cm`` and ``material``.
+    """
+    kind: str
+    t_s: float
+    duration_s: float = 0.0
+    distance_cm: float | None = None
+    material: str | None = None
+
+    def as_dict(self) -> dict:
+        return {k: v for k, v in self.__dict__.items() if v is not None}
+
+
+@dataclass(frozen=True)
+class Recording:
+    """Samples of one or more channels at a fixed rate.
+
+    ``samples`` has shape (n_samples,) for one channel or (n_samples, n_channels);
+    ``units`` says what a sample is (``"g"`` for acceleration, ``"counts"`` for ADC counts,
+    ``"coded"`` for the square-wave coder output).
+    """
+    samples: np.ndarray
+    rate_hz: float
+    events: tuple[Event, ...] = ()
+    units: str = "g"
+    meta: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        validate_samples(self.samples, "samples")
+        check(np.isfinite(self.rate_hz) and self.rate_hz > 0, "rate_hz", self.rate_hz,
+              "a finite sample rate > 0 Hz")
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.samples.shape[0])
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_samples / self.rate_hz
+
+    @property
+    def t_s(self) -> np.ndarray:
+        return np.arange(self.n_samples) / self.rate_hz
+
+    @property
+    def contacts(self) -> tuple[Event, ...]:
+        return tuple(e for e in self.events if e.kind == "contact")
+
+    def with_samples(self, samples: np.ndarray, units: str | None = None) -> "Recording":
+        """The same recording (rate, events) with new samples, e.g. after a processing stage."""
+        return replace(self, samples=np.asarray(samples), units=units or self.units)
+
+
+def validate_samples(samples, name: str = "samples") -> np.ndarray:
+    """Refuse empty or non-finite signals before they reach a filter or a simulator."""
+    arr = np.asarray(samples)
+    if arr.ndim not in (1, 2) or arr.shape[0] == 0:
+        raise SpecError(name, f"array of shape {arr.shape}",
+                        "a non-empty array of shape (n_samples,) or (n_samples, n_channels)")
+    if not np.issubdtype(arr.dtype, np.number):
+        raise SpecError(name, f"dtype {arr.dtype}", "numeric samples")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        first = int(np.argwhere(bad)[0][0])
+        raise SpecError(name, f"{int(bad.sum())} non-finite values (first at sample {first})",
+                        "finite samples only; drop or interpolate NaN/inf samples first")
+    return arr

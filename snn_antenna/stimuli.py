@@ -1,0 +1,207 @@
+"""Stimuli: test waveforms and antenna scenes, each returned as a labelled Recording.
+
+Waveforms (``sine``, ``square``, ``chirp``, ``pulse_train``, ``silence``, ``dc``) are one
+channel in arbitrary units: they drive neurons directly when tuning k, b and I. Scenes model
+the antenna on the robot and return what the sensor board sends: two axes of ADC counts at its
+sample rate, with the contacts labelled.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import antenna
+from .errors import SpecError, check
+from .signals import Event, Recording
+
+
+def _time(duration_s: float, rate_hz: float) -> np.ndarray:
+    check(np.isfinite(rate_hz) and rate_hz > 0, "rate_hz", rate_hz, "a sample rate > 0 Hz")
+    check(np.isfinite(duration_s) and duration_s > 0, "duration_s", duration_s,
+          "a duration > 0 s")
+    return np.arange(int(round(duration_s * rate_hz))) / rate_hz
+
+
+def _check_freq(freq_hz: float, rate_hz: float, name: str = "freq_hz") -> None:
+    check(np.isfinite(freq_hz) and 0 < freq_hz < rate_hz / 2, name, freq_hz,
+          f"a frequency in (0, {rate_hz / 2:g}) Hz (below Nyquist at {rate_hz:g} Hz)")
+
+
+def sine(freq_hz: float, duration_s: float, rate_hz: float = 1000.0,
+         amplitude: float = 1.0, phase: float = 0.0) -> Recording:
+    t = _time(duration_s, rate_hz)
+    _check_freq(freq_hz, rate_hz)
+    return Recording(amplitude * np.sin(2 * np.pi * freq_hz * t + phase), rate_hz, units="a.u.")
+
+
+def square(freq_hz: float, duration_s: float, rate_hz: float = 1000.0,
+           amplitude: float = 1.0) -> Recording:
+    t = _time(duration_s, rate_hz)
+    _check_freq(freq_hz, rate_hz)
+    # Half-period index parity avoids sign(0) = 0 at the sampled zero crossings.
+    half = np.floor(2 * freq_hz * t).astype(int)
+    return Recording(amplitude * np.where(half % 2 == 0, 1.0, -1.0), rate_hz, units="a.u.")
+
+
+def chirp(f0_hz: float, f1_hz: float, duration_s: float, rate_hz: float = 1000.0,
+          amplitude: float = 1.0, method: str = "logarithmic") -> Recording:
+    from scipy.signal import chirp as scipy_chirp
+
+    t = _time(duration_s, rate_hz)
+    _check_freq(f0_hz, rate_hz, "f0_hz")
+    _check_freq(f1_hz, rate_hz, "f1_hz")
+    check(method in ("linear", "logarithmic"), "method", method, "'linear' or 'logarithmic'")
+    return Recording(amplitude * scipy_chirp(t, f0_hz, t[-1] if len(t) > 1 else 1.0, f1_hz,
+                                             method=method), rate_hz, units="a.u.")
+
+
+def pulse_train(rate_per_s: float, duration_s: float, rate_hz: float = 1000.0,
+                amplitude: float = 1.0, width_s: float | None = None) -> Recording:
+    t = _time(duration_s, rate_hz)
+    _check_freq(rate_per_s, rate_hz, "rate_per_s")
+    width_s = 1.0 / rate_hz if width_s is None else width_s
+    check(0 < width_s < 1.0 / rate_per_s, "width_s", width_s,
+          f"a pulse width in (0, {1.0 / rate_per_s:g}) s")
+    return Recording(amplitude * ((t * rate_per_s) % 1.0 < width_s * rate_per_s), rate_hz,
+                     units="a.u.")
+
+
+def silence(duration_s: float, rate_hz: float = 1000.0) -> Recording:
+    return Recording(np.zeros_like(_time(duration_s, rate_hz)), rate_hz, units="a.u.")
+
+
+def dc(level: float, duration_s: float, rate_hz: float = 1000.0) -> Recording:
+    check(np.isfinite(level), "level", level, "a finite level")
+    return Recording(np.full_like(_time(duration_s, rate_hz), level), rate_hz, units="a.u.")
+
+
+def self_motion(speed_cm_s: float, duration_s: float, rate_hz: float = 1000.0,
+                seed: int = 0, terrain: str = "flat") -> Recording:
+    """The probe's own oscillation while the robot drives, in g along the main axis."""
+    t = _time(duration_s, rate_hz)
+    rng = np.random.default_rng(seed)
+    rms = antenna.self_motion_rms_g(speed_cm_s)
+    return Recording(_motion(np.full(len(t), rms), np.full(len(t), antenna.NATURAL_HZ),
+                             np.full(len(t), antenna.NATURAL_TAU_S), speed_cm_s, terrain,
+                             rate_hz, rng), rate_hz)
+
+
+TERRAIN_NOISE_G_PER_CM_S = {"flat": 0.002, "rough": 0.01}  # broadband jolts, ∝ speed (assumed)
+
+
+def _motion(rms_g, freq_hz, tau_s, speed_cm_s, terrain, rate_hz, rng) -> np.ndarray:
+    """Driven ringing in segments of constant mode, plus broadband terrain noise."""
+    check(terrain in TERRAIN_NOISE_G_PER_CM_S, "terrain", terrain,
+          f"one of {sorted(TERRAIN_NOISE_G_PER_CM_S)}")
+    n = len(rms_g)
+    out = np.zeros(n)
+    # Segment boundaries where the ringing mode changes (contact begins or ends).
+    change = np.flatnonzero(np.diff(freq_hz) != 0) + 1
+    for lo, hi in zip(np.r_[0, change], np.r_[change, n]):
+        out[lo:hi] = antenna.resonant_noise(freq_hz[lo], tau_s[lo], rms_g[lo:hi], rate_hz, rng,
+                                            hi - lo)
+    speed = np.broadcast_to(speed_cm_s, (n,))
+    return out + rng.standard_normal(n) * TERRAIN_NOISE_G_PER_CM_S[terrain] * speed
+
+
+@dataclass
+class Contact:
+    t_s: float
+    distance_cm: float
+    material: str = "wood"
+    hold_s: float = 1.0
+
+
+@dataclass
+class RobotScene:
+    """A robot driving at ``speed_cm_s`` whose antenna touches objects.
+
+    On each contact the rod is clamped at ``distance_cm`` for ``hold_s``: the impact makes it
+    ring in its two modes, and while the robot still moves its shaking drives the clamped rod at
+    its new low mode instead of the free rod's 7.8 Hz. The robot stops ``stop_after_contact_s``
+    after the first contact (the control layer's reflex; ``None`` keeps driving); once stopped
+    there is no more self-motion and the ringing decays.
+    """
+    duration_s: float = 8.0
+    rate_hz: float = 1000.0
+    speed_cm_s: float = 12.0
+    terrain: str = "flat"
+    contacts: list[Contact] = field(default_factory=list)
+    stop_after_contact_s: float | None = 0.3
+    orientation_deg: float = 30.0
+    impact_g: float = 2.0
+    sensor_noise_g: float = 0.01
+    adc_bits: int = 10
+    full_scale_g: float = 18.0
+
+    def validate(self) -> None:
+        _time(self.duration_s, self.rate_hz)
+        antenna.self_motion_rms_g(self.speed_cm_s)
+        check(np.isfinite(self.sensor_noise_g) and self.sensor_noise_g >= 0, "sensor_noise_g",
+              self.sensor_noise_g, "a noise level >= 0 g")
+        check(np.isfinite(self.impact_g) and self.impact_g > 0, "impact_g", self.impact_g,
+              "an impact amplitude > 0 g")
+        for i, c in enumerate(self.contacts):
+            check(0 <= c.t_s < self.duration_s, f"contacts[{i}].t_s", c.t_s,
+                  f"a time in [0, {self.duration_s}) s")
+            check(np.isfinite(c.hold_s) and c.hold_s > 0, f"contacts[{i}].hold_s", c.hold_s,
+                  "a hold time > 0 s")
+            antenna.check_distance(c.distance_cm)
+            antenna.check_material(c.material)
+            f_low = float(antenna.low_mode_hz(c.distance_cm))
+            check(f_low < 0.45 * self.rate_hz, "rate_hz", self.rate_hz,
+                  f"a sample rate above {f_low / 0.45:.0f} Hz for the contact at "
+                  f"{c.distance_cm} cm")
+        antenna.ADC(self.adc_bits, self.full_scale_g)
+
+    def speed_profile(self) -> np.ndarray:
+        t = np.arange(int(round(self.duration_s * self.rate_hz))) / self.rate_hz
+        speed = np.full(len(t), float(self.speed_cm_s))
+        if self.contacts and self.stop_after_contact_s is not None:
+            first = min(c.t_s for c in self.contacts)
+            speed[t >= first + self.stop_after_contact_s] = 0.0
+        return speed
+
+    def generate(self, seed: int = 0) -> Recording:
+        self.validate()
+        rng = np.random.default_rng(seed)
+        n = int(round(self.duration_s * self.rate_hz))
+        t = np.arange(n) / self.rate_hz
+        speed = self.speed_profile()
+        freq = np.full(n, antenna.NATURAL_HZ)
+        tau = np.full(n, antenna.NATURAL_TAU_S)
+        for c in self.contacts:
+            held = (t >= c.t_s) & (t < c.t_s + c.hold_s)
+            freq[held] = float(antenna.low_mode_hz(c.distance_cm))
+            tau[held] = float(antenna.decay_times_s(c.distance_cm, c.material)[0])
+        main = _motion(antenna.self_motion_rms_g(speed), freq, tau, speed, self.terrain,
+                       self.rate_hz, rng)
+        events = []
+        for c in self.contacts:
+            i0 = int(round(c.t_s * self.rate_hz))
+            i1 = min(n, int(round((c.t_s + c.hold_s) * self.rate_hz)))
+            main[i0:i1] += antenna.contact_ringing(c.distance_cm, c.material, self.rate_hz,
+                                                   i1 - i0, rng, self.impact_g)
+            events.append(Event("contact", c.t_s, c.hold_s, c.distance_cm, c.material))
+        xy = antenna.project(main, self.orientation_deg)
+        xy += rng.standard_normal(xy.shape) * self.sensor_noise_g
+        adc = antenna.ADC(self.adc_bits, self.full_scale_g)
+        return Recording(adc.to_counts(xy), self.rate_hz, tuple(events), units="counts",
+                         meta={"adc_bits": self.adc_bits, "full_scale_g": self.full_scale_g,
+                               "speed_cm_s": speed})
+
+
+def scene_from_spec(spec: dict) -> RobotScene:
+    """Build a scene from the ``[stimulus]`` table of a spec (already schema-checked)."""
+    spec = dict(spec)
+    kind = spec.pop("kind", "robot")
+    if kind != "robot":
+        raise SpecError("stimulus.kind", kind, "'robot'")
+    from .spec import check_section
+
+    contacts = []
+    for i, table in enumerate(spec.pop("contacts", [])):
+        check_section({f"contacts[{i}]": table}, f"contacts[{i}]", Contact)
+        contacts.append(Contact(**table))
+    return RobotScene(contacts=contacts, **spec)
