@@ -1,0 +1,193 @@
+"""The bridge over real links: pseudo-terminals, socat and loop://, with injected faults."""
+import os
+import shutil
+import subprocess
+import threading
+import time
+
+import numpy as np
+import pytest
+import serial
+
+from snn_antenna.bridge import load_recording
+from snn_antenna.bridge.emulator import Emulator, FaultPlan, PtyLink, SerialLink
+from snn_antenna.bridge.protocol import encode_binary
+from snn_antenna.bridge.recorder import Recorder
+from snn_antenna.bridge.replay import ReplaySource
+from snn_antenna.bridge.source import PortError, SerialSource, run_source
+
+COUNT_KEYS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
+              "reconnects")
+
+
+def random_counts(n, seed=0):
+    return np.random.default_rng(seed).integers(0, 1024, (n, 2))
+
+
+class Session:
+    """A SerialSource feeding a Recorder on a background thread, stopped on demand."""
+
+    def __init__(self, url, out_dir, port=None, **source_kwargs):
+        self.source = SerialSource(url, port=port, **source_kwargs).start()
+        self.recorder = Recorder(out_dir, port=url, wire_format=self.source.decoder.wire_format,
+                                 baudrate=250000)
+        self.stop = threading.Event()
+        self.error = None
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        try:
+            run_source(self.source, [self.recorder], stop=self.stop, no_data_timeout_s=20)
+        except Exception as exc:        # surfaced by finish()
+            self.error = exc
+
+    def finish(self, settle_s=0.3):
+        time.sleep(settle_s)
+        self.stop.set()
+        self.thread.join(10)
+        self.source.stop()
+        self.recorder.close()
+        if self.error:
+            raise self.error
+        return load_recording(self.recorder.dir)
+
+
+def assert_recording_matches(rec, log):
+    sent = np.array([tuple(s) for s in log.written]).reshape(-1, 3)
+    got = np.column_stack([rec.seq, rec.x, rec.y])
+    assert got.shape == sent.shape
+    assert np.array_equal(got, sent), "recorded samples differ from the valid frames sent"
+    counts = {k: rec.counts[k] for k in COUNT_KEYS}
+    assert counts == log.expected_counts()
+    assert rec.complete and rec.torn_bytes == 0
+    assert len(rec.gaps) == rec.counts["gaps"]
+
+
+def test_pty_stream_with_every_fault_is_recorded_exactly(tmp_path):
+    plan = FaultPlan(garbage=4, drop=4, bitflip=4, range=3, stall=2, disconnect=1,
+                     stall_s=0.15, outage_s=0.25)
+    link = PtyLink(tmp_path / "ttyEMU")
+    emulator = Emulator(random_counts(2500), faults=plan, seed=11)
+    session = Session(link.path, tmp_path / "rec")
+    log = emulator.run(link)
+    rec = session.finish()
+    link.close()
+    injected = log.injected()
+    # Everything planned happened (faults planned inside an outage are legitimately skipped).
+    assert injected["disconnect"] == 1 and injected["bitflip"] >= 3 and injected["garbage"] >= 3
+    assert_recording_matches(rec, log)
+    assert rec.counts["reconnects"] == 1 and rec.counts["gaps"] >= 1
+    events = [e["event"] for e in rec.meta["link_events"]]
+    assert events == ["opened", "lost", "reconnected"]
+    # raw.bin holds every byte the port delivered.
+    assert rec.raw_path.stat().st_size == rec.counts["bytes"]
+
+
+def test_replay_reproduces_samples_and_counts(tmp_path):
+    link = PtyLink(tmp_path / "tty")
+    emulator = Emulator(random_counts(1500, 2), seed=5,
+                        faults=FaultPlan(garbage=3, drop=2, bitflip=2, disconnect=1,
+                                         outage_s=0.1))
+    session = Session(link.path, tmp_path / "rec")
+    emulator.run(link)
+    rec = session.finish()
+    link.close()
+    replay = ReplaySource(tmp_path / "rec").start()
+    samples = []
+
+    class Collect:
+        def handle(self, batch):
+            samples.extend(batch.samples)
+
+        def idle(self):
+            pass
+
+    result = run_source(replay, [Collect()], no_data_timeout_s=60)
+    assert np.array_equal(np.array(samples), np.column_stack([rec.seq, rec.x, rec.y]))
+    assert {k: result.counts[k] for k in COUNT_KEYS} == {k: rec.counts[k] for k in COUNT_KEYS}
+
+
+def test_loop_url_ascii_with_faults(tmp_path):
+    port = serial.serial_for_url("loop://", timeout=0.05)
+    plan = FaultPlan(garbage=3, drop=3, range=2, stall=1, stall_s=0.1)
+    emulator = Emulator(random_counts(800, 3), faults=plan, seed=2, wire_format="ascii")
+    session = Session("loop://", tmp_path / "rec", port=port, wire_format="ascii")
+    log = emulator.run(SerialLink(port), realtime=False)
+    rec = session.finish()
+    assert log.injected()["garbage"] == 3
+    assert_recording_matches(rec, log)
+
+
+def test_boot_noise_after_open_is_discarded_not_counted(tmp_path):
+    """A board reset by DTR prints bootloader noise, then frames: no errors, nothing lost."""
+    port = serial.serial_for_url("loop://", timeout=0.05)
+    session = Session("loop://", tmp_path / "rec", port=port)
+    port.write(b"\x1b[0m boot v1.2\r\n\xff\xfe" + encode_binary(5, 1, 2)[3:])
+    port.write(b"".join(encode_binary(s, s, s) for s in range(10, 30)))
+    rec = session.finish()
+    assert rec.seq.tolist() == list(range(10, 30))
+    assert rec.counts["framing_errors"] == rec.counts["crc_errors"] == 0
+    assert rec.meta["counts"]["noise_bytes"] > 0
+
+
+@pytest.mark.skipif(shutil.which("socat") is None, reason="socat is not installed "
+                    "(Debian package socat; .ci/run installs it)")
+def test_socat_port_vanishes_and_returns_at_the_same_path(tmp_path):
+    """A socat pty pair; socat is killed (its links vanish) and restarted at the same paths."""
+    dev, board = tmp_path / "ttyUSB0", tmp_path / "board"
+
+    def start_socat():
+        proc = subprocess.Popen(["socat", f"PTY,raw,echo=0,link={dev}",
+                                 f"PTY,raw,echo=0,link={board}"], stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 5
+        while not (dev.exists() and board.exists()):
+            assert time.monotonic() < deadline, "socat did not create its ptys"
+            time.sleep(0.01)
+        return proc
+
+    socat = start_socat()
+    session = Session(str(dev), tmp_path / "rec", backoff_initial_s=0.02)
+    seq = 0
+
+    def send(n):
+        nonlocal seq
+        with serial.serial_for_url(str(board)) as out:
+            for _ in range(n):
+                out.write(encode_binary(seq, seq % 1024, 3))
+                seq += 1
+                time.sleep(0.001)
+        time.sleep(0.2)                 # let socat and the reader pass the last bytes on
+
+    try:
+        send(300)
+        before = seq
+        socat.terminate()
+        socat.wait(5)
+        time.sleep(0.2)
+        assert not dev.exists()         # the path really vanished
+        seq += 50                       # the board kept sampling while the port was gone
+        socat = start_socat()
+        time.sleep(0.5)                 # the reader's backoff finds the port again
+        send(300)
+    finally:
+        socat.terminate()
+        socat.wait(5)
+    rec = session.finish(settle_s=0)
+    assert rec.counts["reconnects"] == 1
+    assert rec.seq[:before].tolist() == list(range(before))
+    assert rec.seq[before:].tolist() == list(range(before + 50, seq))
+    assert rec.counts["gaps"] == 1 and rec.counts["lost_samples"] == 50
+
+
+def test_port_gone_for_good_fails_with_a_message(tmp_path):
+    link = PtyLink(tmp_path / "tty")
+    source = SerialSource(link.path, reconnect_timeout_s=0.3).start()
+    link.write(b"".join(encode_binary(s, 1, 1) for s in range(5)), threading.Event())
+    time.sleep(0.1)
+    link.disconnect()
+    t0 = time.monotonic()
+    with pytest.raises(PortError, match="disappeared and did not come back within 0.3 s"):
+        run_source(source, [], no_data_timeout_s=10)
+    assert time.monotonic() - t0 < 3
+    source.stop()
