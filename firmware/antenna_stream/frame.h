@@ -1,0 +1,22 @@
+/* The wire frame, shared by the firmware and the host-side test (see snn_antenna/bridge/protocol.py).
+ *
+ * payload (little-endian): seq u16, x u16, y u16; then crc u16 = CRC-16/XMODEM of those 6 bytes.
+ * The 8 bytes are COBS-encoded (9 bytes, no zero inside) and followed by one 0x00 delimiter.
+ */
+#ifndef ANTENNA_FRAME_H
+#define ANTENNA_FRAME_H
+
+#include <stdint.h>
+
+#define FRAME_PAYLOAD_LEN 8u
+#define FRAME_WIRE_LEN (FRAME_PAYLOAD_LEN + 2u) /* COBS overhead byte + delimiter */
+
+uint16_t frame_crc16_xmodem(const uint8_t *data, uint8_t len);
+
+/* COBS-encode len (< 254) bytes into out (len + 1 bytes); returns the encoded length. */
+uint8_t frame_cobs_encode(const uint8_t *data, uint8_t len, uint8_t *out);
+
+/* Build the complete wire frame, delimiter included; returns FRAME_WIRE_LEN. */
+uint8_t frame_encode(uint16_t seq, uint16_t x, uint16_t y, uint8_t out[FRAME_WIRE_LEN]);
+
+#endif
