@@ -12,6 +12,9 @@ class SpecError(ValueError):
         self.field, self.value, self.accepted = field, value, accepted
         super().__init__(f"{field} = {value!r} is not accepted: {accepted}")
 
+    def __reduce__(self):  # errors cross process boundaries (Dask workers) intact
+        return type(self), (self.field, self.value, self.accepted)
+
 
 class NumericalInstabilityError(ArithmeticError):
     """A simulation produced non-finite or runaway state.
@@ -30,6 +33,10 @@ class NumericalInstabilityError(ArithmeticError):
         super().__init__(
             f"neuron {neuron} ({pretty}) became non-finite or ran away at t = {t_ms:.2f} ms "
             f"with method={method!r}, dt={dt_ms:g} ms{hint}")
+
+    def __reduce__(self):
+        return type(self), (self.neuron, self.params, self.dt_ms, self.method, self.t_ms,
+                            self.safe_dt_ms)
 
 
 def check(condition: bool, field: str, value, accepted: str) -> None:

@@ -1,0 +1,153 @@
+"""The result store of a sweep: one xarray Dataset in one zarr store, written chunk by chunk.
+
+    store = SweepStore("out/tuning/results.zarr")
+    done = store.prepare(coords, outputs, block_shape, attrs, fresh=False)  # pre-create or resume
+    store.write_chunk(chunk_id, region, {"spike_count": block})            # from any worker
+    ds = store.load()
+
+``prepare`` writes the metadata of every variable (dims = the grid's axes, each a named
+coordinate) without data, so workers can write their own regions (``to_zarr(region=...)``)
+in parallel without locks: a sweep chunk is exactly one zarr chunk of every variable.
+
+After a chunk's data are written, its element of the ``chunk_done`` array (zarr chunks of
+one element, so workers never share a file; zarr's local store writes each file by an atomic
+rename) is set. A chunk without its mark is redone on resume, whatever part of its data had
+reached the disk; a marked chunk is never recomputed. The store's ``fingerprint`` attribute
+(grid, outputs, chunking and the study's resolved settings) must match to resume: a changed
+spec is refused, ``fresh=True`` starts over.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SpecError
+
+DONE = "chunk_done"
+
+
+@dataclass(frozen=True)
+class Output:
+    """One result variable of a sweep: a value per grid point."""
+    dtype: str = "f8"
+    units: str = ""
+    long_name: str = ""
+
+
+def fingerprint(coords: dict, outputs: dict, block_shape, settings) -> str:
+    h = hashlib.sha256()
+    for name, values in coords.items():
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(values, dtype=float).tobytes())
+    h.update(json.dumps({k: [o.dtype, o.units] for k, o in outputs.items()}).encode())
+    h.update(json.dumps(list(map(int, block_shape))).encode())
+    h.update(json.dumps(settings, sort_keys=True, default=str).encode())
+    return h.hexdigest()[:16]
+
+
+class SweepStore:
+    """A zarr store holding one sweep (see the module docstring)."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+
+    # -- set-up (client side) -----------------------------------------------------------------
+    def prepare(self, coords: dict, outputs: dict[str, Output], block_shape, n_chunks: int,
+                attrs: dict | None = None, settings=None, fresh: bool = False) -> set[int]:
+        """Create the store, or reopen a matching one; return the ids of finished chunks."""
+        import dask.array as da
+        import xarray as xr
+
+        attrs = dict(attrs or {})
+        key = fingerprint(coords, outputs, block_shape, settings)
+        if fresh and self.path.exists():
+            shutil.rmtree(self.path)
+        if self.path.exists():
+            existing = self._read_attrs()
+            if existing.get("fingerprint") != key:
+                raise SpecError("store", str(self.path),
+                                "a store written by the same sweep (grid, outputs, chunking "
+                                "and settings all unchanged); this one holds a different "
+                                "sweep: pass --fresh to start over, or choose another --out")
+            return self.done_chunks()
+        dims = tuple(coords)
+        shape = tuple(len(v) for v in coords.values())
+        data_vars = {
+            name: (dims, da.zeros(shape, dtype=out.dtype, chunks=tuple(block_shape)),
+                   {"units": out.units, "long_name": out.long_name or name})
+            for name, out in outputs.items()}
+        data_vars[DONE] = (("sweep_chunk",), da.zeros(n_chunks, dtype="u1", chunks=1),
+                           {"long_name": "1 once the chunk's results are complete"})
+        ds = xr.Dataset(data_vars, coords={name: (name, np.asarray(v)) for name, v in
+                                           coords.items()},
+                        attrs={**{k: _attr(v) for k, v in attrs.items()}, "fingerprint": key,
+                               "block_shape": list(map(int, block_shape))})
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(self.path.name + ".creating")
+        if tmp.exists():
+            shutil.rmtree(tmp)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds.to_zarr(tmp, compute=False, mode="w", zarr_format=3, consolidated=False)
+        tmp.rename(self.path)  # a half-created store is never mistaken for a sweep
+        return set()
+
+    def _read_attrs(self) -> dict:
+        import zarr
+        try:
+            return dict(zarr.open_group(self.path, mode="r").attrs)
+        except Exception as exc:  # not a zarr store at all
+            raise SpecError("store", str(self.path),
+                            f"a zarr store written by a sweep ({exc}); pass --fresh to "
+                            "replace it") from None
+
+    def done_chunks(self) -> set[int]:
+        import zarr
+        flags = zarr.open_array(self.path / DONE, mode="r")[:]
+        return set(map(int, np.flatnonzero(flags)))
+
+    # -- writing (worker side) ------------------------------------------------------------------
+    def write_chunk(self, chunk_id: int, region: dict[str, slice], data: dict[str, np.ndarray]):
+        """Write one chunk's block of every output, then mark the chunk done."""
+        import xarray as xr
+        import zarr
+
+        dims = tuple(region)
+        ds = xr.Dataset({name: (dims, np.asarray(block)) for name, block in data.items()})
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds.to_zarr(self.path, region=dict(region), mode="r+", consolidated=False)
+        zarr.open_array(self.path / DONE, mode="r+")[chunk_id] = 1
+
+    # -- reading --------------------------------------------------------------------------------
+    def load(self):
+        """The sweep as an in-memory xarray Dataset (without the bookkeeping array)."""
+        import xarray as xr
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds = xr.open_zarr(self.path, consolidated=False).load()
+        ds.attrs = {k: _unattr(v) for k, v in ds.attrs.items()}
+        return ds.drop_vars(DONE)
+
+
+def _attr(value):
+    """zarr attributes are JSON: store nested settings as JSON text."""
+    if isinstance(value, (dict, list, tuple)):
+        return json.dumps(value, default=str)
+    return value
+
+
+def _unattr(value):
+    if isinstance(value, str) and value[:1] in "[{":
+        try:
+            return json.loads(value)
+        except json.JSONDecodeError:
+            return value
+    return value
