@@ -76,22 +76,25 @@ class ResonatorArray:
               f"{self.band_hz[1]:g} Hz ({MIN_SAMPLES_PER_CYCLE} samples per cycle)")
 
     # -- building ---------------------------------------------------------------------------
-    def _build(self, input_expr: str, namespace: dict, first_input: float = 0.0):
+    def _build(self, input_expr: str, extra: str, namespace: dict):
         import brian2 as b2
 
         b2.prefs.codegen.target = self.target
         group = b2.NeuronGroup(
             self.n_neurons,
-            neurons.equations("resonator", input_expr) + "\nspike_count : integer",
+            neurons.equations("resonator", input_expr, extra) + "\nspike_count : integer",
             threshold=f"v >= {neurons.V_PEAK}",
             reset="v = c; u = u + d; spike_count += 1",
-            method=self.method, namespace=namespace, dt=self.dt_ms * b2.ms,
+            method=neurons.brian_method(self.method), namespace=namespace,
+            dt=self.dt_ms * b2.ms,
             name="resonators")
         preset = neurons.PRESETS["resonator"]
         group.k = self.k
         group.a, group.c, group.d = preset.a, preset.c, preset.d
         group.b = self.b
-        v0, u0 = neurons.resting_state("resonator", self.b, first_input)
+        # At rest for zero input, the coder's output for silence, in both forms: a stream's
+        # first sample is not known when the group is built.
+        v0, u0 = neurons.resting_state("resonator", self.b)
         group.v, group.u = v0, u0
         return group
 
@@ -108,7 +111,7 @@ class ResonatorArray:
         self.check_rate(coded.rate_hz)
         b2.start_scope()
         drive = b2.TimedArray(samples, dt=b2.second / coded.rate_hz, name="drive")
-        group = self._build("drive(t) : 1", {"drive": drive}, float(samples[0]))
+        group = self._build("drive(t)", "", {"drive": drive})
         spikes = b2.SpikeMonitor(group, name="spikes")
         guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method,
                                           check_every_ms)
@@ -139,7 +142,7 @@ class ResonatorArray:
         check(samples_per_window >= 1, "window_s", window_s,
               f"a window of at least one sample (1/{rate_hz:g} s)")
         b2.start_scope()
-        group = self._build("I_ext : 1", {})
+        group = self._build("I_ext", "I_ext : 1", {})
         guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method)
         I_ext = group.variables["I_ext"].get_value()  # the array behind the variable
         counts = group.variables["spike_count"].get_value()
@@ -150,17 +153,19 @@ class ResonatorArray:
         # as the TimedArray of the offline form switches value at the sample boundary.
         @b2.network_operation(dt=b2.second / rate_hz, when="start")
         def next_sample(t):
+            # Every step before this one has been integrated: a window that ends at this
+            # sample boundary is complete.
+            if stats.samples and stats.samples % samples_per_window == 0:
+                stats.windows += 1
+                if on_window is not None:
+                    on_window(stats.samples / rate_hz - window_s, counts.copy())
+                counts[:] = 0
             x = feed.next()
             if x is None:
                 net.stop()
                 return
             I_ext[:] = x
             stats.samples += 1
-            if stats.samples % samples_per_window == 0:
-                stats.windows += 1
-                if on_window is not None:
-                    on_window(stats.samples / rate_hz - window_s, counts.copy())
-                counts[:] = 0
 
         net = b2.Network(group, guard, next_sample)
         t0 = time.perf_counter()

@@ -51,14 +51,40 @@ PRESETS: dict[str, Preset] = {
 
 V_PEAK = 30.0  # spike cut-off, the model's threshold
 
-# Integration methods whose results this project has checked. Izhikevich's own update order is
-# not a Brian2 state updater; the speed/accuracy study measures it separately.
-METHODS = ("euler", "rk2", "rk4")
+# Integration methods whose results this project has measured (studies/speed_accuracy.toml):
+# Brian2's own, and "izhikevich", the update order of Izhikevich's published code (v in two
+# half steps, then u from the new v), a Brian2 state updater defined below.
+METHODS = ("euler", "rk2", "rk4", "izhikevich")
 
-# Largest k·dt (model milliseconds per step) at which each method stays finite for the
-# resonator driven by the coder's amplitudes (REFERENCE.md: rk4 went non-finite from k·dt ≈ 1,
-# rk2 at 16, euler stayed finite). Specs beyond this are refused unless forced.
-MAX_STABLE_K_DT = {"euler": 8.0, "rk2": 8.0, "rk4": 0.5}
+# Largest k·dt (model milliseconds per step) at which each method stays finite for every
+# constant drive I in [-50, 50] (the stability map of studies/speed_accuracy.toml, measured
+# by ``snn_antenna.accuracy.stability_map``; tests/test_stability.py re-checks both sides of
+# each limit). Specs beyond it are refused unless forced.
+MAX_STABLE_K_DT = {"euler": 8.0, "rk2": 8.0, "rk4": 0.5, "izhikevich": 8.0}
+
+
+def brian_method(method: str):
+    """What to pass as a NeuronGroup's ``method`` for one of ``METHODS``."""
+    check(method in METHODS, "method", method, f"one of {list(METHODS)}")
+    return izhikevich_order if method == "izhikevich" else method
+
+
+def izhikevich_order(equations, variables=None, method_options=None) -> str:
+    """Brian2 state updater in the order of Izhikevich's own code (Izhikevich 2003).
+
+    His MATLAB loop advances v in two Euler half steps "for numerical stability", then u by
+    one Euler step from the new v, with I held over the step. Brian2's ``euler`` updates v
+    and u together from the old values; at coarse dt the two differ.
+    """
+    from brian2.stateupdaters.base import UnsupportedEquationsException
+
+    f = {var: str(expr) for var, expr in equations.get_substituted_expressions(variables)}
+    if set(f) != {"v", "u"}:
+        raise UnsupportedEquationsException("the Izhikevich order needs exactly dv/dt and du/dt")
+    return (f"v = v + 0.5*dt*({f['v']})\n"
+            f"v = v + 0.5*dt*({f['v']})\n"
+            f"u = u + dt*({f['u']})")
+
 
 # Preferred frequency of the k = 1 resonator. Linearising at rest gives a damped oscillation
 # at 24.5 Hz (τ ≈ 19 ms); the neuron, driven by the square-wave coder's ±0.15 near threshold,
@@ -69,14 +95,20 @@ LINEAR_HZ_PER_K = 24.52
 DRIVEN_HZ_PER_K = 20.4
 
 
-def equations(preset: str | Preset = "resonator", input_expr: str = "I_ext : 1") -> str:
-    """Brian2 equations of an Izhikevich neuron; ``input_expr`` defines ``I``'s source."""
+def equations(preset: str | Preset = "resonator", input_expr: str = "I_ext",
+              extra: str = "I_ext : 1") -> str:
+    """Brian2 equations of an Izhikevich neuron.
+
+    ``I = input_expr`` is the input current (e.g. ``drive(t)`` from a TimedArray, or a
+    parameter ``I_ext`` written from outside); ``extra`` declares what it refers to.
+    """
     p = PRESETS[preset] if isinstance(preset, str) else preset
     p2, p1, p0 = p.quadratic
     return f"""
     dv/dt = k * ({p2!r}*v**2 + {p1!r}*v + {p0!r} - u + I) / ms : 1
     du/dt = a * k * (b*v - u) / ms : 1
-    I = {input_expr}
+    I = {input_expr} : 1
+    {extra}
     k : 1 (constant)
     a : 1 (constant)
     b : 1 (constant)
@@ -213,22 +245,23 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
                         f"{max_stable_dt_ms(values['k'], method):.4g} ms), or force=True")
 
     if current.ndim == 1:
-        input_expr = "drive(t) : 1"
+        input_expr, extra = "drive(t)", ""
         index = None
     else:
         index = np.arange(n_neurons) if input_index is None else np.asarray(input_index)
         if index.shape != (n_neurons,) or index.min() < 0 or index.max() >= n_inputs:
             raise SpecError("input_index", f"array of shape {index.shape}",
                             f"one column index in [0, {n_inputs}) per neuron")
-        input_expr = "drive(t, input_index) : 1\ninput_index : integer (constant)"
+        input_expr, extra = "drive(t, input_index)", "input_index : integer (constant)"
 
     b2.start_scope()
     b2.prefs.codegen.target = target
     b2.defaultclock.dt = dt_ms * b2.ms
     drive = b2.TimedArray(current, dt=input_dt_ms * b2.ms, name="drive")
-    group = b2.NeuronGroup(n_neurons, equations(preset_obj, input_expr),
+    group = b2.NeuronGroup(n_neurons, equations(preset_obj, input_expr, extra),
                            threshold=f"v >= {V_PEAK}", reset="v = c; u = u + d",
-                           method=method, namespace={"drive": drive}, name="neurons")
+                           method=brian_method(method), namespace={"drive": drive},
+                           name="neurons")
     for name, arr in values.items():
         setattr(group, name, arr)
     if index is not None:

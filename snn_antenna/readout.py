@@ -16,10 +16,20 @@ from . import antenna
 from .errors import check
 
 
-def dominant_hz(rates: xr.DataArray) -> xr.DataArray:
-    """Preferred frequency of the most active neuron per window (0 where all are silent)."""
-    idx = rates.argmax("neuron_hz")
-    out = rates.neuron_hz[idx].where(rates.max("neuron_hz") > 0, 0.0)
+def dominant_hz(rates: xr.DataArray, tie: float = 0.9) -> xr.DataArray:
+    """Preferred frequency of the most active neuron (0 where all neurons are silent).
+
+    A resonator fires once per input cycle across the plateau of its tuning curve, so several
+    neighbours often tie; the neurons within ``tie`` × the maximum rate form the plateau and
+    the one nearest its geometric centre is the dominant neuron (a plain argmax would always
+    pick the plateau's lowest neuron). Reduces over ``neuron_hz``; other dims are kept.
+    """
+    peak = rates.max("neuron_hz")
+    plateau = rates.where(rates >= tie * peak, 0.0)
+    centre = np.log(centroid_hz(plateau).where(peak > 0, 1.0))
+    distance = np.abs(np.log(rates.neuron_hz) - centre)
+    idx = distance.where(plateau > 0).fillna(np.inf).argmin("neuron_hz")
+    out = rates.neuron_hz[idx].where(peak > 0, 0.0)
     return out.drop_vars("neuron_hz").rename("dominant_hz").assign_attrs(units="Hz")
 
 

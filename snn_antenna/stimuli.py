@@ -137,6 +137,9 @@ class RobotScene:
 
     def validate(self) -> None:
         _time(self.duration_s, self.rate_hz)
+        check(antenna.NATURAL_HZ < 0.45 * self.rate_hz, "rate_hz", self.rate_hz,
+              f"a sample rate above {antenna.NATURAL_HZ / 0.45:.0f} Hz (the probe's "
+              f"self-oscillation at {antenna.NATURAL_HZ} Hz must be sampled)")
         antenna.self_motion_rms_g(self.speed_cm_s)
         check(np.isfinite(self.sensor_noise_g) and self.sensor_noise_g >= 0, "sensor_noise_g",
               self.sensor_noise_g, "a noise level >= 0 g")

@@ -71,7 +71,7 @@ def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
     contact_dominant = None
     if match is not None:
         episode = rates.sel(window_s=slice(match.onset_s, match.end_s - 1e-9)).sum("window_s")
-        contact_dominant = float(episode.neuron_hz.values[int(np.argmax(episode.values))])
+        contact_dominant = float(dominant_hz(episode))
     summary = {
         "motion_dominant_hz": motion_hz,
         "contact_dominant_hz": contact_dominant,

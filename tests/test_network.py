@@ -1,0 +1,73 @@
+"""The resonator array: offline and streaming agree; rate maps and read-out."""
+import numpy as np
+import pytest
+
+from snn_antenna.errors import SpecError
+from snn_antenna.network import ResonatorArray, rate_map
+from snn_antenna.readout import ContactDetector, centroid_hz, dominant_hz
+from snn_antenna.signals import Recording
+from snn_antenna import stimuli
+
+
+def coded_test_input():
+    """Two seconds at 8 Hz then one at 16 Hz, coded as the coder would (±0.15)."""
+    a = stimuli.square(8.0, 2.0, amplitude=0.15).samples
+    b = stimuli.square(16.0, 1.0, amplitude=0.15).samples
+    return Recording(np.r_[a, b], 1000.0, units="coded")
+
+
+def test_streaming_gives_the_same_spikes_as_offline():
+    array = ResonatorArray(target="numpy", n_neurons=12)
+    coded = coded_test_input()
+    offline = array.run(coded, window_s=0.1).rate_map
+    windows = []
+    chunks = np.array_split(coded.samples, [7, 333, 1500, 2999])
+    stats = array.stream(iter(chunks), coded.rate_hz, window_s=0.1,
+                         on_window=lambda t, counts: windows.append(counts))
+    streamed = np.stack(windows, axis=1) / 0.1
+    assert stats.samples == coded.n_samples and stats.windows == 30
+    np.testing.assert_array_equal(streamed, offline.values)
+    assert offline.values.sum() > 20
+
+
+def test_rate_map_is_labelled_and_read_out_follows_the_input_frequency():
+    array = ResonatorArray(target="numpy")
+    rates = array.run(coded_test_input(), window_s=0.25).rate_map
+    assert rates.dims == ("neuron_hz", "window_s")
+    assert rates.neuron_hz.attrs["units"] == "Hz" and rates.attrs["units"] == "Hz"
+    early = float(centroid_hz(rates.sel(window_s=slice(0.5, 1.99)).sum("window_s")))
+    late = float(centroid_hz(rates.sel(window_s=slice(2.0, 3.0)).sum("window_s")))
+    assert early == pytest.approx(8.0, rel=0.07) and late == pytest.approx(16.0, rel=0.07)
+    dom = dominant_hz(rates)
+    assert np.all(dom.sel(window_s=slice(2.25, 3.0)) > 12)
+
+
+def test_contact_detector_finds_the_shift_above_the_motion_band():
+    hz = np.geomspace(7, 30, 24)
+    # 30 windows: motion activity in the 7–8 Hz neurons, then a contact at 16 Hz (windows 20–24)
+    t = np.repeat(np.arange(30) * 0.1 + 0.05, 1)
+    spikes_i, spikes_t = [], []
+    for w in range(30):
+        neuron = 1 if w < 20 or w >= 25 else int(np.argmin(np.abs(hz - 16)))
+        spikes_i += [neuron] * 3
+        spikes_t += [w * 0.1 + 0.01, w * 0.1 + 0.04, w * 0.1 + 0.07]
+    rates = rate_map(np.array(spikes_i), np.array(spikes_t), hz, 3.0, 0.1)
+    (contact,) = ContactDetector().detect(rates)
+    assert contact.onset_s == pytest.approx(2.0) and contact.end_s == pytest.approx(2.5)
+    assert contact.frequency_hz == pytest.approx(hz[np.argmin(np.abs(hz - 16))])
+
+
+@pytest.mark.parametrize("kwargs,field", [
+    ({"n_neurons": 0}, "n_neurons"),
+    ({"band_hz": (30.0, 7.0)}, "band_hz"),
+    ({"spacing": "mel"}, "spacing"),
+    ({"dt_ms": 1.0, "band_hz": (7.0, 500.0), "method": "rk4"}, "dt_ms"),
+])
+def test_bad_arrays_are_refused(kwargs, field):
+    with pytest.raises(SpecError, match=field):
+        ResonatorArray(**kwargs)
+
+
+def test_input_sampled_too_slowly_for_the_band_is_refused():
+    with pytest.raises(SpecError, match="rate_hz.*at least 120"):
+        ResonatorArray(target="numpy").run(Recording(np.zeros(100), 100.0))

@@ -1,0 +1,76 @@
+"""The main job from the README: the quickstart scene, end to end, and the CLI's refusals."""
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna import antenna, spec as specs
+from snn_antenna.studies import quickstart
+
+ROOT = Path(__file__).resolve().parents[1]
+QUICKSTART = ROOT / "studies" / "quickstart.toml"
+
+
+def cli(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "snn_antenna.cli", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+def test_quickstart_command_writes_the_report(tmp_path):
+    out = tmp_path / "qs"
+    proc = cli("run", str(QUICKSTART), "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    assert "contact detected" in proc.stdout and "decoded distance" in proc.stdout
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("motion_dominant_hz", "contact_dominant_hz", "contact_detected_s", "distance_cm"):
+        assert summary[key] is not None
+    prov = summary["provenance"]
+    assert prov["seed"] == 1 and prov["brian2_target"] == "cython"
+    assert prov["spec"]["network"]["n_neurons"] == 24  # the resolved spec, includes expanded
+    assert prov["snn_antenna_version"] and prov["brian2_version"]
+    html = (out / "report.html").read_text()
+    assert "data:image/png;base64," in html and (out / "rate_map.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3, 4])
+def test_quickstart_meets_the_papers_fig10_in_kind(tmp_path, seed):
+    spec = specs.load(QUICKSTART, [f"seed={seed}"])
+    s = quickstart.run(spec, tmp_path, log=lambda *_: None)
+    # self-motion sits in the 7–8 Hz neurons
+    assert 7.0 <= s["motion_dominant_hz"] <= 9.0
+    # on contact, activity moves to the neurons around the low mode: the population centroid
+    # within one channel of it; the single most active neuron within two, because a resonator
+    # fires once per cycle across a plateau of its tuning curve and neighbours nearly tie.
+    hz = np.geomspace(7, 30, 24)
+    target = antenna.low_mode_hz(19.0)
+    channel = np.log(hz[1] / hz[0])
+    assert abs(np.log(s["contact_frequency_hz"] / target)) <= channel
+    assert abs(np.log(s["contact_dominant_hz"] / target)) <= 2 * channel
+    assert abs(s["contact_detected_s"] - 5.5) <= 0.3
+    assert abs(s["distance_cm"] - 19.0) <= 1.5
+
+
+def test_spec_errors_name_the_field_and_exit_cleanly(tmp_path):
+    cases = [
+        (["--set", "network.n_neurons=0"], "network.n_neurons"),
+        (["--set", "network.colour=3"], "network.colour"),
+        (["--set", "stimulus.contacts.0.distance_cm=-2"], "distance_cm"),
+        (["--set", "stimulus.contacts.0.distance_cm=55"], "distance_cm"),
+        (["--set", "stimulus.rate_hz=100"], "rate_hz"),
+        (["--set", "stimulus.contacts.0.material='granite'"], "material"),
+        (["--set", "readout.windows=3"], "readout.windows"),
+        (["--set", "banana=1"], "banana"),
+    ]
+    for extra, field in cases:
+        proc = cli("run", str(QUICKSTART), "--out", str(tmp_path / "x"), *extra)
+        assert proc.returncode == 2, (extra, proc.stderr)
+        assert field in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+        assert not (tmp_path / "x" / "summary.json").exists()
+
+
+def test_missing_spec_file_is_a_clear_error(tmp_path):
+    proc = cli("run", str(tmp_path / "nope.toml"))
+    assert proc.returncode == 2 and "nope.toml" in proc.stderr
