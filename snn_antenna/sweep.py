@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
+from distributed.diagnostics.plugin import WorkerPlugin
 
 from . import neurons
 from .errors import NumericalInstabilityError, SpecError, check
@@ -262,7 +263,10 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
 def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, workers):
     from distributed import as_completed
 
-    evaluate_future = client.scatter(evaluate, broadcast=True) if todo else None
+    if not todo:
+        return
+    client.register_plugin(_ImportBrian2(), name="snn-antenna-import-brian2")
+    evaluate_future = client.scatter(evaluate, broadcast=True)
     futures = [client.submit(_run_chunk, str(store.path), i, regions[i],
                              grid.points(regions[i]), evaluate_future, outputs,
                              key=f"sweep-chunk-{i}-{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}",
@@ -276,6 +280,14 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
     except BaseException:  # Ctrl-C or a failed chunk: finished chunks stay in the store
         client.cancel(futures)
         raise
+
+
+class _ImportBrian2(WorkerPlugin):
+    """Worker plugin: import Brian2 in each worker's main thread, where it may install its
+    SIGINT handler (importing it first inside a task thread fails); restarted workers too."""
+
+    def setup(self, worker):
+        import brian2  # noqa: F401
 
 
 @contextmanager
