@@ -11,6 +11,7 @@ from ..errors import SpecError
 
 STUDIES = {
     "quickstart": "snn_antenna.studies.quickstart",
+    "tuning_sweep": "snn_antenna.studies.tuning_sweep",
 }
 
 
