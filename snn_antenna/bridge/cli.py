@@ -39,7 +39,7 @@ def add_subcommands(subparsers) -> None:
                    help="pace at the recorded sample rate (default: as fast as possible)")
     p.add_argument("--network", default=None,
                    help="networks/NAME.toml: run the online pipeline on the replay")
-    p.add_argument("--window", type=float, default=0.1, help="rate-map window in s")
+    _set_arg(p)
     p.set_defaults(func=cmd_replay)
 
     p = subparsers.add_parser("emulate", help="emulate the sensor board (pty or URL), with faults")
@@ -71,8 +71,14 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--out", default=None,
                    help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
-    p.add_argument("--window", type=float, default=0.1, help="rate-map window in s")
+    _set_arg(p)
     p.set_defaults(func=cmd_stream)
+
+
+def _set_arg(p) -> None:
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a field of the network spec, e.g. --set network.dt_ms=0.25, "
+                        "--set preprocess.threshold=0.05, --set readout.window_s=0.05")
 
 
 def _port_args(p) -> None:
@@ -161,13 +167,16 @@ def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
     from .replay import ReplaySource
 
-    source = ReplaySource(args.recording, realtime=args.realtime).start()
     if args.network:
-        from .online import run_online
+        from .online import LiveDisplay, build_online, run_online
 
-        report = run_online(source, args.network, window_s=args.window, handlers=())
+        parts = build_online(args.network, args.set)
+        source = ReplaySource(args.recording, realtime=args.realtime).start()
+        report = run_online(source, parts, no_data_timeout_s=1e9,
+                            display=LiveDisplay(sys.stdout))
         print(json.dumps(report, indent=1))
         return 0
+    source = ReplaySource(args.recording, realtime=args.realtime).start()
     result = run_source(source, [], no_data_timeout_s=1e9)
     recording = source.recording
     recorded = {k: recording.counts.get(k) for k in result.counts if k in recording.counts}
@@ -221,10 +230,14 @@ def cmd_emulate(args) -> int:
 @_guarded
 def cmd_stream(args) -> int:
     """Run the online pipeline on a live port, recording while streaming."""
-    from .online import LiveDisplay, run_online
+    from .online import LiveDisplay, build_online, run_online, warm_up
     from .recorder import Recorder
 
     _check_duration(args.duration)
+    parts = build_online(args.network, args.set)     # a bad spec fails before the port opens
+    print("preparing the network (Brian2 compiles on the first run, then uses its cache)",
+          file=sys.stderr, flush=True)
+    warm_up(parts)
     if args.out is None:
         args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
     stop = stop_on_signals()
@@ -233,7 +246,7 @@ def cmd_stream(args) -> int:
                         baudrate=args.baudrate, extra_meta={"network": args.network})
     status, message = "ok", ""
     try:
-        report = run_online(source, args.network, window_s=args.window, handlers=[recorder],
+        report = run_online(source, parts, handlers=[recorder],
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
                             stop=stop, display=LiveDisplay(sys.stdout))
     except PortError as exc:

@@ -44,8 +44,12 @@ class ReplaySource:
         self._t0 = time.monotonic()
         return self
 
+    def pending(self) -> bool:
+        return False                    # one chunk at a time keeps real-time pacing simple
+
     def stop(self) -> None:
-        pass
+        self._pos = len(self._raw)
+        self._ended = True
 
     def counts(self) -> dict:
         stats = self.decoder.stats.as_dict()

@@ -12,6 +12,7 @@ any loss shows up where it belongs, as counted gaps in the sequence numbers.
 """
 from __future__ import annotations
 
+import collections
 import errno
 import queue
 import threading
@@ -131,6 +132,7 @@ class SerialSource:
         self.reconnect_timeout_s = reconnect_timeout_s
         self.backoff_initial_s, self.backoff_max_s = backoff_initial_s, backoff_max_s
         self._queue: queue.Queue[Batch] = queue.Queue(maxsize=queue_size)
+        self._leftover: collections.deque[Batch] = collections.deque()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.bytes_received = 0
@@ -146,21 +148,32 @@ class SerialSource:
         return self
 
     def get(self, timeout: float | None = None) -> Batch | None:
+        if self._leftover:
+            return self._leftover.popleft()
         try:
             return self._queue.get(timeout=timeout)
         except queue.Empty:
             return None
 
+    def pending(self) -> bool:
+        """Whether :meth:`get` would return a batch without waiting."""
+        return bool(self._leftover) or not self._queue.empty()
+
     def stop(self) -> None:
+        """Stop reading; batches already read stay available to :meth:`get`."""
         self._stop.set()
-        if self._thread is not None:
-            while self._thread.is_alive():
-                try:                    # unblock a reader waiting on a full queue
-                    self._queue.get_nowait()
-                except queue.Empty:
-                    pass
-                self._thread.join(timeout=0.05)
+        while self._thread is not None and self._thread.is_alive():
+            self._take_queued()         # unblocks a reader waiting on a full queue
+            self._thread.join(timeout=0.05)
+        self._take_queued()
         self.transport.close()
+
+    def _take_queued(self) -> None:
+        while True:
+            try:
+                self._leftover.append(self._queue.get_nowait())
+            except queue.Empty:
+                return
 
     def __enter__(self):
         return self.start()
@@ -231,52 +244,80 @@ class SerialSource:
 
 @dataclass
 class RunResult:
-    status: str             # "ok" (duration reached or stopped), "interrupted"
-    message: str = ""
+    status: str             # "ok": the duration was reached, the stop was set or the file ended
     counts: dict = field(default_factory=dict)
+    busy_s: float = 0.0     # wall time not spent waiting for the port
 
 
-def run_source(source: SerialSource, handlers, *, duration_s: float | None = None,
-               no_data_timeout_s: float = 5.0, idle_interval_s: float = 0.02,
-               stop: threading.Event | None = None) -> RunResult:
-    """Hand every batch of a started source to each handler (``handle(batch)``, ``idle()``) until
-    ``duration_s`` of wall time, ``stop``, or an error.
+@dataclass
+class SourceLoop:
+    """Drives a started source: hands every batch to each handler (``handle(batch)``, and
+    ``idle()`` when nothing came) and yields it, until ``duration_s`` of wall time, ``stop``, or
+    an error. Iterating is for consumers that do more with the batches (the online pipeline);
+    :func:`run_source` just exhausts it.
 
     Raises :class:`PortError` when the port is lost for good, or when no valid frame arrives for
     ``no_data_timeout_s`` while the link is up (a board reset by DTR is silent for 1-3 s, hence
     the 5 s default). Handlers have seen everything received before the error.
     """
-    if duration_s is not None and not duration_s > 0:
-        raise SpecError("duration", duration_s, "a number of seconds > 0")
-    if not no_data_timeout_s > 0:
-        raise SpecError("no_data_timeout", no_data_timeout_s, "a number of seconds > 0")
-    started = last_valid = time.monotonic()
-    link_up = True
-    while stop is None or not stop.is_set():
-        now = time.monotonic()
-        if duration_s is not None and now - started >= duration_s:
-            break
-        batch = source.get(timeout=idle_interval_s)
-        now = time.monotonic()
-        if batch is not None:
-            for handler in handlers:
-                handler.handle(batch)
-            if batch.samples:
-                last_valid = now
-            if batch.event == "lost":
-                link_up = False
-            elif batch.event == "reconnected":
-                link_up, last_valid = True, now
-            elif batch.event == "failed":
-                raise PortError(batch.message)
-            elif batch.event == "end":      # a replayed file is exhausted
+    source: object
+    handlers: tuple = ()
+    duration_s: float | None = None
+    no_data_timeout_s: float = 5.0
+    stop: threading.Event | None = None
+    idle_interval_s: float = 0.02
+    waiting_s: float = 0.0          # time spent blocked waiting for the port
+
+    def __post_init__(self):
+        if self.duration_s is not None and not self.duration_s > 0:
+            raise SpecError("duration", self.duration_s, "a number of seconds > 0")
+        if not self.no_data_timeout_s > 0:
+            raise SpecError("no_data_timeout", self.no_data_timeout_s, "a number of seconds > 0")
+
+    def __iter__(self):
+        started = last_valid = time.monotonic()
+        link_up = True
+        while self.stop is None or not self.stop.is_set():
+            if self.duration_s is not None and time.monotonic() - started >= self.duration_s:
                 break
-        else:
-            for handler in handlers:
-                handler.idle()
-        if link_up and now - last_valid > no_data_timeout_s:
-            raise PortError(_silence_message(source, now - last_valid))
-    return RunResult("ok", counts=source.counts())
+            asked = time.monotonic()
+            batch = self.source.get(timeout=self.idle_interval_s)
+            now = time.monotonic()
+            self.waiting_s += now - asked
+            if batch is None:
+                for handler in self.handlers:
+                    handler.idle()
+            else:
+                for handler in self.handlers:
+                    handler.handle(batch)
+                if batch.samples:
+                    last_valid = now
+                if batch.event == "lost":
+                    link_up = False
+                elif batch.event == "reconnected":
+                    link_up, last_valid = True, now
+                elif batch.event == "failed":
+                    raise PortError(batch.message)
+                elif batch.event == "end":      # a replayed file is exhausted
+                    return
+                yield batch
+            if link_up and now - last_valid > self.no_data_timeout_s:
+                raise PortError(_silence_message(self.source, now - last_valid))
+        # Stopped by the clock or a signal: what the port delivered until now is still kept.
+        self.source.stop()
+        while (batch := self.source.get(timeout=0)) is not None:
+            for handler in self.handlers:
+                handler.handle(batch)
+
+
+def run_source(source, handlers, *, duration_s: float | None = None,
+               no_data_timeout_s: float = 5.0, stop: threading.Event | None = None) -> RunResult:
+    """Run a started source into ``handlers`` (see :class:`SourceLoop`)."""
+    loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
+    t0 = time.monotonic()
+    for _ in loop:
+        pass
+    return RunResult("ok", source.counts(), time.monotonic() - t0 - loop.waiting_s)
 
 
 def _silence_message(source: SerialSource, silent_s: float) -> str:

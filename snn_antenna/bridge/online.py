@@ -1,0 +1,334 @@
+"""The online pipeline: live samples → streaming preprocessing → Brian2 resonator array → rate
+map and contact events, while the recorder keeps everything.
+
+All spiking is Brian2: the array runs in runtime mode through
+:meth:`snn_antenna.network.ResonatorArray.stream`, which pulls coded samples from the generator
+built here. What this module adds on top of the foundation's streaming API:
+
+- calibration: the PCA alignment needs a fit, so the first ``calibration_s`` of samples fit the
+  chain, then go through it like every later sample (same numbers as the offline chain);
+- timing: each sample's host arrival time is kept until its window is published, giving the
+  latency from arrival to the rate map, and the time spent waiting for the port is subtracted
+  from the wall time, giving the real-time factor of the computation itself;
+- online contact episodes, read out by the foundation's :class:`~snn_antenna.readout.ContactDetector`.
+
+Gaps in the stream are not filled: the network sees the received samples back to back.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from .. import spec as specs
+from ..errors import SpecError
+from ..network import ResonatorArray
+from ..preprocess import make_chain, partial_transform, reset
+from ..readout import ContactDetector, ContactEstimate
+from .source import SourceLoop
+
+RATE_HZ = 1000.0
+ADC_BITS, FULL_SCALE_G = 10, 18.0       # the board: ADXL321 (±18 g) into a 10-bit ADC
+SECTIONS = ("network", "preprocess", "readout")
+
+
+@dataclass
+class OnlineParts:
+    array: ResonatorArray
+    chain: object                       # sklearn Pipeline from make_chain
+    detector: ContactDetector
+    window_s: float
+    spec: dict
+
+
+def build_online(network_path, overrides=(), rate_hz: float = RATE_HZ) -> OnlineParts:
+    """The parts the ``--network`` file names, checked before any port is opened.
+
+    A network file (``networks/*.toml``, the fields of ResonatorArray) or a study-style file
+    with ``[network]``, ``[preprocess]`` and ``[readout]`` tables; ``--set`` overrides apply to
+    the study form (``--set preprocess.threshold=0.05``).
+    """
+    path = Path(network_path)
+    if not path.is_file():
+        raise SpecError("network", str(path), "the path of a network spec, e.g. "
+                                              "networks/resonator_array.toml")
+    raw = specs.load(path)
+    raw.pop("seed", None)
+    spec = ({k: raw.get(k, {}) for k in SECTIONS} if isinstance(raw.get("network"), dict)
+            else {"network": raw, "preprocess": {}, "readout": {}})
+    for item in overrides:
+        if "=" not in item:
+            raise SpecError("--set", item, "key=value, e.g. preprocess.threshold=0.05")
+        dotted, text = item.split("=", 1)
+        specs.set_field(spec, dotted.strip(), specs.parse_value(text.strip()))
+    for key in spec:
+        if key not in SECTIONS:
+            raise SpecError(key, spec[key], f"a section of an online spec: {', '.join(SECTIONS)}")
+    with specs.section("network"):
+        array = ResonatorArray(**specs.check_section(spec, "network", ResonatorArray))
+        array.check_rate(rate_hz)
+    with specs.section("preprocess"):
+        pre = specs.check_section(spec, "preprocess", make_chain,
+                                  exclude=["rate_hz", "adc_bits", "full_scale_g"])
+        chain = make_chain(rate_hz, ADC_BITS, FULL_SCALE_G, **pre)
+    with specs.section("readout"):
+        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
+        window_s = float(read.pop("window_s", 0.1))
+        detector = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
+                                      for k, v in read.items()})
+    return OnlineParts(array, chain, detector, window_s, spec)
+
+
+def warm_up(parts: OnlineParts) -> None:
+    """Run the array on 50 ms of silence, so that Brian2 generates and compiles its code (cached
+    on disk afterwards) before a port is opened and samples start to queue up."""
+    parts.array.stream(iter([np.zeros(int(0.05 * RATE_HZ))]), RATE_HZ, window_s=0.05)
+
+
+class ArrivalClock:
+    """Host arrival time of every sample index, kept only until its window is published."""
+
+    def __init__(self):
+        self._chunks: deque[tuple[int, float]] = deque()    # (end index, arrival time)
+        self.n = 0
+
+    def add(self, n_samples: int, arrival_s: float) -> None:
+        self.n += n_samples
+        self._chunks.append((self.n, arrival_s))
+
+    def arrival(self, index: int) -> float:
+        while self._chunks and self._chunks[0][0] <= index:
+            self._chunks.popleft()
+        return self._chunks[0][1]
+
+
+class EpisodeTracker:
+    """Online contact episodes: onset as soon as a contact window appears, the estimate when the
+    episode has ended (``detector.max_gap_windows`` quiet windows later)."""
+
+    def __init__(self, detector: ContactDetector, neuron_hz: np.ndarray, window_s: float):
+        self.detector, self.neuron_hz, self.window_s = detector, neuron_hz, window_s
+        self._rates: list[np.ndarray] = []
+        self._starts: list[float] = []
+        self._quiet = 0
+        self.estimates: list[ContactEstimate] = []
+
+    def _frame(self, rates: list[np.ndarray], starts: list[float]) -> xr.DataArray:
+        return xr.DataArray(np.column_stack(rates), dims=("neuron_hz", "window_s"),
+                            coords={"neuron_hz": self.neuron_hz, "window_s": starts},
+                            attrs={"window_s": self.window_s})
+
+    def is_contact_window(self, rates: np.ndarray) -> bool:
+        """``ContactDetector.contact_windows`` for one window, in numpy: building a DataArray
+        ten times a second cost more than the network (a test keeps the two in step)."""
+        above = self.neuron_hz > self.detector.motion_band_hz[1]
+        high, low = rates[above].sum(), rates[~above].sum()
+        return bool(high >= self.detector.min_rate_hz and high > low)
+
+    def update(self, t_s: float, rates: np.ndarray) -> tuple[str, object] | None:
+        """Feed one window; returns ("onset", t_s), ("contact", ContactEstimate) or None."""
+        hit = self.is_contact_window(rates)
+        if not self._rates:
+            if hit:
+                self._rates, self._starts, self._quiet = [rates], [t_s], 0
+                return "onset", t_s
+            return None
+        self._rates.append(rates)
+        self._starts.append(t_s)
+        self._quiet = 0 if hit else self._quiet + 1
+        if self._quiet > self.detector.max_gap_windows:
+            return self.close()
+        return None
+
+    def close(self) -> tuple[str, ContactEstimate] | None:
+        if not self._rates:
+            return None
+        keep = len(self._rates) - self._quiet
+        found = self.detector.detect(self._frame(self._rates[:keep], self._starts[:keep]))
+        self._rates, self._starts, self._quiet = [], [], 0
+        if not found:
+            return None
+        self.estimates.append(found[0])
+        return "contact", found[0]
+
+
+BARS = " ▁▂▃▄▅▆▇█"
+
+
+def rate_bar(rates_hz: np.ndarray, full_scale_hz: float) -> str:
+    levels = np.clip(np.round(rates_hz / full_scale_hz * (len(BARS) - 1)), 0, len(BARS) - 1)
+    return "".join(BARS[int(v)] for v in levels)
+
+
+class LiveDisplay:
+    """A compact live rate map: one character per neuron. On a terminal the line is redrawn in
+    place every window; elsewhere (logs, pipes) one line per second. Events get their own line."""
+
+    def __init__(self, out=None, full_scale_hz: float = 100.0):
+        self.out = out or sys.stdout
+        self.tty = hasattr(self.out, "isatty") and self.out.isatty()
+        self.full_scale_hz = full_scale_hz
+        self._last_plain = -1.0
+
+    def header(self, neuron_hz: np.ndarray) -> None:
+        print(f"rate map: {len(neuron_hz)} resonators {neuron_hz[0]:.1f}–{neuron_hz[-1]:.1f} Hz "
+              f"(low → high), full bar = {self.full_scale_hz:g} spikes/s", file=self.out,
+              flush=True)
+
+    def window(self, t_s: float, rates: np.ndarray, neuron_hz: np.ndarray, rtf: float,
+               latency_ms: float) -> None:
+        peak = f"{neuron_hz[int(np.argmax(rates))]:5.1f} Hz" if rates.max() > 0 else "  silent"
+        line = (f"{t_s:8.1f} s |{rate_bar(rates, self.full_scale_hz)}| peak {peak}  "
+                f"rt x{rtf:5.1f}  latency {latency_ms:5.1f} ms")
+        if self.tty:
+            print("\r" + line, end="", file=self.out, flush=True)
+        elif t_s - self._last_plain >= 1.0 - 1e-9:
+            self._last_plain = t_s
+            print(line, file=self.out, flush=True)
+
+    def event(self, text: str) -> None:
+        print(("\r\n" if self.tty else "") + text, file=self.out, flush=True)
+
+
+@dataclass
+class OnlineReport:
+    samples: int = 0
+    windows: int = 0
+    simulated_s: float = 0.0
+    wall_s: float = 0.0
+    waiting_s: float = 0.0
+    started: float = 0.0                # perf_counter when the pipeline started
+    latencies_ms: list[float] = field(default_factory=list)
+    contacts: list[dict] = field(default_factory=list)
+    # (perf_counter, waiting_s, simulated_s) at the first and the latest published window
+    first_window: tuple | None = None
+    last_window: tuple | None = None
+    caught_up_at: int = 0               # index of the first window after the start-up backlog
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per second of computation in the steady state: from the first
+        published window (Brian2's build and compile excluded) to the last, time spent waiting
+        for the port excluded."""
+        if self.first_window is None:
+            return float("nan")
+        (t0, w0, s0), (t1, w1, s1) = self.first_window, self.last_window
+        if s1 <= s0:
+            return float("nan")
+        return (s1 - s0) / max((t1 - t0) - (w1 - w0), 1e-9)
+
+    def as_dict(self, parts: OnlineParts, counts: dict) -> dict:
+        def summary(values):
+            if not len(values):
+                return {"median": None, "p95": None, "max": None, "windows": 0}
+            lat = np.asarray(values)
+            return {"median": round(float(np.median(lat)), 2),
+                    "p95": round(float(np.percentile(lat, 95)), 2),
+                    "max": round(float(lat.max()), 2), "windows": len(values)}
+
+        return {
+            "samples": self.samples, "windows": self.windows,
+            "simulated_s": round(self.simulated_s, 3), "wall_s": round(self.wall_s, 3),
+            "waiting_s": round(self.waiting_s, 3),
+            "startup_s": round(self.first_window[0] - self.started, 3) if self.first_window else None,
+            "realtime_factor": round(self.realtime_factor, 2),
+            # From a sample's arrival on the host to the rate-map window that includes it:
+            # all windows, and those after the start-up backlog was worked off (live only).
+            "latency_ms": summary(self.latencies_ms),
+            "steady_latency_ms": summary(self.latencies_ms[self.caught_up_at:]
+                                         if self.caught_up_at else []),
+            "window_s": parts.window_s,
+            "network": {"n_neurons": parts.array.n_neurons, "dt_ms": parts.array.dt_ms,
+                        "target": parts.array.target, "method": parts.array.method},
+            "contacts": self.contacts, "counts": counts,
+        }
+
+
+def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | None = None,
+               no_data_timeout_s: float = 5.0, stop=None, display: LiveDisplay | None = None,
+               calibration_s: float = 1.0) -> dict:
+    """Stream a started source (serial or replay) through the network; returns the report."""
+    if not 0 < calibration_s <= 60:
+        raise SpecError("calibration_s", calibration_s, "seconds in (0, 60]")
+    loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
+    clock, report = ArrivalClock(), OnlineReport()
+    neuron_hz = parts.array.neuron_hz
+    tracker = EpisodeTracker(parts.detector, neuron_hz, parts.window_s)
+    calibration: list[np.ndarray] = []
+    n_calibration = int(calibration_s * RATE_HZ)
+    if display:
+        display.header(neuron_hz)
+
+    def coded_chunks():
+        calibrated = False
+        waiting: list = []
+        for batch in loop:
+            if batch.samples:
+                waiting += batch.samples
+                clock.add(len(batch.samples), batch.host_time_s)
+            # A live port delivers a frame or two per read; the chain costs the same for one
+            # sample as for a hundred, so take everything already queued in one go.
+            if not waiting or source.pending():
+                continue
+            counts = np.asarray(waiting, dtype=float)[:, 1:]
+            waiting = []
+            if not calibrated:
+                calibration.append(counts)
+                if sum(len(c) for c in calibration) < n_calibration:
+                    continue
+                # Fit on the calibration data, then stream it through like any later sample.
+                counts = np.concatenate(calibration)
+                reset(parts.chain.fit(counts))
+                calibrated = True
+            yield partial_transform(parts.chain, counts)
+
+    def on_window(t_s: float, spike_counts: np.ndarray) -> None:
+        now = time.time()
+        if report.first_window is None:         # steady state starts here (Brian2 is built)
+            report.first_window = report.last_window = (time.perf_counter(), loop.waiting_s,
+                                                        t_s + parts.window_s)
+        # ResonatorArray.stream publishes a window as its last sample is put in place; the
+        # last sample of the window has been integrated.
+        last_integrated = int(round((t_s + parts.window_s) * RATE_HZ)) - 1
+        latency_ms = (now - clock.arrival(max(last_integrated, 0))) * 1e3
+        report.latencies_ms.append(latency_ms)
+        if not report.caught_up_at and loop.waiting_s - report.last_window[1] > 0.1 * parts.window_s:
+            # The pipeline had to wait for the port: any start-up backlog is gone.
+            report.caught_up_at = len(report.latencies_ms)
+        rates = spike_counts / parts.window_s
+        event = tracker.update(t_s, rates)
+        report.last_window = (time.perf_counter(), loop.waiting_s, t_s + parts.window_s)
+        if display:
+            show(display, event)
+            display.window(t_s, rates, neuron_hz, report.realtime_factor, latency_ms)
+
+    t0 = report.started = time.perf_counter()
+    stats = parts.array.stream(coded_chunks(), RATE_HZ, window_s=parts.window_s,
+                               on_window=on_window)
+    report.wall_s = time.perf_counter() - t0
+    report.waiting_s = loop.waiting_s
+    report.samples, report.windows, report.simulated_s = (stats.samples, stats.windows,
+                                                          stats.simulated_s)
+    final = tracker.close()
+    if display:
+        show(display, final)
+        if display.tty:
+            print(file=display.out)
+    report.contacts = [e.as_dict() for e in tracker.estimates]
+    return report.as_dict(parts, source.counts())
+
+
+def show(display: LiveDisplay, event) -> None:
+    if event is None:
+        return
+    kind, what = event
+    if kind == "onset":
+        display.event(f"contact onset at {what:.2f} s")
+    else:
+        display.event(f"contact {what.onset_s:.2f}–{what.end_s:.2f} s: ringing "
+                      f"{what.frequency_hz:.1f} Hz → distance {what.distance_cm:.1f} cm")

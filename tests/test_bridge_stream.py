@@ -1,0 +1,80 @@
+"""The online pipeline on a live pty: emulator → stream (Brian2) → contacts, rate map, recording."""
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna.bridge import load_recording
+from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
+from snn_antenna.bridge.online import EpisodeTracker, build_online
+from snn_antenna.errors import SpecError
+from snn_antenna.readout import ContactDetector
+from snn_antenna.stimuli import Contact, RobotScene
+
+ROOT = Path(__file__).resolve().parents[1]
+NETWORK = ROOT / "networks" / "resonator_array.toml"
+CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+
+
+def test_stream_detects_a_contact_live_and_records_everything(tmp_path):
+    scene = RobotScene(duration_s=4.0, contacts=[Contact(2.0, 19.0)])
+    counts = scene.generate(seed=3).samples
+    link = PtyLink(tmp_path / "tty")
+    emulator = Emulator(counts)
+
+    def serve():
+        try:
+            emulator.run(link, peer_timeout_s=120)
+        except PeerGone:
+            pass
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    try:
+        result = subprocess.run(
+            [*CLI, "stream", "--port", link.path, "--network", NETWORK, "--out",
+             tmp_path / "rec", "--duration", "5.5", "--set", "preprocess.threshold=0.05"],
+            capture_output=True, text=True, timeout=150)
+    finally:
+        server.join(10)
+        link.close()
+    assert result.returncode == 0, result.stderr
+    report = json.loads(result.stdout[result.stdout.index("{\n"):])
+    assert "rate map: 24 resonators" in result.stdout and "|" in result.stdout
+    assert "contact onset" in result.stdout and "distance" in result.stdout
+    assert len(report["contacts"]) == 1
+    contact = report["contacts"][0]
+    assert 1.9 <= contact["onset_s"] <= 2.5 and abs(contact["distance_cm"] - 19.0) < 3.0
+    assert report["samples"] >= 3900 and report["realtime_factor"] > 1.0
+    assert report["steady_latency_ms"]["windows"] > 0
+    assert 0 < report["steady_latency_ms"]["median"] < 100
+    rec = load_recording(tmp_path / "rec")
+    assert rec.n_samples == len(emulator.log.written) == 4000
+    assert np.array_equal(np.column_stack([rec.x, rec.y]), counts)
+
+
+def test_online_contact_rule_matches_the_readout(tmp_path):
+    rng = np.random.default_rng(0)
+    detector = ContactDetector()
+    neuron_hz = np.geomspace(7, 30, 24)
+    tracker = EpisodeTracker(detector, neuron_hz, 0.1)
+    rates = rng.exponential(20, (24, 300)) * rng.integers(0, 2, (24, 300))
+    frame = tracker._frame(list(rates.T), list(np.arange(300) * 0.1))
+    offline = detector.contact_windows(frame).values
+    assert offline.any() and not offline.all()
+    assert [tracker.is_contact_window(r) for r in rates.T] == offline.tolist()
+
+
+def test_bad_network_spec_fails_before_the_port_opens(tmp_path):
+    spec = tmp_path / "net.toml"
+    spec.write_text("n_neurons = 24\nbandwidth = 3\n")
+    with pytest.raises(SpecError, match="network.bandwidth"):
+        build_online(spec)
+    result = subprocess.run([*CLI, "stream", "--port", "/dev/ttyDOESNOTEXIST", "--network",
+                             NETWORK, "--set", "network.dt_ms=5"],
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "network.dt_ms" in result.stderr
