@@ -1,0 +1,182 @@
+"""How far a Brian2 run is from the reference, and where each integration method stays sane.
+
+Errors of a run against its reference (``snn_antenna.reference``) on the same input:
+
+- ``spike_time_error_ms``: mean distance from each spike to the nearest spike of the same
+  neuron in the other train, both ways, capped at ``cap_ms`` (a missing or extra spike costs
+  the cap). Brian2 records a spike at the start of the step in which v crossed 30, so even a
+  perfect integrator shows about dt/2 here.
+- ``spike_count_error``: total |Δ count| per neuron over the reference's total count.
+- ``rate_map_error``: L1 distance of the rate maps over the reference's L1 norm.
+
+``stability_map`` classifies (method, k·dt, constant drive I) as accurate, inaccurate but
+finite, or non-finite. It uses the model's time-scale invariance: the discrete update
+depends on k and dt only through k·dt, so one group per method at dt = 1 ms with k set to
+each k·dt value covers the whole axis in one vectorised run.
+"""
+from __future__ import annotations
+
+import numpy as np
+import xarray as xr
+
+from . import neurons, reference
+from .errors import check
+
+ACCURATE, INACCURATE, NON_FINITE = 0, 1, 2
+CLASSES = {ACCURATE: "accurate", INACCURATE: "inaccurate but finite", NON_FINITE: "non-finite"}
+
+
+def spike_time_error_ms(spike_i, spike_t_ms, ref_i, ref_t_ms, n_neurons: int,
+                        cap_ms: float = 10.0) -> float:
+    """Mean nearest-spike distance (ms, both directions, capped at ``cap_ms``)."""
+    spike_i, ref_i = np.asarray(spike_i), np.asarray(ref_i)
+    spike_t, ref_t = np.asarray(spike_t_ms, float), np.asarray(ref_t_ms, float)
+    total, count = 0.0, 0
+    for j in range(n_neurons):
+        a, b = np.sort(spike_t[spike_i == j]), np.sort(ref_t[ref_i == j])
+        for x, y in ((a, b), (b, a)):
+            if len(x) == 0:
+                continue
+            count += len(x)
+            if len(y) == 0:
+                total += cap_ms * len(x)
+                continue
+            pos = np.clip(np.searchsorted(y, x), 1, len(y) - 1) if len(y) > 1 else \
+                np.zeros(len(x), int)
+            near = np.abs(x - y[pos])
+            if len(y) > 1:
+                near = np.minimum(near, np.abs(x - y[pos - 1]))
+            total += float(np.minimum(near, cap_ms).sum())
+    return total / count if count else 0.0
+
+
+def spike_count_error(counts, ref_counts) -> float:
+    """Σ |count − reference count| over the reference's total (0 when both are silent)."""
+    counts, ref_counts = np.asarray(counts, float), np.asarray(ref_counts, float)
+    diff = float(np.abs(counts - ref_counts).sum())
+    return diff / max(float(ref_counts.sum()), 1.0)
+
+
+def rate_map_error(rates, ref_rates) -> float:
+    """Relative L1 distance of two rate maps (same shape)."""
+    r, ref = np.asarray(rates, float), np.asarray(ref_rates, float)
+    check(r.shape == ref.shape, "rates", r.shape, f"the reference's shape {ref.shape}")
+    norm = float(np.abs(ref).sum())
+    diff = float(np.abs(r - ref).sum())
+    return diff / norm if norm > 0 else (0.0 if diff == 0 else 1.0)
+
+
+def window_f1(hit, ref_hit) -> float:
+    """F1 of detected windows against the reference's (1 when neither detects anything)."""
+    hit, ref_hit = np.asarray(hit, bool), np.asarray(ref_hit, bool)
+    tp = int((hit & ref_hit).sum())
+    fp, fn = int((hit & ~ref_hit).sum()), int((~hit & ref_hit).sum())
+    return 1.0 if tp + fp + fn == 0 else 2 * tp / (2 * tp + fp + fn)
+
+
+# -- stability map ---------------------------------------------------------------------------
+def _steady_rates(spike_i, spike_t_ms, k_dt, duration_ms, n) -> np.ndarray:
+    """Spike rate (per model-second) of each neuron over the second half of its run."""
+    model_t = spike_t_ms * k_dt[spike_i]           # model-ms: t × k with dt = 1 ms
+    half = duration_ms * k_dt / 2
+    late = model_t >= half[spike_i]
+    counts = np.bincount(spike_i[late], minlength=n)
+    return counts / (half / 1000.0)
+
+
+def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
+                  preset: str = "resonator", b: float | None = None,
+                  model_ms: float = 400.0, rate_tolerance: float = 0.05,
+                  target: str = "numpy", progress=None) -> xr.Dataset:
+    """Classify each (method, k·dt, constant drive I) run from the reset point.
+
+    A run is non-finite when |v| or |u| leaves ``neurons.RUNAWAY_LIMIT`` or becomes NaN at
+    any step; accurate when its steady spike rate (second half of ``model_ms`` model
+    milliseconds) is within ``rate_tolerance`` (relative, plus one spike) of the reference's.
+    Returns a Dataset with ``status`` (0 accurate, 1 inaccurate, 2 non-finite), ``rate_hz``
+    and ``reference_rate_hz`` over (integrator, k_dt, I), and the measured ``max_stable_k_dt``
+    (largest k·dt below which no drive went non-finite) per method.
+    """
+    import brian2 as b2
+
+    k_dt = np.geomspace(0.01, 50, 25) if k_dt is None else np.asarray(k_dt, float)
+    drives = np.linspace(-50, 50, 21) if drives is None else np.asarray(drives, float)
+    check(np.all(k_dt > 0) and np.all(np.isfinite(k_dt)), "k_dt", k_dt, "values > 0")
+    check(np.all(np.isfinite(drives)), "drives", drives, "finite currents")
+    p = neurons.PRESETS[preset]
+    b = p.b if b is None else b
+    v_reset, u_reset = p.c, b * p.c
+
+    # The reference rate of each drive (k = 1, exact), over the same model-time window.
+    ref = reference.simulate(preset, drives[None, :], k=1.0, input_dt_ms=model_ms, b=b,
+                             v0=v_reset, u0=u_reset)
+    late = ref.spike_t_ms >= model_ms / 2
+    ref_rate = np.bincount(ref.spike_i[late], minlength=len(drives)) / (model_ms / 2000.0)
+
+    kk, ii = np.meshgrid(k_dt, np.arange(len(drives)), indexing="ij")
+    kk, ii = kk.ravel(), ii.ravel()
+    n = kk.size
+    duration_ms = model_ms / float(k_dt.min())   # dt = 1 ms: every neuron runs >= model_ms
+    status = np.empty((len(methods), len(k_dt), len(drives)), dtype=np.int8)
+    rates = np.empty(status.shape)
+    for m_idx, method in enumerate(methods):
+        if progress:
+            progress(f"stability map: {method} ({n} neurons, {duration_ms:.0f} steps)")
+        b2.start_scope()
+        b2.prefs.codegen.target = target
+        drive = b2.TimedArray(drives[None, :], dt=duration_ms * b2.ms, name="drive")
+        group = b2.NeuronGroup(
+            n, neurons.equations(p, "drive(t, input_index)",
+                                 "input_index : integer (constant)\nblown : boolean"),
+            threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
+            method=neurons.brian_method(method), namespace={"drive": drive},
+            dt=1 * b2.ms, name="neurons")
+        group.k, group.a, group.b, group.c, group.d = kk, p.a, b, p.c, p.d
+        group.input_index = ii
+        group.v, group.u = v_reset, u_reset
+        # Latched every step: NaN fails every comparison, so "not (|v| < limit)" catches it.
+        limit = neurons.RUNAWAY_LIMIT
+        group.run_regularly(f"blown = blown or not (abs(v) < {limit} and abs(u) < {limit})",
+                            when="after_groups")
+        spikes = b2.SpikeMonitor(group)
+        net = b2.Network(group, spikes)
+        with np.errstate(all="ignore"):
+            net.run(duration_ms * b2.ms, namespace={})
+        blown = np.asarray(group.blown[:], bool)
+        r = _steady_rates(np.asarray(spikes.i[:], int), np.asarray(spikes.t / b2.ms), kk,
+                          duration_ms, n)
+        ref_r = ref_rate[ii]
+        one_spike = 1000.0 / (kk * duration_ms / 2)   # one spike in the window, per second
+        ok = np.abs(r - ref_r) <= rate_tolerance * ref_r + one_spike
+        st = np.where(blown, NON_FINITE, np.where(ok, ACCURATE, INACCURATE))
+        status[m_idx] = st.reshape(len(k_dt), len(drives))
+        rates[m_idx] = np.where(blown, -1.0, r).reshape(len(k_dt), len(drives))
+
+    ds = xr.Dataset(
+        {"status": (("integrator", "k_dt", "I"), status,
+                    {"meaning": "; ".join(f"{k} {v}" for k, v in CLASSES.items())}),
+         "rate_hz": (("integrator", "k_dt", "I"), rates,
+                     {"units": "Hz (model time)", "note": "-1 where non-finite"}),
+         "reference_rate_hz": (("I",), ref_rate, {"units": "Hz (model time)"})},
+        coords={"integrator": list(methods),
+                "k_dt": ("k_dt", k_dt, {"units": "model ms per step"}),
+                "I": ("I", drives, {"long_name": "constant drive"})},
+        attrs={"preset": preset, "b": b, "model_ms": model_ms,
+               "rate_tolerance": rate_tolerance})
+    ds["max_stable_k_dt"] = ("integrator", [_largest_passing(k_dt, status[m] != NON_FINITE)
+                                        for m in range(len(methods))])
+    ds["max_accurate_k_dt"] = ("integrator", [_largest_passing(k_dt, status[m] == ACCURATE)
+                                          for m in range(len(methods))])
+    return ds
+
+
+def _largest_passing(k_dt: np.ndarray, passing: np.ndarray) -> float:
+    """Largest k·dt such that it and every smaller one pass for every drive (0 if none)."""
+    good = passing.all(axis=1)
+    order = np.argsort(k_dt)
+    best = 0.0
+    for j in order:
+        if not good[j]:
+            break
+        best = float(k_dt[j])
+    return best
