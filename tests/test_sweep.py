@@ -1,0 +1,252 @@
+"""Sweeps: grids, bad-grid refusal, the resumable store, Dask = single process, kill + resume."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna import neurons
+from snn_antenna.errors import SpecError
+from snn_antenna.store import Output, SweepStore
+from snn_antenna.sweep import Grid, NeuronSweep, axis_values, check_memory, run_sweep
+
+REPO = Path(__file__).resolve().parents[1]
+SMALL = {"k": [0.5, 1.0], "I": [0.15, 0.5], "input_hz": [6.0, 10.0, 14.0, 18.0, 22.0, 26.0]}
+FAST = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="numpy")
+
+
+# -- grids ------------------------------------------------------------------------------------
+def test_axis_values_lists_and_ranges():
+    assert np.allclose(axis_values("k", {"start": 1, "stop": 4, "num": 3, "scale": "log"}),
+                       [1, 2, 4])
+    assert np.allclose(axis_values("x", {"start": 2, "stop": 60, "num": 59}), np.arange(2, 61))
+    assert np.allclose(axis_values("b", [0.2, 0.26]), [0.2, 0.26])
+    assert np.allclose(axis_values("b", 0.26), [0.26])
+
+
+def test_blocks_tile_the_grid_once_and_keep_trailing_axes_whole():
+    grid = Grid({"k": [1, 2, 3], "b": [1, 2, 3, 4, 5], "f": np.arange(7)})
+    assert grid.block_shape(20) == (1, 2, 7)
+    seen = np.zeros(grid.shape, int)
+    for region in grid.blocks(20):
+        seen[tuple(region.values())] += 1
+        pts = grid.points(region)
+        assert len(pts["k"]) == np.prod([s.stop - s.start for s in region.values()]) <= 20
+    assert (seen == 1).all()
+    assert grid.block_shape(1000) == grid.shape
+    assert grid.block_shape(3) == (1, 1, 3)
+
+
+@pytest.mark.parametrize("axes, field, why", [
+    ({"k": []}, "axes.k", "empty"),
+    ({"k": {"start": 1, "stop": 2, "num": 0}}, "axes.k.num", ">= 1"),
+    ({"k": [1.0, 1.0]}, "axes.k", "distinct"),
+    ({"k": {"start": 0, "stop": 2, "num": 3, "scale": "log"}}, "axes.k", "> 0"),
+    ({"k": [1.0, float("nan")]}, "axes.k", "finite"),
+])
+def test_malformed_axes_are_refused(axes, field, why):
+    with pytest.raises(SpecError, match=why) as err:
+        Grid(axes)
+    assert err.value.field == field
+
+
+def test_bad_neuron_grids_are_refused_before_any_work(tmp_path):
+    store = tmp_path / "r.zarr"
+    cases = [
+        (Grid({"tau": [1.0]}), "axes.tau", "a parameter of the neuron sweep"),
+        (Grid({"k": [1.0, 100.0]}), "axes.k", "MAX_STABLE_K_DT"),
+        (Grid({"input_hz": [10.0, 400.0]}), "axes.input_hz", "4 samples per cycle"),
+        (Grid({"k": [-1.0, 1.0]}), "axes.k", "> 0"),
+    ]
+    for grid, field, why in cases:
+        with pytest.raises(SpecError, match=why) as err:
+            run_sweep(grid, FAST, store, NeuronSweep.OUTPUTS, progress=False)
+        assert err.value.field == field
+    # the stable limit is the foundation's: exactly at the limit passes the check
+    k_limit = neurons.MAX_STABLE_K_DT["euler"] / FAST.dt_ms
+    FAST.for_grid(Grid({"k": [k_limit]}), (1,))
+    # 10^12 points: far more results than memory
+    huge = Grid({"k": {"start": 0.5, "stop": 1, "num": 10_000},
+                 "b": {"start": 0.2, "stop": 0.3, "num": 10_000},
+                 "input_hz": {"start": 2, "stop": 60, "num": 10_000}})
+    with pytest.raises(SpecError, match="fit in memory"):
+        run_sweep(huge, FAST, store, NeuronSweep.OUTPUTS, progress=False)
+    with pytest.raises(SpecError, match="chunks that fit"):
+        check_memory(Grid({"k": [1.0, 2.0]}), NeuronSweep.OUTPUTS, 2, 10**12)
+    assert not store.exists()  # nothing was started
+
+
+def test_study_spec_refuses_unknown_axis_before_work(tmp_path):
+    from snn_antenna import spec as specs
+    from snn_antenna.studies import tuning_sweep
+
+    spec = specs.load(REPO / "studies/tuning_sweep.toml", ["axes.q=[1, 2]"], quick=True)
+    with pytest.raises(SpecError) as err:
+        tuning_sweep.run(spec, tmp_path / "out")
+    assert err.value.field == "axes.q"
+    spec = specs.load(REPO / "studies/tuning_sweep.toml", ["axes.k=[]"], quick=True)
+    with pytest.raises(SpecError, match="empty"):
+        tuning_sweep.run(spec, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+# -- the store --------------------------------------------------------------------------------
+def polynomial(points):
+    """A cheap deterministic evaluator for store tests."""
+    return {"y": points["x"] ** 2 + 10 * points["z"], "n": (points["x"] * 3).astype(int)}
+
+
+OUTS = {"y": Output("f8"), "n": Output("i4")}
+
+
+def test_store_resumes_skips_finished_and_redoes_partial_chunks(tmp_path):
+    grid = Grid({"x": np.arange(5.0), "z": [0.5, 1.5, 2.5]})
+    path = tmp_path / "s.zarr"
+    first = run_sweep(grid, polynomial, path, OUTS, chunk_points=3, progress=False,
+                      attrs={"spec": {"a": 1}})
+    assert first.chunks_computed == list(range(5)) and first.chunks_skipped == []
+    x, z = np.meshgrid(grid.axes["x"], grid.axes["z"], indexing="ij")
+    assert np.array_equal(first.data.y.values, x ** 2 + 10 * z)
+    assert first.data.attrs["spec"] == {"a": 1}
+    assert list(first.data.y.dims) == ["x", "z"]
+    # a chunk whose data reached the disk but whose mark did not: redone
+    store = SweepStore(path)
+    import zarr
+    zarr.open_array(path / "chunk_done", mode="r+")[3] = 0
+    zarr.open_array(path / "y", mode="r+")[3, :] = -1.0
+    again = run_sweep(grid, polynomial, path, OUTS, chunk_points=3, progress=False)
+    assert again.chunks_computed == [3] and len(again.chunks_skipped) == 4
+    assert again.data.equals(first.data)
+    assert store.done_chunks() == set(range(5))
+    # another grid in the same store is refused; fresh starts over
+    with pytest.raises(SpecError, match="--fresh"):
+        run_sweep(Grid({"x": [1.0], "z": [1.0]}), polynomial, path, OUTS, progress=False)
+    fresh = run_sweep(grid, polynomial, path, OUTS, chunk_points=3, fresh=True, progress=False)
+    assert fresh.chunks_computed == list(range(5))
+
+
+# -- the neuron evaluator ---------------------------------------------------------------------
+def euler_reference(p, sweep: NeuronSweep):
+    """Hand-written Euler loop of the same equations and coder input (independent of Brian2)."""
+    pre = neurons.PRESETS[sweep.preset]
+    p2, p1, p0 = pre.quadratic
+    v, u = (np.array(x, float) for x in sweep.initial_state(p))
+    n_steps = int(round(sweep.duration_s * 1000 / sweep.dt_ms))
+    count = np.zeros(len(v), int)
+    per_sample = int(round(1000 / sweep.input_rate_hz / sweep.dt_ms))
+    for step in range(n_steps):
+        t_in = (step // per_sample) / sweep.input_rate_hz
+        I = p["I"] * np.where(np.floor(2 * p["input_hz"] * t_in) % 2 == 0, 1.0, -1.0)
+        dv = p["k"] * (p2 * v * v + p1 * v + p0 - u + I)
+        du = p["a"] * p["k"] * (p["b"] * v - u)
+        v, u = v + sweep.dt_ms * dv, u + sweep.dt_ms * du
+        fired = v >= neurons.V_PEAK
+        v[fired] = p["c"][fired]
+        u[fired] += p["d"][fired]
+        count += fired & (step * sweep.dt_ms >= sweep.settle_s * 1000 - 1e-9)
+    return count
+
+
+def test_vectorised_runtime_sweep_matches_a_hand_written_euler_loop():
+    grid = Grid(SMALL)
+    points = grid.points()
+    brian = FAST(points)["spike_count"]
+    ref = euler_reference(FAST.parameters(points), FAST)
+    assert brian.sum() > 20  # the grid has responding and silent neurons
+    assert (brian == 0).sum() > 3
+    assert np.abs(brian - ref).max() <= 1
+
+
+def test_standalone_engine_matches_runtime_engine(tmp_path, monkeypatch):
+    # one compile (~10-20 s on a fresh machine; reused from the cache afterwards)
+    grid = Grid(SMALL)
+    points = grid.points()
+    standalone = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="standalone",
+                             group_size=30)(points)["spike_count"]  # 24 points padded to 30 neurons
+    runtime = FAST(points)["spike_count"]
+    assert np.abs(standalone - runtime).max() <= 1
+    assert standalone.sum() > 20
+
+
+# -- parallel execution -----------------------------------------------------------------------
+def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
+    from snn_antenna.sweep import dask_client
+
+    grid = Grid(SMALL)
+    serial = run_sweep(grid, FAST, tmp_path / "serial.zarr", NeuronSweep.OUTPUTS,
+                       chunk_points=6, progress=False)
+    with dask_client(workers=2) as client:
+        parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,
+                             chunk_points=6, client=client, progress=False)
+    assert parallel.chunks_computed and len(parallel.workers) >= 1
+    assert all(str(os.getpid()) not in w for w in parallel.workers)  # really other processes
+    assert parallel.data.spike_count.equals(serial.data.spike_count)
+    assert parallel.data.rate_hz.equals(serial.data.rate_hz)
+    assert serial.data.spike_count.values.sum() > 0
+
+
+KILLED_SWEEP = textwrap.dedent("""
+    import sys
+    from snn_antenna.sweep import Grid, NeuronSweep, run_sweep
+    grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
+    run_sweep(grid, NeuronSweep(duration_s=0.4, settle_s=0.1, engine="numpy"), sys.argv[1],
+              NeuronSweep.OUTPUTS, chunk_points=4, progress=False)
+""")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL])
+def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
+    path = tmp_path / "killed.zarr"
+    proc = subprocess.Popen([sys.executable, "-c", KILLED_SWEEP, str(path)],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    store = SweepStore(path)
+    deadline = time.monotonic() + 90
+    try:
+        while time.monotonic() < deadline:
+            if (path / "chunk_done").exists() and len(store.done_chunks()) >= 2:
+                break
+            time.sleep(0.05)
+        proc.send_signal(sig)
+    finally:
+        proc.wait(timeout=30)
+    done_before = store.done_chunks()
+    assert 2 <= len(done_before) < 6, "the sweep must be killed mid-way"
+    grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
+    resumed = run_sweep(grid, FAST, path, NeuronSweep.OUTPUTS, chunk_points=4, progress=False)
+    assert set(resumed.chunks_skipped) == done_before
+    assert set(resumed.chunks_computed) == set(range(6)) - done_before
+    whole = run_sweep(grid, FAST, tmp_path / "whole.zarr", NeuronSweep.OUTPUTS, chunk_points=4,
+                      progress=False)
+    assert resumed.data.spike_count.equals(whole.data.spike_count)
+    assert whole.data.spike_count.values.sum() > 0
+
+
+# -- the study --------------------------------------------------------------------------------
+def test_tuning_study_quick_run_and_resume(tmp_path):
+    from snn_antenna.cli import main
+
+    out = tmp_path / "tuning"
+    args = ["run", str(REPO / "studies/tuning_sweep.toml"), "--quick", "--out", str(out),
+            "--set", "axes.k=[0.5, 1.0, 1.5]", "--set", "axes.b=[0.26]",
+            "--set", "neuron.duration_s=0.6"]
+    assert main(args) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert (out / "report.html").is_file() and (out / "results.zarr").is_dir()
+    assert set(summary["figures"]) == {"tuning_curves.png", "heatmaps.png", "maps.png"}
+    peaks = summary["k_to_peak_hz"]["centroid_hz"]
+    assert all(p is not None for p in peaks) and peaks == sorted(peaks)  # tuned by k
+    width = dict(zip(summary["fwhm_vs_I"]["I"], summary["fwhm_vs_I"]["fwhm_hz"]))
+    assert width[0.5] > width[0.15]  # the amplitude widens the band (Fig. 8G)
+    assert summary["chunks_computed"] == summary["chunks"]
+    assert main(args) == 0  # again: everything is read back from the store
+    again = json.loads((out / "summary.json").read_text())
+    assert again["chunks_computed"] == 0 and again["chunks_skipped"] == summary["chunks"]
+    assert again["k_to_peak_hz"] == summary["k_to_peak_hz"]
