@@ -110,6 +110,8 @@ def test_emulate_and_record_processes_agree(tmp_path):
     expected = json.loads((tmp_path / "emu.json").read_text())["expected_counts"]
     rec = load_recording(tmp_path / "rec")
     assert {k: rec.counts[k] for k in expected} == expected
+    replay = run_cli("replay", tmp_path / "rec")
+    assert replay.returncode == 0 and json.loads(replay.stdout)["match"] is True
 
 
 def test_sigkill_loses_at_most_the_last_100_ms(tmp_path):

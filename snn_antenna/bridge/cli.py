@@ -128,22 +128,27 @@ def print_counts(counts: dict, file=sys.stderr) -> None:
     print("  ".join(f"{k}={counts.get(k, 0)}" for k in shown), file=file, flush=True)
 
 
-def _record_session(args, extra_handlers=(), source=None):
-    """Open the port (or use ``source``), record into ``args.out`` while handlers run, and
-    close the recording with the status the session ended with."""
+@_guarded
+def cmd_record(args) -> int:
+    """Record a serial stream into ``args.out``; the recording is closed with the status the
+    session ended with, also when the port fails."""
     from .recorder import Recorder
 
+    _check_duration(args.duration)
     stop = stop_on_signals()
-    source = source or open_source(args)
-    recorder = Recorder(args.out, port=args.port, wire_format=args.format,
-                        baudrate=args.baudrate)
+    source = open_source(args)
     status, message = "ok", ""
     try:
-        result = run_source(source, [recorder, *extra_handlers], duration_s=args.duration,
-                            no_data_timeout_s=args.no_data_timeout, stop=stop)
+        recorder = Recorder(args.out, port=args.port, wire_format=args.format,
+                            baudrate=args.baudrate)
+    except SpecError:
+        source.stop()
+        raise
+    try:
+        run_source(source, [recorder], duration_s=args.duration,
+                   no_data_timeout_s=args.no_data_timeout, stop=stop)
         if stop.is_set():
             status = "stopped"
-        return result
     except PortError as exc:
         status, message = "port-error", str(exc)
         raise
@@ -152,13 +157,6 @@ def _record_session(args, extra_handlers=(), source=None):
         recorder.close(status, message)
         print(f"recording in {args.out}: ", end="", file=sys.stderr)
         print_counts(recorder.counts)
-
-
-@_guarded
-def cmd_record(args) -> int:
-    """Record a serial stream."""
-    _check_duration(args.duration)
-    _record_session(args)
     return 0
 
 

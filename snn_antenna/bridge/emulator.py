@@ -88,8 +88,10 @@ class PtyLink:
     def wait_for_peer(self, timeout_s: float | None, stop: threading.Event) -> None:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
         while not self.peer_open():
-            if stop.is_set() or (deadline is not None and time.monotonic() > deadline):
-                raise PeerGone(f"nobody opened {self.path}")
+            if stop.is_set():
+                raise PeerGone("stopped")
+            if deadline is not None and time.monotonic() > deadline:
+                raise PeerGone(f"nobody opened {self.path} within {timeout_s:g} s")
             time.sleep(0.005)
         # pyserial configures the tty and flushes its input right after open(): bytes written
         # in that instant would vanish, so give it a moment.
@@ -148,7 +150,9 @@ class PtyLink:
     def close(self) -> None:
         self.disconnect()
 
-    can_disconnect = property(lambda self: self.link is not None)
+    @property
+    def can_disconnect(self) -> bool:
+        return self.link is not None
 
 
 class SerialLink:
