@@ -169,22 +169,27 @@ class LiveDisplay:
     """A compact live rate map: one character per neuron. On a terminal the line is redrawn in
     place every window; elsewhere (logs, pipes) one line per second. Events get their own line."""
 
-    def __init__(self, out=None, full_scale_hz: float = 100.0):
+    def __init__(self, out=None, full_scale_hz: float | None = None):
         self.out = out or sys.stdout
         self.tty = hasattr(self.out, "isatty") and self.out.isatty()
-        self.full_scale_hz = full_scale_hz
+        self.fixed_scale_hz = full_scale_hz
+        self.full_scale_hz = full_scale_hz or 10.0
         self._last_plain = -1.0
 
     def header(self, neuron_hz: np.ndarray) -> None:
+        scale = (f"{self.fixed_scale_hz:g} spikes/s" if self.fixed_scale_hz
+                 else "the highest rate so far")
         print(f"rate map: {len(neuron_hz)} resonators {neuron_hz[0]:.1f}–{neuron_hz[-1]:.1f} Hz "
-              f"(low → high), full bar = {self.full_scale_hz:g} spikes/s", file=self.out,
-              flush=True)
+              f"(low → high), full bar = {scale}", file=self.out, flush=True)
 
     def window(self, t_s: float, rates: np.ndarray, neuron_hz: np.ndarray, rtf: float,
-               latency_ms: float) -> None:
+               latency_ms: float | None) -> None:
+        if not self.fixed_scale_hz:
+            self.full_scale_hz = max(self.full_scale_hz, float(rates.max()))
         peak = f"{neuron_hz[int(np.argmax(rates))]:5.1f} Hz" if rates.max() > 0 else "  silent"
+        lat = f"  latency {latency_ms:5.1f} ms" if latency_ms is not None else ""
         line = (f"{t_s:8.1f} s |{rate_bar(rates, self.full_scale_hz)}| peak {peak}  "
-                f"rt x{rtf:5.1f}  latency {latency_ms:5.1f} ms")
+                f"rt x{rtf:5.1f}{lat}")
         if self.tty:
             print("\r" + line, end="", file=self.out, flush=True)
         elif t_s - self._last_plain >= 1.0 - 1e-9:
@@ -260,6 +265,9 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     neuron_hz = parts.array.neuron_hz
     tracker = EpisodeTracker(parts.detector, neuron_hz, parts.window_s)
     calibration: list[np.ndarray] = []
+    # A replay read flat out delivers seconds of samples at once: arrival-to-rate-map latency
+    # only means something for a live port (or a replay paced in real time).
+    live = getattr(source, "realtime", True)
     n_calibration = int(calibration_s * RATE_HZ)
     if display:
         display.header(neuron_hz)
@@ -295,8 +303,10 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
         # ResonatorArray.stream publishes a window as its last sample is put in place; the
         # last sample of the window has been integrated.
         last_integrated = int(round((t_s + parts.window_s) * RATE_HZ)) - 1
-        latency_ms = (now - clock.arrival(max(last_integrated, 0))) * 1e3
-        report.latencies_ms.append(latency_ms)
+        arrived = clock.arrival(max(last_integrated, 0))
+        latency_ms = (now - arrived) * 1e3 if live else None
+        if live:
+            report.latencies_ms.append(latency_ms)
         if not report.caught_up_at and loop.waiting_s - report.last_window[1] > 0.1 * parts.window_s:
             # The pipeline had to wait for the port: any start-up backlog is gone.
             report.caught_up_at = len(report.latencies_ms)
