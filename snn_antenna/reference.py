@@ -144,8 +144,10 @@ def run_array(array, coded: Recording, window_s: float = 0.1, rtol: float = DEFA
         raise SpecError("coded.samples", f"array of shape {samples.shape}", "one channel")
     array.check_rate(coded.rate_hz)
     t0 = time.perf_counter()
+    # The array starts at rest for zero input (the coder's output for silence).
+    v0, u0 = neurons.resting_state("resonator", array.b)
     result = simulate("resonator", samples, array.k, input_dt_ms=1000.0 / coded.rate_hz,
-                      b=array.b, rtol=rtol, atol=atol)
+                      b=array.b, v0=v0, u0=u0, rtol=rtol, atol=atol)
     return ArrayResult(array.neuron_hz, result.spike_i, result.spike_t_ms / 1000.0,
                        coded.duration_s, window_s, wall_s=time.perf_counter() - t0,
                        extra={"rtol": rtol, "atol": atol})

@@ -12,6 +12,7 @@ from ..errors import SpecError
 STUDIES = {
     "quickstart": "snn_antenna.studies.quickstart",
     "tuning_sweep": "snn_antenna.studies.tuning_sweep",
+    "speed_accuracy": "snn_antenna.studies.speed_accuracy",
 }
 
 
