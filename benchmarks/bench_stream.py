@@ -5,8 +5,9 @@
 
 1. Throughput: the emulator (its own process) writes a robot scene (contacts at 19 and 27 cm)
    into a pseudo-terminal as fast as the reader takes it; serial source → decoder →
-   preprocessing → Brian2 array → rate map. The real-time factor is simulated seconds per second of computation in the steady state
-   (Brian2's build excluded, time spent waiting for bytes excluded).
+   preprocessing → Brian2 array → rate map. The real-time factor is simulated seconds per
+   second of computation in the steady state (Brian2's build and the time spent waiting for
+   bytes excluded).
 2. Latency: the emulator runs as its own process at 1 kHz real time on a pseudo-terminal; the
    pipeline streams from it. The latency is from a sample's arrival on the host to the
    publication of the rate-map window that contains it (steady state, after the start-up
@@ -86,10 +87,11 @@ def main(argv=None) -> int:
     if steady["windows"]:
         print(f"sample-to-rate-map latency: median {steady['median']:.1f} ms, "
               f"p95 {steady['p95']:.1f} ms, max {steady['max']:.1f} ms "
-              f"(+ up to {live['window_s'] * 1000:.0f} ms for a sample to wait for its window's end)")
+              f"(+ up to {live['window_s'] * 1000:.0f} ms for a sample to wait for the end of "
+              "its window)")
     else:
         print("sample-to-rate-map latency: the pipeline never caught up with real time")
-    print(f"contacts (fast run): " + "; ".join(
+    print("contacts (fast run): " + "; ".join(
         f"{c['onset_s']:.1f} s → {c['distance_cm']:.1f} cm" for c in fast["contacts"]))
     return 0
 

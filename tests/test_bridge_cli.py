@@ -9,7 +9,6 @@ import threading
 import time
 
 import numpy as np
-import pytest
 
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink

@@ -1,5 +1,4 @@
 """The bridge over real links: pseudo-terminals, socat and loop://, with injected faults."""
-import os
 import shutil
 import subprocess
 import threading

@@ -1,4 +1,4 @@
-"""The wire protocol on bytes alone: COBS, CRC, framing, gaps, and the decoder under any chunking."""
+"""The wire protocol on bytes alone: COBS, CRC, framing, gaps, the decoder under any chunking."""
 import binascii
 
 import pytest

@@ -1,4 +1,4 @@
-"""The online pipeline on a live pty: emulator → stream (Brian2) → contacts, rate map, recording."""
+"""The online pipeline live on a pty: emulator → stream (Brian2) → contacts, rate map, record."""
 import json
 import subprocess
 import sys

@@ -312,7 +312,8 @@ class Emulator:
         return {int(i): k for i, k in zip(where, kinds)}
 
     def run(self, link, n_frames: int | None = None, *, realtime: bool = True,
-            stop: threading.Event | None = None, peer_timeout_s: float | None = 30.0) -> EmulatorLog:
+            stop: threading.Event | None = None,
+            peer_timeout_s: float | None = 30.0) -> EmulatorLog:
         stop = stop or threading.Event()
         n_frames = len(self.counts) if n_frames is None else n_frames
         if n_frames <= 0:

@@ -10,7 +10,8 @@ built here. What this module adds on top of the foundation's streaming API:
 - timing: each sample's host arrival time is kept until its window is published, giving the
   latency from arrival to the rate map, and the time spent waiting for the port is subtracted
   from the wall time, giving the real-time factor of the computation itself;
-- online contact episodes, read out by the foundation's :class:`~snn_antenna.readout.ContactDetector`.
+- online contact episodes, read out by the foundation's
+  :class:`~snn_antenna.readout.ContactDetector`.
 
 Gaps in the stream are not filled: the network sees the received samples back to back.
 """
@@ -240,7 +241,8 @@ class OnlineReport:
             "samples": self.samples, "windows": self.windows,
             "simulated_s": round(self.simulated_s, 3), "wall_s": round(self.wall_s, 3),
             "waiting_s": round(self.waiting_s, 3),
-            "startup_s": round(self.first_window[0] - self.started, 3) if self.first_window else None,
+            "startup_s": (round(self.first_window[0] - self.started, 3) if self.first_window
+                          else None),
             "realtime_factor": round(self.realtime_factor, 2),
             # From a sample's arrival on the host to the rate-map window that includes it:
             # all windows, and those after the start-up backlog was worked off (live only).
@@ -307,7 +309,8 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
         latency_ms = (now - arrived) * 1e3 if live else None
         if live:
             report.latencies_ms.append(latency_ms)
-        if not report.caught_up_at and loop.waiting_s - report.last_window[1] > 0.1 * parts.window_s:
+        waited_s = loop.waiting_s - report.last_window[1]
+        if not report.caught_up_at and waited_s > 0.1 * parts.window_s:
             # The pipeline had to wait for the port: any start-up backlog is gone.
             report.caught_up_at = len(report.latencies_ms)
         rates = spike_counts / parts.window_s

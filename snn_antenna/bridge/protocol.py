@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import binascii
 import struct
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import NamedTuple
 
 from ..errors import SpecError
@@ -253,7 +253,8 @@ class Decoder:
         return Sample(seq, x, y)
 
 
-def decode_all(data: bytes, wire_format: str = "binary", synced: bool = True) -> tuple[list[Sample], Decoder]:
+def decode_all(data: bytes, wire_format: str = "binary",
+               synced: bool = True) -> tuple[list[Sample], Decoder]:
     """Decode a whole byte string at once (tests, replay of a file)."""
     decoder = Decoder(wire_format, synced=synced)
     return decoder.feed(data), decoder

@@ -25,7 +25,6 @@ from ..errors import SpecError
 from .protocol import Decoder, Sample, check_wire_format
 
 DEFAULT_BAUDRATE = 250000
-URL_SCHEMES = ("loop://", "socket://", "rfc2217://", "spy://", "alt://", "hwgrep://")
 ACCEPTED_PORTS = ("an existing serial device path (e.g. /dev/ttyACM0) or a pyserial URL "
                   "(loop://, socket://HOST:PORT, rfc2217://HOST:PORT)")
 
@@ -39,9 +38,9 @@ class Batch:
     """What one read of the port produced, stamped with the host clock when it was read.
 
     ``event`` marks a change of link state (``"opened"``, ``"lost"``, ``"reconnected"``,
-    ``"failed"``, or ``"end"`` of a replayed file) and then ``raw`` and ``samples`` are empty; ``counts`` is a snapshot of the
-    decoder's and the transport's counters after this batch, so a consumer writing both data and
-    counts stays consistent.
+    ``"failed"``, or ``"end"`` of a replayed file) and then ``raw`` and ``samples`` are empty.
+    ``counts`` is a snapshot of the decoder's and the transport's counters after this batch, so
+    a consumer writing both data and counts stays consistent.
     """
     host_time_s: float
     raw: bytes = b""
