@@ -535,7 +535,10 @@ def _standalone_counts(sweep: NeuronSweep, p: dict[str, np.ndarray]) -> np.ndarr
               "f_in": p["input_hz"], "I_amp": p["I"], "v": v0, "u": u0}
     run_args = {getattr(group, name): np.r_[arr, np.repeat(arr[:1], pad)]
                 for name, arr in values.items()}
-    project["device"].run(run_args=run_args, with_output=False)
+    device = project["device"]
+    device.run(run_args=run_args, with_output=False)
+    for name in device.run_args_arrays:  # this chunk's parameter files: not needed again
+        Path(device.project_dir, "static_arrays", name).unlink(missing_ok=True)
     v = np.asarray(group.v[:])
     u = np.asarray(group.u[:])
     ok = np.isfinite(v) & np.isfinite(u) & (np.abs(v) < neurons.RUNAWAY_LIMIT) \

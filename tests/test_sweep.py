@@ -183,9 +183,12 @@ def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
     grid = Grid(SMALL)
     serial = run_sweep(grid, FAST, tmp_path / "serial.zarr", NeuronSweep.OUTPUTS,
                        chunk_points=6, progress=False)
-    with dask_client(workers=2) as client:
-        parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,
-                             chunk_points=6, client=client, progress=False)
+    with dask_client(workers=2) as own:  # the embedded default: a LocalCluster of processes
+        assert len(own.scheduler_info()["workers"]) == 2
+        # attach to it as --scheduler tcp://HOST:PORT does for an existing cluster
+        with dask_client(scheduler=own.scheduler.address) as client:
+            parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,
+                                 chunk_points=6, client=client, progress=False)
     assert parallel.chunks_computed and len(parallel.workers) >= 1
     assert all(str(os.getpid()) not in w for w in parallel.workers)  # really other processes
     assert parallel.data.spike_count.equals(serial.data.spike_count)
