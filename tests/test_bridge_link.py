@@ -1,5 +1,6 @@
 """The bridge over real links: pseudo-terminals, socat and loop://, with injected faults."""
 import shutil
+import socket
 import subprocess
 import threading
 import time
@@ -190,3 +191,34 @@ def test_port_gone_for_good_fails_with_a_message(tmp_path):
         run_source(source, [], no_data_timeout_s=10)
     assert time.monotonic() - t0 < 3
     source.stop()
+
+
+def test_socket_url_reconnects_when_the_server_comes_back(tmp_path):
+    """``socket://``: the TCP peer (a serial-to-network bridge) drops the connection, the
+    source reconnects to the same URL and the recording continues with the outage as a gap."""
+    server = socket.create_server(("127.0.0.1", 0))
+    url = f"socket://127.0.0.1:{server.getsockname()[1]}"
+
+    def serve():
+        seq = 0
+        for _ in range(2):
+            conn, _ = server.accept()
+            time.sleep(0.1)             # pyserial flushes input right after connecting
+            for _ in range(200):
+                conn.sendall(encode_binary(seq, seq % 1024, 7))
+                seq += 1
+                time.sleep(0.001)
+            time.sleep(0.2)
+            conn.close()
+            seq += 25                   # samples the board took while nobody was connected
+
+    threading.Thread(target=serve, daemon=True).start()
+    session = Session(url, tmp_path / "rec", reconnect_timeout_s=5)
+    deadline = time.monotonic() + 10
+    while session.recorder.n_samples < 400 and time.monotonic() < deadline:
+        time.sleep(0.05)
+    rec = session.finish(settle_s=0)
+    server.close()
+    assert rec.seq.tolist() == list(range(200)) + list(range(225, 425))
+    assert rec.counts["reconnects"] >= 1 and rec.counts["crc_errors"] == 0
+    assert (rec.counts["gaps"], rec.counts["lost_samples"]) == (1, 25)

@@ -122,10 +122,39 @@ def open_source(args) -> SerialSource:
                         reconnect_timeout_s=args.reconnect_timeout).start()
 
 
-def print_counts(counts: dict, file=sys.stderr) -> None:
-    shown = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
-             "reconnects")
-    print("  ".join(f"{k}={counts.get(k, 0)}" for k in shown), file=file, flush=True)
+SHOWN_COUNTS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps",
+                "lost_samples", "reconnects")
+
+
+def format_counts(counts: dict) -> str:
+    return "  ".join(f"{k}={counts.get(k, 0)}" for k in SHOWN_COUNTS)
+
+
+class Progress:
+    """A recording's counts on stderr: redrawn twice a second on a terminal, a line every
+    10 s in a log; link losses and reconnections get their own line at once."""
+
+    def __init__(self, file=sys.stderr):
+        self.file = file
+        self.tty = file.isatty()
+        self.interval_s = 0.5 if self.tty else 10.0
+        self.counts: dict = {}
+        self.t0 = self._last = time.monotonic()
+
+    def handle(self, batch) -> None:
+        self.counts = batch.counts or self.counts
+        if batch.event in ("lost", "reconnected"):
+            print(("\n" if self.tty else "") + f"port {batch.event}"
+                  + (f": {batch.message}" if batch.message else ""), file=self.file, flush=True)
+        self.idle()
+
+    def idle(self) -> None:
+        now = time.monotonic()
+        if now - self._last >= self.interval_s:
+            self._last = now
+            line = f"{now - self.t0:7.1f} s  {format_counts(self.counts)}"
+            print(("\r" + line) if self.tty else line, end="" if self.tty else "\n",
+                  file=self.file, flush=True)
 
 
 @_guarded
@@ -145,7 +174,7 @@ def cmd_record(args) -> int:
         source.stop()
         raise
     try:
-        run_source(source, [recorder], duration_s=args.duration,
+        run_source(source, [recorder, Progress()], duration_s=args.duration,
                    no_data_timeout_s=args.no_data_timeout, stop=stop)
         if stop.is_set():
             status = "stopped"
@@ -155,8 +184,8 @@ def cmd_record(args) -> int:
     finally:
         source.stop()
         recorder.close(status, message)
-        print(f"recording in {args.out}: ", end="", file=sys.stderr)
-        print_counts(recorder.counts)
+        print(f"\nrecording in {args.out}: {format_counts(recorder.counts)}", file=sys.stderr,
+              flush=True)
     return 0
 
 
