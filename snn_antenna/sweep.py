@@ -33,10 +33,21 @@ The public API is small:
   Engines: ``"standalone"`` (Brian2 cpp_standalone, compiled once per process and re-run per
   chunk with new parameters via ``run_args``; each worker process keeps its own project
   directory) or ``"numpy"`` / ``"cython"`` (runtime, through ``neurons.simulate`` with a 2-D
-  input current and ``input_index``). ``benchmarks/bench_sweep.py`` measures which is faster.
+  input current and ``input_index``). ``benchmarks/bench_sweep.py`` measures which is faster:
+  once compiled, standalone is 2.5-16x faster than cython and 6-16x faster than numpy per
+  neuron-step; its one-off compile (~10-20 s per worker process and group size, cached on
+  disk) pays off beyond a few 10^8 neuron-steps, so small first looks use ``numpy``.
+- ``SceneSweep``: the same for neurons driven by coded robot scenes, with axes over scene
+  and preprocessing fields (``stimulus.speed_cm_s``, ``stimulus.contacts.0.distance_cm``,
+  ``preprocess.threshold``) beside ``k, a, b, c, d``: each distinct scene is generated and
+  coded once and becomes one input column (runtime engines).
+
+Brian2's cython cache is shared by the workers of a machine (Brian2 locks each extension
+while it compiles it), so each extension compiles once, not once per worker.
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import hashlib
 import math
@@ -55,7 +66,7 @@ from .errors import NumericalInstabilityError, SpecError, check
 from .store import Output, SweepStore
 
 __all__ = ["Grid", "axis_values", "run_sweep", "SweepOutcome", "dask_client", "NeuronSweep",
-           "Output", "memory_budget_bytes"]
+           "SceneSweep", "Output", "memory_budget_bytes"]
 
 
 # -- the grid ---------------------------------------------------------------------------------
@@ -412,16 +423,7 @@ class NeuronSweep:
 
     def parameters(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         """Every parameter per point, axes first, then this sweep's fixed values."""
-        n = len(next(iter(points.values())))
-        preset = neurons.PRESETS[self.preset].params()
-        out = {}
-        for name in NEURON_AXES:
-            if name in points:
-                out[name] = np.asarray(points[name], dtype=float)
-            else:
-                fixed = getattr(self, name)
-                out[name] = np.full(n, preset[name] if fixed is None else fixed, dtype=float)
-        return out
+        return _parameters(self, points, NEURON_AXES)
 
     def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         p = self.parameters(points)
@@ -442,6 +444,19 @@ class NeuronSweep:
         return rest[inverse.ravel(), 0], rest[inverse.ravel(), 1]
 
 
+def _parameters(sweep, points: dict[str, np.ndarray], names) -> dict[str, np.ndarray]:
+    n = len(next(iter(points.values())))
+    preset = neurons.PRESETS[sweep.preset].params()
+    out = {}
+    for name in names:
+        if name in points:
+            out[name] = np.asarray(points[name], dtype=float)
+        else:
+            fixed = getattr(sweep, name)
+            out[name] = np.full(n, preset[name] if fixed is None else fixed, dtype=float)
+    return out
+
+
 def _runtime_counts(sweep: NeuronSweep, p: dict[str, np.ndarray]) -> np.ndarray:
     """All points as one group through ``neurons.simulate`` (2-D input + input_index)."""
     from .stimuli import square
@@ -450,12 +465,125 @@ def _runtime_counts(sweep: NeuronSweep, p: dict[str, np.ndarray]) -> np.ndarray:
     unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
     current = np.stack([square(f, sweep.duration_s, sweep.input_rate_hz, amplitude=I).samples
                         for f, I in unique], axis=1)
+    return count_spikes(sweep, p, current, 1000.0 / sweep.input_rate_hz, inverse.ravel(),
+                        sweep.settle_s)
+
+
+def count_spikes(sweep, p: dict[str, np.ndarray], current: np.ndarray, input_dt_ms: float,
+                 input_index: np.ndarray, count_from_s: float) -> np.ndarray:
+    """Spikes per neuron from ``count_from_s`` on: one NeuronGroup, neuron i driven by
+    column ``input_index[i]`` of ``current`` (runtime target ``sweep.engine``)."""
     result = neurons.simulate(sweep.preset, current, sweep.dt_ms, k=p["k"], method=sweep.method,
-                              input_dt_ms=1000.0 / sweep.input_rate_hz,
-                              input_index=inverse.ravel(), target=sweep.engine,
-                              force=sweep.force, a=p["a"], b=p["b"], c=p["c"], d=p["d"])
-    counted = result.spike_t_ms >= sweep.settle_s * 1000.0
+                              input_dt_ms=input_dt_ms, input_index=input_index,
+                              target=sweep.engine, force=sweep.force,
+                              a=p["a"], b=p["b"], c=p["c"], d=p["d"])
+    counted = result.spike_t_ms >= count_from_s * 1000.0
     return np.bincount(result.spike_i[counted], minlength=len(p["k"]))
+
+
+SCENE_PREFIXES = ("stimulus.", "preprocess.")
+
+
+@dataclass(frozen=True)
+class SceneSweep:
+    """Spike counts of neurons driven by coded robot scenes; axes may be scene fields.
+
+    Axes: neuron parameters (``k, a, b, c, d``), ``stimulus.FIELD`` (a ``RobotScene`` field,
+    e.g. ``stimulus.speed_cm_s`` or ``stimulus.contacts.0.distance_cm``) and
+    ``preprocess.FIELD`` (a ``make_chain`` argument, e.g. ``preprocess.threshold``). Each
+    distinct scene is generated (seeded), preprocessed and coded once and becomes one column of
+    a 2-D input; every point is a neuron reading its scene's column (``neurons.simulate`` with
+    ``input_index``). Spikes are counted from ``count_from_s`` to the scene's end. Runtime
+    engines only: a standalone TimedArray's shape is fixed at compile time.
+    """
+    stimulus: dict = dataclasses.field(default_factory=dict)
+    preprocess: dict = dataclasses.field(default_factory=dict)
+    seed: int = 0
+    preset: str = "resonator"
+    dt_ms: float = 0.1
+    method: str = "euler"
+    engine: str = "cython"
+    count_from_s: float = 0.0
+    k: float = 1.0
+    a: float | None = None
+    b: float | None = None
+    c: float | None = None
+    d: float | None = None
+    force: bool = False
+
+    OUTPUTS = {"spike_count": Output("i4", "1", "spikes counted from count_from_s")}
+
+    def __post_init__(self):
+        check(self.engine in ("cython", "numpy"), "engine", self.engine,
+              "'cython' or 'numpy' (scene inputs need a runtime target)")
+        NeuronSweep(preset=self.preset, dt_ms=self.dt_ms, method=self.method)  # same checks
+
+    def _scene_and_chain(self, values: dict):
+        from .preprocess import make_chain
+        from .spec import set_field
+        from .stimuli import scene_from_spec
+
+        spec = {"stimulus": copy.deepcopy(self.stimulus),
+                "preprocess": copy.deepcopy(self.preprocess)}
+        for name, value in values.items():
+            set_field(spec, name, value.item() if hasattr(value, "item") else value)
+        scene = scene_from_spec(spec["stimulus"])
+        scene.validate()
+        chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g,
+                           **spec["preprocess"])
+        return scene, chain
+
+    def for_grid(self, grid: Grid, block_shape) -> "SceneSweep":
+        scene_axes = [d for d in grid.dims if d.startswith(SCENE_PREFIXES)]
+        for name in grid.dims:
+            check(name in NEURON_AXES and name not in ("input_hz", "I") or name in scene_axes,
+                  f"axes.{name}", list(grid.axes[name]),
+                  "k, a, b, c, d, stimulus.FIELD or preprocess.FIELD")
+        # every value of every scene axis must make a valid scene and chain, before any work
+        for name in scene_axes:
+            for value in grid.axes[name]:
+                try:
+                    scene, chain = self._scene_and_chain({name: value})
+                    for _, step in chain.steps:
+                        getattr(step, "_validate_params_", lambda: None)()
+                except SpecError as exc:
+                    raise SpecError(f"axes.{name}", float(value), str(exc)) from None
+                except (TypeError, KeyError, IndexError) as exc:
+                    raise SpecError(f"axes.{name}", float(value),
+                                    f"a field of the scene or the chain ({exc})") from None
+        k = grid.axes.get("k", np.atleast_1d(self.k))
+        check(bool(np.all(k > 0)), "axes.k", list(k), "time-scale factors > 0")
+        limit = neurons.MAX_STABLE_K_DT[self.method]
+        if not self.force and float(np.max(k)) * self.dt_ms > limit:
+            raise SpecError("axes.k", list(k), f"k <= {limit / self.dt_ms:g} at dt = "
+                            f"{self.dt_ms:g} ms (neurons.MAX_STABLE_K_DT[{self.method!r}] = "
+                            f"{limit:g}), or a smaller dt_ms")
+        return self
+
+    @property
+    def bytes_per_point(self) -> int:
+        scene, _ = self._scene_and_chain({})
+        return int(8 * scene.duration_s * scene.rate_hz) + 64
+
+    def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        n = len(next(iter(points.values())))
+        p = _parameters(self, {"k": np.full(n, float(self.k)), **points}, "kabcd")
+        scene_names = [k for k in points if k.startswith(SCENE_PREFIXES)]
+        if scene_names:
+            combos = np.stack([points[k] for k in scene_names], axis=1)
+            unique, inverse = np.unique(combos, axis=0, return_inverse=True)
+        else:
+            unique, inverse = np.zeros((1, 0)), np.zeros(n, int)
+        columns, rate_hz = [], None
+        for row in unique:
+            scene, chain = self._scene_and_chain(dict(zip(scene_names, row)))
+            rec = scene.generate(self.seed)
+            columns.append(chain.fit(rec.samples).transform(rec.samples))
+            rate_hz = scene.rate_hz
+        current = np.stack(columns, axis=1)
+        counts = count_spikes(self, p, current, 1000.0 / rate_hz, inverse.ravel(),
+                              self.count_from_s)
+        return {"spike_count": counts.astype(np.int32)}
 
 
 # One compiled standalone project per process (Brian2's device is process-global); a worker

@@ -253,3 +253,46 @@ def test_tuning_study_quick_run_and_resume(tmp_path):
     again = json.loads((out / "summary.json").read_text())
     assert again["chunks_computed"] == 0 and again["chunks_skipped"] == summary["chunks"]
     assert again["k_to_peak_hz"] == summary["k_to_peak_hz"]
+
+
+# -- scene axes -------------------------------------------------------------------------------
+def short_scene():
+    import tomllib
+    with open(REPO / "stimuli/quickstart_scene.toml", "rb") as f:
+        scene = tomllib.load(f)
+    scene["duration_s"] = 0.6
+    scene["contacts"][0].update(t_s=0.1, hold_s=0.5)
+    return scene
+
+
+def test_scene_axes_group_points_by_scene_and_match_single_runs(tmp_path):
+    from snn_antenna.preprocess import make_chain
+    from snn_antenna.stimuli import scene_from_spec
+    from snn_antenna.sweep import SceneSweep
+
+    sweep = SceneSweep(stimulus=short_scene(), preprocess={"coder_amplitude": 0.3},
+                       engine="numpy", count_from_s=0.1)
+    with pytest.raises(SpecError) as err:  # refused before any scene is generated
+        run_sweep(Grid({"stimulus.speed": [1.0]}), sweep, tmp_path / "x.zarr",
+                  SceneSweep.OUTPUTS, progress=False)
+    assert err.value.field == "axes.stimulus.speed"
+    with pytest.raises(SpecError, match="distance"):
+        run_sweep(Grid({"stimulus.contacts.0.distance_cm": [19.0, 500.0]}), sweep,
+                  tmp_path / "x.zarr", SceneSweep.OUTPUTS, progress=False)
+    grid = Grid({"stimulus.contacts.0.distance_cm": [12.0, 26.0], "k": [0.6, 0.9, 1.3]})
+    out = run_sweep(grid, sweep, tmp_path / "s.zarr", SceneSweep.OUTPUTS, progress=False)
+    counts = out.data.spike_count
+    assert counts.dims == ("stimulus.contacts.0.distance_cm", "k")
+    for distance in (12.0, 26.0):  # each scene on its own, through the foundation directly
+        table = short_scene()
+        table["contacts"][0]["distance_cm"] = distance
+        scene = scene_from_spec(table)
+        rec = scene.generate(0)
+        chain = make_chain(scene.rate_hz, coder_amplitude=0.3).fit(rec.samples)
+        alone = neurons.simulate("resonator", chain.transform(rec.samples), 0.1,
+                                 k=grid.axes["k"], input_dt_ms=1.0, target="numpy")
+        late = alone.spike_t_ms >= 100.0
+        expected = np.bincount(alone.spike_i[late], minlength=3)
+        assert np.array_equal(counts.sel({"stimulus.contacts.0.distance_cm": distance}).values,
+                              expected)
+    assert counts.values.sum() > 0
