@@ -1,0 +1,66 @@
+"""The baseline comparison study: a tiny run end to end; its numbers are the computed ones."""
+import json
+
+import numpy as np
+import pytest
+
+from snn_antenna import spec as specs
+from snn_antenna.cli import main
+from snn_antenna.errors import SpecError
+from snn_antenna.studies import baseline_comparison as study
+
+SPEC = "studies/baseline_comparison.toml"
+TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
+        "stimulus.repetitions=6", "stimulus.n_jobs=1", "evaluation.seeds=[0,1]",
+        "evaluation.nmf_dims=[3]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50"]
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("baseline")
+    spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={out / 'cache'}"])
+    summary = study.run(spec, out / "report", log=lambda *_: None)
+    return out / "report", summary
+
+
+def test_report_folder_and_summary_keys(tiny_run):
+    out, summary = tiny_run
+    for name in ("report.html", "summary.json", "fig2c_frequency_laws.png",
+                 "fig4b_predicted_distance.png", "fig6d_confusion.png", "fig7a_nmf_basis.png",
+                 "fig7b_nmf_accuracy.png", "predictions.json"):
+        assert (out / name).is_file(), name
+    stored = json.loads((out / "summary.json").read_text())
+    for key in ("calibration", "distance_rmse_mm", "material_accuracy", "two_material", "timing"):
+        assert key in stored
+    assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3]
+    assert stored["data"]["n_events"] == 54
+    assert sum(stored["data"]["skipped"].values()) + stored["data"]["n_processed"] == 54
+
+
+def test_report_numbers_are_recomputed_from_the_predictions(tiny_run):
+    out, _ = tiny_run
+    stored = json.loads((out / "summary.json").read_text())
+    preds = json.loads((out / "predictions.json").read_text())
+    html = (out / "report.html").read_text()
+    for name, folds in preds["folds"].items():
+        task = preds["task"][name]
+        if task == "distance":
+            rmse = [10 * np.sqrt(np.mean((np.array(f["predicted"]) - f["true"]) ** 2))
+                    for f in folds]
+            assert stored["distance_rmse_mm"][name]["mean"] == pytest.approx(np.mean(rmse))
+            assert f"{np.mean(rmse):.2f} ± {np.std(rmse, ddof=1):.2f}" in html
+        elif task == "material" and not name.startswith("nmf_"):
+            acc = [np.mean(np.array(f["predicted"]) == f["true"]) for f in folds]
+            assert stored["material_accuracy"][name]["mean"] == pytest.approx(np.mean(acc))
+    # test contacts never appear in their split's training set: disjoint repetitions
+    assert all(len(f["test_event"]) == len(set(f["test_event"]))
+               for folds in preds["folds"].values() for f in folds)
+
+
+def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
+    with pytest.raises(SpecError, match="evaluation.bogus"):
+        study.build(specs.load(SPEC, ["evaluation.bogus=1"]))
+    with pytest.raises(SpecError, match="stimulus.material"):
+        study.build(specs.load(SPEC, ["stimulus.materials=['wood','granite']"]))
+    assert main(["run", SPEC, "--out", str(tmp_path), "--set", "events.split_hz=5000"]) == 2
+    assert "events.split_hz" in capsys.readouterr().err
