@@ -31,6 +31,7 @@ def test_stream_detects_a_contact_live_and_records_everything(tmp_path):
             emulator.run(link, peer_timeout_s=120)
         except PeerGone:
             pass
+        link.disconnect()               # the board is unplugged once the scene is over
 
     server = threading.Thread(target=serve, daemon=True)
     server.start()

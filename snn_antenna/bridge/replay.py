@@ -41,7 +41,7 @@ class ReplaySource:
 
     def start(self) -> "ReplaySource":
         self._raw = self.recording.raw_path.read_bytes()
-        self._t0 = time.monotonic()
+        self._t0 = self.started_monotonic = time.monotonic()
         return self
 
     def pending(self) -> bool:

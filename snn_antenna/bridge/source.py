@@ -140,6 +140,7 @@ class SerialSource:
     def start(self) -> "SerialSource":
         """Open the port now, so that a missing or busy port fails in the caller's thread."""
         self.transport.open()
+        self.started_monotonic = time.monotonic()
         self._put(Batch(time.time(), counts=self.counts(), event="opened"))
         self._thread = threading.Thread(target=self._run, name=f"serial-reader {self.url}",
                                         daemon=True)
@@ -274,7 +275,10 @@ class SourceLoop:
             raise SpecError("no_data_timeout", self.no_data_timeout_s, "a number of seconds > 0")
 
     def __iter__(self):
-        started = last_valid = time.monotonic()
+        last_valid = time.monotonic()
+        # A duration counts from the port's opening: a consumer may start iterating later
+        # (Brian2 builds its network first) while the reader is already collecting.
+        started = getattr(self.source, "started_monotonic", last_valid)
         link_up = True
         while self.stop is None or not self.stop.is_set():
             if self.duration_s is not None and time.monotonic() - started >= self.duration_s:
