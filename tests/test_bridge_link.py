@@ -222,3 +222,24 @@ def test_socket_url_reconnects_when_the_server_comes_back(tmp_path):
     assert rec.seq.tolist() == list(range(200)) + list(range(225, 425))
     assert rec.counts["reconnects"] >= 1 and rec.counts["crc_errors"] == 0
     assert (rec.counts["gaps"], rec.counts["lost_samples"]) == (1, 25)
+
+
+def test_torn_last_record_is_dropped_and_recordings_are_never_overwritten(tmp_path):
+    from snn_antenna.bridge.source import Batch
+    from snn_antenna.errors import SpecError
+
+    recorder = Recorder(tmp_path / "rec", port="loop://", wire_format="binary", baudrate=250000)
+    samples = [(s, s, 1023 - s) for s in range(50)]
+    recorder.handle(Batch(123.5, b"\x01" * 500, samples, {"frames": 50}))
+    recorder.close()
+    with open(tmp_path / "rec" / "samples.bin", "ab") as f:
+        f.write(b"\x33" * 7)                # a record cut short by a crash
+    rec = load_recording(tmp_path / "rec")
+    assert rec.torn_bytes == 7 and rec.n_samples == 50
+    assert rec.seq.tolist() == list(range(50)) and rec.y.tolist() == [1023 - s for s in range(50)]
+    assert np.all(rec.host_time_s == 123.5)
+    assert rec.to_recording().samples.shape == (50, 2)
+    with pytest.raises(SpecError, match="out = .*never overwritten"):
+        Recorder(tmp_path / "rec", port="loop://", wire_format="binary", baudrate=250000)
+    with pytest.raises(SpecError, match="recording = .*snn-antenna record"):
+        load_recording(tmp_path)
