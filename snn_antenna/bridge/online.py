@@ -243,7 +243,8 @@ class OnlineReport:
             "waiting_s": round(self.waiting_s, 3),
             "startup_s": (round(self.first_window[0] - self.started, 3) if self.first_window
                           else None),
-            "realtime_factor": round(self.realtime_factor, 2),
+            "realtime_factor": (round(self.realtime_factor, 2)
+                                if np.isfinite(self.realtime_factor) else None),
             # From a sample's arrival on the host to the rate-map window that includes it:
             # all windows, and those after the start-up backlog was worked off (live only).
             "latency_ms": summary(self.latencies_ms),
@@ -302,8 +303,8 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
         if report.first_window is None:         # steady state starts here (Brian2 is built)
             report.first_window = report.last_window = (time.perf_counter(), loop.waiting_s,
                                                         t_s + parts.window_s)
-        # ResonatorArray.stream publishes a window as its last sample is put in place; the
-        # last sample of the window has been integrated.
+        # ResonatorArray.stream publishes a window once its last sample has been integrated,
+        # before it asks for the next one.
         last_integrated = int(round((t_s + parts.window_s) * RATE_HZ)) - 1
         arrived = clock.arrival(max(last_integrated, 0))
         latency_ms = (now - arrived) * 1e3 if live else None
