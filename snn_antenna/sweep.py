@@ -34,7 +34,7 @@ The public API is small:
   chunk with new parameters via ``run_args``; each worker process keeps its own project
   directory) or ``"numpy"`` / ``"cython"`` (runtime, through ``neurons.simulate`` with a 2-D
   input current and ``input_index``). ``benchmarks/bench_sweep.py`` measures which is faster:
-  once compiled, standalone is 2.5-16x faster than cython and 6-16x faster than numpy per
+  once compiled, standalone is 2.5-7.5x faster than cython and 6-16x faster than numpy per
   neuron-step; its one-off compile (~10-20 s per worker process and group size, cached on
   disk) pays off beyond a few 10^8 neuron-steps, so small first looks use ``numpy``.
 - ``SceneSweep``: the same for neurons driven by coded robot scenes, with axes over scene
@@ -257,21 +257,50 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     bar = tqdm(total=len(regions), initial=len(done), unit="chunk", desc=desc,
                disable=not progress, smoothing=0.1)
     try:
-        if client is None:
-            for i in todo:
-                _, _, who = _run_chunk(str(store.path), i, regions[i],
-                                       grid.points(regions[i]), evaluate, outputs)
-                workers[who] = workers.get(who, 0) + 1
-                bar.update()
-        else:
-            _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, workers)
+        with _interruptible() as interrupted:
+            if client is None:
+                for i in todo:
+                    _, _, who = _run_chunk(str(store.path), i, regions[i],
+                                           grid.points(regions[i]), evaluate, outputs)
+                    workers[who] = workers.get(who, 0) + 1
+                    bar.update()
+                    if interrupted():
+                        raise KeyboardInterrupt
+            else:
+                _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar,
+                             workers, interrupted)
     finally:
         bar.close()
     return SweepOutcome(store.load(), len(regions), todo, sorted(done),
                         time.perf_counter() - t0, workers)
 
 
-def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, workers):
+@contextmanager
+def _interruptible():
+    """Ctrl-C raises KeyboardInterrupt and is also remembered: Python drops an exception
+    raised while a weakref callback runs (Brian2 has many), so the sweep checks the flag
+    after every chunk and stops there even when the exception was lost."""
+    import signal
+    import threading
+
+    requested = []
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: False
+        return
+
+    def handler(signum, frame):
+        requested.append(signum)
+        raise KeyboardInterrupt
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield lambda: bool(requested)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, workers,
+                 interrupted=lambda: False):
     from distributed import as_completed
 
     if not todo:
@@ -288,6 +317,8 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
             _, _, who = future.result()  # re-raises a worker's exception here
             workers[who] = workers.get(who, 0) + 1
             bar.update()
+            if interrupted():
+                raise KeyboardInterrupt
     except BaseException:  # Ctrl-C or a failed chunk: finished chunks stay in the store
         client.cancel(futures)
         raise
@@ -473,6 +504,11 @@ def count_spikes(sweep, p: dict[str, np.ndarray], current: np.ndarray, input_dt_
                  input_index: np.ndarray, count_from_s: float) -> np.ndarray:
     """Spikes per neuron from ``count_from_s`` on: one NeuronGroup, neuron i driven by
     column ``input_index[i]`` of ``current`` (runtime target ``sweep.engine``)."""
+    import brian2 as b2
+
+    # Brian2 answers Ctrl-C by ending the run early and returning: a chunk would be stored
+    # with truncated counts and marked done. Raising KeyboardInterrupt leaves it unmarked.
+    b2.prefs.core.stop_on_keyboard_interrupt = False
     result = neurons.simulate(sweep.preset, current, sweep.dt_ms, k=p["k"], method=sweep.method,
                               input_dt_ms=input_dt_ms, input_index=input_index,
                               target=sweep.engine, force=sweep.force,

@@ -205,8 +205,15 @@ KILLED_SWEEP = textwrap.dedent("""
 """)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL])
-def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
+@pytest.fixture(scope="module")
+def whole_sweep(tmp_path_factory):
+    grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
+    return run_sweep(grid, FAST, tmp_path_factory.mktemp("whole") / "w.zarr",
+                     NeuronSweep.OUTPUTS, chunk_points=4, progress=False)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "Ctrl-C"])
+def test_killed_sweep_resumes_without_recomputing(tmp_path, sig, whole_sweep):
     path = tmp_path / "killed.zarr"
     proc = subprocess.Popen([sys.executable, "-c", KILLED_SWEEP, str(path)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -219,15 +226,15 @@ def test_killed_sweep_resumes_without_recomputing(tmp_path, sig):
             time.sleep(0.05)
         proc.send_signal(sig)
     finally:
-        proc.wait(timeout=30)
+        returncode = proc.wait(timeout=30)
+    assert returncode != 0  # it was stopped, it did not finish
     done_before = store.done_chunks()
     assert 2 <= len(done_before) < 6, "the sweep must be killed mid-way"
     grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
     resumed = run_sweep(grid, FAST, path, NeuronSweep.OUTPUTS, chunk_points=4, progress=False)
     assert set(resumed.chunks_skipped) == done_before
     assert set(resumed.chunks_computed) == set(range(6)) - done_before
-    whole = run_sweep(grid, FAST, tmp_path / "whole.zarr", NeuronSweep.OUTPUTS, chunk_points=4,
-                      progress=False)
+    whole = whole_sweep
     assert resumed.data.spike_count.equals(whole.data.spike_count)
     assert whole.data.spike_count.values.sum() > 0
 
