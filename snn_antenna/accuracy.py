@@ -84,69 +84,88 @@ def _steady_rates(spike_i, spike_t_ms, k_dt, duration_ms, n) -> np.ndarray:
     return counts / (half / 1000.0)
 
 
+def run_drives(method: str, k_dt, drives, steps: int, *, preset: str = "resonator",
+               b: float | None = None, target: str = "numpy"):
+    """Every (k·dt, drive) pair as one neuron of ONE group, ``steps`` steps from the reset point.
+
+    dt is 1 ms and k carries k·dt (the update depends on their product only). Returns
+    ``(runaway, spike_i, spike_t_ms, k_of, drive_of)``: ``runaway[j]`` is True when neuron
+    j's |v| or |u| passed ``neurons.RUNAWAY_LIMIT`` or became NaN at ANY step (latched right
+    after each state update, before a reset can hide it).
+    """
+    import brian2 as b2
+
+    k_dt, drives = np.asarray(k_dt, float), np.asarray(drives, float)
+    check(np.all(k_dt > 0) and np.all(np.isfinite(k_dt)), "k_dt", k_dt, "values > 0")
+    check(np.all(np.isfinite(drives)), "drives", drives, "finite currents")
+    check(isinstance(steps, int) and steps >= 1, "steps", steps, "an integer >= 1")
+    p = neurons.PRESETS[preset]
+    b = p.b if b is None else b
+    kk, ii = np.meshgrid(k_dt, np.arange(len(drives)), indexing="ij")
+    kk, ii = kk.ravel(), ii.ravel()
+    b2.start_scope()
+    b2.prefs.codegen.target = target
+    drive = b2.TimedArray(drives[None, :], dt=steps * b2.ms, name="drive")
+    group = b2.NeuronGroup(
+        kk.size, neurons.equations(p, "drive(t, input_index)",
+                                   "input_index : integer (constant)\nblown : boolean"),
+        threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
+        method=neurons.brian_method(method), namespace={"drive": drive},
+        dt=1 * b2.ms, name="neurons")
+    group.k, group.a, group.b, group.c, group.d = kk, p.a, b, p.c, p.d
+    group.input_index = ii
+    group.v, group.u = p.c, b * p.c
+    # NaN fails every comparison, so "not (|v| < limit)" catches it too.
+    limit = neurons.RUNAWAY_LIMIT
+    group.run_regularly(f"blown = blown or not (abs(v) < {limit} and abs(u) < {limit})",
+                        when="after_groups")
+    spikes = b2.SpikeMonitor(group)
+    with np.errstate(all="ignore"):
+        b2.Network(group, spikes).run(steps * b2.ms, namespace={})
+    return (np.asarray(group.blown[:], bool), np.asarray(spikes.i[:], int),
+            np.asarray(spikes.t / b2.ms), kk, drives[ii])
+
+
 def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
                   preset: str = "resonator", b: float | None = None,
                   model_ms: float = 400.0, rate_tolerance: float = 0.05,
                   target: str = "numpy", progress=None) -> xr.Dataset:
     """Classify each (method, k·dt, constant drive I) run from the reset point.
 
-    A run is non-finite when |v| or |u| leaves ``neurons.RUNAWAY_LIMIT`` or becomes NaN at
-    any step; accurate when its steady spike rate (second half of ``model_ms`` model
-    milliseconds) is within ``rate_tolerance`` (relative, plus one spike) of the reference's.
-    Returns a Dataset with ``status`` (0 accurate, 1 inaccurate, 2 non-finite), ``rate_hz``
-    and ``reference_rate_hz`` over (integrator, k_dt, I), and the measured ``max_stable_k_dt``
-    (largest k·dt below which no drive went non-finite) per method.
+    Every neuron runs ``model_ms / min(k_dt)`` steps (so the finest k·dt covers ``model_ms``
+    model milliseconds and coarser ones more). A run is non-finite when it ran away
+    (``run_drives``); accurate when its steady spike rate (second half of the run) is within
+    ``rate_tolerance`` (relative, plus one spike) of the reference's. Returns a Dataset with
+    ``status`` (0 accurate, 1 inaccurate, 2 non-finite), ``rate_hz`` and
+    ``reference_rate_hz`` over (integrator, k_dt, I), and per method the measured
+    ``max_stable_k_dt`` (largest k·dt up to which no drive went non-finite) and
+    ``max_accurate_k_dt`` (up to which every drive was accurate).
     """
-    import brian2 as b2
-
     k_dt = np.geomspace(0.01, 50, 25) if k_dt is None else np.asarray(k_dt, float)
     drives = np.linspace(-50, 50, 21) if drives is None else np.asarray(drives, float)
     check(np.all(k_dt > 0) and np.all(np.isfinite(k_dt)), "k_dt", k_dt, "values > 0")
     check(np.all(np.isfinite(drives)), "drives", drives, "finite currents")
     p = neurons.PRESETS[preset]
     b = p.b if b is None else b
-    v_reset, u_reset = p.c, b * p.c
 
     # The reference rate of each drive (k = 1, exact), over the same model-time window.
     ref = reference.simulate(preset, drives[None, :], k=1.0, input_dt_ms=model_ms, b=b,
-                             v0=v_reset, u0=u_reset)
+                             v0=p.c, u0=b * p.c)
     late = ref.spike_t_ms >= model_ms / 2
     ref_rate = np.bincount(ref.spike_i[late], minlength=len(drives)) / (model_ms / 2000.0)
 
-    kk, ii = np.meshgrid(k_dt, np.arange(len(drives)), indexing="ij")
-    kk, ii = kk.ravel(), ii.ravel()
-    n = kk.size
-    duration_ms = model_ms / float(k_dt.min())   # dt = 1 ms: every neuron runs >= model_ms
+    steps = int(np.ceil(model_ms / float(k_dt.min())))
     status = np.empty((len(methods), len(k_dt), len(drives)), dtype=np.int8)
     rates = np.empty(status.shape)
+    ref_r = np.tile(ref_rate, len(k_dt))
     for m_idx, method in enumerate(methods):
         if progress:
-            progress(f"stability map: {method} ({n} neurons, {duration_ms:.0f} steps)")
-        b2.start_scope()
-        b2.prefs.codegen.target = target
-        drive = b2.TimedArray(drives[None, :], dt=duration_ms * b2.ms, name="drive")
-        group = b2.NeuronGroup(
-            n, neurons.equations(p, "drive(t, input_index)",
-                                 "input_index : integer (constant)\nblown : boolean"),
-            threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
-            method=neurons.brian_method(method), namespace={"drive": drive},
-            dt=1 * b2.ms, name="neurons")
-        group.k, group.a, group.b, group.c, group.d = kk, p.a, b, p.c, p.d
-        group.input_index = ii
-        group.v, group.u = v_reset, u_reset
-        # Latched every step: NaN fails every comparison, so "not (|v| < limit)" catches it.
-        limit = neurons.RUNAWAY_LIMIT
-        group.run_regularly(f"blown = blown or not (abs(v) < {limit} and abs(u) < {limit})",
-                            when="after_groups")
-        spikes = b2.SpikeMonitor(group)
-        net = b2.Network(group, spikes)
-        with np.errstate(all="ignore"):
-            net.run(duration_ms * b2.ms, namespace={})
-        blown = np.asarray(group.blown[:], bool)
-        r = _steady_rates(np.asarray(spikes.i[:], int), np.asarray(spikes.t / b2.ms), kk,
-                          duration_ms, n)
-        ref_r = ref_rate[ii]
-        one_spike = 1000.0 / (kk * duration_ms / 2)   # one spike in the window, per second
+            progress(f"stability map: {method} ({k_dt.size * drives.size} neurons, "
+                     f"{steps} steps)")
+        blown, spike_i, spike_t, kk, _ = run_drives(method, k_dt, drives, steps,
+                                                    preset=preset, b=b, target=target)
+        r = _steady_rates(spike_i, spike_t, kk, steps, kk.size)
+        one_spike = 1000.0 / (kk * steps / 2)   # one spike in the window, per second
         ok = np.abs(r - ref_r) <= rate_tolerance * ref_r + one_spike
         st = np.where(blown, NON_FINITE, np.where(ok, ACCURATE, INACCURATE))
         status[m_idx] = st.reshape(len(k_dt), len(drives))
@@ -161,12 +180,12 @@ def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
         coords={"integrator": list(methods),
                 "k_dt": ("k_dt", k_dt, {"units": "model ms per step"}),
                 "I": ("I", drives, {"long_name": "constant drive"})},
-        attrs={"preset": preset, "b": b, "model_ms": model_ms,
+        attrs={"preset": preset, "b": b, "model_ms": model_ms, "steps": steps,
                "rate_tolerance": rate_tolerance})
     ds["max_stable_k_dt"] = ("integrator", [_largest_passing(k_dt, status[m] != NON_FINITE)
-                                        for m in range(len(methods))])
+                                            for m in range(len(methods))])
     ds["max_accurate_k_dt"] = ("integrator", [_largest_passing(k_dt, status[m] == ACCURATE)
-                                          for m in range(len(methods))])
+                                              for m in range(len(methods))])
     return ds
 
 
