@@ -130,6 +130,28 @@ class LowPass(_Causal):
         return y
 
 
+class HighPass(LowPass):
+    """Butterworth high-pass with the filter state carried across calls (e.g. to keep only a
+    resonator band's own mode). The state starts at rest, so a first-sample offset passes
+    as a step and decays within a few periods of the cut-off."""
+
+    def _validate_params_(self):
+        from scipy.signal import butter
+
+        super()._validate_params_()
+        self.sos_ = butter(self.order, self.cutoff_hz, btype="highpass", fs=self.rate_hz,
+                           output="sos")
+
+    def _step(self, X):
+        from scipy.signal import sosfilt
+
+        X = np.atleast_1d(X)
+        if self.state_ is None:
+            self.state_ = np.zeros((self.sos_.shape[0], 2) + X.shape[1:])
+        y, self.state_ = sosfilt(self.sos_, X, axis=0, zi=self.state_)
+        return y
+
+
 class Centre(_Causal):
     """Remove the slowly varying mean (gravity, drift): x − EMA(x) with time constant tau_s.
 
@@ -190,12 +212,21 @@ class SquareWaveCoder(_Causal):
 
 def make_chain(rate_hz: float, adc_bits: int = 10, full_scale_g: float = 18.0,
                lowpass_hz: float = 30.0, lowpass_order: int = 4, centre_tau_s: float = 1.0,
-               coder_amplitude: float = 0.15, threshold: float = 0.0) -> Pipeline:
-    """The paper's preprocessing chain from ADC counts (n, 2) to the coded input current."""
-    return Pipeline([
+               coder_amplitude: float = 0.15, threshold: float = 0.0,
+               highpass_hz: float | None = None) -> Pipeline:
+    """The paper's preprocessing chain from ADC counts (n, 2) to the coded input current.
+
+    ``highpass_hz`` (default: none) adds a high-pass of the same order after the low-pass,
+    making the chain a band-pass, e.g. for resonators above the rod's low mode.
+    """
+    steps = [
         ("to_g", CountsToG(adc_bits, full_scale_g)),
         ("align", PCAAlign()),
         ("lowpass", LowPass(rate_hz, lowpass_hz, lowpass_order)),
+    ]
+    if highpass_hz is not None:
+        steps.append(("highpass", HighPass(rate_hz, highpass_hz, lowpass_order)))
+    return Pipeline(steps + [
         ("centre", Centre(rate_hz, centre_tau_s)),
         ("coder", SquareWaveCoder(coder_amplitude, threshold)),
     ])
