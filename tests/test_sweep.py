@@ -303,3 +303,28 @@ def test_scene_axes_group_points_by_scene_and_match_single_runs(tmp_path):
         assert np.array_equal(counts.sel({"stimulus.contacts.0.distance_cm": distance}).values,
                               expected)
     assert counts.values.sum() > 0
+
+
+@pytest.mark.slow
+def test_a_killed_dask_worker_loses_nothing(tmp_path, whole_sweep):
+    """SIGKILL one worker process mid-sweep: Dask reruns its chunk elsewhere, same numbers."""
+    import threading
+
+    from snn_antenna.sweep import dask_client
+
+    grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
+    path = tmp_path / "k.zarr"
+    store = SweepStore(path)
+    with dask_client(workers=2) as client:
+        victim = next(iter(client.run(os.getpid).values()))
+
+        def kill_when_two_chunks_are_done():
+            while not ((path / "chunk_done").exists() and len(store.done_chunks()) >= 2):
+                time.sleep(0.02)
+            os.kill(victim, signal.SIGKILL)
+
+        threading.Thread(target=kill_when_two_chunks_are_done, daemon=True).start()
+        out = run_sweep(grid, FAST, path, NeuronSweep.OUTPUTS, chunk_points=4, client=client,
+                        progress=False)
+        assert victim not in client.run(os.getpid).values()  # it really died
+    assert out.data.spike_count.equals(whole_sweep.data.spike_count)
