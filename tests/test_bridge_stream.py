@@ -10,7 +10,7 @@ import pytest
 
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
-from snn_antenna.bridge.online import EpisodeTracker, build_online
+from snn_antenna.bridge.online import CalibratedChain, EpisodeTracker, build_online
 from snn_antenna.errors import SpecError
 from snn_antenna.readout import ContactDetector
 from snn_antenna.stimuli import Contact, RobotScene
@@ -79,3 +79,27 @@ def test_bad_network_spec_fails_before_the_port_opens(tmp_path):
                              NETWORK, "--set", "network.dt_ms=5"],
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "network.dt_ms" in result.stderr
+
+
+def test_calibrated_chain_does_not_depend_on_chunking():
+    """The same samples chunked as a port might deliver them give the same coded signal."""
+    counts = RobotScene(duration_s=3.0, contacts=[Contact(1.5, 19.0)]).generate(seed=5).samples
+    parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
+    outputs, means = [], []
+    for cuts in ([3000], [1, 998, 2, 700, 1299], list(np.diff(np.r_[0:3000:37, 3000]))):
+        chain = CalibratedChain(parts.chain, 1000)
+        pieces, start = [], 0
+        for n in cuts:
+            coded = chain.push(counts[start:start + n].astype(float))
+            start += n
+            if coded is not None:
+                pieces.append(coded)
+        outputs.append(np.concatenate(pieces))
+        means.append(parts.chain.named_steps["align"].mean_.copy())
+    # Fitted on exactly the first 1000 samples, whatever chunk crossed that mark.
+    first_g = parts.chain.named_steps["to_g"].transform(counts[:1000].astype(float))
+    for mean in means:
+        assert np.allclose(mean, first_g.mean(axis=0), rtol=0, atol=1e-12)
+    assert len(outputs[0]) == 3000 and np.count_nonzero(outputs[0]) > 100
+    for other in outputs[1:]:
+        assert np.array_equal(other, outputs[0])

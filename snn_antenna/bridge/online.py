@@ -91,6 +91,33 @@ def warm_up(parts: OnlineParts) -> None:
     parts.array.stream(iter([np.zeros(int(0.05 * RATE_HZ))]), RATE_HZ, window_s=0.05)
 
 
+class CalibratedChain:
+    """The preprocessing chain on a stream whose first ``n_calibration`` samples fit it.
+
+    The PCA alignment needs a fit. The first samples are held back until there are
+    ``n_calibration`` of them; the chain is fitted on exactly those (however the port chunked
+    them, the same data give the same numbers), then they and every later chunk are streamed
+    through it with ``partial_transform``.
+    """
+
+    def __init__(self, chain, n_calibration: int):
+        self.chain, self.n_calibration = chain, n_calibration
+        self._held: list[np.ndarray] = []
+        self.fitted = False
+
+    def push(self, counts: np.ndarray) -> np.ndarray | None:
+        """ADC counts (n, 2) in, coded samples out (None while calibrating)."""
+        if not self.fitted:
+            self._held.append(counts)
+            counts = np.concatenate(self._held)
+            if len(counts) < self.n_calibration:
+                self._held = [counts]
+                return None
+            reset(self.chain.fit(counts[:self.n_calibration]))
+            self._held, self.fitted = [], True
+        return partial_transform(self.chain, counts)
+
+
 class ArrivalClock:
     """Host arrival time of every sample index, kept only until its window is published."""
 
@@ -267,16 +294,14 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     clock, report = ArrivalClock(), OnlineReport()
     neuron_hz = parts.array.neuron_hz
     tracker = EpisodeTracker(parts.detector, neuron_hz, parts.window_s)
-    calibration: list[np.ndarray] = []
     # A replay read flat out delivers seconds of samples at once: arrival-to-rate-map latency
     # only means something for a live port (or a replay paced in real time).
     live = getattr(source, "realtime", True)
-    n_calibration = int(calibration_s * RATE_HZ)
     if display:
         display.header(neuron_hz)
 
     def coded_chunks():
-        calibrated = False
+        chain = CalibratedChain(parts.chain, int(calibration_s * RATE_HZ))
         waiting: list = []
         for batch in loop:
             if batch.samples:
@@ -286,17 +311,10 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
             # sample as for a hundred, so take everything already queued in one go.
             if not waiting or source.pending():
                 continue
-            counts = np.asarray(waiting, dtype=float)[:, 1:]
+            coded = chain.push(np.asarray(waiting, dtype=float)[:, 1:])
             waiting = []
-            if not calibrated:
-                calibration.append(counts)
-                if sum(len(c) for c in calibration) < n_calibration:
-                    continue
-                # Fit on the calibration data, then stream it through like any later sample.
-                counts = np.concatenate(calibration)
-                reset(parts.chain.fit(counts))
-                calibrated = True
-            yield partial_transform(parts.chain, counts)
+            if coded is not None:
+                yield coded
 
     def on_window(t_s: float, spike_counts: np.ndarray) -> None:
         now = time.time()
