@@ -12,6 +12,7 @@ import signal
 import sys
 import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import SpecError
@@ -157,25 +158,23 @@ class Progress:
                   file=self.file, flush=True)
 
 
-@_guarded
-def cmd_record(args) -> int:
-    """Record a serial stream into ``args.out``; the recording is closed with the status the
-    session ended with, also when the port fails."""
+@contextmanager
+def recording_session(args, extra_meta: dict | None = None):
+    """Open the port, then the recording; yield (source, recorder, stop). However the session
+    ends, the port is released and the recording closed with that ending as its status."""
     from .recorder import Recorder
 
-    _check_duration(args.duration)
     stop = stop_on_signals()
     source = open_source(args)
-    status, message = "ok", ""
     try:
         recorder = Recorder(args.out, port=args.port, wire_format=args.format,
-                            baudrate=args.baudrate)
+                            baudrate=args.baudrate, extra_meta=extra_meta)
     except SpecError:
         source.stop()
         raise
+    status, message = "ok", ""
     try:
-        run_source(source, [recorder, Progress()], duration_s=args.duration,
-                   no_data_timeout_s=args.no_data_timeout, stop=stop)
+        yield source, recorder, stop
         if stop.is_set():
             status = "stopped"
     except PortError as exc:
@@ -186,6 +185,15 @@ def cmd_record(args) -> int:
         recorder.close(status, message)
         print(f"\nrecording in {args.out}: {format_counts(recorder.counts)}", file=sys.stderr,
               flush=True)
+
+
+@_guarded
+def cmd_record(args) -> int:
+    """Record a serial stream into ``args.out``."""
+    _check_duration(args.duration)
+    with recording_session(args) as (source, recorder, stop):
+        run_source(source, [recorder, Progress()], duration_s=args.duration,
+                   no_data_timeout_s=args.no_data_timeout, stop=stop)
     return 0
 
 
@@ -258,7 +266,6 @@ def cmd_emulate(args) -> int:
 def cmd_stream(args) -> int:
     """Run the online pipeline on a live port, recording while streaming."""
     from .online import LiveDisplay, build_online, run_online, warm_up
-    from .recorder import Recorder
 
     _check_duration(args.duration)
     parts = build_online(args.network, args.set)     # a bad spec fails before the port opens
@@ -267,23 +274,12 @@ def cmd_stream(args) -> int:
     warm_up(parts)
     if args.out is None:
         args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
-    stop = stop_on_signals()
-    source = open_source(args)
-    recorder = Recorder(args.out, port=args.port, wire_format=args.format,
-                        baudrate=args.baudrate, extra_meta={"network": args.network})
-    status, message = "ok", ""
-    try:
-        report = run_online(source, parts, handlers=[recorder],
-                            duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
-                            stop=stop, display=LiveDisplay(sys.stdout))
-    except PortError as exc:
-        status, message = "port-error", str(exc)
-        raise
-    finally:
-        source.stop()
-        recorder.close(status, message)
+    with recording_session(args, {"network": str(args.network), "set": args.set}) as (
+            source, recorder, stop):
+        report = run_online(source, parts, handlers=[recorder], duration_s=args.duration,
+                            no_data_timeout_s=args.no_data_timeout, stop=stop,
+                            display=LiveDisplay(sys.stdout))
     print(json.dumps(report, indent=1))
-    print(f"recording in {args.out}", file=sys.stderr)
     return 0
 
 
