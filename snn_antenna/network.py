@@ -151,8 +151,9 @@ class ResonatorArray:
 
         # when="start": the new sample is in place before this step's integration, exactly
         # as the TimedArray of the offline form switches value at the sample boundary.
+        # No ``t`` argument: Brian2 would build a Quantity for it on every call (~1 kHz).
         @b2.network_operation(dt=b2.second / rate_hz, when="start")
-        def next_sample(t):
+        def next_sample():
             # Every step before this one has been integrated: a window that ends at this
             # sample boundary is complete.
             if stats.samples and stats.samples % samples_per_window == 0:
