@@ -247,7 +247,7 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     check_memory(grid, outputs, int(np.prod(block_shape)),
                  getattr(evaluate, "bytes_per_point", 0))
     regions = grid.blocks(chunk_points)
-    store = SweepStore(store_path)
+    store = SweepStore(Path(store_path).resolve())  # workers may run elsewhere
     settings = repr(evaluate) if settings is None else settings
     done = store.prepare(grid.coords(), outputs, block_shape, len(regions), attrs,
                          settings, fresh)
@@ -307,10 +307,10 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
         return
     client.register_plugin(_ImportBrian2(), name="snn-antenna-import-brian2")
     evaluate_future = client.scatter(evaluate, broadcast=True)
+    run = f"{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}"
     futures = [client.submit(_run_chunk, str(store.path), i, regions[i],
                              grid.points(regions[i]), evaluate_future, outputs,
-                             key=f"sweep-chunk-{i}-{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}",
-                             pure=False)
+                             key=f"sweep-{run}-chunk-{i}", pure=False)
                for i in todo]
     try:
         for future in as_completed(futures):

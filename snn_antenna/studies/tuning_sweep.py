@@ -20,7 +20,7 @@ import xarray as xr
 
 from .. import neurons
 from .. import spec as specs
-from ..errors import SpecError, check
+from ..errors import check
 from ..report import Report, provenance
 from ..sweep import NEURON_AXES, Grid, NeuronSweep, dask_client, run_sweep
 
@@ -105,11 +105,13 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
     report.text(spec.get("description", ""))
     _write_report(report, data, maps, summary, reference)
     summary = report.write(summary, spec, neuron.engine)
-    cal = summary["calibration"]
-    log(f"k → peak frequency: {cal['hz_per_k_peak']:.2f} Hz per unit k (centroid "
-        f"{cal['hz_per_k_centroid']:.2f}); neurons.DRIVEN_HZ_PER_K = "
-        f"{neurons.DRIVEN_HZ_PER_K:g} {'holds' if cal['driven_hz_per_k_holds'] else 'does NOT hold'}"
-        f" (within {cal['tolerance'] * 100:.0f} %); report in {out_dir}/report.html")
+    cal = summary.get("calibration")
+    if cal and cal["hz_per_k_peak"] is not None:
+        verdict = "holds" if cal["driven_hz_per_k_holds"] else "does NOT hold"
+        log(f"k → peak frequency: {cal['hz_per_k_peak']:.2f} Hz per unit k (centroid "
+            f"{cal['hz_per_k_centroid']:.2f}); neurons.DRIVEN_HZ_PER_K = "
+            f"{neurons.DRIVEN_HZ_PER_K:g} {verdict} (within {cal['tolerance'] * 100:.0f} %)")
+    log(f"report in {out_dir}/report.html")
     return summary
 
 
@@ -238,6 +240,8 @@ def _write_report(report: Report, data: xr.Dataset, maps: xr.Dataset, summary: d
     import matplotlib.pyplot as plt
 
     cal = summary.get("calibration")
+    if cal and cal["hz_per_k_peak"] is None:
+        cal = None  # no k gave a single spike
     if cal:
         report.heading("Calibration: k → preferred frequency")
         report.text(
