@@ -192,11 +192,12 @@ class Fold:
 
 
 def inputs_of(features: xr.Dataset, kind: str) -> np.ndarray:
-    if kind == "spectrum":
-        return np.asarray(features["spectrum"].values, dtype=np.float32)
-    if kind == "params":
-        return np.asarray(features["params"].values, dtype=np.float32)
-    raise SpecError("inputs", kind, "'spectrum' or 'params'")
+    """The input matrix ``kind``: ``"spectrum"``, ``"params"`` or any other (event, feature)
+    variable of the features (e.g. spiking features added by a study)."""
+    if kind in features.data_vars and features[kind].ndim == 2:
+        return np.asarray(features[kind].values, dtype=np.float32)
+    raise SpecError("inputs", kind, f"one of the feature matrices "
+                                    f"{[v for v in features.data_vars if features[v].ndim == 2]}")
 
 
 def targets_of(features: xr.Dataset, task: str, materials: list[str]) -> np.ndarray:
@@ -221,6 +222,7 @@ def fit_fold(baseline: Baseline, X, y, train, test, seed) -> Fold:
     with warnings.catch_warnings():
         # A fixed epoch budget is the design (see Mlp); its end is not a failure.
         warnings.simplefilter("ignore", ConvergenceWarning)
+        warnings.filterwarnings("ignore", message=".*batch_size.*clipped")  # tiny data sets
         est.fit(X[train], y[train])
     fit_s = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -26,10 +26,13 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from sklearn.base import BaseEstimator, RegressorMixin
+from sklearn.pipeline import Pipeline
 
 from . import antenna, neurons
 from .errors import SpecError, check
 from .network import ResonatorArray
+from .antenna import ADC
 from .preprocess import make_chain
 
 
@@ -144,16 +147,18 @@ class SpikingBank:
 
     def code(self, counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float
              ) -> np.ndarray:
-        """Coded inputs (n_samples, n_events × n_bands): each event through each band's chain,
-        fitted on that event alone (its own PCA axis), as a live system would per contact."""
+        """Coded inputs (n_samples, n_events × n_bands), column e·n_bands + j for event e
+        through band j's chain. Each event is aligned on its own principal axis (what
+        ``PCAAlign`` fitted on that event gives); the chain's later stages run on all events
+        at once as columns (they filter along time only)."""
         n_samples = min(counts.shape[1], int(round(self.duration_s * rate_hz)))
-        out = np.empty((n_samples, len(counts) * len(self.bands)))
-        chains = [b.chain(rate_hz, adc_bits, full_scale_g) for b in self.bands.values()]
-        for e, ev in enumerate(counts):
-            ev = ev[:n_samples]
-            for j, chain in enumerate(chains):
-                out[:, e * len(chains) + j] = chain.fit(ev).transform(ev)
-        return out
+        main = align_events(counts[:, :n_samples], adc_bits, full_scale_g)   # (samples, events)
+        coded = []
+        for band in self.bands.values():
+            chain = band.chain(rate_hz, adc_bits, full_scale_g)
+            after_align = Pipeline(chain.steps[2:])
+            coded.append(after_align.fit(main).transform(main))
+        return np.stack(coded, axis=2).reshape(n_samples, -1)
 
     def run(self, counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float,
             progress: bool = True) -> SpikeFeatures:
@@ -196,6 +201,21 @@ class SpikingBank:
                              min(counts.shape[1] / rate_hz, self.duration_s), wall, steps)
 
 
+def align_events(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.ndarray:
+    """Events (events, samples, 2 axes of counts) → main axis in g, shape (samples, events).
+
+    The batched form of ``preprocess.CountsToG`` + ``PCAAlign`` fitted per event: mean removed,
+    projected on the covariance's top eigenvector, its largest component made positive.
+    """
+    g = ADC(adc_bits, full_scale_g).to_g(counts)
+    centred = g - g.mean(axis=1, keepdims=True)
+    cov = np.einsum("esi,esj->eij", centred, centred)
+    _, vectors = np.linalg.eigh(cov)
+    axis = vectors[:, :, -1]
+    axis *= np.sign(axis[np.arange(len(axis)), np.argmax(np.abs(axis), axis=1)])[:, None]
+    return np.einsum("esi,ei->se", centred, axis)
+
+
 def spike_summary(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
                   duration_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per neuron: spike count, first spike time (``duration_s`` if none), last − first."""
@@ -207,12 +227,25 @@ def spike_summary(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
     return counts, first, last - first
 
 
-def distance_from_dominant(features: SpikeFeatures, band: str = "low") -> np.ndarray:
-    """The paper's nonlinear map (Fig. 10E): most active neuron's frequency → distance (cm)
-    through the inverse low-mode law; events where the band stayed silent get NaN-free
-    ``ROD_LENGTH_CM / 2`` (the centre of the rod: the least-wrong guess, counted in rmse)."""
-    f = features.dominant_hz(band)
-    out = np.full(len(f), antenna.ROD_LENGTH_CM / 2)
-    fired = f > 0
-    out[fired] = antenna.distance_from_low_hz(f[fired])
-    return out
+class DominantNeuronDistance(RegressorMixin, BaseEstimator):
+    """The paper's decoder (Fig. 10E) as an estimator: the most active neuron's preferred
+    frequency → distance through the inverse low-mode law. Nothing is learnt; ``fit`` only
+    checks the input width. X holds spike counts of neurons tuned to ``neuron_hz``; an event
+    where all stayed silent gets the middle of the calibrated range."""
+
+    def __init__(self, neuron_hz=None):
+        self.neuron_hz = neuron_hz
+
+    def fit(self, X, y=None):
+        check(self.neuron_hz is not None and np.shape(X)[1] == len(self.neuron_hz), "X",
+              f"shape {np.shape(X)}", "one column of spike counts per neuron of neuron_hz")
+        self.n_features_in_ = np.shape(X)[1]
+        return self
+
+    def predict(self, X):
+        X = np.asarray(X)
+        hz = np.asarray(self.neuron_hz, dtype=float)[np.argmax(X, axis=1)]
+        out = np.full(len(X), float(np.mean(antenna.CALIBRATED_RANGE_CM)))
+        fired = X.max(axis=1) > 0
+        out[fired] = antenna.distance_from_low_hz(hz[fired])
+        return out

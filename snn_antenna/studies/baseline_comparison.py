@@ -21,7 +21,7 @@ from .. import spec as specs
 from ..errors import SpecError, check
 from ..report import Report, atomic_write
 
-SECTIONS = ("stimulus", "events", "evaluation")
+SECTIONS = ("stimulus", "events", "evaluation", "spiking")
 
 PAPER = {
     "r2_low": 0.995, "r2_high": 0.987, "spread_ratio_high_to_low": 3.0,
@@ -38,7 +38,7 @@ class Evaluation:
     test_fraction: float = 0.3
     nmf_dims: list = field(default_factory=lambda: list(bl.NMF_DIMENSIONS))
     nmf_max_iter: int = 400
-    mlp_max_iter: int = 400
+    mlp_max_iter: int = 300
     pipelines: list = field(default_factory=lambda: ["distance", "material", "two_material"])
 
     def __post_init__(self):
@@ -58,6 +58,43 @@ class Evaluation:
               f"a list of task groups out of {sorted(known)}")
 
 
+@dataclass
+class SpikingPlan:
+    """The spiking read-out to compare (``[spiking]``; absent: FFT baselines only).
+
+    ``bank`` holds ``spiking.SpikingBank`` fields (its bands as ``[spiking.bank.bands.NAME]``);
+    ``designs`` is a list of array variants, each ``{name, band, ...Band fields}``, run on the
+    events of the first ``design_repetitions`` repetitions and decoded on the first split.
+    """
+    bank: dict = field(default_factory=dict)
+    designs: list = field(default_factory=list)
+    design_repetitions: int = 10
+    cost_sample_events: int = 200
+
+
+def build_spiking(spec: dict):
+    from ..spiking import Band, SpikingBank
+
+    if "spiking" not in spec:
+        return None, None
+    with specs.section("spiking"):
+        plan = SpikingPlan(**specs.check_section(spec, "spiking", SpikingPlan))
+        bank = SpikingBank(**plan.bank)
+        for i, design in enumerate(plan.designs):
+            design = dict(design)
+            name, band = design.pop("name", f"design_{i}"), design.pop("band", "low")
+            check(band in bank.bands, f"designs[{i}].band", band, f"one of {list(bank.bands)}")
+            base = asdict(bank.bands[band])
+            unknown = set(design) - set(base)
+            check(not unknown, f"designs[{i}]", sorted(unknown),
+                  f"fields of a band: {sorted(base)}")
+            SpikingBank(**{**plan.bank, "bands": {band: Band(**{**base, **design})}})
+            check(isinstance(name, str), f"designs[{i}].name", name, "a string")
+        check(isinstance(plan.design_repetitions, int) and plan.design_repetitions >= 2,
+              "design_repetitions", plan.design_repetitions, "an integer >= 2")
+    return plan, bank
+
+
 def build(spec: dict):
     """Check the whole spec before any long work; return its parts."""
     specs.check_top_level(spec, SECTIONS)
@@ -73,7 +110,11 @@ def build(spec: dict):
         if "two_material" in evaluation.pipelines:
             raise SpecError("stimulus.materials", list(bench_spec.materials),
                             "a list that holds wood and aluminium for the two-material network")
-    return bench_spec, processor, evaluation
+    plan, bank = build_spiking(spec)
+    if bank is not None:
+        with specs.section("spiking"):
+            bank.check_rate(bench_spec.rate_hz)
+    return bench_spec, processor, evaluation, plan, bank
 
 
 def load_features(bench_spec: bench.BenchSpec, processor: events.EventProcessor, log=print,
@@ -136,7 +177,7 @@ def _wood_vs_aluminium(feats: xr.Dataset, tau: np.ndarray, per_group: int = 10) 
     m = feats["material"].values.astype(str)
     if not {"wood", "aluminium"} <= set(m):
         return {}
-    pos, rep = feats["position"].values, feats["repetition"].values
+    pos = feats["position"].values
     differing, sites, t_values = 0, 0, []
     for site in np.unique(pos):
         a = tau[(m == "wood") & (pos == site)][:per_group]
@@ -152,8 +193,9 @@ def _wood_vs_aluminium(feats: xr.Dataset, tau: np.ndarray, per_group: int = 10) 
 
 
 # -- baselines ------------------------------------------------------------------------------
-def run_baselines(feats: xr.Dataset, evaluation: Evaluation, log=print) -> dict:
-    """Train and test every baseline on every seed's split; predictions and scores."""
+def run_baselines(feats: xr.Dataset, evaluation: Evaluation, log=print,
+                  extra: list | None = None) -> dict:
+    """Train and test every baseline (and ``extra`` ones) on every seed's split."""
     from tqdm.auto import tqdm
 
     materials = sorted(set(feats["material"].values.astype(str)))
@@ -166,6 +208,7 @@ def run_baselines(feats: xr.Dataset, evaluation: Evaluation, log=print) -> dict:
         chosen += bl.material_baselines(evaluation.nmf_dims, mlp, evaluation.nmf_max_iter)
     if "two_material" in evaluation.pipelines:
         chosen.append(bl.two_material_baseline(mlp))
+    chosen += extra or []
     results = {}
     bar = tqdm(total=len(chosen) * len(evaluation.seeds), desc="baselines", unit="fit")
     for b in chosen:
@@ -195,10 +238,11 @@ def run_baselines(feats: xr.Dataset, evaluation: Evaluation, log=print) -> dict:
 
 
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print) -> dict:
-    bench_spec, processor, evaluation = build(spec)
+    bench_spec, processor, evaluation, plan, bank = build(spec)
     out_dir = Path(out_dir)
     t_start = time.perf_counter()
-    log(f"[1/4] bench data set: {bench_spec.n_events} events at {bench_spec.rate_hz:g} Hz")
+    stages = 5 if bank is not None else 4
+    log(f"[1/{stages}] bench data set: {bench_spec.n_events} events at {bench_spec.rate_hz:g} Hz")
     t0 = time.perf_counter()
     data, feats_all = load_features(bench_spec, processor, log, fresh)
     data_s = time.perf_counter() - t0
@@ -206,31 +250,239 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
     valid = feats_all["skipped"].values == ""
     feats = feats_all.isel(event=np.flatnonzero(valid))
     log(f"      {int(valid.sum())} events processed, skipped: {skipped}")
-    log("[2/4] calibration against the paper's signal measurements")
+    log(f"[2/{stages}] calibration against the paper's signal measurements")
     cal = calibration(feats)
     log(f"      r² low {cal['r2_low']:.4f} (paper 0.995), high {cal['r2_high']:.4f} (0.987); "
         f"precision {cal['single_contact_precision_mm']:.2f} mm (6.2)")
-    log(f"[3/4] baselines on {len(evaluation.seeds)} split(s) by repetition")
-    results = run_baselines(feats, evaluation, log)
-    log("[4/4] report")
+    costs = {"fft": fft_cost(data, processor, feats, plan.cost_sample_events if plan else 200)}
+    extra, spiking_info = [], None
+    if bank is not None:
+        log(f"[3/{stages}] spiking read-out: {bank.n_neurons} resonators per event "
+            f"({', '.join(bank.bands)}), Brian2 {bank.target}, dt {bank.dt_ms:g} ms, "
+            f"{bank.batch_events} events per NeuronGroup")
+        spikes = load_spiking(data, bank, bench_spec, log, fresh)
+        feats = add_spiking_inputs(feats, spikes)
+        costs["spiking"] = spiking_cost(data, bank, plan.cost_sample_events)
+        extra = spiking_baselines(spikes, bl.Mlp(max_iter=evaluation.mlp_max_iter))
+        spiking_info = {"neurons_per_event": bank.n_neurons, "bands": {
+            k: asdict(v) for k, v in bank.bands.items()}, "target": bank.target,
+            "dt_ms": bank.dt_ms, "duration_s": bank.duration_s}
+    log(f"[{stages - 1}/{stages}] baselines on {len(evaluation.seeds)} split(s) by repetition")
+    results = run_baselines(feats, evaluation, log, extra)
+    designs = []
+    if plan is not None and plan.designs:
+        designs = run_designs(data, feats, bank, plan, evaluation, log)
+    log(f"[{stages}/{stages}] report")
     summary = _summary(cal, results, skipped, feats, bench_spec, data_s,
-                       time.perf_counter() - t_start)
+                       time.perf_counter() - t_start, costs, spiking_info, designs)
     _save_predictions(out_dir, feats, results)
-    report = Report(out_dir, "Baseline comparison: FFT, parametric and NMF read-outs")
+    report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs")
     _write_report(report, spec, summary, cal, feats, results, processor)
-    summary = report.write(summary, spec, "none (no spiking part)")
+    summary = report.write(summary, spec, bank.target if bank else "none (no spiking part)")
     log(f"report in {out_dir}/report.html ({summary['timing']['total_s']:.0f} s)")
     return summary
 
 
-def _summary(cal, results, skipped, feats, bench_spec, data_s, total_s) -> dict:
+# -- spiking --------------------------------------------------------------------------------
+SPIKING_TASKS = {"distance", "material"}
+
+
+def load_spiking(data: xr.Dataset, bank, bench_spec, log=print, fresh: bool = False
+                 ) -> xr.Dataset:
+    """Spiking features of every event, cached by the data set and the bank's spec."""
+    from .. import neurons, preprocess, spiking
+
+    key = bench.source_hash({"bench": bench_spec.key(), "bank": _bank_dict(bank)},
+                            spiking, neurons, preprocess)
+    path = Path(bench_spec.cache_dir) / f"spiking-{key}.zarr"
+
+    def compute():
+        f = bank.run(data["counts"].values, float(data.attrs["rate_hz"]),
+                     int(data.attrs["adc_bits"]), float(data.attrs["full_scale_g"]))
+        log(f"      {data.sizes['event']} events: {f.neuron_steps:.3g} neuron-steps in "
+            f"{f.wall_s:.1f} s of simulation")
+        return xr.Dataset(
+            {"counts": (("event", "neuron"), f.counts.astype(np.int32)),
+             "latency_s": (("event", "neuron"), f.latency_s),
+             "span_s": (("event", "neuron"), f.span_s)},
+            coords={"event": data["event"].values, "neuron_hz": ("neuron", f.neuron_hz),
+                    "band": ("neuron", f.band.astype(str))},
+            attrs={"simulation_wall_s": f.wall_s, "neuron_steps": f.neuron_steps})
+    return bench.cached(path, compute, log, fresh)
+
+
+def _bank_dict(bank) -> dict:
+    d = asdict(bank)
+    d["bands"] = {k: {kk: (list(vv) if isinstance(vv, tuple) else vv) for kk, vv in v.items()}
+                  for k, v in d["bands"].items()}
+    return d
+
+
+def add_spiking_inputs(feats: xr.Dataset, spikes: xr.Dataset) -> xr.Dataset:
+    """Spiking input matrices for the decoders, on the same events as the FFT features."""
+    sp = spikes.sel(event=feats["event"].values)
+    out = feats.copy()
+    for name, bands in (("spiking_all", None), ("spiking_low", ["low"])):
+        keep = np.ones(sp.sizes["neuron"], bool) if bands is None else \
+            np.isin(sp["band"].values, bands)
+        if not keep.any():
+            continue
+        m = np.hstack([sp[v].values[:, keep] for v in ("counts", "latency_s", "span_s")])
+        out[name] = (("event", f"{name}_feature"), m.astype(np.float32))
+    if "low" in set(sp["band"].values):
+        out["spiking_low_counts"] = (("event", "low_neuron"),
+                                     sp["counts"].values[:, sp["band"].values == "low"])
+    return out
+
+
+def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp) -> list:
+    """Decoders of the spiking features, in the same framework as the FFT baselines."""
+    from sklearn.compose import TransformedTargetRegressor
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    from ..spiking import DominantNeuronDistance
+
+    bands = set(spikes["band"].values)
+    out = []
+
+    def regressor(seed):
+        return TransformedTargetRegressor(make_pipeline(StandardScaler(),
+                                                        mlp.regressor((20, 5), seed)),
+                                          transformer=StandardScaler())
+
+    def classifier(seed):
+        return make_pipeline(StandardScaler(), mlp.classifier((51,), seed))
+
+    if "low" in bands:
+        low_hz = spikes["neuron_hz"].values[spikes["band"].values == "low"]
+        out.append(bl.Baseline("spiking_dominant", "distance", "spiking_low_counts",
+                               lambda seed: DominantNeuronDistance(low_hz),
+                               "most active low-band resonator → inverse low-mode law "
+                               "(Fig. 10E), no training"))
+        out.append(bl.Baseline("spiking_mlp_distance_low", "distance", "spiking_low",
+                               regressor, "MLP 20-5 on the low band's counts, latencies, spans"))
+    out.append(bl.Baseline("spiking_mlp_distance", "distance", "spiking_all", regressor,
+                           "MLP 20-5 on all bands' spiking features"))
+    if "low" in bands and len(bands) > 1:
+        out.append(bl.Baseline("spiking_mlp_material_low", "material", "spiking_low",
+                               classifier, "MLP 51 on the low band only"))
+    out.append(bl.Baseline("spiking_mlp_material", "material", "spiking_all", classifier,
+                           "MLP 51 on all bands (the high band's firing spans carry decay)"))
+    return out
+
+
+def fft_cost(data: xr.Dataset, processor, feats: xr.Dataset, n: int) -> dict:
+    """Wall time per event of the FFT feature extraction, measured now on ``n`` events."""
+    ids = feats["event"].values[:n]
+    t0 = time.perf_counter()
+    events.process_block(data["counts"].values[ids], processor, int(data.attrs["adc_bits"]),
+                         float(data.attrs["full_scale_g"]))
+    return {"features_us_per_event": 1e6 * (time.perf_counter() - t0) / len(ids)}
+
+
+def spiking_cost(data: xr.Dataset, bank, n: int) -> dict:
+    """Wall time (coding + Brian2) and neuron-steps per event, measured now on one batch."""
+    from dataclasses import replace
+
+    ids = np.linspace(0, data.sizes["event"] - 1, n).astype(int)
+    sample = data["counts"].values[ids]
+    one = replace(bank, batch_events=max(bank.batch_events, n))
+    t0 = time.perf_counter()
+    f = one.run(sample, float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"]),
+                float(data.attrs["full_scale_g"]), progress=False)
+    total = time.perf_counter() - t0
+    return {"features_us_per_event": 1e6 * total / n,
+            "simulation_us_per_event": 1e6 * f.wall_s / n,
+            "neuron_steps_per_event": f.neuron_steps / n,
+            "ns_per_neuron_step": 1e9 * f.wall_s / f.neuron_steps, "events_measured": n,
+            "target": bank.target}
+
+
+def run_designs(data, feats, bank, plan, evaluation, log=print) -> list[dict]:
+    """Array variants (one band changed at a time) on a subset: accuracy and cost of each."""
+    from dataclasses import replace
+
+    from ..spiking import Band
+
+    subset = feats.isel(event=np.flatnonzero(feats["repetition"].values
+                                             < plan.design_repetitions))
+    ids = subset["event"].values
+    counts = data["counts"].values[ids]
+    materials = sorted(set(subset["material"].values.astype(str)))
+    mlp = bl.Mlp(max_iter=evaluation.mlp_max_iter)
+    seed = evaluation.seeds[0]
+    train, test = bl.split_by_repetition(subset["repetition"].values, evaluation.test_fraction,
+                                         seed)
+    rows = []
+    log(f"      array designs on {len(ids)} events (repetitions < {plan.design_repetitions})")
+    for i, design in enumerate(plan.designs):
+        design = dict(design)
+        name, band = design.pop("name", f"design_{i}"), design.pop("band", "low")
+        variant = Band(**{**asdict(bank.bands[band]), **design})
+        one = replace(bank, bands={band: variant})
+        t0 = time.perf_counter()
+        f = one.run(counts, float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"]),
+                    float(data.attrs["full_scale_g"]), progress=False)
+        wall = time.perf_counter() - t0
+        X = f.matrix().astype(np.float32)
+        row = {"design": name, "band": band, **{k: (list(v) if isinstance(v, tuple) else v)
+                                               for k, v in design.items()},
+               "n_neurons": variant.n_neurons,
+               "wall_us_per_event": 1e6 * wall / len(ids),
+               "neuron_steps_per_event": f.neuron_steps / len(ids)}
+        for task, y, base in (
+                ("distance", subset["distance_cm"].values.astype(float),
+                 spiking_baselines_for(task="distance", mlp=mlp)),
+                ("material", bl.targets_of(subset, "material", materials),
+                 spiking_baselines_for(task="material", mlp=mlp))):
+            fold = bl.fit_fold(base, X, y, train, test, seed)
+            row.update({("distance_rmse_mm" if task == "distance" else "material_accuracy"):
+                        next(iter(bl.score(task, y[test], fold.prediction).values()))})
+        log(f"      {name:22s} {variant.n_neurons:3d} neurons: {row['distance_rmse_mm']:.2f} mm, "
+            f"{100 * row['material_accuracy']:.1f} %, {row['wall_us_per_event']:.0f} µs/event")
+        rows.append(row)
+    return rows
+
+
+def spiking_baselines_for(task: str, mlp: bl.Mlp) -> bl.Baseline:
+    from sklearn.compose import TransformedTargetRegressor
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    if task == "distance":
+        return bl.Baseline("design_distance", "distance", "spiking", lambda seed:
+                           TransformedTargetRegressor(make_pipeline(
+                               StandardScaler(), mlp.regressor((20, 5), seed)),
+                               transformer=StandardScaler()))
+    return bl.Baseline("design_material", "material", "spiking", lambda seed: make_pipeline(
+        StandardScaler(), mlp.classifier((51,), seed)))
+
+
+def _summary(cal, results, skipped, feats, bench_spec, data_s, total_s, costs=None,
+             spiking_info=None, designs=()) -> dict:
     dist = {k: r["summary"] for k, r in results.items() if r["baseline"].task == "distance"}
     mat = {k: r["summary"] for k, r in results.items() if r["baseline"].task == "material"}
     nmf = [{"n": int(k.split("_")[1]), "accuracy": v["accuracy"], "accuracy_sd": v["accuracy_sd"]}
            for k, v in mat.items() if k.startswith("nmf_")]
     two = next((r["summary"] for r in results.values()
                 if r["baseline"].task == "two_material"), None)
-    return {
+    costs = costs or {}
+    per_event = {}
+    for k, r in results.items():
+        kind = "spiking" if k.startswith("spiking_") else "fft"
+        front = costs.get(kind, {}).get("features_us_per_event", 0.0)
+        per_event[k] = front + r["summary"]["predict_us_per_event"]
+    spiking = None
+    if spiking_info is not None:
+        spiking = {
+            "distance_rmse_mm": {k: {"mean": v["rmse_mm"], "sd": v["rmse_mm_sd"]}
+                                 for k, v in dist.items() if k.startswith("spiking_")},
+            "material_accuracy": {k: {"mean": v["accuracy"], "sd": v["accuracy_sd"]}
+                                  for k, v in mat.items() if k.startswith("spiking_")},
+            "cost": costs.get("spiking"), **spiking_info,
+            "designs": list(designs)}
+    out = {
         "calibration": {"ours": cal, "paper": PAPER},
         "distance_rmse_mm": {k: {"mean": v["rmse_mm"], "sd": v["rmse_mm_sd"],
                                  "n_seeds": v["n_seeds"]} for k, v in dist.items()},
@@ -248,7 +500,12 @@ def _summary(cal, results, skipped, feats, bench_spec, data_s, total_s) -> dict:
         "data": {"n_events": int(bench_spec.n_events), "n_processed": int(feats.sizes["event"]),
                  "skipped": skipped, "rate_hz": bench_spec.rate_hz,
                  "n_bins": int(feats.sizes["freq_hz"]), "bench_key": bench_spec.key()},
+        "cost_us_per_event": per_event,
+        "feature_costs": costs,
     }
+    if spiking is not None:
+        out["spiking"] = spiking
+    return out
 
 
 def _save_predictions(out_dir: Path, feats: xr.Dataset, results: dict) -> None:
@@ -296,14 +553,81 @@ def _write_report(report, spec, summary, cal, feats, results, processor) -> None
         report.figure(_fig_nmf_curve(summary), "fig7b_nmf_accuracy",
                       "Material accuracy vs NMF dimension; the line is the full spectrum "
                       "(Fig. 7B).")
+    if "spiking" in summary:
+        _write_spiking(report, summary)
+    report.figure(_fig_pareto(summary), "pareto_cost_accuracy",
+                  "Accuracy vs cost per event (feature extraction + decoder, wall time measured "
+                  "in this run) of every pipeline; the line joins the Pareto front.")
     report.table([{"pipeline": k, "fit (s)": v["fit_s"],
-                   "inference (µs/event)": v["predict_us_per_event"]}
+                   "decoder (µs/event)": v["predict_us_per_event"],
+                   "features + decoder (µs/event)": summary["cost_us_per_event"][k]}
                   for k, v in summary["timing"].items() if isinstance(v, dict)],
                  "Cost: training wall time (mean over seeds) and inference per event")
     report.text(f"Data: {summary['data']['n_events']} generated events, "
                 f"{summary['data']['n_processed']} processed, skipped "
                 f"{summary['data']['skipped']}; spectrum of {summary['data']['n_bins']} bins "
                 f"at {processor.rate_hz:g} Hz.")
+
+
+def _write_spiking(report, summary) -> None:
+    sp = summary["spiking"]
+    report.heading("Spiking read-out beside the FFT")
+    best_fft_d = summary["distance_rmse_mm"].get("mlp_spectrum", {}).get("mean")
+    nmf30 = next((r["accuracy"] for r in summary["material_accuracy"]["nmf_curve"]
+                  if r["n"] == 30), None)
+    rows = []
+    for k, v in sp["distance_rmse_mm"].items():
+        rows.append({"pipeline": k, "task": "distance rmse (mm)",
+                     "ours": f"{v['mean']:.2f} ± {v['sd']:.2f}",
+                     "vs full-spectrum MLP": f"{v['mean'] / best_fft_d:.2f}×" if best_fft_d
+                     else ""})
+    for k, v in sp["material_accuracy"].items():
+        rows.append({"pipeline": k, "task": "8-material accuracy",
+                     "ours": f"{100 * v['mean']:.1f} ± {100 * v['sd']:.1f} %",
+                     "vs full-spectrum MLP": (f"NMF-30: {100 * nmf30:.1f} %" if nmf30 else "")})
+    report.table(rows, "Same contacts, same splits. Goals: distance within 2× of the "
+                       "full-spectrum MLP; material at or above NMF-30.")
+    cost = sp.get("cost") or {}
+    report.text(f"Spiking cost, measured in this run on {cost.get('events_measured')} events: "
+                f"{cost.get('features_us_per_event', 0):.0f} µs per event (coding + Brian2 "
+                f"{cost.get('target')}), {cost.get('neuron_steps_per_event', 0):.3g} "
+                f"neuron-steps per event, {cost.get('ns_per_neuron_step', 0):.1f} ns per "
+                f"neuron-step; {sp['neurons_per_event']} resonators per event, dt "
+                f"{sp['dt_ms']} ms, {sp['duration_s']} s per event.")
+    if sp.get("designs"):
+        report.table(sp["designs"], "Array designs (one band changed at a time, first split, "
+                                    "events of the first repetitions only)")
+
+
+def _fig_pareto(summary):
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    cost = summary["cost_us_per_event"]
+    panels = ((axes[0], summary["distance_rmse_mm"], "distance rmse (mm)", False),
+              (axes[1], {k: v for k, v in summary["material_accuracy"].items()
+                         if k != "nmf_curve"} | {f"nmf_{r['n']}": {"mean": r["accuracy"]}
+                                                 for r in summary["material_accuracy"]
+                                                 ["nmf_curve"]},
+               "8-material accuracy", True))
+    for ax, table, label, higher in panels:
+        pts = sorted((cost[k], v["mean"], k) for k, v in table.items() if k in cost)
+        if not pts:
+            continue
+        for c, a, k in pts:
+            colour = "tab:red" if k.startswith("spiking_") else "tab:blue"
+            ax.scatter(c, a, color=colour, s=18)
+            ax.annotate(k, (c, a), fontsize=6, xytext=(3, 2), textcoords="offset points")
+        front, best = [], None
+        for c, a, k in pts:
+            if best is None or (a > best if higher else a < best):
+                front.append((c, a))
+                best = a
+        ax.plot(*zip(*front), color="k", lw=0.8, drawstyle="steps-post")
+        ax.set_xscale("log")
+        ax.set_xlabel("cost per event (µs: features + decoder)")
+        ax.set_ylabel(label)
+    axes[0].set_title("blue: FFT pipelines, red: spiking", fontsize=8)
+    return fig
 
 
 def _calibration_rows(cal: dict) -> list[dict]:
