@@ -1,0 +1,122 @@
+"""Contact detection under a coder threshold Th: many codings at once, scored per contact.
+
+The square-wave coder's threshold Th hides the robot's self-motion but, set too high, hides
+contacts too (the paper's Fig. 9). Measuring that trade needs the resonator array run on many
+codings of many scenes: ``run_codings`` runs them all as ONE Brian2 NeuronGroup (one copy of
+the array per coding, each copy reading its own column of a 2-D TimedArray through
+``neurons.simulate``), and ``score`` compares the read-out's detections with the labelled
+contacts.
+
+Scoring, per contact: a detection whose first window starts between one window before the
+contact and the end of its hold is a true positive (latency: from the contact to the end of
+that first window, when the detection is known); further detections within the same hold
+are duplicates (neither right nor wrong); other detections are false positives; contacts
+without a detection are misses. Only contacts the array can see are scored: those whose
+low mode lies above the self-motion band and within the array's band (a post touched near
+the tip rings above 30 Hz, beyond the paper's 7–30 Hz array); detections of the others are
+ignored. The first ``settle_s`` of a scene (filters and self-motion building up) is not
+scored.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from . import antenna, neurons
+from .errors import check
+from .network import ResonatorArray, rate_map
+from .readout import ContactDetector, ContactEstimate
+from .signals import Event
+
+
+def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
+                window_s: float = 0.1, target: str | None = None) -> list[xr.DataArray]:
+    """Rate maps of the array driven by each column of ``coded`` (n_samples, n_codings)."""
+    coded = np.asarray(coded, dtype=float)
+    if coded.ndim == 1:
+        coded = coded[:, None]
+    array.check_rate(rate_hz)
+    n_codings, n = coded.shape[1], array.n_neurons
+    result = neurons.simulate(
+        "resonator", coded, dt_ms=array.dt_ms, k=np.tile(array.k, n_codings), b=array.b,
+        method=array.method, input_index=np.repeat(np.arange(n_codings), n),
+        input_dt_ms=1000.0 / rate_hz, target=target or array.target, force=array.force)
+    duration_s = coded.shape[0] / rate_hz
+    copy = result.spike_i // n
+    t_s = result.spike_t_ms / 1000.0
+    return [rate_map(result.spike_i[copy == c] - c * n, t_s[copy == c], array.neuron_hz,
+                     duration_s, window_s) for c in range(n_codings)]
+
+
+@dataclass
+class Score:
+    """Detection counts; add scores of several scenes with ``+``."""
+    tp: int = 0
+    fp: int = 0
+    misses: int = 0
+    duplicates: int = 0
+    unscored_contacts: int = 0
+    minutes: float = 0.0
+    latencies_s: list = field(default_factory=list)
+
+    def __add__(self, other: "Score") -> "Score":
+        return Score(self.tp + other.tp, self.fp + other.fp, self.misses + other.misses,
+                     self.duplicates + other.duplicates,
+                     self.unscored_contacts + other.unscored_contacts,
+                     self.minutes + other.minutes, self.latencies_s + other.latencies_s)
+
+    @property
+    def f1(self) -> float | None:
+        denominator = 2 * self.tp + self.fp + self.misses
+        return 2 * self.tp / denominator if denominator else None
+
+    @property
+    def fp_per_min(self) -> float | None:
+        return self.fp / self.minutes if self.minutes > 0 else None
+
+    @property
+    def latency_s(self) -> float | None:
+        return float(np.mean(self.latencies_s)) if self.latencies_s else None
+
+    def as_dict(self) -> dict:
+        return {"tp": self.tp, "fp": self.fp, "misses": self.misses,
+                "duplicates": self.duplicates, "unscored_contacts": self.unscored_contacts,
+                "f1": self.f1, "fp_per_min": self.fp_per_min, "latency_s": self.latency_s}
+
+
+def visible(contact: Event, detector: ContactDetector, array: ResonatorArray) -> bool:
+    """Can the array see this contact at all (its low mode in the band above self-motion)?"""
+    f = float(antenna.low_mode_hz(contact.distance_cm))
+    return detector.motion_band_hz[1] < f <= float(array.band_hz[1])
+
+
+def score(detections: list[ContactEstimate], contacts, duration_s: float,
+          detector: ContactDetector, array: ResonatorArray, window_s: float,
+          settle_s: float = 1.0) -> Score:
+    check(0 <= settle_s < duration_s, "settle_s", settle_s, f"a time in [0, {duration_s}) s")
+    contacts = sorted((c for c in contacts if c.t_s >= settle_s), key=lambda c: c.t_s)
+    seen = [visible(c, detector, array) for c in contacts]
+    matched = [False] * len(contacts)
+    s = Score(minutes=(duration_s - settle_s) / 60.0,
+              unscored_contacts=int(len(contacts) - sum(seen)))
+    for d in sorted(detections, key=lambda d: d.onset_s):
+        if d.onset_s < settle_s:
+            continue
+        hits = [i for i, c in enumerate(contacts)
+                if c.t_s - window_s <= d.onset_s < c.t_s + max(c.duration_s, window_s)]
+        if not hits:
+            s.fp += 1
+            continue
+        i = hits[0]
+        if not seen[i]:
+            continue
+        if matched[i]:
+            s.duplicates += 1
+            continue
+        matched[i] = True
+        s.tp += 1
+        s.latencies_s.append(d.onset_s + window_s - contacts[i].t_s)
+    s.misses = int(sum(1 for m, v in zip(matched, seen) if v and not m))
+    return s

@@ -1,0 +1,271 @@
+"""Robot scenes with a course: a speed profile, obstacles in the plane, a sweeping antenna.
+
+The robot drives along +x from ``start_x_cm`` with speed ``profile`` (constant, steps or ramp,
+0–30 cm/s in the studies). The antenna's base rides on the robot; the rod points ``pan_deg``
+to the left of the heading, tilted ``tilt_deg`` above the horizon, and sweeps as the paper's
+pan-tilt unit did (a limit cycle, 2 s by default; amplitude 0 holds it still). Obstacles are
+vertical posts (the paper's 12 mm test rods). A contact arises when the rod enters a post:
+its distance along the rod is where it touches (the post's centre projected on the rod), the
+rod stays clamped there for ``hold_s`` (1 s), and contacts do not overlap (a touch during a
+held contact is part of it). Posts met beyond the rod's tip are not touched.
+
+What shakes the probe is modelled in one place each: the self-oscillation near 7.8 Hz grows
+with the square of speed (``antenna.self_motion_rms_g``), the terrain's broadband jolts grow
+linearly with speed, four times more on ``rough`` ground than on ``flat``
+(``stimuli.TERRAIN_NOISE_G_PER_CM_S``). The pan-tilt sweep itself is assumed smooth: it adds no
+vibration, so a robot standing still produces no self-motion at all. When the robot stops
+after a contact (``stop_after_contact_s``) the antenna stops sweeping too.
+
+``CourseScene.generate`` returns the usual Recording (2 axes of ADC counts, contacts labelled
+as events) with the robot's path, speed and antenna angles in ``meta``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from . import antenna
+from .errors import SpecError, check
+from .signals import Recording
+from .stimuli import Contact, RobotScene
+
+SPEED_RANGE_CM_S = (0.0, antenna.SPEED_LIMIT_CM_S)
+PROFILE_KINDS = ("constant", "steps", "ramp")
+
+
+@dataclass
+class SpeedProfile:
+    """Robot speed over time (cm/s).
+
+    ``constant``: ``speed_cm_s`` throughout. ``steps``: ``points`` = [[t_s, speed], ...], each
+    speed held from its time on (before the first point: the first speed). ``ramp``: linear
+    between the points, held flat outside them.
+    """
+    kind: str = "constant"
+    speed_cm_s: float = 12.0
+    points: list = field(default_factory=list)
+
+    def validate(self) -> None:
+        check(self.kind in PROFILE_KINDS, "speed.kind", self.kind, f"one of {PROFILE_KINDS}")
+        if self.kind == "constant":
+            antenna.self_motion_rms_g(self.speed_cm_s)  # refuses negative / non-finite
+            return
+        pts = np.asarray(self.points, dtype=float) if len(self.points) else np.empty((0, 2))
+        check(pts.ndim == 2 and pts.shape[1] == 2 and len(pts) >= 1, "speed.points",
+              self.points, "a list of [t_s, speed_cm_s] pairs")
+        check(bool(np.all(np.isfinite(pts[:, 0]))) and bool(np.all(np.diff(pts[:, 0]) > 0))
+              and pts[0, 0] >= 0, "speed.points", self.points,
+              "times >= 0 s in increasing order")
+        try:
+            antenna.self_motion_rms_g(pts[:, 1])
+        except SpecError as exc:
+            raise SpecError("speed.points", self.points, exc.accepted) from None
+
+    def at(self, t_s) -> np.ndarray:
+        t = np.asarray(t_s, dtype=float)
+        if self.kind == "constant":
+            return np.full(t.shape, float(self.speed_cm_s))
+        pts = np.asarray(self.points, dtype=float)
+        if self.kind == "ramp":
+            return np.interp(t, pts[:, 0], pts[:, 1])
+        idx = np.searchsorted(pts[:, 0], t, side="right") - 1
+        return pts[np.clip(idx, 0, None), 1]
+
+
+@dataclass
+class Obstacle:
+    """A vertical post at (x_cm, y_cm) in the plane (y to the robot's left)."""
+    x_cm: float
+    y_cm: float
+    radius_cm: float = 0.6
+    material: str = "wood"
+
+    def validate(self, i: int = 0) -> None:
+        check(np.isfinite(self.x_cm) and np.isfinite(self.y_cm), f"obstacles[{i}]",
+              (self.x_cm, self.y_cm), "finite coordinates in cm")
+        check(np.isfinite(self.radius_cm) and 0 < self.radius_cm < 20, f"obstacles[{i}].radius_cm",
+              self.radius_cm, "a radius in (0, 20) cm")
+        antenna.check_material(self.material)
+
+
+def rod_touch(base_xy: np.ndarray, pan_deg, tilt_deg, obstacle: Obstacle,
+              length_cm: float = antenna.ROD_LENGTH_CM) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose: does the rod touch the post, and at which distance along the rod (cm)?
+
+    ``base_xy`` has shape (n, 2); angles are scalars or one per pose. The rod's shadow in the
+    plane has length L·cos(tilt); a vertical post is touched where that shadow passes within
+    the post's radius, at the along-rod distance (planar distance) / cos(tilt).
+    """
+    pan = np.deg2rad(np.asarray(pan_deg, dtype=float))
+    tilt = np.deg2rad(np.asarray(tilt_deg, dtype=float))
+    direction = np.stack(np.broadcast_arrays(np.cos(pan), np.sin(pan)), axis=-1)
+    rel = np.array([obstacle.x_cm, obstacle.y_cm]) - np.asarray(base_xy, dtype=float)
+    along = np.sum(rel * direction, axis=-1)                     # planar, from the base
+    across = np.abs(rel[..., 0] * direction[..., 1] - rel[..., 1] * direction[..., 0])
+    cos_tilt = np.cos(tilt)
+    distance_cm = along / cos_tilt
+    touching = (across <= obstacle.radius_cm) & (along > 0) & (distance_cm < length_cm - 0.05)
+    return touching, distance_cm
+
+
+def contacts_from_poses(t_s: np.ndarray, base_xy: np.ndarray, pan_deg, tilt_deg,
+                        obstacles: list[Obstacle], hold_s: float = 1.0) -> list[Contact]:
+    """Contacts where the rod enters a post; none begins while another is held."""
+    entries = []
+    for ob in obstacles:
+        touching, distance = rod_touch(base_xy, pan_deg, tilt_deg, ob)
+        touching = np.broadcast_to(touching, t_s.shape)
+        distance = np.broadcast_to(distance, t_s.shape)
+        starts = np.flatnonzero(touching[1:] & ~touching[:-1]) + 1
+        entries += [(float(t_s[i]), float(distance[i]), ob.material) for i in starts]
+    contacts, free_from = [], -np.inf
+    for t, d, material in sorted(entries):
+        if t >= free_from:
+            contacts.append(Contact(t_s=t, distance_cm=d, material=material, hold_s=hold_s))
+            free_from = t + hold_s
+    return contacts
+
+
+@dataclass
+class CourseScene(RobotScene):
+    """A RobotScene whose speed follows ``speed`` and whose contacts come from ``obstacles``.
+
+    Explicit ``contacts`` (inherited) are kept as well, for scripted touches. Every field is
+    a TOML key of a ``kind = "course"`` stimulus spec (see ``stimuli/robot_course.toml``).
+    """
+    speed: SpeedProfile | None = None        # None: constant ``speed_cm_s``
+    obstacles: list[Obstacle] = field(default_factory=list)
+    start_x_cm: float = 0.0
+    pan_deg: float = 40.0                    # sweep centre, left of the heading (paper: 40°)
+    pan_amplitude_deg: float = 0.0           # ± around the centre (paper's range: ±40°)
+    tilt_deg: float = 0.0
+    tilt_amplitude_deg: float = 0.0          # paper's range: ±45° around 10° above the horizon
+    sweep_period_s: float = 2.0              # paper: a limit cycle of 2 s
+    tilt_phase_deg: float = 90.0             # tilt leads pan: the tip sweeps an area
+    hold_s: float = 1.0                      # how long each contact clamps the rod
+
+    @property
+    def profile(self) -> SpeedProfile:
+        return self.speed if self.speed is not None else SpeedProfile("constant", self.speed_cm_s)
+
+    def validate(self) -> None:
+        self.profile.validate()
+        super().validate()
+        for i, ob in enumerate(self.obstacles):
+            ob.validate(i)
+        for name in ("start_x_cm", "pan_deg", "pan_amplitude_deg", "tilt_deg",
+                     "tilt_amplitude_deg", "tilt_phase_deg"):
+            check(np.isfinite(getattr(self, name)), name, getattr(self, name), "a finite value")
+        check(abs(self.tilt_deg) + abs(self.tilt_amplitude_deg) < 85, "tilt_amplitude_deg",
+              self.tilt_amplitude_deg, "a tilt range within ±85° of the horizon")
+        check(np.isfinite(self.sweep_period_s) and self.sweep_period_s > 0, "sweep_period_s",
+              self.sweep_period_s, "a period > 0 s")
+        check(np.isfinite(self.hold_s) and self.hold_s > 0, "hold_s", self.hold_s,
+              "a contact hold time > 0 s")
+
+    def time(self) -> np.ndarray:
+        return np.arange(int(round(self.duration_s * self.rate_hz))) / self.rate_hz
+
+    def angles(self, t_s: np.ndarray, moving: np.ndarray | None = None):
+        """Pan and tilt (deg) over time; the sweep's phase advances only while ``moving``."""
+        dt = 1.0 / self.rate_hz
+        active = np.ones(len(t_s), bool) if moving is None else moving
+        phase = 2 * np.pi * np.cumsum(np.r_[0.0, active[:-1]] * dt) / self.sweep_period_s
+        pan = self.pan_deg + self.pan_amplitude_deg * np.sin(phase)
+        tilt = self.tilt_deg + self.tilt_amplitude_deg * np.sin(
+            phase + np.deg2rad(self.tilt_phase_deg))
+        return pan, tilt
+
+    def plan(self) -> dict:
+        """Kinematics and contacts: robot path, speed, angles, and the contacts they make."""
+        t = self.time()
+        dt = 1.0 / self.rate_hz
+        speed = self.profile.at(t)
+        moving = np.ones(len(t), bool)
+        contacts = self._touches(t, speed, moving)
+        if self.stop_after_contact_s is not None and contacts:
+            stop = min(c.t_s for c in contacts) + self.stop_after_contact_s
+            speed = np.where(t >= stop, 0.0, speed)
+            moving = t < stop
+            contacts = [c for c in self._touches(t, speed, moving) if c.t_s < stop]
+        x = self.start_x_cm + np.cumsum(np.r_[0.0, speed[:-1]]) * dt
+        pan, tilt = self.angles(t, moving)
+        return {"t_s": t, "speed_cm_s": speed, "robot_x_cm": x, "pan_deg": pan,
+                "tilt_deg": tilt, "contacts": contacts}
+
+    def _touches(self, t, speed, moving) -> list[Contact]:
+        dt = 1.0 / self.rate_hz
+        x = self.start_x_cm + np.cumsum(np.r_[0.0, speed[:-1]]) * dt
+        pan, tilt = self.angles(t, moving)
+        base = np.c_[x, np.zeros_like(x)]
+        found = contacts_from_poses(t, base, pan, tilt, self.obstacles, self.hold_s)
+        scripted = list(self.contacts)
+        return sorted(scripted + found, key=lambda c: c.t_s)
+
+    def speed_profile(self) -> np.ndarray:
+        return self.plan()["speed_cm_s"]
+
+    def generate(self, seed: int = 0) -> Recording:
+        self.validate()
+        plan = self.plan()
+        # The planned contacts become scripted ones: the base class rings the rod for each and
+        # stops the robot after the first, exactly as planned.
+        fixed = replace(self, obstacles=[], contacts=plan["contacts"])
+        rec = RobotScene.generate(fixed, seed)
+        rec.meta.update({k: plan[k] for k in ("robot_x_cm", "pan_deg", "tilt_deg")})
+        rec.meta["speed_cm_s"] = plan["speed_cm_s"]
+        return rec
+
+
+def random_course(rng: np.random.Generator, length_cm: float, spacing_cm: float = 45.0,
+                  lateral_cm: tuple = (8.0, 30.0), materials: tuple = ("wood",),
+                  first_reach_cm: tuple = (12.0, 28.0), first_angle_deg: tuple = (20.0, 60.0),
+                  radius_cm: float = 0.6) -> list[Obstacle]:
+    """Posts along the path: one every ``spacing_cm`` (±30 %), at random lateral offsets.
+
+    The first post stands within reach of the antenna at the start (``first_reach_cm`` from
+    its base, ``first_angle_deg`` left of the heading), so a robot standing still touches
+    something too as its antenna sweeps.
+    """
+    check(np.isfinite(spacing_cm) and spacing_cm > 0, "spacing_cm", spacing_cm,
+          "a spacing > 0 cm")
+    check(np.isfinite(length_cm) and length_cm > 0, "length_cm", length_cm, "a length > 0 cm")
+    reach, angle = rng.uniform(*first_reach_cm), np.deg2rad(rng.uniform(*first_angle_deg))
+    posts = [(reach * np.cos(angle), reach * np.sin(angle))]
+    x = posts[0][0] + spacing_cm * rng.uniform(0.7, 1.3)
+    while x < length_cm:
+        posts.append((x, rng.uniform(*lateral_cm)))
+        x += spacing_cm * rng.uniform(0.7, 1.3)
+    return [Obstacle(float(px), float(py), radius_cm, str(rng.choice(list(materials))))
+            for px, py in posts]
+
+
+def scene_from_spec(spec: dict) -> RobotScene:
+    """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` or ``kind = "course"``."""
+    from . import stimuli
+    from .spec import check_section
+
+    spec = dict(spec)
+    kind = spec.get("kind", "robot")
+    if kind == "robot":
+        return stimuli.scene_from_spec(spec)
+    if kind != "course":
+        raise SpecError("stimulus.kind", kind, "'robot' or 'course'")
+    spec.pop("kind")
+    check_section({"stimulus": spec}, "stimulus", CourseScene)
+    if spec.get("stop_after_contact_s") == "never":   # TOML has no null
+        spec["stop_after_contact_s"] = None
+    contacts = []
+    for i, table in enumerate(spec.pop("contacts", [])):
+        check_section({f"contacts[{i}]": table}, f"contacts[{i}]", Contact)
+        contacts.append(Contact(**table))
+    obstacles = []
+    for i, table in enumerate(spec.pop("obstacles", [])):
+        check_section({f"obstacles[{i}]": table}, f"obstacles[{i}]", Obstacle)
+        obstacles.append(Obstacle(**table))
+    speed = spec.pop("speed", None)
+    if speed is not None:
+        check_section({"speed": speed}, "speed", SpeedProfile)
+        speed = SpeedProfile(**speed)
+    return CourseScene(contacts=contacts, obstacles=obstacles, speed=speed, **spec)
