@@ -89,12 +89,13 @@ def izhikevich_order(equations, variables=None, method_options=None) -> str:
 
 
 # Preferred frequency of the k = 1 resonator. Linearising at rest gives a damped oscillation
-# at 24.5 Hz (τ ≈ 19 ms); the neuron, driven by the square-wave coder's ±0.15 near threshold,
-# responds best somewhat lower because the orbit is slower away from the fixed point. The
-# driven value is measured by ``measure_peak_hz`` and checked in tests; it is what the array
-# uses, because spike rates, not small oscillations, are what the read-out sees.
+# at 24.5 Hz (τ ≈ 19 ms). Driven by the coder's ±0.15 square wave the neuron fires once per
+# cycle for 19–24.5 Hz (16–26 Hz at all); the rate-weighted geometric centroid of that tuning
+# curve is 20.6 Hz (20.5 at dt 0.05 ms; 20.7 in studies/tuning_sweep.toml's finer grid; the
+# paper's 7 Hz neuron with k = 0.3425 gives 20.4). tests/test_neurons.py re-measures it. The
+# array uses the driven value: spike rates, not small oscillations, are what the read-out sees.
 LINEAR_HZ_PER_K = 24.52
-DRIVEN_HZ_PER_K = 20.4
+DRIVEN_HZ_PER_K = 20.6
 
 
 def equations(preset: str | Preset = "resonator", input_expr: str = "I_ext",

