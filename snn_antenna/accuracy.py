@@ -23,7 +23,8 @@ from . import neurons, reference
 from .errors import check
 
 ACCURATE, INACCURATE, NON_FINITE = 0, 1, 2
-CLASSES = {ACCURATE: "accurate", INACCURATE: "inaccurate but finite", NON_FINITE: "non-finite"}
+CLASSES = {ACCURATE: "accurate", INACCURATE: "inaccurate but finite",
+           NON_FINITE: "non-finite or runaway"}
 
 
 def spike_time_error_ms(spike_i, spike_t_ms, ref_i, ref_t_ms, n_neurons: int,

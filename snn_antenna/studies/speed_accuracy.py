@@ -739,7 +739,8 @@ def _write_report(out_dir, spec, summary, rows, smap, sweep) -> None:
     report.heading("Stability map")
     report.figure(_stability_figure(smap), "stability_map",
                   "Constant drive I against k·dt, from the reset point: accurate (steady rate "
-                  "within tolerance of the reference), inaccurate but finite, non-finite.")
+                  "within tolerance of the reference), inaccurate but finite, non-finite or "
+                  "runaway (|v| or |u| above 1e6 at any step).")
     report.table([dict(method=m, **v) for m, v in summary["stability_limits"].items()],
                  "Stability limits (k·dt in model ms per step)")
     report.heading("All runs")
@@ -810,7 +811,7 @@ def _stability_figure(smap):
         ax.set_yticks(ticks + 0.5)
         ax.set_yticklabels([f"{k_dt[t]:.3g}" for t in ticks], fontsize=7)
     axes[0][0].set_ylabel("k·dt (model ms per step)")
-    fig.text(0.5, -0.02, "green: accurate   amber: inaccurate but finite   red: non-finite",
+    fig.text(0.5, -0.02, "green: accurate   amber: inaccurate but finite   red: non-finite or runaway",
              ha="center", fontsize=9)
     fig.tight_layout()
     return fig
