@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import xarray as xr
+from threadpoolctl import threadpool_limits
 
 from .. import baseline as bl
 from .. import bench, events
@@ -39,6 +40,9 @@ class Evaluation:
     nmf_dims: list = field(default_factory=lambda: list(bl.NMF_DIMENSIONS))
     nmf_max_iter: int = 400
     mlp_max_iter: int = 300
+    # The 8-material MLPs stop improving early (full-spectrum MLP: 36.8 % after 25 epochs,
+    # 36.3 % at convergence) and cost 0.5 s per epoch: they get their own, smaller budget.
+    material_max_iter: int = 60
     pipelines: list = field(default_factory=lambda: ["distance", "material", "two_material"])
 
     def __post_init__(self):
@@ -50,7 +54,7 @@ class Evaluation:
         check(isinstance(self.nmf_dims, list) and all(isinstance(n, int) and n >= 1
                                                       for n in self.nmf_dims),
               "nmf_dims", self.nmf_dims, "a list of integers >= 1")
-        for name in ("nmf_max_iter", "mlp_max_iter"):
+        for name in ("nmf_max_iter", "mlp_max_iter", "material_max_iter"):
             value = getattr(self, name)
             check(isinstance(value, int) and value >= 1, name, value, "an integer >= 1")
         known = {"distance", "material", "two_material"}
@@ -205,12 +209,17 @@ def run_baselines(feats: xr.Dataset, evaluation: Evaluation, log=print,
     if "distance" in evaluation.pipelines:
         chosen += bl.distance_baselines(n_bins, mlp)
     if "material" in evaluation.pipelines:
-        chosen += bl.material_baselines(evaluation.nmf_dims, mlp, evaluation.nmf_max_iter)
+        chosen += bl.material_baselines(evaluation.nmf_dims,
+                                        bl.Mlp(max_iter=evaluation.material_max_iter),
+                                        evaluation.nmf_max_iter)
     if "two_material" in evaluation.pipelines:
         chosen.append(bl.two_material_baseline(mlp))
     chosen += extra or []
     results = {}
     bar = tqdm(total=len(chosen) * len(evaluation.seeds), desc="baselines", unit="fit")
+    # One BLAS thread: on this shared 2-core machine, 5 epochs of the material MLP took 44 s
+    # with the default threads and 5 s with one (threads spin against other processes).
+    limit = threadpool_limits(1)
     for b in chosen:
         keep = np.ones(feats.sizes["event"], dtype=bool)
         if b.task == "two_material":
@@ -234,6 +243,7 @@ def run_baselines(feats: xr.Dataset, evaluation: Evaluation, log=print,
         results[b.name] = {"baseline": b, "folds": folds, "summary": summary,
                            "event": sub["event"].values, "y": y}
     bar.close()
+    limit.restore_original_limits()
     return results
 
 
@@ -263,7 +273,8 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         spikes = load_spiking(data, bank, bench_spec, log, fresh)
         feats = add_spiking_inputs(feats, spikes)
         costs["spiking"] = spiking_cost(data, bank, plan.cost_sample_events)
-        extra = spiking_baselines(spikes, bl.Mlp(max_iter=evaluation.mlp_max_iter))
+        extra = spiking_baselines(spikes, bl.Mlp(max_iter=evaluation.mlp_max_iter),
+                                  bl.Mlp(max_iter=evaluation.material_max_iter))
         spiking_info = {"neurons_per_event": bank.n_neurons, "bands": {
             k: asdict(v) for k, v in bank.bands.items()}, "target": bank.target,
             "dt_ms": bank.dt_ms, "duration_s": bank.duration_s}
@@ -335,7 +346,7 @@ def add_spiking_inputs(feats: xr.Dataset, spikes: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp) -> list:
+def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp, material_mlp: bl.Mlp) -> list:
     """Decoders of the spiking features, in the same framework as the FFT baselines."""
     from sklearn.compose import TransformedTargetRegressor
     from sklearn.pipeline import make_pipeline
@@ -352,7 +363,7 @@ def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp) -> list:
                                           transformer=StandardScaler())
 
     def classifier(seed):
-        return make_pipeline(StandardScaler(), mlp.classifier((51,), seed))
+        return make_pipeline(StandardScaler(), material_mlp.classifier((51,), seed))
 
     if "low" in bands:
         low_hz = spikes["neuron_hz"].values[spikes["band"].values == "low"]
@@ -375,9 +386,10 @@ def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp) -> list:
 def fft_cost(data: xr.Dataset, processor, feats: xr.Dataset, n: int) -> dict:
     """Wall time per event of the FFT feature extraction, measured now on ``n`` events."""
     ids = feats["event"].values[:n]
+    args = (processor, int(data.attrs["adc_bits"]), float(data.attrs["full_scale_g"]))
+    events.process_block(data["counts"].values[ids[:2]], *args)   # warm-up: imports, caches
     t0 = time.perf_counter()
-    events.process_block(data["counts"].values[ids], processor, int(data.attrs["adc_bits"]),
-                         float(data.attrs["full_scale_g"]))
+    events.process_block(data["counts"].values[ids], *args)
     return {"features_us_per_event": 1e6 * (time.perf_counter() - t0) / len(ids)}
 
 
@@ -388,9 +400,11 @@ def spiking_cost(data: xr.Dataset, bank, n: int) -> dict:
     ids = np.linspace(0, data.sizes["event"] - 1, n).astype(int)
     sample = data["counts"].values[ids]
     one = replace(bank, batch_events=max(bank.batch_events, n))
+    rate, bits, fs = (float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"]),
+                      float(data.attrs["full_scale_g"]))
+    one.run(sample[:2], rate, bits, fs, progress=False)   # warm-up: code generation, compiling
     t0 = time.perf_counter()
-    f = one.run(sample, float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"]),
-                float(data.attrs["full_scale_g"]), progress=False)
+    f = one.run(sample, rate, bits, fs, progress=False)
     total = time.perf_counter() - t0
     return {"features_us_per_event": 1e6 * total / n,
             "simulation_us_per_event": 1e6 * f.wall_s / n,
@@ -411,11 +425,13 @@ def run_designs(data, feats, bank, plan, evaluation, log=print) -> list[dict]:
     counts = data["counts"].values[ids]
     materials = sorted(set(subset["material"].values.astype(str)))
     mlp = bl.Mlp(max_iter=evaluation.mlp_max_iter)
+    material_mlp = bl.Mlp(max_iter=evaluation.material_max_iter)
     seed = evaluation.seeds[0]
     train, test = bl.split_by_repetition(subset["repetition"].values, evaluation.test_fraction,
                                          seed)
     rows = []
     log(f"      array designs on {len(ids)} events (repetitions < {plan.design_repetitions})")
+    limit = threadpool_limits(1)   # as in run_baselines
     for i, design in enumerate(plan.designs):
         design = dict(design)
         name, band = design.pop("name", f"design_{i}"), design.pop("band", "low")
@@ -435,13 +451,14 @@ def run_designs(data, feats, bank, plan, evaluation, log=print) -> list[dict]:
                 ("distance", subset["distance_cm"].values.astype(float),
                  spiking_baselines_for(task="distance", mlp=mlp)),
                 ("material", bl.targets_of(subset, "material", materials),
-                 spiking_baselines_for(task="material", mlp=mlp))):
+                 spiking_baselines_for(task="material", mlp=material_mlp))):
             fold = bl.fit_fold(base, X, y, train, test, seed)
             row.update({("distance_rmse_mm" if task == "distance" else "material_accuracy"):
                         next(iter(bl.score(task, y[test], fold.prediction).values()))})
         log(f"      {name:22s} {variant.n_neurons:3d} neurons: {row['distance_rmse_mm']:.2f} mm, "
             f"{100 * row['material_accuracy']:.1f} %, {row['wall_us_per_event']:.0f} µs/event")
         rows.append(row)
+    limit.restore_original_limits()
     return rows
 
 
