@@ -64,7 +64,8 @@ class EventProcessor:
               f"0 < min_hz < split_hz < max_hz <= {self.rate_hz / 2:g} Hz (Nyquist)")
         check(self.n_fft is None or (isinstance(self.n_fft, int) and self.n_fft >= 16),
               "n_fft", self.n_fft, "an integer number of FFT points >= 16, or None")
-        check(0 < self.band_fraction < 1, "band_fraction", self.band_fraction, "a fraction in (0, 1)")
+        check(0 < self.band_fraction < 1, "band_fraction", self.band_fraction,
+              "a fraction in (0, 1)")
 
     @property
     def fft_points(self) -> int:

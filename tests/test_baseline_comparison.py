@@ -12,7 +12,11 @@ from snn_antenna.studies import baseline_comparison as study
 SPEC = "studies/baseline_comparison.toml"
 TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
         "stimulus.repetitions=6", "stimulus.n_jobs=1", "evaluation.seeds=[0,1]",
-        "evaluation.nmf_dims=[3]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50"]
+        "evaluation.nmf_dims=[3]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
+        "evaluation.material_max_iter=30", "spiking.bank.target=numpy",
+        "spiking.bank.duration_s=0.3", "spiking.design_repetitions=3",
+        "spiking.cost_sample_events=6",
+        "spiking.designs=[{name='low_8', band='low', n_neurons=8}]"]
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +34,15 @@ def test_report_folder_and_summary_keys(tiny_run):
                  "fig7b_nmf_accuracy.png", "predictions.json"):
         assert (out / name).is_file(), name
     stored = json.loads((out / "summary.json").read_text())
-    for key in ("calibration", "distance_rmse_mm", "material_accuracy", "two_material", "timing"):
+    for key in ("calibration", "distance_rmse_mm", "material_accuracy", "two_material", "timing",
+                "spiking", "cost_us_per_event"):
         assert key in stored
+    spiking = stored["spiking"]
+    assert {"spiking_dominant", "spiking_mlp_distance"} <= set(spiking["distance_rmse_mm"])
+    assert "spiking_mlp_material" in spiking["material_accuracy"]
+    assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(48 * 0.3 / 1e-4)
+    assert [d["design"] for d in spiking["designs"]] == ["low_8"]
+    assert (out / "pareto_cost_accuracy.png").is_file()
     assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3]
     assert stored["data"]["n_events"] == 54
     assert sum(stored["data"]["skipped"].values()) + stored["data"]["n_processed"] == 54
@@ -52,6 +63,9 @@ def test_report_numbers_are_recomputed_from_the_predictions(tiny_run):
         elif task == "material" and not name.startswith("nmf_"):
             acc = [np.mean(np.array(f["predicted"]) == f["true"]) for f in folds]
             assert stored["material_accuracy"][name]["mean"] == pytest.approx(np.mean(acc))
+        if name.startswith("spiking_") and task == "distance":
+            assert stored["spiking"]["distance_rmse_mm"][name]["mean"] == pytest.approx(
+                np.mean(rmse))
     # test contacts never appear in their split's training set: disjoint repetitions
     assert all(len(f["test_event"]) == len(set(f["test_event"]))
                for folds in preds["folds"].values() for f in folds)
