@@ -121,43 +121,35 @@ class SpeedGate:
         return v
 
     # -- the network ------------------------------------------------------------------------
-    def _network(self, speed_cm_s: np.ndarray, teacher_hz: np.ndarray, learning: np.ndarray,
-                 step_s: float, weights: np.ndarray, record_read_every_s: float | None = None):
-        """Build and run ``n_copies`` gates (columns of ``speed_cm_s``); return spikes/traces.
+    def objects(self, n_copies: int = 1, speed_expr: str = "speed_cm_s",
+                extra: str = "speed_cm_s : 1 (shared)", weights=None,
+                namespace: dict | None = None, teacher_expr: str = "0*Hz",
+                learning_expr: str = "0"):
+        """The gate's Brian2 objects: speed population, read-out, plastic synapses, teacher.
 
-        ``speed_cm_s`` (n_steps, n_copies), ``teacher_hz`` and ``learning`` (n_steps,) are
-        held for ``step_s`` each. Returns (readout spike indices, times in s, final weights,
-        read trace (n_records, n_copies) or None).
+        ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
+        what it refers to: by default a shared variable the closed loop writes). Returned as
+        a dict of named objects (``speed_population``, ``readout``, ``plastic``, ``teacher``,
+        ``teaching``); Th is ``decode(readout.r_read)``.
         """
         import brian2 as b2
 
-        n_steps, n_copies = speed_cm_s.shape
         n_in = self.n_speed_neurons
-        b2.start_scope()
-        b2.prefs.codegen.target = self.target
-        b2.defaultclock.dt = self.dt_ms * b2.ms
-        b2.seed(self.seed)
-        step = step_s * b2.second
-        speed_ta = b2.TimedArray(speed_cm_s, dt=step, name="speed_command")
-        teacher_ta = b2.TimedArray(np.asarray(teacher_hz, float) * b2.Hz, dt=step,
-                                   name="teacher_rate")
-        learning_ta = b2.TimedArray(np.asarray(learning, float), dt=step, name="learning")
-        namespace = {"speed_command": speed_ta, "teacher_rate": teacher_ta,
-                     "learning": learning_ta, "tau_syn": self.tau_syn_ms * b2.ms,
-                     "tau_trace": self.tau_trace_s * b2.second,
-                     "tau_read": self.tau_read_s * b2.second,
-                     "peak_current": self.peak_current, "speed_offset": self.speed_offset,
-                     "sigma": self.sigma_cm_s}
+        ns = {"tau_syn": self.tau_syn_ms * b2.ms, "tau_trace": self.tau_trace_s * b2.second,
+              "tau_read": self.tau_read_s * b2.second, "peak_current": self.peak_current,
+              "speed_offset": self.speed_offset, "sigma": self.sigma_cm_s,
+              **(namespace or {})}
         class1 = neurons.PRESETS["class1"]
-
+        dt = self.dt_ms * b2.ms
         speed_pop = b2.NeuronGroup(
             n_in * n_copies,
             neurons.equations(
                 "class1",
-                "speed_offset + peak_current * exp(-(speed_command(t, copy) - preferred)**2 / (2*sigma**2))",
-                "preferred : 1 (constant)\ncopy : integer (constant)"),
+                f"speed_offset + peak_current * exp(-(({speed_expr}) - preferred)**2 "
+                "/ (2*sigma**2))",
+                f"preferred : 1 (constant)\ncopy : integer (constant)\n{extra}"),
             threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
-            method="euler", namespace=namespace, name="speed_population")
+            method="euler", namespace=ns, dt=dt, name="speed_population")
         readout = b2.NeuronGroup(
             n_copies,
             neurons.equations("class1", "bias + I_syn", """
@@ -169,45 +161,68 @@ class SpeedGate:
             threshold=f"v >= {neurons.V_PEAK}",
             reset=f"v = c; u = u + d; r_out += {1 / self.tau_trace_s!r}; "
                   f"r_read += {1 / self.tau_read_s!r}",
-            method="euler", namespace=namespace, name="readout")
+            method="euler", namespace=ns, dt=dt, name="readout")
         for group in (speed_pop, readout):
             group.k = 1.0
             group.a, group.b, group.c, group.d = class1.a, class1.b, class1.c, class1.d
         speed_pop.preferred = np.tile(self.preferred_cm_s, n_copies)
         speed_pop.copy = np.repeat(np.arange(n_copies), n_in)
         readout.bias = self.readout_bias
-        v0, u0 = neurons.resting_state("class1")
-        speed_pop.v, speed_pop.u = v0, u0
+        speed_pop.v, speed_pop.u = neurons.resting_state("class1")
         readout.v, readout.u = neurons.resting_state("class1", current=self.readout_bias)
-
         plastic = b2.Synapses(
             speed_pop, readout, model="w : 1",
             on_pre=f"""I_syn_post += w
-            w = clip(w + {self.eta!r} * learning(t) * (r_teacher_post - r_out_post), -{self.w_max!r}, {self.w_max!r})""",
-            namespace=namespace, name="plastic")
+            w = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - r_out_post), -{self.w_max!r}, {self.w_max!r})""",
+            namespace=ns, dt=dt, name="plastic")
         plastic.connect(i=np.arange(n_in * n_copies), j=np.repeat(np.arange(n_copies), n_in))
-        plastic.w = np.tile(weights, n_copies)
+        plastic.w = np.tile(np.zeros(n_in) if weights is None else weights, n_copies)
         # A pacemaker fires exactly at the teacher rate: the rule sees the target, not the
         # counting noise of a Poisson train.
-        teacher = b2.NeuronGroup(n_copies, "dphase/dt = teacher_rate(t) : 1",
+        teacher = b2.NeuronGroup(n_copies, f"dphase/dt = {teacher_expr} : 1",
                                  threshold="phase >= 1", reset="phase -= 1", method="euler",
-                                 namespace=namespace, name="teacher")
+                                 namespace=ns, dt=dt, name="teacher")
         teaching = b2.Synapses(teacher, readout,
                                on_pre=f"r_teacher_post += {1 / self.tau_trace_s!r}",
-                               name="teaching")
+                               dt=dt, name="teaching")
         teaching.connect(j="i")
-        spikes = b2.SpikeMonitor(readout, name="readout_spikes")
-        objects = [speed_pop, readout, plastic, teacher, teaching, spikes,
-                   neurons.instability_guard(speed_pop, "class1", self.dt_ms, "euler"),
-                   ]
+        return {"speed_population": speed_pop, "readout": readout, "plastic": plastic,
+                "teacher": teacher, "teaching": teaching}
+
+    def _network(self, speed_cm_s: np.ndarray, teacher_hz: np.ndarray, learning: np.ndarray,
+                 step_s: float, weights: np.ndarray, record_read_every_s: float | None = None):
+        """Build and run ``n_copies`` gates (columns of ``speed_cm_s``); return spikes/traces.
+
+        ``speed_cm_s`` (n_steps, n_copies), ``teacher_hz`` and ``learning`` (n_steps,) are
+        held for ``step_s`` each. Returns (readout spike indices, times in s, final weights,
+        read trace (n_records, n_copies) or None).
+        """
+        import brian2 as b2
+
+        n_steps, n_copies = speed_cm_s.shape
+        b2.start_scope()
+        b2.prefs.codegen.target = self.target
+        b2.seed(self.seed)
+        step = step_s * b2.second
+        namespace = {
+            "speed_command": b2.TimedArray(speed_cm_s, dt=step, name="speed_command"),
+            "teacher_rate": b2.TimedArray(np.asarray(teacher_hz, float) * b2.Hz, dt=step,
+                                          name="teacher_rate"),
+            "learning": b2.TimedArray(np.asarray(learning, float), dt=step, name="learning")}
+        parts = self.objects(n_copies, "speed_command(t, copy)", "", weights, namespace,
+                             teacher_expr="teacher_rate(t)", learning_expr="learning(t)")
+        spikes = b2.SpikeMonitor(parts["readout"], name="readout_spikes")
+        objects = [*parts.values(), spikes,
+                   neurons.instability_guard(parts["speed_population"], "class1", self.dt_ms,
+                                             "euler")]
         trace = None
         if record_read_every_s is not None:
-            trace = b2.StateMonitor(readout, "r_read", record=True,
+            trace = b2.StateMonitor(parts["readout"], "r_read", record=True,
                                     dt=record_read_every_s * b2.second, name="read_trace")
             objects.append(trace)
         net = b2.Network(*objects)
         net.run(n_steps * step, namespace={})
-        w = np.asarray(plastic.w[:], float).reshape(n_copies, n_in)[0]
+        w = np.asarray(parts["plastic"].w[:], float).reshape(n_copies, -1)[0]
         read = np.asarray(trace.r_read[:], float).T if trace is not None else None
         return (np.asarray(spikes.i[:], int), np.asarray(spikes.t_[:], float), w, read)
 

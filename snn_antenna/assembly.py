@@ -1,0 +1,114 @@
+"""Scene composition: a network spec lists the parts a scene needs; only those are built.
+
+``networks/*.toml`` name the parts and the inputs the scene provides:
+
+- ``bench.toml``: ``parts = ["resonators"]`` (a bench contact: no robot, no motion),
+- ``robot.toml``: ``+ "gate"`` (a driving robot: the speed command sets Th),
+- ``exploration.toml``: ``+ "cpg", "control"`` (the antenna sweeps; contacts stop the robot).
+
+Each part declares what it needs; a spec asking for a part whose inputs are missing is refused
+before anything is built. ``build`` returns an ``Assembly`` whose Brian2 ``Network`` holds the
+listed parts' objects and nothing else, so runtime and memory grow only with what is built.
+The resonators take their input as ``I_ext`` written by the caller (runtime mode: the closed
+loop writes each coded sample); the gate and CPG read the shared ``speed_cm_s`` it writes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import spec as specs
+from .cpg import CPG
+from .control import ControlLayer
+from .errors import SpecError, check
+from .gate import SpeedGate
+from .network import ResonatorArray
+
+INPUTS = ("antenna", "speed_command")
+# part → (what it needs: scene inputs or other parts)
+NEEDS = {
+    "resonators": ("antenna",),
+    "gate": ("speed_command",),
+    "cpg": ("speed_command",),
+    "control": ("resonators",),
+}
+SETTINGS = {"resonators": ResonatorArray, "gate": SpeedGate, "cpg": CPG,
+            "control": ControlLayer}
+
+
+def check_parts(parts, inputs) -> None:
+    for name in parts:
+        check(name in NEEDS, "network.parts", name, f"parts among {sorted(NEEDS)}")
+    for name in inputs:
+        check(name in INPUTS, "network.inputs", name, f"inputs among {list(INPUTS)}")
+    have = set(parts) | set(inputs)
+    for name in parts:
+        missing = [n for n in NEEDS[name] if n not in have]
+        if missing:
+            raise SpecError("network.parts", name,
+                            f"{name!r} needs {' and '.join(missing)}: add "
+                            f"{', '.join(repr(m) for m in missing)} to the network's "
+                            f"{'parts' if missing[0] in NEEDS else 'inputs'}")
+
+
+@dataclass
+class Assembly:
+    network: object                     # brian2.Network
+    objects: dict = field(default_factory=dict)
+    parts: dict = field(default_factory=dict)   # name → configured part (ResonatorArray, ...)
+
+    def names(self) -> set[str]:
+        return {obj.name for obj in self.network.objects}
+
+
+def configure(table: dict) -> dict:
+    """Check a network spec table and configure its parts (nothing built yet)."""
+    allowed = {"parts", "inputs", "description", *SETTINGS}
+    for key in table:
+        check(key in allowed, f"network.{key}", table[key],
+              f"a known key of a network spec: {', '.join(sorted(allowed))}")
+    parts = list(table.get("parts", []))
+    check(len(parts) > 0, "network.parts", parts, "a non-empty list of parts")
+    check_parts(parts, table.get("inputs", []))
+    configured = {}
+    for name in parts:
+        with specs.section(f"network.{name}"):
+            settings = dict(specs.check_section(table, name, SETTINGS[name]))
+            settings = {k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()}
+            configured[name] = SETTINGS[name](**settings)
+    return configured
+
+
+def build(table: dict, fitted: dict | None = None) -> Assembly:
+    """Build the Brian2 objects of the listed parts into one Network (runtime mode).
+
+    ``fitted`` replaces configured parts by trained ones (e.g. ``{"gate": SpeedGate().fit(...)}``:
+    its learned weights go into the network's plastic synapses).
+    """
+    import brian2 as b2
+
+    from . import neurons
+
+    configured = configure(table)
+    for name, part in (fitted or {}).items():
+        check(name in configured, "fitted", name, f"a part listed in the spec: {list(configured)}")
+        configured[name] = part
+    b2.start_scope()
+    objects = {}
+    if "resonators" in configured:
+        array = configured["resonators"]
+        group = array._build("I_ext", "I_ext : 1", {})
+        objects["resonators"] = group
+        objects["resonator_guard"] = neurons.instability_guard(group, "resonator", array.dt_ms,
+                                                               array.method)
+    if "gate" in configured:
+        gate = configured["gate"]
+        objects.update(gate.objects(weights=getattr(gate, "weights_", None)))
+    if "cpg" in configured:
+        ring, syn = configured["cpg"].objects()
+        objects.update({"cpg": ring, "cpg_ring": syn})
+    if "control" in configured:
+        objects.update(configured["control"].objects(objects["resonators"],
+                                                     configured["resonators"].neuron_hz))
+    return Assembly(b2.Network(*objects.values()), objects, configured)
