@@ -106,7 +106,8 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
         gate = configured["gate"]
         objects.update(gate.objects(weights=getattr(gate, "weights_", None)))
     if "cpg" in configured:
-        ring, syn = configured["cpg"].objects()
+        ring, syn = configured["cpg"].objects(
+            hold_expr="hold_input", extra="speed_cm_s : 1 (shared)\nhold_input : 1 (shared)")
         objects.update({"cpg": ring, "cpg_ring": syn})
     if "control" in configured:
         objects.update(configured["control"].objects(objects["resonators"],

@@ -269,3 +269,87 @@ def scene_from_spec(spec: dict) -> RobotScene:
         check_section({"speed": speed}, "speed", SpeedProfile)
         speed = SpeedProfile(**speed)
     return CourseScene(contacts=contacts, obstacles=obstacles, speed=speed, **spec)
+
+
+class OnlineAntenna:
+    """A course scene sample by sample, for closed loops: the caller moves robot and antenna.
+
+    Each ``step(n, speed_cm_s, pan_deg, tilt_deg)`` advances the robot by n samples at that
+    speed with the antenna at that pose, starts a contact where the rod enters a post (none
+    while another is held), and returns the n samples the sensor board sends (2 axes of ADC
+    counts). The physics is ``CourseScene.generate``'s, in streaming form: the driven mode's
+    filter state carries over between calls (``antenna.resonant_noise`` with memory).
+    """
+
+    def __init__(self, scene: CourseScene, seed: int = 0):
+        scene.validate()
+        self.scene = scene
+        self.rng = np.random.default_rng(seed)
+        self.adc = antenna.ADC(scene.adc_bits, scene.full_scale_g)
+        self.t_s = 0.0
+        self.x_cm = float(scene.start_x_cm)
+        self.contacts: list[Contact] = []
+        self._touching = [False] * len(scene.obstacles)
+        self._held_until = -np.inf
+        self._mode = (antenna.NATURAL_HZ, antenna.NATURAL_TAU_S)
+        self._zi = np.zeros(2)
+        self._ringing = np.empty(0)
+        self._pose = None
+
+    def _filter(self):
+        """Two-pole resonator at the current mode, gain normalised to unit output rms."""
+        from scipy.signal import lfilter
+
+        f, tau = self._mode
+        rate = self.scene.rate_hz
+        r = np.exp(-1.0 / (tau * rate))
+        a = [1.0, -2 * r * np.cos(2 * np.pi * f / rate), r * r]
+        impulse = lfilter([1.0], a, np.r_[1.0, np.zeros(int(20 * tau * rate) + 10)])
+        return [1.0 / np.sqrt(np.sum(impulse ** 2))], a
+
+    def step(self, n: int, speed_cm_s: float, pan_deg: float, tilt_deg: float) -> np.ndarray:
+        from scipy.signal import lfilter
+
+        sc = self.scene
+        antenna.self_motion_rms_g(speed_cm_s)
+        # The rod sweeps through the chunk: poses interpolated sample by sample from the last
+        # call's, so a post passed between two calls is still met.
+        last = self._pose if self._pose is not None else (pan_deg, tilt_deg)
+        frac = np.arange(1, n + 1) / n
+        pan = last[0] + (pan_deg - last[0]) * frac
+        tilt = last[1] + (tilt_deg - last[1]) * frac
+        base = np.c_[self.x_cm + speed_cm_s * np.arange(n) / sc.rate_hz, np.zeros(n)]
+        self._pose = (pan_deg, tilt_deg)
+        entries = []
+        for k, ob in enumerate(sc.obstacles):
+            touching, distance = rod_touch(base, pan, tilt, ob)
+            was = np.r_[self._touching[k], touching[:-1]]
+            entries += [(i, float(distance[i]), ob.material)
+                        for i in np.flatnonzero(touching & ~was)]
+            self._touching[k] = bool(touching[-1])
+        for i, d, material in sorted(entries):
+            t_i = self.t_s + i / sc.rate_hz
+            if t_i < self._held_until:
+                continue
+            self.contacts.append(Contact(t_i, d, material, sc.hold_s))
+            self._held_until = t_i + sc.hold_s
+            self._mode = (float(antenna.low_mode_hz(d)),
+                          float(antenna.decay_times_s(d, material)[0]))
+            self._ringing = np.r_[np.zeros(i), antenna.contact_ringing(
+                d, material, sc.rate_hz, int(round(sc.hold_s * sc.rate_hz)), self.rng,
+                sc.impact_g)]
+        if self.t_s >= self._held_until and self._mode[0] != antenna.NATURAL_HZ:
+            self._mode = (antenna.NATURAL_HZ, antenna.NATURAL_TAU_S)
+        b, a = self._filter()
+        drive = self.rng.standard_normal(n) * float(antenna.self_motion_rms_g(speed_cm_s))
+        main, self._zi = lfilter(b, a, drive, zi=self._zi)
+        from .stimuli import TERRAIN_NOISE_G_PER_CM_S
+        main = main + self.rng.standard_normal(n) * TERRAIN_NOISE_G_PER_CM_S[sc.terrain] \
+            * speed_cm_s
+        ring, self._ringing = self._ringing[:n], self._ringing[n:]
+        main[:len(ring)] += ring
+        xy = antenna.project(main, sc.orientation_deg)
+        xy += self.rng.standard_normal(xy.shape) * sc.sensor_noise_g
+        self.t_s += n / sc.rate_hz
+        self.x_cm += speed_cm_s * n / sc.rate_hz
+        return self.adc.to_counts(xy)

@@ -12,6 +12,7 @@ from ..errors import SpecError
 STUDIES = {
     "quickstart": "snn_antenna.studies.quickstart",
     "gating_threshold": "snn_antenna.studies.gating_threshold",
+    "exploration": "snn_antenna.studies.exploration",
     "tuning_sweep": "snn_antenna.studies.tuning_sweep",
     "speed_accuracy": "snn_antenna.studies.speed_accuracy",
     "baseline_comparison": "snn_antenna.studies.baseline_comparison",

@@ -1,0 +1,252 @@
+"""Active exploration: the closed loop of the paper's Fig. 3, run in Brian2 with Python in the loop.
+
+The robot drives among posts; the CPG sweeps the antenna; where the rod meets a post the
+antenna rings; the preprocessing chain codes the signal with the Th the speed gate recalls
+from the speed command; the resonators feed the class-I control layer, whose motor unit
+stops the robot (and the sweep). The network is what ``networks/exploration.toml`` lists
+(``assembly.build``), in runtime mode, with two NetworkOperations:
+
+- every ``chunk_ms``: read the CPG's angles and the motor unit, move the robot, generate the
+  next chunk of antenna samples (``scenes.OnlineAntenna``), preprocess it
+  (``preprocess.partial_transform``) and code it with the gate's current Th;
+- every sample: write the next coded sample into the resonators' input.
+
+Summary: ``cpg_period_s`` (measured while driving, and the spec's value at that speed),
+``pan_tilt_phase_deg``, ``contact_distance_cm`` (true and decoded from the rate map),
+``stopped_after_contact_s``.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+
+from .. import antenna
+from .. import spec as specs
+from ..assembly import build as build_network, configure
+from ..cpg import cycle_periods, phase_lag_deg
+from ..errors import SpecError, check
+from ..network import rate_map
+from ..preprocess import make_chain
+from ..readout import ContactDetector
+from ..report import Report
+from ..scenes import CourseScene, OnlineAntenna, scene_from_spec
+
+SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
+
+
+def _gate_training(speeds_cm_s=(0.0, 30.0), th_star_g=(0.1, 0.6)):
+    return locals()
+
+
+def _loop(speed_cm_s=15.0, duration_s=12.0, chunk_ms=10.0, calibration_s=2.0):
+    return locals()
+
+
+def build(spec: dict) -> dict:
+    specs.check_top_level(spec, SECTIONS)
+    parts = {}
+    with specs.section("network"):
+        table = spec.get("network", {})
+        configured = configure(table)
+        for need in ("resonators", "gate", "cpg", "control"):
+            if need not in configured:
+                raise SpecError("network.parts", table.get("parts"),
+                                f"the exploration loop needs {need!r} among the parts")
+        parts["network"] = table
+        parts["configured"] = configured
+    with specs.section("stimulus"):
+        scene = scene_from_spec(spec.get("stimulus", {"kind": "course"}))
+        check(isinstance(scene, CourseScene), "kind", "robot", "'course'")
+        parts["scene"] = scene
+    with specs.section("preprocess"):
+        pre = specs.check_section(spec, "preprocess", make_chain,
+                                  exclude=["rate_hz", "adc_bits", "full_scale_g", "threshold"])
+        parts["chain"] = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
+    with specs.section("readout"):
+        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
+        parts["window_s"] = float(read.pop("window_s", 0.1))
+        parts["detector"] = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
+                                               for k, v in read.items()})
+    with specs.section("gate_training"):
+        gt = {**_gate_training(), **specs.check_section(spec, "gate_training", _gate_training)}
+        v, th = np.asarray(gt["speeds_cm_s"], float), np.asarray(gt["th_star_g"], float)
+        check(v.shape == th.shape and len(v) >= 2, "th_star_g", gt["th_star_g"],
+              "one threshold per speed, at least two")
+        configured["gate"].check_speeds(v, "speeds_cm_s")
+        parts["gate_training"] = (v, th)
+    with specs.section("loop"):
+        loop = {**_loop(), **specs.check_section(spec, "loop", _loop)}
+        antenna.self_motion_rms_g(loop["speed_cm_s"])
+        configured["gate"].check_speeds([loop["speed_cm_s"]], "speed_cm_s")
+        check(loop["duration_s"] > 0 and loop["chunk_ms"] >= 1 and loop["calibration_s"] > 0,
+              "loop", loop, "duration_s > 0, chunk_ms >= 1, calibration_s > 0")
+        parts["loop"] = loop
+    return parts
+
+
+def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
+    import brian2 as b2
+
+    parts = build(spec)
+    seed = int(spec.get("seed", 0))
+    loop, scene, chain = parts["loop"], parts["scene"], parts["chain"]
+    cfg = parts["configured"]
+    t_start = time.perf_counter()
+    speed_cmd = float(loop["speed_cm_s"])
+
+    log(f"[1/4] training the speed gate on Th*({list(parts['gate_training'][0])} cm/s)")
+    gate = cfg["gate"].fit(*parts["gate_training"])
+    log(f"[2/4] calibrating the chain on {loop['calibration_s']:g} s of driving "
+        f"at {speed_cmd:g} cm/s")
+    calib = replace(scene, obstacles=[], contacts=[], duration_s=float(loop["calibration_s"]),
+                    speed=None, speed_cm_s=speed_cmd, stop_after_contact_s=None)
+    chain.fit(calib.generate(seed + 1).samples)
+    steps = [step for _, step in chain.steps]
+    coder = steps[-1]
+
+    log("[3/4] building " + ", ".join(cfg) + " in Brian2 and closing the loop")
+    asm = build_network(parts["network"], fitted={"gate": gate})
+    obj = asm.objects
+    world = OnlineAntenna(replace(scene, stop_after_contact_s=None), seed)
+    rate_hz = scene.rate_hz
+    n_chunk = int(round(loop["chunk_ms"] * rate_hz / 1000.0))
+    i_ext = obj["resonators"].variables["I_ext"].get_value()
+    r_read = obj["readout"].variables["r_read"].get_value()
+    x_ring = obj["cpg"].variables["x"].get_value()
+    motor_spikes = b2.SpikeMonitor(obj["control_motor"], name="motor_spikes")
+    res_spikes = b2.SpikeMonitor(obj["resonators"], name="resonator_spikes")
+    state = {"buffer": np.zeros(n_chunk), "k": 0, "stopped_at": None, "log": []}
+    cpg = cfg["cpg"]
+
+    @b2.network_operation(dt=loop["chunk_ms"] * b2.ms, when="start", order=-1)
+    def close_the_loop(t):
+        t_s = float(t / b2.second)
+        if state["stopped_at"] is None and motor_spikes.num_spikes > 0:
+            state["stopped_at"] = t_s
+        speed = 0.0 if state["stopped_at"] is not None else speed_cmd
+        obj["cpg"].speed_cm_s = speed
+        obj["speed_population"].speed_cm_s = speed
+        obj["cpg"].hold_input = 0.0 if state["stopped_at"] is None else 5.0   # reflex: freeze
+        pan, tilt = cpg.angles(x_ring.copy())
+        counts = world.step(n_chunk, speed, float(pan), float(tilt))
+        x = counts
+        for step in steps[:-1]:
+            x = step.partial_transform(x)
+        th = float(gate.decode(r_read[0]))
+        state["buffer"] = coder.partial_transform(x, threshold=th)
+        state["k"] = 0
+        state["log"].append((t_s, speed, float(pan), float(tilt), th, world.x_cm))
+
+    @b2.network_operation(dt=b2.second / rate_hz, when="start", order=0)
+    def feed(t):
+        i_ext[:] = state["buffer"][state["k"]]
+        state["k"] += 1
+
+    net = asm.network
+    net.add(motor_spikes, res_spikes, close_the_loop, feed)
+    t0 = time.perf_counter()
+    net.run(float(loop["duration_s"]) * b2.second, namespace={})
+    wall = time.perf_counter() - t0
+    log(f"      {loop['duration_s']:g} s simulated in {wall:.1f} s")
+
+    log("[4/4] reading out and writing the report")
+    t, speed, pan, tilt, th, x_cm = (np.array(c) for c in zip(*state["log"]))
+    driving = speed > 0
+    periods = cycle_periods(t[driving], pan[driving]) if driving.sum() > 10 else np.array([])
+    period = float(np.median(periods)) if len(periods) else None
+    phase = (phase_lag_deg(t[driving], pan[driving], tilt[driving], period)
+             if period else None)
+    rates = rate_map(np.asarray(res_spikes.i[:]), np.asarray(res_spikes.t_[:]),
+                     cfg["resonators"].neuron_hz, float(loop["duration_s"]), parts["window_s"])
+    detections = parts["detector"].detect(rates)
+    first = world.contacts[0] if world.contacts else None
+    match = None
+    if first is not None:
+        after = [d for d in detections if d.end_s > first.t_s]
+        match = after[0] if after else None
+    stopped = state["stopped_at"]
+    summary = {
+        "cpg_period_s": {"measured": period, "spec": float(1 / cpg.frequency_hz(speed_cmd))},
+        "pan_tilt_phase_deg": {"measured": phase, "spec": float(cpg.phase_offset_deg)},
+        "contact_distance_cm": {"true": first.distance_cm if first else None,
+                                "decoded": match.distance_cm if match else None},
+        "contact_t_s": first.t_s if first else None,
+        "stopped_at_s": stopped,
+        "stopped_after_contact_s": (stopped - first.t_s) if (stopped is not None and first)
+        else None,
+        "contacts": [{"t_s": c.t_s, "distance_cm": c.distance_cm, "material": c.material}
+                     for c in world.contacts],
+        "detections": [d.as_dict() for d in detections],
+        "pan_range_deg": [float(pan.min()), float(pan.max())],
+        "tilt_range_deg": [float(tilt.min()), float(tilt.max())],
+        "gate_th_g_while_driving": float(np.median(th[driving])) if driving.any() else None,
+        "simulation_wall_s": wall,
+        "total_wall_s": time.perf_counter() - t_start,
+        "built_objects": sorted(asm.names()),
+    }
+    rep = Report(out_dir, "snn-antenna: active exploration, closed loop")
+    rep.text(spec.get("description", ""))
+    rep.table([{"quantity": k, "value": str(v)} for k, v in summary.items()
+               if k not in ("contacts", "detections", "built_objects")], "Closed loop")
+    rep.figure(_figure(t, speed, pan, tilt, th, x_cm, rates, scene, world, detections, stopped),
+               "exploration", "Joint angles from the CPG, robot speed and the gate's Th, the "
+               "rate map (dashed: true contacts, green: detections, red: stop) and the tip's "
+               "path in the plane with the posts.")
+    summary = rep.write(summary, spec, cfg["resonators"].target)
+    log(f"contact at {summary['contact_t_s']} s, {summary['contact_distance_cm']} cm; "
+        f"stopped {summary['stopped_after_contact_s']} s after it; CPG period "
+        f"{summary['cpg_period_s']}; report in {out_dir}/report.html")
+    return summary
+
+
+def _figure(t, speed, pan, tilt, th, x_cm, rates, scene, world, detections, stopped):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(12, 9))
+    gs = fig.add_gridspec(3, 2, width_ratios=[2, 1])
+    a0 = fig.add_subplot(gs[0, 0])
+    a0.plot(t, pan, label="pan")
+    a0.plot(t, tilt, label="tilt")
+    a0.set_ylabel("angle (deg)")
+    a0.legend(fontsize=8)
+    a1 = fig.add_subplot(gs[1, 0], sharex=a0)
+    a1.plot(t, speed, color="k")
+    a1.set_ylabel("speed (cm/s)")
+    a1b = a1.twinx()
+    a1b.plot(t, th, color="tab:red", lw=0.8)
+    a1b.set_ylabel("gate Th (g)", color="tab:red")
+    a2 = fig.add_subplot(gs[2, 0], sharex=a0)
+    w = float(rates.attrs["window_s"])
+    hz = rates.neuron_hz.values
+    edges_hz = np.r_[hz[0] / np.sqrt(hz[1] / hz[0]), np.sqrt(hz[:-1] * hz[1:]),
+                     hz[-1] * np.sqrt(hz[-1] / hz[-2])]
+    edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
+    a2.pcolormesh(edges_t, edges_hz, rates.values, cmap="magma", shading="flat")
+    a2.set_yscale("log")
+    a2.set_ylabel("neuron (Hz)")
+    a2.set_xlabel("time (s)")
+    for c in world.contacts:
+        a2.axvline(c.t_s, color="tab:cyan", ls="--")
+    for d in detections:
+        a2.axvline(d.onset_s, color="tab:green")
+    if stopped is not None:
+        for ax in (a0, a1, a2):
+            ax.axvline(stopped, color="tab:red", lw=1)
+    a3 = fig.add_subplot(gs[:, 1])
+    reach = antenna.ROD_LENGTH_CM * np.cos(np.deg2rad(tilt))
+    tip_x = x_cm + reach * np.cos(np.deg2rad(pan))
+    tip_y = reach * np.sin(np.deg2rad(pan))
+    a3.scatter(tip_y, tip_x, c=t, s=3, cmap="viridis")
+    a3.plot(np.zeros_like(x_cm), x_cm, color="k", lw=2, label="robot path")
+    for ob in scene.obstacles:
+        a3.add_patch(plt.Circle((ob.y_cm, ob.x_cm), max(ob.radius_cm, 1.0), color="tab:brown"))
+    a3.set_aspect("equal")
+    a3.set_xlabel("left (cm)")
+    a3.set_ylabel("forward (cm)")
+    a3.set_title("tip path (colour: time)", fontsize=9)
+    fig.tight_layout()
+    return fig
