@@ -73,7 +73,7 @@ def configure(table: dict) -> dict:
     check_parts(parts, table.get("inputs", []))
     configured = {}
     for name in parts:
-        with specs.section(f"network.{name}"):
+        with specs.section("network"):
             settings = dict(specs.check_section(table, name, SETTINGS[name]))
             settings = {k: tuple(v) if isinstance(v, list) else v for k, v in settings.items()}
             configured[name] = SETTINGS[name](**settings)

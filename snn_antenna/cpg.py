@@ -15,8 +15,9 @@ latencies, so ``drive`` follows from the wanted frequency in closed form,
 drive = 1 − S·(1 − e^(−latency/τ)), and the frequency rises with the robot's speed:
 f = f₀ · (1 + speed_gain · v / 30 cm/s).
 
-Joint angles are the ring's population vector, filtered: each neuron's spikes feed a trace
-x_j (τ_x); the phase φ = arg Σ x_j e^{2πij/N} drives pan = c_p + A_p cos φ and
+Joint angles are the ring's population vector, filtered: each neuron's spikes feed an
+alpha-shaped trace x_j (two exponential stages of τ_x, so the vector turns smoothly between
+spikes instead of jumping 360°/N at each); the phase φ = arg Σ x_j e^{2πij/N} drives pan = c_p + A_p cos φ and
 tilt = c_t + A_t cos(φ − offset), so the tip sweeps an area (offset 90° by default) and both
 angles stay within their ranges (the paper's: pan 80° centred 40° to the side, tilt 90°
 centred 10° above the horizon).
@@ -37,7 +38,7 @@ class CPG:
     n_neurons: int = 24
     tau_ms: float = 50.0
     token_drive: float = 1.0           # S
-    trace_ms: float = 80.0             # τ_x of the angle read-out
+    trace_ms: float = 60.0             # τ_x of the angle read-out
     pan_centre_deg: float = 40.0
     pan_amplitude_deg: float = 40.0
     tilt_centre_deg: float = 10.0
@@ -95,7 +96,8 @@ class CPG:
               "gain": self.speed_gain, **(namespace or {})}
         eqs = f"""
         dv/dt = (drive + token * S - hold - v) / tau : 1
-        dx/dt = -x / tau_x : 1
+        dx/dt = (y - x) / tau_x : 1
+        dy/dt = -y / tau_x : 1
         drive = 1 - S * (1 - exp(-step / tau)) : 1
         step = period / (n_ring * (1 + gain * speed / 30)) * second : second
         speed = {speed_expr} : 1
@@ -104,7 +106,7 @@ class CPG:
         {extra}
         """
         ring = b2.NeuronGroup(self.n_neurons, eqs, threshold="v >= 1",
-                              reset="v = 0; token = 0; x += 1", method="euler",
+                              reset="v = 0; token = 0; y += 1", method="euler",
                               namespace=ns, dt=self.dt_ms * b2.ms, name="cpg")
         ring.token = 0
         ring.token[0] = 1
