@@ -249,3 +249,24 @@ class DominantNeuronDistance(RegressorMixin, BaseEstimator):
         fired = X.max(axis=1) > 0
         out[fired] = antenna.distance_from_low_hz(hz[fired])
         return out
+
+
+class CentroidDistance(DominantNeuronDistance):
+    """Like ``DominantNeuronDistance`` but from the rate-weighted geometric centroid of the
+    neurons' preferred frequencies (``readout.centroid_hz``), the quantity the resonators'
+    k is tuned to (``neurons.DRIVEN_HZ_PER_K``); the most active neuron alone sits about a
+    channel below the ringing frequency, because a resonator fires most for input somewhat
+    above its centroid."""
+
+    def predict(self, X):
+        import xarray as xr
+
+        from .readout import centroid_hz
+
+        rates = xr.DataArray(np.asarray(X, dtype=float), dims=("event", "neuron_hz"),
+                             coords={"neuron_hz": np.asarray(self.neuron_hz, dtype=float)})
+        f = centroid_hz(rates).values
+        out = np.full(len(f), float(np.mean(antenna.CALIBRATED_RANGE_CM)))
+        out[f > 0] = antenna.distance_from_low_hz(f[f > 0])
+        return out
+

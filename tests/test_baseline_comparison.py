@@ -38,7 +38,7 @@ def test_report_folder_and_summary_keys(tiny_run):
                 "spiking", "cost_us_per_event"):
         assert key in stored
     spiking = stored["spiking"]
-    assert {"spiking_dominant", "spiking_mlp_distance"} <= set(spiking["distance_rmse_mm"])
+    assert {"spiking_dominant", "spiking_centroid", "spiking_mlp_distance"} <= set(spiking["distance_rmse_mm"])
     assert "spiking_mlp_material" in spiking["material_accuracy"]
     assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(48 * 0.3 / 1e-4)
     assert [d["design"] for d in spiking["designs"]] == ["low_8"]

@@ -7,8 +7,8 @@ import pytest
 from snn_antenna import bench, neurons
 from snn_antenna.network import ResonatorArray
 from snn_antenna.signals import Recording
-from snn_antenna.spiking import (HIGH_BAND, LOW_BAND, DominantNeuronDistance, SpikingBank,
-                                 spike_summary)
+from snn_antenna.spiking import (HIGH_BAND, LOW_BAND, CentroidDistance,
+                                 DominantNeuronDistance, SpikingBank, spike_summary)
 from snn_antenna.stimuli import square
 
 RATE = 2000.0
@@ -76,6 +76,8 @@ def test_spiking_decoders_recover_distance_on_positions_not_trained_on():
     # the paper's map (no training) on every event
     law = DominantNeuronDistance(feats.neuron_hz).fit(feats.counts).predict(feats.counts)
     assert 10 * np.sqrt(np.mean((law - d) ** 2)) < 0.35 * spread_mm
+    centroid = CentroidDistance(feats.neuron_hz).fit(feats.counts).predict(feats.counts)
+    assert 10 * np.sqrt(np.mean((centroid - d) ** 2)) < 0.15 * spread_mm
     # an MLP on the spike counts, trained on every other position, tested on those between
     held_out = np.isin(events["position"].values, np.arange(1, 16, 2))
     mlp = TransformedTargetRegressor(make_pipeline(StandardScaler(), MLPRegressor(

@@ -73,7 +73,7 @@ class SpikingPlan:
     bank: dict = field(default_factory=dict)
     designs: list = field(default_factory=list)
     design_repetitions: int = 10
-    cost_sample_events: int = 200
+    cost_sample_events: int = 400
 
 
 def build_spiking(spec: dict):
@@ -352,7 +352,7 @@ def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp, material_mlp: bl.Mlp) -> 
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    from ..spiking import DominantNeuronDistance
+    from ..spiking import CentroidDistance, DominantNeuronDistance
 
     bands = set(spikes["band"].values)
     out = []
@@ -371,6 +371,10 @@ def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp, material_mlp: bl.Mlp) -> 
                                lambda seed: DominantNeuronDistance(low_hz),
                                "most active low-band resonator → inverse low-mode law "
                                "(Fig. 10E), no training"))
+        out.append(bl.Baseline("spiking_centroid", "distance", "spiking_low_counts",
+                               lambda seed: CentroidDistance(low_hz),
+                               "rate-weighted centroid of the low band → inverse low-mode "
+                               "law, no training"))
         out.append(bl.Baseline("spiking_mlp_distance_low", "distance", "spiking_low",
                                regressor, "MLP 20-5 on the low band's counts, latencies, spans"))
     out.append(bl.Baseline("spiking_mlp_distance", "distance", "spiking_all", regressor,
