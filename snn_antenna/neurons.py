@@ -197,7 +197,7 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
              input_dt_ms: float | None = None, input_index=None, v0=None, u0=None,
              record_traces: bool | str = False, trace_dt_ms: float | None = None,
              target: str = "numpy", force: bool = False, check_every_ms: float = 10.0,
-             **params) -> SimulationResult:
+             run_ms: float | None = None, **params) -> SimulationResult:
     """Run Izhikevich neurons on an input current; the building block of k/b/I tuning.
 
     ``current`` is an array of samples every ``input_dt_ms`` (default ``dt_ms``): shape
@@ -206,6 +206,8 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
     ``k`` and preset parameters (``a``, ``b``, ``c``, ``d``) may be scalars or one value per
     neuron. Neurons start at their resting state for the first input sample unless ``v0`` /
     ``u0`` are given. ``record_traces`` records v and u (``True``) or only the named variable.
+    ``run_ms`` runs only the input's first milliseconds: the same compiled code as the whole
+    run (Brian2 compiles the input's length into it), e.g. to warm up before timing.
 
     Returns spike times in ms (and traces on request). Raises ``NumericalInstabilityError`` as
     soon as a neuron's state becomes non-finite, and refuses before running a k·dt beyond the
@@ -286,6 +288,10 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
     objects.append(guard)
 
     duration_ms = current.shape[0] * input_dt_ms
+    if run_ms is not None:
+        check(np.isfinite(run_ms) and 0 < run_ms <= duration_ms, "run_ms", run_ms,
+              f"a duration in (0, {duration_ms:g}] ms (the input's length)")
+        duration_ms = float(run_ms)
     net = b2.Network(*objects)
     net.run(duration_ms * b2.ms, namespace={})
     guard.function()  # the last partial interval

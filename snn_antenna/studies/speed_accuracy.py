@@ -248,7 +248,7 @@ class ArrayScene:
         array = self.array(method, dt_ms, target, n_neurons)
         coded = self.coded
         if warm_up:
-            coded = coded.with_samples(coded.samples[: int(0.05 * coded.rate_hz)])
+            return _warm_up_array(array, coded)
         if target == "cpp_standalone":
             return _run_standalone(array, coded)
         with Timer() as timer:
@@ -317,12 +317,11 @@ class TuningScene:
     def run(self, method, dt_ms, target, n_neurons=None, warm_up=False) -> Run:
         check(target in ("numpy", "cython"), "target", target,
               "a runtime target for the tuning scene")
-        current = self.current[: 50] if warm_up else self.current
         with Timer() as timer:
-            res = neurons.simulate("resonator", current, dt_ms, self.k_of, method,
+            res = neurons.simulate("resonator", self.current, dt_ms, self.k_of, method,
                                    input_dt_ms=1000.0 / self.tun.rate_hz,
                                    input_index=self.input_of, target=target, force=True,
-                                   b=self.net.get("b", 0.26))
+                                   b=self.net.get("b", 0.26), run_ms=5.0 if warm_up else None)
         return Run(res.spike_i, res.spike_t_ms, timer.wall_s, timer.cpu_s)
 
     def reference(self, rtol, atol) -> Run:
@@ -351,6 +350,26 @@ class TuningScene:
             "readout_matches": bool(np.array_equal(out["preferred"],
                                                    ref_readout["preferred"])),
         }
+
+
+def _warm_up_array(array: ResonatorArray, coded: Recording) -> Run:
+    """Compile what ``array.run(coded)`` will run, on a few steps of the same input.
+
+    Brian2 compiles the TimedArray's length and step ratio into the code, so the warm-up
+    builds the very objects ``ResonatorArray.run`` builds (same input, same names).
+    """
+    import brian2 as b2
+
+    with Timer() as timer:
+        b2.start_scope()
+        drive = b2.TimedArray(np.asarray(coded.samples, float), dt=b2.second / coded.rate_hz,
+                              name="drive")
+        group = array._build("drive(t)", "", {"drive": drive})
+        spikes = b2.SpikeMonitor(group, name="spikes")
+        guard = neurons.instability_guard(group, "resonator", array.dt_ms, array.method)
+        b2.Network(group, spikes, guard).run(5 * b2.ms, namespace={})
+    return Run(np.asarray(spikes.i[:], int), np.asarray(spikes.t_[:]) * 1000.0, timer.wall_s,
+               timer.cpu_s)
 
 
 def _run_standalone(array: ResonatorArray, coded: Recording) -> Run:
