@@ -2,11 +2,14 @@
 import json
 from pathlib import Path
 
+import pytest
+
 from snn_antenna.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
+@pytest.mark.slow   # ~30 s of CPU: the study's parts are covered by tests/test_gate.py
 def test_gating_study_writes_report_summary_and_store(tmp_path):
     out = tmp_path / "gating"
     status = main(["run", str(ROOT / "studies" / "gating_threshold.toml"), "--out", str(out),
