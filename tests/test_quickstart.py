@@ -55,22 +55,30 @@ def test_quickstart_meets_the_papers_fig10_in_kind(tmp_path, seed):
     assert abs(s["distance_cm"] - 19.0) <= 1.5
 
 
-def test_spec_errors_name_the_field_and_exit_cleanly(tmp_path):
-    cases = [
-        (["--set", "network.n_neurons=0"], "network.n_neurons"),
-        (["--set", "network.colour=3"], "network.colour"),
-        (["--set", "stimulus.contacts.0.distance_cm=-2"], "distance_cm"),
-        (["--set", "stimulus.contacts.0.distance_cm=55"], "distance_cm"),
-        (["--set", "stimulus.rate_hz=100"], "rate_hz"),
-        (["--set", "stimulus.contacts.0.material='granite'"], "material"),
-        (["--set", "readout.windows=3"], "readout.windows"),
-        (["--set", "banana=1"], "banana"),
-    ]
-    for extra, field in cases:
-        proc = cli("run", str(QUICKSTART), "--out", str(tmp_path / "x"), *extra)
-        assert proc.returncode == 2, (extra, proc.stderr)
-        assert field in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
-        assert not (tmp_path / "x" / "summary.json").exists()
+@pytest.mark.parametrize("extra,field", [
+    (["--set", "network.n_neurons=0"], "network.n_neurons"),
+    (["--set", "network.colour=3"], "network.colour"),
+    (["--set", "stimulus.contacts.0.distance_cm=-2"], "distance_cm"),
+    (["--set", "stimulus.contacts.0.distance_cm=55"], "distance_cm"),
+    (["--set", "stimulus.rate_hz=100"], "rate_hz"),
+    (["--set", "stimulus.contacts.0.material='granite'"], "material"),
+    (["--set", "readout.windows=3"], "readout.windows"),
+    (["--set", "banana=1"], "banana"),
+])
+def test_spec_errors_name_the_field_before_any_work(tmp_path, capsys, extra, field):
+    from snn_antenna.cli import main
+
+    assert main(["run", str(QUICKSTART), "--out", str(tmp_path / "x"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert field in err and "Traceback" not in err, err
+    assert not (tmp_path / "x").exists()  # refused before anything was written
+
+
+def test_spec_error_from_the_command_line_is_one_line_without_traceback(tmp_path):
+    proc = cli("run", str(QUICKSTART), "--out", str(tmp_path / "x"),
+               "--set", "stimulus.contacts.0.distance_cm=-2")
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr
+    assert proc.stderr.strip().count("\n") == 0 and "distance_cm" in proc.stderr
 
 
 def test_missing_spec_file_is_a_clear_error(tmp_path):
