@@ -73,7 +73,7 @@ class Cost:
     include_recommended: bool = True
     targets: list = dataclasses.field(default_factory=lambda: list(TARGETS))
     dtypes: list = dataclasses.field(default_factory=lambda: list(DTYPES))
-    n_neurons: list = dataclasses.field(default_factory=lambda: [24, 240, 2400])
+    n_neurons: list = dataclasses.field(default_factory=lambda: [24, 2400])
 
 
 @dataclasses.dataclass
