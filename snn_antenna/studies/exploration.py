@@ -96,7 +96,8 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     t_start = time.perf_counter()
     speed_cmd = float(loop["speed_cm_s"])
 
-    log(f"[1/4] training the speed gate on Th*({list(parts['gate_training'][0])} cm/s)")
+    log("[1/4] training the speed gate on Th* at "
+        + ", ".join(f"{v:g}" for v in parts["gate_training"][0]) + " cm/s")
     gate = cfg["gate"].fit(*parts["gate_training"])
     log(f"[2/4] calibrating the chain on {loop['calibration_s']:g} s of driving "
         f"at {speed_cmd:g} cm/s")
