@@ -42,7 +42,7 @@ def main() -> None:
     def naive(n):
         out = []
         for e in range(n):
-            res = array.run(Recording(coded[:, e], rate, units="coded"))
+            res = array.run(Recording(np.ascontiguousarray(coded[:, e]), rate, units="coded"))
             out.append(np.bincount(res.spike_i, minlength=array.n_neurons))
         return np.array(out)
 

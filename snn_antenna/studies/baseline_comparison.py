@@ -645,9 +645,11 @@ def _fig_pareto(summary):
                 best = a
         ax.plot(*zip(*front), color="k", lw=0.8, drawstyle="steps-post")
         ax.set_xscale("log")
+        ax.xaxis.set_minor_formatter(plt.NullFormatter())
         ax.set_xlabel("cost per event (µs: features + decoder)")
         ax.set_ylabel(label)
     axes[0].set_title("blue: FFT pipelines, red: spiking", fontsize=8)
+    fig.tight_layout()
     return fig
 
 
