@@ -446,8 +446,8 @@ def run_designs(data, feats, bank, plan, evaluation, log=print) -> list[dict]:
                     float(data.attrs["full_scale_g"]), progress=False)
         wall = time.perf_counter() - t0
         X = f.matrix().astype(np.float32)
-        row = {"design": name, "band": band, **{k: (list(v) if isinstance(v, tuple) else v)
-                                               for k, v in design.items()},
+        row = {"design": name, "band": band,
+               "change": ", ".join(f"{k} = {v}" for k, v in design.items()),
                "n_neurons": variant.n_neurons,
                "wall_us_per_event": 1e6 * wall / len(ids),
                "neuron_steps_per_event": f.neuron_steps / len(ids)}
