@@ -65,7 +65,9 @@ def test_pareto_front_and_recommendation_pick_the_cheapest_sufficient_runs():
                                 (0.5, 0.5, 0.2, False), (1.0, 0.6, 0.3, True))]
     front = study.pareto_front(rows, "rate_map_error")
     assert [r["dt_ms"] for r in front] == [0.5, 0.1, 0.01]
-    recs = {r["criterion"]: r["dt_ms"] for r in study.recommend(rows, study.Match())}
+    forced = dict(rows[2], dt_ms=0.7, cpu_s=0.1, readout_matches=True, rate_map_error=0.0,
+                  beyond_stable_limit=True)
+    recs = {r["criterion"]: r["dt_ms"] for r in study.recommend(rows + [forced], study.Match())}
     assert recs["read-out matches the reference"] == 1.0        # cheapest that matches
     assert recs["rate map within 5%"] == 0.1
     assert recs["read-out matches at this dt and every finer one"] == 0.1   # 0.5 breaks it

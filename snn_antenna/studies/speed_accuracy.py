@@ -484,8 +484,12 @@ def pareto_front(rows: list[dict], error: str) -> list[dict]:
 def recommend(rows: list[dict], match: Match) -> list[dict]:
     """Per scene: the fastest run whose read-out matches the reference; the fastest whose
     rate map is within ``match.rate_map_error``; and the fastest setting at and below whose
-    dt (same method) every run matches (robust to lucky coarse steps)."""
+    dt (same method) every run matches (robust to lucky coarse steps). Runs beyond their
+    method's stability limit (forced in the sweep to show what happens) are never
+    recommended."""
     out = []
+    # Only settings a user gets without force=True: within the measured stability limit.
+    rows = [r for r in rows if not r.get("beyond_stable_limit")]
     for scene in dict.fromkeys(r["scene"] for r in rows):
         mine = [r for r in rows if r["scene"] == scene and r["status"] == "ok"]
         criteria = {
