@@ -11,8 +11,8 @@ held contact is part of it). Posts met beyond the rod's tip are not touched.
 
 What shakes the probe is modelled in one place each: the self-oscillation near 7.8 Hz grows
 with the square of speed (``antenna.self_motion_rms_g``), the terrain's broadband jolts grow
-linearly with speed, four times more on ``rough`` ground than on ``flat``
-(``stimuli.TERRAIN_NOISE_G_PER_CM_S``). The pan-tilt sweep itself is assumed smooth: it adds no
+with the square of speed too, five times more on ``rough`` ground than on ``flat``
+(``antenna.terrain_noise_rms_g``). The pan-tilt sweep itself is assumed smooth: it adds no
 vibration, so a robot standing still produces no self-motion at all. When the robot stops
 after a contact (``stop_after_contact_s``) the antenna stops sweeping too.
 
@@ -343,9 +343,8 @@ class OnlineAntenna:
         b, a = self._filter()
         drive = self.rng.standard_normal(n) * float(antenna.self_motion_rms_g(speed_cm_s))
         main, self._zi = lfilter(b, a, drive, zi=self._zi)
-        from .stimuli import TERRAIN_NOISE_G_PER_CM_S
-        main = main + self.rng.standard_normal(n) * TERRAIN_NOISE_G_PER_CM_S[sc.terrain] \
-            * speed_cm_s
+        main = main + self.rng.standard_normal(n) * float(
+            antenna.terrain_noise_rms_g(speed_cm_s, sc.terrain))
         ring, self._ringing = self._ringing[:n], self._ringing[n:]
         main[:len(ring)] += ring
         xy = antenna.project(main, sc.orientation_deg)

@@ -87,22 +87,17 @@ def self_motion(speed_cm_s: float, duration_s: float, rate_hz: float = 1000.0,
                              rate_hz, rng), rate_hz)
 
 
-TERRAIN_NOISE_G_PER_CM_S = {"flat": 0.002, "rough": 0.01}  # broadband jolts, ∝ speed (assumed)
-
-
 def _motion(rms_g, freq_hz, tau_s, speed_cm_s, terrain, rate_hz, rng) -> np.ndarray:
     """Driven ringing in segments of constant mode, plus broadband terrain noise."""
-    check(terrain in TERRAIN_NOISE_G_PER_CM_S, "terrain", terrain,
-          f"one of {sorted(TERRAIN_NOISE_G_PER_CM_S)}")
     n = len(rms_g)
+    jolts = antenna.terrain_noise_rms_g(np.broadcast_to(speed_cm_s, (n,)), terrain)
     out = np.zeros(n)
     # Segment boundaries where the ringing mode changes (contact begins or ends).
     change = np.flatnonzero(np.diff(freq_hz) != 0) + 1
     for lo, hi in zip(np.r_[0, change], np.r_[change, n]):
         out[lo:hi] = antenna.resonant_noise(freq_hz[lo], tau_s[lo], rms_g[lo:hi], rate_hz, rng,
                                             hi - lo)
-    speed = np.broadcast_to(speed_cm_s, (n,))
-    return out + rng.standard_normal(n) * TERRAIN_NOISE_G_PER_CM_S[terrain] * speed
+    return out + rng.standard_normal(n) * jolts
 
 
 @dataclass
