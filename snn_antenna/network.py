@@ -104,7 +104,9 @@ class ResonatorArray:
         """Drive the array with a coded recording (one channel); spikes and a rate map."""
         import brian2 as b2
 
-        samples = np.asarray(validate_samples(coded.samples, "coded.samples"), dtype=float)
+        # Contiguous: Brian2's cython TimedArray refuses a strided view (e.g. a column slice).
+        samples = np.ascontiguousarray(validate_samples(coded.samples, "coded.samples"),
+                                       dtype=float)
         if samples.ndim != 1:
             raise SpecError("coded.samples", f"array of shape {samples.shape}",
                             "one channel (run the preprocessing chain first)")

@@ -222,7 +222,7 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
     check(np.isfinite(dt_ms) and 0 < dt_ms <= 10, "dt_ms", dt_ms, "a step in (0, 10] ms")
     if current is None:
         raise SpecError("current", None, "an array of input samples")
-    current = validate_samples(current, "current").astype(float)
+    current = np.ascontiguousarray(validate_samples(current, "current"), dtype=float)
     input_dt_ms = dt_ms if input_dt_ms is None else input_dt_ms
     check(np.isfinite(input_dt_ms) and input_dt_ms >= dt_ms * (1 - 1e-9), "input_dt_ms",
           input_dt_ms, f"a sample interval >= dt_ms ({dt_ms} ms)")

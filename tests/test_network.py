@@ -71,3 +71,12 @@ def test_bad_arrays_are_refused(kwargs, field):
 def test_input_sampled_too_slowly_for_the_band_is_refused():
     with pytest.raises(SpecError, match="rate_hz.*at least 120"):
         ResonatorArray(target="numpy").run(Recording(np.zeros(100), 100.0))
+
+
+def test_a_column_of_a_larger_array_runs_on_the_compiled_target():
+    """A strided view (a column slice) used to make Brian2's cython TimedArray refuse it."""
+    columns = np.stack([coded_test_input().samples] * 2, axis=1)
+    view = Recording(columns[:, 1], 1000.0, units="coded")
+    assert not view.samples.flags.c_contiguous
+    result = ResonatorArray(target="cython", n_neurons=4).run(view)
+    assert result.spike_i.size > 0
