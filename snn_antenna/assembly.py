@@ -5,6 +5,8 @@
 - ``bench.toml``: ``parts = ["resonators"]`` (a bench contact: no robot, no motion),
 - ``robot.toml``: ``+ "gate"`` (a driving robot: the speed command sets Th),
 - ``exploration.toml``: ``+ "cpg", "control"`` (the antenna sweeps; contacts stop the robot).
+- ``bench_material.toml``: a high-band array ``+ "material"`` (class-I neurons naming the
+  material; fitted offline, passed as ``fitted={"material": MaterialUnit().fit(...)}``).
 
 Each part declares what it needs; a spec asking for a part whose inputs are missing is refused
 before anything is built. ``build`` returns an ``Assembly`` whose Brian2 ``Network`` holds the
@@ -20,7 +22,7 @@ import numpy as np
 
 from . import spec as specs
 from .cpg import CPG
-from .control import ControlLayer
+from .control import ControlLayer, MaterialUnit
 from .errors import SpecError, check
 from .gate import SpeedGate
 from .network import ResonatorArray
@@ -32,9 +34,10 @@ NEEDS = {
     "gate": ("speed_command",),
     "cpg": ("speed_command",),
     "control": ("resonators",),
+    "material": ("resonators",),
 }
 SETTINGS = {"resonators": ResonatorArray, "gate": SpeedGate, "cpg": CPG,
-            "control": ControlLayer}
+            "control": ControlLayer, "material": MaterialUnit}
 
 
 def check_parts(parts, inputs) -> None:
@@ -112,4 +115,6 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
     if "control" in configured:
         objects.update(configured["control"].objects(objects["resonators"],
                                                      configured["resonators"].neuron_hz))
+    if "material" in configured:
+        objects.update(configured["material"].objects(objects["resonators"]))
     return Assembly(b2.Network(*objects.values()), objects, configured)

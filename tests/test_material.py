@@ -1,0 +1,82 @@
+"""The control layer's material unit: class-I neurons whose rates name the contact's material."""
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna import assembly, bench
+from snn_antenna.control import window_features
+from snn_antenna.errors import SpecError
+from snn_antenna.spiking import HIGH_BAND, SpikingBank
+
+ROOT = Path(__file__).resolve().parents[1]
+WINDOW_S = 0.15          # one bench contact per read-out window
+RATE_HZ = 2000.0
+MATERIAL_OBJECTS = {"material", "material_listen", "material_read"}
+
+
+def network_spec(name):
+    with open(ROOT / "networks" / f"{name}.toml", "rb") as f:
+        table = tomllib.load(f)
+    for part in ("resonators", "gate", "cpg"):
+        if part in table:
+            table[part]["target"] = "numpy"
+    if "material" in table:
+        table["material"]["window_s"] = WINDOW_S
+    return table
+
+
+def coded_contacts(seed, repetitions, positions_cm):
+    """Bench contacts of all eight materials, coded as the high band's chain codes them."""
+    spec = bench.BenchSpec(positions_cm=positions_cm, repetitions=repetitions,
+                           duration_s=WINDOW_S, rate_hz=RATE_HZ, seed=seed)
+    counts = np.concatenate([bench._generate_block(spec, mi, pi)
+                             for mi in range(len(spec.materials))
+                             for pi in range(len(spec.positions_cm))])
+    materials = np.repeat(spec.materials, len(spec.positions_cm) * repetitions)
+    bank = SpikingBank(bands={"high": HIGH_BAND}, duration_s=WINDOW_S)
+    return bank.code(counts, RATE_HZ, spec.adc_bits, spec.full_scale_g), materials
+
+
+def test_the_most_active_material_neuron_names_the_material_more_often_than_chance():
+    import brian2 as b2
+
+    table = network_spec("bench_material")
+    coded, materials = coded_contacts(0, 6, (12.0, 20.0, 28.0))
+    unit = assembly.configure(table)["material"].fit(
+        window_features(table, coded, RATE_HZ), materials)
+    # Unseen contacts at unseen positions, back to back, then one silent window.
+    coded, materials = coded_contacts(1, 2, (16.0, 24.0))
+    n_samples, n_events = coded.shape
+    asm = assembly.build(table, fitted={"material": unit})
+    feed = b2.TimedArray(np.r_[coded.T.ravel(), np.zeros(n_samples)], dt=b2.second / RATE_HZ)
+    asm.objects["resonators"].run_regularly("I_ext = coded_input(t)", dt=b2.second / RATE_HZ)
+    spikes = b2.SpikeMonitor(asm.objects["material"])
+    asm.network.add(spikes)
+    asm.network.run((n_events + 1) * WINDOW_S * b2.second, namespace={"coded_input": feed})
+    # The read-out of contact e drives the unit during window e + 1.
+    event = (np.asarray(spikes.t_[:]) // WINDOW_S).astype(int) - 1
+    rates = np.zeros((n_events + 1, len(unit.classes)))
+    np.add.at(rates, (event, np.asarray(spikes.i[:])), 1)
+    rates = rates[:n_events]
+    decoded = np.array(unit.class_names)[np.argmax(rates, axis=1)]
+    correct = (decoded == unit.class_of(materials)) & (rates.max(axis=1) > 0)
+    # 32 contacts, two classes: chance gives >= 21 correct with p < 0.03; measured 23 (72 %).
+    assert correct.sum() >= 21, f"{correct.sum()} of {n_events} correct"
+    assert rates.sum() > 0
+
+
+def test_networks_without_the_part_build_no_material_objects():
+    for name in ("bench", "exploration"):
+        assert not assembly.build(network_spec(name)).names() & MATERIAL_OBJECTS
+
+
+def test_the_material_unit_needs_resonators_and_a_fit():
+    with pytest.raises(SpecError, match="needs resonators"):
+        assembly.build({"parts": ["material"], "inputs": ["antenna"]})
+    with pytest.raises(SpecError, match="fitted MaterialUnit"):
+        assembly.build(network_spec("bench_material"))
+    with pytest.raises(SpecError, match="unobtainium"):
+        assembly.configure({**network_spec("bench_material"),
+                            "material": {"classes": {"metal": ["unobtainium"], "b": ["wood"]}}})
