@@ -150,6 +150,30 @@ seed {prov['seed']}, Python {html.escape(prov['python'])}, created {prov['create
         return summary
 
 
+def draw_rate_map(ax, rates):
+    """Draw a rate map (the paper's frequency map, Fig. 10H) on ``ax``; returns the mesh.
+
+    Neurons sit on a log-frequency axis, each cell spanning halfway to its neighbours, so a
+    log-spaced array draws as equal rows labelled by frequency.
+    """
+    w = float(rates.attrs["window_s"])
+    hz = rates.neuron_hz.values
+    if len(hz) > 1:
+        edges_hz = np.r_[hz[0] / np.sqrt(hz[1] / hz[0]), np.sqrt(hz[:-1] * hz[1:]),
+                         hz[-1] * np.sqrt(hz[-1] / hz[-2])]
+    else:
+        edges_hz = np.array([hz[0] * 0.9, hz[0] * 1.1])
+    edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
+    mesh = ax.pcolormesh(edges_t, edges_hz, rates.values, cmap="magma", shading="flat")
+    ax.set_yscale("log")
+    ticks = [f for f in (5, 7, 10, 15, 20, 30, 50, 100, 200, 500) if edges_hz[0] <= f <= edges_hz[-1]]
+    ax.set_yticks(ticks)
+    ax.set_yticklabels([str(f) for f in ticks])
+    ax.minorticks_off()
+    ax.set_ylabel("neuron (Hz)")
+    return mesh
+
+
 def _fmt(value) -> str:
     if isinstance(value, (float, np.floating)):
         return f"{value:.4g}"

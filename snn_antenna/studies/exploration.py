@@ -30,7 +30,7 @@ from ..errors import SpecError, check
 from ..network import rate_map
 from ..preprocess import make_chain
 from ..readout import ContactDetector
-from ..report import Report
+from ..report import Report, draw_rate_map
 from ..scenes import CourseScene, OnlineAntenna, scene_from_spec
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
@@ -221,14 +221,7 @@ def _figure(t, speed, pan, tilt, th, x_cm, rates, scene, world, detections, stop
     a1b.plot(t, th, color="tab:red", lw=0.8)
     a1b.set_ylabel("gate Th (g)", color="tab:red")
     a2 = fig.add_subplot(gs[2, 0], sharex=a0)
-    w = float(rates.attrs["window_s"])
-    hz = rates.neuron_hz.values
-    edges_hz = np.r_[hz[0] / np.sqrt(hz[1] / hz[0]), np.sqrt(hz[:-1] * hz[1:]),
-                     hz[-1] * np.sqrt(hz[-1] / hz[-2])]
-    edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
-    a2.pcolormesh(edges_t, edges_hz, rates.values, cmap="magma", shading="flat")
-    a2.set_yscale("log")
-    a2.set_ylabel("neuron (Hz)")
+    draw_rate_map(a2, rates)
     a2.set_xlabel("time (s)")
     for c in world.contacts:
         a2.axvline(c.t_s, color="tab:cyan", ls="--")

@@ -33,7 +33,7 @@ from ..gating import Score, run_codings, score
 from ..network import ResonatorArray
 from ..preprocess import make_chain
 from ..readout import ContactDetector
-from ..report import Report
+from ..report import Report, draw_rate_map
 from ..scenes import CourseScene, SpeedProfile, random_course, scene_from_spec
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "course", "sweep", "gate",
@@ -466,15 +466,7 @@ def _fig_f1_curves(ds, th_star):
 
 
 def _draw_map(ax, rates, rec, detections, parts, title):
-    w = float(rates.attrs["window_s"])
-    hz = rates.neuron_hz.values
-    edges_hz = np.r_[hz[0] / np.sqrt(hz[1] / hz[0]), np.sqrt(hz[:-1] * hz[1:]),
-                     hz[-1] * np.sqrt(hz[-1] / hz[-2])]
-    edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
-    ax.pcolormesh(edges_t, edges_hz, rates.values, cmap="magma", shading="flat")
-    ax.set_yscale("log")
-    ax.set_yticks([7, 10, 15, 20, 30])
-    ax.set_yticklabels(["7", "10", "15", "20", "30"])
+    draw_rate_map(ax, rates)
     from ..gating import visible
     for c in rec.contacts:
         ok = visible(c, parts["detector"], parts["array"])

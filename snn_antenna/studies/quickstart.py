@@ -13,7 +13,7 @@ from .. import spec as specs
 from ..network import ResonatorArray
 from ..preprocess import make_chain
 from ..readout import ContactDetector, band_activity_hz, dominant_hz
-from ..report import Report
+from ..report import Report, draw_rate_map
 from ..stimuli import RobotScene, scene_from_spec
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout")
@@ -128,16 +128,7 @@ def _figure(rec, coded, rates, detections):
     ax0.legend(loc="upper left", fontsize=8)
     ax1.plot(t, coded.samples, lw=0.5, color="k")
     ax1.set_ylabel("coded I")
-    w = float(rates.attrs["window_s"])
-    hz = rates.neuron_hz.values
-    edges_hz = np.r_[hz[0] / np.sqrt(hz[1] / hz[0]), np.sqrt(hz[:-1] * hz[1:]),
-                     hz[-1] * np.sqrt(hz[-1] / hz[-2])] if len(hz) > 1 else [hz[0] * .9, hz[0] * 1.1]
-    edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
-    mesh = ax2.pcolormesh(edges_t, edges_hz, rates.values, cmap="magma", shading="flat")
-    ax2.set_yscale("log")
-    ax2.set_yticks([7, 10, 15, 20, 30])
-    ax2.set_yticklabels(["7", "10", "15", "20", "30"])
-    ax2.set_ylabel("neuron (Hz)")
+    mesh = draw_rate_map(ax2, rates)
     ax2.set_xlabel("time (s)")
     fig.colorbar(mesh, ax=[ax0, ax1, ax2], label="spike rate (Hz)", shrink=0.5)
     for c in rec.contacts:
@@ -145,6 +136,6 @@ def _figure(rec, coded, rates, detections):
             ax.axvline(c.t_s, color="tab:cyan", ls="--", lw=1)
     for d in detections:
         ax2.axvline(d.onset_s, color="tab:green", lw=1.5)
-        ax2.text(d.onset_s, edges_hz[-1], f" {d.distance_cm:.1f} cm", color="tab:green",
+        ax2.text(d.onset_s, ax2.get_ylim()[1], f" {d.distance_cm:.1f} cm", color="tab:green",
                  va="bottom", fontsize=8)
     return fig
