@@ -201,14 +201,21 @@ def resonant_noise(freq_hz: float, tau_s: float, rms_g, rate_hz: float,
     """
     from scipy.signal import lfilter
 
-    r = np.exp(-1.0 / (tau_s * rate_hz))
-    w = 2 * np.pi * freq_hz / rate_hz
-    a = [1.0, -2 * r * np.cos(w), r * r]
-    # Unit-variance white noise through the two-pole filter: variance of the output.
-    impulse = lfilter([1.0], a, np.r_[1.0, np.zeros(int(20 * tau_s * rate_hz) + 10)])
-    gain = 1.0 / np.sqrt(np.sum(impulse ** 2))
+    b, a = mode_filter(freq_hz, tau_s, rate_hz)
     drive = rng.standard_normal(n_samples) * np.broadcast_to(rms_g, (n_samples,))
-    return lfilter([gain], a, drive)
+    return lfilter(b, a, drive)
+
+
+def mode_filter(freq_hz: float, tau_s: float, rate_hz: float) -> tuple[list, list]:
+    """(b, a) of a two-pole resonator at ``freq_hz`` decaying with ``tau_s``, gain normalised
+    so unit-variance white noise comes out with unit rms (for ``scipy.signal.lfilter``)."""
+    from scipy.signal import lfilter
+
+    r = np.exp(-1.0 / (tau_s * rate_hz))
+    a = [1.0, -2 * r * np.cos(2 * np.pi * freq_hz / rate_hz), r * r]
+    # The output variance for unit-variance input is the impulse response's energy.
+    impulse = lfilter([1.0], a, np.r_[1.0, np.zeros(int(20 * tau_s * rate_hz) + 10)])
+    return [1.0 / np.sqrt(np.sum(impulse ** 2))], a
 
 
 # Broadband jolts from the ground at 12 cm/s (rms g, assumed). Like the self-oscillation they

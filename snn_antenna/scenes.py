@@ -297,15 +297,9 @@ class OnlineAntenna:
         self._pose = None
 
     def _filter(self):
-        """Two-pole resonator at the current mode, gain normalised to unit output rms."""
-        from scipy.signal import lfilter
-
+        """The ringing mode's filter (the same one the offline scenes use)."""
         f, tau = self._mode
-        rate = self.scene.rate_hz
-        r = np.exp(-1.0 / (tau * rate))
-        a = [1.0, -2 * r * np.cos(2 * np.pi * f / rate), r * r]
-        impulse = lfilter([1.0], a, np.r_[1.0, np.zeros(int(20 * tau * rate) + 10)])
-        return [1.0 / np.sqrt(np.sum(impulse ** 2))], a
+        return antenna.mode_filter(f, tau, self.scene.rate_hz)
 
     def step(self, n: int, speed_cm_s: float, pan_deg: float, tilt_deg: float) -> np.ndarray:
         from scipy.signal import lfilter
