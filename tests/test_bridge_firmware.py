@@ -31,10 +31,13 @@ def test_vectors_file_matches_the_python_encoder():
         "regenerate with: python firmware/antenna_stream/make_vectors.py"
 
 
+needs_host_toolchain = pytest.mark.skipif(
+    HOST_CC is None or shutil.which("make") is None,
+    reason="no host C compiler or make on PATH (Debian: build-essential)")
+
+
 @pytest.fixture(scope="module")
 def frame_test(tmp_path_factory):
-    if HOST_CC is None or shutil.which("make") is None:
-        pytest.skip("no host C compiler or make on PATH (Debian: build-essential)")
     build = tmp_path_factory.mktemp("fw-host")
     result = make(build, "host-test", HOSTCC=HOST_CC)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -42,12 +45,14 @@ def frame_test(tmp_path_factory):
     return build / "frame_test"
 
 
+@needs_host_toolchain
 def test_c_encoder_passes_the_shared_vectors(frame_test):
     result = subprocess.run([frame_test, FIRMWARE / "test_vectors.json"], capture_output=True,
                             text=True, timeout=10)
     assert result.returncode == 0 and "64 vectors checked, 0 failed" in result.stdout
 
 
+@needs_host_toolchain
 def test_c_frames_decode_in_python(frame_test):
     rng = random.Random(3)
     samples = [Sample(rng.randrange(65536), rng.randrange(1024), rng.randrange(1024))
