@@ -1,4 +1,7 @@
 """The bridge over real links: pseudo-terminals, socat and loop://, with injected faults."""
+import fcntl
+import os
+import select
 import shutil
 import socket
 import subprocess
@@ -62,6 +65,44 @@ def assert_recording_matches(rec, log):
     assert counts == log.expected_counts()
     assert rec.complete and rec.torn_bytes == 0
     assert len(rec.gaps) == rec.counts["gaps"]
+
+
+def test_the_links_own_queue_probe_is_not_taken_for_a_reader(monkeypatch):
+    """unread_bytes() opens the slave for a moment. A peer check from the streaming thread in
+    that moment must still see no reader; it used to see one, so the emulator started, met
+    POLLHUP when the probe closed and gave up before the real reader had opened the port."""
+    link = PtyLink()
+    real_ioctl = fcntl.ioctl
+    hup_during_probe, seen, checkers = [], [], []
+
+    def ioctl_with_a_peer_check(fd, *args):
+        # Called while the probe holds the slave open, which clears POLLHUP on the master...
+        poller = select.poll()
+        poller.register(link.master, select.POLLOUT)
+        hup_during_probe.append(any(ev & select.POLLHUP for _, ev in poller.poll(0)))
+        # ...and the emulator's thread asks whether a reader is there.
+        checker = threading.Thread(target=lambda: seen.append(link.peer_open()))
+        checker.start()
+        checkers.append(checker)
+        checker.join(0.2)
+        return real_ioctl(fd, *args)
+
+    try:
+        assert not link.peer_open()
+        monkeypatch.setattr(fcntl, "ioctl", ioctl_with_a_peer_check)
+        assert link.unread_bytes() == 0
+        monkeypatch.undo()
+        checkers[0].join(5)
+        assert hup_during_probe == [False], "the probe did not open the slave: nothing tested"
+        assert seen == [False], "the link took its own probe for a reader"
+        reader = os.open(link.slave_name, os.O_RDWR | os.O_NOCTTY)
+        try:
+            assert link.peer_open()             # a real reader is still seen...
+        finally:
+            os.close(reader)
+        assert not link.peer_open()             # ...and so is its leaving
+    finally:
+        link.close()
 
 
 def test_pty_stream_with_every_fault_is_recorded_exactly(tmp_path):

@@ -60,6 +60,12 @@ class PtyLink:
         self.link = Path(link) if link is not None else None
         self.master: int | None = None
         self.slave_name = ""
+        # Held while unread_bytes() has the slave open itself: that fd clears POLLHUP on the
+        # master exactly as a reader's would, so peer_open() must not look meanwhile. Without
+        # this, a probe from another thread (a test watching the queue) passed for the reader:
+        # the emulator started, the probe closed, the first write saw POLLHUP and gave up
+        # before the real reader had opened the port, which then received nothing at all.
+        self._probing = threading.Lock()
         self._open()
 
     @property
@@ -81,9 +87,11 @@ class PtyLink:
             os.replace(tmp, self.link)
 
     def peer_open(self) -> bool:
-        poller = select.poll()
-        poller.register(self.master, select.POLLOUT)
-        return not any(ev & select.POLLHUP for _, ev in poller.poll(0))
+        """Whether a reader holds the slave open (the link's own probe does not count)."""
+        with self._probing:
+            poller = select.poll()
+            poller.register(self.master, select.POLLOUT)
+            return not any(ev & select.POLLHUP for _, ev in poller.poll(0))
 
     def wait_for_peer(self, timeout_s: float | None, stop: threading.Event) -> None:
         deadline = None if timeout_s is None else time.monotonic() + timeout_s
@@ -119,17 +127,22 @@ class PtyLink:
                 raise
 
     def unread_bytes(self) -> int:
-        """Bytes written but not yet read by the peer (the slave's input queue)."""
-        try:
-            fd = os.open(self.slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
-        except OSError:
-            return 0
-        try:
-            count = array.array("i", [0])
-            fcntl.ioctl(fd, termios.FIONREAD, count, True)
-            return count[0]
-        finally:
-            os.close(fd)
+        """Bytes written but not yet read by the peer (the slave's input queue).
+
+        The queue is only visible from the slave side, so this opens the slave for a moment;
+        ``_probing`` keeps that moment from being taken for a reader (see :meth:`peer_open`).
+        """
+        with self._probing:
+            try:
+                fd = os.open(self.slave_name, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+            except OSError:
+                return 0
+            try:
+                count = array.array("i", [0])
+                fcntl.ioctl(fd, termios.FIONREAD, count, True)
+                return count[0]
+            finally:
+                os.close(fd)
 
     def drain(self, timeout_s: float = 2.0) -> None:
         time.sleep(0.02)                # the pty moves written bytes to the reader asynchronously
