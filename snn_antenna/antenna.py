@@ -34,6 +34,16 @@ as a damped oscillation with a low and a high mode. What comes from the paper (P
   7.8 Hz and the ground adds broadband jolts. Assumed: both grow with the square of speed
   (0.25 g and 0.024 g rms at 12 cm/s on flat ground), which makes the threshold that hides them
   at 27 cm/s about five times that at 12 cm/s, as the paper measured (Fig. 9).
+- Impact (physics, one assumed constant): when a moving rod meets a post the contact point
+  stops and the free end beyond it keeps the speed it had, so the low mode starts with a tip
+  velocity amplitude equal to the tip's speed normal to the rod, and its acceleration amplitude
+  is 2π·F_low·v_tip (``impact_amplitude_g``). ``IMPACT_TRANSFER`` is the share of that speed
+  which survives the soft contact of a compliant tube on a post (the rest goes into sliding,
+  bending around the post and higher modes); it is assumed, 0.1, chosen so that impacts in the
+  course scenes fall in the range of the self-motion they compete with, which is what the
+  paper's Fig. 9 reports of its signals (doubling Th* lost true positives at 12 and at 27 cm/s,
+  so contact signals sat within a factor two of a threshold that rose more than five-fold).
+  Scripted contacts (``stimuli.RobotScene``, the bench) keep an explicit ``impact_g``.
 - Sensor: ADXL321-like, ±18 g into a 10-bit ADC (35 mg per count), white noise 10 mg; modes
   above 0.45 × the sample rate are removed, as the sensor's anti-aliasing bandwidth would.
 """
@@ -55,6 +65,8 @@ NATURAL_HZ = 7.8              # free probe's self-oscillation while driving (pap
 NATURAL_TAU_S = 1.0
 SELF_MOTION_G_AT_12 = 0.25    # self-oscillation amplitude at 12 cm/s (assumed)
 SPEED_LIMIT_CM_S = 60.0
+IMPACT_TRANSFER = 0.1         # share of the tip's normal speed that rings the low mode (assumed)
+G_CM_S2 = 980.665             # standard gravity, cm/s²
 
 
 # Contact-to-contact scatter (coefficients of variation; assumed, see the module docstring).
@@ -190,6 +202,16 @@ def contact_ringing(distance_cm: float, material: str, rate_hz: float, n_samples
         out += a_low * ratio * np.exp(-t / tau_high) * np.cos(
             2 * np.pi * f_high * t + rng.uniform(0, 2 * np.pi))
     return out
+
+
+def impact_amplitude_g(distance_cm, tip_speed_cm_s, transfer: float = IMPACT_TRANSFER):
+    """Low-mode amplitude (g) of a contact at ``distance_cm`` met with the rod's tip moving at
+    ``tip_speed_cm_s`` normal to the rod: 2π·F_low·v·transfer / g (see the module docstring)."""
+    v = np.abs(np.asarray(tip_speed_cm_s, dtype=float))
+    check(bool(np.all(np.isfinite(v))), "tip_speed_cm_s", tip_speed_cm_s, "finite speeds in cm/s")
+    check(np.isfinite(transfer) and 0 < transfer <= 1, "impact_transfer", transfer,
+          "a share in (0, 1]")
+    return 2 * np.pi * low_mode_hz(distance_cm) * v * transfer / G_CM_S2
 
 
 def resonant_noise(freq_hz: float, tau_s: float, rms_g, rate_hz: float,

@@ -7,7 +7,11 @@ pan-tilt unit did (a limit cycle, 2 s by default; amplitude 0 holds it still). O
 vertical posts (the paper's 12 mm test rods). A contact arises when the rod enters a post:
 its distance along the rod is where it touches (the post's centre projected on the rod), the
 rod stays clamped there for ``hold_s`` (1 s), and contacts do not overlap (a touch during a
-held contact is part of it). Posts met beyond the rod's tip are not touched.
+held contact is part of it). Posts met beyond the rod's tip are not touched. How hard the rod
+rings depends on how fast it met the post: the tip's speed normal to the rod, from the robot's
+motion and the sweep (``tip_normal_speed_cm_s``), sets the impact (``antenna.impact_amplitude_g``),
+so a post met at a sweep's turning point while standing still barely rings, and one met
+mid-sweep or at speed rings hard.
 
 What shakes the probe is modelled in one place each: the self-oscillation near 7.8 Hz grows
 with the square of speed (``antenna.self_motion_rms_g``), the terrain's broadband jolts grow
@@ -109,20 +113,45 @@ def rod_touch(base_xy: np.ndarray, pan_deg, tilt_deg, obstacle: Obstacle,
     return touching, distance_cm
 
 
+def tip_normal_speed_cm_s(speed_cm_s, pan_deg, tilt_deg, rate_hz: float,
+                          length_cm: float = antenna.ROD_LENGTH_CM) -> np.ndarray:
+    """Speed (cm/s, signed) of the rod's tip across the rod, in the plane, per pose.
+
+    The robot's velocity (speed along +x) seen across a rod at ``pan_deg`` plus the sweep's
+    angular speed times the tip's planar radius; the tilt's own motion slides the rod along a
+    vertical post and does not strike it.
+    """
+    pan = np.deg2rad(np.asarray(pan_deg, dtype=float))
+    pan_rate = np.gradient(pan) * rate_hz if pan.size > 1 else np.zeros_like(pan)
+    radius = length_cm * np.cos(np.deg2rad(np.asarray(tilt_deg, dtype=float)))
+    return -np.asarray(speed_cm_s, dtype=float) * np.sin(pan) + radius * pan_rate
+
+
 def contacts_from_poses(t_s: np.ndarray, base_xy: np.ndarray, pan_deg, tilt_deg,
-                        obstacles: list[Obstacle], hold_s: float = 1.0) -> list[Contact]:
-    """Contacts where the rod enters a post; none begins while another is held."""
+                        obstacles: list[Obstacle], hold_s: float = 1.0,
+                        tip_speed_cm_s=None, transfer: float = antenna.IMPACT_TRANSFER
+                        ) -> list[Contact]:
+    """Contacts where the rod enters a post; none begins while another is held.
+
+    With ``tip_speed_cm_s`` (one per pose) each contact's ringing amplitude follows from the
+    tip's speed at the moment of touch (``antenna.impact_amplitude_g``); without it the scene's
+    ``impact_g`` applies.
+    """
     entries = []
     for ob in obstacles:
         touching, distance = rod_touch(base_xy, pan_deg, tilt_deg, ob)
         touching = np.broadcast_to(touching, t_s.shape)
         distance = np.broadcast_to(distance, t_s.shape)
         starts = np.flatnonzero(touching[1:] & ~touching[:-1]) + 1
-        entries += [(float(t_s[i]), float(distance[i]), ob.material) for i in starts]
+        entries += [(float(t_s[i]), float(distance[i]), ob.material, i) for i in starts]
     contacts, free_from = [], -np.inf
-    for t, d, material in sorted(entries):
+    for t, d, material, i in sorted(entries):
         if t >= free_from:
-            contacts.append(Contact(t_s=t, distance_cm=d, material=material, hold_s=hold_s))
+            amplitude = None if tip_speed_cm_s is None else float(
+                antenna.impact_amplitude_g(d, np.broadcast_to(tip_speed_cm_s, t_s.shape)[i],
+                                           transfer))
+            contacts.append(Contact(t_s=t, distance_cm=d, material=material, hold_s=hold_s,
+                                    amplitude_g=amplitude))
             free_from = t + hold_s
     return contacts
 
@@ -144,6 +173,7 @@ class CourseScene(RobotScene):
     sweep_period_s: float = 2.0              # paper: a limit cycle of 2 s
     tilt_phase_deg: float = 90.0             # tilt leads pan: the tip sweeps an area
     hold_s: float = 1.0                      # how long each contact clamps the rod
+    impact_transfer: float = antenna.IMPACT_TRANSFER  # see antenna.impact_amplitude_g
 
     @property
     def profile(self) -> SpeedProfile:
@@ -163,6 +193,8 @@ class CourseScene(RobotScene):
               self.sweep_period_s, "a period > 0 s")
         check(np.isfinite(self.hold_s) and self.hold_s > 0, "hold_s", self.hold_s,
               "a contact hold time > 0 s")
+        check(np.isfinite(self.impact_transfer) and 0 < self.impact_transfer <= 1,
+              "impact_transfer", self.impact_transfer, "a share in (0, 1]")
 
     def time(self) -> np.ndarray:
         return np.arange(int(round(self.duration_s * self.rate_hz))) / self.rate_hz
@@ -199,7 +231,9 @@ class CourseScene(RobotScene):
         x = self.start_x_cm + np.cumsum(np.r_[0.0, speed[:-1]]) * dt
         pan, tilt = self.angles(t, moving)
         base = np.c_[x, np.zeros_like(x)]
-        found = contacts_from_poses(t, base, pan, tilt, self.obstacles, self.hold_s)
+        tip = tip_normal_speed_cm_s(speed, pan, tilt, self.rate_hz)
+        found = contacts_from_poses(t, base, pan, tilt, self.obstacles, self.hold_s, tip,
+                                    self.impact_transfer)
         scripted = list(self.contacts)
         return sorted(scripted + found, key=lambda c: c.t_s)
 
@@ -308,16 +342,20 @@ class OnlineAntenna:
         antenna.self_motion_rms_g(speed_cm_s)
         # The rod sweeps through the chunk: poses interpolated sample by sample from the last
         # call's, so a post passed between two calls is still met.
-        last = self._pose if self._pose is not None else (pan_deg, tilt_deg)
+        first = self._pose is None
+        last = (pan_deg, tilt_deg) if first else self._pose
         frac = np.arange(1, n + 1) / n
         pan = last[0] + (pan_deg - last[0]) * frac
         tilt = last[1] + (tilt_deg - last[1]) * frac
         base = np.c_[self.x_cm + speed_cm_s * np.arange(n) / sc.rate_hz, np.zeros(n)]
         self._pose = (pan_deg, tilt_deg)
+        tip = tip_normal_speed_cm_s(speed_cm_s, np.r_[last[0], pan], np.r_[last[1], tilt],
+                                    sc.rate_hz)[1:]
         entries = []
         for k, ob in enumerate(sc.obstacles):
             touching, distance = rod_touch(base, pan, tilt, ob)
-            was = np.r_[self._touching[k], touching[:-1]]
+            # A rod that starts inside a post has not entered it (as in ``contacts_from_poses``).
+            was = np.r_[touching[0] if first else self._touching[k], touching[:-1]]
             entries += [(i, float(distance[i]), ob.material)
                         for i in np.flatnonzero(touching & ~was)]
             self._touching[k] = bool(touching[-1])
@@ -325,13 +363,14 @@ class OnlineAntenna:
             t_i = self.t_s + i / sc.rate_hz
             if t_i < self._held_until:
                 continue
-            self.contacts.append(Contact(t_i, d, material, sc.hold_s))
+            amplitude = float(antenna.impact_amplitude_g(d, tip[i], sc.impact_transfer))
+            self.contacts.append(Contact(t_i, d, material, sc.hold_s, amplitude))
             self._held_until = t_i + sc.hold_s
             self._mode = (float(antenna.low_mode_hz(d)),
                           float(antenna.decay_times_s(d, material)[0]))
             self._ringing = np.r_[np.zeros(i), antenna.contact_ringing(
                 d, material, sc.rate_hz, int(round(sc.hold_s * sc.rate_hz)), self.rng,
-                sc.impact_g)]
+                amplitude)]
         if self.t_s >= self._held_until and self._mode[0] != antenna.NATURAL_HZ:
             self._mode = (antenna.NATURAL_HZ, antenna.NATURAL_TAU_S)
         b, a = self._filter()

@@ -106,6 +106,7 @@ class Contact:
     distance_cm: float
     material: str = "wood"
     hold_s: float = 1.0
+    amplitude_g: float | None = None   # the impact's ringing; None: the scene's ``impact_g``
 
 
 @dataclass
@@ -147,6 +148,8 @@ class RobotScene:
                   "a hold time > 0 s")
             antenna.check_distance(c.distance_cm)
             antenna.check_material(c.material)
+            check(c.amplitude_g is None or (np.isfinite(c.amplitude_g) and c.amplitude_g >= 0),
+                  f"contacts[{i}].amplitude_g", c.amplitude_g, "an amplitude >= 0 g (or unset)")
             f_low = float(antenna.low_mode_hz(c.distance_cm))
             check(f_low < 0.45 * self.rate_hz, "rate_hz", self.rate_hz,
                   f"a sample rate above {f_low / 0.45:.0f} Hz for the contact at "
@@ -180,7 +183,8 @@ class RobotScene:
             i0 = int(round(c.t_s * self.rate_hz))
             i1 = min(n, int(round((c.t_s + c.hold_s) * self.rate_hz)))
             main[i0:i1] += antenna.contact_ringing(c.distance_cm, c.material, self.rate_hz,
-                                                   i1 - i0, rng, self.impact_g)
+                                                   i1 - i0, rng, self.impact_g
+                                                   if c.amplitude_g is None else c.amplitude_g)
             events.append(Event("contact", c.t_s, c.hold_s, c.distance_cm, c.material))
         xy = antenna.project(main, self.orientation_deg)
         xy += rng.standard_normal(xy.shape) * self.sensor_noise_g

@@ -7,8 +7,8 @@ import pytest
 
 from snn_antenna import antenna
 from snn_antenna.errors import SpecError
-from snn_antenna.scenes import (CourseScene, Obstacle, SpeedProfile, random_course, rod_touch,
-                                scene_from_spec)
+from snn_antenna.scenes import (CourseScene, Obstacle, OnlineAntenna, SpeedProfile,
+                                random_course, rod_touch, scene_from_spec)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -58,6 +58,63 @@ def test_posts_beyond_the_tip_are_not_touched_and_contacts_do_not_overlap():
     starts = np.array([c.t_s for c in contacts])
     assert np.all(np.diff(starts) >= 1.0)
     assert np.allclose([c.distance_cm for c in contacts], np.hypot(15.0, 12.0), atol=0.1)
+
+
+def test_impact_rings_with_the_tip_speed_at_the_touch():
+    """A still antenna driven past a post: the tip crosses the rod at v·sin(pan), so the impact
+    is 2π·F_low·v·sin(pan)·transfer / g and doubles with speed; standing still, a post met at
+    the sweep's turning point rings far less than one met mid-sweep."""
+    pan, transfer = 40.0, 0.05
+    amplitudes = []
+    for v in (10.0, 20.0):
+        scene = CourseScene(duration_s=20.0, speed_cm_s=v, pan_deg=pan, impact_transfer=transfer,
+                            stop_after_contact_s=None, obstacles=[Obstacle(150.0, 12.0)])
+        (contact,) = scene.plan()["contacts"]
+        expected = (2 * np.pi * antenna.low_mode_hz(contact.distance_cm) * v
+                    * np.sin(np.deg2rad(pan)) * transfer / antenna.G_CM_S2)
+        assert contact.amplitude_g == pytest.approx(expected, rel=1e-3)
+        amplitudes.append(contact.amplitude_g)
+    assert amplitudes[1] == pytest.approx(2 * amplitudes[0], rel=1e-3)
+
+    def still(bearing_deg):   # a post 20 cm out; the rod sweeps 40° ± 40°, 2 s per cycle
+        b = np.deg2rad(bearing_deg)
+        scene = CourseScene(duration_s=6.0, speed_cm_s=0.0, pan_amplitude_deg=40.0,
+                            stop_after_contact_s=None,
+                            obstacles=[Obstacle(20 * np.cos(b), 20 * np.sin(b))])
+        return np.median([c.amplitude_g for c in scene.plan()["contacts"]])
+
+    peak_tip = 41.3 * np.deg2rad(40.0) * 2 * np.pi / 2.0   # ω·L mid-sweep, cm/s
+    assert still(40.0) == pytest.approx(float(antenna.impact_amplitude_g(20.0, peak_tip)),
+                                        rel=0.05)
+    # Near the turning point the rod's edge meets the post (radius 0.6 cm, 1.7° at 20 cm) where
+    # the sweep's speed has fallen to cos(asin((78° − 1.7° − 40°) / 40°)) ≈ 0.42 of its peak.
+    edge = np.rad2deg(np.arcsin(0.6 / 20.0))
+    slow = np.cos(np.arcsin((78.0 - edge - 40.0) / 40.0))
+    assert still(78.0) == pytest.approx(slow * still(40.0), rel=0.05)
+    rec = CourseScene(duration_s=3.0, speed_cm_s=0.0, pan_amplitude_deg=40.0,
+                      sensor_noise_g=0.0, obstacles=[Obstacle(15.3, 12.9)]).generate(seed=2)
+    assert np.ptp(rec.samples, axis=0).max() > 0     # that touch does ring the rod
+    with pytest.raises(SpecError, match="impact_transfer"):
+        CourseScene(impact_transfer=1.5).validate()
+    with pytest.raises(SpecError, match="tip_speed_cm_s"):
+        antenna.impact_amplitude_g(20.0, np.nan)
+
+
+def test_the_online_antenna_rings_like_the_planned_scene():
+    """The closed loop's antenna, stepped along the planned poses, meets the same posts with
+    the same impact amplitudes as ``CourseScene.plan``."""
+    scene = CourseScene(duration_s=8.0, speed_cm_s=15.0, pan_amplitude_deg=40.0,
+                        stop_after_contact_s=None,
+                        obstacles=random_course(np.random.default_rng(4), 150.0))
+    plan = scene.plan()
+    world = OnlineAntenna(scene, seed=0)
+    world.step(1, 15.0, plan["pan_deg"][0], plan["tilt_deg"][0])
+    for i in range(1, len(plan["t_s"]) - 10, 10):
+        world.step(10, 15.0, plan["pan_deg"][i + 9], plan["tilt_deg"][i + 9])
+    assert len(world.contacts) == len(plan["contacts"]) >= 3
+    for online, planned in zip(world.contacts, plan["contacts"]):
+        assert online.t_s == pytest.approx(planned.t_s, abs=0.011)
+        assert online.amplitude_g == pytest.approx(planned.amplitude_g, rel=0.1)
 
 
 def test_the_robot_stops_after_a_contact_and_the_antenna_with_it():
