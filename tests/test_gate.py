@@ -125,3 +125,21 @@ def test_study_spec_refuses_bad_speeds_before_any_work():
                       ["gate.train_speeds_cm_s=[0.0, 13.0]"], quick=True)
     with pytest.raises(SpecError, match="train_speeds_cm_s"):
         gating_threshold.build(spec)
+
+
+def test_th_star_is_the_monotone_fit_of_each_speeds_best_threshold():
+    from snn_antenna.studies.gating_threshold import choose_th_star, monotone_th_star
+    speeds = np.array([0.0, 6.0, 12.0, 18.0, 24.0])
+    rising = np.array([0.03, 0.05, 0.1, 0.3, 0.6])
+    assert monotone_th_star(speeds, rising, np.ones(5)) == pytest.approx(rising)
+    # A speed whose best Th dips below a slower one's is pooled with it (geometric mean,
+    # weighted by the contacts each speed scored); the result never falls with speed.
+    dip = np.array([0.03, 0.1, 0.025, 0.3, 0.6])
+    fitted = monotone_th_star(speeds, dip, np.array([5, 1, 3, 5, 5]))
+    assert np.all(np.diff(fitted) >= 0)
+    assert fitted[1] == pytest.approx(fitted[2]) == pytest.approx(np.exp(
+        (np.log(0.1) + 3 * np.log(0.025)) / 4))
+    assert fitted[0] == pytest.approx(0.03) and fitted[3:] == pytest.approx([0.3, 0.6])
+    # Each speed's best Th: the middle of the widest F1 plateau, not its lucky edge.
+    grid = np.array([0.0, 0.01, 0.03, 0.1, 0.3, 1.0, 3.0])
+    assert choose_th_star(grid, np.array([0.2, 0.5, 0.9, 0.9, 0.9, 0.4, 0.0])) == 0.1

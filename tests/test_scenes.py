@@ -163,3 +163,21 @@ def test_unknown_keys_and_kinds_are_refused():
         scene_from_spec({"kind": "course", "obstacles": [{"x_cm": 1, "y_cm": 2, "colour": 3}]})
     with pytest.raises(SpecError, match="material"):
         CourseScene(obstacles=[Obstacle(10, 10, material="granite")]).validate()
+
+
+def test_course_impacts_sit_between_the_self_motion_at_low_and_high_speed():
+    """The documented calibration of ``antenna.IMPACT_TRANSFER``: in the gating study's courses
+    the impacts on posts the array can see are of the size of the shaking they compete with,
+    above the self-motion at 12 cm/s and below twice that at 27 cm/s (the paper's Fig. 9)."""
+    amplitudes = []
+    for v in (0.0, 12.0, 27.0):
+        for seed in range(6):
+            obstacles = random_course(np.random.default_rng([seed, 7]), v * 15 + 80,
+                                      materials=("wood", "aluminium"))
+            scene = CourseScene(duration_s=15.0, speed_cm_s=v, pan_amplitude_deg=40.0,
+                                stop_after_contact_s=None, obstacles=obstacles)
+            amplitudes += [c.amplitude_g for c in scene.plan()["contacts"]
+                           if 10.5 < antenna.low_mode_hz(c.distance_cm) <= 30.0]
+    median = np.median(amplitudes)
+    assert len(amplitudes) > 30
+    assert antenna.self_motion_rms_g(12.0) < median < 2 * antenna.self_motion_rms_g(27.0)
