@@ -196,10 +196,23 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
                "rate map (dashed: true contacts, green: detections, red: stop) and the tip's "
                "path in the plane with the posts.")
     summary = rep.write(summary, spec, cfg["resonators"].target)
-    log(f"contact at {summary['contact_t_s']} s, {summary['contact_distance_cm']} cm; "
-        f"stopped {summary['stopped_after_contact_s']} s after it; CPG period "
-        f"{summary['cpg_period_s']}; report in {out_dir}/report.html")
+    log(human_summary(summary, out_dir))
     return summary
+
+
+def human_summary(s: dict, out_dir) -> str:
+    """Three lines a person reads at the end of a run (None where nothing happened)."""
+    fmt = lambda v, spec=".2f": "none" if v is None else format(v, spec)
+    d, p = s["contact_distance_cm"], s["cpg_period_s"]
+    contact = "the antenna touched no post" if s["contact_t_s"] is None else (
+        f"first contact at {s['contact_t_s']:.2f} s, {d['true']:.1f} cm along the rod, "
+        f"decoded {fmt(d['decoded'], '.1f')} cm; robot stopped "
+        f"{fmt(s['stopped_after_contact_s'])} s after it")
+    return "\n".join([
+        contact,
+        f"CPG period {p['measured']:.3f} s (spec {p['spec']:.3f} s), pan-tilt phase "
+        f"{s['pan_tilt_phase_deg']['measured']:.1f} deg",
+        f"report in {out_dir}/report.html ({s['total_wall_s']:.0f} s)"])
 
 
 def _figure(t, speed, pan, tilt, th, x_cm, rates, scene, world, detections, stopped):
