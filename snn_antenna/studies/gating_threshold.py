@@ -433,7 +433,7 @@ def _write_report(out_dir, spec, parts, ds, th_star, fig9, gate, train, train_th
     d = summary["gated_minus_best_fixed"]
     g, f = summary["f1_gated"], summary["f1_best_fixed"]
     sf, dd = summary["f1_sweep_fixed"], summary["gated_minus_sweep_fixed"]
-    verdict = "at least" if d["mean"] >= 0 else "below"
+    verdict = "above" if d["mean"] > 0 else "equal to" if d["mean"] == 0 else "below"
     rep.text(f"On scenes not used for training, the learned gate's F1 is {g['mean']:.3f} ± "
              f"{g['std']:.3f} (mean ± sd over {len(g['per_seed'])} seeds), {verdict} the best "
              f"single fixed threshold in hindsight ({f['threshold_g']:g} g: {f['mean']:.3f} ± "
