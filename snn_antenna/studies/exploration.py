@@ -36,8 +36,24 @@ from ..scenes import CourseScene, OnlineAntenna, scene_from_spec
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
 
 
-def _gate_training(speeds_cm_s=(0.0, 30.0), th_star_g=(0.1, 0.6)):
+def _gate_training(speeds_cm_s=(0.0, 30.0), th_star_g=(0.1, 0.6), from_summary=None):
     return locals()
+
+
+def th_star_from_summary(path) -> tuple[np.ndarray, np.ndarray]:
+    """The training speeds and their Th* from a gating study's ``summary.json``: the same
+    examples that study taught its own gate."""
+    import json
+    from pathlib import Path
+
+    accepted = "the summary.json of a studies/gating_threshold.toml run"
+    try:
+        summary = json.loads(Path(path).read_text())
+        th_star = {float(v): float(t) for v, t in summary["th_star"].items()}
+        speeds = np.asarray(summary["train_speeds_cm_s"], dtype=float)
+        return speeds, np.array([th_star[float(v)] for v in speeds])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        raise SpecError("from_summary", str(path), accepted) from None
 
 
 def _loop(speed_cm_s=15.0, duration_s=12.0, chunk_ms=10.0, calibration_s=2.0):
@@ -71,7 +87,10 @@ def build(spec: dict) -> dict:
                                                for k, v in read.items()})
     with specs.section("gate_training"):
         gt = {**_gate_training(), **specs.check_section(spec, "gate_training", _gate_training)}
-        v, th = np.asarray(gt["speeds_cm_s"], float), np.asarray(gt["th_star_g"], float)
+        if gt["from_summary"] is not None:       # replaces the spec's own list
+            v, th = th_star_from_summary(gt["from_summary"])
+        else:
+            v, th = np.asarray(gt["speeds_cm_s"], float), np.asarray(gt["th_star_g"], float)
         check(v.shape == th.shape and len(v) >= 2, "th_star_g", gt["th_star_g"],
               "one threshold per speed, at least two")
         configured["gate"].check_speeds(v, "speeds_cm_s")
