@@ -65,8 +65,8 @@ from . import neurons
 from .errors import NumericalInstabilityError, SpecError, check
 from .store import Output, SweepStore
 
-__all__ = ["Grid", "axis_values", "run_sweep", "SweepOutcome", "dask_client", "NeuronSweep",
-           "SceneSweep", "Output", "memory_budget_bytes"]
+__all__ = ["Grid", "axis_values", "run_sweep", "SweepOutcome", "dask_client", "executor",
+           "NeuronSweep", "SceneSweep", "Output", "memory_budget_bytes"]
 
 
 # -- the grid ---------------------------------------------------------------------------------
@@ -341,6 +341,7 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
     """
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -358,15 +359,36 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
         return
     n = workers or os.cpu_count() or 1
     check(isinstance(n, int) and n >= 1, "sweep.workers", workers, "an integer >= 0 (0: auto)")
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=None,
-                           silence_logs=logging.ERROR if quiet else logging.WARNING)
+    # The workers' statistical profiler deadlocks them: every 10 ms it calls
+    # sys._current_frames(), which holds the interpreter's thread-list lock while it allocates;
+    # a garbage collection there runs Brian2's weakref callbacks, and a task thread starting a
+    # thread (zarr's I/O pool, when a chunk is written) then waits forever (seen here: a
+    # worker stuck in Thread.start with the main thread in brian2's InstanceTrackerSet.remove
+    # under Worker.trigger_profile, the sweep hung). Workers inherit this configuration.
+    with dask.config.set({"distributed.worker.profile.enabled": False}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               dashboard_address=None,
+                               silence_logs=logging.ERROR if quiet else logging.WARNING)
     client = Client(cluster)
     try:
         yield client
     finally:
         client.close()
         cluster.close()
+
+
+@contextmanager
+def executor(workers: int = 0, scheduler: str | None = None, log=None):
+    """Where a study's sweep runs: ``None`` (this process, for ``run_sweep(client=None)``)
+    when ``workers == 1`` and no scheduler is given, otherwise a ``dask_client``."""
+    if scheduler is None and workers == 1:
+        yield None
+        return
+    with dask_client(workers, scheduler) as client:
+        if log is not None:
+            log(f"      Dask: {len(client.scheduler_info()['workers'])} worker(s) at "
+                f"{client.scheduler.address}")
+        yield client
 
 
 # -- the vectorised neuron evaluator ----------------------------------------------------------

@@ -41,3 +41,33 @@ def test_bad_speed_in_the_spec_fails_fast_with_one_line(tmp_path, capsys):
     assert status == 2
     assert "speeds_cm_s" in capsys.readouterr().err
     assert not (tmp_path / "x").exists()
+
+
+def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_changes(tmp_path):
+    """The Th × speed sweep runs on the shared sweep engine: its counts land in a zarr store,
+    a second run computes nothing, a changed gate reuses it, a changed sweep is refused."""
+    from snn_antenna import spec as specs
+    from snn_antenna.errors import SpecError
+    from snn_antenna.studies.gating_threshold import (SWEEP_OUTPUTS, ThresholdSweep, build,
+                                                      sweep_settings)
+    from snn_antenna.sweep import Grid, run_sweep
+
+    def sweep(*overrides):
+        spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
+                          ["sweep.scene_s=5.0", "sweep.speeds_cm_s=[0.0, 27.0]", *overrides],
+                          quick=True)
+        build(spec)
+        grid = Grid({"speed_cm_s": [27.0], "scene": [0.0], "threshold_g": [0.0, 0.3, 100.0]})
+        return run_sweep(grid, ThresholdSweep(spec), tmp_path / "sweep.zarr", SWEEP_OUTPUTS,
+                         settings=sweep_settings(spec), progress=False)
+
+    first = sweep()
+    data = first.data.squeeze()
+    assert first.chunks_computed == [0]
+    assert int(data.tp.sel(threshold_g=100.0)) == 0 == int(data.fp.sel(threshold_g=100.0))
+    assert int(data.fp.sel(threshold_g=0.0)) > 0      # Th = 0: the shaking makes detections
+    assert float(data.minutes[0]) == pytest.approx(4.0 / 60)   # 5 s scene, 1 s settling
+    again = sweep("gate.epochs=5", "sweep.workers=2")
+    assert again.chunks_computed == [] and again.data.equals(first.data)
+    with pytest.raises(SpecError, match="fresh"):
+        sweep("sweep.settle_s=0.5")

@@ -177,6 +177,11 @@ def test_standalone_engine_matches_runtime_engine(tmp_path, monkeypatch):
 
 
 # -- parallel execution -----------------------------------------------------------------------
+def _profiler_enabled():
+    import dask
+    return dask.config.get("distributed.worker.profile.enabled")
+
+
 def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
     from snn_antenna.sweep import dask_client
 
@@ -185,6 +190,9 @@ def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
                        chunk_points=6, progress=False)
     with dask_client(workers=2) as own:  # the embedded default: a LocalCluster of processes
         assert len(own.scheduler_info()["workers"]) == 2
+        # Its workers run without Dask's statistical profiler, which deadlocked a worker
+        # writing its chunk (see sweep.dask_client).
+        assert set(own.run(_profiler_enabled).values()) == {False}
         # attach to it as --scheduler tcp://HOST:PORT does for an existing cluster
         with dask_client(scheduler=own.scheduler.address) as client:
             parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,

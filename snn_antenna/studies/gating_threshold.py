@@ -21,12 +21,15 @@ Stages (each prints a progress line):
    over all speeds of the sweep).
 
 Outputs: report.html, summary.json, figures, and ``sweep.zarr`` (the scored grid, one
-xarray Dataset with dims speed_cm_s × threshold_g × scene).
+xarray Dataset with dims speed_cm_s × scene × threshold_g, written chunk by chunk by
+``sweep.run_sweep``: on a local Dask cluster or ``--scheduler``, resumed after an interruption,
+reused when only the gate or evaluation settings change; ``--fresh`` starts over).
 """
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 import xarray as xr
@@ -40,6 +43,8 @@ from ..preprocess import make_chain
 from ..readout import ContactDetector
 from ..report import Report, draw_rate_map
 from ..scenes import CourseScene, SpeedProfile, random_course, scene_from_spec
+from ..store import Output
+from ..sweep import Grid, executor, run_sweep
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "course", "sweep", "gate",
             "evaluation")
@@ -47,7 +52,7 @@ LOW_HIGH_CM_S = (12.0, 27.0)  # the paper's two speeds (Fig. 9)
 
 
 def _sweep_settings(thresholds_g=(0.0, 0.1), speeds_cm_s=(0.0, 12.0), n_scenes=3,
-                    scene_s=15.0, settle_s=1.0, target=None, codings_per_run=200):
+                    scene_s=15.0, settle_s=1.0, target=None, codings_per_run=200, workers=0):
     return locals()
 
 
@@ -63,7 +68,7 @@ def _course_settings(spacing_cm=45.0, lateral_cm=(8.0, 30.0), materials=("wood",
 def build(spec: dict) -> dict:
     """Check the whole spec and build every part before any simulation runs."""
     specs.check_top_level(spec, SECTIONS)
-    parts = {}
+    parts = {"seed": int(spec.get("seed", 0))}
     with specs.section("network"):
         parts["array"] = ResonatorArray(**specs.check_section(spec, "network", ResonatorArray))
     with specs.section("stimulus"):
@@ -104,6 +109,9 @@ def build(spec: dict) -> dict:
               "a time in [0, scene_s) s")
         check(isinstance(sweep["codings_per_run"], int) and sweep["codings_per_run"] >= 1,
               "codings_per_run", sweep["codings_per_run"], "an integer >= 1")
+        check(isinstance(sweep["workers"], int) and sweep["workers"] >= 0, "workers",
+              sweep["workers"], "an integer >= 0 (0: one Dask worker per CPU core; 1: this "
+              "process)")
         sweep["thresholds_g"], sweep["speeds_cm_s"] = th, v
         parts["sweep"] = sweep
     with specs.section("gate"):
@@ -151,7 +159,7 @@ def conditioned(parts: dict, scene: CourseScene, seed: int):
     return rec, x, chain.named_steps["coder"]
 
 
-def run_and_score(parts: dict, items: list, desc: str = "codings") -> tuple[list, list]:
+def run_and_score(parts: dict, items: list, desc: str | None = None) -> tuple[list, list]:
     """``items`` = [(recording, coded column)] → (Score per item, rate map per item).
 
     Items run as copies of the array in one Brian2 group, ``codings_per_run`` at a time
@@ -162,7 +170,7 @@ def run_and_score(parts: dict, items: list, desc: str = "codings") -> tuple[list
     per_run = parts["sweep"]["codings_per_run"]
     scores, maps = [], []
     batches = [items[i:i + per_run] for i in range(0, len(items), per_run)]
-    for batch in tqdm(batches, desc=desc, unit="run", disable=len(batches) < 2):
+    for batch in tqdm(batches, desc=desc, unit="run", disable=desc is None or len(batches) < 2):
         coded = np.stack([c for _, c in batch], axis=1)
         batch_maps = run_codings(parts["array"], coded, batch[0][0].rate_hz,
                                  parts["window_s"], target=parts["sweep"]["target"])
@@ -172,6 +180,67 @@ def run_and_score(parts: dict, items: list, desc: str = "codings") -> tuple[list
                                 parts["array"], parts["window_s"], parts["sweep"]["settle_s"]))
         maps += batch_maps
     return scores, maps
+
+
+SWEEP_OUTPUTS = {
+    "tp": Output("i4", "1", "contacts detected (true positives)"),
+    "fp": Output("i4", "1", "detections away from any contact (false positives)"),
+    "misses": Output("i4", "1", "scored contacts without a detection"),
+    "duplicates": Output("i4", "1", "further detections within a detected contact"),
+    "unscored_contacts": Output("i4", "1", "contacts outside the array's band"),
+    "latency_sum_s": Output("f8", "s", "summed latency of the true positives"),
+    "minutes": Output("f8", "min", "scored time"),
+}
+
+
+def sweep_scene(parts: dict, speed_cm_s: float, scene: int):
+    """The sweep's seeded course scene ``scene`` at a constant speed, conditioned."""
+    seed = parts["seed"] * 1000 + int(scene)
+    return conditioned(parts, make_scene(parts, SpeedProfile("constant", float(speed_cm_s)),
+                                         seed), seed)
+
+
+@dataclass(frozen=True)
+class ThresholdSweep:
+    """The Th × speed sweep as a ``sweep.run_sweep`` evaluator (so it runs on Dask workers,
+    resumes after an interruption and lands in a zarr store like every sweep).
+
+    Points over ``speed_cm_s`` × ``scene`` × ``threshold_g``: each (speed, scene) of a chunk is
+    generated and conditioned once and coded at each of its thresholds, and all codings of the
+    chunk run as copies of the array in one Brian2 group (``run_and_score``). It holds the
+    resolved spec, so it pickles; ``build`` re-checks it on the worker (milliseconds).
+    """
+    spec: dict
+
+    def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        parts = build(self.spec)
+        n = len(points["threshold_g"])
+        items, order = [], []
+        pairs = np.stack([points["speed_cm_s"], points["scene"]], axis=1)
+        for v, scene in np.unique(pairs, axis=0):
+            idx = np.flatnonzero((pairs[:, 0] == v) & (pairs[:, 1] == scene))
+            rec, x, coder = sweep_scene(parts, v, scene)
+            coded = coder.partial_transform(np.repeat(x[:, None], len(idx), axis=1),
+                                            threshold=points["threshold_g"][idx][None, :])
+            items += [(rec, coded[:, j]) for j in range(len(idx))]
+            order += list(idx)
+        scores, _ = run_and_score(parts, items)
+        out = {name: np.zeros(n, dtype=o.dtype) for name, o in SWEEP_OUTPUTS.items()}
+        for i, sc in zip(order, scores):
+            for name in ("tp", "fp", "misses", "duplicates", "unscored_contacts", "minutes"):
+                out[name][i] = getattr(sc, name)
+            out["latency_sum_s"][i] = float(np.sum(sc.latencies_s))
+        return out
+
+
+def sweep_settings(spec: dict) -> dict:
+    """What makes two sweeps the same (the store's fingerprint): not the gate or evaluation
+    settings, nor where it runs, so changing those reuses a finished sweep."""
+    resolved = specs.resolved(spec)
+    settings = {k: resolved.get(k) for k in ("seed", "network", "stimulus", "preprocess",
+                                             "readout", "course", "sweep")}
+    settings["sweep"] = {k: v for k, v in (settings["sweep"] or {}).items() if k != "workers"}
+    return settings
 
 
 def pooled_f1(scores) -> float:
@@ -208,10 +277,12 @@ def monotone_th_star(speeds: np.ndarray, best_th: np.ndarray, weights: np.ndarra
 
 
 # -- the study ----------------------------------------------------------------------------
-def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
+def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
+        scheduler: str | None = None, log=print) -> dict:
 
     parts = build(spec)
-    seed = int(spec.get("seed", 0))
+    seed = parts["seed"]
+    out_dir = Path(out_dir)
     sweep, gate, ev = parts["sweep"], parts["gate"], parts["evaluation"]
     thresholds, speeds = sweep["thresholds_g"], sweep["speeds_cm_s"]
     t_start = time.perf_counter()
@@ -221,34 +292,18 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     log(f"[1/4] sweep: {len(speeds)} speeds x {len(thresholds)} thresholds x {n_sc} scenes of "
         f"{sweep['scene_s']:g} s ({len(speeds) * len(thresholds) * n_sc} codings, "
         f"{parts['array'].n_neurons} resonators each)")
-    fields = ("tp", "fp", "misses", "duplicates", "unscored_contacts", "latency_sum_s")
-    grid = {f: np.zeros((len(speeds), len(thresholds), n_sc)) for f in fields}
-    minutes = np.zeros((len(speeds), n_sc))
-    sweep_scenes, items = {}, []
-    for iv, v in enumerate(speeds):
-        for s in range(n_sc):
-            scene = make_scene(parts, SpeedProfile("constant", float(v)), seed * 1000 + s)
-            rec, x, coder = conditioned(parts, scene, seed * 1000 + s)
-            sweep_scenes[(iv, s)] = (rec, x, coder)
-            coded = coder.partial_transform(np.repeat(x[:, None], len(thresholds), axis=1),
-                                            threshold=thresholds[None, :])
-            items += [(rec, coded[:, j]) for j in range(len(thresholds))]
-    scores, _ = run_and_score(parts, items, "sweep")
-    del items
-    for iv in range(len(speeds)):
-        for s in range(n_sc):
-            for j in range(len(thresholds)):
-                sc = scores[(iv * n_sc + s) * len(thresholds) + j]
-                for f in fields[:-1]:
-                    grid[f][iv, j, s] = getattr(sc, f)
-                grid["latency_sum_s"][iv, j, s] = float(np.sum(sc.latencies_s))
-                minutes[iv, s] = sc.minutes
-    ds = xr.Dataset(
-        {f: (("speed_cm_s", "threshold_g", "scene"), grid[f]) for f in fields},
-        coords={"speed_cm_s": ("speed_cm_s", speeds, {"units": "cm/s"}),
-                "threshold_g": ("threshold_g", thresholds, {"units": "g"}),
-                "scene": np.arange(n_sc)})
-    ds["minutes"] = (("speed_cm_s", "scene"), minutes)
+    grid = Grid({"speed_cm_s": speeds, "scene": np.arange(n_sc),
+                 "threshold_g": thresholds}, {"speed_cm_s": "cm/s", "threshold_g": "g"})
+    with executor(sweep["workers"], scheduler, log) as client:
+        outcome = run_sweep(grid, ThresholdSweep(specs.resolved(spec)), out_dir / "sweep.zarr",
+                            SWEEP_OUTPUTS, client=client, fresh=fresh,
+                            chunk_points=sweep["codings_per_run"], settings=sweep_settings(spec),
+                            attrs={"description": "Th x speed sweep: detections scored per "
+                                                  "contact", "spec": specs.resolved(spec)})
+    log(f"      {len(outcome.chunks_computed)} chunk(s) computed, "
+        f"{len(outcome.chunks_skipped)} already in {out_dir / 'sweep.zarr'}, "
+        f"{outcome.wall_s:.0f} s")
+    ds = outcome.data
     pooled = ds.sum("scene")
     f1 = (2 * pooled.tp / (2 * pooled.tp + pooled.fp + pooled.misses)).fillna(0.0)
     ds["f1"] = f1
@@ -266,8 +321,6 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     overall = ds[["tp", "fp", "misses"]].sum(("speed_cm_s", "scene"))
     sweep_fixed_th = choose_th_star(thresholds, (2 * overall.tp / (
         2 * overall.tp + overall.fp + overall.misses)).fillna(0.0).values)
-    ds.attrs["description"] = "Th x speed sweep: detections scored per contact"
-    ds.to_zarr(f"{out_dir}/sweep.zarr", mode="w")
     log("      best Th per speed: " + ", ".join(f"{v:g}: {t:.3g}"
                                                 for v, t in zip(speeds, per_speed_best)))
     log("      Th*(speed), monotone: " + ", ".join(f"{v:g}: {t:.3g}"
@@ -279,9 +332,10 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     for v in LOW_HIGH_CM_S:
         iv = int(np.argmin(np.abs(speeds - v)))
         ts = [0.0, th_star[iv], 2 * th_star[iv]]
-        fig9[float(speeds[iv])] = {"thresholds": ts, "rec": sweep_scenes[(iv, 0)][0]}
+        fig9[float(speeds[iv])] = {"thresholds": ts}
         for s in range(n_sc):
-            rec, x, coder = sweep_scenes[(iv, s)]
+            rec, x, coder = sweep_scene(parts, speeds[iv], s)
+            fig9[float(speeds[iv])].setdefault("rec", rec)
             coded = coder.partial_transform(np.repeat(x[:, None], 3, axis=1),
                                             threshold=np.array(ts)[None, :])
             items += [(rec, coded[:, j]) for j in range(3)]
@@ -403,6 +457,9 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
         "paper_in_kind": in_kind,
         "per_speed": per_speed,
         "quick": quick,
+        "sweep_chunks": {"computed": len(outcome.chunks_computed),
+                         "reused": len(outcome.chunks_skipped), "workers": outcome.workers},
+        "sweep_wall_s": outcome.wall_s,
         "total_wall_s": time.perf_counter() - t_start,
     }
     _write_report(out_dir, spec, parts, ds, th_star, fig9, gate, train, train_th, held_out,

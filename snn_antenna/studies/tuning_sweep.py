@@ -22,7 +22,7 @@ from .. import neurons
 from .. import spec as specs
 from ..errors import check
 from ..report import Report, provenance
-from ..sweep import NEURON_AXES, Grid, NeuronSweep, dask_client, run_sweep
+from ..sweep import NEURON_AXES, Grid, NeuronSweep, executor, run_sweep
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
 
@@ -74,14 +74,8 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
     common = dict(chunk_points=settings.chunk_points, fresh=fresh, attrs=attrs,
                   settings=dataclasses.asdict(neuron), desc="chunks")
     store = out_dir / "results.zarr"
-    if scheduler or settings.workers != 1:
-        with dask_client(settings.workers, scheduler) as client:
-            log(f"      Dask: {len(client.scheduler_info()['workers'])} worker(s) at "
-                f"{client.scheduler.address}")
-            outcome = run_sweep(grid, neuron, store, NeuronSweep.OUTPUTS, client=client,
-                                **common)
-    else:
-        outcome = run_sweep(grid, neuron, store, NeuronSweep.OUTPUTS, **common)
+    with executor(settings.workers, scheduler, log) as client:
+        outcome = run_sweep(grid, neuron, store, NeuronSweep.OUTPUTS, client=client, **common)
     log(f"      {len(outcome.chunks_computed)} chunk(s) computed, "
         f"{len(outcome.chunks_skipped)} already in the store, {outcome.wall_s:.1f} s")
     log("[2/3] deriving peak frequency, band width and spike rate maps")
