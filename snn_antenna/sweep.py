@@ -305,7 +305,7 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
 
     if not todo:
         return
-    client.register_plugin(_ImportBrian2(), name="snn-antenna-import-brian2")
+    client.register_plugin(_PrepareWorker(), name="snn-antenna-prepare-worker")
     evaluate_future = client.scatter(evaluate, broadcast=True)
     run = f"{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}"
     futures = [client.submit(_run_chunk, str(store.path), i, regions[i],
@@ -324,12 +324,27 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
         raise
 
 
-class _ImportBrian2(WorkerPlugin):
-    """Worker plugin: import Brian2 in each worker's main thread, where it may install its
-    SIGINT handler (importing it first inside a task thread fails); restarted workers too."""
+class _PrepareWorker(WorkerPlugin):
+    """Worker plugin, run in each worker's main thread (restarted workers too, and the workers
+    of a cluster given by ``--scheduler``):
+
+    - import Brian2 there, where it may install its SIGINT handler (importing it first inside
+      a task thread fails);
+    - stop Dask's statistical profiler, which deadlocks workers: every 10 ms it calls
+      ``sys._current_frames()``, which holds the interpreter's thread-list lock while it
+      allocates; a garbage collection there runs Brian2's weakref callbacks, and a task thread
+      starting a thread (zarr's I/O pool, when a chunk is written) then waits forever (seen:
+      a worker stuck in ``Thread.start`` with its main thread in Brian2's
+      ``InstanceTrackerSet.remove`` under ``Worker.trigger_profile``; the sweep hung).
+    """
 
     def setup(self, worker):
         import brian2  # noqa: F401
+
+        for name in ("profile", "profile-cycle"):
+            callback = worker.periodic_callbacks.pop(name, None)
+            if callback is not None:
+                callback.stop()
 
 
 @contextmanager
@@ -341,7 +356,6 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
     """
     import logging
 
-    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
@@ -359,16 +373,9 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
         return
     n = workers or os.cpu_count() or 1
     check(isinstance(n, int) and n >= 1, "sweep.workers", workers, "an integer >= 0 (0: auto)")
-    # The workers' statistical profiler deadlocks them: every 10 ms it calls
-    # sys._current_frames(), which holds the interpreter's thread-list lock while it allocates;
-    # a garbage collection there runs Brian2's weakref callbacks, and a task thread starting a
-    # thread (zarr's I/O pool, when a chunk is written) then waits forever (seen here: a
-    # worker stuck in Thread.start with the main thread in brian2's InstanceTrackerSet.remove
-    # under Worker.trigger_profile, the sweep hung). Workers inherit this configuration.
-    with dask.config.set({"distributed.worker.profile.enabled": False}):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                               dashboard_address=None,
-                               silence_logs=logging.ERROR if quiet else logging.WARNING)
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           dashboard_address=None,
+                           silence_logs=logging.ERROR if quiet else logging.WARNING)
     client = Client(cluster)
     try:
         yield client

@@ -177,9 +177,8 @@ def test_standalone_engine_matches_runtime_engine(tmp_path, monkeypatch):
 
 
 # -- parallel execution -----------------------------------------------------------------------
-def _profiler_enabled():
-    import dask
-    return dask.config.get("distributed.worker.profile.enabled")
+def _profiler_callbacks(dask_worker):
+    return sorted(name for name in dask_worker.periodic_callbacks if name.startswith("profile"))
 
 
 def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
@@ -190,13 +189,13 @@ def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
                        chunk_points=6, progress=False)
     with dask_client(workers=2) as own:  # the embedded default: a LocalCluster of processes
         assert len(own.scheduler_info()["workers"]) == 2
-        # Its workers run without Dask's statistical profiler, which deadlocked a worker
-        # writing its chunk (see sweep.dask_client).
-        assert set(own.run(_profiler_enabled).values()) == {False}
         # attach to it as --scheduler tcp://HOST:PORT does for an existing cluster
         with dask_client(scheduler=own.scheduler.address) as client:
             parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,
                                  chunk_points=6, client=client, progress=False)
+            # The sweep stopped Dask's statistical profiler on the workers it used: it
+            # deadlocked a worker writing its chunk (see sweep._PrepareWorker).
+            assert set(map(tuple, client.run(_profiler_callbacks).values())) == {()}
     assert parallel.chunks_computed and len(parallel.workers) >= 1
     assert all(str(os.getpid()) not in w for w in parallel.workers)  # really other processes
     assert parallel.data.spike_count.equals(serial.data.spike_count)
