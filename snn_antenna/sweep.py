@@ -305,7 +305,7 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
 
     if not todo:
         return
-    client.register_plugin(_PrepareWorker(), name="snn-antenna-prepare-worker")
+    prepare_workers(client)
     evaluate_future = client.scatter(evaluate, broadcast=True)
     run = f"{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}"
     futures = [client.submit(_run_chunk, str(store.path), i, regions[i],
@@ -322,6 +322,12 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
     except BaseException:  # Ctrl-C or a failed chunk: finished chunks stay in the store
         client.cancel(futures)
         raise
+
+
+def prepare_workers(client) -> None:
+    """Make ``client``'s workers (current and future) fit to run Brian2 (``_PrepareWorker``).
+    Call it before submitting any Brian2 task; registering again is harmless."""
+    client.register_plugin(_PrepareWorker(), name="snn-antenna-prepare-worker")
 
 
 class _PrepareWorker(WorkerPlugin):

@@ -20,6 +20,10 @@ Stages (each prints a progress line):
    themselves, an oracle no robot has) and the one a user would deploy (the Th of highest F1
    over all speeds of the sweep).
 
+Every Brian2 stage uses the same Dask client (``sweep.workers``, ``--scheduler``; none with
+``workers = 1``): after the sweep, Fig. 9 and the fixed-Th evaluation start on the workers
+while this process trains the gate (``Codings``), then the lookup and gated codings follow.
+
 Outputs: report.html, summary.json, figures, and ``sweep.zarr`` (the scored grid, one
 xarray Dataset with dims speed_cm_s × scene × threshold_g, written chunk by chunk by
 ``sweep.run_sweep``: on a local Dask cluster or ``--scheduler``, resumed after an interruption,
@@ -29,10 +33,10 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 
 from .. import spec as specs
 from ..errors import SpecError, check
@@ -44,7 +48,7 @@ from ..readout import ContactDetector
 from ..report import Report, draw_rate_map
 from ..scenes import CourseScene, SpeedProfile, random_course, scene_from_spec
 from ..store import Output
-from ..sweep import Grid, executor, run_sweep
+from ..sweep import Grid, executor, prepare_workers, run_sweep
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "course", "sweep", "gate",
             "evaluation")
@@ -159,27 +163,67 @@ def conditioned(parts: dict, scene: CourseScene, seed: int):
     return rec, x, chain.named_steps["coder"]
 
 
-def run_and_score(parts: dict, items: list, desc: str | None = None) -> tuple[list, list]:
-    """``items`` = [(recording, coded column)] → (Score per item, rate map per item).
-
-    Items run as copies of the array in one Brian2 group, ``codings_per_run`` at a time
-    (fewer, larger runs: Brian2's cost per step hardly grows with the group's size).
-    """
-    from tqdm import tqdm
-
-    per_run = parts["sweep"]["codings_per_run"]
-    scores, maps = [], []
-    batches = [items[i:i + per_run] for i in range(0, len(items), per_run)]
-    for batch in tqdm(batches, desc=desc, unit="run", disable=desc is None or len(batches) < 2):
-        coded = np.stack([c for _, c in batch], axis=1)
-        batch_maps = run_codings(parts["array"], coded, batch[0][0].rate_hz,
-                                 parts["window_s"], target=parts["sweep"]["target"])
-        for (rec, _), rates in zip(batch, batch_maps):
-            detections = parts["detector"].detect(rates)
-            scores.append(score(detections, rec.contacts, rec.duration_s, parts["detector"],
-                                parts["array"], parts["window_s"], parts["sweep"]["settle_s"]))
-        maps += batch_maps
+def score_codings(parts: dict, coded: np.ndarray, labels: list) -> tuple[list, list]:
+    """Columns of ``coded`` as copies of the array in ONE Brian2 group, each column's
+    detections scored against its scene's ``(contacts, duration_s)`` in ``labels``.
+    Returns (Score, rate map) per column."""
+    detector, window_s = parts["detector"], parts["window_s"]
+    maps = run_codings(parts["array"], coded, parts["scene"].rate_hz, window_s,
+                       target=parts["sweep"]["target"])
+    scores = [score(detector.detect(rates), contacts, duration_s, detector, parts["array"],
+                    window_s, parts["sweep"]["settle_s"])
+              for rates, (contacts, duration_s) in zip(maps, labels)]
     return scores, maps
+
+
+def _score_batch(spec: dict, coded: np.ndarray, labels: list) -> tuple[list, list]:
+    """``score_codings`` on a Dask worker: the parts are rebuilt there from the spec."""
+    return score_codings(build(spec), coded, labels)
+
+
+class Codings:
+    """Coded columns → (Score, rate map) each, ``sweep.codings_per_run`` columns per Brian2
+    group (fewer, larger runs: Brian2's cost per step hardly grows with the group's size).
+
+    ``submit(items)`` takes [(recording, coded column)] and returns at once: with a Dask
+    client the batches start on the study's workers, so this process can do other work
+    meanwhile (the study trains the gate while the workers run Fig. 9 and the fixed-Th
+    evaluation); without one they are deferred. ``collect`` waits for them (or runs them
+    here) and returns scores and maps in the items' order.
+    """
+
+    def __init__(self, spec: dict, client=None):
+        self.spec, self.parts, self.client = spec, build(spec), client
+        if client is not None:
+            prepare_workers(client)
+
+    def submit(self, items: list) -> list:
+        per_run = self.parts["sweep"]["codings_per_run"]
+        pending = []
+        for i in range(0, len(items), per_run):
+            batch = items[i:i + per_run]
+            coded = np.stack([c for _, c in batch], axis=1)
+            labels = [(rec.contacts, rec.duration_s) for rec, _ in batch]
+            pending.append(partial(score_codings, self.parts, coded, labels)
+                           if self.client is None else
+                           self.client.submit(_score_batch, self.spec, coded, labels,
+                                              pure=False))
+        return pending
+
+    def collect(self, pending: list, desc: str | None = None) -> tuple[list, list]:
+        from tqdm import tqdm
+
+        scores, maps = [], []
+        for handle in tqdm(pending, desc=desc, unit="run",
+                           disable=desc is None or len(pending) < 2):
+            batch_scores, batch_maps = handle() if isinstance(handle, partial) else \
+                handle.result()
+            scores += batch_scores
+            maps += batch_maps
+        return scores, maps
+
+    def run(self, items: list, desc: str | None = None) -> tuple[list, list]:
+        return self.collect(self.submit(items), desc)
 
 
 SWEEP_OUTPUTS = {
@@ -207,7 +251,7 @@ class ThresholdSweep:
 
     Points over ``speed_cm_s`` × ``scene`` × ``threshold_g``: each (speed, scene) of a chunk is
     generated and conditioned once and coded at each of its thresholds, and all codings of the
-    chunk run as copies of the array in one Brian2 group (``run_and_score``). It holds the
+    chunk run as copies of the array in one Brian2 group (``Codings``). It holds the
     resolved spec, so it pickles; ``build`` re-checks it on the worker (milliseconds).
     """
     spec: dict
@@ -224,7 +268,7 @@ class ThresholdSweep:
                                             threshold=points["threshold_g"][idx][None, :])
             items += [(rec, coded[:, j]) for j in range(len(idx))]
             order += list(idx)
-        scores, _ = run_and_score(parts, items)
+        scores, _ = Codings(self.spec).run(items)
         out = {name: np.zeros(n, dtype=o.dtype) for name, o in SWEEP_OUTPUTS.items()}
         for i, sc in zip(order, scores):
             for name in ("tp", "fp", "misses", "duplicates", "unscored_contacts", "minutes"):
@@ -279,10 +323,15 @@ def monotone_th_star(speeds: np.ndarray, best_th: np.ndarray, weights: np.ndarra
 # -- the study ----------------------------------------------------------------------------
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         scheduler: str | None = None, log=print) -> dict:
-
     parts = build(spec)
+    # One Dask client (or none: ``sweep.workers = 1``) serves every Brian2 stage.
+    with executor(parts["sweep"]["workers"], scheduler, log) as client:
+        return _run(spec, parts, Path(out_dir), quick, fresh, client, log)
+
+
+def _run(spec: dict, parts: dict, out_dir: Path, quick: bool, fresh: bool, client,
+         log) -> dict:
     seed = parts["seed"]
-    out_dir = Path(out_dir)
     sweep, gate, ev = parts["sweep"], parts["gate"], parts["evaluation"]
     thresholds, speeds = sweep["thresholds_g"], sweep["speeds_cm_s"]
     t_start = time.perf_counter()
@@ -294,12 +343,11 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         f"{parts['array'].n_neurons} resonators each)")
     grid = Grid({"speed_cm_s": speeds, "scene": np.arange(n_sc),
                  "threshold_g": thresholds}, {"speed_cm_s": "cm/s", "threshold_g": "g"})
-    with executor(sweep["workers"], scheduler, log) as client:
-        outcome = run_sweep(grid, ThresholdSweep(specs.resolved(spec)), out_dir / "sweep.zarr",
-                            SWEEP_OUTPUTS, client=client, fresh=fresh,
-                            chunk_points=sweep["codings_per_run"], settings=sweep_settings(spec),
-                            attrs={"description": "Th x speed sweep: detections scored per "
-                                                  "contact", "spec": specs.resolved(spec)})
+    outcome = run_sweep(grid, ThresholdSweep(specs.resolved(spec)), out_dir / "sweep.zarr",
+                        SWEEP_OUTPUTS, client=client, fresh=fresh,
+                        chunk_points=sweep["codings_per_run"], settings=sweep_settings(spec),
+                        attrs={"description": "Th x speed sweep: detections scored per "
+                                              "contact", "spec": specs.resolved(spec)})
     log(f"      {len(outcome.chunks_computed)} chunk(s) computed, "
         f"{len(outcome.chunks_skipped)} already in {out_dir / 'sweep.zarr'}, "
         f"{outcome.wall_s:.0f} s")
@@ -325,9 +373,11 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
                                                 for v, t in zip(speeds, per_speed_best)))
     log("      Th*(speed), monotone: " + ", ".join(f"{v:g}: {t:.3g}"
                                                    for v, t in zip(speeds, th_star)))
+    codings = Codings(specs.resolved(spec), client)
+    where = "on the Dask workers" if client is not None else "after the gate"
 
     # 2. Fig. 9 in kind: Th = 0, Th*, 2 Th* at the paper's two speeds -----------------------------
-    log("[2/4] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed")
+    log(f"[2/4] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed (runs {where})")
     fig9, items = {}, []
     for v in LOW_HIGH_CM_S:
         iv = int(np.argmin(np.abs(speeds - v)))
@@ -339,27 +389,10 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
             coded = coder.partial_transform(np.repeat(x[:, None], 3, axis=1),
                                             threshold=np.array(ts)[None, :])
             items += [(rec, coded[:, j]) for j in range(3)]
-    scores, maps = run_and_score(parts, items, "Fig. 9")
-    for r, e in enumerate(fig9.values()):
-        block = slice(r * 3 * n_sc, (r + 1) * 3 * n_sc)
-        sc, mp = scores[block], maps[block]
-        e["scores"] = [sum(sc[j::3], Score()) for j in range(3)]
-        e["maps"] = mp[:3]
+    fig9_runs = codings.submit(items)
 
-    # 3. the gate ---------------------------------------------------------------------------------
-    train = parts["train_speeds"]
-    train_th = np.array([th_star[int(np.flatnonzero(speeds == v)[0])] for v in train])
-    log(f"[3/4] training the speed gate in Brian2 on {len(train)} speeds "
-        f"({gate.epochs} epochs, {gate.present_s:g} s per presentation)")
-    gate.fit(train, train_th, test_speeds=speeds)
-    recalled = gate.learning_curve_.isel(epoch=-1).values
-    held_out = ~np.isin(speeds, train)
-    ratio = recalled / th_star
-    log("      recalled/Th*: " + ", ".join(f"{v:g}: {r:.2f}" for v, r in zip(speeds, ratio)))
-
-    # 4. gated vs fixed vs lookup on new scenes -----------------------------------------------------
-    log(f"[4/4] evaluation on new scenes: {ev['n_scenes']} per speed + {ev['n_ramps']} ramps "
-        f"0→{speeds.max():g} cm/s, fixed Th (all {len(thresholds)}), lookup and gated")
+    # New scenes for the evaluation (new seeds: constant speeds and ramps); the fixed-Th codings
+    # need no gate, so they start now and run while the gate learns.
     methods = [f"fixed:{t:g}" for t in thresholds] + ["lookup", "gated"]
     eval_profiles = [(f"{v:g} cm/s", SpeedProfile("constant", float(v))) for v in speeds]
     eval_profiles += [(f"ramp {i}", SpeedProfile("ramp", points=[
@@ -372,28 +405,56 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         for s in slots:
             sd = ev["seed_offset"] + seed * 1000 + ip * 10 + s
             scenes.append((ip, s, *conditioned(parts, make_scene(parts, profile, sd), sd)))
+    items = []
+    for ip, s, rec, x, coder in scenes:
+        coded = coder.partial_transform(np.repeat(x[:, None], len(thresholds), axis=1),
+                                        threshold=thresholds[None, :])
+        items += [(rec, coded[:, j]) for j in range(len(thresholds))]
+    fixed_runs = codings.submit(items)
+    del items
+
+    # 3. the gate ---------------------------------------------------------------------------------
+    train = parts["train_speeds"]
+    train_th = np.array([th_star[int(np.flatnonzero(speeds == v)[0])] for v in train])
+    log(f"[3/4] training the speed gate in Brian2 on {len(train)} speeds "
+        f"({gate.epochs} epochs, {gate.present_s:g} s per presentation)")
+    gate.fit(train, train_th, test_speeds=speeds)
+    recalled = gate.learning_curve_.isel(epoch=-1).values
+    held_out = ~np.isin(speeds, train)
+    ratio = recalled / th_star
+    log("      recalled/Th*: " + ", ".join(f"{v:g}: {r:.2f}" for v, r in zip(speeds, ratio)))
+
+    # 4. gated vs fixed vs lookup on the new scenes -----------------------------------------------
+    log(f"[4/4] evaluation on new scenes: {ev['n_scenes']} per speed + {ev['n_ramps']} ramps "
+        f"0→{speeds.max():g} cm/s, fixed Th (all {len(thresholds)}), lookup and gated")
     log(f"      the gate recalls Th online along {len(scenes)} scenes' speed")
     speed_cols = np.stack([rec.meta["speed_cm_s"] for _, _, rec, _, _ in scenes], axis=1)
     gated_th = gate.thresholds(speed_cols, scenes[0][2].rate_hz)
     lookup_th = np.exp(np.interp(speed_cols, train, np.log(train_th)))
     items = []
     for k, (ip, s, rec, x, coder) in enumerate(scenes):
-        cols = [coder.partial_transform(np.repeat(x[:, None], len(thresholds), axis=1),
-                                        threshold=thresholds[None, :]),
-                coder.partial_transform(x, threshold=lookup_th[:, k])[:, None],
-                coder.partial_transform(x, threshold=gated_th[:, k])[:, None]]
-        coded = np.concatenate(cols, axis=1)
-        items += [(rec, coded[:, j]) for j in range(coded.shape[1])]
-    scores, maps = run_and_score(parts, items, "evaluation")
+        items += [(rec, coder.partial_transform(x, threshold=lookup_th[:, k])),
+                  (rec, coder.partial_transform(x, threshold=gated_th[:, k]))]
+    adaptive_runs = codings.submit(items)
     del items
-    m = len(methods)
+    scores, maps = codings.collect(fig9_runs, "Fig. 9")
+    for r, e in enumerate(fig9.values()):
+        block = slice(r * 3 * n_sc, (r + 1) * 3 * n_sc)
+        sc, mp = scores[block], maps[block]
+        e["scores"] = [sum(sc[j::3], Score()) for j in range(3)]
+        e["maps"] = mp[:3]
+    fixed_scores, _ = codings.collect(fixed_runs, "evaluation, fixed Th")
+    adaptive_scores, adaptive_maps = codings.collect(adaptive_runs, "evaluation, lookup and gated")
+    n_th = len(thresholds)
     eval_scores, example = {}, None   # (profile index, seed slot, method) -> Score
     for k, (ip, s, rec, _, _) in enumerate(scenes):
-        for j, method in enumerate(methods):
-            eval_scores[(ip, s, method)] = scores[k * m + j]
+        for j, t in enumerate(thresholds):
+            eval_scores[(ip, s, f"fixed:{t:g}")] = fixed_scores[k * n_th + j]
+        eval_scores[(ip, s, "lookup")] = adaptive_scores[2 * k]
+        eval_scores[(ip, s, "gated")] = adaptive_scores[2 * k + 1]
         if eval_profiles[ip][1].kind == "ramp" and example is None:
             example = {"rec": rec, "gated_th": gated_th[:, k], "lookup_th": lookup_th[:, k],
-                       "map": maps[k * m + m - 1]}
+                       "map": adaptive_maps[2 * k + 1]}
     n_slots = max(ev["n_scenes"], 1)
 
     def f1_per_seed(method, profiles=range(len(eval_profiles))):
