@@ -18,8 +18,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from . import spec as specs
 from .cpg import CPG
 from .control import ControlLayer, MaterialUnit

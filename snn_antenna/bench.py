@@ -20,8 +20,6 @@ from __future__ import annotations
 import hashlib
 import inspect
 import json
-import shutil
-import warnings
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -33,6 +31,7 @@ import xarray as xr
 from . import antenna
 from .errors import SpecError, check
 from .signals import Event, Recording
+from .store import write_dataset
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
 
@@ -201,15 +200,7 @@ def cached(path: Path, build: Callable[[], xr.Dataset], log=print, fresh: bool =
         log(f"cache: reusing {path}")
         return xr.open_zarr(path, consolidated=False).load()
     ds = build()
-    tmp = path.with_name(path.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():
-        # Label strings (material names) have no zarr v3 spec yet; zarr-python reads them.
-        warnings.filterwarnings("ignore", message=".*does not have a Zarr V3 specification")
-        ds.to_zarr(tmp, mode="w", consolidated=False)
-    shutil.rmtree(path, ignore_errors=True)
-    tmp.rename(path)
+    write_dataset(ds, path)
     log(f"cache: stored {path}")
     return ds
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .errors import SpecError, check
+from .errors import check
 from .signals import validate_samples
 
 PARAMETERS = ("F_low", "A_low", "tau_low", "F_high", "A_high", "tau_high")

@@ -32,6 +32,29 @@ from .errors import SpecError
 DONE = "chunk_done"
 
 
+def write_dataset(ds, path: str | Path, **to_zarr) -> None:
+    """Write ``ds`` as the zarr store ``path``: atomically, and in data types Zarr v3 specifies.
+
+    The store is written under a temporary name beside ``path`` and renamed into place, so an
+    interrupted write never leaves a half store to be taken for a finished one. Text (method
+    or material names) is stored as variable-length UTF-8, Zarr v3's ``string`` type: numpy's
+    fixed-width unicode has no Zarr v3 specification, and other readers may refuse it.
+    Metadata are not consolidated (no part of Zarr v3 either). ``to_zarr`` is passed on
+    (``compute=False`` writes the metadata only, for a store filled region by region).
+    """
+    path = Path(path)
+    text = {name: var.astype(object) for name, var in ds.variables.items()
+            if var.dtype.kind == "U"}
+    ds = ds.assign_coords({k: v for k, v in text.items() if k in ds.coords}).assign(
+        {k: v for k, v in text.items() if k not in ds.coords})
+    tmp = path.with_name(path.name + ".partial")
+    shutil.rmtree(tmp, ignore_errors=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    ds.to_zarr(tmp, mode="w", zarr_format=3, consolidated=False, **to_zarr)
+    shutil.rmtree(path, ignore_errors=True)
+    tmp.rename(path)
+
+
 @dataclass(frozen=True)
 class Output:
     """One result variable of a sweep: a value per grid point."""
@@ -88,14 +111,7 @@ class SweepStore:
                                            coords.items()},
                         attrs={**{k: _attr(v) for k, v in attrs.items()}, "fingerprint": key,
                                "block_shape": list(map(int, block_shape))})
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(self.path.name + ".creating")
-        if tmp.exists():
-            shutil.rmtree(tmp)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ds.to_zarr(tmp, compute=False, mode="w", zarr_format=3, consolidated=False)
-        tmp.rename(self.path)  # a half-created store is never mistaken for a sweep
+        write_dataset(ds, self.path, compute=False)  # never a half-created store
         return set()
 
     def _read_attrs(self) -> dict:

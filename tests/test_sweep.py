@@ -133,6 +133,44 @@ def test_store_resumes_skips_finished_and_redoes_partial_chunks(tmp_path):
     assert fresh.chunks_computed == list(range(5))
 
 
+def test_datasets_are_written_atomically_with_text_as_zarr_v3_strings(tmp_path, monkeypatch):
+    """Every store (sweep, bench cache, stability map) is written by ``write_dataset``: text
+    labels become Zarr v3's specified ``string`` type (numpy's fixed-width unicode has no
+    Zarr v3 spec: other readers may refuse it), and a write that fails leaves no store."""
+    import warnings
+
+    import xarray as xr
+    import zarr
+
+    from snn_antenna.store import write_dataset
+
+    ds = xr.Dataset({"status": (("method", "k_dt"), np.arange(6).reshape(2, 3)),
+                     "label": ("method", np.array(["fine", "blown"]))},
+                    coords={"method": ["euler", "rk2"], "k_dt": [0.1, 1.0, 10.0]})
+    path = tmp_path / "map.zarr"
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")        # no "no Zarr V3 specification" warning
+        write_dataset(ds, path)
+    group = zarr.open_group(path, mode="r")
+    assert group.metadata.zarr_format == 3
+    assert {group["method"].metadata.data_type.to_json(zarr_format=3),
+            group["label"].metadata.data_type.to_json(zarr_format=3)} == {"string"}
+    back = xr.open_zarr(path, consolidated=False).load()
+    assert list(back.method.values) == ["euler", "rk2"] and list(back.label.values) == \
+        ["fine", "blown"]
+    assert np.array_equal(back.status.values, ds.status.values)
+
+    # A write that dies half way leaves the finished store as it was and no half store.
+    def broken(self, *args, **kwargs):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(xr.Dataset, "to_zarr", broken)
+    with pytest.raises(OSError):
+        write_dataset(ds.assign(status=ds.status * 0), path)
+    assert np.array_equal(xr.open_zarr(path, consolidated=False).status.values,
+                          ds.status.values)
+
+
 # -- the neuron evaluator ---------------------------------------------------------------------
 def euler_reference(p, sweep: NeuronSweep):
     """Hand-written Euler loop of the same equations and coder input (independent of Brian2)."""

@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
-
 from .. import spec as specs
 from ..network import ResonatorArray
 from ..preprocess import make_chain

@@ -26,13 +26,14 @@ import numpy as np
 
 from .. import accuracy, neurons, reference
 from .. import spec as specs
-from ..errors import NumericalInstabilityError, SpecError, check
-from ..network import ArrayResult, ResonatorArray, rate_map
+from ..errors import NumericalInstabilityError, check
+from ..network import ResonatorArray, rate_map
 from ..preprocess import make_chain
 from ..readout import ContactDetector
 from ..report import Report
 from ..signals import Recording
 from ..stimuli import RobotScene, scene_from_spec, square
+from ..store import write_dataset
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
             "stability", "reference", "match")
@@ -632,7 +633,7 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         sweep.methods, np.geomspace(stab.k_dt_min, stab.k_dt_max, stab.n_k_dt),
         np.asarray(stab.drives, float), b=net.get("b", 0.26), model_ms=stab.model_ms,
         rate_tolerance=stab.rate_tolerance)
-    smap.to_zarr(out_dir / "stability_map.zarr", mode="w")
+    write_dataset(smap, out_dir / "stability_map.zarr")
 
     summary = _summarise(rows, ref_rows, recommendations, convergence, smap, scenes, net,
                          sweep, time.perf_counter() - t_start)
