@@ -257,7 +257,8 @@ class ThresholdSweep:
     spec: dict
 
     def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        parts = build(self.spec)
+        codings = Codings(self.spec)   # builds (re-checks) the parts here, on the worker
+        parts = codings.parts
         n = len(points["threshold_g"])
         items, order = [], []
         pairs = np.stack([points["speed_cm_s"], points["scene"]], axis=1)
@@ -268,7 +269,7 @@ class ThresholdSweep:
                                             threshold=points["threshold_g"][idx][None, :])
             items += [(rec, coded[:, j]) for j in range(len(idx))]
             order += list(idx)
-        scores, _ = Codings(self.spec).run(items)
+        scores, _ = codings.run(items)
         out = {name: np.zeros(n, dtype=o.dtype) for name, o in SWEEP_OUTPUTS.items()}
         for i, sc in zip(order, scores):
             for name in ("tp", "fp", "misses", "duplicates", "unscored_contacts", "minutes"):
