@@ -14,6 +14,7 @@ import os
 import platform
 import sys
 import tempfile
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -81,14 +82,94 @@ def provenance(spec: dict, target: str | None = None) -> dict:
     }
 
 
-class Report:
-    """Collect sections, tables and figures; ``write`` produces the folder."""
+@dataclass
+class Calibrated:
+    """A number the generator or a default was *set* to match: never a result.
 
-    def __init__(self, out_dir: str | Path, title: str):
+    ``value`` is what the model gives after calibration, ``target`` the number it was tuned
+    to, ``source`` where the target comes from (a section of docs/reference.md), ``how`` the
+    knob that was turned.
+    """
+    quantity: str
+    value: Any
+    target: Any
+    unit: str = ""
+    source: str = ""
+    how: str = ""
+
+
+@dataclass
+class Predicted:
+    """A number the model produced out of sample; only these are compared with the paper.
+
+    ``paper`` is the paper's value for the same quantity (None when the paper has none),
+    ``interval`` a confidence interval of ``value`` (or of a paired difference) over ``n``
+    seeds or splits, ``note`` what a reader needs to weigh it (e.g. "not resolved").
+    """
+    quantity: str
+    value: Any
+    unit: str = ""
+    paper: Any = None
+    source: str = ""
+    interval: tuple | None = None
+    n: int | None = None
+    note: str = ""
+
+
+class Report:
+    """Collect sections, tables and figures; ``write`` produces the folder.
+
+    Every report lists what it was calibrated to apart from what it predicts
+    (``calibrated`` / ``predicted``); a quantity may not be both. ``quick`` marks a run of
+    the spec's small profile with a banner, with ``quick_note`` saying what is too small to
+    compare.
+    """
+
+    def __init__(self, out_dir: str | Path, title: str, quick: bool = False,
+                 quick_note: str = "quick profile: too small to compare with the paper"):
         self.out_dir = Path(out_dir)
         self.title = title
+        self.quick = quick
+        self.quick_note = quick_note
         self._parts: list[str] = []
         self.figures: list[str] = []
+        self._calibrated: list[Calibrated] = []
+        self._predicted: list[Predicted] = []
+
+    def calibrated(self, *items: Calibrated) -> None:
+        self._calibrated.extend(items)
+        self._check_apart()
+
+    def predicted(self, *items: Predicted) -> None:
+        self._predicted.extend(items)
+        self._check_apart()
+
+    def _check_apart(self) -> None:
+        both = {c.quantity for c in self._calibrated} & {p.quantity for p in self._predicted}
+        if both:
+            raise ValueError(f"{sorted(both)} listed as calibrated and as predicted: a "
+                             "calibration target cannot be shown as a reproduction")
+
+    def _provenance_sections(self) -> str:
+        parts = []
+        if self._calibrated:
+            rows = [{"quantity": c.quantity, "model": c.value, "target": c.target,
+                     "unit": c.unit, "source": c.source, "tuned by": c.how}
+                    for c in self._calibrated]
+            parts.append("<h2>Calibrated to</h2><p>The generator or a default was set to "
+                         "match these numbers; they are inputs, not results.</p>"
+                         + _table_html(rows))
+        if self._predicted:
+            rows = []
+            for p in self._predicted:
+                ci = p.interval
+                rows.append({"quantity": p.quantity, "model": p.value, "unit": p.unit,
+                             "95 % interval": (f"{_fmt(ci[0])} to {_fmt(ci[1])}"
+                                               if ci is not None else ""),
+                             "n": p.n, "paper": p.paper, "source": p.source, "note": p.note})
+            parts.append("<h2>Predicted</h2><p>Produced out of sample; only these are "
+                         "compared with the paper.</p>" + _table_html(rows))
+        return "".join(parts)
 
     def text(self, paragraph: str) -> None:
         self._parts.append(f"<p>{html.escape(paragraph)}</p>")
@@ -97,14 +178,8 @@ class Report:
         self._parts.append(f"<h2>{html.escape(text)}</h2>")
 
     def table(self, rows: list[dict], caption: str = "") -> None:
-        if not rows:
-            return
-        cols = list(rows[0])
-        head = "".join(f"<th>{html.escape(str(c))}</th>" for c in cols)
-        body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols)
-                       + "</tr>" for r in rows)
-        cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-        self._parts.append(f"<table>{cap}<tr>{head}</tr>{body}</table>")
+        if rows:
+            self._parts.append(_table_html(rows, caption))
 
     def figure(self, fig, name: str, caption: str = "") -> Path:
         """Save a matplotlib figure as NAME.png and embed it in the page."""
@@ -126,10 +201,16 @@ class Report:
         summary = dict(summary)
         summary["provenance"] = provenance(spec, target)
         summary["figures"] = list(self.figures)
+        summary["quick"] = bool(self.quick)
+        summary["calibrated"] = [asdict(c) for c in self._calibrated]
+        summary["predicted"] = [asdict(p) for p in self._predicted]
         payload = json.dumps(_jsonable(summary), indent=2, allow_nan=False)
         atomic_write(self.out_dir / "summary.json", payload)
         spec_html = html.escape(json.dumps(_jsonable(spec), indent=2))
         prov = summary["provenance"]
+        banner = (f'<p class="quick-banner" style="background:#fff3cd;border:1px solid #e0b000;'
+                  f'padding:.6em 1em"><strong>{html.escape(self.quick_note)}</strong></p>'
+                  if self.quick else "")
         page = f"""<!doctype html>
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(self.title)}</title>
 <style>body{{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
@@ -138,6 +219,7 @@ padding:.25em .6em;text-align:right}} th{{background:#f3f3f3}} img{{max-width:10
 figcaption{{color:#555;font-size:.9em}} pre{{background:#f7f7f7;padding:1em;overflow:auto}}
 </style></head><body>
 <h1>{html.escape(self.title)}</h1>
+{banner}{self._provenance_sections()}
 {''.join(self._parts)}
 <h2>Provenance</h2>
 <p>snn-antenna {html.escape(prov['snn_antenna_version'])}, Brian2
@@ -172,6 +254,15 @@ def draw_rate_map(ax, rates):
     ax.minorticks_off()
     ax.set_ylabel("neuron (Hz)")
     return mesh
+
+
+def _table_html(rows: list[dict], caption: str = "") -> str:
+    cols = list(dict.fromkeys(c for r in rows for c in r))
+    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in cols)
+    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols)
+                   + "</tr>" for r in rows)
+    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+    return f"<table>{cap}<tr>{head}</tr>{body}</table>"
 
 
 def _fmt(value) -> str:
