@@ -137,15 +137,16 @@ class Report:
         self._predicted: list[Predicted] = []
 
     def calibrated(self, *items: Calibrated) -> None:
+        self._check_apart(items, self._predicted)
         self._calibrated.extend(items)
-        self._check_apart()
 
     def predicted(self, *items: Predicted) -> None:
+        self._check_apart(items, self._calibrated)
         self._predicted.extend(items)
-        self._check_apart()
 
-    def _check_apart(self) -> None:
-        both = {c.quantity for c in self._calibrated} & {p.quantity for p in self._predicted}
+    @staticmethod
+    def _check_apart(new, other) -> None:
+        both = {i.quantity for i in new} & {o.quantity for o in other}
         if both:
             raise ValueError(f"{sorted(both)} listed as calibrated and as predicted: a "
                              "calibration target cannot be shown as a reproduction")
