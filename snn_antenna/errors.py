@@ -39,6 +39,22 @@ class NumericalInstabilityError(ArithmeticError):
                             self.safe_dt_ms)
 
 
+class PipelineError(RuntimeError):
+    """A live run (stream, replay, closed loop) stopped because a stage of its own failed.
+
+    Raised in place of whatever escaped a Brian2 network operation that is not already one of
+    the project's errors, so the user sees which stage failed and why, never Brian2's "unexpected
+    error, please report" message; the original exception is the ``__cause__``.
+    """
+
+    def __init__(self, stage: str, reason: str):
+        self.stage, self.reason = stage, reason
+        super().__init__(f"{stage} failed: {reason}")
+
+    def __reduce__(self):
+        return type(self), (self.stage, self.reason)
+
+
 def check(condition: bool, field: str, value, accepted: str) -> None:
     """Raise SpecError(field, value, accepted) unless condition holds."""
     if not condition:

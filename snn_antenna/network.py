@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 
 from . import neurons
-from .errors import SpecError, check
+from .errors import PipelineError, SpecError, check
 from .signals import Recording, validate_samples
 
 MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice
@@ -150,20 +150,25 @@ class ResonatorArray:
         counts = group.variables["spike_count"].get_value()
         feed = _Feed(chunks)
         stats = StreamStats()
+        failed: list[BaseException] = []
 
         # when="start": the new sample is in place before this step's integration, exactly
         # as the TimedArray of the offline form switches value at the sample boundary.
         # No ``t`` argument: Brian2 would build a Quantity for it on every call (~1 kHz).
         @b2.network_operation(dt=b2.second / rate_hz, when="start")
         def next_sample():
-            # Every step before this one has been integrated: a window that ends at this
-            # sample boundary is complete.
-            if stats.samples and stats.samples % samples_per_window == 0:
-                stats.windows += 1
-                if on_window is not None:
-                    on_window(stats.samples / rate_hz - window_s, counts.copy())
-                counts[:] = 0
-            x = feed.next()
+            try:
+                # Every step before this one has been integrated: a window that ends at this
+                # sample boundary is complete.
+                if stats.samples and stats.samples % samples_per_window == 0:
+                    stats.windows += 1
+                    if on_window is not None:
+                        on_window(stats.samples / rate_hz - window_s, counts.copy())
+                    counts[:] = 0
+                x = feed.next()
+            except Exception as exc:     # re-raised below, once Brian2 has stopped cleanly
+                failed.append(exc)
+                x = None
             if x is None:
                 net.stop()
                 return
@@ -175,7 +180,20 @@ class ResonatorArray:
         net.run(max_duration_s * b2.second, namespace={})
         stats.wall_s = time.perf_counter() - t0
         stats.simulated_s = stats.samples / rate_hz
+        if failed:
+            raise _as_project_error(failed[0], stats.samples / rate_hz)
         return stats
+
+
+def _as_project_error(exc: Exception, t_s: float) -> Exception:
+    """The project's own errors (bad input, a lost port, instability) pass unchanged; anything
+    else from the source or the window callback becomes a PipelineError naming where it broke."""
+    if type(exc).__module__.startswith("snn_antenna") or isinstance(exc, SpecError):
+        return exc
+    error = PipelineError("the live pipeline", f"{type(exc).__name__} at {t_s:.2f} s of "
+                                               f"input: {exc}")
+    error.__cause__ = exc
+    return error
 
 
 class _Feed:

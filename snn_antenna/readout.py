@@ -13,7 +13,7 @@ import numpy as np
 import xarray as xr
 
 from . import antenna
-from .errors import check
+from .errors import SpecError, check
 
 
 def dominant_hz(rates: xr.DataArray, tie: float = 0.9) -> xr.DataArray:
@@ -82,9 +82,23 @@ class ContactDetector:
         low = rates.where(~above, 0).sum("neuron_hz")
         return (high >= self.min_rate_hz) & (high > low)
 
-    def detect(self, rates: xr.DataArray) -> list[ContactEstimate]:
-        hit = self.contact_windows(rates).values
-        window = float(rates.attrs.get("window_s", np.diff(rates.window_s.values[:2])[0]))
+    def detect(self, rates: xr.DataArray, window_s: float | None = None) -> list[ContactEstimate]:
+        """Contact episodes of a rate map, first to last.
+
+        Total over every rate map with dims ``neuron_hz`` and ``window_s``: no window, one
+        window, gaps between windows, a contact in the first or the last window. The window's
+        width comes from ``window_s``, else ``rates.attrs["window_s"]`` (``rate_map`` sets it),
+        else the spacing of the first two windows; a single window with none of these has no
+        knowable end and is refused.
+        """
+        check(isinstance(rates, xr.DataArray) and set(rates.dims) == {"neuron_hz", "window_s"},
+              "rates", type(rates).__name__ if not isinstance(rates, xr.DataArray)
+              else f"DataArray with dims {rates.dims}",
+              "a rate map (DataArray with dims neuron_hz and window_s, e.g. network.rate_map)")
+        check(bool(np.all(np.isfinite(rates.values))) and not bool(np.any(rates.values < 0)),
+              "rates", "non-finite or negative rates", "finite rates >= 0 Hz")
+        window = self._window_width(rates, window_s)
+        hit = self.contact_windows(rates).transpose("window_s").values
         starts = rates.window_s.values
         episodes, current, gap = [], [], 0
         for j, h in enumerate(hit):
@@ -108,6 +122,25 @@ class ContactDetector:
                                        frequency_hz=f,
                                        distance_cm=float(antenna.distance_from_low_hz(f))))
         return out
+
+    @staticmethod
+    def _window_width(rates: xr.DataArray, window_s: float | None) -> float:
+        # Only where it is needed is the coordinate spacing read: a one-window map has none.
+        if window_s is None:
+            window_s = rates.attrs.get("window_s")
+        if window_s is None and rates.sizes["window_s"] >= 2:
+            window_s = float(np.diff(rates.window_s.values[:2])[0])
+        if window_s is None:
+            if rates.sizes["window_s"] == 0:
+                return 0.0            # nothing to end: no episode can be found
+            raise SpecError("window_s", None, "the window width in s (pass window_s=, or a "
+                                              "rate map with attrs['window_s'] as "
+                                              "network.rate_map makes): one window has no "
+                                              "spacing to read it from")
+        check(isinstance(window_s, (int, float, np.floating, np.integer))
+              and not isinstance(window_s, bool) and np.isfinite(window_s) and window_s > 0,
+              "window_s", window_s, "a window width > 0 s")
+        return float(window_s)
 
 
 def band_activity_hz(rates: xr.DataArray, t0_s: float, t1_s: float,

@@ -15,11 +15,12 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import SpecError
+from ..errors import NumericalInstabilityError, PipelineError, SpecError
 from .protocol import WIRE_FORMATS
 from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
 
-EXIT_BAD_INPUT, EXIT_PORT = 2, 1
+EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
+EXIT_FAILED = 1                         # a stage of the pipeline itself failed
 
 
 def add_subcommands(subparsers) -> None:
@@ -105,6 +106,14 @@ def _guarded(command):
         except PortError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_PORT
+        except NumericalInstabilityError as exc:
+            print(f"numerical instability: {exc}", file=sys.stderr)
+            return EXIT_INSTABILITY
+        except PipelineError as exc:
+            where = getattr(args, "out", None)
+            kept = f" (the recording in {where} is kept, marked incomplete)" if where else ""
+            print(f"error: {exc}{kept}", file=sys.stderr)
+            return EXIT_FAILED
     run.__name__ = command.__name__
     run.__doc__ = command.__doc__
     return run
@@ -172,7 +181,7 @@ def recording_session(args, extra_meta: dict | None = None):
     except SpecError:
         source.stop()
         raise
-    status, message = "ok", ""
+    status, message, complete = "ok", "", True
     try:
         yield source, recorder, stop
         if stop.is_set():
@@ -180,9 +189,15 @@ def recording_session(args, extra_meta: dict | None = None):
     except PortError as exc:
         status, message = "port-error", str(exc)
         raise
+    except BaseException as exc:        # the pipeline failed: never "complete", "ok"
+        status, complete = "failed", False
+        message = str(exc) or type(exc).__name__
+        if isinstance(exc, KeyboardInterrupt):
+            status, message = "interrupted", "interrupted"
+        raise
     finally:
         source.stop()
-        recorder.close(status, message)
+        recorder.close(status, message, complete=complete)
         print(f"\nrecording in {args.out}: {format_counts(recorder.counts)}", file=sys.stderr,
               flush=True)
 

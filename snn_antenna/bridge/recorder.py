@@ -115,14 +115,16 @@ class Recorder:
             self._write_meta()
             self._last_meta = now
 
-    def close(self, status: str = "ok", message: str = "") -> None:
+    def close(self, status: str = "ok", message: str = "", complete: bool = True) -> None:
+        """Flush and close; ``complete=False`` records that the session ended in a failure
+        (``status`` and ``message`` say which), although every byte received is kept."""
         if self._raw.closed:
             return
         for f in (self._raw, self._samples):
             f.flush()
             os.fsync(f.fileno())
             f.close()
-        self.meta.update(status=status, message=message, complete=True,
+        self.meta.update(status=status, message=message, complete=complete,
                          stopped_unix_s=time.time())
         self._write_meta()
 
