@@ -10,10 +10,13 @@ import base64
 import datetime as _dt
 import html
 import json
+import logging
 import os
 import platform
+import re
 import sys
 import tempfile
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -22,13 +25,18 @@ import numpy as np
 
 
 def atomic_write(path: str | Path, data: bytes | str) -> None:
-    """Write to a temporary file beside ``path`` and rename it into place."""
+    """Write to a temporary file beside ``path`` and rename it into place.
+
+    The file gets the mode any new file would get (0644 under the usual umask 022):
+    ``mkstemp`` creates its file 0600, which would keep a shared report from its readers.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     mode = "wb" if isinstance(data, bytes) else "w"
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
-        with os.fdopen(fd, mode) as f:
+        os.fchmod(fd, 0o666 & ~_umask())
+        with os.fdopen(fd, mode, encoding=None if isinstance(data, bytes) else "utf-8") as f:
             f.write(data)
             f.flush()
             os.fsync(f.fileno())
@@ -39,7 +47,22 @@ def atomic_write(path: str | Path, data: bytes | str) -> None:
         raise
 
 
+def _umask() -> int:
+    """The process's umask, read without changing it where the system says (Linux)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("Umask:"):
+                return int(line.split()[1], 8)
+    except OSError:
+        pass
+    mask = os.umask(0o022)   # elsewhere: set and restore at once
+    os.umask(mask)
+    return mask
+
+
 def _jsonable(obj: Any):
+    if hasattr(obj, "as_dict") and callable(obj.as_dict):   # stats.Interval and the like
+        return _jsonable(obj.as_dict())
     if isinstance(obj, dict):
         return {str(k): _jsonable(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -123,6 +146,10 @@ class Report:
     (``calibrated`` / ``predicted``); a quantity may not be both. ``quick`` marks a run of
     the spec's small profile with a banner, with ``quick_note`` saying what is too small to
     compare.
+
+    Pass numbers, dicts and lists as they are: the report formats them (significant figures,
+    nested rows, human column names beside the summary.json key). ``fmt`` does the same for
+    numbers inside a sentence.
     """
 
     def __init__(self, out_dir: str | Path, title: str, quick: bool = False,
@@ -164,16 +191,20 @@ class Report:
             rows = []
             for p in self._predicted:
                 ci = p.interval
+                interval = ""
+                if ci is not None:
+                    interval = f"{fmt(ci[0])} to {fmt(ci[1])}"
+                    if p.n is not None:
+                        interval += f" (n = {p.n})"
                 rows.append({"quantity": p.quantity, "model": p.value, "unit": p.unit,
-                             "95 % interval": (f"{_fmt(ci[0])} to {_fmt(ci[1])}"
-                                               if ci is not None else ""),
-                             "n": p.n, "paper": p.paper, "source": p.source, "note": p.note})
+                             "95 % interval": interval, "n": p.n, "paper": p.paper,
+                             "source": p.source, "note": p.note})
             parts.append("<h2>Predicted</h2><p>Produced out of sample; only these are "
                          "compared with the paper.</p>" + _table_html(rows))
         return "".join(parts)
 
-    def text(self, paragraph: str) -> None:
-        self._parts.append(f"<p>{html.escape(paragraph)}</p>")
+    def text(self, paragraph) -> None:
+        self._parts.append(f"<p>{html.escape(fmt(paragraph))}</p>")
 
     def heading(self, text: str) -> None:
         self._parts.append(f"<h2>{html.escape(text)}</h2>")
@@ -184,19 +215,34 @@ class Report:
 
     def figure(self, fig, name: str, caption: str = "") -> Path:
         """Save a matplotlib figure as NAME.png and embed it in the page."""
+        import io
+
         import matplotlib.pyplot as plt
 
         path = self.out_dir / f"{name}.png"
-        self.out_dir.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path.with_suffix(".png.tmp"), dpi=110, bbox_inches="tight", format="png")
-        os.replace(path.with_suffix(".png.tmp"), path)
+        buffer = io.BytesIO()
+        fig.savefig(buffer, dpi=110, bbox_inches="tight", format="png")
         plt.close(fig)
-        data = base64.b64encode(path.read_bytes()).decode()
+        atomic_write(path, buffer.getvalue())
+        data = base64.b64encode(buffer.getvalue()).decode()
         self._parts.append(f'<figure><img alt="{html.escape(name)}" '
                            f'src="data:image/png;base64,{data}"/>'
-                           f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+                           f"<figcaption>{html.escape(fmt(caption))}</figcaption></figure>")
         self.figures.append(path.name)
         return path
+
+    def _banner(self) -> str:
+        if not self.quick:
+            return ""
+        note = self.quick_note
+        if note.lower().startswith("quick profile:"):    # the banner's title says it already
+            note = note.split(":", 1)[1].strip()
+            note = note[:1].upper() + note[1:]
+        return ('<div class="quick-banner" role="note"><strong>Quick profile</strong> '
+                f"<span>{html.escape(note)}</span><small>This page was made with "
+                "<code>--quick</code>: the spec's <code>[quick]</code> profile, a small run "
+                "that checks the whole pipeline in seconds. Its numbers are not results; run "
+                "the study without <code>--quick</code> for those.</small></div>")
 
     def write(self, summary: dict, spec: dict, target: str | None = None) -> dict:
         summary = dict(summary)
@@ -209,23 +255,21 @@ class Report:
         atomic_write(self.out_dir / "summary.json", payload)
         spec_html = html.escape(json.dumps(_jsonable(spec), indent=2))
         prov = summary["provenance"]
-        banner = (f'<p class="quick-banner" style="background:#fff3cd;border:1px solid #e0b000;'
-                  f'padding:.6em 1em"><strong>{html.escape(self.quick_note)}</strong></p>'
-                  if self.quick else "")
+        title = html.escape(self.title + (" (quick profile)" if self.quick else ""))
         page = f"""<!doctype html>
-<html lang="en"><head><meta charset="utf-8"><title>{html.escape(self.title)}</title>
-<style>body{{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
-color:#222}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;
-padding:.25em .6em;text-align:right}} th{{background:#f3f3f3}} img{{max-width:100%}}
-figcaption{{color:#555;font-size:.9em}} pre{{background:#f7f7f7;padding:1em;overflow:auto}}
-</style></head><body>
+<html lang="en"><head><meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>{title}</title>
+<style>{_CSS}</style></head><body>
 <h1>{html.escape(self.title)}</h1>
-{banner}{self._provenance_sections()}
+{self._banner()}{self._provenance_sections()}
 {''.join(self._parts)}
 <h2>Provenance</h2>
 <p>snn-antenna {html.escape(prov['snn_antenna_version'])}, Brian2
 {html.escape(prov['brian2_version'])} (target {html.escape(prov['brian2_target'])}),
-seed {prov['seed']}, Python {html.escape(prov['python'])}, created {prov['created']}.</p>
+seed {prov['seed']}, Python {html.escape(prov['python'])}, created {prov['created']}.
+Every number on this page is in <code>summary.json</code> beside it, under the key shown
+below each column name.</p>
 <details><summary>Resolved spec</summary><pre>{spec_html}</pre></details>
 </body></html>
 """
@@ -233,11 +277,178 @@ seed {prov['seed']}, Python {html.escape(prov['python'])}, created {prov['create
         return summary
 
 
-def draw_rate_map(ax, rates):
+# The page never grows wider than its column: wide tables scroll inside their own box,
+# images shrink to fit, long words break.
+_CSS = """
+body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
+color:#222;line-height:1.4;overflow-wrap:anywhere}
+h1{font-size:1.6em} h2{margin-top:1.6em;border-bottom:1px solid #ddd}
+.quick-banner{background:#fff3cd;border:2px solid #e0a800;border-left-width:.6em;
+border-radius:4px;padding:.7em 1em;margin:1em 0}
+.quick-banner strong{display:block;font-size:1.15em;color:#7a5200;text-transform:uppercase;
+letter-spacing:.04em} .quick-banner span{display:block;font-weight:600;margin:.2em 0}
+.quick-banner small{display:block;color:#5c4a00}
+.table-scroll{max-width:100%;overflow-x:auto;margin:1em 0}
+table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal}
+caption{caption-side:top;text-align:left;color:#555;padding:.3em 0}
+td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right;vertical-align:top}
+th{background:#f3f3f3;font-weight:600}
+th .key{display:block;font-weight:normal;font-size:.75em;color:#888;font-family:monospace;
+overflow-wrap:anywhere}
+td.text{text-align:left} td.num{white-space:nowrap}
+table.nested{font-size:1em;margin:0;width:100%} table.nested td,table.nested th{border:0;
+border-bottom:1px solid #eee;padding:.05em .4em} table.nested th{background:none;
+text-align:left;color:#555;font-weight:normal;white-space:nowrap}
+img{max-width:100%;height:auto} figure{margin:1.2em 0}
+figcaption{color:#555;font-size:.9em}
+pre{background:#f7f7f7;padding:1em;overflow:auto;overflow-wrap:normal}
+"""
+
+
+# -- formatting -------------------------------------------------------------------------------
+# Units a key may end with (``distance_rmse_mm``), longest first; the words between are the
+# name. Keys that are already words (with spaces) are left as they are.
+_UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per unit k",
+          ("mm",): "mm", ("cm",): "cm", ("m",): "m", ("ms",): "ms", ("us",): "µs",
+          ("s",): "s", ("hz",): "Hz", ("khz",): "kHz", ("g",): "g", ("pct",): "%",
+          ("percent",): "%", ("db",): "dB", ("mv",): "mV", ("deg",): "°", ("j",): "J",
+          ("mb",): "MB", ("gb",): "GB"}
+_WORDS = {"f1": "F1", "rmse": "RMSE", "mae": "MAE", "cpu": "CPU", "snn": "SNN", "svm": "SVM",
+          "nmf": "NMF", "fwhm": "FWHM", "ci": "CI", "adc": "ADC", "id": "ID", "dt": "dt",
+          "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP"}
+_NAMES = {"cpu_s": "CPU time (s)", "wall_s": "wall time (s)", "compile_s": "compile time (s)",
+          "k_dt": "k·dt", "n": "n", "p_value": "p value"}
+
+
+def label(key) -> str:
+    """A column name a reader understands: ``distance_rmse_mm`` -> "distance RMSE (mm)"."""
+    key = str(key)
+    if key in _NAMES:
+        return _NAMES[key]
+    if " " in key or "_" not in key:
+        return key
+    words = key.split("_")
+    unit = ""
+    for suffix, name in sorted(_UNITS.items(), key=lambda kv: -len(kv[0])):
+        if len(words) > len(suffix) and tuple(w.lower() for w in words[-len(suffix):]) == suffix:
+            unit, words = name, words[:-len(suffix)]
+            break
+    text = " ".join(_WORDS.get(w.lower(), w) for w in words)
+    return f"{text} ({unit})" if unit else text
+
+
+def unit_of(key) -> str:
+    """The unit a key's name ends with ("" when none): ``rate_hz`` -> "Hz"."""
+    text = label(key)
+    return text[text.rfind("(") + 1:-1] if text.endswith(")") and "(" in text else ""
+
+
+def fmt(value, unit: str = "", digits: int = 4) -> str:
+    """``value`` as a reader wants it in a sentence or a cell: numbers to ``digits``
+    significant figures (plus ``unit``), dicts as "name = value" pairs, lists inline,
+    intervals with their n. Never Python's repr of a dict or a float's 17 digits."""
+    text = _fmt(value, digits)
+    return f"{text} {unit}" if unit and text and _is_number(value) else text
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) \
+        and not isinstance(value, (bool, np.bool_))
+
+
+def _fmt(value, digits: int = 4) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (bool, np.bool_)):
+        return "yes" if value else "no"
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return _number(float(value), digits)
+    if hasattr(value, "as_dict") and callable(value.as_dict):
+        value = value.as_dict()
+    if isinstance(value, dict):
+        special = _summary_statistic(value, digits)
+        if special is not None:
+            return special
+        return ", ".join(_pair(k, v, digits) for k, v in value.items())
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if isinstance(value, (list, tuple, set)):
+        items = list(value)
+        shown = [_fmt(v, digits) for v in items[:_MAX_ITEMS]]
+        more = f", … ({len(items)} values)" if len(items) > _MAX_ITEMS else ""
+        if any(isinstance(v, (dict, list, tuple)) for v in items):
+            return "; ".join(shown) + more
+        return ", ".join(shown) + more
+    return str(value)
+
+
+_MAX_ITEMS = 12
+
+
+def _pair(key, value, digits) -> str:
+    unit = unit_of(key)
+    name = label(key)
+    if unit:
+        name = name[:name.rfind("(")].rstrip()
+        return f"{name} = {fmt(value, unit, digits)}"
+    return f"{name} = {_fmt(value, digits)}"
+
+
+def _number(x: float, digits: int) -> str:
+    """``digits`` significant figures, trailing zeros dropped; powers of ten as ×10ⁿ."""
+    if not np.isfinite(x):
+        return "n/a"
+    if x == 0:
+        return "0"
+    exponent = int(np.floor(np.log10(abs(x))))
+    if -4 <= exponent < 6:
+        decimals = max(digits - 1 - exponent, 0)
+        text = f"{round(x, decimals):.{decimals}f}"
+        if "." in text:
+            text = text.rstrip("0").rstrip(".")
+        return "0" if text in ("-0", "") else text
+    mantissa = f"{x / 10 ** exponent:.{digits - 1}f}".rstrip("0").rstrip(".")
+    if mantissa in ("10", "-10"):      # rounding carried into the next power
+        mantissa, exponent = mantissa[:-1], exponent + 1
+    return f"{mantissa}×10{str(exponent).translate(_SUPERSCRIPT)}"
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def _summary_statistic(d: dict, digits: int) -> str | None:
+    """An interval (stats.Interval.as_dict) or a mean ± sd: with n beside it, always."""
+    if {"mean", "low", "high"} <= set(d):
+        n = d.get("n")
+        level = d.get("level", 0.95)
+        text = (f"{_fmt(d['mean'], digits)} ({_fmt(100 * level, 3)} % CI "
+                f"{_fmt(d['low'], digits)} to {_fmt(d['high'], digits)}, "
+                f"n = {_fmt(n)}")
+        if d.get("verdict"):
+            text += f"; {d['verdict']}"
+        return text + ")"
+    spread = next((k for k in ("std", "sd", "sem") if k in d), None)
+    if "mean" in d and spread is not None:
+        n = d.get("n", d.get("n_seeds"))
+        rest = {k: v for k, v in d.items() if k not in ("mean", spread, "n", "n_seeds")}
+        text = (f"{_fmt(d['mean'], digits)} ± {_fmt(d[spread], digits)} "
+                f"({'sd' if spread != 'sem' else 'sem'}, "
+                f"{'n = ' + _fmt(n) if n is not None else 'n not given'})")
+        return text + ("; " + _fmt(rest, digits) if rest else "")
+    return None
+
+
+def draw_rate_map(ax, rates, colorbar: bool | str = False, **mesh_kwargs):
     """Draw a rate map (the paper's frequency map, Fig. 10H) on ``ax``; returns the mesh.
 
     Neurons sit on a log-frequency axis, each cell spanning halfway to its neighbours, so a
-    log-spaced array draws as equal rows labelled by frequency.
+    log-spaced array draws as equal rows labelled by frequency. ``colorbar=True`` adds the
+    colour scale ("spike rate (Hz)"; a string replaces that label) beside ``ax``: a rate map
+    without one cannot be read. ``mesh_kwargs`` (e.g. ``vmax``) go to ``pcolormesh``.
     """
     w = float(rates.attrs["window_s"])
     hz = rates.neuron_hz.values
@@ -247,26 +458,173 @@ def draw_rate_map(ax, rates):
     else:
         edges_hz = np.array([hz[0] * 0.9, hz[0] * 1.1])
     edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
-    mesh = ax.pcolormesh(edges_t, edges_hz, rates.values, cmap="magma", shading="flat")
+    mesh = ax.pcolormesh(edges_t, edges_hz, rates.values,
+                         **{"cmap": "magma", "shading": "flat", **mesh_kwargs})
     ax.set_yscale("log")
     ticks = [f for f in (5, 7, 10, 15, 20, 30, 50, 100, 200, 500) if edges_hz[0] <= f <= edges_hz[-1]]
     ax.set_yticks(ticks)
     ax.set_yticklabels([str(f) for f in ticks])
     ax.minorticks_off()
     ax.set_ylabel("neuron (Hz)")
+    if colorbar:
+        rate_colorbar(ax, mesh, colorbar if isinstance(colorbar, str) else "spike rate (Hz)")
     return mesh
+
+
+def rate_colorbar(ax, mesh, label_text: str = "spike rate (Hz)"):
+    """The colour scale of a rate map (or any mesh) beside ``ax``, labelled with its unit."""
+    bar = ax.figure.colorbar(mesh, ax=ax, pad=0.02, fraction=0.05)
+    bar.set_label(label_text)
+    return bar
 
 
 def _table_html(rows: list[dict], caption: str = "") -> str:
     cols = list(dict.fromkeys(c for r in rows for c in r))
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in cols)
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(_fmt(r.get(c)))}</td>" for c in cols)
-                   + "</tr>" for r in rows)
-    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-    return f"<table>{cap}<tr>{head}</tr>{body}</table>"
+    head = "".join(_header_html(c) for c in cols)
+    body = "".join("<tr>" + "".join(_cell_html(r.get(c)) for c in cols) + "</tr>"
+                   for r in rows)
+    cap = f"<caption>{html.escape(fmt(caption))}</caption>" if caption else ""
+    return (f'<div class="table-scroll"><table>{cap}<thead><tr>{head}</tr></thead>'
+            f"<tbody>{body}</tbody></table></div>")
 
 
-def _fmt(value) -> str:
-    if isinstance(value, (float, np.floating)):
-        return f"{value:.4g}"
-    return "" if value is None else str(value)
+def _header_html(key) -> str:
+    name = label(key)
+    key_html = f'<span class="key">{html.escape(str(key))}</span>' if name != str(key) else ""
+    return f"<th>{html.escape(name)}{key_html}</th>"
+
+
+def _cell_html(value) -> str:
+    if hasattr(value, "as_dict") and callable(value.as_dict):
+        value = value.as_dict()
+    if isinstance(value, dict) and _summary_statistic(value, 4) is None and value:
+        rows = "".join(f"<tr><th>{html.escape(label(k))}</th>{_cell_html(v)}</tr>"
+                       for k, v in value.items())
+        return f'<td class="text"><table class="nested">{rows}</table></td>'
+    if isinstance(value, (list, tuple)) and value and all(isinstance(v, dict) for v in value):
+        return f'<td class="text">{_table_html(list(value))}</td>'
+    text = html.escape(_fmt(value))
+    kind = "num" if _is_number(value) else "text"
+    return f'<td class="{kind}">{text}</td>'
+
+
+# -- the run's log ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Expected:
+    """Warnings a study knows it causes: ``patterns`` (regular expressions searched in the
+    message) and ``why`` they are harmless, said once on the terminal instead of the warnings."""
+    why: str
+    patterns: tuple[str, ...]
+
+
+# Warnings the toolkit causes on purpose or harmlessly (use with ``LogFile.expected``).
+UNSTABLE_ON_PURPOSE = Expected(
+    "the stability map runs each integrator past its stable step on purpose; the NaN and "
+    "overflow it meets are what it measures (the red cells)",
+    (r"has NaN, very large values", r"overflow encountered", r"invalid value encountered"))
+FLOAT32_CHECK = Expected(
+    "Brian2 checks float32 state against 1e50, a number float32 cannot hold; the cast in "
+    "that check overflows, the state itself is finite",
+    (r"overflow encountered in cast",))
+CPG_TOKEN_ORDER = Expected(
+    "the CPG's ring writes every neuron's token when one neuron fires; only the token's "
+    "holder fires, so two writes never meet in one step and the order cannot matter",
+    (r"abstract code block that may not be\s+well-defined.*token_post",))
+
+
+class LogFile:
+    """``OUT/run.log``: everything a run says, whole; the terminal gets the same minus the
+    warnings the study declared expected, each explained in one line instead.
+
+        with LogFile(out_dir, log) as log:          # log(...) prints and keeps the line
+            log("[1/3] sweeping")
+            with log.expected(UNSTABLE_ON_PURPOSE):
+                smap = accuracy.stability_map(...)
+
+    Brian2's log messages and Python warnings (which Brian2 routes through ``logging``) are
+    written to the file as they come. A re-run appends, under a line naming its start.
+    """
+
+    def __init__(self, out_dir: str | Path, echo=print, name: str = "run.log"):
+        self.path = Path(out_dir) / name
+        self.echo = echo
+        self._active: list[list] = []    # [Expected, count] of the open ``expected`` blocks
+        self._file = None
+        self._handler = None
+        self._filter = _ExpectedFilter(self)
+        self._consoles: list[logging.Handler] = []
+
+    def __enter__(self) -> "LogFile":
+        from brian2.utils.logger import BrianLogger   # its console handler prints warnings
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "a", encoding="utf-8")
+        try:
+            os.chmod(self.path, 0o666 & ~_umask())
+        except OSError:
+            pass
+        self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "
+                    f"({' '.join(sys.argv)})")
+        logging.captureWarnings(True)
+        self._handler = logging.StreamHandler(self._file)
+        self._handler.setLevel(logging.INFO)
+        self._handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+        for name in ("brian2", "py.warnings"):
+            logging.getLogger(name).addHandler(self._handler)
+        self._consoles = [h for h in (BrianLogger.console_handler, logging.lastResort)
+                          if h is not None]
+        for h in self._consoles:
+            h.addFilter(self._filter)
+        return self
+
+    def __exit__(self, *exc) -> bool:
+        for h in self._consoles:
+            h.removeFilter(self._filter)
+        for name in ("brian2", "py.warnings"):
+            logging.getLogger(name).removeHandler(self._handler)
+        if exc[0] is not None:
+            import traceback
+            self._write("".join(traceback.format_exception(*exc)))
+        self._file.close()
+        return False
+
+    def __call__(self, *message) -> None:
+        text = " ".join(str(m) for m in message)
+        self.echo(text)
+        self._write(text)
+
+    def _write(self, text: str) -> None:
+        if self._file is not None and not self._file.closed:
+            self._file.write(text + "\n")
+            self._file.flush()
+
+    @contextmanager
+    def expected(self, *kinds: Expected):
+        """Within: warnings matching ``kinds`` go to the file only; one line says why."""
+        entries = [[kind, 0] for kind in kinds]
+        self._active.extend(entries)
+        try:
+            yield self
+        finally:
+            for entry in entries:
+                self._active.remove(entry)
+                kind, count = entry
+                if count:
+                    self(f"  ({count} expected warning{'s' * (count > 1)} kept in "
+                         f"{self.path}: {kind.why})")
+
+    def _swallow(self, message: str) -> bool:
+        for entry in self._active:
+            if any(re.search(p, message, re.S) for p in entry[0].patterns):
+                entry[1] += 1
+                return True
+        return False
+
+
+class _ExpectedFilter(logging.Filter):
+    def __init__(self, owner: LogFile):
+        super().__init__()
+        self.owner = owner
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not self.owner._swallow(record.getMessage())

@@ -55,6 +55,36 @@ def write_dataset(ds, path: str | Path, **to_zarr) -> None:
     tmp.rename(path)
 
 
+def read_dataset(path: str | Path):
+    """The zarr store ``path`` (written by ``write_dataset``) as an in-memory xarray Dataset.
+
+    Zarr v3 hands its variable-length strings back as NumPy's ``StringDType``, which the rest
+    of the code (``values.astype(str)``, ``np.isin`` against lists of names, JSON) does not
+    expect: ``StringDType`` cannot even be cast to ``str``. Text is therefore returned as plain
+    NumPy unicode, exactly the type it had before it was written, so a cached store and a
+    freshly built data set are interchangeable. Every reader of a store goes through here.
+    """
+    import xarray as xr
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = xr.open_zarr(Path(path), consolidated=False).load()
+    return plain_text(ds)
+
+
+def plain_text(ds):
+    """``ds`` with every ``StringDType`` variable (coordinates too) as plain NumPy unicode."""
+    text = {name: var.copy(data=np.asarray(var.values.astype(object), dtype=str))
+            for name, var in ds.variables.items() if _is_variable_text(var.dtype)}
+    return ds.assign_coords({k: v for k, v in text.items() if k in ds.coords}).assign(
+        {k: v for k, v in text.items() if k not in ds.coords})
+
+
+def _is_variable_text(dtype) -> bool:
+    string_dtype = getattr(np.dtypes, "StringDType", None)  # numpy >= 2 only
+    return string_dtype is not None and isinstance(dtype, string_dtype)
+
+
 @dataclass(frozen=True)
 class Output:
     """One result variable of a sweep: a value per grid point."""
@@ -144,11 +174,7 @@ class SweepStore:
     # -- reading --------------------------------------------------------------------------------
     def load(self):
         """The sweep as an in-memory xarray Dataset (without the bookkeeping array)."""
-        import xarray as xr
-
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            ds = xr.open_zarr(self.path, consolidated=False).load()
+        ds = read_dataset(self.path)
         ds.attrs = {k: _unattr(v) for k, v in ds.attrs.items()}
         return ds.drop_vars(DONE)
 

@@ -21,7 +21,7 @@ import xarray as xr
 from .. import neurons
 from .. import spec as specs
 from ..errors import check
-from ..report import Report, provenance
+from ..report import Calibrated, LogFile, Predicted, Report, fmt, provenance
 from ..sweep import NEURON_AXES, Grid, NeuronSweep, executor, run_sweep
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
@@ -65,6 +65,12 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         scheduler: str | None = None, log=print) -> dict:
     neuron, grid, settings, reference = build(spec)
     out_dir = Path(out_dir)
+    with LogFile(out_dir, log) as run_log:
+        return _run(spec, out_dir, quick, fresh, scheduler, run_log, neuron, grid, settings,
+                    reference)
+
+
+def _run(spec, out_dir, quick, fresh, scheduler, log, neuron, grid, settings, reference):
     t0 = time.perf_counter()
     log(f"[1/3] sweeping {grid.describe()} ({neuron.engine}, dt {neuron.dt_ms:g} ms, "
         f"{neuron.duration_s:g} s per point) into {out_dir / 'results.zarr'}")
@@ -95,8 +101,10 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         "store": str(store),
     })
     log("[3/3] writing the report")
-    report = Report(out_dir, "snn-antenna tuning sweep: resonator tuning over k, b and I")
+    report = Report(out_dir, "snn-antenna tuning sweep: resonator tuning over k, b and I",
+                    quick=quick, quick_note=quick_note(summary, neuron))
     report.text(spec.get("description", ""))
+    _provenance_rows(report, summary)
     _write_report(report, data, maps, summary, reference)
     summary = report.write(summary, spec, neuron.engine)
     cal = summary.get("calibration")
@@ -107,6 +115,60 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
             f"{neurons.DRIVEN_HZ_PER_K:g} {verdict} (within {cal['tolerance'] * 100:.0f} %)")
     log(f"report in {out_dir}/report.html")
     return summary
+
+
+def quick_note(summary: dict, neuron: NeuronSweep) -> str:
+    """What the quick profile's grid is too small for, from the grid that ran."""
+    grid = summary["grid"]
+    sizes = " × ".join(f"{len(v)} {name}" for name, v in
+                       (("k", grid.get("k", [])), ("b", grid.get("b", [])),
+                        ("I", grid.get("I", [])), ("frequencies", grid.get("input_hz", [])))
+                       if v)
+    step = summary.get("calibration", {}).get("input_hz_step")
+    return (f"quick profile: too small to compare with the paper. A grid of {sizes}, "
+            f"{neuron.duration_s:g} s per point ({neuron.engine}); frequency steps of "
+            f"{fmt(step)} Hz limit the slope to a few per cent, and a b or I with one or two "
+            "values draws no trend.")
+
+
+PAPER_HZ_PER_K = 7.0 / 0.3425   # the paper's 7 Hz neuron has k = 0.3425 (docs/reference.md)
+
+
+def _provenance_rows(report: Report, summary: dict) -> None:
+    """What the sweep calibrates (the foundation's constant) apart from what it predicts."""
+    cal = summary.get("calibration")
+    if not cal or cal["hz_per_k_centroid"] is None:
+        return
+    used = fmt(summary["reference_used"])
+    report.calibrated(Calibrated(
+        "preferred frequency per unit k (tuning-curve centroid)",
+        value=neurons.DRIVEN_HZ_PER_K, target=cal["hz_per_k_centroid"], unit="Hz",
+        source=f"the centroid this sweep measures at {used}; the constant was set "
+               "from the full profile's grid",
+        how="neurons.DRIVEN_HZ_PER_K, the constant the array uses to place its neurons"))
+    report.predicted(Predicted(
+        "preferred frequency per unit k (tuning-curve peak)", value=cal["hz_per_k_peak"],
+        unit="Hz", paper=PAPER_HZ_PER_K,
+        source="paper: the 7 Hz neuron has k = 0.3425 (docs/reference.md)",
+        interval=tuple(cal["hz_per_k_peak_range"]) if cal["hz_per_k_peak_range"] else None,
+        n=cal["responding_k"],
+        note=(f"range of peak/k over the {cal['responding_k']} k values that fired (not a "
+              f"confidence interval); the paper codes with amplitude 0.085 in its scaling, "
+              f"this sweep at {used}; the grid's frequency step is "
+              f"{fmt(cal['input_hz_step'])} Hz")))
+    if "fwhm_vs_I" in summary:
+        w = summary["fwhm_vs_I"]
+        report.predicted(Predicted(
+            "band width (FWHM) at each input amplitude I",
+            value={f"I = {fmt(i)}": f for i, f in zip(w["I"], w["fwhm_hz"])}, unit="Hz",
+            source="the paper's Fig. 8G: the amplitude sets the band's width (no number)",
+            note="widens with I as in the paper" if _increasing(w["fwhm_hz"])
+            else "does not widen monotonically with I here"))
+
+
+def _increasing(values) -> bool:
+    v = [x for x in values if x is not None]
+    return len(v) >= 2 and all(b > a for a, b in zip(v, v[1:]))
 
 
 # -- derived maps -----------------------------------------------------------------------------
@@ -241,16 +303,17 @@ def _write_report(report: Report, data: xr.Dataset, maps: xr.Dataset, summary: d
         report.text(
             f"Least-squares slope through the origin: {cal['hz_per_k_peak']:.3g} Hz per unit k "
             f"from the tuning curves' peaks, {cal['hz_per_k_centroid']:.3g} from their "
-            f"geometric centroids; the foundation uses neurons.DRIVEN_HZ_PER_K = "
-            f"{cal['foundation_driven_hz_per_k']:g} (defined as the centroid), which "
+            f"geometric centroids; the array places its neurons with "
+            f"{cal['foundation_driven_hz_per_k']:g} Hz per unit k (neurons.DRIVEN_HZ_PER_K, "
+            f"defined as the centroid), which "
             f"{'holds' if cal['driven_hz_per_k_holds'] else 'does not hold'} within "
             f"{cal['tolerance'] * 100:.0f} %. Frequency step of the grid: "
             f"{cal['input_hz_step']:.3g} Hz.")
         kp = summary["k_to_peak_hz"]
         report.table([{"k": k, "peak_hz": p, "centroid_hz": c,
-                       "peak/k": (p / k if p else None)}
+                       "peak/k (Hz per unit k)": (p / k if p else None)}
                       for k, p, c in zip(kp["k"], kp["peak_hz"], kp["centroid_hz"])],
-                     f"k_to_peak_hz at {summary['reference_used']}")
+                     f"Preferred frequency per k at {fmt(summary['reference_used'])}")
 
     # tuning curves
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=False)
@@ -282,59 +345,102 @@ def _write_report(report: Report, data: xr.Dataset, maps: xr.Dataset, summary: d
     # heatmaps
     panels = [("k", "input_hz", data.rate_hz, "spike rate (Hz)")]
     if "k" in maps.dims and "I" in maps.dims:
-        panels.append(("k", "I", maps.fwhm_hz, "FWHM (Hz)"))
+        panels.append(("k", "I", maps.fwhm_hz, "band width, FWHM (Hz)"))
     if "k" in maps.dims and "b" in maps.dims:
         panels.append(("k", "b", maps.peak_rate_hz, "peak spike rate (Hz)"))
     panels = [p for p in panels if all(d in p[2].dims for d in p[:2])]
-    fig, axes = plt.subplots(1, len(panels), figsize=(5 * len(panels), 4), squeeze=False)
+    # the dense k × frequency map across the page, the small ones below it: each readable at
+    # the page's width
+    layout = [["rate"] * 2] + ([[f"p{i}" for i in range(1, len(panels))]
+                                + ["."] * (3 - len(panels))] if len(panels) > 1 else [])
+    fig, named = plt.subplot_mosaic(layout, figsize=(10, 4 + 3.6 * (len(panels) > 1)),
+                                    layout="constrained",
+                                    height_ratios=[1.1, 1][:len(layout)])
+    axes = [[named["rate"]] + [named[f"p{i}"] for i in range(1, len(panels))]]
     for ax, (ydim, xdim, da, label) in zip(axes[0], panels):
         sub = _at(da, reference, (ydim, xdim)).transpose(ydim, xdim)
-        mesh = ax.pcolormesh(sub[xdim].values, sub[ydim].values,
-                             np.ma.masked_invalid(sub.values.astype(float)),
-                             shading="nearest", cmap="magma")
-        fig.colorbar(mesh, ax=ax, label=label)
-        ax.set_xlabel(xdim)
-        ax.set_ylabel(ydim)
-        if xdim == "input_hz":
+        values = np.ma.masked_invalid(sub.values.astype(float))
+        if xdim == "input_hz":   # dense and log-spaced: a frequency axis
+            mesh = ax.pcolormesh(sub[xdim].values, sub[ydim].values, values,
+                                 shading="nearest", cmap="magma")
             _log_hz_axis(ax)
             kk = sub.k.values
             ax.plot(neurons.DRIVEN_HZ_PER_K * kk, kk, "c--", lw=1,
-                    label=f"DRIVEN_HZ_PER_K·k ({neurons.DRIVEN_HZ_PER_K:g})")
+                    label=f"in use: {neurons.DRIVEN_HZ_PER_K:g} Hz × k")
             if cal and cal["hz_per_k_peak"]:
                 ax.plot(cal["hz_per_k_peak"] * kk, kk, "w:", lw=1.2,
-                        label=f"fit {cal['hz_per_k_peak']:.3g}·k")
+                        label=f"peaks here: {cal['hz_per_k_peak']:.3g} Hz × k")
             ax.legend(fontsize=7, loc="lower right")
+        else:                    # a few grid values: one labelled cell per value
+            mesh = ax.pcolormesh(np.arange(sub.sizes[xdim] + 1), np.arange(sub.sizes[ydim] + 1),
+                                 values, cmap="magma")
+            _value_ticks(ax.set_xticks, ax.set_xticklabels, sub[xdim].values)
+            _value_ticks(ax.set_yticks, ax.set_yticklabels, sub[ydim].values)
+        fig.colorbar(mesh, ax=ax, label=label)
+        ax.set_xlabel(AXIS_NAMES.get(xdim, xdim))
+        ax.set_ylabel(AXIS_NAMES.get(ydim, ydim))
     report.figure(fig, "heatmaps",
                   "Left: spike rate over k and input frequency (reference b, I) with the "
-                  "foundation's calibration line and the fitted one. Middle: band width (FWHM) "
-                  "of each tuning curve over k and I. Right: peak spike rate over k and b "
-                  "(the paper's Fig. 8H). Blank cells: the neuron never fired.")
+                  "frequency per unit k the array uses and the one fitted to these peaks. "
+                  "Middle: band width (FWHM) of each tuning curve over k and I. Right: peak "
+                  "spike rate over k and b (the paper's Fig. 8H). Blank cells: the neuron "
+                  "never fired.")
 
     # derived maps as lines
-    fig, axes = plt.subplots(1, 3, figsize=(14, 3.8))
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.6), layout="constrained")
     if cal:
         kp = summary["k_to_peak_hz"]
         k = np.array(kp["k"])
         axes[0].plot(k, [np.nan if p is None else p for p in kp["peak_hz"]], "o-", label="peak")
         axes[0].plot(k, [np.nan if p is None else p for p in kp["centroid_hz"]], "s--",
                      label="centroid")
-        axes[0].plot(k, neurons.DRIVEN_HZ_PER_K * k, "k:", label="DRIVEN_HZ_PER_K·k")
-        axes[0].set_xlabel("k")
+        axes[0].plot(k, neurons.DRIVEN_HZ_PER_K * k, "k:",
+                     label=f"in use: {neurons.DRIVEN_HZ_PER_K:g} Hz × k")
+        axes[0].set_xlabel(AXIS_NAMES["k"])
         axes[0].set_ylabel("preferred frequency (Hz)")
         axes[0].legend(fontsize=7)
     if "fwhm_vs_I" in summary:
         w = summary["fwhm_vs_I"]
         axes[1].plot(w["I"], [np.nan if x is None else x for x in w["fwhm_hz"]], "o-")
-        axes[1].set_xlabel("input amplitude I")
-        axes[1].set_ylabel("FWHM (Hz)")
+        _grid_axis(axes[1], w["I"])
+        axes[1].set_xlabel(AXIS_NAMES["I"])
+        axes[1].set_ylabel("band width, FWHM (Hz)")
     if "rate_vs_b" in summary:
         r = summary["rate_vs_b"]
         axes[2].plot(r["b"], [np.nan if x is None else x for x in r["peak_rate_hz"]], "o-")
-        axes[2].set_xlabel("b")
+        axes[2].set_xlabel(AXIS_NAMES["b"])
         axes[2].set_ylabel("peak spike rate (Hz)")
+        _grid_axis(axes[2], r["b"])
+        missing = [b for b, x in zip(r["b"], r["peak_rate_hz"]) if x is None]
+        if missing:
+            axes[2].set_title(f"no spike at b = {fmt(missing)}", fontsize=8)
     report.figure(fig, "maps",
                   f"Calibration k → preferred frequency; band width vs I; peak rate vs b "
-                  f"(at {summary['reference_used']}).")
+                  f"(at {fmt(summary['reference_used'])}; a b without a point never fired).")
+
+
+AXIS_NAMES = {"k": "time scale k", "I": "input amplitude I", "b": "recovery b",
+              "input_hz": "input frequency (Hz)", "a": "recovery rate a",
+              "c": "reset c (mV)", "d": "reset step d"}
+
+
+def _grid_axis(ax, values) -> None:
+    """The x axis spans the grid's values (a curve with one finite point would otherwise
+    get a range of its own), ticked at them when there are few."""
+    lo, hi = min(values), max(values)
+    pad = 0.08 * (hi - lo) if hi > lo else 0.05 * abs(hi) or 0.05
+    ax.set_xlim(lo - pad, hi + pad)
+    if len(values) <= 8:
+        ax.set_xticks(values)
+        ax.set_xticklabels([f"{v:.3g}" for v in values])
+
+
+def _value_ticks(set_ticks, set_labels, values, most: int = 12) -> None:
+    """A tick at the centre of each cell (every few cells when there are many)."""
+    step = max(1, int(np.ceil(len(values) / most)))
+    idx = np.arange(0, len(values), step)
+    set_ticks(idx + 0.5)
+    set_labels([f"{values[i]:.3g}" for i in idx])
 
 
 def _log_hz_axis(ax) -> None:
