@@ -28,7 +28,7 @@ def _run(args) -> int:
     module = runner(study)
     check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
     out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
-    outputs.check_writable(out)
+    folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)
     estimate = plan(spec)
     if estimate is not None:
         from .sweep import LONG_SWEEP_S
@@ -44,8 +44,11 @@ def _run(args) -> int:
         extra["fresh"] = True
     if getattr(args, "scheduler", None):
         extra["scheduler"] = args.scheduler
-    with outputs.output_folder(out, study, force=args.force, fresh=args.fresh):
+    folder.clear()                      # --force: another study's files, now that all passed
+    try:
         module.run(spec, out, quick=args.quick, **extra)
+    finally:
+        outputs.record(folder)          # what this run wrote, however it ended
     return 0
 
 

@@ -9,7 +9,8 @@ folder:
   folder updates its report and resumes its stores;
 - a folder holding another study's outputs, or files snn-antenna did not write, is refused,
   unless ``force``: then the files the toolkit wrote there (listed in the manifest) are removed
-  and the user's files are kept.
+  (:meth:`OutputFolder.clear`, once every other check has passed) and the user's files are
+  kept.
 
 After the run (also a failed or interrupted one), :func:`record` lists every top-level entry the
 run wrote in the folder's manifest, :data:`MANIFEST`, with the study's name. Only entries listed
@@ -37,6 +38,15 @@ class OutputFolder:
     study: str
     before: dict = field(default_factory=dict)      # entry -> signature before the run
     listed: set = field(default_factory=set)        # entries the toolkit wrote before
+    replace: set = field(default_factory=set)       # another study's entries, for --force
+
+    def clear(self) -> None:
+        """Remove the other study's entries (``--force``): only what the manifest lists.
+        Called once every check has passed, so a refused run removes nothing."""
+        for entry in sorted(self.replace):
+            _remove(self.path / entry)
+        self.replace = set()
+        self.before = _signatures(self.path)
 
 
 def check_writable(path) -> Path:
@@ -110,11 +120,10 @@ def prepare(path, study: str, force: bool = False, fresh: bool = False) -> Outpu
                 raise SpecError("--fresh", str(path / entry),
                                 "a store snn-antenna created (this one is not in the folder's "
                                 f"{MANIFEST}); --fresh never removes anything else")
+    replace = set()
     if other_study and force:
-        for entry in sorted(listed):
-            _remove(path / entry)
-        listed = set()
-    return OutputFolder(path, study, _signatures(path), listed)
+        replace, listed = listed, set()
+    return OutputFolder(path, study, _signatures(path), listed, replace)
 
 
 def _remove(target: Path) -> None:
@@ -163,8 +172,10 @@ def record(folder: OutputFolder) -> None:
 
 @contextmanager
 def output_folder(path, study: str, force: bool = False, fresh: bool = False):
-    """``prepare`` the folder, yield it, and ``record`` what the run wrote however it ended."""
+    """``prepare`` and ``clear`` the folder, yield it, and ``record`` what the run wrote
+    however it ended."""
     folder = prepare(path, study, force=force, fresh=fresh)
+    folder.clear()
     try:
         yield folder
     finally:
