@@ -8,26 +8,47 @@ with status 2; they never show a traceback from deep inside Brian2 or numpy.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import traceback
 from pathlib import Path
 
-from .errors import NumericalInstabilityError, SpecError
+from .errors import NumericalInstabilityError, PipelineError, SpecError
 
 
 def _run(args) -> int:
+    from . import outputs
     from . import spec as specs
-    from .studies import runner
+    from .studies import check_spec, plan, runner
 
+    # Every check before any work: the spec as resolved, the rules joining its sections, the
+    # size of a sweep, the output folder. Nothing here imports Brian2 or starts a worker.
     spec = specs.load(args.spec, args.set, quick=args.quick)
     study = spec.get("study")
     module = runner(study)
+    check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
     out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
+    folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)
+    estimate = plan(spec)
+    if estimate is not None:
+        from .sweep import LONG_SWEEP_S
+
+        print(f"sweep: {estimate.describe()}", file=sys.stderr, flush=True)
+        if estimate.seconds > LONG_SWEEP_S and not args.yes:
+            raise SpecError("axes", f"{estimate.points:,} points",
+                            f"a sweep expected to take at most {LONG_SWEEP_S / 3600:g} h "
+                            f"(this one: about {estimate.seconds / 3600:.3g} h); shrink an "
+                            "axis, or pass --yes to run it anyway")
     extra = {}
     if getattr(args, "fresh", False):
         extra["fresh"] = True
     if getattr(args, "scheduler", None):
         extra["scheduler"] = args.scheduler
-    module.run(spec, out, quick=args.quick, **extra)
+    folder.clear()                      # --force: another study's files, now that all passed
+    try:
+        module.run(spec, out, quick=args.quick, **extra)
+    finally:
+        outputs.record(folder)          # what this run wrote, however it ended
     return 0
 
 
@@ -47,6 +68,11 @@ def build_parser() -> argparse.ArgumentParser:
                      help="sweeps: discard stored results and start over")
     run.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                      help="sweeps: run on an existing Dask cluster instead of a local one")
+    run.add_argument("--force", action="store_true",
+                     help="reuse an --out folder that holds another study's outputs or other "
+                          "files: what snn-antenna wrote there is replaced, other files are kept")
+    run.add_argument("--yes", action="store_true",
+                     help="sweeps: run even when the estimate is beyond the limit (1 h)")
     run.set_defaults(func=_run)
     try:
         from .bridge.cli import add_subcommands
@@ -59,17 +85,43 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    return guarded(args.func, args, "snn-antenna")
+
+
+def guarded(func, args, prog: str) -> int:
+    """Run a command; whatever goes wrong is one line on stderr and an exit status.
+
+    Catching everything here also keeps Brian2's temporary files (``brian_debug_*``,
+    ``brian_script_*``) from piling up: Brian2 keeps them only when an exception reaches its
+    ``sys.excepthook``. A failure that is not the user's (a bug) names its place in the code;
+    ``SNN_ANTENNA_TRACEBACK=1`` prints the whole traceback.
+    """
     try:
-        return args.func(args)
+        return func(args)
     except SpecError as exc:
-        print(f"snn-antenna: error: {exc}", file=sys.stderr)
+        print(f"{prog}: error: {exc}", file=sys.stderr)
         return 2
     except NumericalInstabilityError as exc:
-        print(f"snn-antenna: numerical instability: {exc}", file=sys.stderr)
+        print(f"{prog}: numerical instability: {exc}", file=sys.stderr)
         return 3
     except KeyboardInterrupt:
-        print("snn-antenna: interrupted", file=sys.stderr)
+        print(f"{prog}: interrupted", file=sys.stderr)
         return 130
+    except PipelineError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"{prog}: error: {exc.strerror or exc}"
+              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        return 1
+    except Exception as exc:                            # a bug: say where, briefly
+        if os.environ.get("SNN_ANTENNA_TRACEBACK"):
+            traceback.print_exc()
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        print(f"{prog}: internal error: {type(exc).__name__}: {exc} (at "
+              f"{Path(frame.filename).name}:{frame.lineno}; SNN_ANTENNA_TRACEBACK=1 shows the "
+              "traceback; please report it)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -59,3 +59,23 @@ def check(condition: bool, field: str, value, accepted: str) -> None:
     """Raise SpecError(field, value, accepted) unless condition holds."""
     if not condition:
         raise SpecError(field, value, accepted)
+
+
+def is_number(value) -> bool:
+    """A finite real number: not true/false (bool is an int in Python), not a string, not
+    complex, not an array."""
+    import numbers
+
+    import numpy as np
+
+    return (isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+            and bool(np.isfinite(value)))
+
+
+def is_integer(value) -> bool:
+    """An integer that is not true/false (Python's and NumPy's integer types)."""
+    import numbers
+
+    import numpy as np
+
+    return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))

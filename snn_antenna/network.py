@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 
 from . import neurons
-from .errors import PipelineError, SpecError, check
+from .errors import PipelineError, SpecError, check, is_integer, is_number
 from .signals import Recording, validate_samples
 
 MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice
@@ -40,18 +40,25 @@ class ResonatorArray:
     force: bool = False
 
     def __post_init__(self):
-        check(isinstance(self.n_neurons, int) and 1 <= self.n_neurons <= 100_000, "n_neurons",
+        check(is_integer(self.n_neurons) and 1 <= self.n_neurons <= 100_000, "n_neurons",
               self.n_neurons, "an integer in [1, 100000]")
-        lo, hi = (float(x) for x in self.band_hz)
-        check(np.isfinite(lo) and np.isfinite(hi) and 0 < lo <= hi, "band_hz", self.band_hz,
+        band_ok = (isinstance(self.band_hz, (list, tuple, np.ndarray)) and len(self.band_hz) == 2
+                   and all(is_number(x) for x in self.band_hz))
+        check(band_ok and 0 < self.band_hz[0] <= self.band_hz[1], "band_hz", self.band_hz,
               "[low, high] in Hz with 0 < low <= high")
-        check(self.spacing in ("log", "linear"), "spacing", self.spacing, "'log' or 'linear'")
-        check(np.isfinite(self.b), "b", self.b, "a finite value")
-        check(self.method in neurons.METHODS, "method", self.method,
-              f"one of {list(neurons.METHODS)}")
-        check(self.target in ("numpy", "cython"), "target", self.target, "'numpy' or 'cython'")
-        check(np.isfinite(self.dt_ms) and 0 < self.dt_ms <= 1.0, "dt_ms", self.dt_ms,
+        lo, hi = (float(x) for x in self.band_hz)
+        check(isinstance(self.spacing, str) and self.spacing in ("log", "linear"), "spacing",
+              self.spacing, "'log' or 'linear'")
+        check(is_number(self.b), "b", self.b, "a finite number")
+        check(is_number(self.hz_per_k) and self.hz_per_k > 0, "hz_per_k", self.hz_per_k,
+              "Hz per unit k > 0")
+        check(isinstance(self.method, str) and self.method in neurons.METHODS, "method",
+              self.method, f"one of {list(neurons.METHODS)}")
+        check(isinstance(self.target, str) and self.target in ("numpy", "cython"), "target",
+              self.target, "'numpy' or 'cython'")
+        check(is_number(self.dt_ms) and 0 < self.dt_ms <= 1.0, "dt_ms", self.dt_ms,
               "a step in (0, 1] ms")
+        check(isinstance(self.force, bool), "force", self.force, "true or false")
         k_dt = float(self.k.max()) * self.dt_ms
         if not self.force and k_dt > neurons.MAX_STABLE_K_DT[self.method]:
             raise SpecError("dt_ms", self.dt_ms,
@@ -139,6 +146,8 @@ class ResonatorArray:
         """
         import brian2 as b2
 
+        check(is_number(rate_hz) and rate_hz > 0, "rate_hz", rate_hz, "a sample rate > 0 Hz")
+        check(is_number(window_s) and window_s > 0, "window_s", window_s, "a window > 0 s")
         self.check_rate(rate_hz)
         samples_per_window = int(round(window_s * rate_hz))
         check(samples_per_window >= 1, "window_s", window_s,
@@ -252,7 +261,7 @@ class ArrayResult:
 def rate_map(spike_i, spike_t_s, neuron_hz, duration_s: float,
              window_s: float = 0.1) -> xr.DataArray:
     """Spike rates (Hz) per neuron and window: the paper's frequency map (Fig. 10H)."""
-    check(np.isfinite(window_s) and 0 < window_s <= duration_s, "window_s", window_s,
+    check(is_number(window_s) and 0 < window_s <= duration_s, "window_s", window_s,
           f"a window in (0, {duration_s:g}] s")
     n_windows = int(np.floor(duration_s / window_s + 1e-9))
     edges = np.arange(n_windows + 1) * window_s

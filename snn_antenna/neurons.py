@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import NumericalInstabilityError, SpecError, check
+from .errors import NumericalInstabilityError, SpecError, check, is_integer, is_number
 from .signals import validate_samples
 
 
@@ -182,8 +182,11 @@ class SimulationResult:
 
 
 def _broadcast(name: str, value, n: int) -> np.ndarray:
-    arr = np.broadcast_to(np.asarray(value, dtype=float), (n,)) if np.ndim(value) == 0 \
-        else np.asarray(value, dtype=float)
+    raw = np.asarray(value)
+    if raw.size == 0 or raw.dtype.kind not in "iuf":
+        raise SpecError(name, value, "a real number or one per neuron (not empty, not "
+                                     "complex, not true/false, not text)")
+    arr = np.broadcast_to(raw.astype(float), (n,)) if raw.ndim == 0 else raw.astype(float)
     if arr.shape != (n,):
         raise SpecError(name, f"array of shape {np.shape(value)}",
                         f"a scalar or one value per neuron (shape ({n},))")
@@ -213,19 +216,46 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
     soon as a neuron's state becomes non-finite, and refuses before running a k·dt beyond the
     method's stable limit unless ``force=True``.
     """
-    import brian2 as b2
-
-    check(preset in PRESETS, "preset", preset, f"one of {sorted(PRESETS)}")
-    check(method in METHODS, "method", method, f"one of {list(METHODS)}")
-    check(target in ("numpy", "cython"), "target", target,
+    # Every argument checked before Brian2 is imported: a bad one is a SpecError naming it.
+    check(isinstance(preset, str) and preset in PRESETS, "preset", preset,
+          f"one of {sorted(PRESETS)}")
+    check(isinstance(method, str) and method in METHODS, "method", method,
+          f"one of {list(METHODS)}")
+    check(isinstance(target, str) and target in ("numpy", "cython"), "target", target,
           "'numpy' or 'cython' (runtime targets; cpp_standalone is used by the sweep engine)")
-    check(np.isfinite(dt_ms) and 0 < dt_ms <= 10, "dt_ms", dt_ms, "a step in (0, 10] ms")
+    check(is_number(dt_ms) and 0 < dt_ms <= 10, "dt_ms", dt_ms, "a step in (0, 10] ms")
+    check(is_number(check_every_ms) and check_every_ms > 0, "check_every_ms", check_every_ms,
+          "an interval > 0 ms between instability checks")
+    check(isinstance(record_traces, (bool, str)) and record_traces in (False, True, "v", "u"),
+          "record_traces", record_traces, "False, True (v and u), 'v' or 'u'")
+    check(trace_dt_ms is None or (is_number(trace_dt_ms) and trace_dt_ms >= dt_ms),
+          "trace_dt_ms", trace_dt_ms, f"None or an interval >= dt_ms ({dt_ms} ms)")
+    check(isinstance(force, bool), "force", force, "True or False")
+    check(n_neurons is None or (is_integer(n_neurons) and 1 <= n_neurons <= 10_000_000),
+          "n_neurons", n_neurons, "None (from the inputs) or an integer in [1, 10000000]")
     if current is None:
         raise SpecError("current", None, "an array of input samples")
+    if np.iscomplexobj(current):
+        raise SpecError("current", "complex values", "real input samples")
     current = np.ascontiguousarray(validate_samples(current, "current"), dtype=float)
     input_dt_ms = dt_ms if input_dt_ms is None else input_dt_ms
-    check(np.isfinite(input_dt_ms) and input_dt_ms >= dt_ms * (1 - 1e-9), "input_dt_ms",
+    check(is_number(input_dt_ms) and input_dt_ms >= dt_ms * (1 - 1e-9), "input_dt_ms",
           input_dt_ms, f"a sample interval >= dt_ms ({dt_ms} ms)")
+    if current.ndim == 2 and input_index is None and current.shape[0] < current.shape[1]:
+        # Time runs along axis 0. Fewer steps than inputs looks like (inputs, steps): refused
+        # rather than guessed, since either reading would run.
+        raise SpecError("current", f"array of shape {current.shape}",
+                        "shape (n_steps, n_inputs), time along the first axis; this one has "
+                        "fewer steps than inputs and looks transposed: pass current.T, or "
+                        "input_index to say which column drives each neuron")
+    if input_index is not None:
+        index_arr = np.asarray(input_index)
+        check(index_arr.ndim == 1 and index_arr.size >= 1 and index_arr.dtype.kind in "iu",
+              "input_index", input_index, "one integer column index per neuron")
+        check(current.ndim == 2, "input_index", "given for a 1-D current",
+              "None for a 1-D current (every neuron gets the same input)")
+    if np.size(k) == 0:
+        raise SpecError("k", k, "a time-scale factor > 0, or one per neuron (not empty)")
     n_inputs = 1 if current.ndim == 1 else current.shape[1]
     if n_neurons is None:
         sizes = [np.size(k)] + [np.size(v) for v in params.values()]
@@ -259,6 +289,8 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
                             f"one column index in [0, {n_inputs}) per neuron")
         input_expr, extra = "drive(t, input_index)", "input_index : integer (constant)"
 
+    import brian2 as b2
+
     b2.start_scope()
     b2.prefs.codegen.target = target
     b2.defaultclock.dt = dt_ms * b2.ms
@@ -289,7 +321,7 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
 
     duration_ms = current.shape[0] * input_dt_ms
     if run_ms is not None:
-        check(np.isfinite(run_ms) and 0 < run_ms <= duration_ms, "run_ms", run_ms,
+        check(is_number(run_ms) and 0 < run_ms <= duration_ms, "run_ms", run_ms,
               f"a duration in (0, {duration_ms:g}] ms (the input's length)")
         duration_ms = float(run_ms)
     net = b2.Network(*objects)

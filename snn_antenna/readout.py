@@ -13,7 +13,7 @@ import numpy as np
 import xarray as xr
 
 from . import antenna
-from .errors import SpecError, check
+from .errors import SpecError, check, is_integer, is_number
 
 
 def dominant_hz(rates: xr.DataArray, tie: float = 0.9) -> xr.DataArray:
@@ -69,11 +69,14 @@ class ContactDetector:
     max_gap_windows: int = 1
 
     def __post_init__(self):
-        lo, hi = self.motion_band_hz
-        check(0 <= lo <= hi, "motion_band_hz", self.motion_band_hz, "[low, high] Hz, low <= high")
-        check(np.isfinite(self.min_rate_hz) and self.min_rate_hz > 0, "min_rate_hz",
+        band = self.motion_band_hz
+        band_ok = (isinstance(band, (list, tuple, np.ndarray)) and len(band) == 2
+                   and all(is_number(x) for x in band))
+        check(band_ok and 0 <= band[0] <= band[1], "motion_band_hz", band,
+              "[low, high] Hz, 0 <= low <= high")
+        check(is_number(self.min_rate_hz) and self.min_rate_hz > 0, "min_rate_hz",
               self.min_rate_hz, "a rate > 0 Hz")
-        check(isinstance(self.max_gap_windows, int) and self.max_gap_windows >= 0,
+        check(is_integer(self.max_gap_windows) and self.max_gap_windows >= 0,
               "max_gap_windows", self.max_gap_windows, "an integer >= 0")
 
     def contact_windows(self, rates: xr.DataArray) -> xr.DataArray:
@@ -137,9 +140,8 @@ class ContactDetector:
                                               "rate map with attrs['window_s'] as "
                                               "network.rate_map makes): one window has no "
                                               "spacing to read it from")
-        check(isinstance(window_s, (int, float, np.floating, np.integer))
-              and not isinstance(window_s, bool) and np.isfinite(window_s) and window_s > 0,
-              "window_s", window_s, "a window width > 0 s")
+        check(is_number(window_s) and window_s > 0, "window_s", window_s,
+              "a window width > 0 s")
         return float(window_s)
 
 

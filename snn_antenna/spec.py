@@ -14,6 +14,8 @@ import copy
 import dataclasses
 import inspect
 import tomllib
+import types
+import typing
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable
@@ -72,19 +74,36 @@ def parse_value(text: str) -> Any:
 
 
 def set_field(spec: dict, dotted: str, value: Any) -> None:
-    *parents, last = dotted.split(".")
+    """Set ``dotted`` (``table.key``, ``list.INDEX.key``) to ``value``; a missing table is
+    created, a list index must name an existing entry (``contacts.0``, not ``contacts.5`` of a
+    one-entry list, ``contacts.x`` or ``contacts.-1``)."""
+    parts = dotted.split(".")
+    if not dotted or any(not p.strip() for p in parts):
+        raise SpecError("--set", dotted, "a dotted key such as network.n_neurons")
+    *parents, last = parts
     node = spec
     for i, key in enumerate(parents):
-        if key.isdigit() and isinstance(node, list):
-            node = node[int(key)]
-            continue
-        node = node.setdefault(key, {})
+        where = ".".join(parts[:i])
+        if isinstance(node, list):
+            node = node[_list_index(node, key, where, ".".join(parts[:i + 1]))]
+        else:
+            node = node.setdefault(key, {})
         if not isinstance(node, (dict, list)):
-            raise SpecError(".".join(parents[:i + 1]), node, "a table to set fields in")
+            raise SpecError(".".join(parts[:i + 1]), node, "a table to set fields in")
     if isinstance(node, list):
-        node[int(last)] = value
+        node[_list_index(node, last, ".".join(parents), dotted)] = value
     else:
         node[last] = value
+
+
+def _list_index(items: list, key: str, where: str, dotted: str) -> int:
+    """The entry of list ``where`` that ``key`` names, or a SpecError naming the user's key."""
+    if not (key.isascii() and key.isdigit()) or int(key) >= len(items):
+        accepted = (f"an index in 0..{len(items) - 1} of the {len(items)} entr"
+                    f"{'y' if len(items) == 1 else 'ies'} of {where} (to add an entry, "
+                    f"write it in the spec file)" if items else f"nothing: {where} is empty")
+        raise SpecError(dotted, key, accepted)
+    return int(key)
 
 
 def accepted_keys(target) -> dict[str, Any]:
@@ -100,7 +119,8 @@ def accepted_keys(target) -> dict[str, Any]:
 
 def check_section(spec: dict, section: str, target, exclude: Iterable[str] = (),
                   extra: Iterable[str] = ()) -> dict:
-    """Refuse keys of ``spec[section]`` that ``target`` does not take; return the table."""
+    """Refuse keys of ``spec[section]`` that ``target`` does not take, and values whose type
+    is not the one ``target`` declares for them (see :func:`check_type`); return the table."""
     table = spec.get(section, {})
     if not isinstance(table, dict):
         raise SpecError(section, table, "a table of settings")
@@ -109,7 +129,71 @@ def check_section(spec: dict, section: str, target, exclude: Iterable[str] = (),
         if key not in allowed:
             raise SpecError(f"{section}.{key}", table[key],
                             f"a known key of [{section}]: {', '.join(sorted(allowed))}")
+    hints = declared_types(target)
+    for key, value in table.items():
+        if key in hints:
+            check_type(f"{section}.{key}", value, hints[key])
     return table
+
+
+def declared_types(target) -> dict[str, Any]:
+    """The annotations of a dataclass's fields or a callable's parameters ({} if unknown)."""
+    try:
+        plain_class = isinstance(target, type) and not dataclasses.is_dataclass(target)
+        hints = typing.get_type_hints(target.__init__ if plain_class else target)
+    except Exception:       # annotations that cannot be resolved: no type check, not a crash
+        return {}
+    hints.pop("return", None)
+    return hints
+
+
+def _describe(tp) -> str:
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is bool:
+        return "true or false"
+    if tp is int:
+        return "an integer (not true/false)"
+    if tp is float:
+        return "a number (not true/false)"
+    if tp is str:
+        return "a string"
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        if all(a in (int, float) for a in args):
+            return f"a list of {len(args)} numbers, e.g. {list(range(7, 7 + len(args)))}"
+        return f"a list of {len(args)} ({', '.join(_describe(a) for a in args)})"
+    if origin in (tuple, list):
+        return f"a list of {_describe(args[0]) if args else 'values'}"
+    if origin is dict or tp is dict:
+        return "a table"
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_describe(a) for a in args if a is not type(None))
+    return getattr(tp, "__name__", str(tp))
+
+
+def _matches(value, tp) -> bool:
+    """Whether ``value`` is plainly not of type ``tp``. Deliberately lenient: a target may
+    accept more than it declares (a word such as "never" for a float field), so only the
+    mistakes no target means are refused: true/false for a number, a number for true/false,
+    a list of the wrong length for a fixed-length pair, a table or list for a number."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is bool:
+        return isinstance(value, bool)
+    if tp in (int, float):
+        return not isinstance(value, (bool, list, tuple, dict))
+    if origin in (typing.Union, types.UnionType):
+        return any(_matches(value, a) for a in args if a is not type(None))
+    if origin is tuple and args and args[-1] is not Ellipsis and isinstance(value, (list, tuple)):
+        return len(value) == len(args) and all(_matches(v, a) for v, a in zip(value, args))
+    if origin in (tuple, list) and args and isinstance(value, (list, tuple)):
+        return all(_matches(v, args[0]) for v in value)
+    return True
+
+
+def check_type(field: str, value, tp) -> None:
+    """Refuse ``value`` unless it has the declared type ``tp``: TOML ``true`` is not the
+    integer 1, a ``[low, high]`` pair has two entries, a number is not a string."""
+    if not _matches(value, tp):
+        raise SpecError(field, value, _describe(tp))
 
 
 def check_top_level(spec: dict, sections: Iterable[str]) -> None:

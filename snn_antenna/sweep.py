@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import functools
 import hashlib
 import math
 import os
@@ -59,14 +60,14 @@ from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from distributed.diagnostics.plugin import WorkerPlugin
 
 from . import neurons
 from .errors import NumericalInstabilityError, SpecError, check
 from .store import Output, SweepStore
 
 __all__ = ["Grid", "axis_values", "run_sweep", "SweepOutcome", "dask_client", "executor",
-           "NeuronSweep", "SceneSweep", "Output", "memory_budget_bytes"]
+           "NeuronSweep", "SceneSweep", "Output", "memory_budget_bytes", "max_workers",
+           "estimate", "Estimate"]
 
 
 # -- the grid ---------------------------------------------------------------------------------
@@ -194,6 +195,68 @@ def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
     check(chunk <= budget, "sweep.chunk_points", chunk_points,
           f"chunks that fit in memory: {chunk / 1e9:.3g} GB per chunk, "
           f"{budget / 1e9:.3g} GB allowed; lower chunk_points")
+
+
+# -- what a sweep will cost, before it starts ---------------------------------------------------
+# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
+# compile excluded). numpy: measured with the quick tuning sweep (9.4e6 neuron-steps in 4.3 s on
+# a loaded 2-core machine, `snn-antenna run studies/tuning_sweep.toml --quick`); cython and
+# standalone from the ratios benchmarks/bench_sweep.py measured (standalone 6-16x numpy,
+# 2.5-7.5x cython), at their low ends so the estimate errs long.
+MEASURED_STEPS_PER_S = {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 1.3e7}
+STANDALONE_COMPILE_S = 20.0        # one-off per worker process and group size (cached on disk)
+WORKER_MEMORY_BYTES = 500 * 2**20  # one worker process with Brian2 and Dask imported
+LONG_SWEEP_S = 3600.0              # beyond this the CLI asks for --yes
+
+
+def max_workers() -> int:
+    """Worker processes this machine can run: one per core, and no more than fit in the
+    memory available now (two at least, so the parallel path runs on any machine)."""
+    cores = os.cpu_count() or 1
+    by_memory = (memory_budget_bytes() * 4) // WORKER_MEMORY_BYTES
+    return max(2, min(cores, by_memory))
+
+
+@dataclass
+class Estimate:
+    """A sweep's size and expected cost, computed from the grid's shape alone (nothing is
+    materialised, so a grid of 10^9 points is sized in microseconds)."""
+    points: int
+    neuron_steps: int
+    workers: int
+    seconds: float
+    result_bytes: int
+    chunk_bytes: int
+    engine: str
+
+    def describe(self) -> str:
+        return (f"{self.points:,} points, {self.neuron_steps:.3g} neuron-steps on "
+                f"{self.workers} worker(s) ({self.engine}): about {_duration(self.seconds)} at "
+                f"{MEASURED_STEPS_PER_S[self.engine]:.3g} neuron-steps/s per worker, "
+                f"{self.result_bytes / 1e6:.3g} MB of results, "
+                f"{self.chunk_bytes / 1e6:.3g} MB per chunk")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def estimate(grid: Grid, sweep: "NeuronSweep", chunk_points: int, workers: int) -> Estimate:
+    """Points, neuron-steps, expected wall time and memory of ``sweep`` over ``grid``."""
+    workers = min(workers or os.cpu_count() or 1, max_workers())
+    steps = int(round(sweep.duration_s * 1000 / sweep.dt_ms))
+    neuron_steps = grid.size * steps
+    seconds = neuron_steps / (MEASURED_STEPS_PER_S[sweep.engine] * workers)
+    if sweep.engine == "standalone":
+        seconds += STANDALONE_COMPILE_S
+    per_point = sum(np.dtype(o.dtype).itemsize for o in NeuronSweep.OUTPUTS.values())
+    chunk = min(chunk_points, grid.size) * sweep.bytes_per_point
+    return Estimate(grid.size, neuron_steps, workers, seconds, grid.size * per_point, chunk,
+                    sweep.engine)
 
 
 # -- running ----------------------------------------------------------------------------------
@@ -327,30 +390,46 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
 def prepare_workers(client) -> None:
     """Make ``client``'s workers (current and future) fit to run Brian2 (``_PrepareWorker``).
     Call it before submitting any Brian2 task; registering again is harmless."""
-    client.register_plugin(_PrepareWorker(), name="snn-antenna-prepare-worker")
+    client.register_plugin(_prepare_worker_class()(), name="snn-antenna-prepare-worker")
 
 
-class _PrepareWorker(WorkerPlugin):
-    """Worker plugin, run in each worker's main thread (restarted workers too, and the workers
-    of a cluster given by ``--scheduler``):
+@functools.cache
+def _prepare_worker_class():
+    # Defined on first use: importing distributed costs half a second, which a refusal of a
+    # bad spec (this module is imported to size the grid) should not pay. Pickled by
+    # reference through the module's __getattr__ below, as a module-level class would be.
+    from distributed.diagnostics.plugin import WorkerPlugin
 
-    - import Brian2 there, where it may install its SIGINT handler (importing it first inside
-      a task thread fails);
-    - stop Dask's statistical profiler, which deadlocks workers: every 10 ms it calls
-      ``sys._current_frames()``, which holds the interpreter's thread-list lock while it
-      allocates; a garbage collection there runs Brian2's weakref callbacks, and a task thread
-      starting a thread (zarr's I/O pool, when a chunk is written) then waits forever (seen:
-      a worker stuck in ``Thread.start`` with its main thread in Brian2's
-      ``InstanceTrackerSet.remove`` under ``Worker.trigger_profile``; the sweep hung).
-    """
+    class _PrepareWorker(WorkerPlugin):
+        """Worker plugin, run in each worker's main thread (restarted workers too, and the workers
+        of a cluster given by ``--scheduler``):
 
-    def setup(self, worker):
-        import brian2  # noqa: F401
+        - import Brian2 there, where it may install its SIGINT handler (importing it first inside
+          a task thread fails);
+        - stop Dask's statistical profiler, which deadlocks workers: every 10 ms it calls
+          ``sys._current_frames()``, which holds the interpreter's thread-list lock while it
+          allocates; a garbage collection there runs Brian2's weakref callbacks, and a task thread
+          starting a thread (zarr's I/O pool, when a chunk is written) then waits forever (seen:
+          a worker stuck in ``Thread.start`` with its main thread in Brian2's
+          ``InstanceTrackerSet.remove`` under ``Worker.trigger_profile``; the sweep hung).
+        """
 
-        for name in ("profile", "profile-cycle"):
-            callback = worker.periodic_callbacks.pop(name, None)
-            if callback is not None:
-                callback.stop()
+        def setup(self, worker):
+            import brian2  # noqa: F401
+
+            for name in ("profile", "profile-cycle"):
+                callback = worker.periodic_callbacks.pop(name, None)
+                if callback is not None:
+                    callback.stop()
+
+    _PrepareWorker.__module__, _PrepareWorker.__qualname__ = __name__, "_PrepareWorker"
+    return _PrepareWorker
+
+
+def __getattr__(name):
+    if name == "_PrepareWorker":
+        return _prepare_worker_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @contextmanager
@@ -377,8 +456,11 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
         finally:
             client.close()
         return
-    n = workers or os.cpu_count() or 1
-    check(isinstance(n, int) and n >= 1, "sweep.workers", workers, "an integer >= 0 (0: auto)")
+    check(isinstance(workers, int) and not isinstance(workers, bool) and workers >= 0,
+          "sweep.workers", workers, "an integer >= 0 (0: one per core)")
+    # Never more processes than the machine has cores and memory for (500 workers on 2
+    # cores took ~10 GB in a minute and ran no faster).
+    n = min(workers or os.cpu_count() or 1, max_workers())
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=None,
                            silence_logs=logging.ERROR if quiet else logging.WARNING)

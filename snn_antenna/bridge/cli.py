@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import signal
 import sys
 import threading
@@ -244,11 +245,20 @@ def cmd_emulate(args) -> int:
     """Emulate the board."""
     from .emulator import Emulator, FaultPlan, PeerGone, PtyLink, SerialLink, stimulus_counts
 
+    # Everything checked before the pty exists or a byte is written.
     plan = FaultPlan.parse(args.faults)
     if args.link and not args.pty:
         raise SpecError("link", args.link, "only with --pty")
+    if args.frames is not None and not args.frames > 0:
+        raise SpecError("frames", args.frames, "a number of frames > 0")
+    if plan.disconnect and not args.link:
+        raise SpecError("faults.disconnect", plan.disconnect,
+                        "0 unless the emulator owns a pty with a stable --link path")
+    if args.log:
+        _check_output_file("log", args.log)
     emulator = Emulator(stimulus_counts(args.stimulus, args.seed), faults=plan, seed=args.seed,
                         wire_format=args.format)
+    emulator.schedule(args.frames or len(emulator.counts))
     if args.pty:
         link = PtyLink(args.link)
     else:
@@ -260,21 +270,35 @@ def cmd_emulate(args) -> int:
     print(link.path, flush=True)
     stop = stop_on_signals()
     t0 = time.monotonic()
+    ended = None
     try:
-        log = emulator.run(link, args.frames, realtime=not args.fast, stop=stop,
-                           peer_timeout_s=args.peer_timeout)
+        emulator.run(link, args.frames, realtime=not args.fast, stop=stop,
+                     peer_timeout_s=args.peer_timeout)
     except PeerGone as exc:
-        raise PortError(f"emulator stopped: {exc}") from exc
+        ended = f"emulator stopped: {exc}"
+    except OSError as exc:             # the device went away under us (pyserial's errors too)
+        ended = f"emulator stopped: the port {args.port or link.path} failed: {exc}"
     finally:
         link.close()
-    summary = {"path": link.path, "seconds": round(time.monotonic() - t0, 3),
-               "frames_written": len(log.written), "injected": log.injected(),
-               "expected_counts": log.expected_counts(),
-               "faults": [list(f) for f in log.faults]}
-    if args.log:
-        Path(args.log).write_text(json.dumps(summary, indent=1))
-    print(json.dumps({k: v for k, v in summary.items() if k != "faults"}), flush=True)
+        log = emulator.log
+        summary = {"path": link.path, "seconds": round(time.monotonic() - t0, 3),
+                   "frames_written": len(log.written), "injected": log.injected(),
+                   "expected_counts": log.expected_counts(), "stopped": ended,
+                   "faults": [list(f) for f in log.faults]}
+        if args.log:                    # whoever stopped first, the log says what was sent
+            from .recorder import write_json_atomically
+            write_json_atomically(Path(args.log), summary)
+    if ended:
+        raise PortError(ended)
+    print(json.dumps({k: v for k, v in summary.items() if k not in ("faults", "stopped")}),
+          flush=True)
     return 0
+
+
+def _check_output_file(name: str, path) -> None:
+    path = Path(path)
+    if path.is_dir() or not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
+        raise SpecError(name, str(path), "a file path in a folder you can write to")
 
 
 @_guarded
@@ -304,10 +328,12 @@ def _check_duration(duration) -> None:
 
 
 def main(argv=None) -> int:
+    from ..cli import guarded
+
     parser = argparse.ArgumentParser(prog="snn-antenna", description="snn-antenna serial bridge")
     add_subcommands(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
-    return args.func(args)
+    return guarded(args.func, args, "snn-antenna")
 
 
 if __name__ == "__main__":

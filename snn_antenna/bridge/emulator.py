@@ -66,6 +66,8 @@ class PtyLink:
         # the emulator started, the probe closed, the first write saw POLLHUP and gave up
         # before the real reader had opened the port, which then received nothing at all.
         self._probing = threading.Lock()
+        if self.link is not None:
+            check_link_path(self.link)
         self._open()
 
     @property
@@ -166,6 +168,33 @@ class PtyLink:
     @property
     def can_disconnect(self) -> bool:
         return self.link is not None
+
+
+def is_own_link(path: Path) -> bool:
+    """A symlink to a pseudo-terminal: what PtyLink makes (perhaps left by a killed emulator)."""
+    return path.is_symlink() and os.readlink(path).startswith(("/dev/pts/", "/dev/tty"))
+
+
+def check_link_path(link: Path) -> None:
+    """Refuse a --link path that holds anything but an emulator's own link: the emulator
+    replaces that path and removes it on exit, so it must never be a file or folder of the
+    user's."""
+    link = Path(link)
+    if link.is_symlink() and not is_own_link(link):
+        raise SpecError("link", str(link), f"a new path or an emulator's own link to a pty; "
+                                           f"this is a symlink to {os.readlink(link)}, left as "
+                                           "it is")
+    if link.exists() and not link.is_symlink():
+        what = "folder" if link.is_dir() else "file"
+        raise SpecError("link", str(link), f"a new path or an emulator's own link to a pty; "
+                                           f"this is an existing {what}, left as it is")
+    if not link.parent.is_dir() or not os.access(link.parent, os.W_OK | os.X_OK):
+        raise SpecError("link", str(link), f"a path in a folder you can write to "
+                                           f"({link.parent} is not one)")
+    tmp = link.with_name(link.name + ".new")
+    if (tmp.exists() or tmp.is_symlink()) and not is_own_link(tmp):
+        raise SpecError("link", str(link), f"a path whose {tmp.name} is free (the emulator "
+                                           "creates the link there first)")
 
 
 class SerialLink:
@@ -315,6 +344,8 @@ class Emulator:
     def schedule(self, n_frames: int) -> dict[int, str]:
         """Seeded, distinct frame indices for every planned fault."""
         slots = n_frames - 2 * self.fault_margin
+        if self.faults.total == 0:
+            return {}
         if self.faults.total > max(slots, 0):
             raise SpecError("faults", self.faults.total,
                             f"at most {max(slots, 0)} faults for {n_frames} frames "

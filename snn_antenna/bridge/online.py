@@ -31,6 +31,7 @@ from ..errors import SpecError
 from ..network import ResonatorArray
 from ..preprocess import make_chain, partial_transform, reset
 from ..readout import ContactDetector, ContactEstimate
+from ..studies import check_spec
 from .source import SourceLoop
 
 RATE_HZ = 1000.0
@@ -70,6 +71,8 @@ def build_online(network_path, overrides=(), rate_hz: float = RATE_HZ) -> Online
     for key in spec:
         if key not in SECTIONS:
             raise SpecError(key, spec[key], f"a section of an online spec: {', '.join(SECTIONS)}")
+    # The rules joining the sections, named by the spec's keys (the rate is the board's).
+    check_spec(spec, [item.split("=", 1)[0].strip() for item in overrides], rate_hz=rate_hz)
     with specs.section("network"):
         array = ResonatorArray(**specs.check_section(spec, "network", ResonatorArray))
         array.check_rate(rate_hz)

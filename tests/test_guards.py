@@ -1,0 +1,355 @@
+"""Every probe of a hostile or careless user: one line naming the key or argument, exit status 2
+(or the documented behaviour), no traceback, and no file of the user's touched."""
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna import outputs
+from snn_antenna.cli import main
+from snn_antenna.errors import SpecError
+
+ROOT = Path(__file__).resolve().parents[1]
+QUICKSTART = str(ROOT / "studies" / "quickstart.toml")
+TUNING = str(ROOT / "studies" / "tuning_sweep.toml")
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
+
+
+def refused(capsys, argv, *names):
+    """Run the CLI in this process; it must refuse with status 2 and one line naming ``names``."""
+    status = main(argv)
+    err = capsys.readouterr().err
+    assert status == 2, err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    for name in names:
+        assert name in err, err
+    return err
+
+
+# -- the spec ---------------------------------------------------------------------------------
+@pytest.mark.parametrize("setting, names", [
+    ("stimulus.contacts.5.distance_cm=25", ["stimulus.contacts.5", "0..0"]),
+    ("stimulus.contacts.x.distance_cm=25", ["stimulus.contacts.x"]),
+    ("stimulus.contacts.-1.distance_cm=25", ["stimulus.contacts.-1"]),
+    ("network.band_hz=[7,20,30]", ["network.band_hz", "a list of 2 numbers"]),
+    ("network.n_neurons=true", ["network.n_neurons", "not true/false"]),
+    ("preprocess.lowpass_hz=900", ["preprocess.lowpass_hz", "stimulus.rate_hz = 1000"]),
+    ("readout.window_s=0", ["readout.window_s"]),
+    ("network.band_hz=[7,600]", ["network.band_hz", "stimulus.rate_hz"]),
+    ("network.band_hz=[5,900]", ["network.band_hz", "stimulus.rate_hz"]),
+    ("stimulus.rate_hz=50", ["stimulus.rate_hz"]),
+])
+def test_bad_settings_are_refused_naming_the_users_key(tmp_path, capsys, setting, names):
+    out = tmp_path / "out"
+    err = refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(out), "--set", setting],
+                  *names)
+    for internal in ("cutoff_hz", "order =", "network.rate_hz"):
+        assert internal not in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("setting", ["sweep.workers=true", "sweep.workers=500"])
+def test_worker_counts_are_capped_by_the_machine(tmp_path, capsys, setting):
+    refused(capsys, ["run", TUNING, "--quick", "--out", str(tmp_path / "o"), "--set", setting],
+            "sweep.workers")
+    assert not (tmp_path / "o").exists()
+
+
+FORTY_MILLION = ['axes.k={start=0.3,stop=2,num=400,scale="log"}',
+                 "axes.b={start=0.2,stop=0.3,num=100}", "axes.I={start=0.1,stop=0.8,num=100}",
+                 "axes.input_hz={start=2,stop=60,num=10}"]
+BILLIONS = ['axes.k={start=0.3,stop=2,num=1000,scale="log"}',
+            "axes.b={start=0.2,stop=0.3,num=1000}", "axes.I={start=0.1,stop=0.8,num=160}",
+            "axes.input_hz={start=2,stop=60,num=10}"]
+
+
+def test_a_long_sweep_shows_its_estimate_and_needs_yes(tmp_path, capsys):
+    argv = ["run", TUNING, "--quick", "--out", str(tmp_path / "o")]
+    for s in FORTY_MILLION:
+        argv += ["--set", s]
+    t0 = time.perf_counter()
+    status = main(argv)
+    elapsed = time.perf_counter() - t0
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err
+    assert "40,000,000 points" in err and "neuron-steps" in err and " h " in err
+    assert "--yes" in err and "MB of results" in err
+    assert elapsed < 2.0               # sized from the axes, nothing materialised
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_grid_too_big_for_memory_is_refused_at_once_even_with_yes(tmp_path, capsys):
+    argv = ["run", TUNING, "--quick", "--yes", "--out", str(tmp_path / "o")]
+    for s in BILLIONS:
+        argv += ["--set", s]
+    t0 = time.perf_counter()
+    err = refused(capsys, argv, "axes", "1,600,000,000 points")
+    assert time.perf_counter() - t0 < 2.0      # was 36 s: no Dask cluster before the check
+    assert "GB needed" in err
+
+
+def test_refusals_come_before_brian2_and_show_no_traceback(tmp_path):
+    """As the user runs it: a fresh process, one line, status 2, Brian2 never imported."""
+    code = ("import sys; from snn_antenna.cli import main; s = main(sys.argv[1:]); "
+            "print('brian2' in sys.modules); sys.exit(s)")
+    for setting in ("network.n_neurons=true", "stimulus.contacts.5.distance_cm=25",
+                    "preprocess.lowpass_hz=900"):
+        proc = subprocess.run([sys.executable, "-c", code, "run", QUICKSTART, "--quick",
+                               "--out", str(tmp_path / "o"), "--set", setting],
+                              capture_output=True, text=True, timeout=120, cwd=ROOT)
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+        assert proc.stdout.strip() == "False"
+
+
+# -- output folders ---------------------------------------------------------------------------
+def test_out_that_is_a_file_or_under_a_file_is_refused_before_work(tmp_path, capsys):
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(afile)], "--out", "file")
+    refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(afile / "sub")], "--out",
+            "is a file")
+    assert afile.read_text() == "mine"
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root writes anywhere")
+def test_out_that_cannot_be_written_is_refused(tmp_path, capsys):
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    locked.chmod(0o500)
+    try:
+        refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(locked / "o")], "--out",
+                "not writable")
+    finally:
+        locked.chmod(0o700)
+
+
+def fake_outputs(folder: Path, study: str, files=("report.html", "summary.json")) -> None:
+    folder.mkdir(parents=True, exist_ok=True)
+    for name in files:
+        (folder / name).write_text(study)
+    (folder / "results.zarr").mkdir()
+    (folder / "results.zarr" / "zarr.json").write_text("{}")
+    outputs.record(outputs.OutputFolder(folder, study))   # as the CLI does after a run
+
+
+def snapshot(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() if p.is_file() else None
+            for p in sorted(folder.rglob("*"))}
+
+
+def test_another_studys_folder_or_the_users_files_are_refused_untouched(tmp_path, capsys):
+    sweep_out = tmp_path / "sweep"
+    fake_outputs(sweep_out, "tuning_sweep")
+    before = snapshot(sweep_out)
+    refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(sweep_out)], "--out",
+            "'tuning_sweep' study", "--force")
+    assert snapshot(sweep_out) == before
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("my notes")
+    refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(mine)], "--out", "notes.txt")
+    assert (mine / "notes.txt").read_text() == "my notes" and len(list(mine.iterdir())) == 1
+
+
+def test_force_clears_only_what_the_toolkit_wrote(tmp_path):
+    folder = tmp_path / "o"
+    fake_outputs(folder, "tuning_sweep")
+    (folder / "notes.txt").write_text("my notes")
+    prepared = outputs.prepare(folder, "quickstart", force=True)
+    assert (folder / "maps.png").exists() or (folder / "report.html").exists()  # not yet
+    prepared.clear()
+    assert sorted(p.name for p in folder.iterdir()) == [outputs.MANIFEST, "notes.txt"]
+    (folder / "report.html").write_text("new report")
+    outputs.record(prepared)
+    manifest = outputs.read_manifest(folder)
+    assert manifest["study"] == "quickstart" and manifest["files"] == ["report.html"]
+
+
+def test_a_study_reruns_into_its_own_folder(tmp_path):
+    folder = tmp_path / "o"
+    fake_outputs(folder, "quickstart")
+    prepared = outputs.prepare(folder, "quickstart")       # no refusal, nothing removed
+    assert (folder / "results.zarr" / "zarr.json").is_file()
+    (folder / "rate_map.png").write_text("new figure")
+    outputs.record(prepared)
+    assert outputs.read_manifest(folder)["files"] == ["rate_map.png", "report.html",
+                                                      "results.zarr", "summary.json"]
+
+
+def test_quickstart_with_force_keeps_the_users_files(tmp_path, capsys):
+    folder = tmp_path / "sweep"
+    fake_outputs(folder, "tuning_sweep", files=("report.html", "summary.json", "maps.png"))
+    (folder / "notes.txt").write_text("my notes")
+    assert main(["run", QUICKSTART, "--quick", "--force", "--out", str(folder)]) == 0
+    names = {p.name for p in folder.iterdir()}
+    assert "maps.png" not in names and "results.zarr" not in names   # the sweep's, removed
+    assert (folder / "notes.txt").read_text() == "my notes"          # the user's, kept
+    assert outputs.read_manifest(folder)["study"] == "quickstart"
+    assert json.loads((folder / "summary.json").read_text())["provenance"]["spec"]["study"] \
+        == "quickstart"
+
+
+def test_fresh_never_removes_a_store_the_toolkit_did_not_create(tmp_path, capsys):
+    folder = tmp_path / "o"
+    (folder / "results.zarr").mkdir(parents=True)
+    (folder / "results.zarr" / "thesis.tex").write_text("mine")
+    refused(capsys, ["run", TUNING, "--quick", "--fresh", "--force", "--out", str(folder)],
+            "--fresh", "results.zarr")
+    refused(capsys, ["run", TUNING, "--quick", "--fresh", "--out", str(folder)], "--out")
+    assert (folder / "results.zarr" / "thesis.tex").read_text() == "mine"
+
+
+# -- the emulator -----------------------------------------------------------------------------
+@pytest.mark.parametrize("kind", ["file", "folder", "symlink"])
+def test_emulate_link_never_replaces_the_users_path(tmp_path, capsys, kind):
+    link = tmp_path / "ttyANT"
+    if kind == "file":
+        link.write_text("precious")
+    elif kind == "folder":
+        link.mkdir()
+    else:
+        (tmp_path / "target").write_text("precious")
+        link.symlink_to(tmp_path / "target")
+    refused(capsys, ["emulate", "--pty", "--link", str(link), "--frames", "100",
+                     "--peer-timeout", "1"], "link", "left as it is")
+    assert not (tmp_path / "ttyANT.new").exists() and not (tmp_path / "ttyANT.new").is_symlink()
+    if kind == "file":
+        assert link.read_text() == "precious" and not link.is_symlink()
+    elif kind == "folder":
+        assert link.is_dir()
+    else:
+        assert link.resolve() == tmp_path / "target"
+
+
+def test_emulate_log_is_written_when_the_reader_stops_first(tmp_path):
+    import serial
+
+    link, log = tmp_path / "tty", tmp_path / "emu.json"
+    emu = subprocess.Popen([*CLI, "emulate", "--pty", "--link", str(link), "--frames", "20000",
+                            "--peer-timeout", "60", "--log", str(log)],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        deadline = time.monotonic() + 60
+        while not link.is_symlink() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        port = serial.Serial(str(link), timeout=0.2)
+        got = b""
+        while len(got) < 500 and time.monotonic() < deadline:
+            got += port.read(256)
+        port.close()                    # the reader goes away mid-stream
+        out, err = emu.communicate(timeout=60)
+    finally:
+        emu.kill()
+    assert emu.returncode == 1 and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and "reader closed" in err
+    summary = json.loads(log.read_text())
+    assert summary["frames_written"] > 0 and "reader closed" in summary["stopped"]
+    assert not link.exists()
+
+
+def test_emulate_on_a_port_that_vanishes_is_one_line(tmp_path):
+    master, slave = os.openpty()
+    name = os.ttyname(slave)
+    os.close(slave)
+    emu = subprocess.Popen([*CLI, "emulate", "--port", name, "--frames", "20000"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    time.sleep(0.5)
+
+    def drain():
+        try:
+            while os.read(master, 4096):
+                pass
+        except OSError:
+            pass
+
+    threading.Thread(target=drain, daemon=True).start()
+    time.sleep(2.0)
+    os.close(master)                    # the device disappears
+    out, err = emu.communicate(timeout=60)
+    assert emu.returncode in (1, 2) and "Traceback" not in err, err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_emulate_on_a_missing_port_names_it(capsys):
+    refused(capsys, ["emulate", "--port", "/dev/pts/99999", "--frames", "10"], "port")
+
+
+# -- Brian2's temporary files ------------------------------------------------------------------
+def test_a_failed_run_leaves_no_brian2_temp_files(tmp_path):
+    """A bug inside a Brian2 run (injected here) is one line, and Brian2's debug log and
+    script copy are removed at exit: Brian2 keeps them only for exceptions that reach its
+    excepthook."""
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    code = ("import sys, numpy as np\n"
+            "from snn_antenna import neurons\n"
+            "from snn_antenna.cli import guarded\n"
+            "def boom(args):\n"
+            "    neurons.simulate('resonator', np.full(100, 0.1), record_traces='v')\n"
+            "    raise IndexError('injected')\n"
+            "sys.exit(guarded(boom, None, 'snn-antenna'))\n")
+    script = tmp_path / "boom.py"
+    script.write_text(code)
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "TMPDIR": str(temp)})
+    assert proc.returncode == 1 and "internal error: IndexError: injected" in proc.stderr
+    assert "Traceback" not in proc.stderr and "please report this issue" not in proc.stderr
+    assert not [p.name for p in temp.iterdir() if p.name.startswith("brian_")]
+
+
+# -- the Python API ----------------------------------------------------------------------------
+DRIVE = np.full(200, 0.15)
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"n_neurons": 0}, "n_neurons"),
+    ({"n_neurons": True}, "n_neurons"),
+    ({"k": []}, "k"),
+    ({"k": 1j}, "k"),
+    ({"dt_ms": "0.1"}, "dt_ms"),
+    ({"record_traces": "w"}, "record_traces"),
+    ({"check_every_ms": 0}, "check_every_ms"),
+    ({"current": DRIVE.astype(complex)}, "current"),
+    ({"current": np.zeros((3, 2000))}, "current"),         # (inputs, steps): looks transposed
+    ({"input_index": [0.5]}, "input_index"),
+])
+def test_simulate_refuses_bad_arguments_by_name(kwargs, name):
+    from snn_antenna import neurons
+
+    kwargs = dict(kwargs)
+    current = kwargs.pop("current", DRIVE if "input_index" not in kwargs
+                         else np.zeros((100, 2)))
+    with pytest.raises(SpecError) as err:
+        neurons.simulate("resonator", current, **kwargs)
+    assert err.value.field == name
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"band_hz": [7, 20, 30]}, "band_hz"), ({"band_hz": "7-30"}, "band_hz"),
+    ({"n_neurons": True}, "n_neurons"), ({"dt_ms": "0.1"}, "dt_ms"),
+    ({"force": "yes"}, "force"),
+])
+def test_resonator_array_refuses_bad_arguments_by_name(kwargs, name):
+    from snn_antenna.network import ResonatorArray
+
+    with pytest.raises(SpecError) as err:
+        ResonatorArray(**kwargs)
+    assert err.value.field == name
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"motion_band_hz": [7]}, "motion_band_hz"), ({"min_rate_hz": "20"}, "min_rate_hz"),
+    ({"max_gap_windows": True}, "max_gap_windows"),
+])
+def test_contact_detector_refuses_bad_arguments_by_name(kwargs, name):
+    from snn_antenna.readout import ContactDetector
+
+    with pytest.raises(SpecError) as err:
+        ContactDetector(**kwargs)
+    assert err.value.field == name
