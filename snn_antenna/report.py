@@ -565,6 +565,9 @@ class LogFile:
             pass
         self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "
                     f"({' '.join(sys.argv)})")
+        # Python warnings through logging (as Brian2 sets up at import), re-armed in case
+        # someone (a test runner, a notebook) replaced warnings.showwarning since
+        logging.captureWarnings(False)
         logging.captureWarnings(True)
         self._handler = logging.StreamHandler(self._file)
         self._handler.setLevel(logging.INFO)
