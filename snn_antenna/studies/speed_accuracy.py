@@ -471,6 +471,15 @@ def measure(scene, ref: Run, ref_readout: dict, method, dt_ms, target, dtype, wa
     return _check_finite(row, run)
 
 
+def count_nonfinite(rows: list[dict]) -> dict:
+    """Runs that raised NumericalInstabilityError, and runs that finished without it yet gave
+    a non-finite spike time or score (``_check_finite``): both as measured."""
+    return {"nonfinite_without_exception": sum(bool(r.get("nonfinite_without_exception"))
+                                               for r in rows),
+            "raised_instability": sum(r["status"].startswith("non-finite (raised")
+                                      for r in rows)}
+
+
 def _check_finite(row: dict, run: Run) -> dict:
     """A run that raised nothing but still produced a non-finite spike time or score is
     marked (and counted in the summary), its scores dropped: NaN never reaches a report."""
@@ -734,10 +743,7 @@ def _summarise(rows, ref_rows, recommendations, convergence, smap, scenes, net, 
             {k: r.get(k) for k in ("scene", "wall_s", COST, "rate_map_error", "readout_matches")}
             for r in default_rows]),
         "stability_limits": limits,
-        # runs that finished without NumericalInstabilityError yet gave a non-finite value
-        "nonfinite_without_exception": sum(bool(r.get("nonfinite_without_exception"))
-                                           for r in rows),
-        "raised_instability": sum(r["status"].startswith("non-finite (raised") for r in rows),
+        **count_nonfinite(rows),
         "total_wall_s": total_s,
     }
 
