@@ -289,13 +289,13 @@ border-radius:4px;padding:.7em 1em;margin:1em 0}
 letter-spacing:.04em} .quick-banner span{display:block;font-weight:600;margin:.2em 0}
 .quick-banner small{display:block;color:#5c4a00}
 .table-scroll{max-width:100%;overflow-x:auto;margin:1em 0}
-table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal}
+table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal;width:max-content}
 caption{caption-side:top;text-align:left;color:#555;padding:.3em 0}
 td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right;vertical-align:top}
 th{background:#f3f3f3;font-weight:600}
-th .key{display:block;font-weight:normal;font-size:.75em;color:#888;font-family:monospace;
-overflow-wrap:anywhere}
-td.text{text-align:left} td.num{white-space:nowrap}
+th .key{display:block;font-weight:normal;font-size:.72em;color:#888;font-family:monospace;
+white-space:nowrap}
+th.text,td.text{text-align:left} td.text{max-width:28em} td.num{white-space:nowrap}
 table.nested{font-size:1em;margin:0;width:100%} table.nested td,table.nested th{border:0;
 border-bottom:1px solid #eee;padding:.05em .4em} table.nested th{background:none;
 text-align:left;color:#555;font-weight:normal;white-space:nowrap}
@@ -333,7 +333,7 @@ def label(key) -> str:
         if len(words) > len(suffix) and tuple(w.lower() for w in words[-len(suffix):]) == suffix:
             unit, words = name, words[:-len(suffix)]
             break
-    text = " ".join(_WORDS.get(w.lower(), w) for w in words)
+    text = " ".join(_WORDS.get(w.lower(), w) for w in words).replace("k dt", "k·dt")
     return f"{text} ({unit})" if unit else text
 
 
@@ -480,7 +480,8 @@ def rate_colorbar(ax, mesh, label_text: str = "spike rate (Hz)"):
 
 def _table_html(rows: list[dict], caption: str = "") -> str:
     cols = list(dict.fromkeys(c for r in rows for c in r))
-    head = "".join(_header_html(c) for c in cols)
+    numeric = {c for c in cols if all(r.get(c) is None or _is_number(r.get(c)) for r in rows)}
+    head = "".join(_header_html(c, c in numeric) for c in cols)
     body = "".join("<tr>" + "".join(_cell_html(r.get(c)) for c in cols) + "</tr>"
                    for r in rows)
     cap = f"<caption>{html.escape(fmt(caption))}</caption>" if caption else ""
@@ -488,10 +489,10 @@ def _table_html(rows: list[dict], caption: str = "") -> str:
             f"<tbody>{body}</tbody></table></div>")
 
 
-def _header_html(key) -> str:
+def _header_html(key, numeric: bool) -> str:
     name = label(key)
     key_html = f'<span class="key">{html.escape(str(key))}</span>' if name != str(key) else ""
-    return f"<th>{html.escape(name)}{key_html}</th>"
+    return f'<th class="{"num" if numeric else "text"}">{html.escape(name)}{key_html}</th>'
 
 
 def _cell_html(value) -> str:
@@ -565,6 +566,9 @@ class LogFile:
             pass
         self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "
                     f"({' '.join(sys.argv)})")
+        # Python warnings through logging (as Brian2 sets up at import), re-armed in case
+        # someone (a test runner, a notebook) replaced warnings.showwarning since
+        logging.captureWarnings(False)
         logging.captureWarnings(True)
         self._handler = logging.StreamHandler(self._file)
         self._handler.setLevel(logging.INFO)

@@ -71,3 +71,46 @@ def test_pareto_front_and_recommendation_pick_the_cheapest_sufficient_runs():
     assert recs["read-out matches the reference"] == 1.0        # cheapest that matches
     assert recs["rate map within 5%"] == 0.1
     assert recs["read-out matches at this dt and every finer one"] == 0.1   # 0.5 breaks it
+
+
+def _row(status="ok", **errors):
+    return dict(sweep="main", scene="bench", method="euler", dt_ms=0.1, status=status,
+                **{e: errors.get(e, 0.1) for e in study.ERRORS}, distance_cm=25.0)
+
+
+def test_a_run_with_a_non_finite_value_but_no_exception_is_marked_and_counted():
+    finite = study.Run(np.array([0, 1]), np.array([1.0, 2.0]), 0.1, 0.1)
+    silent = study.Run(np.array([0, 1]), np.array([1.0, np.nan]), 0.1, 0.1)
+    ok = study._check_finite(_row(), finite)
+    assert ok["status"] == "ok" and ok["nonfinite_without_exception"] is False
+    bad = study._check_finite(_row(), silent)
+    assert bad["nonfinite_without_exception"] is True and "spike times" in bad["status"]
+    score = study._check_finite(_row(rate_map_error=float("inf")), finite)
+    assert score["rate_map_error"] is None and "rate_map_error" in score["status"]
+    raised = _row(status="non-finite (raised NumericalInstabilityError)")
+    counts = study.count_nonfinite([ok, bad, score, raised])
+    assert counts == {"nonfinite_without_exception": 2, "raised_instability": 1}
+
+
+def test_the_reference_verdict_says_what_was_measured():
+    rows = [_row(spike_time_error_ms=0.6), _row(spike_time_error_ms=2.0)]
+    base = dict(same_spike_counts=True, scene="bench", rtol=1e-10, check_rtol=1e-12)
+    far = dict(base, max_shift_ms=1e-5)
+    far.update(study._convergence_verdict(far, rows))
+    assert far["far_below"] and "converged far below" in study._convergence_text(far)
+    near = dict(base, max_shift_ms=0.1)
+    near.update(study._convergence_verdict(near, rows))
+    text = study._convergence_text(near)
+    assert not near["far_below"] and "far below" not in text and "only 6×" in text
+    moved = dict(base, same_spike_counts=False, max_shift_ms=3.0)
+    moved.update(study._convergence_verdict(moved, rows))
+    assert "not converged" in study._convergence_text(moved)
+
+
+def test_the_quick_banner_names_the_methods_the_quick_sweep_leaves_out():
+    spec = specs.load(SPEC, quick=True)
+    *_, parts = study.build(spec)
+    note = study.quick_note(parts["sweep"], parts, parts["sweep"].scenes)
+    missing = [m for m in study.neurons.METHODS if m not in parts["sweep"].methods]
+    assert missing and all(m in note for m in missing)
+    assert note.startswith("quick profile")

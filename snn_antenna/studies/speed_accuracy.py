@@ -30,7 +30,8 @@ from ..errors import NumericalInstabilityError, check
 from ..network import ResonatorArray, rate_map
 from ..preprocess import make_chain
 from ..readout import ContactDetector
-from ..report import Report
+from ..report import (FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, Calibrated, LogFile, Predicted,
+                      Report, fmt)
 from ..signals import Recording
 from ..stimuli import RobotScene, scene_from_spec, square
 from ..store import write_dataset
@@ -467,6 +468,29 @@ def measure(scene, ref: Run, ref_readout: dict, method, dt_ms, target, dtype, wa
     else:  # a larger array has no reference here: its neurons are uncoupled, error per
         # neuron is the same as in the 24-neuron array; only cost is measured
         row.update({e: None for e in ERRORS}, distance_cm=None, readout_matches=None)
+    return _check_finite(row, run)
+
+
+def count_nonfinite(rows: list[dict]) -> dict:
+    """Runs that raised NumericalInstabilityError, and runs that finished without it yet gave
+    a non-finite spike time or score (``_check_finite``): both as measured."""
+    return {"nonfinite_without_exception": sum(bool(r.get("nonfinite_without_exception"))
+                                               for r in rows),
+            "raised_instability": sum(r["status"].startswith("non-finite (raised")
+                                      for r in rows)}
+
+
+def _check_finite(row: dict, run: Run) -> dict:
+    """A run that raised nothing but still produced a non-finite spike time or score is
+    marked (and counted in the summary), its scores dropped: NaN never reaches a report."""
+    bad = [name for name in ERRORS + ("distance_cm",)
+           if row.get(name) is not None and not np.isfinite(row[name])]
+    if not np.all(np.isfinite(run.spike_t_ms)):
+        bad.append("spike times")
+    row["nonfinite_without_exception"] = bool(bad)
+    if bad:
+        row.update(status=f"non-finite without exception ({', '.join(bad)})",
+                   readout_matches=False, **{e: None for e in ERRORS}, distance_cm=None)
     return row
 
 
@@ -559,11 +583,15 @@ class RunLog:
 
 
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print) -> dict:
-    net, robot_scenes, pre, detector, window_s, parts = build(spec)
+    built = build(spec)
+    with LogFile(out_dir, log) as run_log:
+        return _run(spec, Path(out_dir), quick, fresh, run_log, *built)
+
+
+def _run(spec, out_dir, quick, fresh, log, net, robot_scenes, pre, detector, window_s, parts):
     seed = int(spec.get("seed", 0))
     sweep, cost, stab, refset, match = (parts[n] for n in ("sweep", "cost", "stability",
                                                             "reference", "match"))
-    out_dir = Path(out_dir)
     t_start = time.perf_counter()
     wanted = list(dict.fromkeys(sweep.scenes + [cost.scene]))
     log(f"[1/5] scenes ({', '.join(wanted)}, seed {seed})")
@@ -591,17 +619,18 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
     log(f"[3/5] main sweep: {len(configs)} runs ({sweep.target}, {sweep.dtype})")
     rows, warmed = [], set()
     done = RunLog(out_dir / "runs.jsonl", spec, fresh)
-    for j, (name, method, dt) in enumerate(configs, 1):
-        n = _size(scenes[name])
-        row = done.get(sweep="main", scene=name, method=method, dt_ms=dt, target=sweep.target,
-                       dtype=sweep.dtype, n_neurons=n)
-        if row is None:
-            row = measure(scenes[name], refs[name], ref_readouts[name], method, dt,
-                          sweep.target, sweep.dtype, warmed)
-            row["sweep"] = "main"
-            done.add(row)
-        rows.append(row)
-        log(f"  [{j}/{len(configs)}] {_describe(row)}")
+    with log.expected(UNSTABLE_ON_PURPOSE):   # coarse steps are forced past their limits
+        for j, (name, method, dt) in enumerate(configs, 1):
+            n = _size(scenes[name])
+            row = done.get(sweep="main", scene=name, method=method, dt_ms=dt,
+                           target=sweep.target, dtype=sweep.dtype, n_neurons=n)
+            if row is None:
+                row = measure(scenes[name], refs[name], ref_readouts[name], method, dt,
+                              sweep.target, sweep.dtype, warmed)
+                row["sweep"] = "main"
+                done.add(row)
+            rows.append(row)
+            log(f"  [{j}/{len(configs)}] {_describe(row)}")
 
     recommendations = recommend(rows, match)
     settings = [tuple(s) for s in cost.settings]
@@ -615,29 +644,31 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
     log(f"[4/5] cost sweep on {cost.scene}: {len(cost_configs)} runs "
         f"(targets × dtypes × sizes at {settings})")
     default_n = _size(scenes[cost.scene])
-    for j, (method, dt, target, dtype, n) in enumerate(cost_configs, 1):
-        row = done.get(sweep="cost", scene=cost.scene, method=method, dt_ms=dt, target=target,
-                       dtype=dtype, n_neurons=n)
-        if row is None:
-            row = measure(scenes[cost.scene], refs[cost.scene], ref_readouts[cost.scene],
-                          method, dt, target, dtype, warmed,
-                          n_neurons=n if n != default_n else None)
-            row["sweep"] = "cost"
-            done.add(row)
-        rows.append(row)
-        log(f"  [{j}/{len(cost_configs)}] {_describe(row)}")
+    with log.expected(FLOAT32_CHECK):
+        for j, (method, dt, target, dtype, n) in enumerate(cost_configs, 1):
+            row = done.get(sweep="cost", scene=cost.scene, method=method, dt_ms=dt,
+                           target=target, dtype=dtype, n_neurons=n)
+            if row is None:
+                row = measure(scenes[cost.scene], refs[cost.scene], ref_readouts[cost.scene],
+                              method, dt, target, dtype, warmed,
+                              n_neurons=n if n != default_n else None)
+                row["sweep"] = "cost"
+                done.add(row)
+            rows.append(row)
+            log(f"  [{j}/{len(cost_configs)}] {_describe(row)}")
 
     log(f"[5/5] stability map ({len(sweep.methods)} methods × {stab.n_k_dt} k·dt × "
         f"{len(stab.drives)} drives) and report")
-    smap = accuracy.stability_map(
-        sweep.methods, np.geomspace(stab.k_dt_min, stab.k_dt_max, stab.n_k_dt),
-        np.asarray(stab.drives, float), b=net.get("b", 0.26), model_ms=stab.model_ms,
-        rate_tolerance=stab.rate_tolerance)
+    with log.expected(UNSTABLE_ON_PURPOSE):
+        smap = accuracy.stability_map(
+            sweep.methods, np.geomspace(stab.k_dt_min, stab.k_dt_max, stab.n_k_dt),
+            np.asarray(stab.drives, float), b=net.get("b", 0.26), model_ms=stab.model_ms,
+            rate_tolerance=stab.rate_tolerance)
     write_dataset(smap, out_dir / "stability_map.zarr")
 
     summary = _summarise(rows, ref_rows, recommendations, convergence, smap, scenes, net,
                          sweep, time.perf_counter() - t_start)
-    _write_report(out_dir, spec, summary, rows, smap, sweep)
+    _write_report(out_dir, spec, summary, rows, smap, sweep, quick, parts)
     log(_human(summary, out_dir))
     return summary
 
@@ -705,41 +736,122 @@ def _summarise(rows, ref_rows, recommendations, convergence, smap, scenes, net, 
     return {
         "rows": rows,
         "references": ref_rows,
-        "reference_convergence": convergence,
+        "reference_convergence": {**convergence, **_convergence_verdict(convergence, rows)},
         "recommendations": recommendations,
         "quickstart_fastest_matching": quick_answer,
         "shipped_default": dict(default, default_rows=[
             {k: r.get(k) for k in ("scene", "wall_s", COST, "rate_map_error", "readout_matches")}
             for r in default_rows]),
         "stability_limits": limits,
-        "nonfinite_without_exception": 0,   # a NaN anywhere would have failed summary.json
+        **count_nonfinite(rows),
         "total_wall_s": total_s,
     }
 
 
-def _write_report(out_dir, spec, summary, rows, smap, sweep) -> None:
-    report = Report(out_dir, "snn-antenna: speed vs accuracy of the resonator array")
+def _convergence_verdict(convergence: dict, rows: list[dict]) -> dict:
+    """How far below the Brian2 errors the reference's own uncertainty lies, as measured."""
+    errors = [r for r in rows if r["sweep"] == "main" and r["status"] == "ok"
+              and r.get("spike_time_error_ms") is not None]
+    finest = min(errors, key=lambda r: r["spike_time_error_ms"], default=None)
+    out = {"smallest_brian2_error_ms": finest["spike_time_error_ms"] if finest else None,
+           "smallest_error_setting": (f"{finest['scene']} {finest['method']} "
+                                      f"dt={finest['dt_ms']:g} ms") if finest else None}
+    shift = convergence["max_shift_ms"]
+    if finest and shift > 0:
+        out["error_over_shift"] = finest["spike_time_error_ms"] / shift
+    out["far_below"] = bool(convergence["same_spike_counts"] and finest is not None
+                            and (shift == 0 or out["error_over_shift"] >= FAR_BELOW))
+    return out
+
+
+FAR_BELOW = 100.0   # "far below": the smallest Brian2 error is at least this many times larger
+
+
+def _convergence_text(conv: dict) -> str:
+    head = (f"Each scene's reference is solve_ivp (DOP853, rtol {conv['rtol']:g}) from input "
+            f"switch to switch with exact threshold crossings and resets. Re-run at rtol "
+            f"{conv['check_rtol']:g} on the {conv['scene']} scene, ")
+    if not conv["same_spike_counts"]:
+        return head + (f"some neurons fire a different number of spikes (spike-time "
+                       f"difference {fmt(conv['max_shift_ms'])} ms): the reference is not "
+                       f"converged at rtol {conv['rtol']:g}, and Brian2 errors of that size "
+                       f"or smaller say nothing.")
+    text = (head + f"every neuron fires the same number of spikes and spike times move by at "
+            f"most {fmt(conv['max_shift_ms'])} ms. ")
+    if conv["smallest_brian2_error_ms"] is None:
+        return text + "No Brian2 run finished to compare that with."
+    compare = (f"The smallest Brian2 spike-time error here is "
+               f"{fmt(conv['smallest_brian2_error_ms'])} ms ({conv['smallest_error_setting']})")
+    if conv["max_shift_ms"] == 0:
+        return text + compare + ": the reference did not move at all."
+    ratio = fmt(conv["error_over_shift"], digits=2)
+    if conv["far_below"]:
+        return text + compare + f", {ratio}× the reference's shift: the reference is " \
+            "converged far below every Brian2 error reported here."
+    return text + compare + f", only {ratio}× the reference's shift: errors near that size " \
+        "are partly the reference's own, read them with that margin."
+
+
+def quick_note(sweep: Sweep, parts: dict, scenes: dict) -> str:
+    """What the quick profile leaves out, from the settings that ran."""
+    missing = [m for m in neurons.METHODS if m not in sweep.methods]
+    stab = parts["stability"]
+    note = (f"quick profile: too small to choose a setting. Methods "
+            f"{', '.join(sweep.methods)} at dt {fmt(sorted(sweep.dt_ms))} ms on the "
+            f"{', '.join(sweep.scenes)} scene{'s' * (len(sweep.scenes) > 1)} "
+            f"({sweep.target} target)")
+    if missing:
+        note += (f"; {', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not in the "
+                 f"quick sweep, so a recommendation here is only the best of these")
+    return note + (f". The stability map has {stab.n_k_dt} k·dt steps × {len(stab.drives)} "
+                   f"drives (the full map {Stability.n_k_dt} × {len(Stability().drives)}): "
+                   f"its limits are grid points, not the shipped ones.")
+
+
+def _provenance_rows(report: Report, summary: dict, net: dict) -> None:
+    """The shipped stability limits are set from this map (calibrated); the integration
+    errors are measured against the reference (predicted; the paper has none)."""
+    for m, v in summary["stability_limits"].items():
+        report.calibrated(Calibrated(
+            f"largest stable k·dt, {m}", value=v["shipped_max_stable_k_dt"],
+            target=v["measured_max_stable_k_dt"], unit="model ms per step",
+            source="this run's stability map; the shipped value is the full profile's "
+                   "largest finite grid point, rounded down",
+            how="neurons.MAX_STABLE_K_DT (refuses a coarser dt unless force=True)"))
+    d = summary["shipped_default"]
+    for r in d["default_rows"]:
+        if r.get("rate_map_error") is None:
+            continue
+        report.predicted(Predicted(
+            f"rate-map error of the shipped default ({d['method']}, dt {d['dt_ms']:g} ms), "
+            f"{r['scene']} scene", value=r["rate_map_error"], unit="relative",
+            source="this run against the solve_ivp reference", n=1,
+            note="one scene run with one seed (deterministic); the paper reports no "
+                 "integration error"))
+
+
+def _write_report(out_dir, spec, summary, rows, smap, sweep, quick, parts) -> None:
+    report = Report(out_dir, "snn-antenna: speed vs accuracy of the resonator array",
+                    quick=quick, quick_note=quick_note(sweep, parts, sweep.scenes))
     report.text(spec.get("description", ""))
+    _provenance_rows(report, summary, {})
     conv = summary["reference_convergence"]
     report.heading("Reference")
-    report.text(
-        f"Each scene's reference is solve_ivp (DOP853, rtol {conv['rtol']:g}) from input switch "
-        f"to switch with exact threshold crossings and resets. Re-run at rtol "
-        f"{conv['check_rtol']:g} on the {conv['scene']} scene, "
-        f"{'every neuron fires the same number of spikes and ' if conv['same_spike_counts'] else ''}"
-        f"spike times move by at most {conv['max_shift_ms']:.2e} ms: the reference is "
-        f"converged far below every Brian2 error reported here.")
+    report.text(_convergence_text(conv))
     report.table([{k: r[k] for k in ("scene", "cpu_s", "wall_s", "n_spikes", "distance_cm")}
-                  for r in summary["references"]], "Reference runs (seconds)")
+                  for r in summary["references"]], "Reference runs")
     q = summary["quickstart_fastest_matching"]
     report.heading("Recommendation")
+    if quick:
+        report.text("Quick profile: the settings below are the best of the few the quick "
+                    "sweep ran (see the banner), not a recommendation for the toolkit.")
     if q:
         report.text(
             f"Quickstart scene: the fastest setting whose decoded distance and detection match "
             f"the reference is {q['method']} at dt = {q['dt_ms']:g} ms ({q['target']}, "
-            f"{q['dtype']}): {q['cpu_s']:.2f} s CPU ({q['wall_s']:.2f} s wall), "
+            f"{q['dtype']}): {fmt(q['cpu_s'], 's')} CPU ({fmt(q['wall_s'], 's')} wall), "
             f"{q['speedup_vs_reference']:.0f}× faster than the reference "
-            f"({q['reference_cpu_s']:.1f} s CPU) and "
+            f"({fmt(q['reference_cpu_s'], 's')} CPU) and "
             f"{q['speedup_vs_slowest_brian2']:.0f}× faster than the slowest Brian2 setting "
             f"({q['slowest_brian2_setting']}).")
     cols = ("scene", "criterion", "method", "dt_ms", "target", "dtype", "cpu_s", "wall_s",
@@ -752,12 +864,13 @@ def _write_report(out_dir, spec, summary, rows, smap, sweep) -> None:
                   for r in d["default_rows"]], "The shipped default, as measured")
     report.heading("Pareto fronts")
     report.figure(_pareto_figure(rows), "pareto",
-                  "Error against CPU time per scene (main sweep; numbers are dt in ms); the "
-                  "line is the Pareto front. Runs that raised NumericalInstabilityError are "
-                  "not drawn. CPU time, not wall time, ranks runs: the machine is shared.")
+                  "Error against CPU time per scene (main sweep): colour is the method, the "
+                  "marker's shape the step dt; the black line is the Pareto front. Runs that "
+                  "raised NumericalInstabilityError are not drawn. CPU time, not wall time, "
+                  "ranks runs: the machine is shared.")
     report.heading("Cost: targets, precision, array size")
-    cost_cols = ("method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s", "wall_s", "compile_s",
-                 "rate_map_error", "readout_matches", "status")
+    cost_cols = ("method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s", "wall_s",
+                 "compile_s", "rate_map_error", "readout_matches", "status")
     report.table([{c: r.get(c) for c in cost_cols} for r in rows if r["sweep"] == "cost"],
                  "Cost sweep (errors only where a reference of the same size exists)")
     report.heading("Stability map")
@@ -767,10 +880,14 @@ def _write_report(out_dir, spec, summary, rows, smap, sweep) -> None:
                   "runaway (|v| or |u| above 1e6 at any step).")
     report.table([dict(method=m, **v) for m, v in summary["stability_limits"].items()],
                  "Stability limits (k·dt in model ms per step)")
+    n_silent = summary["nonfinite_without_exception"]
+    report.text(
+        f"{summary['raised_instability']} run(s) raised NumericalInstabilityError (shown as "
+        f"non-finite); {n_silent} run(s) finished without an exception yet produced a "
+        f"non-finite spike time or score" + (" (listed below)." if n_silent else "."))
     report.heading("All runs")
     all_cols = ("sweep", "scene", "method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s",
-                "wall_s",
-                "status") + ERRORS
+                "wall_s", "status") + ERRORS
     report.table([{c: r.get(c) for c in all_cols} for r in rows], "Every configuration")
     report.write(summary, spec, sweep.target)
 
@@ -779,37 +896,59 @@ def _pareto_figure(rows):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     main = [r for r in rows if r["sweep"] == "main"]
     scenes = list(dict.fromkeys(r["scene"] for r in main))
     errors = ("rate_map_error", "spike_time_error_ms")
-    fig, axes = plt.subplots(len(errors), len(scenes), figsize=(4 * len(scenes), 7),
-                             squeeze=False)
+    names = {"rate_map_error": "rate-map error (relative)",
+             "spike_time_error_ms": "spike-time error (ms)"}
+    fig, axes = plt.subplots(len(errors), len(scenes), figsize=(4.2 * len(scenes) + 1.6, 6.4),
+                             squeeze=False, layout="constrained")
     colours = dict(zip(neurons.METHODS, ("tab:blue", "tab:orange", "tab:green", "tab:red")))
+    steps = sorted({r["dt_ms"] for r in main})
+    shapes = dict(zip(steps, "osD^vPX*hp"))
+    methods = list(dict.fromkeys(r["method"] for r in main))
     for col, scene in enumerate(scenes):
         mine = [r for r in main if r["scene"] == scene and r["status"] == "ok"]
         for row, err in enumerate(errors):
             ax = axes[row][col]
-            for m in dict.fromkeys(r["method"] for r in mine):
-                pts = [r for r in mine if r["method"] == m]
-                ax.scatter([r[COST] for r in pts],
-                           [max(r[err], 1e-6) for r in pts], label=m, s=18,
-                           color=colours.get(m))
-                for r in pts:
-                    ax.annotate(f"{r['dt_ms']:g}", (r[COST], max(r[err], 1e-6)),
-                                fontsize=6, alpha=0.7)
+            for r in mine:
+                ax.scatter(r[COST], max(r[err], 1e-6), s=30, marker=shapes[r["dt_ms"]],
+                           color=colours.get(r["method"]), edgecolor="k", linewidth=0.4,
+                           alpha=0.85)
             front = pareto_front(mine, err)
             ax.plot([r[COST] for r in front], [max(r[err], 1e-6) for r in front],
                     color="k", lw=0.8, drawstyle="steps-post")
-            ax.set_xscale("log")
-            ax.set_yscale("log")
+            _scale(ax.set_xscale, [r[COST] for r in mine])
+            _scale(ax.set_yscale, [max(r[err], 1e-6) for r in mine])
             ax.set_xlabel("CPU time (s)")
-            ax.set_ylabel(err.replace("_", " "))
-            ax.set_title(scene)
-            if row == 0 and col == 0:
-                ax.legend(fontsize=7)
-    fig.tight_layout()
+            ax.set_ylabel(names[err])
+            ax.set_title(f"{scene} scene", fontsize=10)
+    handles = [Line2D([], [], ls="", marker="o", color=colours.get(m), label=m)
+               for m in methods]
+    handles += [Line2D([], [], ls="", marker=shapes[dt], color="grey", markeredgecolor="k",
+                       label=f"dt {dt:g} ms") for dt in steps]
+    fig.legend(handles=handles, loc="outside right center", fontsize=8, frameon=False)
     return fig
+
+
+def _scale(set_scale, values) -> None:
+    """Log only where the values span more than a decade: a narrow range reads best linear.
+    Tick labels are plain numbers (0.03, not 3×10⁻²), few enough not to collide."""
+    from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    axis = set_scale.__self__.xaxis if set_scale.__name__ == "set_xscale" \
+        else set_scale.__self__.yaxis
+    values = [v for v in values if v is not None and v > 0]
+    if values and max(values) / min(values) > 10:
+        set_scale("log")
+        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        axis.set_minor_formatter(FuncFormatter(
+            lambda v, _: f"{v:g}" if v > 0 and round(v / 10 ** np.floor(np.log10(v))) in (2, 5)
+            else ""))
+    else:
+        axis.set_major_locator(MaxNLocator(5))
 
 
 def _stability_figure(smap):
@@ -817,28 +956,37 @@ def _stability_figure(smap):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
 
     methods = list(smap.integrator.values)
-    fig, axes = plt.subplots(1, len(methods), figsize=(3.6 * len(methods), 3.8), sharey=True,
-                             squeeze=False)
-    cmap = ListedColormap(["#4caf50", "#ffc107", "#d32f2f"])
+    fig, axes = plt.subplots(1, len(methods), figsize=(3.3 * len(methods) + 0.8, 4.0),
+                             sharey=True, squeeze=False, layout="constrained")
+    colours = ["#4caf50", "#ffc107", "#d32f2f"]
+    cmap = ListedColormap(colours)
     k_dt, drives = smap.k_dt.values, smap.I.values
     for ax, m in zip(axes[0], methods):
         ax.pcolormesh(np.arange(len(drives) + 1), np.arange(len(k_dt) + 1),
-                      smap.status.sel(integrator=m).values, cmap=cmap, vmin=0, vmax=2)
+                      smap.status.sel(integrator=m).values, cmap=cmap, vmin=0, vmax=2,
+                      edgecolors="white", linewidth=0.3)
         limit = float(smap.max_stable_k_dt.sel(integrator=m))
         ax.set_title(f"{m} (finite to k·dt {limit:.3g})", fontsize=9)
-        ax.set_xticks(np.arange(len(drives))[::3] + 0.5)
-        ax.set_xticklabels([f"{x:g}" for x in drives[::3]], fontsize=7)
-        ax.set_xlabel("drive I")
-        ticks = np.arange(0, len(k_dt), 4)
-        ax.set_yticks(ticks + 0.5)
-        ax.set_yticklabels([f"{k_dt[t]:.3g}" for t in ticks], fontsize=7)
+        _cell_ticks(ax.set_xticks, ax.set_xticklabels, drives, most=7)
+        ax.set_xlabel("constant drive I")
+        _cell_ticks(ax.set_yticks, ax.set_yticklabels, k_dt, most=13)
     axes[0][0].set_ylabel("k·dt (model ms per step)")
-    fig.text(0.5, -0.02, "green: accurate   amber: inaccurate but finite   red: non-finite or runaway",
-             ha="center", fontsize=9)
-    fig.tight_layout()
+    fig.legend(handles=[Patch(color=c, label=t) for c, t in
+                        zip(colours, ("accurate", "inaccurate but finite",
+                                      "non-finite or runaway"))],
+               loc="outside lower center", ncol=3, fontsize=8, frameon=False)
     return fig
+
+
+def _cell_ticks(set_ticks, set_labels, values, most: int) -> None:
+    """A tick at the centre of every cell, or of every few cells when there are many."""
+    step = max(1, int(np.ceil(len(values) / most)))
+    idx = np.arange(0, len(values), step)
+    set_ticks(idx + 0.5)
+    set_labels([f"{values[i]:.3g}" for i in idx], fontsize=7)
 
 
 def _human(s: dict, out_dir) -> str:
