@@ -243,8 +243,8 @@ def warmup_samples(samples, rate_hz: float, warmup_s: float) -> np.ndarray:
     Refuses a warm-up shorter than ten samples or longer than the recording.
     """
     samples = validate_samples(samples, "samples")
-    n = int(round(float(warmup_s) * float(rate_hz)))
-    check(np.isfinite(warmup_s) and 10 <= n <= samples.shape[0], "preprocess.warmup_s",
+    n = int(round(float(warmup_s) * float(rate_hz))) if np.isfinite(warmup_s) else -1
+    check(10 <= n <= samples.shape[0], "preprocess.warmup_s",
           warmup_s, f"a warm-up of at least {10 / rate_hz:g} s and at most the recording's "
           f"{samples.shape[0] / rate_hz:g} s")
     return samples[:n]
