@@ -329,7 +329,7 @@ def _provenance_rows(rep: Report, s: dict, parts: dict) -> None:
                    "network cpg pan/tilt centre and amplitude"),
         Calibrated("gate's Th*(speed) training examples",
                    ", ".join(f"{a:g}: {b:g}" for a, b in zip(v, th)), "Th* of the gating study",
-                   "g per cm/s", "studies/gating_threshold.toml (seed 3), as listed in "
+                   "cm/s: g", "studies/gating_threshold.toml (seed 3), as listed in "
                    "studies/exploration.toml", "gate_training"),
     )
     rep.predicted(
