@@ -86,7 +86,7 @@ def test_the_closed_loop_stops_the_robot_at_a_post_without_seeing_the_ground_tru
 
     def step_then_lie(self, *args, **kwargs):
         samples = step(self, *args, **kwargs)
-        self.contacts = [replace(c, t_s=float(rng.uniform(0, 6)),
+        self.contacts = [replace(c, t_s=float(rng.uniform(0.5, 3.5)),
                                  distance_cm=float(rng.uniform(9, 35)), material="brass")
                          for c in self.contacts]
         return samples

@@ -219,8 +219,9 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
                    f"log10 F = {antenna.LOW_LAW[0]} d + {antenna.LOW_LAW[1]}",
                    "log10 F = 0.0268 d + 0.69", "", "docs/reference.md, Fig. 2C",
                    "antenna.LOW_LAW; readout inverts the same law"),
-        Calibrated("self-motion amplitude ∝ speed² (threshold at 27 vs 12 cm/s)",
-                   (27 / 12) ** 2, "> 5", "×", "docs/reference.md, Fig. 9",
+        Calibrated("self-motion amplitude at 27 vs 12 cm/s (∝ speed²), made to match the "
+                   "optimal threshold's ratio", (27 / 12) ** 2, "> 5", "×",
+                   "docs/reference.md, Fig. 9",
                    "antenna.SELF_MOTION_G_AT_12 (0.25 g, assumed) and the speed² law"),
         Calibrated("hertz per unit k of a resonator", neurons.DRIVEN_HZ_PER_K, 7.0 / 0.3425,
                    "Hz", "docs/reference.md, neuron model (paper: 7 Hz neuron k = 0.3425, "
@@ -233,8 +234,8 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
     report.predicted(
         Predicted("false positives per minute while driving (12 cm/s)", sc["fp_per_min"],
                   "1/min", None, "this run (score after a blind read-out)", interval,
-                  sc["fp"], "n = false positives counted; exact Poisson interval over "
-                  f"{sc['scored_minutes']:.2f} min; the paper gives no rate"),
+                  None, f"{sc['fp']} false positive(s) in {sc['scored_minutes']:.2f} min "
+                  "of driving; exact Poisson interval; the paper gives no rate"),
         Predicted("contacts detected", sc["tp"], "", None, "this run", None,
                   sc["tp"] + sc["misses"], f"{sc['misses']} missed"),
         Predicted("mean detection latency", sc["latency_s"], "s", None, "this run", None,
