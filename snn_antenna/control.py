@@ -15,7 +15,10 @@
   ``bias + gain · logit``, so the most active neuron names the material. The intercept is
   gated by the resonators' summed activity, so silent resonators leave every neuron at
   ``bias``, below rheobase (no spikes at rest). The material shows in the high mode (decay,
-  stiffness): feed the unit a high-band array.
+  stiffness): feed the unit a high-band array. Measured (``tests/test_material.py``,
+  2026-11-23), metal vs non-metal on unseen bench contacts at unseen positions: 419 of 640
+  correct over 20 train/test seed pairs (65.5 %, Wilson 95 % interval 61.7–69.1 %; one seed
+  of 32 contacts ranged from 15 to 26 correct, too few to tell the unit from chance).
 
 All use ``neurons.equations("class1", ...)``: rate grows with input current above rheobase.
 """

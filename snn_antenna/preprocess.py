@@ -8,6 +8,11 @@ the whole array) and the streaming form (``partial_transform`` on successive chu
 same numbers on the same data, whatever the chunk boundaries. ``transform`` is ``reset`` then
 one ``partial_transform``. Parameters are stored as given and validated in ``fit``, as in
 scikit-learn, so the stages sit in a ``Pipeline`` and cross-validate with familiar tools.
+
+What a fit learns (the PCA axis and mean) must come from what a robot has before it reads:
+``fit_warmup(chain, samples, rate_hz, warmup_s)`` fits on the first ``warmup_s`` of a recording
+only (the spec key ``preprocess.warmup_s``), or fit on a separate calibration recording.
+Never fit on the recording being read out: its contacts would leak into the alignment.
 """
 from __future__ import annotations
 
@@ -230,6 +235,28 @@ def make_chain(rate_hz: float, adc_bits: int = 10, full_scale_g: float = 18.0,
         ("centre", Centre(rate_hz, centre_tau_s)),
         ("coder", SquareWaveCoder(coder_amplitude, threshold)),
     ])
+
+
+def warmup_samples(samples, rate_hz: float, warmup_s: float) -> np.ndarray:
+    """The first ``warmup_s`` of ``samples``: what a robot has recorded before it reads out.
+
+    Refuses a warm-up shorter than ten samples or longer than the recording.
+    """
+    samples = validate_samples(samples, "samples")
+    n = int(round(float(warmup_s) * float(rate_hz))) if np.isfinite(warmup_s) else -1
+    check(10 <= n <= samples.shape[0], "preprocess.warmup_s",
+          warmup_s, f"a warm-up of at least {10 / rate_hz:g} s and at most the recording's "
+          f"{samples.shape[0] / rate_hz:g} s")
+    return samples[:n]
+
+
+def fit_warmup(pipeline: Pipeline, samples, rate_hz: float, warmup_s: float) -> Pipeline:
+    """Fit the chain on the first ``warmup_s`` of ``samples`` only (see ``warmup_samples``).
+
+    The fitted chain then transforms the whole recording causally, offline or streaming;
+    read-outs should ignore what it codes before ``warmup_s`` (the chain was calibrating).
+    """
+    return pipeline.fit(warmup_samples(samples, rate_hz, warmup_s))
 
 
 def partial_transform(pipeline: Pipeline, X):

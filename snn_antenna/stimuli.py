@@ -116,8 +116,8 @@ class RobotScene:
     On each contact the rod is clamped at ``distance_cm`` for ``hold_s``: the impact makes it
     ring in its two modes, and while the robot still moves its shaking drives the clamped rod at
     its new low mode instead of the free rod's 7.8 Hz. The robot stops ``stop_after_contact_s``
-    after the first contact (the control layer's reflex; ``None`` keeps driving); once stopped
-    there is no more self-motion and the ringing decays.
+    after the first contact (the control layer's reflex; ``None``, ``"never"`` in a spec, keeps
+    driving); once stopped there is no more self-motion and the ringing decays.
     """
     duration_s: float = 8.0
     rate_hz: float = 1000.0
@@ -197,6 +197,8 @@ class RobotScene:
 def scene_from_spec(spec: dict) -> RobotScene:
     """Build a scene from the ``[stimulus]`` table of a spec (already schema-checked)."""
     spec = dict(spec)
+    if spec.get("stop_after_contact_s") == "never":   # TOML has no null
+        spec["stop_after_contact_s"] = None
     kind = spec.pop("kind", "robot")
     if kind != "robot":
         raise SpecError("stimulus.kind", kind, "'robot'")

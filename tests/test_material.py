@@ -4,11 +4,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from snn_antenna import assembly, bench
 from snn_antenna.control import window_features
 from snn_antenna.errors import SpecError
 from snn_antenna.spiking import HIGH_BAND, SpikingBank
+from snn_antenna.stats import binomial_interval
 
 ROOT = Path(__file__).resolve().parents[1]
 WINDOW_S = 0.15          # one bench contact per read-out window
@@ -39,15 +41,20 @@ def coded_contacts(seed, repetitions, positions_cm):
     return bank.code(counts, RATE_HZ, spec.adc_bits, spec.full_scale_g), materials
 
 
-def test_the_most_active_material_neuron_names_the_material_more_often_than_chance():
+def material_unit_correct(train_seed: int, test_seed: int,
+                          test_repetitions: int = 2) -> tuple[int, int]:
+    """Train the unit on bench contacts of ``train_seed`` (12, 20, 28 cm, 6 repetitions), play
+    unseen contacts of ``test_seed`` at unseen positions (16, 24 cm, ``test_repetitions`` of
+    each material: 16 contacts per repetition)
+    back to back through the network, and count how often its most active neuron names the
+    contact's class (metal / non-metal)."""
     import brian2 as b2
 
     table = network_spec("bench_material")
-    coded, materials = coded_contacts(0, 6, (12.0, 20.0, 28.0))
+    coded, materials = coded_contacts(train_seed, 6, (12.0, 20.0, 28.0))
     unit = assembly.configure(table)["material"].fit(
         window_features(table, coded, RATE_HZ), materials)
-    # Unseen contacts at unseen positions, back to back, then one silent window.
-    coded, materials = coded_contacts(1, 2, (16.0, 24.0))
+    coded, materials = coded_contacts(test_seed, test_repetitions, (16.0, 24.0))
     n_samples, n_events = coded.shape
     asm = assembly.build(table, fitted={"material": unit})
     feed = b2.TimedArray(np.r_[coded.T.ravel(), np.zeros(n_samples)], dt=b2.second / RATE_HZ)
@@ -62,9 +69,27 @@ def test_the_most_active_material_neuron_names_the_material_more_often_than_chan
     rates = rates[:n_events]
     decoded = np.array(unit.class_names)[np.argmax(rates, axis=1)]
     correct = (decoded == unit.class_of(materials)) & (rates.max(axis=1) > 0)
-    # 32 contacts, two classes: chance gives >= 21 correct with p < 0.03; measured 23 (72 %).
-    assert correct.sum() >= 21, f"{correct.sum()} of {n_events} correct"
-    assert rates.sum() > 0
+    return int(correct.sum()), int(n_events)
+
+
+def test_the_most_active_material_neuron_names_the_material_more_often_than_chance():
+    # 160 unseen contacts (10 of each material at each of two unseen positions). Measured:
+    # 100 of 160 (62.5 %); over 20 train/test seed pairs of 32 contacts, 419 of 640 (65.5 %,
+    # Wilson 95 % interval 61.7-69.1 %; single seeds ranged 15-26 of 32, so 32 contacts
+    # cannot resolve the unit from chance). What is resolved: above chance, not how far.
+    correct, n = material_unit_correct(train_seed=0, test_seed=1, test_repetitions=10)
+    assert n == 160
+    p_chance = stats.binomtest(correct, n, 0.5, alternative="greater").pvalue
+    assert p_chance < 0.01, f"{correct} of {n} correct: p = {p_chance:.3g} against chance"
+    assert binomial_interval(correct, n)[0] > 0.5
+
+
+@pytest.mark.slow
+def test_over_many_seeds_the_material_unit_is_resolved_above_chance():
+    results = [material_unit_correct(2 * seed, 2 * seed + 1) for seed in range(20)]
+    correct, n = (sum(r[i] for r in results) for i in (0, 1))
+    low, high = binomial_interval(correct, n)
+    assert n == 640 and low > 0.55, (correct, n, low, high)   # measured 419 of 640, 61.7-69.1 %
 
 
 def test_networks_without_the_part_build_no_material_objects():

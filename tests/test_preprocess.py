@@ -14,7 +14,8 @@ SCENE = RobotScene(duration_s=4.0, contacts=[Contact(2.0, 19.0)]).generate(seed=
 @settings(max_examples=25, deadline=None)
 @given(st.lists(st.integers(1, 900), min_size=1, max_size=12))
 def test_streaming_equals_offline_for_any_chunking(sizes):
-    chain = pp.make_chain(SCENE.rate_hz, threshold=0.05).fit(SCENE.samples)
+    chain = pp.fit_warmup(pp.make_chain(SCENE.rate_hz, threshold=0.05), SCENE.samples,
+                          SCENE.rate_hz, warmup_s=1.5)
     offline = chain.transform(SCENE.samples)
     pp.reset(chain)
     cuts = np.cumsum(sizes)
@@ -22,6 +23,21 @@ def test_streaming_equals_offline_for_any_chunking(sizes):
     streamed = np.concatenate([pp.partial_transform(chain, c)
                                for c in np.split(SCENE.samples, cuts)])
     np.testing.assert_array_equal(offline, streamed)
+
+
+def test_a_warm_up_fit_sees_only_the_warm_up():
+    # Everything after the warm-up (here: the contact at 2 s) is replaced; the fitted chain,
+    # and so the coded signal up to any time, must not change.
+    n = int(1.5 * SCENE.rate_hz)
+    other = SCENE.samples.copy()
+    other[n:] = other[n:, ::-1] * 2
+    a = pp.fit_warmup(pp.make_chain(SCENE.rate_hz), SCENE.samples, SCENE.rate_hz, 1.5)
+    b = pp.fit_warmup(pp.make_chain(SCENE.rate_hz), other, SCENE.rate_hz, 1.5)
+    np.testing.assert_array_equal(a.named_steps["align"].axis_, b.named_steps["align"].axis_)
+    np.testing.assert_array_equal(a.transform(SCENE.samples)[:n], b.transform(other)[:n])
+    for bad in (0.0, 0.005, 4.5, float("nan")):
+        with pytest.raises(SpecError, match="warmup_s"):
+            pp.fit_warmup(pp.make_chain(SCENE.rate_hz), SCENE.samples, SCENE.rate_hz, bad)
 
 
 def test_pca_recovers_the_oscillation_axis():
