@@ -1,5 +1,10 @@
 """Gating threshold: how the coder's Th must follow speed, and a spiking gate that learns it.
 
+Every read-out is blind: the preprocessing chain is fitted once on a separate calibration
+drive without posts (``calibrated_chain``), the coder's Th is fixed or comes from the speed
+command only, and the array and detector see only the coded signal (``read_out``). Detections
+are scored against the labelled contacts afterwards (``score_detections``).
+
 Stages (each prints a progress line):
 
 1. Sweep Th × speed over seeded course scenes: every scene is coded at every Th and all
@@ -10,15 +15,22 @@ Stages (each prints a progress line):
    (``monotone_th_star``): the shaking that Th must hide only grows with speed, and a few
    contacts per speed make a single speed's argmax noisy.
 2. Fig. 9 in kind: rate maps at 12 and 27 cm/s for Th = 0, Th* and 2·Th*, and the true
-   positives lost by doubling Th*.
+   positives lost by doubling Th*. Both Fig. 9 numbers (the Th* ratio and the lost true
+   positives) were built into the generator by calibration: the report lists them under
+   "Calibrated to", never as findings.
 3. Train the speed gate (``gate.SpeedGate``, Brian2 associative memory) on Th* at a few
    speeds; record its learning curve and its recall at every swept speed (held-out ones too).
-4. On new scenes (new seeds, constant speeds and ramps 0→30 cm/s) compare detection F1 of the
-   gate's online Th (recalled from each scene's speed at every sample) against every fixed Th
-   and a lookup table of the trained Th* (interpolated in log Th). Two single thresholds are
-   reported: the best in hindsight (the fixed Th with the highest F1 on the evaluation scenes
-   themselves, an oracle no robot has) and the one a user would deploy (the Th of highest F1
-   over all speeds of the sweep).
+4. Pilot evaluation on new scenes (``Evaluation``): per seed, constant speeds the gate was not
+   trained on, a ramp over the speed range, random speed steps, and the ramp and steps on the
+   other terrain. Detection F1 of the gate's online Th (recalled from each scene's speed
+   command at every sample) is compared with fixed thresholds around Th*'s range and with a
+   lookup table of the same trained Th* (interpolated in log Th). Two single thresholds are
+   reported: the best in hindsight (highest F1 on the evaluation scenes themselves, an oracle
+   no robot has) and the one a user would deploy (highest F1 over all speeds of the sweep).
+5. The pilot's spread of paired differences sets how many seeds resolve a difference of
+   ``evaluation.margin_f1`` (``stats.seeds_needed``), up to ``evaluation.max_seeds``; the
+   remaining seeds run, and every comparison is reported as a paired difference with its
+   95 % CI and n (``stats.paired_difference``), "not resolved" when the interval spans zero.
 
 Every Brian2 stage uses the same Dask client (``sweep.workers``, ``--scheduler``; none with
 ``workers = 1``): after the sweep, Fig. 9 and the fixed-Th evaluation start on the workers
@@ -548,6 +560,7 @@ def _run(spec: dict, parts: dict, out_dir: Path, quick: bool, fresh: bool, clien
         if held_out.any() else None,
         "recall_error_factor_trained": float(np.exp(np.mean(np.abs(np.log(ratio[~held_out]))))),
         "train_speeds_cm_s": train.tolist(),
+        "gate_tau_read_s": gate.tau_read_s,
         "calibration_checks": calibration_checks,
         "seeds": {"pilot": n_pilot, "needed": needed, "used": n_seeds,
                   "budget": ev["max_seeds"], "margin_f1": ev["margin_f1"]},
@@ -746,12 +759,15 @@ def _difference(a, b) -> dict:
     keep = np.isfinite(a) & np.isfinite(b)   # a seed without contacts or detections has no F1
     a, b = a[keep], b[keep]
     if len(a) < 2:
-        return {"mean": float(np.mean(a - b)), "low": None, "high": None, "n": int(len(a)),
+        return {"mean": float(np.mean(a - b)) if len(a) else None, "low": None, "high": None,
+                "n": int(len(a)),
                 "p_value": None, "resolved": False, "verdict": "n < 2: no interval"}
     return paired_difference(a, b).as_dict()
 
 
 def _ci(d: dict, digits: int = 3) -> str:
+    if d["mean"] is None:
+        return "no seed with contacts"
     if d.get("low") is None:
         return f"{d['mean']:.{digits}f} (n = {d['n']}, no interval)"
     return (f"{d['mean']:.{digits}f} (95 % CI {d['low']:.{digits}f} to {d['high']:.{digits}f}, "
@@ -759,6 +775,8 @@ def _ci(d: dict, digits: int = 3) -> str:
 
 
 def _diff_text(d: dict) -> str:
+    if d["mean"] is None:
+        return "no seed with contacts to compare"
     if d.get("low") is None:
         return f"{d['mean']:+.3f} (n = {d['n']}, no interval)"
     return (f"{d['mean']:+.3f} (95 % CI {d['low']:+.3f} to {d['high']:+.3f}, n = {d['n']}, "
@@ -768,21 +786,27 @@ def _diff_text(d: dict) -> str:
 
 
 def earns_its_place(s: dict) -> tuple[bool, str]:
-    """The gate's bar: resolved above the best fixed Th, and not resolved below the lookup."""
+    """The gate's bar: resolved above the best fixed Th, and not resolved below the lookup;
+    otherwise why not, in the summary's own numbers."""
     d_fixed = s["differences"]["gated − best fixed in hindsight"]
     d_lookup = s["differences"]["gated − lookup"]
     above_fixed = d_fixed.get("low") is not None and d_fixed["low"] > 0
-    not_below_lookup = d_lookup.get("high") is None or d_lookup["high"] >= 0
-    if above_fixed and not_below_lookup:
+    below_lookup = d_lookup.get("high") is not None and d_lookup["high"] < 0
+    if above_fixed and not below_lookup:
         return True, ("the gate is resolved above the best single threshold (even one chosen "
                       "in hindsight on these scenes) and not resolved below the lookup table")
     why = []
     if not above_fixed:
-        why.append("its lead over the best fixed Th in hindsight is not resolved"
-                   if d_fixed["mean"] > 0 or d_fixed.get("high", 0) and d_fixed["high"] > 0
-                   else "it scores below the best fixed Th in hindsight")
-    if not not_below_lookup:
-        why.append("it is resolved below the lookup table it interpolates")
+        ahead = d_fixed["mean"] is not None and d_fixed["mean"] > 0
+        why.append("its lead over the best fixed Th in hindsight is not resolved" if ahead
+                   else "it does not score above the best fixed Th in hindsight")
+    if below_lookup:
+        why.append(
+            "it is resolved below the lookup table: both hold the same trained Th*, but the "
+            "gate recalls it only within a factor "
+            f"{s['recall_error_factor_trained']:.2f} on the trained speeds (the table is exact "
+            f"there) and its read-out trace (τ = {s['gate_tau_read_s']:g} s) lags each speed "
+            "step, so at best a spiking associative memory matches the table it learns")
     return False, "; ".join(why)
 
 
