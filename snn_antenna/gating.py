@@ -7,15 +7,21 @@ the array per coding, each copy reading its own column of a 2-D TimedArray throu
 ``neurons.simulate``), and ``score`` compares the read-out's detections with the labelled
 contacts.
 
+The read-out (``run_codings`` then ``ContactDetector.detect``) sees only the coded signal, as
+a robot would; ``score`` compares its detections with the ground truth afterwards, and is the
+only place the ground truth enters.
+
 Scoring, per contact: a detection whose first window starts between one window before the
 contact and the end of its hold is a true positive (latency: from the contact to the end of
 that first window, when the detection is known); further detections within the same hold
 are duplicates (neither right nor wrong); other detections are false positives; contacts
-without a detection are misses. Only contacts the array can see are scored: those whose
-low mode lies above the self-motion band and within the array's band (a post touched near
-the tip rings above 30 Hz, beyond the paper's 7–30 Hz array); detections of the others are
-ignored. The first ``settle_s`` of a scene (filters and self-motion building up) is not
-scored.
+without a detection are misses. A contact whose low mode lies below the self-motion band or
+beyond the array's band (a post touched near the tip rings above 30 Hz, beyond the paper's
+7–30 Hz array) cannot be told by frequency: it is its own category, decided here at scoring
+time from the true distance: ``out_of_band_contacts`` counts them, ``out_of_band_hits`` the
+detections that fell on one (neither true nor false positives: the contact was real, but
+the array was not built to see it). The first ``settle_s`` of a scene (filters and
+self-motion building up) is not scored.
 """
 from __future__ import annotations
 
@@ -57,14 +63,16 @@ class Score:
     fp: int = 0
     misses: int = 0
     duplicates: int = 0
-    unscored_contacts: int = 0
+    out_of_band_contacts: int = 0
+    out_of_band_hits: int = 0
     minutes: float = 0.0
     latencies_s: list = field(default_factory=list)
 
     def __add__(self, other: "Score") -> "Score":
         return Score(self.tp + other.tp, self.fp + other.fp, self.misses + other.misses,
                      self.duplicates + other.duplicates,
-                     self.unscored_contacts + other.unscored_contacts,
+                     self.out_of_band_contacts + other.out_of_band_contacts,
+                     self.out_of_band_hits + other.out_of_band_hits,
                      self.minutes + other.minutes, self.latencies_s + other.latencies_s)
 
     @property
@@ -82,12 +90,15 @@ class Score:
 
     def as_dict(self) -> dict:
         return {"tp": self.tp, "fp": self.fp, "misses": self.misses,
-                "duplicates": self.duplicates, "unscored_contacts": self.unscored_contacts,
+                "duplicates": self.duplicates, "out_of_band_contacts": self.out_of_band_contacts,
+                "out_of_band_hits": self.out_of_band_hits,
                 "f1": self.f1, "fp_per_min": self.fp_per_min, "latency_s": self.latency_s}
 
 
 def visible(contact: Event, detector: ContactDetector, array: ResonatorArray) -> bool:
-    """Can the array see this contact at all (its low mode in the band above self-motion)?"""
+    """Can the array see this contact at all (its low mode in the band above self-motion)?
+
+    A scoring-time category from the true distance: never used to filter detections."""
     f = float(antenna.low_mode_hz(contact.distance_cm))
     return detector.motion_band_hz[1] < f <= float(array.band_hz[1])
 
@@ -100,7 +111,7 @@ def score(detections: list[ContactEstimate], contacts, duration_s: float,
     seen = [visible(c, detector, array) for c in contacts]
     matched = [False] * len(contacts)
     s = Score(minutes=(duration_s - settle_s) / 60.0,
-              unscored_contacts=int(len(contacts) - sum(seen)))
+              out_of_band_contacts=int(len(contacts) - sum(seen)))
     for d in sorted(detections, key=lambda d: d.onset_s):
         if d.onset_s < settle_s:
             continue
@@ -110,12 +121,13 @@ def score(detections: list[ContactEstimate], contacts, duration_s: float,
             s.fp += 1
             continue
         i = hits[0]
-        if not seen[i]:
-            continue
         if matched[i]:
             s.duplicates += 1
             continue
         matched[i] = True
+        if not seen[i]:
+            s.out_of_band_hits += 1
+            continue
         s.tp += 1
         s.latencies_s.append(d.onset_s + window_s - contacts[i].t_s)
     s.misses = int(sum(1 for m, v in zip(matched, seen) if v and not m))

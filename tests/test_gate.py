@@ -105,7 +105,11 @@ def test_scoring_per_contact():
            ContactEstimate(3.5, 3.8, 15.0, 19.0), ContactEstimate(8.1, 8.4, 40.0, 30.0),
            ContactEstimate(0.2, 0.4, 15.0, 19.0)]           # before settling: not scored
     s = score(det, contacts, 10.0, detector, array, window_s=0.1, settle_s=1.0)
-    assert (s.tp, s.fp, s.misses, s.duplicates, s.unscored_contacts) == (1, 1, 1, 1, 1)
+    # The detection at 8.1 s fell on the out-of-band contact: its own category, decided here
+    # from the true distance, neither a true nor a false positive (and never dropped earlier).
+    assert (s.tp, s.fp, s.misses, s.duplicates) == (1, 1, 1, 1)
+    assert (s.out_of_band_contacts, s.out_of_band_hits) == (1, 1)
+    assert score(det[:3] + det[4:], contacts, 10.0, detector, array, 0.1, 1.0).out_of_band_hits == 0
     assert s.latencies_s == pytest.approx([0.0])
     assert s.f1 == pytest.approx(2 / 4) and s.fp_per_min == pytest.approx(1 / 0.15)
     total = s + Score(tp=1, minutes=1.5)
