@@ -155,18 +155,12 @@ class EventProcessor:
         # Extreme points are half a period apart; the minimum interval keeps noise wiggles out.
         spacing = max(self.extreme_min_interval_ms * 1e-3, 0.4 / f_hz) * self.rate_hz
         peaks, _ = find_peaks(rect, distance=max(1, int(spacing)))
-        # Away from the window's ends, where the band's smoothing pulls the component down.
-        inner = peaks[(peaks >= edge) & (peaks < n - edge)]
-        if len(inner) >= 3:
-            peaks = inner
         if len(peaks) == 0:
             raise SkippedEvent("no_decay_fit")
-        peaks = peaks[int(np.argmax(rect[peaks])):]  # from the largest on: the decay
-        # Only the contiguous run above the minimum: later points are the other mode's
-        # leakage through the band (the impact's sharp start is broadband), not this decay.
-        below = np.flatnonzero(rect[peaks] < self.extreme_min_fraction * rect.max())
-        if len(below):
-            peaks = peaks[:below[0]]
+        # Away from the window's ends, where the band's smoothing pulls the component down;
+        # a mode too short-lived for three such points keeps them all.
+        inner = self._decay_run(rect, peaks[(peaks >= edge) & (peaks < n - edge)])
+        peaks = inner if len(inner) >= 3 else self._decay_run(rect, peaks)
         if len(peaks) < 3:
             raise SkippedEvent("no_decay_fit")
         # Each extreme's height and time from a parabola through it and its neighbours.
@@ -181,6 +175,16 @@ class EventProcessor:
         if not slope < 0:
             raise SkippedEvent("no_decay_fit")
         return float(np.exp(intercept)), float(-1.0 / slope)
+
+    def _decay_run(self, rect: np.ndarray, peaks: np.ndarray) -> np.ndarray:
+        """The extreme points of the decay: from the largest on, and only the contiguous run
+        above the minimum (later points are the other mode's leakage through the band; the
+        impact's sharp start is broadband), not this decay."""
+        if len(peaks) == 0:
+            return peaks
+        peaks = peaks[int(np.argmax(rect[peaks])):]
+        below = np.flatnonzero(rect[peaks] < self.extreme_min_fraction * rect.max())
+        return peaks[:below[0]] if len(below) else peaks
 
     # -- whole events -----------------------------------------------------------------------
     def features(self, x: np.ndarray) -> tuple[np.ndarray, dict[str, float]]:
