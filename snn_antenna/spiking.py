@@ -17,8 +17,18 @@ Two bands (``Band``):
   above the coder's threshold, so how long each fires carries the decay time, which is where
   the material shows.
 
-Features per event and neuron: spike count, first-spike latency and firing span (last − first
-spike), each in ``SpikeFeatures`` with the neurons' preferred frequencies.
+- ``rod`` (a physics-motivated third bank; ``stimuli/bench.toml`` and the baseline study):
+  resonators over the struck rods' own bending modes (Euler–Bernoulli from each material's
+  E, ρ and the 12 mm × 15 cm rod: 107–377 Hz, ``antenna.Material.rod_mode_hz``), input
+  band-passed around them with a low threshold, because the rod's line is weak (a few % of
+  the impact) but outlasts the antenna's own high mode (τ_high ≤ 60 ms; a metal rod rings for
+  0.5–1.4 s, wood and plastics for 50–200 ms).
+
+Features per event and neuron: spike count, first-spike latency, firing span (last − first
+spike) and the counts in time bins (``SpikingBank.bin_edges_s``): how each channel's firing
+decays, a spike-based spectrogram; after ~0.2 s the antenna's own high mode has died and what
+still drives the high-frequency resonators is the rod. Each in ``SpikeFeatures`` with the
+neurons' preferred frequencies.
 """
 from __future__ import annotations
 
@@ -84,6 +94,7 @@ class SpikeFeatures:
     duration_s: float
     wall_s: float = 0.0
     neuron_steps: float = 0.0
+    binned_counts: np.ndarray | None = None  # (events, neurons, bins of bin_edges_s)
 
     def matrix(self) -> np.ndarray:
         """One row per event: counts, latencies and spans of every neuron (decoder input)."""
@@ -93,7 +104,9 @@ class SpikeFeatures:
         keep = np.isin(self.band, list(bands))
         return SpikeFeatures(self.counts[:, keep], self.latency_s[:, keep], self.span_s[:, keep],
                              self.neuron_hz[keep], self.band[keep], self.duration_s,
-                             self.wall_s, self.neuron_steps)
+                             self.wall_s, self.neuron_steps,
+                             None if self.binned_counts is None
+                             else self.binned_counts[:, keep])
 
     def dominant_hz(self, band: str = "low") -> np.ndarray:
         """Preferred frequency of each event's most active neuron in ``band`` (0: silent)."""
@@ -111,6 +124,11 @@ class SpikingBank:
     method: str = "euler"
     target: str = "numpy"
     batch_events: int = 400
+    # Inner edges (s from the start of each event's recording, which holds the bench's 50 ms
+    # lead-in) of the time bins whose spike counts trace each channel's decay: 50 ms after
+    # the impact, then 150 ms (the antenna's high mode, τ_high ≤ 60 ms, is below 8 % by
+    # then while a struck metal rod still rings), then 250 ms.
+    bin_edges_s: tuple = (0.1, 0.2, 0.3)
 
     def __post_init__(self):
         check(isinstance(self.bands, dict) and len(self.bands) >= 1, "bands", self.bands,
@@ -126,6 +144,12 @@ class SpikingBank:
               self.duration_s, "a run length > 0 s per event")
         check(isinstance(self.batch_events, int) and self.batch_events >= 1, "batch_events",
               self.batch_events, "an integer >= 1 (events per Brian2 run)")
+        edges = np.asarray(self.bin_edges_s, dtype=float)
+        check(edges.ndim == 1 and np.all(np.isfinite(edges)) and np.all(np.diff(edges) > 0)
+              and (len(edges) == 0 or (edges[0] > 0 and edges[-1] < self.duration_s)),
+              "bin_edges_s", self.bin_edges_s,
+              f"increasing times in (0, duration_s = {self.duration_s}) s")
+        self.bin_edges_s = tuple(float(e) for e in edges)
 
     def check_rate(self, rate_hz: float) -> None:
         for name, band in self.bands.items():
@@ -174,6 +198,7 @@ class SpikingBank:
         n = len(counts)
         names = np.array(list(self.bands))
         feats = {key: np.zeros((n, per_event)) for key in ("counts", "latency", "span")}
+        feats["binned"] = np.zeros((n, per_event, len(self.bin_edges_s) + 1))
         wall, steps = 0.0, 0.0
         bar = tqdm(total=n, desc="spiking", unit="event", disable=not progress, leave=False)
         for lo in range(0, n, self.batch_events):
@@ -194,11 +219,15 @@ class SpikingBank:
             feats["counts"][lo:lo + m] = c.reshape(m, per_event)
             feats["latency"][lo:lo + m] = lat.reshape(m, per_event)
             feats["span"][lo:lo + m] = span.reshape(m, per_event)
+            feats["binned"][lo:lo + m] = binned_spike_counts(
+                result.spike_i, result.spike_t_ms / 1000.0, m * per_event,
+                self.bin_edges_s).reshape(m, per_event, -1)
             bar.update(m)
         bar.close()
         return SpikeFeatures(feats["counts"], feats["latency"], feats["span"],
                              np.concatenate([a.neuron_hz for a in arrays]), names[band_of],
-                             min(counts.shape[1] / rate_hz, self.duration_s), wall, steps)
+                             min(counts.shape[1] / rate_hz, self.duration_s), wall, steps,
+                             feats["binned"])
 
 
 def align_events(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.ndarray:
@@ -225,6 +254,16 @@ def spike_summary(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
     last = first.copy()
     np.maximum.at(last, spike_i, spike_t_s)
     return counts, first, last - first
+
+
+def binned_spike_counts(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
+                        inner_edges_s) -> np.ndarray:
+    """(neurons, len(inner_edges_s) + 1): spikes before the first edge, between edges, and
+    at or after the last."""
+    bins = np.searchsorted(np.asarray(inner_edges_s, dtype=float), spike_t_s, side="right")
+    n_bins = len(inner_edges_s) + 1
+    flat = np.bincount(np.asarray(spike_i) * n_bins + bins, minlength=n_neurons * n_bins)
+    return flat.reshape(n_neurons, n_bins)
 
 
 class DominantNeuronDistance(RegressorMixin, BaseEstimator):

@@ -58,3 +58,30 @@ def test_event_recording_carries_its_contact():
 def test_bad_specs_are_refused(change, field):
     with pytest.raises(SpecError, match=field):
         bench.BenchSpec(**{**SMALL, **change}).validate()
+
+
+def test_a_reused_store_gives_back_plain_text_labels(tmp_path):
+    """Zarr v3 returns text as StringDType; the cache hands back the labels it was given."""
+    spec = bench.BenchSpec(**SMALL, cache_dir=str(tmp_path))
+    made = bench.load(spec, log=lambda *_: None)
+    again = bench.load(spec, log=lambda *_: None)
+    for name in ("material", "axis"):
+        assert again[name].dtype.kind == "U", (name, again[name].dtype)
+        assert list(again[name].values) == list(made[name].values)
+    assert again.sel(axis="x")["counts"].shape == made.sel(axis="x")["counts"].shape
+
+
+def test_the_cache_key_follows_the_antenna_physics(monkeypatch):
+    """A change in antenna.py's source (the physics) makes a new data set."""
+    import inspect
+
+    from snn_antenna import antenna
+    spec = bench.BenchSpec(**SMALL)
+    before = spec.key()
+    real = inspect.getsource
+
+    def edited(obj):
+        text = real(obj)
+        return text.replace("ROD_COUPLING = ", "ROD_COUPLING = 2 * ") if obj is antenna else text
+    monkeypatch.setattr(bench.inspect, "getsource", edited)
+    assert spec.key() != before

@@ -72,3 +72,35 @@ def test_processor_settings_are_checked():
         events.EventProcessor(rate_hz=RATE, split_hz=600.0)
     with pytest.raises(SpecError, match="end_fraction"):
         events.EventProcessor(rate_hz=RATE, end_fraction=1.5)
+
+
+def tau_low_spread(proc, f_low, tau_low, n=40):
+    """Relative bias and CV of τ_low over contacts that differ only in phase and noise."""
+    rng = np.random.default_rng(7)
+    taus = []
+    for i in range(n):
+        t = np.arange(int(RATE)) / RATE
+        x = 2.0 * np.exp(-t / tau_low) * np.cos(2 * np.pi * f_low * t + rng.normal(0, 0.2))
+        x += 0.9 * np.exp(-t / (tau_low / 5)) * np.cos(2 * np.pi * 7.5 * f_low * t
+                                                 + rng.uniform(0, 6))
+        x = np.r_[np.zeros(100), x] + rng.normal(0, 0.01, 100 + len(t))
+        taus.append(proc.features(x)[1]["tau_low"])
+    taus = np.array(taus)
+    return taus.mean() / tau_low - 1, taus.std(ddof=1) / taus.mean()
+
+
+@pytest.mark.parametrize("f_low,tau_low", [(8.0, 0.30), (20.0, 0.21), (45.0, 0.11)])
+def test_tau_low_is_as_precise_as_the_papers(f_low, tau_low):
+    """The paper's CV of τ_low (< 1 %) needs the fit itself well below 1 %: on decays with
+    one known τ, the extraction's own CV < 0.75 % (0.3–0.4 % from 20 Hz up; the 8 Hz mode
+    gives the fewest extreme points) and bias < 1 %."""
+    bias, cv = tau_low_spread(events.EventProcessor(rate_hz=RATE), f_low, tau_low)
+    assert abs(bias) < 0.01 and cv < 0.0075, (bias, cv)
+
+
+def test_extreme_points_at_the_window_edges_spoil_the_fit():
+    """Why the edges are left out: with every extreme point and the narrower band, the same
+    decays scatter by more than the paper's whole CV of τ_low."""
+    naive = events.EventProcessor(rate_hz=RATE, edge_sigmas=0.0, band_fraction_low=0.15)
+    bias, cv = tau_low_spread(naive, 20.0, 0.21)
+    assert cv > 0.01 or abs(bias) > 0.03, (bias, cv)
