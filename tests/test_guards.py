@@ -354,3 +354,17 @@ def test_contact_detector_refuses_bad_arguments_by_name(kwargs, name):
     with pytest.raises(SpecError) as err:
         ContactDetector(**kwargs)
     assert err.value.field == name
+
+
+def test_record_and_stream_refuse_an_out_that_is_not_new_or_empty(tmp_path, capsys):
+    full = tmp_path / "full"
+    full.mkdir()
+    (full / "raw.bin").write_bytes(b"mine")
+    refused(capsys, ["record", "--port", "loop://", "--out", str(full)], "out",
+            "new or empty")
+    assert (full / "raw.bin").read_bytes() == b"mine"
+    afile = tmp_path / "afile"
+    afile.write_text("mine")
+    refused(capsys, ["stream", "--port", "loop://", "--network",
+                     str(ROOT / "networks" / "resonator_array.toml"), "--out",
+                     str(afile / "rec")], "--out", "is a file")
