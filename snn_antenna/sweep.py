@@ -62,7 +62,7 @@ from typing import Any, Callable
 import numpy as np
 
 from . import neurons
-from .errors import NumericalInstabilityError, SpecError, check
+from .errors import NumericalInstabilityError, SpecError, check, is_integer
 from .store import Output, SweepStore
 
 __all__ = ["Grid", "axis_values", "run_sweep", "SweepOutcome", "dask_client", "executor",
@@ -138,8 +138,8 @@ class Grid:
 
     def block_shape(self, chunk_points: int) -> tuple[int, ...]:
         """Chunk shape: trailing axes whole while they fit, then a part of the next axis."""
-        check(isinstance(chunk_points, int) and chunk_points >= 1, "chunk_points",
-              chunk_points, "an integer >= 1")
+        check(is_integer(chunk_points) and chunk_points >= 1, "chunk_points",
+              chunk_points, "an integer >= 1 (not true/false)")
         block, room = [], chunk_points
         for n in reversed(self.shape):
             take = max(1, min(n, room))

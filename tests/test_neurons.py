@@ -76,15 +76,35 @@ def test_each_resonator_of_the_array_peaks_within_one_channel_of_its_target():
     assert np.all(np.diff(centre) > 0)  # the map is ordered
 
 
+def centroid_hz(k, freqs):
+    """Measured preferred frequency (rate-weighted geometric centroid) of one resonator."""
+    current = np.stack([square_wave(f, 2000.0, 0.1, 0.15) for f in freqs], 1)
+    counts = neurons.simulate("resonator", current, 0.1, k=np.full(len(freqs), k)).spike_counts
+    return float(np.exp((counts * np.log(freqs)).sum() / counts.sum()))
+
+
+def ringing_hz(k, dt=0.05):
+    """Measured small-signal frequency: a small kick from rest, then zero crossings."""
+    current = np.zeros(int(400 / dt))
+    current[:20] = 0.2
+    v = neurons.simulate("resonator", current, dt, k=k, record_traces="v").traces["v"][:, 0]
+    v = v[int(20 / dt):] - v[-1]
+    crossings = np.flatnonzero(np.diff(np.sign(v)) > 0)
+    return 1000 / (np.median(np.diff(crossings)) * dt)
+
+
 def test_driven_hz_per_k_is_what_the_k1_resonator_measures():
     freqs = np.geomspace(10, 40, 120)
-    counts = tuning_curves(np.array([neurons.DRIVEN_HZ_PER_K]), freqs)[0]
-    centre = np.exp((counts * np.log(freqs)).sum() / counts.sum())
+    centre = centroid_hz(1.0, freqs)
     assert centre == pytest.approx(neurons.DRIVEN_HZ_PER_K, rel=0.02)
-    # the paper's 7 Hz neuron has k = 0.3425
-    assert neurons.k_for_frequency(7.0) == pytest.approx(0.3425, rel=0.02)
-    # the small-signal (linearised) frequency is higher: the driven neuron is slower
-    assert neurons.LINEAR_HZ_PER_K > neurons.DRIVEN_HZ_PER_K
+    # The paper's 7 Hz neuron has k = 0.3425: the neuron with that k measures about 7 Hz, and
+    # k_for_frequency maps the frequency it measures back to the paper's k.
+    measured_7 = centroid_hz(0.3425, np.geomspace(3.5, 14, 80))
+    assert measured_7 == pytest.approx(7.0, rel=0.03)
+    assert neurons.k_for_frequency(measured_7) == pytest.approx(0.3425, rel=0.03)
+    # The small-signal (linearised) frequency is higher than the driven one, as measured on
+    # the same k = 1 neuron: the driven neuron is slower than its ringing.
+    assert ringing_hz(1.0) > centre * 1.1
 
 
 def test_response_band_narrows_as_input_amplitude_falls():

@@ -174,6 +174,7 @@ def recording_session(args, extra_meta: dict | None = None):
     ends, the port is released and the recording closed with that ending as its status."""
     from .recorder import Recorder
 
+    _check_recording_dir(args.out)          # before the port is opened
     stop = stop_on_signals()
     source = open_source(args)
     try:
@@ -295,6 +296,16 @@ def cmd_emulate(args) -> int:
     return 0
 
 
+def _check_recording_dir(path) -> None:
+    """A recording goes into a new or empty folder: never beside (or into) a user's files."""
+    from ..outputs import check_writable
+
+    path = check_writable(path)
+    if path.is_dir() and any(path.iterdir()):
+        raise SpecError("out", str(path), "a new or empty directory (an existing recording or "
+                                          "other files are never written into)")
+
+
 def _check_output_file(name: str, path) -> None:
     path = Path(path)
     if path.is_dir() or not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
@@ -308,11 +319,12 @@ def cmd_stream(args) -> int:
 
     _check_duration(args.duration)
     parts = build_online(args.network, args.set)     # a bad spec fails before the port opens
+    if args.out is None:
+        args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
+    _check_recording_dir(args.out)
     print("preparing the network (Brian2 compiles on the first run, then uses its cache)",
           file=sys.stderr, flush=True)
     warm_up(parts)
-    if args.out is None:
-        args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
     with recording_session(args, {"network": str(args.network), "set": args.set}) as (
             source, recorder, stop):
         report = run_online(source, parts, handlers=[recorder], duration_s=args.duration,
