@@ -184,7 +184,8 @@ def open_in_browser(chromium: str, report: Path, width: int = WIDTH_PX) -> dict:
                     encoding="utf-8")
     try:
         proc = subprocess.run(
-            [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+            [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+             "--hide-scrollbars",
              "--no-first-run", f"--window-size={width},900", "--virtual-time-budget=20000",
              "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=180)
     finally:
@@ -293,6 +294,7 @@ def test_a_study_run_again_succeeds_with_the_same_numbers(quick_reports, study):
     """Run after run (after an interrupted first one when the study keeps a store): both
     complete runs succeed, reuse what is stored, and report the same numbers."""
     run = quick_reports.get(study)
+    assert run.failure is None, f"{study}: {run.failure}"
     assert len(run.summaries) == 2
     assert_same_numbers(*run.summaries, study)
     print(f"{study}: runs took {[round(s, 1) for s in run.seconds]} s"
@@ -303,6 +305,7 @@ def test_a_study_run_again_succeeds_with_the_same_numbers(quick_reports, study):
 @pytest.mark.parametrize("study", STUDIES)
 def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study):
     run = quick_reports.get(study)
+    assert run.summaries, f"{study}: no complete run to open: {run.failure}"
     seen = open_in_browser(chromium, run.report)
     assert_reads_cleanly(seen, quick=True)
     for name in ("report.html", "summary.json"):
