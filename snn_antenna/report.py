@@ -406,7 +406,9 @@ def _number(x: float, digits: int) -> str:
         return "0"
     exponent = int(np.floor(np.log10(abs(x))))
     if -4 <= exponent < 6:
-        decimals = max(digits - 1 - exponent, 0)
+        decimals = digits - 1 - exponent
+        if decimals < 0:     # 64245 to 2 figures: 64000
+            return f"{round(x, decimals):.0f}"
         text = f"{round(x, decimals):.{decimals}f}"
         if "." in text:
             text = text.rstrip("0").rstrip(".")

@@ -45,6 +45,7 @@ def test_numbers_dicts_and_lists_are_formatted_for_a_reader():
     assert fmt(-34.99580198960206) == "-35"
     assert fmt(3.1e-5) == "3.1×10⁻⁵"
     assert fmt(0.024, "g") == "0.024 g"
+    assert fmt(64245.3, digits=2) == "64000" and fmt(123456.7) == "123500"
     assert fmt({"measured": 1.3320387601234507, "spec": 1.3333333333333333}) == \
         "measured = 1.332, spec = 1.333"
     assert fmt([-34.99580198960206, 54.99964982285057]) == "-35, 55"
