@@ -289,13 +289,14 @@ border-radius:4px;padding:.7em 1em;margin:1em 0}
 letter-spacing:.04em} .quick-banner span{display:block;font-weight:600;margin:.2em 0}
 .quick-banner small{display:block;color:#5c4a00}
 .table-scroll{max-width:100%;overflow-x:auto;margin:1em 0}
-table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal;width:max-content}
+table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal}
 caption{caption-side:top;text-align:left;color:#555;padding:.3em 0}
 td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right;vertical-align:top}
 th{background:#f3f3f3;font-weight:600}
 th .key{display:block;font-weight:normal;font-size:.72em;color:#888;font-family:monospace;
 white-space:nowrap}
-th.text,td.text{text-align:left} td.text{max-width:28em} td.num{white-space:nowrap}
+th.text,td.text{text-align:left} td.num{white-space:nowrap}
+table.wide{width:max-content} table.wide td.text{max-width:24em}
 table.nested{font-size:1em;margin:0;width:100%} table.nested td,table.nested th{border:0;
 border-bottom:1px solid #eee;padding:.05em .4em} table.nested th{background:none;
 text-align:left;color:#555;font-weight:normal;white-space:nowrap}
@@ -406,7 +407,9 @@ def _number(x: float, digits: int) -> str:
         return "0"
     exponent = int(np.floor(np.log10(abs(x))))
     if -4 <= exponent < 6:
-        decimals = max(digits - 1 - exponent, 0)
+        decimals = digits - 1 - exponent
+        if decimals < 0:     # 64245 to 2 figures: 64000
+            return f"{round(x, decimals):.0f}"
         text = f"{round(x, decimals):.{decimals}f}"
         if "." in text:
             text = text.rstrip("0").rstrip(".")
@@ -485,8 +488,14 @@ def _table_html(rows: list[dict], caption: str = "") -> str:
     body = "".join("<tr>" + "".join(_cell_html(r.get(c)) for c in cols) + "</tr>"
                    for r in rows)
     cap = f"<caption>{html.escape(fmt(caption))}</caption>" if caption else ""
-    return (f'<div class="table-scroll"><table>{cap}<thead><tr>{head}</tr></thead>'
+    # Up to WIDE_COLUMNS columns fit the page with their text wrapped; wider tables keep
+    # their lines and scroll sideways inside their own box.
+    wide = ' class="wide"' if len(cols) > WIDE_COLUMNS else ""
+    return (f'<div class="table-scroll"><table{wide}>{cap}<thead><tr>{head}</tr></thead>'
             f"<tbody>{body}</tbody></table></div>")
+
+
+WIDE_COLUMNS = 8
 
 
 def _header_html(key, numeric: bool) -> str:

@@ -45,6 +45,7 @@ def test_numbers_dicts_and_lists_are_formatted_for_a_reader():
     assert fmt(-34.99580198960206) == "-35"
     assert fmt(3.1e-5) == "3.1×10⁻⁵"
     assert fmt(0.024, "g") == "0.024 g"
+    assert fmt(64245.3, digits=2) == "64000" and fmt(123456.7) == "123500"
     assert fmt({"measured": 1.3320387601234507, "spec": 1.3333333333333333}) == \
         "measured = 1.332, spec = 1.333"
     assert fmt([-34.99580198960206, 54.99964982285057]) == "-35, 55"
@@ -184,7 +185,8 @@ def open_in_browser(chromium: str, report: Path, width: int = WIDTH_PX) -> dict:
                     encoding="utf-8")
     try:
         proc = subprocess.run(
-            [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+            [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+             "--hide-scrollbars",
              "--no-first-run", f"--window-size={width},900", "--virtual-time-budget=20000",
              "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=180)
     finally:
@@ -293,6 +295,7 @@ def test_a_study_run_again_succeeds_with_the_same_numbers(quick_reports, study):
     """Run after run (after an interrupted first one when the study keeps a store): both
     complete runs succeed, reuse what is stored, and report the same numbers."""
     run = quick_reports.get(study)
+    assert run.failure is None, f"{study}: {run.failure}"
     assert len(run.summaries) == 2
     assert_same_numbers(*run.summaries, study)
     print(f"{study}: runs took {[round(s, 1) for s in run.seconds]} s"
@@ -303,6 +306,7 @@ def test_a_study_run_again_succeeds_with_the_same_numbers(quick_reports, study):
 @pytest.mark.parametrize("study", STUDIES)
 def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study):
     run = quick_reports.get(study)
+    assert run.summaries, f"{study}: no complete run to open: {run.failure}"
     seen = open_in_browser(chromium, run.report)
     assert_reads_cleanly(seen, quick=True)
     for name in ("report.html", "summary.json"):
