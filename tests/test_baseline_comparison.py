@@ -12,7 +12,7 @@ from snn_antenna.studies import baseline_comparison as study
 SPEC = "studies/baseline_comparison.toml"
 TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
         "stimulus.repetitions=6", "stimulus.n_jobs=1", "evaluation.seeds=[0,1]",
-        "evaluation.nmf_dims=[3]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
+        "evaluation.nmf_dims=[3,24,30]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
         "evaluation.material_max_iter=30", "spiking.bank.target=numpy",
         "spiking.bank.duration_s=0.3", "spiking.bank.bin_edges_s=[0.1,0.2]",
         "spiking.design_repetitions=3",
@@ -26,6 +26,29 @@ def tiny_run(tmp_path_factory):
     spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={out / 'cache'}"])
     summary = study.run(spec, out / "report", log=lambda *_: None)
     return out / "report", summary
+
+
+@pytest.fixture(scope="module")
+def tiny_quick_run(tmp_path_factory):
+    """The spec's quick profile on the same tiny data (its own NMF sizes and designs)."""
+    out = tmp_path_factory.mktemp("baseline_quick")
+    keep = [o for o in TINY if not o.startswith(("evaluation.nmf_dims", "spiking.designs"))]
+    spec = specs.load(SPEC, keep + [f"stimulus.cache_dir={out / 'cache'}"], quick=True)
+    summary = study.run(spec, out / "report", quick=True, log=lambda *_: None)
+    return out / "report", summary
+
+
+def test_quick_and_full_profiles_report_the_same_kinds_of_numbers(tiny_run, tiny_quick_run):
+    (full_dir, _), (quick_dir, _) = tiny_run, tiny_quick_run
+    full = json.loads((full_dir / "summary.json").read_text())
+    quick = json.loads((quick_dir / "summary.json").read_text())
+    assert (full["quick"], quick["quick"]) == (False, True)
+    for key in ("calibrated", "predicted"):
+        assert [r["quantity"] for r in quick[key]] == [r["quantity"] for r in full[key]], key
+    assert set(quick["spiking"]["against_fft"]) == set(full["spiking"]["against_fft"])
+    assert set(quick) == set(full)
+    assert "Quick profile" in (quick_dir / "report.html").read_text()
+    assert "Quick profile" not in (full_dir / "report.html").read_text()
 
 
 def test_report_folder_and_summary_keys(tiny_run):
@@ -44,7 +67,7 @@ def test_report_folder_and_summary_keys(tiny_run):
     assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(72 * 0.3 / 1e-4)
     assert [d["design"] for d in spiking["designs"]] == ["low_8"]
     assert (out / "pareto_cost_accuracy.png").is_file()
-    assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3]
+    assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3, 24, 30]
     assert stored["data"]["n_events"] == 54
     assert sum(stored["data"]["skipped"].values()) + stored["data"]["n_processed"] == 54
 
