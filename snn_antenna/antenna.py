@@ -20,7 +20,7 @@ as a damped oscillation with a low and a high mode. What comes from the paper (P
      f₁ = 1.8751² / (2π L²) · (d/4) · √(E/ρ): 107–123 Hz for the plastics, 256–271 Hz for
      brass and copper, 334 Hz wood, 369–377 Hz steel and aluminium), decaying with its loss
      factor plus the tube's on the share of the mode's energy the resting antenna stores
-     (τ = 1/(π f η): 50 ms acrylic to 1.4 s steel); the impact's impulse is the same on every
+     (τ = 1/(π f η): 49 ms acrylic to 1.2 s steel); the impact's impulse is the same on every
      rod, so its end moves with an acceleration ∝ f₁/ρ and ``ROD_COUPLING`` of it (calibrated,
      below) reaches the tip while the antenna rests on the rod. The second mode (×6.27) lies
      above the spectrum's 508 Hz for every material and is left out;
@@ -32,7 +32,7 @@ as a damped oscillation with a low and a high mode. What comes from the paper (P
   3. the contact takes energy out of the antenna's modes: the rod, a spring of 3EI/L³ at its
      end, stores the share k_a/(k_a + k_rod) of a mode's strain energy and dissipates its loss
      factor of it per radian, 1/τ += π f η_rod · share. Stiff, low-loss metals take almost
-     nothing; wood (η 0.01, soft) shortens τ_low by ~1 %, the plastics by 8–25 %, more for
+     nothing; wood (η 0.01, soft) shortens τ_low by ~1 %, the plastics by 5–16 %, more for
      distal contacts (higher f), while τ still falls almost linearly with distance.
   The antenna's own decay (assumed) is τ_low 0.30 → 0.10 s and τ_high 60 → 15 ms from 8 to
   37.5 cm. Calibrated (declared in the baseline report): ``ANTENNA_CONTACT_STIFFNESS_N_M``

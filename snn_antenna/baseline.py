@@ -189,6 +189,7 @@ class Fold:
     fit_s: float
     predict_s_per_event: float
     estimator: object = field(repr=False, default=None)
+    train_index: np.ndarray | None = field(repr=False, default=None)
 
 
 def inputs_of(features: xr.Dataset, kind: str) -> np.ndarray:
@@ -230,7 +231,7 @@ def fit_fold(baseline: Baseline, X, y, train, test, seed) -> Fold:
     predict_s = (time.perf_counter() - t0) / max(1, int(test.sum()))
     if not np.all(np.isfinite(pred)):
         raise ArithmeticError(f"{baseline.name} predicted non-finite values")
-    return Fold(seed, np.flatnonzero(test), pred, fit_s, predict_s, est)
+    return Fold(seed, np.flatnonzero(test), pred, fit_s, predict_s, est, np.flatnonzero(train))
 
 
 def score(task: str, y_true, y_pred) -> dict:

@@ -22,7 +22,7 @@ Two bands (``Band``):
   E, ρ and the 12 mm × 15 cm rod: 107–377 Hz, ``antenna.Material.rod_mode_hz``), input
   band-passed around them with a low threshold, because the rod's line is weak (a few % of
   the impact) but outlasts the antenna's own high mode (τ_high ≤ 60 ms; a metal rod rings for
-  0.5–1.4 s, wood and plastics for 50–200 ms).
+  0.5–1.2 s, wood and plastics for 50–105 ms).
 
 Features per event and neuron: spike count, first-spike latency, firing span (last − first
 spike) and the counts in time bins (``SpikingBank.bin_edges_s``): how each channel's firing

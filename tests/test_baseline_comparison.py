@@ -12,9 +12,10 @@ from snn_antenna.studies import baseline_comparison as study
 SPEC = "studies/baseline_comparison.toml"
 TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
         "stimulus.repetitions=6", "stimulus.n_jobs=1", "evaluation.seeds=[0,1]",
-        "evaluation.nmf_dims=[3]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
+        "evaluation.nmf_dims=[3,24,30]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
         "evaluation.material_max_iter=30", "spiking.bank.target=numpy",
-        "spiking.bank.duration_s=0.3", "spiking.design_repetitions=3",
+        "spiking.bank.duration_s=0.3", "spiking.bank.bin_edges_s=[0.1,0.2]",
+        "spiking.design_repetitions=3",
         "spiking.cost_sample_events=6",
         "spiking.designs=[{name='low_8', band='low', n_neurons=8}]"]
 
@@ -25,6 +26,29 @@ def tiny_run(tmp_path_factory):
     spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={out / 'cache'}"])
     summary = study.run(spec, out / "report", log=lambda *_: None)
     return out / "report", summary
+
+
+@pytest.fixture(scope="module")
+def tiny_quick_run(tmp_path_factory):
+    """The spec's quick profile on the same tiny data (its own NMF sizes and designs)."""
+    out = tmp_path_factory.mktemp("baseline_quick")
+    keep = [o for o in TINY if not o.startswith(("evaluation.nmf_dims", "spiking.designs"))]
+    spec = specs.load(SPEC, keep + [f"stimulus.cache_dir={out / 'cache'}"], quick=True)
+    summary = study.run(spec, out / "report", quick=True, log=lambda *_: None)
+    return out / "report", summary
+
+
+def test_quick_and_full_profiles_report_the_same_kinds_of_numbers(tiny_run, tiny_quick_run):
+    (full_dir, _), (quick_dir, _) = tiny_run, tiny_quick_run
+    full = json.loads((full_dir / "summary.json").read_text())
+    quick = json.loads((quick_dir / "summary.json").read_text())
+    assert (full["quick"], quick["quick"]) == (False, True)
+    for key in ("calibrated", "predicted"):
+        assert [r["quantity"] for r in quick[key]] == [r["quantity"] for r in full[key]], key
+    assert set(quick["spiking"]["against_fft"]) == set(full["spiking"]["against_fft"])
+    assert set(quick) == set(full)
+    assert "Quick profile" in (quick_dir / "report.html").read_text()
+    assert "Quick profile" not in (full_dir / "report.html").read_text()
 
 
 def test_report_folder_and_summary_keys(tiny_run):
@@ -40,10 +64,10 @@ def test_report_folder_and_summary_keys(tiny_run):
     spiking = stored["spiking"]
     assert {"spiking_dominant", "spiking_centroid", "spiking_mlp_distance"} <= set(spiking["distance_rmse_mm"])
     assert "spiking_mlp_material" in spiking["material_accuracy"]
-    assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(48 * 0.3 / 1e-4)
+    assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(72 * 0.3 / 1e-4)
     assert [d["design"] for d in spiking["designs"]] == ["low_8"]
     assert (out / "pareto_cost_accuracy.png").is_file()
-    assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3]
+    assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3, 24, 30]
     assert stored["data"]["n_events"] == 54
     assert sum(stored["data"]["skipped"].values()) + stored["data"]["n_processed"] == 54
 
@@ -59,16 +83,31 @@ def test_report_numbers_are_recomputed_from_the_predictions(tiny_run):
             rmse = [10 * np.sqrt(np.mean((np.array(f["predicted"]) - f["true"]) ** 2))
                     for f in folds]
             assert stored["distance_rmse_mm"][name]["mean"] == pytest.approx(np.mean(rmse))
-            assert f"{np.mean(rmse):.2f} ± {np.std(rmse, ddof=1):.2f}" in html
+            if name in study.TRAINING_FREE:   # shown once, as a self-consistency check
+                table = html[html.index("Self-consistency"):][:3000]
+                assert f"{np.mean(rmse):.2f}" in table
+            else:
+                assert f"{np.mean(rmse):.2f} ± {np.std(rmse, ddof=1):.2f}" in html
         elif task == "material" and not name.startswith("nmf_"):
             acc = [np.mean(np.array(f["predicted"]) == f["true"]) for f in folds]
             assert stored["material_accuracy"][name]["mean"] == pytest.approx(np.mean(acc))
         if name.startswith("spiking_") and task == "distance":
             assert stored["spiking"]["distance_rmse_mm"][name]["mean"] == pytest.approx(
                 np.mean(rmse))
-    # test contacts never appear in their split's training set: disjoint repetitions
-    assert all(len(f["test_event"]) == len(set(f["test_event"]))
-               for folds in preds["folds"].values() for f in folds)
+
+
+def test_no_test_repetition_was_trained_on(tiny_run):
+    """Per fold, the repetitions of the training contacts and of the test contacts are
+    disjoint (so no contact, nor its repetition's twin at another site, leaks), and every
+    contact of the pipeline's events is on one side."""
+    out, _ = tiny_run
+    preds = json.loads((out / "predictions.json").read_text())
+    rep = {int(k): v for k, v in preds["repetition"].items()}
+    for name, folds in preds["folds"].items():
+        for f in folds:
+            train, test = set(f["train_event"]), set(f["test_event"])
+            assert train and test and not train & test, name
+            assert not {rep[e] for e in train} & {rep[e] for e in test}, name
 
 
 def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
