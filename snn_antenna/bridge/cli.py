@@ -18,6 +18,7 @@ from pathlib import Path
 from ..errors import NumericalInstabilityError, PipelineError, SpecError
 from .protocol import WIRE_FORMATS
 from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
+from .view import add_view_args, live_view
 
 EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
 EXIT_FAILED = 1                         # a stage of the pipeline itself failed
@@ -42,6 +43,7 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--network", default=None,
                    help="networks/NAME.toml: run the online pipeline on the replay")
     _set_arg(p)
+    add_view_args(p)
     p.set_defaults(func=cmd_replay)
 
     p = subparsers.add_parser("emulate", help="emulate the sensor board (pty or URL), with faults")
@@ -74,6 +76,7 @@ def add_subcommands(subparsers) -> None:
                    help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
     _set_arg(p)
+    add_view_args(p)
     p.set_defaults(func=cmd_stream)
 
 
@@ -217,13 +220,17 @@ def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
     from .replay import ReplaySource
 
+    if args.view and not args.network:
+        raise SpecError("view", True, "--view with --network (the view shows the network)")
     if args.network:
         from .online import LiveDisplay, build_online, run_online
 
         parts = build_online(args.network, args.set)
-        source = ReplaySource(args.recording, realtime=args.realtime).start()
-        report = run_online(source, parts, no_data_timeout_s=1e9,
-                            display=LiveDisplay(sys.stdout))
+        with live_view(args, parts) as view:        # None without --view
+            source = ReplaySource(args.recording, realtime=args.realtime).start()
+            report = run_online(source, parts, no_data_timeout_s=1e9,
+                                display=LiveDisplay(sys.stdout), handlers=[view] if view else [],
+                                view=view)
         print(json.dumps(report, indent=1))
         return 0
     source = ReplaySource(args.recording, realtime=args.realtime).start()
@@ -289,11 +296,11 @@ def cmd_stream(args) -> int:
     warm_up(parts)
     if args.out is None:
         args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
-    with recording_session(args, {"network": str(args.network), "set": args.set}) as (
-            source, recorder, stop):
-        report = run_online(source, parts, handlers=[recorder], duration_s=args.duration,
-                            no_data_timeout_s=args.no_data_timeout, stop=stop,
-                            display=LiveDisplay(sys.stdout))
+    with live_view(args, parts) as view, recording_session(
+            args, {"network": str(args.network), "set": args.set}) as (source, recorder, stop):
+        report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
+                            duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
+                            stop=stop, display=LiveDisplay(sys.stdout), view=view)
     print(json.dumps(report, indent=1))
     return 0
 
