@@ -19,6 +19,7 @@ from pathlib import Path
 from ..errors import NumericalInstabilityError, PipelineError, SpecError
 from .protocol import WIRE_FORMATS
 from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
+from .view import add_view_args, live_view
 
 EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
 EXIT_FAILED = 1                         # a stage of the pipeline itself failed
@@ -43,6 +44,7 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--network", default=None,
                    help="networks/NAME.toml: run the online pipeline on the replay")
     _set_arg(p)
+    add_view_args(p)
     p.set_defaults(func=cmd_replay)
 
     p = subparsers.add_parser("emulate", help="emulate the sensor board (pty or URL), with faults")
@@ -75,6 +77,7 @@ def add_subcommands(subparsers) -> None:
                    help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
     _set_arg(p)
+    add_view_args(p)
     p.set_defaults(func=cmd_stream)
 
 
@@ -219,13 +222,17 @@ def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
     from .replay import ReplaySource
 
+    if args.view and not args.network:
+        raise SpecError("view", True, "--view with --network (the view shows the network)")
     if args.network:
         from .online import LiveDisplay, build_online, run_online
 
         parts = build_online(args.network, args.set)
-        source = ReplaySource(args.recording, realtime=args.realtime).start()
-        report = run_online(source, parts, no_data_timeout_s=1e9,
-                            display=LiveDisplay(sys.stdout))
+        with live_view(args, parts) as view:        # None without --view
+            source = ReplaySource(args.recording, realtime=args.realtime).start()
+            report = run_online(source, parts, no_data_timeout_s=1e9,
+                                display=LiveDisplay(sys.stdout), handlers=[view] if view else [],
+                                view=view)
         print(json.dumps(report, indent=1))
         return 0
     source = ReplaySource(args.recording, realtime=args.realtime).start()
@@ -325,11 +332,11 @@ def cmd_stream(args) -> int:
     print("preparing the network (Brian2 compiles on the first run, then uses its cache)",
           file=sys.stderr, flush=True)
     warm_up(parts)
-    with recording_session(args, {"network": str(args.network), "set": args.set}) as (
-            source, recorder, stop):
-        report = run_online(source, parts, handlers=[recorder], duration_s=args.duration,
-                            no_data_timeout_s=args.no_data_timeout, stop=stop,
-                            display=LiveDisplay(sys.stdout))
+    with live_view(args, parts) as view, recording_session(
+            args, {"network": str(args.network), "set": args.set}) as (source, recorder, stop):
+        report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
+                            duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
+                            stop=stop, display=LiveDisplay(sys.stdout), view=view)
     print(json.dumps(report, indent=1))
     return 0
 

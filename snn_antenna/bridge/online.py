@@ -289,8 +289,9 @@ class OnlineReport:
 
 def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | None = None,
                no_data_timeout_s: float = 5.0, stop=None, display: LiveDisplay | None = None,
-               calibration_s: float = 1.0) -> dict:
-    """Stream a started source (serial or replay) through the network; returns the report."""
+               calibration_s: float = 1.0, view=None) -> dict:
+    """Stream a started source (serial or replay) through the network; returns the report.
+    ``view`` (bridge/view.py's LiveView) is told each window and contact; it only copies."""
     if not 0 < calibration_s <= 60:
         raise SpecError("calibration_s", calibration_s, "seconds in (0, 60]")
     loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
@@ -338,6 +339,8 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
         rates = spike_counts / parts.window_s
         event = tracker.update(t_s, rates)
         report.last_window = (time.perf_counter(), loop.waiting_s, t_s + parts.window_s)
+        if view is not None:
+            view.window(t_s, rates, event, report.realtime_factor, latency_ms)
         if display:
             show(display, event)
             display.window(t_s, rates, neuron_hz, report.realtime_factor, latency_ms)
@@ -350,6 +353,8 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     report.samples, report.windows, report.simulated_s = (stats.samples, stats.windows,
                                                           stats.simulated_s)
     final = tracker.close()
+    if view is not None:
+        view.event(final)
     if display:
         show(display, final)
         if display.tty:

@@ -1,0 +1,311 @@
+"""The live browser view (bridge/view.py): /state.json advances and shows the contact with its
+distance; a stalled or closed page costs no sample; headless Chromium draws the page.
+
+The Chromium test writes its screenshot where LIVE_VIEW_SCREENSHOT says (the README's is made
+with ``LIVE_VIEW_SCREENSHOT=docs/live_view.png python -m pytest tests/test_live_view.py -k
+chromium``), else into the test's temporary folder.
+"""
+import io
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna.bridge import load_recording
+from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
+from snn_antenna.bridge.online import build_online, run_online
+from snn_antenna.bridge.protocol import Sample, encode_binary
+from snn_antenna.bridge.recorder import Recorder
+from snn_antenna.bridge.replay import ReplaySource
+from snn_antenna.bridge.source import Batch
+from snn_antenna.bridge.view import LiveView
+from snn_antenna.stimuli import Contact, RobotScene
+
+ROOT = Path(__file__).resolve().parents[1]
+NETWORK = ROOT / "networks" / "resonator_array.toml"
+CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+TH = ["--set", "preprocess.threshold=0.05"]
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def scene_counts():
+    """A robot driving, one contact at 2 s, 19 cm from the base; 6 s."""
+    return RobotScene(duration_s=6.0, contacts=[Contact(2.0, 19.0)]).generate(seed=3).samples
+
+
+def write_recording(out: Path, counts: np.ndarray) -> Path:
+    """A recording as `record` writes it, without a port: every frame in one batch."""
+    recorder = Recorder(out, port="test://", wire_format="binary", baudrate=250000)
+    seq = np.arange(len(counts)) % 65536
+    raw = b"".join(encode_binary(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts))
+    samples = [Sample(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts)]
+    recorder.handle(Batch(time.time(), raw, samples, {"frames": len(samples)}))
+    recorder.close()
+    return out
+
+
+def get_json(url: str) -> dict:
+    with urllib.request.urlopen(url, timeout=5) as reply:
+        assert reply.headers["Content-Type"].startswith("application/json")
+        return json.loads(reply.read())
+
+
+def view_url(proc, timeout_s: float = 120.0) -> str:
+    """The URL the command prints on stderr (the rest of stderr keeps draining)."""
+    found, lines = threading.Event(), []
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+            if "live view:" in line:
+                found.set()
+        found.set()
+
+    threading.Thread(target=read, daemon=True).start()
+    found.wait(timeout_s)
+    for line in lines:
+        if match := re.search(r"live view: (http://\S+/)", line):
+            return match.group(1)
+    raise AssertionError("no view URL printed:\n" + "".join(lines))
+
+
+def end(proc, timeout_s: float = 30.0) -> str:
+    """Ctrl-C until the command has exited (the first ends the stream, the next the view)."""
+    deadline = time.monotonic() + timeout_s
+    while proc.poll() is None and time.monotonic() < deadline:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(1.0)
+        except subprocess.TimeoutExpired:
+            pass
+    if proc.poll() is None:
+        proc.kill()
+        pytest.fail("the command did not end on Ctrl-C")
+    return proc.stdout.read()
+
+
+def test_state_json_advances_during_replay_and_shows_the_contact(tmp_path, scene_counts):
+    rec = write_recording(tmp_path / "rec", scene_counts)
+    proc = subprocess.Popen([*CLI, "replay", rec, "--network", NETWORK, *TH, "--realtime",
+                             "--view", "--view-port", "0", "--view-hold", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = view_url(proc)
+        assert url.startswith("http://127.0.0.1:")       # loopback unless exposed on purpose
+        seen, deadline = [], time.monotonic() + 90
+        while time.monotonic() < deadline:
+            state = get_json(url + "state.json")
+            seen.append(state)
+            if state["contacts"] and state["t_s"] >= 6.0:
+                break
+            time.sleep(0.25)
+        page = urllib.request.urlopen(url, timeout=10).read().decode()
+    finally:
+        out = end(proc)
+    times = [s["t_s"] for s in seen]
+    windows = [s["windows"] for s in seen]
+    # It advanced while the replay ran at 1 kHz: several distinct intermediate states.
+    assert len({t for t in times if 0 < t < 6.0}) >= 3, times
+    assert times == sorted(times) and windows == sorted(windows)
+    last = seen[-1]
+    assert last["t_s"] == 6.0 and last["windows"] == 60
+    assert len(last["rate_map"]["rates_hz"]) == len(last["rate_map"]["neuron_hz"]) == 24
+    assert last["rate_map"]["t_s"] == pytest.approx(5.9)
+    assert last["th_g"] == 0.05
+    assert last["counters"]["frames"] == 6000 and last["counters"]["crc_errors"] == 0
+    assert last["counters"]["realtime_factor"] > 1.0
+    assert last["counters"]["view_frames_dropped"] == 0
+    (contact,) = last["contacts"]
+    assert 1.9 <= contact["onset_s"] <= 2.5 and abs(contact["distance_cm"] - 19.0) < 3.0
+    # The page is Bokeh's, with its JS served locally (works with no internet).
+    assert "snn-antenna live view" in page and "/static/js/bokeh" in page
+    assert "https://" not in page.split("<body")[0]
+    # The command's own report agrees with what the view showed.
+    report = json.loads(out[out.index("{\n"):])
+    assert report["contacts"] == last["contacts"]
+
+
+def stall_and_close_clients(url: str):
+    """A page that connected and then never reads again (a frozen tab), one that closed, and a
+    bare HTTP request that never reads its answer."""
+    from bokeh.client import pull_session
+
+    stalled = pull_session(url=url)          # its IO loop never runs again: nothing is read
+    closed = pull_session(url=url)
+    closed.close()
+    import socket
+    host, port = url.split("//")[1].rstrip("/").split(":")
+    raw = socket.create_connection((host, int(port)))
+    raw.sendall(b"GET / HTTP/1.1\r\nHost: localhost\r\n\r\n")
+    return stalled, raw
+
+
+def stream_from_emulator(tmp_path, counts, name, view: bool):
+    link = PtyLink(tmp_path / f"tty-{name}")
+    emulator = Emulator(counts)
+
+    def serve():
+        try:
+            emulator.run(link, peer_timeout_s=120)
+        except PeerGone:
+            pass
+        link.disconnect()               # the board is unplugged once the scene is over
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    cmd = [*CLI, "stream", "--port", link.path, "--network", NETWORK, "--out", tmp_path / name,
+           "--duration", "20", *TH]
+    clients = None
+    try:
+        if not view:
+            result = subprocess.run(cmd, capture_output=True, text=True, timeout=150)
+            assert result.returncode == 0, result.stderr
+            out = result.stdout
+        else:
+            proc = subprocess.Popen([*cmd, "--view", "--view-port", "0", "--view-hold", "0"],
+                                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            url = view_url(proc)
+            clients = stall_and_close_clients(url)
+            try:
+                proc.wait(150)
+            finally:
+                if proc.poll() is None:
+                    proc.kill()
+            assert proc.returncode == 0
+            out = proc.stdout.read()
+    finally:
+        server.join(10)
+        link.close()
+        if clients:
+            clients[1].close()
+    report = json.loads(out[out.index("{\n"):])
+    return load_recording(tmp_path / name), report, emulator.log.written
+
+
+def test_a_stalled_or_closed_page_loses_no_sample(tmp_path, scene_counts):
+    counts = scene_counts[:4000]
+    with_view, report, written = stream_from_emulator(tmp_path, counts, "view", view=True)
+    without, plain_report, _ = stream_from_emulator(tmp_path, counts, "plain", view=False)
+    assert len(written) == 4000
+    for rec in (with_view, without):
+        assert rec.n_samples == 4000 and rec.complete
+        assert np.array_equal(np.column_stack([rec.x, rec.y]), counts)
+    assert with_view.counts == without.counts
+    assert report["samples"] == plain_report["samples"] == 4000
+    assert [round(c["distance_cm"], 6) for c in report["contacts"]] == \
+        [round(c["distance_cm"], 6) for c in plain_report["contacts"]]
+
+
+def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene_counts):
+    """In-process: no server drains the inbox; the pipeline runs to the end regardless, with
+    the same result as without a view, and the inbox holds only its bound."""
+    rec = write_recording(tmp_path / "rec", scene_counts[:3000])
+    parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
+    plain = run_online(ReplaySource(rec).start(), parts, no_data_timeout_s=1e9)
+    parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
+    view = LiveView(parts)                  # never started: nobody reads the inbox
+    viewed = run_online(ReplaySource(rec).start(), parts, handlers=[view],
+                        no_data_timeout_s=1e9, view=view)
+    assert viewed["samples"] == plain["samples"] == 3000
+    assert viewed["contacts"] == plain["contacts"]
+    assert len(view._inbox) <= view._inbox.maxlen
+    view.drain()
+    state = view.state()
+    # Everything the pipeline produced reached the history: signal and coded input at the
+    # display rate, every window.
+    assert state["t_s"] == 3.0 and state["windows"] == 30
+    assert view.coded.total == view.xy.total == 1500
+    assert set(np.unique(view.coded.rows[:, 3])) <= {-0.15, 0.0, 0.15}
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+def test_chromium_draws_the_live_page_while_the_emulator_streams(tmp_path, scene_counts):
+    playwright = pytest.importorskip("playwright.sync_api")
+    link = PtyLink(tmp_path / "tty")
+    emulator = Emulator(scene_counts)
+
+    def serve():
+        try:
+            emulator.run(link, peer_timeout_s=120)
+        except PeerGone:
+            pass
+
+    server = threading.Thread(target=serve, daemon=True)
+    server.start()
+    proc = subprocess.Popen([*CLI, "stream", "--port", link.path, "--network", NETWORK, *TH,
+                             "--out", tmp_path / "rec", "--view", "--view-port", "0",
+                             "--view-hold", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    shot = Path(os.environ.get("LIVE_VIEW_SCREENSHOT", tmp_path / "live_view.png"))
+    try:
+        url = view_url(proc)
+        with playwright.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                        args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1200, "height": 800})
+            page.goto(url)
+            page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0",
+                                   timeout=30_000)
+            canvases = page.locator("canvas")
+            page.wait_for_function(
+                "() => Bokeh.documents[0].get_model_by_name('xy').data.t.length > 100",
+                timeout=60_000)
+            latest = "() => Bokeh.documents[0].get_model_by_name('xy').data.t.at(-1)"
+            first_t = page.evaluate(latest)
+            first = page.screenshot()
+            time.sleep(1.5)
+            second_t = page.evaluate(latest)
+            second = page.screenshot()
+            listed = page.get_by_text(re.compile(r"→ \d+\.\d cm")).first
+            listed.wait_for(timeout=60_000)
+            page.wait_for_function(
+                "() => Bokeh.documents[0].get_model_by_name('contacts').data.label"
+                ".some(l => / cm$/.test(l))", timeout=10_000)
+            labels = page.evaluate(
+                "() => Bokeh.documents[0].get_model_by_name('contacts').data.label")
+            text = listed.inner_text()
+            time.sleep(1.0)                 # let the rate map show the ringing after it
+            shot.parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(shot))
+            n_canvases = canvases.count()
+            blank = [i for i in range(n_canvases) if _is_blank(canvases.nth(i).screenshot())]
+            browser.close()
+    finally:
+        end(proc)
+        server.join(10)
+        link.close()
+    assert n_canvases >= 3 and not blank, (n_canvases, blank)
+    assert second_t > first_t > 0                        # the plotted data move on
+    assert _differs(first, second)                       # and the drawing with it
+    distance = float(re.search(r"→ (\d+\.\d) cm", text).group(1))
+    assert abs(distance - 19.0) < 3.0
+    assert f"{distance:.1f} cm" in labels                # the marker on the plots
+    assert shot.stat().st_size > 20_000
+
+
+def _pixels(png: bytes) -> np.ndarray:
+    import matplotlib.image
+
+    return matplotlib.image.imread(io.BytesIO(png), format="png")[..., :3]
+
+
+def _is_blank(png: bytes) -> bool:
+    """One colour only (a canvas that never drew)."""
+    pixels = _pixels(png).reshape(-1, 3)
+    return len(np.unique(np.round(pixels * 255).astype(int), axis=0)) < 3
+
+
+def _differs(a: bytes, b: bytes) -> bool:
+    pa, pb = _pixels(a), _pixels(b)
+    return pa.shape == pb.shape and np.mean(np.any(pa != pb, axis=-1)) > 0.005
