@@ -248,8 +248,10 @@ def test_a_page_with_every_element_reads_cleanly_in_chromium(chromium, tmp_path,
 
 
 # -- every study, run as a user runs it -----------------------------------------------------
+# Timings (seconds, µs or ns per event, speed-ups) and run bookkeeping; a key that is a
+# result, like tau_low_slope_s_per_cm or spike_time_error_ms, is compared.
 _VOLATILE = re.compile(r"(^|_)(wall|cpu|compile|seconds|created|speedup|workers|chunks|"
-                       r"computed|skipped|reused|command)(_|$)|_s$|_s_")
+                       r"computed|skipped|reused|command|timing|cost|costs|us|ns)(_|$)|_s$")
 
 
 def stable_numbers(obj, path: str = "") -> dict:
@@ -271,10 +273,17 @@ def stable_numbers(obj, path: str = "") -> dict:
 
 def test_stable_numbers_ignore_timings_but_not_results():
     a = {"rmse_mm": 1.0, "wall_s": 3.0, "rows": [{"cpu_s": 1.0, "f1": 0.5}],
-         "provenance": {"created": "now"}, "workers": {"vm:1": 2}}
+         "provenance": {"created": "now"}, "workers": {"vm:1": 2},
+         "cost": {"predict_us_per_event": 2.5}, "spike_time_error_ms": 0.25,
+         "tau_low_slope_s_per_cm": 0.01}
     b = {"rmse_mm": 1.0, "wall_s": 9.0, "rows": [{"cpu_s": 7.0, "f1": 0.5}],
-         "provenance": {"created": "later"}, "workers": {"vm:2": 2}}
-    assert stable_numbers(a) == stable_numbers(b) == {".rmse_mm": 1.0, ".rows[0].f1": 0.5}
+         "provenance": {"created": "later"}, "workers": {"vm:2": 2},
+         "cost": {"predict_us_per_event": 8.0}, "spike_time_error_ms": 0.25,
+         "tau_low_slope_s_per_cm": 0.01}
+    assert stable_numbers(a) == stable_numbers(b) == {
+        ".rmse_mm": 1.0, ".rows[0].f1": 0.5, ".spike_time_error_ms": 0.25,
+        ".tau_low_slope_s_per_cm": 0.01}
+    assert stable_numbers({"tau_low_slope_s_per_cm": 0.02}) != stable_numbers(a)
 
 
 def assert_same_numbers(first: dict, second: dict, study: str) -> None:
