@@ -322,3 +322,22 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
         assert (run.out / name).stat().st_mode & 0o044 == 0o044, f"{name} unreadable by others"
     print(f"{study}: {len(seen['images'])} images, page {seen['scrollWidth']} px, figures "
           f"shrunk to fit: {[(i['alt'], i['naturalWidth'], i['shownWidth']) for i in seen['images'] if i['naturalWidth'] > i['shownWidth']]}")
+
+
+def test_the_known_expected_warnings_match_what_brian2_prints():
+    """Messages as a quick run printed them (exploration, speed_accuracy)."""
+    seen = {
+        rp.CPG_TOKEN_ORDER: "Came across an abstract code block that may not be well-defined: "
+                            "the outcome may depend on the order of execution. You can ignore "
+                            "this warning if you are sure that the order of operations does not "
+                            "matter. Abstract code: 'token_post = int(j == ((i + 1) % n_ring))'",
+        rp.UNSTABLE_ON_PURPOSE: "neurons's variable 'v' has NaN, very large values, or "
+                                "encountered an error in numerical integration.",
+        rp.FLOAT32_CHECK: "/brian2/groups/group.py:1226: RuntimeWarning: overflow encountered "
+                          "in cast",
+    }
+    for kind, message in seen.items():
+        assert any(re.search(p, message, re.S) for p in kind.patterns), kind.why
+    # an order warning about any other variable is not explained away
+    other = seen[rp.CPG_TOKEN_ORDER].replace("token_post", "v_post")
+    assert not any(re.search(p, other, re.S) for p in rp.CPG_TOKEN_ORDER.patterns)
