@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import html
 import json
-import logging
 import math
 import os
 import re
@@ -248,8 +247,10 @@ def test_a_page_with_every_element_reads_cleanly_in_chromium(chromium, tmp_path,
 
 
 # -- every study, run as a user runs it -----------------------------------------------------
+# Timings (seconds, µs or ns per event, speed-ups) and run bookkeeping; a key that is a
+# result, like tau_low_slope_s_per_cm or spike_time_error_ms, is compared.
 _VOLATILE = re.compile(r"(^|_)(wall|cpu|compile|seconds|created|speedup|workers|chunks|"
-                       r"computed|skipped|reused|command)(_|$)|_s$|_s_")
+                       r"computed|skipped|reused|command|timing|cost|costs|us|ns)(_|$)|_s$")
 
 
 def stable_numbers(obj, path: str = "") -> dict:
@@ -271,10 +272,17 @@ def stable_numbers(obj, path: str = "") -> dict:
 
 def test_stable_numbers_ignore_timings_but_not_results():
     a = {"rmse_mm": 1.0, "wall_s": 3.0, "rows": [{"cpu_s": 1.0, "f1": 0.5}],
-         "provenance": {"created": "now"}, "workers": {"vm:1": 2}}
+         "provenance": {"created": "now"}, "workers": {"vm:1": 2},
+         "cost": {"predict_us_per_event": 2.5}, "spike_time_error_ms": 0.25,
+         "tau_low_slope_s_per_cm": 0.01}
     b = {"rmse_mm": 1.0, "wall_s": 9.0, "rows": [{"cpu_s": 7.0, "f1": 0.5}],
-         "provenance": {"created": "later"}, "workers": {"vm:2": 2}}
-    assert stable_numbers(a) == stable_numbers(b) == {".rmse_mm": 1.0, ".rows[0].f1": 0.5}
+         "provenance": {"created": "later"}, "workers": {"vm:2": 2},
+         "cost": {"predict_us_per_event": 8.0}, "spike_time_error_ms": 0.25,
+         "tau_low_slope_s_per_cm": 0.01}
+    assert stable_numbers(a) == stable_numbers(b) == {
+        ".rmse_mm": 1.0, ".rows[0].f1": 0.5, ".spike_time_error_ms": 0.25,
+        ".tau_low_slope_s_per_cm": 0.01}
+    assert stable_numbers({"tau_low_slope_s_per_cm": 0.02}) != stable_numbers(a)
 
 
 def assert_same_numbers(first: dict, second: dict, study: str) -> None:
@@ -313,3 +321,22 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
         assert (run.out / name).stat().st_mode & 0o044 == 0o044, f"{name} unreadable by others"
     print(f"{study}: {len(seen['images'])} images, page {seen['scrollWidth']} px, figures "
           f"shrunk to fit: {[(i['alt'], i['naturalWidth'], i['shownWidth']) for i in seen['images'] if i['naturalWidth'] > i['shownWidth']]}")
+
+
+def test_the_known_expected_warnings_match_what_brian2_prints():
+    """Messages as a quick run printed them (exploration, speed_accuracy)."""
+    seen = {
+        rp.CPG_TOKEN_ORDER: "Came across an abstract code block that may not be well-defined: "
+                            "the outcome may depend on the order of execution. You can ignore "
+                            "this warning if you are sure that the order of operations does not "
+                            "matter. Abstract code: 'token_post = int(j == ((i + 1) % n_ring))'",
+        rp.UNSTABLE_ON_PURPOSE: "neurons's variable 'v' has NaN, very large values, or "
+                                "encountered an error in numerical integration.",
+        rp.FLOAT32_CHECK: "/brian2/groups/group.py:1226: RuntimeWarning: overflow encountered "
+                          "in cast",
+    }
+    for kind, message in seen.items():
+        assert any(re.search(p, message, re.S) for p in kind.patterns), kind.why
+    # an order warning about any other variable is not explained away
+    other = seen[rp.CPG_TOKEN_ORDER].replace("token_post", "v_post")
+    assert not any(re.search(p, other, re.S) for p in rp.CPG_TOKEN_ORDER.patterns)
