@@ -44,6 +44,9 @@ def refused(capsys, argv, *names):
     ("network.band_hz=[7,600]", ["network.band_hz", "stimulus.rate_hz"]),
     ("network.band_hz=[5,900]", ["network.band_hz", "stimulus.rate_hz"]),
     ("stimulus.rate_hz=50", ["stimulus.rate_hz"]),
+    ('preprocess.threshold="x"', ["preprocess.threshold", "a finite number"]),
+    ("network=5", ["network = 5", "a table"]),
+    ("stimulus.contacts.0=5", ["stimulus.contacts", "a table"]),
 ])
 def test_bad_settings_are_refused_naming_the_users_key(tmp_path, capsys, setting, names):
     out = tmp_path / "out"
