@@ -109,6 +109,12 @@ class ResonatorArray:
     def run(self, coded: Recording, window_s: float = 0.1,
             check_every_ms: float = 10.0) -> "ArrayResult":
         """Drive the array with a coded recording (one channel); spikes and a rate map."""
+        if not isinstance(coded, Recording):
+            raise SpecError("coded", type(coded).__name__,
+                            "a signals.Recording of coded samples (rec.with_samples(...))")
+        check(is_number(window_s) and window_s > 0, "window_s", window_s, "a window > 0 s")
+        check(is_number(check_every_ms) and check_every_ms > 0, "check_every_ms",
+              check_every_ms, "an interval > 0 ms between instability checks")
         import brian2 as b2
 
         # Contiguous: Brian2's cython TimedArray refuses a strided view (e.g. a column slice).

@@ -348,6 +348,8 @@ def instability_guard(group, preset: str, dt_ms: float, method: str,
     ``every_ms`` of simulated time and names the neuron. It reads the arrays behind the
     variables directly (no unit handling), so it costs microseconds per check.
     """
+    check(is_number(every_ms) and every_ms > 0, "check_every_ms", every_ms,
+          "an interval > 0 ms between instability checks")
     import brian2 as b2
 
     v_arr = group.variables["v"].get_value

@@ -213,7 +213,7 @@ def section(name: str):
     try:
         yield
     except SpecError as exc:
-        if exc.field.startswith(f"{name}."):
+        if exc.field == name or exc.field.startswith(f"{name}."):
             raise
         raise SpecError(f"{name}.{exc.field}", exc.value, exc.accepted) from None
     except TypeError as exc:  # a wrong type that slipped past key checks

@@ -44,6 +44,9 @@ def refused(capsys, argv, *names):
     ("network.band_hz=[7,600]", ["network.band_hz", "stimulus.rate_hz"]),
     ("network.band_hz=[5,900]", ["network.band_hz", "stimulus.rate_hz"]),
     ("stimulus.rate_hz=50", ["stimulus.rate_hz"]),
+    ('preprocess.threshold="x"', ["preprocess.threshold", "a finite number"]),
+    ("network=5", ["network = 5", "a table"]),
+    ("stimulus.contacts.0=5", ["stimulus.contacts", "a table"]),
 ])
 def test_bad_settings_are_refused_naming_the_users_key(tmp_path, capsys, setting, names):
     out = tmp_path / "out"
@@ -368,3 +371,16 @@ def test_record_and_stream_refuse_an_out_that_is_not_new_or_empty(tmp_path, caps
     refused(capsys, ["stream", "--port", "loop://", "--network",
                      str(ROOT / "networks" / "resonator_array.toml"), "--out",
                      str(afile / "rec")], "--out", "is a file")
+
+
+def test_resonator_array_run_refuses_bad_arguments_by_name():
+    from snn_antenna.network import ResonatorArray
+    from snn_antenna.signals import Recording
+
+    coded = Recording(np.zeros(100), 1000.0, units="coded")
+    for kwargs, name in [({"coded": np.zeros(100)}, "coded"), ({"window_s": 0}, "window_s"),
+                         ({"check_every_ms": 0}, "check_every_ms")]:
+        args = {"coded": coded, **kwargs}
+        with pytest.raises(SpecError) as err:
+            ResonatorArray(target="numpy").run(**args)
+        assert err.value.field == name

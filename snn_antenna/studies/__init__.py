@@ -15,7 +15,7 @@ import importlib
 
 import numpy as np
 
-from ..errors import SpecError, check
+from ..errors import SpecError, check, is_number
 
 STUDIES = {
     "quickstart": "snn_antenna.studies.quickstart",
@@ -75,7 +75,13 @@ def _check_preprocess(spec, stimulus, rate, rate_key) -> None:
     if not isinstance(table, dict) or not table:
         return
     from ..preprocess import make_chain
+    from ..spec import declared_types
 
+    # The chain's parameters are all numbers (None where optional): text is never one.
+    for key, tp in declared_types(make_chain).items():
+        value = table.get(key)
+        if key in table and not (is_number(value) or (value is None and tp is not float)):
+            raise SpecError(f"preprocess.{key}", value, "a finite number")
     try:
         chain = make_chain(rate, stimulus.get("adc_bits", 10),
                            stimulus.get("full_scale_g", 18.0), **table)
