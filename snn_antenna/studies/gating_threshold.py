@@ -67,6 +67,8 @@ from ..sweep import Grid, executor, prepare_workers, run_sweep
 SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",
             "gate", "evaluation")
 LOW_HIGH_CM_S = (12.0, 27.0)  # the paper's two speeds (Fig. 9)
+F1_BOUNDS = (0.0, 1.0)
+NON_NEGATIVE = (0.0, np.inf)
 
 
 def _sweep_settings(thresholds_g=(0.0, 0.1), speeds_cm_s=(0.0, 12.0), n_scenes=3,
@@ -708,7 +710,7 @@ class Evaluation:
         compared = {"gated": "gated", "lookup": "lookup",
                     f"best fixed in hindsight ({oracle[6:]} g)": oracle,
                     f"fixed from the sweep ({sweep_fixed_th:g} g)": f"fixed:{sweep_fixed_th:g}"}
-        f1 = {label: _interval(self.per_seed(m)) for label, m in compared.items()}
+        f1 = {label: _interval(self.per_seed(m), F1_BOUNDS) for label, m in compared.items()}
         per_seed = {label: [None if not np.isfinite(x) else float(x) for x in self.per_seed(m)]
                     for label, m in compared.items()}
         gated = self.per_seed("gated")
@@ -722,34 +724,40 @@ class Evaluation:
         for cat in self.categories:
             row = {"scenes": cat}
             for label, m in compared.items():
-                row[f"F1 {label}"] = _interval(self.per_seed(m, cat))
+                row[f"F1 {label}"] = _interval(self.per_seed(m, cat), F1_BOUNDS)
             row["gated − lookup"] = _difference(self.per_seed("gated", cat),
                                                 self.per_seed("lookup", cat))
             row["gated − best fixed"] = _difference(self.per_seed("gated", cat),
                                                     self.per_seed(oracle, cat))
-            row["FP/min gated"] = _interval(self.per_seed("gated", cat, "fp_per_min"))
-            row["latency gated (s)"] = _interval(self.per_seed("gated", cat, "latency_s"))
+            row["FP/min gated"] = _interval(self.per_seed("gated", cat, "fp_per_min"), NON_NEGATIVE)
+            row["latency gated (s)"] = _interval(self.per_seed("gated", cat, "latency_s"), NON_NEGATIVE)
             total = sum((v for k, v in self.scores.items() if k[2] == "gated"
                          and self.profiles(k[0])[k[1]][0] == cat), Score())
             row["contacts scored"] = total.tp + total.misses
             per_category.append(row)
         fixed_curve = [{"threshold_g": float(t),
-                        **_interval(self.per_seed(f"fixed:{t:g}"))} for t in self.fixed_th]
+                        **_interval(self.per_seed(f"fixed:{t:g}"), F1_BOUNDS)}
+                       for t in self.fixed_th]
         return {"f1": f1, "f1_per_seed": per_seed, "differences": diffs, "per_category": per_category,
                 "fixed_curve": fixed_curve, "oracle_th_g": float(oracle[6:]),
-                "latency_gated_s": _interval(self.per_seed("gated", what="latency_s")),
-                "fp_per_min_gated": _interval(self.per_seed("gated", what="fp_per_min"))}
+                "latency_gated_s": _interval(self.per_seed("gated", what="latency_s"),
+                                              NON_NEGATIVE),
+                "fp_per_min_gated": _interval(self.per_seed("gated", what="fp_per_min"),
+                                               NON_NEGATIVE)}
 
 
-def _interval(values) -> dict:
-    """Mean with its 95 % t interval over seeds (n < 2: no interval)."""
+def _interval(values, bounds: tuple | None = None) -> dict:
+    """Mean with its 95 % t interval over seeds (n < 2: no interval), clipped to ``bounds``
+    for a bounded quantity (a t interval over few seeds can reach past F1 = 1)."""
     x = np.asarray(values, dtype=float)
     x = x[np.isfinite(x)]
     if len(x) < 2:
         return {"mean": float(x.mean()) if len(x) else None, "low": None, "high": None,
                 "n": int(len(x))}
     i = mean_interval(x)
-    return {"mean": i.mean, "low": i.low, "high": i.high, "n": i.n}
+    lo, hi = (-np.inf, np.inf) if bounds is None else bounds
+    return {"mean": i.mean, "low": float(max(i.low, lo)), "high": float(min(i.high, hi)),
+            "n": i.n}
 
 
 def _difference(a, b) -> dict:
@@ -928,7 +936,7 @@ def _write_report(out_dir, spec, parts, ds, th_star, fig9, gate, train, train_th
                for r in summary["per_category"]],
               "Per scene type: mean over seeds (95 % CI); differences paired by seed")
     rep.figure(_fig_per_category(summary), "f1_per_category",
-               "F1 per scene type, mean over seeds with 95 % CI (drawn within [0, 1]): the gate, "
+               "F1 per scene type, mean over seeds with 95 % CI (clipped to [0, 1]): the gate, "
                "the lookup table, the best fixed Th in hindsight and the fixed Th chosen on "
                "the sweep.")
     rep.figure(_fig_compare(summary), "f1_methods",
@@ -1035,7 +1043,7 @@ def _fig_per_category(summary):
                   label=label)
     ax.set_xticks(range(len(rows)), [r["scenes"] for r in rows])
     ax.set_ylabel("F1 (mean over seeds, 95 % CI)")
-    ax.set_ylim(-0.02, 1.02)   # F1 lies in [0, 1]; a t interval over few seeds may not
+    ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=8, loc="lower left")
     fig.tight_layout()
     return fig
@@ -1043,7 +1051,7 @@ def _fig_per_category(summary):
 
 def _fig_f1_curves(ds, th_star):
     plt = _plt()
-    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.2), sharex=True)
     th = ds.threshold_g.values
     x = np.where(th > 0, th, th[th > 0].min() / 2)
     cmap = plt.get_cmap("viridis")
