@@ -34,7 +34,7 @@ def refused(capsys, argv, *names):
 
 # -- the spec ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("setting, names", [
-    ("stimulus.contacts.5.distance_cm=25", ["stimulus.contacts.5", "0..0"]),
+    ("stimulus.contacts.5.distance_cm=25", ["stimulus.contacts.5", "an index in 0.."]),
     ("stimulus.contacts.x.distance_cm=25", ["stimulus.contacts.x"]),
     ("stimulus.contacts.-1.distance_cm=25", ["stimulus.contacts.-1"]),
     ("network.band_hz=[7,20,30]", ["network.band_hz", "a list of 2 numbers"]),
