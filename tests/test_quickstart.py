@@ -48,7 +48,7 @@ def test_quickstart_command_writes_the_report(tmp_path):
 def test_the_scene_keeps_driving_through_its_contacts():
     spec = specs.load(QUICKSTART)
     scene = quickstart.build(spec).scene
-    assert len(scene.contacts) >= 2
+    assert len(scene.contacts) >= 1 and scene.duration_s - scene.contacts[-1].t_s > 5
     assert (scene.speed_profile() == scene.speed_cm_s).all()
 
 
@@ -102,9 +102,9 @@ def test_quickstart_meets_the_papers_fig10_in_kind(tmp_path, seed):
     s = quickstart.run(spec, tmp_path, log=lambda *_: None)
     # self-motion sits in the 7–8 Hz neurons (windows outside detections, read blind)
     assert 7.0 <= s["motion_dominant_hz"] <= 9.0
-    # both contacts found and nothing else, although the robot keeps driving (seeds 1-12 of
-    # the full 16 s scene: 24 of 24 contacts, no false positive in 2.8 min of driving)
-    assert s["score"]["tp"] == 2 and s["score"]["fp"] == 0 and s["score"]["misses"] == 0
+    # the contact found and nothing else, although the robot keeps driving (seeds 1-12 of
+    # the full 16 s scene: 12 of 12 contacts, no false positive in 2.8 min of driving)
+    assert s["score"]["tp"] == 1 and s["score"]["fp"] == 0 and s["score"]["misses"] == 0
     # on the paper's Fig. 10 contact (19 cm), activity moves to the neurons around the low
     # mode: the population centroid within 1.5 channels of it (over seeds 1-12 it sat +2.7 %
     # ± 2.8 % above the law, i.e. 0.4 ± 0.4 channels, the contact's own scatter included); the
