@@ -82,11 +82,11 @@ def _check_preprocess(spec, stimulus, rate, rate_key) -> None:
         value = table.get(key)
         if key in table and not (is_number(value) or (value is None and tp is not float)):
             raise SpecError(f"preprocess.{key}", value, "a finite number")
-    try:
-        chain = make_chain(rate, stimulus.get("adc_bits", 10),
-                           stimulus.get("full_scale_g", 18.0), **table)
-    except TypeError:
-        return                  # an unknown key: the study's own check names it
+    # keys of the table that are not the chain's (e.g. warmup_s, how long the chain is fitted)
+    # have rules of their own in the study; an unknown key is named by the study's own check
+    chain_keys = {k: v for k, v in table.items() if k in declared_types(make_chain)}
+    chain = make_chain(rate, stimulus.get("adc_bits", 10),
+                       stimulus.get("full_scale_g", 18.0), **chain_keys)
     for name, stage in chain.steps:
         try:
             stage._validate_params_()       # the stage's own rules, not a copy of them
