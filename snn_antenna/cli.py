@@ -45,6 +45,7 @@ def _run(args) -> int:
     if getattr(args, "scheduler", None):
         extra["scheduler"] = args.scheduler
     folder.clear()                      # --force: another study's files, now that all passed
+    outputs.claim(folder)
     try:
         module.run(spec, out, quick=args.quick, **extra)
     finally:

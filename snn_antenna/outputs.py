@@ -39,6 +39,7 @@ class OutputFolder:
     before: dict = field(default_factory=dict)      # entry -> signature before the run
     listed: set = field(default_factory=set)        # entries the toolkit wrote before
     replace: set = field(default_factory=set)       # another study's entries, for --force
+    created: bool = False                           # the run made the folder (claim)
 
     def clear(self) -> None:
         """Remove the other study's entries (``--force``): only what the manifest lists.
@@ -99,6 +100,11 @@ def prepare(path, study: str, force: bool = False, fresh: bool = False) -> Outpu
     manifest = read_manifest(path)
     if manifest is not None:
         owner, listed = manifest.get("study"), set(manifest["files"]) & set(entries)
+        if owner == study and manifest.get("status") == "running":
+            # a run of this study was killed before it could record what it wrote: the folder
+            # held only listed entries when it started (anything else was refused then), so
+            # what appeared since is that run's own partial output, to be resumed
+            listed = set(entries)
     else:
         owner = _legacy_study(path) if entries else None
         listed = set(entries) if owner == study else set()
@@ -152,6 +158,16 @@ def _signatures(path: Path) -> dict:
     return {e: _signature(path / e) for e in _entries(path)}
 
 
+def claim(folder: OutputFolder) -> None:
+    """Mark the folder as being written by this study before the run starts, so a run killed
+    outright (SIGKILL, power loss) leaves a folder its study may resume and no other may take."""
+    folder.created = not folder.path.exists()
+    folder.path.mkdir(parents=True, exist_ok=True)
+    _write_manifest(folder.path, folder.study, set(folder.listed) & set(_entries(folder.path)),
+                    "running")
+    folder.before = _signatures(folder.path)
+
+
 def record(folder: OutputFolder) -> None:
     """Write the manifest: every entry this run created or changed, and the toolkit's earlier
     entries that are still there. Atomic (a reader sees the old or the new manifest)."""
@@ -163,7 +179,17 @@ def record(folder: OutputFolder) -> None:
         if folder.before.get(entry) != signature:
             written.add(entry)
     written &= set(_entries(path))
-    data = {"kind": KIND, "study": folder.study, "files": sorted(written),
+    if not written and folder.created:
+        # refused or failed before writing anything: leave no trace of a folder it made
+        (path / MANIFEST).unlink(missing_ok=True)
+        if not any(path.iterdir()):
+            path.rmdir()
+        return
+    _write_manifest(path, folder.study, written, "ended")
+
+
+def _write_manifest(path: Path, study: str, files: set, status: str) -> None:
+    data = {"kind": KIND, "study": study, "files": sorted(files), "status": status,
             "updated_unix_s": time.time()}
     tmp = path / (MANIFEST + ".tmp")
     tmp.write_text(json.dumps(data, indent=1))
@@ -176,6 +202,7 @@ def output_folder(path, study: str, force: bool = False, fresh: bool = False):
     however it ended."""
     folder = prepare(path, study, force=force, fresh=fresh)
     folder.clear()
+    claim(folder)
     try:
         yield folder
     finally:

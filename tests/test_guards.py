@@ -384,3 +384,27 @@ def test_resonator_array_run_refuses_bad_arguments_by_name():
         with pytest.raises(SpecError) as err:
             ResonatorArray(target="numpy").run(**args)
         assert err.value.field == name
+
+
+def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(tmp_path):
+    from snn_antenna import outputs
+
+    out = tmp_path / "sweep"
+    folder = outputs.prepare(out, "tuning_sweep")
+    outputs.claim(folder)
+    (out / "results.zarr").mkdir()           # the run is killed here: record never runs
+    (out / "run.log").write_text("started\n")
+    again = outputs.prepare(out, "tuning_sweep")
+    assert {"results.zarr", "run.log"} <= again.listed
+    with pytest.raises(SpecError, match="tuning_sweep"):
+        outputs.prepare(out, "quickstart")
+
+
+def test_a_refused_run_leaves_no_folder_behind(tmp_path):
+    from snn_antenna import outputs
+
+    out = tmp_path / "new"
+    with pytest.raises(SpecError):
+        with outputs.output_folder(out, "quickstart"):
+            raise SpecError("seed", -1, "a seed ≥ 0")
+    assert not out.exists()
