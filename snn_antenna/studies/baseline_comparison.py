@@ -1129,7 +1129,7 @@ def _fig_nmf_curve(summary):
                         textcoords="offset points", color="tab:red")
     if spiking:
         ax.scatter([], [], color="tab:red", label="spiking (x: resonators)")
-    ax.set_xlabel("NMF dimension")
+    ax.set_xlabel("filters: NMF dimension, or resonators (spiking)")
     ax.set_ylabel("8-material accuracy (%)")
     ax.legend()
     return fig
