@@ -952,10 +952,13 @@ def _fig_pareto(summary):
                      if k in cost and k not in TRAINING_FREE)
         if not pts:
             continue
-        for c, a, k in pts:
+        # Pipelines sharing a front end share a cost: their labels alternate sides, in
+        # order of the y value, so neighbours do not print over each other.
+        for rank, (c, a, k) in enumerate(sorted(pts, key=lambda p: (round(p[0], -1), p[1]))):
             colour = "tab:red" if k.startswith("spiking_") else "tab:blue"
             ax.scatter(c, a, color=colour, s=22, zorder=3)
-            ax.annotate(str(number.get(k, "")), (c, a), fontsize=7, xytext=(4, 3),
+            ax.annotate(str(number.get(k, "")), (c, a), fontsize=7,
+                        xytext=(5, -3) if rank % 2 == 0 else (-15, -3),
                         textcoords="offset points", color=colour)
         front, best = [], None
         for c, a, k in pts:
