@@ -967,6 +967,7 @@ def _fig_pareto(summary):
                 best = a
         ax.plot(*zip(*front), color="k", lw=0.8, drawstyle="steps-post")
         ax.set_xscale("log")
+        ax.margins(x=0.12)   # room for the labels on the left of the cheapest points
         ax.xaxis.set_minor_formatter(plt.NullFormatter())
         ax.set_xlabel("cost per event (µs: features + decoder)")
         ax.set_ylabel(ylabel)
