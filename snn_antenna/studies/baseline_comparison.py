@@ -875,6 +875,8 @@ def _write_report(report, spec, summary, cal, feats, results, processor) -> None
                   "in this run) of every pipeline; the line joins the Pareto front; numbers "
                   "are keyed in the table below.")
     report.table([{"#": i + 1, "pipeline": label(k),
+                   "task": ("distance" if k in summary["distance_rmse_mm"] else
+                            "wood/aluminium" if k == "mlp_5_8_2" else "material"),
                    "features + decoder (µs/event)": summary["cost_us_per_event"][k],
                    "fit (s)": v["fit_s"]}
                   for i, (k, v) in enumerate(_cost_items(summary))],
@@ -968,7 +970,9 @@ def _fig_pareto(summary):
         ax.plot(*zip(*front), color="k", lw=0.8, drawstyle="steps-post")
         ax.set_xscale("log")
         ax.margins(x=0.12)   # room for the labels on the left of the cheapest points
-        ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        costs = [c for c, _, _ in pts]
+        if max(costs) / min(costs) > 10:   # within one decade the minor ticks are the labels
+            ax.xaxis.set_minor_formatter(plt.NullFormatter())
         ax.set_xlabel("cost per event (µs: features + decoder)")
         ax.set_ylabel(ylabel)
     axes[0].set_title("blue: FFT pipelines, red: spiking; numbers: cost table", fontsize=8)
