@@ -6,9 +6,9 @@ as a damped oscillation with a low and a high mode. What comes from the paper (P
 
 - Mode frequencies (paper): ``log10 F_low = 0.0268 d + 0.69``, ``log10 F_high = 0.0305 d + 1.52``.
   Contact-to-contact scatter, calibrated against the paper's signal numbers as measured by the
-  paper's own processing in ``events.py``: 0.0058 dex for the low mode (the paper's 6.2 mm
+  paper's own processing in ``events.py``: 0.0045 dex for the low mode (the paper's 6.2 mm
   single-contact precision, r² = 0.995; most of the low peak's measured spread is the FFT's
-  resolution of short event windows, 1/T of 1.5–4 Hz at 8–50 Hz, not physics) and 0.014 dex
+  resolution of short event windows, 1/T of 1.5–4 Hz at 8–50 Hz, not physics) and 0.011 dex
   for the high mode (r² = 0.987 of the high law). The high law's r² is set mostly by the
   8 cm site, where the high mode (58 Hz) falls below the paper's 55 Hz split in a share of the
   contacts and the peak search above the split then finds the rod's own mode instead.
@@ -79,8 +79,8 @@ ROD_LENGTH_CM = 41.3          # total feeler length (paper: 413 mm)
 CALIBRATED_RANGE_CM = (8.0, 37.5)  # where the paper measured the frequency laws
 LOW_LAW = (0.0268, 0.69)      # log10 F_low = slope * d + intercept
 HIGH_LAW = (0.0305, 1.52)
-LOW_SCATTER_DEX = 0.0058     # calibrated, see the module docstring
-HIGH_SCATTER_DEX = 0.014
+LOW_SCATTER_DEX = 0.0045     # calibrated, see the module docstring
+HIGH_SCATTER_DEX = 0.011
 NATURAL_HZ = 7.8              # free probe's self-oscillation while driving (paper)
 NATURAL_TAU_S = 1.0
 SELF_MOTION_G_AT_12 = 0.25    # self-oscillation amplitude at 12 cm/s (assumed)

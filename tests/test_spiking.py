@@ -96,6 +96,15 @@ def test_spike_summary_known_answer():
     assert span == pytest.approx([0.0, 0.2, 0.0, 0.0])
 
 
+def test_binned_counts_known_answer():
+    """Spikes per neuron before 0.1 s, in [0.1, 0.2), and from 0.2 s on (an edge belongs to
+    the bin it opens)."""
+    from snn_antenna.spiking import binned_spike_counts
+    binned = binned_spike_counts(np.array([0, 0, 0, 2, 2]),
+                                 np.array([0.05, 0.1, 0.25, 0.2, 0.19]), 3, (0.1, 0.2))
+    assert binned.tolist() == [[1, 1, 1], [0, 0, 0], [0, 1, 1]]
+
+
 def test_bad_banks_are_refused():
     from snn_antenna.errors import SpecError
     with pytest.raises(SpecError, match="bands.high.dt_ms"):
@@ -104,3 +113,5 @@ def test_bad_banks_are_refused():
         SpikingBank(bands={"high": HIGH_BAND}).check_rate(1000.0)
     with pytest.raises(SpecError, match="bands.low.spacing"):
         SpikingBank(bands={"low": dataclasses.replace(LOW_BAND, spacing="cubic")})
+    with pytest.raises(SpecError, match="bin_edges_s"):
+        SpikingBank(bands={"low": LOW_BAND}, bin_edges_s=(0.2, 0.1))

@@ -875,6 +875,8 @@ def _write_report(report, spec, summary, cal, feats, results, processor) -> None
                   "in this run) of every pipeline; the line joins the Pareto front; numbers "
                   "are keyed in the table below.")
     report.table([{"#": i + 1, "pipeline": label(k),
+                   "task": ("distance" if k in summary["distance_rmse_mm"] else
+                            "wood/aluminium" if k == "mlp_5_8_2" else "material"),
                    "features + decoder (µs/event)": summary["cost_us_per_event"][k],
                    "fit (s)": v["fit_s"]}
                   for i, (k, v) in enumerate(_cost_items(summary))],
@@ -952,10 +954,13 @@ def _fig_pareto(summary):
                      if k in cost and k not in TRAINING_FREE)
         if not pts:
             continue
-        for c, a, k in pts:
+        # Pipelines sharing a front end share a cost: their labels alternate sides, in
+        # order of the y value, so neighbours do not print over each other.
+        for rank, (c, a, k) in enumerate(sorted(pts, key=lambda p: (round(p[0], -1), p[1]))):
             colour = "tab:red" if k.startswith("spiking_") else "tab:blue"
             ax.scatter(c, a, color=colour, s=22, zorder=3)
-            ax.annotate(str(number.get(k, "")), (c, a), fontsize=7, xytext=(4, 3),
+            ax.annotate(str(number.get(k, "")), (c, a), fontsize=7,
+                        xytext=(5, -3) if rank % 2 == 0 else (-15, -3),
                         textcoords="offset points", color=colour)
         front, best = [], None
         for c, a, k in pts:
@@ -964,7 +969,10 @@ def _fig_pareto(summary):
                 best = a
         ax.plot(*zip(*front), color="k", lw=0.8, drawstyle="steps-post")
         ax.set_xscale("log")
-        ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        ax.margins(x=0.12)   # room for the labels on the left of the cheapest points
+        costs = [c for c, _, _ in pts]
+        if max(costs) / min(costs) > 10:   # within one decade the minor ticks are the labels
+            ax.xaxis.set_minor_formatter(plt.NullFormatter())
         ax.set_xlabel("cost per event (µs: features + decoder)")
         ax.set_ylabel(ylabel)
     axes[0].set_title("blue: FFT pipelines, red: spiking; numbers: cost table", fontsize=8)
@@ -1129,7 +1137,7 @@ def _fig_nmf_curve(summary):
                         textcoords="offset points", color="tab:red")
     if spiking:
         ax.scatter([], [], color="tab:red", label="spiking (x: resonators)")
-    ax.set_xlabel("NMF dimension")
+    ax.set_xlabel("filters: NMF dimension, or resonators (spiking)")
     ax.set_ylabel("8-material accuracy (%)")
     ax.legend()
     return fig
