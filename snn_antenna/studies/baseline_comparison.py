@@ -141,7 +141,7 @@ def load_features(bench_spec: bench.BenchSpec, processor: events.EventProcessor,
 
 # -- calibration ----------------------------------------------------------------------------
 def calibration(feats: xr.Dataset) -> dict:
-    """The generated signal's measurements beside the paper's (REFERENCE.md)."""
+    """The generated signal's measurements beside the paper's (docs/reference.md)."""
     from scipy import stats
 
     p = feats["params"]
