@@ -113,6 +113,8 @@ def test_no_test_repetition_was_trained_on(tiny_run):
 def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
     with pytest.raises(SpecError, match="evaluation.bogus"):
         study.build(specs.load(SPEC, ["evaluation.bogus=1"]))
+    with pytest.raises(SpecError, match="spiking.bank.bin_edges_s"):
+        study.build(specs.load(SPEC, ["spiking.bank.bin_edges_s=[0.3,0.1]"]))
     with pytest.raises(SpecError, match="stimulus.material"):
         study.build(specs.load(SPEC, ["stimulus.materials=['wood','granite']"]))
     assert main(["run", SPEC, "--out", str(tmp_path), "--set", "events.split_hz=5000"]) == 2

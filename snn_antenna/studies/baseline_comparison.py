@@ -90,7 +90,8 @@ def build_spiking(spec: dict):
         return None, None
     with specs.section("spiking"):
         plan = SpikingPlan(**specs.check_section(spec, "spiking", SpikingPlan))
-        bank = SpikingBank(**plan.bank)
+        with specs.section("bank"):
+            bank = SpikingBank(**plan.bank)
         for i, design in enumerate(plan.designs):
             design = dict(design)
             name, band = design.pop("name", f"design_{i}"), design.pop("band", "low")
@@ -141,7 +142,7 @@ def load_features(bench_spec: bench.BenchSpec, processor: events.EventProcessor,
 
 # -- calibration ----------------------------------------------------------------------------
 def calibration(feats: xr.Dataset) -> dict:
-    """The generated signal's measurements beside the paper's (REFERENCE.md)."""
+    """The generated signal's measurements beside the paper's (docs/reference.md)."""
     from scipy import stats
 
     p = feats["params"]
