@@ -44,7 +44,9 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
         link = os.path.join(tmp, "tty")
         emulator = subprocess.Popen(
             [sys.executable, "-m", "snn_antenna.bridge.cli", "emulate", "--pty", "--link", link,
-             "--frames", str(n_frames), *(["--fast"] if fast else [])],
+             # A few more frames than measured: an emulator that ends closes the pty, and
+             # bytes still unread in it would be lost (the run would wait for them in vain).
+             "--frames", str(n_frames + 500), *(["--fast"] if fast else [])],
             stdout=subprocess.PIPE, text=True)
         try:
             emulator.stdout.readline()              # the pty exists once its path is printed

@@ -126,6 +126,7 @@ def test_state_json_advances_during_replay_and_shows_the_contact(tmp_path, scene
     assert last["counters"]["frames"] == 6000 and last["counters"]["crc_errors"] == 0
     assert last["counters"]["realtime_factor"] > 1.0
     assert last["counters"]["view_frames_dropped"] == 0
+    assert last["plotted"] == {"xy": 6000 // DISPLAY_EVERY, "coded_input": 6000 // DISPLAY_EVERY}
     (contact,) = last["contacts"]
     assert 1.9 <= contact["onset_s"] <= 2.5 and abs(contact["distance_cm"] - 19.0) < 3.0
     # The page is Bokeh's, with its JS served locally (works with no internet).

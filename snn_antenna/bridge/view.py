@@ -136,7 +136,11 @@ class LiveView:
         self.rate_hz, self.history_s = rate_hz, history_s
         self.neuron_hz = np.asarray(parts.array.neuron_hz, dtype=float)
         self.window_s = parts.window_s
-        self.to_g = parts.chain.named_steps["to_g"]
+        from sklearn.base import clone
+
+        # Its own copy: the pipeline's is unfitted until calibration, and the two threads
+        # should share nothing they call.
+        self.to_g = clone(parts.chain.named_steps["to_g"]).fit(np.zeros((1, 2)))
         coder = parts.chain.named_steps["coder"]
         self.coder_amplitude = coder.amplitude
         _tap_coder(coder, self._coded)
@@ -260,6 +264,8 @@ class LiveView:
                          "latency_ms": _finite(self.latency_ms),
                          **{k: counts.get(k, 0) for k in SHOWN_COUNTERS},
                          "view_frames_dropped": self.dropped},
+            # Points kept for the plots (every DISPLAY_EVERY-th sample), ever.
+            "plotted": {"xy": self.xy.total, "coded_input": self.coded.total},
             "sessions": self.sessions,
         }
 
