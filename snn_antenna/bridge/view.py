@@ -131,7 +131,8 @@ class LiveView:
     to the inbox. Server side: the Bokeh page and ``/state.json`` on their own thread."""
 
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
-                 history_s: float = HISTORY_S, rate_hz: float = 1000.0):
+                 history_s: float = HISTORY_S, rate_hz: float = 1000.0,
+                 inbox_items: int = INBOX_ITEMS):
         self.parts, self.host, self.port = parts, host, port
         self.rate_hz, self.history_s = rate_hz, history_s
         self.neuron_hz = np.asarray(parts.array.neuron_hz, dtype=float)
@@ -146,7 +147,7 @@ class LiveView:
         _tap_coder(coder, self._coded)
         # Pipeline → server: a bounded deque never blocks its writer and drops the oldest item
         # when full; appends and pops are thread-safe. Counters are a latest-value slot.
-        self._inbox: deque = deque(maxlen=INBOX_ITEMS)
+        self._inbox: deque = deque(maxlen=inbox_items)
         self._pushed = 0
         self._counts: dict = {}
         self._n_xy = self._n_coded = 0
