@@ -98,7 +98,7 @@ def end(proc, timeout_s: float = 30.0) -> str:
 def test_state_json_advances_during_replay_and_shows_the_contact(tmp_path, scene_counts):
     rec = write_recording(tmp_path / "rec", scene_counts)
     proc = subprocess.Popen([*CLI, "replay", rec, "--network", NETWORK, *TH, "--realtime",
-                             "--view", "--view-port", "0", "--view-hold", "60"],
+                             "--view", "--view-port", "0", "--view-hold", "300"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         url = view_url(proc)
