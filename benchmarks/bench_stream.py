@@ -14,7 +14,7 @@
    backlog is worked off); a window also waits for its own samples, up to ``window_s``.
 3. ``--view``: the throughput run again, alternately without and with the live browser view
    (bridge/view.py) and a page open on it (headless Chromium, when installed), ``--repeats``
-   times each; the real-time factors are printed side by side. Chromium renders in its own
+   times each on ``--view-seconds`` of input; the real-time factors are printed side by side. Chromium renders in its own
    processes, on the same cores as the pipeline.
 """
 from __future__ import annotations
@@ -80,7 +80,9 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--view", action="store_true",
                     help="also compare the real-time factor with the live view open")
-    ap.add_argument("--repeats", type=int, default=2, help="runs each, with --view")
+    ap.add_argument("--repeats", type=int, default=3, help="runs each, with --view")
+    ap.add_argument("--view-seconds", type=float, default=30.0,
+                    help="seconds of input per run, with --view (longer runs, steadier ratio)")
     args = ap.parse_args(argv)
     overrides = ["preprocess.threshold=0.05", *args.set]
     parts = build_online(args.network, overrides)
@@ -128,8 +130,8 @@ def compare_view(args, overrides) -> None:
         time.sleep(2.0)                         # the page has loaded BokehJS and connected
         without, with_view = [], []
         for _ in range(args.repeats):
-            without.append(_rtf(plain_parts, args.seconds))
-            with_view.append(_rtf(view_parts, args.seconds, view))
+            without.append(_rtf(plain_parts, args.view_seconds))
+            with_view.append(_rtf(view_parts, args.view_seconds, view))
         state = view.state()
     finally:
         page.close()

@@ -26,6 +26,7 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
+from itertools import chain
 
 import numpy as np
 
@@ -98,11 +99,7 @@ def _tap_coder(coder, tap) -> None:
 
     def partial_transform(X, threshold=None):
         coded = plain(X, threshold)
-        n = len(coded)
-        th = coder.threshold if threshold is None else threshold
-        tap(np.asarray(X, dtype=float).reshape(n, -1)[:, 0],
-            np.broadcast_to(np.asarray(th, dtype=float), (n,)),
-            np.asarray(coded, dtype=float).reshape(n, -1)[:, 0])
+        tap(X, coder.threshold if threshold is None else threshold, coded)
         return coded
 
     coder.partial_transform = partial_transform
@@ -123,6 +120,24 @@ class _Ring:
 
     def since(self, cursor: int) -> np.ndarray:
         return self.rows[len(self.rows) - min(self.total - cursor, len(self.rows)):]
+
+
+class _Runs:
+    """Consecutive pieces of one stream, joined: (first index, pieces) per unbroken run (a
+    dropped view frame breaks a run)."""
+
+    def __init__(self):
+        self._runs: list[tuple[int, list]] = []
+        self._next = None
+
+    def add(self, first: int, piece) -> None:
+        if first != self._next:
+            self._runs.append((first, []))
+        self._runs[-1][1].append(piece)
+        self._next = first + len(piece)
+
+    def runs(self):
+        return self._runs
 
 
 class LiveView:
@@ -172,15 +187,16 @@ class LiveView:
     def handle(self, batch) -> None:
         if batch.counts:
             self._counts = batch.counts
-        if batch.samples:
-            self._push(("xy", self._n_xy, np.asarray(batch.samples, dtype=float)[:, 1:]))
+        if batch.samples:           # the list itself: converting it is the server's work
+            self._push(("xy", self._n_xy, batch.samples))
             self._n_xy += len(batch.samples)
 
     def idle(self) -> None:
         pass
 
-    def _coded(self, signal: np.ndarray, th: np.ndarray, coded: np.ndarray) -> None:
-        self._push(("coded", self._n_coded, np.column_stack([signal, th, coded])))
+    def _coded(self, signal, th, coded) -> None:
+        # References only (the chain makes new arrays for every chunk); shaped by the server.
+        self._push(("coded", self._n_coded, (signal, th, coded)))
         self._n_coded += len(coded)
 
     def window(self, t_s: float, rates: np.ndarray, event, realtime_factor: float,
@@ -199,8 +215,10 @@ class LiveView:
 
     # ---- server side (IO loop thread) -----------------------------------------------------
     def drain(self) -> None:
-        """Move everything in the inbox into the history."""
-        xy, coded = [], []
+        """Move everything in the inbox into the history. A port delivers thousands of small
+        batches a second when the pipeline runs ahead of real time: they are joined first and
+        converted in one go (per-item numpy calls would cost the pipeline the GIL)."""
+        xy, coded, windows = _Runs(), _Runs(), []
         while True:
             try:
                 item = self._inbox.popleft()
@@ -209,12 +227,17 @@ class LiveView:
             self.drained += 1
             kind = item[0]
             if kind == "xy":
-                xy.append(self._rows(item[1], self.to_g.transform(item[2])))
+                xy.add(item[1], item[2])
             elif kind == "coded":
-                coded.append(self._rows(item[1], item[2]))
+                signal, th, out = item[2]
+                n = len(out)
+                coded.add(item[1], np.column_stack([
+                    np.asarray(signal, dtype=float).reshape(n, -1)[:, 0],
+                    np.broadcast_to(np.asarray(th, dtype=float), (n,)),
+                    np.asarray(out, dtype=float).reshape(n, -1)[:, 0]]))
             elif kind == "window":
                 _, t_s, rates, rtf, latency_ms = item
-                self.windows.add(np.r_[t_s, rates][None, :])
+                windows.append(np.r_[t_s, rates])
                 self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
                 self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
                 self.latency_ms = latency_ms
@@ -223,11 +246,16 @@ class LiveView:
             elif kind == "contact":
                 self.contacts.append(item[1])
                 self.open_onset_s = None
-        if xy:
-            self.xy.add(np.concatenate(xy))
-        if coded:
-            self.coded.add(np.concatenate(coded))
+        for first, batches in xy.runs():
+            samples = np.asarray(list(chain.from_iterable(batches)), dtype=float)
+            rows = self._rows(first, samples[:, 1:])
+            rows[:, 1:] = self.to_g.transform(rows[:, 1:])
+            self.xy.add(rows)
+        for first, parts in coded.runs():
+            self.coded.add(self._rows(first, np.concatenate(parts)))
             self.th_g = float(self.coded.rows[-1, 2])
+        if windows:
+            self.windows.add(np.vstack(windows))
 
     def _rows(self, first: int, values: np.ndarray) -> np.ndarray:
         """Rows (t_s, values...) of every DISPLAY_EVERY-th sample by stream index, so that
@@ -402,7 +430,8 @@ class LiveView:
                                     text_font_style="bold", text_font_size="13px",
                                     background_fill_color="white",
                                     background_fill_alpha=0.75))
-        counters = Div(text="", sizing_mode="stretch_width")
+        # A fixed height: new text then never re-lays the page out (ten times a second).
+        counters = Div(text="", sizing_mode="stretch_width", height=80)
         doc.add_root(column(counters, antenna, coded, rate_map, sizing_mode="stretch_width"))
         doc.title = "snn-antenna live view"
 
