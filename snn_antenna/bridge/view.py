@@ -36,7 +36,7 @@ HISTORY_S = 10.0                # what the plots keep
 PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
 DRAIN_MS = 50                   # the server thread empties the pipeline's inbox
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
-INBOX_ITEMS = 4096              # ≥ 4 s of 1 ms frames, ~40 s of port reads: plenty of slack
+INBOX_ITEMS = 4096              # seconds of port reads even at one frame a read; drained each 50 ms
 SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "reconnects")
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
@@ -148,12 +148,12 @@ class LiveView:
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
                  history_s: float = HISTORY_S, rate_hz: float = 1000.0,
                  inbox_items: int = INBOX_ITEMS):
+        from sklearn.base import clone
+
         self.parts, self.host, self.port = parts, host, port
         self.rate_hz, self.history_s = rate_hz, history_s
         self.neuron_hz = np.asarray(parts.array.neuron_hz, dtype=float)
         self.window_s = parts.window_s
-        from sklearn.base import clone
-
         # Its own copy: the pipeline's is unfitted until calibration, and the two threads
         # should share nothing they call.
         self.to_g = clone(parts.chain.named_steps["to_g"]).fit(np.zeros((1, 2)))
