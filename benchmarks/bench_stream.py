@@ -1,7 +1,7 @@
 """Online pipeline benchmark: real-time factor and sample-to-rate-map latency, one run each.
 
     python benchmarks/bench_stream.py [--network networks/resonator_array.toml]
-                                      [--seconds 8] [--set network.dt_ms=0.25 ...]
+                                      [--seconds 8] [--set network.dt_ms=0.25 ...] [--view]
 
 1. Throughput: the emulator (its own process) writes a robot scene (contacts at 19 and 27 cm)
    into a pseudo-terminal as fast as the reader takes it; serial source → decoder →
@@ -12,11 +12,17 @@
    pipeline streams from it. The latency is from a sample's arrival on the host to the
    publication of the rate-map window that contains it (steady state, after the start-up
    backlog is worked off); a window also waits for its own samples, up to ``window_s``.
+3. ``--view``: the throughput run again, alternately without and with the live browser view
+   (bridge/view.py) and a page open on it (headless Chromium, when installed), ``--repeats``
+   times each on ``--view-seconds`` of input; the real-time factors are printed side by side. Chromium renders in its own
+   processes, on the same cores as the pipeline.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -25,24 +31,28 @@ import time
 from pathlib import Path
 
 from snn_antenna.bridge.online import build_online, run_online, warm_up
-from snn_antenna.bridge.source import SerialSource
+from snn_antenna.bridge.source import PortError, SerialSource
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def stream_from_emulator(parts, seconds: float, fast: bool) -> dict:
-    """Run the pipeline on an emulator process's pty until the whole scene went through."""
+def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
+    """Run the pipeline on an emulator process's pty until the whole scene went through
+    (with ``view``, a started LiveView, also feeding the view)."""
     n_frames = int(seconds * 1000)
     with tempfile.TemporaryDirectory() as tmp:
         link = os.path.join(tmp, "tty")
         emulator = subprocess.Popen(
             [sys.executable, "-m", "snn_antenna.bridge.cli", "emulate", "--pty", "--link", link,
-             "--frames", str(n_frames), *(["--fast"] if fast else [])],
+             # A few more frames than measured: an emulator that ends closes the pty, and
+             # bytes still unread in it would be lost (the run would wait for them in vain).
+             "--frames", str(n_frames + 500), *(["--fast"] if fast else [])],
             stdout=subprocess.PIPE, text=True)
         try:
             emulator.stdout.readline()              # the pty exists once its path is printed
             source = SerialSource(link).start()
-            report = run_online(source, parts, stop=_stop_when_consumed(source, n_frames))
+            report = run_online(source, parts, stop=_stop_when_consumed(source, n_frames),
+                                handlers=[view] if view else [], view=view)
             source.stop()
         finally:
             emulator.kill()
@@ -68,6 +78,11 @@ def main(argv=None) -> int:
     ap.add_argument("--network", default=str(ROOT / "networks" / "resonator_array.toml"))
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--view", action="store_true",
+                    help="also compare the real-time factor with the live view open")
+    ap.add_argument("--repeats", type=int, default=3, help="runs each, with --view")
+    ap.add_argument("--view-seconds", type=float, default=30.0,
+                    help="seconds of input per run, with --view (longer runs, steadier ratio)")
     args = ap.parse_args(argv)
     overrides = ["preprocess.threshold=0.05", *args.set]
     parts = build_online(args.network, overrides)
@@ -93,7 +108,68 @@ def main(argv=None) -> int:
         print("sample-to-rate-map latency: the pipeline never caught up with real time")
     print("contacts (fast run): " + "; ".join(
         f"{c['onset_s']:.1f} s → {c['distance_cm']:.1f} cm" for c in fast["contacts"]))
+    if args.view:
+        compare_view(args, overrides)
     return 0
+
+
+def compare_view(args, overrides) -> None:
+    """Throughput runs alternating without / with the view and an open page."""
+    from snn_antenna.bridge.view import LiveView
+
+    plain_parts = build_online(args.network, overrides)
+    view_parts = build_online(args.network, overrides)  # the view taps its chain's coder
+    view = LiveView(view_parts, port=0)
+    url = view.start()
+    page = OpenPage(url)
+    try:
+        deadline = time.monotonic() + 60
+        while page.kind.startswith("headless") and view.sessions < 1 \
+                and time.monotonic() < deadline:
+            time.sleep(0.2)
+        time.sleep(2.0)                         # the page has loaded BokehJS and connected
+        without, with_view = [], []
+        for _ in range(args.repeats):
+            without.append(_rtf(plain_parts, args.view_seconds))
+            with_view.append(_rtf(view_parts, args.view_seconds, view))
+        state = view.state()
+    finally:
+        page.close()
+        view.stop()
+    a, b = statistics.median(without), statistics.median(with_view)
+    print(f"live view ({page.kind}, {state['sessions']} page(s) open, "
+          f"{state['counters']['view_frames_dropped']} view frames dropped):")
+    for name, median, runs in (("without view", a, without), ("with view", b, with_view)):
+        print(f"  real-time factor {name:13s} {median:6.1f}x   (runs: "
+              + ", ".join(f"{v:.1f}x" for v in runs) + ")")
+    print(f"  with / without: {b / a:.2f} (median of {args.repeats} alternating runs each)")
+
+
+def _rtf(parts, seconds: float, view=None) -> float:
+    """One throughput run's real-time factor. On a loaded machine the emulator's pty now and
+    then loses its reader mid-run; such a run is said and done again, not counted."""
+    for attempt in range(3):
+        try:
+            return stream_from_emulator(parts, seconds, True, view)["realtime_factor"]
+        except PortError as exc:
+            print(f"  (run lost its port, repeated: {exc})")
+    raise PortError("the emulator's pty failed three runs in a row")
+
+
+class OpenPage:
+    """A page kept open on ``url`` by headless Chromium, when it is installed."""
+
+    def __init__(self, url: str):
+        chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+        self.kind = "headless Chromium" if chromium else "no Chromium installed: no page"
+        self._proc = chromium and subprocess.Popen(
+            [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1200,900",
+             url], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def close(self) -> None:
+        if self._proc:
+            self._proc.terminate()
+            self._proc.wait(10)
 
 
 if __name__ == "__main__":

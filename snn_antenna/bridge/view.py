@@ -26,6 +26,7 @@ import threading
 import time
 from collections import deque
 from contextlib import contextmanager
+from itertools import chain
 
 import numpy as np
 
@@ -34,8 +35,8 @@ from ..errors import SpecError
 HISTORY_S = 10.0                # what the plots keep
 PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
 DRAIN_MS = 50                   # the server thread empties the pipeline's inbox
-DISPLAY_EVERY = 2               # 1 kHz → 500 points/s per line: 30 Hz ringing stays smooth
-INBOX_ITEMS = 4096              # ≥ 4 s of 1 ms frames, ~40 s of port reads: plenty of slack
+DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
+INBOX_ITEMS = 4096              # seconds of port reads even at one frame a read; drained each 50 ms
 SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "reconnects")
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
@@ -98,11 +99,7 @@ def _tap_coder(coder, tap) -> None:
 
     def partial_transform(X, threshold=None):
         coded = plain(X, threshold)
-        n = len(coded)
-        th = coder.threshold if threshold is None else threshold
-        tap(np.asarray(X, dtype=float).reshape(n, -1)[:, 0],
-            np.broadcast_to(np.asarray(th, dtype=float), (n,)),
-            np.asarray(coded, dtype=float).reshape(n, -1)[:, 0])
+        tap(X, coder.threshold if threshold is None else threshold, coded)
         return coded
 
     coder.partial_transform = partial_transform
@@ -125,24 +122,47 @@ class _Ring:
         return self.rows[len(self.rows) - min(self.total - cursor, len(self.rows)):]
 
 
+class _Runs:
+    """Consecutive pieces of one stream, joined: (first index, pieces) per unbroken run (a
+    dropped view frame breaks a run)."""
+
+    def __init__(self):
+        self._runs: list[tuple[int, list]] = []
+        self._next = None
+
+    def add(self, first: int, piece) -> None:
+        if first != self._next:
+            self._runs.append((first, []))
+        self._runs[-1][1].append(piece)
+        self._next = first + len(piece)
+
+    def runs(self):
+        return self._runs
+
+
 class LiveView:
     """Pipeline side: a :class:`~snn_antenna.bridge.source.SourceLoop` handler (``handle``,
     ``idle``) and ``run_online``'s ``view`` hook (``window``, ``event``); all of them only append
     to the inbox. Server side: the Bokeh page and ``/state.json`` on their own thread."""
 
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
-                 history_s: float = HISTORY_S, rate_hz: float = 1000.0):
+                 history_s: float = HISTORY_S, rate_hz: float = 1000.0,
+                 inbox_items: int = INBOX_ITEMS):
+        from sklearn.base import clone
+
         self.parts, self.host, self.port = parts, host, port
         self.rate_hz, self.history_s = rate_hz, history_s
         self.neuron_hz = np.asarray(parts.array.neuron_hz, dtype=float)
         self.window_s = parts.window_s
-        self.to_g = parts.chain.named_steps["to_g"]
+        # Its own copy: the pipeline's is unfitted until calibration, and the two threads
+        # should share nothing they call.
+        self.to_g = clone(parts.chain.named_steps["to_g"]).fit(np.zeros((1, 2)))
         coder = parts.chain.named_steps["coder"]
         self.coder_amplitude = coder.amplitude
         _tap_coder(coder, self._coded)
         # Pipeline → server: a bounded deque never blocks its writer and drops the oldest item
         # when full; appends and pops are thread-safe. Counters are a latest-value slot.
-        self._inbox: deque = deque(maxlen=INBOX_ITEMS)
+        self._inbox: deque = deque(maxlen=inbox_items)
         self._pushed = 0
         self._counts: dict = {}
         self._n_xy = self._n_coded = 0
@@ -167,15 +187,16 @@ class LiveView:
     def handle(self, batch) -> None:
         if batch.counts:
             self._counts = batch.counts
-        if batch.samples:
-            self._push(("xy", self._n_xy, np.asarray(batch.samples, dtype=float)[:, 1:]))
+        if batch.samples:           # the list itself: converting it is the server's work
+            self._push(("xy", self._n_xy, batch.samples))
             self._n_xy += len(batch.samples)
 
     def idle(self) -> None:
         pass
 
-    def _coded(self, signal: np.ndarray, th: np.ndarray, coded: np.ndarray) -> None:
-        self._push(("coded", self._n_coded, np.column_stack([signal, th, coded])))
+    def _coded(self, signal, th, coded) -> None:
+        # References only (the chain makes new arrays for every chunk); shaped by the server.
+        self._push(("coded", self._n_coded, (signal, th, coded)))
         self._n_coded += len(coded)
 
     def window(self, t_s: float, rates: np.ndarray, event, realtime_factor: float,
@@ -194,8 +215,10 @@ class LiveView:
 
     # ---- server side (IO loop thread) -----------------------------------------------------
     def drain(self) -> None:
-        """Move everything in the inbox into the history."""
-        xy, coded = [], []
+        """Move everything in the inbox into the history. A port delivers thousands of small
+        batches a second when the pipeline runs ahead of real time: they are joined first and
+        converted in one go (per-item numpy calls would cost the pipeline the GIL)."""
+        xy, coded, windows = _Runs(), _Runs(), []
         while True:
             try:
                 item = self._inbox.popleft()
@@ -204,12 +227,17 @@ class LiveView:
             self.drained += 1
             kind = item[0]
             if kind == "xy":
-                xy.append(self._rows(item[1], self.to_g.transform(item[2])))
+                xy.add(item[1], item[2])
             elif kind == "coded":
-                coded.append(self._rows(item[1], item[2]))
+                signal, th, out = item[2]
+                n = len(out)
+                coded.add(item[1], np.column_stack([
+                    np.asarray(signal, dtype=float).reshape(n, -1)[:, 0],
+                    np.broadcast_to(np.asarray(th, dtype=float), (n,)),
+                    np.asarray(out, dtype=float).reshape(n, -1)[:, 0]]))
             elif kind == "window":
                 _, t_s, rates, rtf, latency_ms = item
-                self.windows.add(np.r_[t_s, rates][None, :])
+                windows.append(np.r_[t_s, rates])
                 self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
                 self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
                 self.latency_ms = latency_ms
@@ -218,11 +246,16 @@ class LiveView:
             elif kind == "contact":
                 self.contacts.append(item[1])
                 self.open_onset_s = None
-        if xy:
-            self.xy.add(np.concatenate(xy))
-        if coded:
-            self.coded.add(np.concatenate(coded))
+        for first, batches in xy.runs():
+            samples = np.asarray(list(chain.from_iterable(batches)), dtype=float)
+            rows = self._rows(first, samples[:, 1:])
+            rows[:, 1:] = self.to_g.transform(rows[:, 1:])
+            self.xy.add(rows)
+        for first, parts in coded.runs():
+            self.coded.add(self._rows(first, np.concatenate(parts)))
             self.th_g = float(self.coded.rows[-1, 2])
+        if windows:
+            self.windows.add(np.vstack(windows))
 
     def _rows(self, first: int, values: np.ndarray) -> np.ndarray:
         """Rows (t_s, values...) of every DISPLAY_EVERY-th sample by stream index, so that
@@ -260,6 +293,8 @@ class LiveView:
                          "latency_ms": _finite(self.latency_ms),
                          **{k: counts.get(k, 0) for k in SHOWN_COUNTERS},
                          "view_frames_dropped": self.dropped},
+            # Points kept for the plots (every DISPLAY_EVERY-th sample), ever.
+            "plotted": {"xy": self.xy.total, "coded_input": self.coded.total},
             "sessions": self.sessions,
         }
 
@@ -313,7 +348,7 @@ class LiveView:
             app = BokehTornado({"/": Application(FunctionHandler(self._page))},
                                extra_websocket_origins=origins,
                                extra_patterns=[(r"/state\.json", _state_handler(), {"view": self})],
-                               websocket_ping_interval=5, websocket_ping_timeout=15)
+                               websocket_ping_interval=10, websocket_ping_timeout=10)
             http = HTTPServer(app)
             http.add_sockets(sockets)
             self._server = BaseServer(loop, app, http)
@@ -334,8 +369,8 @@ class LiveView:
     def _page(self, doc) -> None:
         """One browser page (a Bokeh session): its own sources, fed from the history."""
         from bokeh.layouts import column
-        from bokeh.models import (ColorBar, ColumnDataSource, Div, LabelSet, LinearAxis,
-                                  LinearColorMapper, Range1d)
+        from bokeh.models import (ColorBar, ColumnDataSource, Div, FixedTicker, LabelSet,
+                                  LinearAxis, LinearColorMapper, Range1d)
         from bokeh.palettes import Viridis256
         from bokeh.plotting import figure
 
@@ -348,8 +383,7 @@ class LiveView:
                       min_border_left=70, min_border_right=110)
         src_xy = ColumnDataSource({"t": [], "x": [], "y": []}, name="xy")
         src_in = ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [], "coded": []})
-        src_map = ColumnDataSource({"left": [], "right": [], "bottom": [], "top": [],
-                                    "rate": []})
+        src_map = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
         src_contacts = ColumnDataSource({"t": [], "label": []}, name="contacts")
 
         antenna = figure(title="Antenna: the two accelerometer axes", y_axis_label="g",
@@ -371,16 +405,18 @@ class LiveView:
                    mode="after", alpha=0.8, legend_label="coded")
 
 
-        edges = np.sqrt(self.neuron_hz[1:] * self.neuron_hz[:-1])
-        bottoms = np.r_[self.neuron_hz[0] ** 2 / edges[0], edges]
-        tops = np.r_[edges, self.neuron_hz[-1] ** 2 / edges[-1]]
+        # One image (a row per resonator, a column per window) rather than a rectangle per
+        # cell: the browser redraws it ten times a second, and it competes for the same cores.
+        n = len(self.neuron_hz)
         mapper = LinearColorMapper(palette=Viridis256, low=0, high=self.peak_rate_hz)
         rate_map = figure(title="Rate map: resonators (tuning frequency) × time",
-                          y_axis_type="log", y_axis_label="resonator tuning (Hz)",
-                          x_axis_label="stream time (s)",
-                          y_range=Range1d(bottoms[0], tops[-1]), **{**common, "height": 260})
-        rate_map.quad(left="left", right="right", bottom="bottom", top="top", source=src_map,
-                      fill_color={"field": "rate", "transform": mapper}, line_color=None)
+                          y_axis_label="resonator tuning (Hz)", x_axis_label="stream time (s)",
+                          y_range=Range1d(-0.5, n - 0.5), **{**common, "height": 260})
+        rate_map.image(image="image", x="x", y="y", dw="dw", dh="dh", source=src_map,
+                       color_mapper=mapper)
+        ticks = list(range(0, n, max(1, n // 8)))
+        rate_map.yaxis.ticker = FixedTicker(ticks=ticks)
+        rate_map.yaxis.major_label_overrides = {i: f"{self.neuron_hz[i]:.1f}" for i in ticks}
         rate_map.add_layout(ColorBar(color_mapper=mapper, title="rate (spikes/s)",
                                      width=12), "right")
 
@@ -394,14 +430,14 @@ class LiveView:
                                     text_font_style="bold", text_font_size="13px",
                                     background_fill_color="white",
                                     background_fill_alpha=0.75))
-        counters = Div(text="", sizing_mode="stretch_width")
+        # A fixed height: new text then never re-lays the page out (ten times a second).
+        counters = Div(text="", sizing_mode="stretch_width", height=80)
         doc.add_root(column(counters, antenna, coded, rate_map, sizing_mode="stretch_width"))
         doc.title = "snn-antenna live view"
 
         cursor = {"xy": 0, "coded": 0, "windows": 0, "contacts": 0}
         shown = {"counters": None, "contacts": None}
         rollover_samples = self.xy.capacity
-        rollover_quads = self.windows.capacity * len(self.neuron_hz)
 
         def update() -> None:
             new_xy = self.xy.since(cursor["xy"])
@@ -415,15 +451,16 @@ class LiveView:
                 src_in.stream({"t": new_in[:, 0], "signal": new_in[:, 1], "th": new_in[:, 2],
                                "neg_th": -new_in[:, 2], "coded": new_in[:, 3]},
                               rollover=rollover_samples)
-            new_windows = self.windows.since(cursor["windows"])
-            cursor["windows"] = self.windows.total
-            if len(new_windows):
-                n = len(self.neuron_hz)
-                starts = np.repeat(new_windows[:, 0], n)
-                src_map.stream({"left": starts, "right": starts + self.window_s,
-                                "bottom": np.tile(bottoms, len(new_windows)),
-                                "top": np.tile(tops, len(new_windows)),
-                                "rate": new_windows[:, 1:].ravel()}, rollover=rollover_quads)
+            if cursor["windows"] != self.windows.total:
+                cursor["windows"] = self.windows.total
+                shown_windows = self.windows.rows
+                # The windows of one stream follow each other; a new stream starts again at 0.
+                restart = np.flatnonzero(np.diff(shown_windows[:, 0]) <= 0)
+                if len(restart):
+                    shown_windows = shown_windows[restart[-1] + 1:]
+                src_map.data = {"image": [np.ascontiguousarray(shown_windows[:, 1:].T)],
+                                "x": [shown_windows[0, 0]], "y": [-0.5],
+                                "dw": [len(shown_windows) * self.window_s], "dh": [n]}
                 if mapper.high != self.peak_rate_hz:
                     mapper.high = self.peak_rate_hz
             marks = self._contact_marks()
