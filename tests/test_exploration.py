@@ -72,7 +72,7 @@ def test_the_closed_loop_stops_the_robot_at_a_post_without_seeing_the_ground_tru
     if first["within_array_band"]:
         assert abs(first["distance_error_cm"]) < 4.0
     else:   # rings above the top neuron: decoded at the array's edge, not scored
-        assert s["score"]["unscored_contacts"] >= 1 and first["low_mode_hz"] > 30.0
+        assert s["score"]["out_of_band_contacts"] >= 1 and first["low_mode_hz"] > 30.0
     period = s["cpg_period_s"]
     assert abs(period["measured"] / period["spec"] - 1) < 0.05
     assert abs(s["pan_tilt_phase_deg"]["measured"] - 90.0) < 10.0

@@ -279,7 +279,7 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
                {"quantity": "misses", "value": scored["misses"]},
                {"quantity": "false positives", "value": scored["fp"]},
                {"quantity": "contacts outside the array's band (not scored)",
-                "value": scored["unscored_contacts"]},
+                "value": scored["out_of_band_contacts"]},
                {"quantity": "first contact: true distance (cm)",
                 "value": first["true_distance_cm"] if first else None},
                {"quantity": "first contact: its low mode (Hz)",
@@ -360,7 +360,7 @@ def human_summary(s: dict, out_dir) -> str:
     return "\n".join([
         contact,
         f"{len(s['detections'])} detection(s): {sc['tp']} true positive(s), {sc['fp']} false "
-        f"positive(s), {sc['misses']} miss(es), {sc['unscored_contacts']} contact(s) outside "
+        f"positive(s), {sc['misses']} miss(es), {sc['out_of_band_contacts']} contact(s) outside "
         "the array's band",
         f"CPG period {fmt(p['measured'], '.3f')} s (spec {p['spec']:.3f} s), pan-tilt phase "
         f"{fmt(s['pan_tilt_phase_deg']['measured'], '.1f')} deg",
