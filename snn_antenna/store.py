@@ -13,9 +13,10 @@ writes (Dask workers return their blocks to it), so a cluster needs no shared fo
 
 After a chunk's data are written, its element of the ``chunk_done`` array (zarr chunks of
 one element; zarr's local store writes each file by an atomic rename) is set. A chunk without
-its mark is redone on resume, whatever part of its data had reached the disk; a marked chunk is never recomputed. The store's ``fingerprint`` attribute
-(grid, outputs, chunking and the study's resolved settings) must match to resume: a changed
-spec is refused, ``fresh=True`` starts over.
+its mark is redone on resume, whatever part of its data had reached the disk; a marked chunk
+is never recomputed. The store's ``fingerprint`` attribute (grid, outputs, chunking and the
+study's resolved settings) must match to resume: a changed spec is refused, ``fresh=True``
+starts over.
 """
 from __future__ import annotations
 
