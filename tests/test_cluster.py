@@ -169,3 +169,37 @@ def test_worker_errors_cross_the_process_boundary_and_finished_chunks_stay(remot
                   client=client, progress=False)
     assert (err.value.field, err.value.value, err.value.accepted) == ("axes.x", -2.0, "x >= 0")
     assert _store_files(worker_dir) == []
+
+
+# -- memory stays bounded: only a window of chunks is out at a time -------------------------------
+def square(points):
+    return {"y": points["x"] ** 2}
+
+
+class CountingClient:
+    """The cluster's client, noting at each submission how many chunks are out (submitted,
+    not yet in the store): the blocks a sweep can have waiting in memory."""
+
+    def __init__(self, client, store: SweepStore):
+        self._client, self._store, self.submitted, self.out = client, store, 0, []
+
+    def submit(self, *args, **kwargs):
+        self.submitted += 1
+        done = len(self._store.done_chunks()) if (self._store.path / "chunk_done").exists() else 0
+        self.out.append(self.submitted - done)
+        return self._client.submit(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._client, name)
+
+
+def test_only_a_window_of_chunks_is_out_at_a_time(remote):
+    client, _, client_dir = remote
+    path = client_dir / "window.zarr"
+    counting = CountingClient(client, SweepStore(path))
+    out = run_sweep(Grid({"x": np.arange(24.0)}), square, path, OUTS, chunk_points=2,
+                    client=counting, progress=False)
+    assert np.array_equal(out.data.y.values, np.arange(24.0) ** 2)
+    assert counting.submitted == 12
+    window = 2 * sum(client.nthreads().values())  # one single-threaded worker: 2
+    assert max(counting.out) <= window < 12
