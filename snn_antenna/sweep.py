@@ -435,8 +435,8 @@ def _prepare_worker_class():
         - stop Dask's statistical profiler, which deadlocks workers: every 10 ms it calls
           ``sys._current_frames()``, which holds the interpreter's thread-list lock while it
           allocates; a garbage collection there runs Brian2's weakref callbacks, and a task thread
-          starting a thread (zarr's I/O pool, when a chunk is written) then waits forever (seen:
-          a worker stuck in ``Thread.start`` with its main thread in Brian2's
+          starting a thread then waits forever (seen when workers still wrote their chunks:
+          one stuck in zarr's I/O pool's ``Thread.start`` with its main thread in Brian2's
           ``InstanceTrackerSet.remove`` under ``Worker.trigger_profile``; the sweep hung).
         """
 
