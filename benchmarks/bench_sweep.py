@@ -1,7 +1,8 @@
 """Sweep throughput: vectorised Brian2 grids vs a naive per-point loop vs a numba kernel.
 
-    /tmp/venv/bin/python benchmarks/bench_sweep.py                 # 10^3, 10^4, 10^5 points
-    /tmp/venv/bin/python benchmarks/bench_sweep.py --sizes 1000 --workers 1 2 --duration-s 0.5
+    python benchmarks/bench_sweep.py                 # 10^3, 10^4, 10^5 points
+    python benchmarks/bench_sweep.py --sizes 1000 --workers 1 2 --duration-s 0.5
+    python benchmarks/bench_sweep.py --sizes 1000000 # a 10^6-point grid's time, and on Dask
 
 Every grid point is one resonator driven by the coder's square wave (``NeuronSweep``), for
 ``--duration-s`` at dt 0.1 ms. Measured in one run and printed side by side, in neuron-steps
@@ -14,7 +15,13 @@ per second (points × steps / wall time):
   timed on a sample of points and EXTRAPOLATED to the grid (said so in the table);
 - ``numba``: a hand-written Euler kernel of the same equations and input (neuron-outer loop,
   one thread), compile time excluded; its spike counts are compared with Brian2's;
-- scaling: the largest grid on a Dask LocalCluster of 1, 2, ... worker processes.
+- scaling: the largest grid on a Dask LocalCluster of 1, 2, ... worker processes (the
+  workers return their blocks; this process writes the store, as on a cluster without a
+  shared folder). Each row prints the machine's load average (1 min) before and after it:
+  other jobs holding a core lower the 2-worker ratio, and the load says whether they did.
+
+Every row also gives the grid's wall time, so ``--sizes 1000000`` answers "how long does a
+10^6-point grid take here".
 """
 from __future__ import annotations
 
@@ -103,6 +110,11 @@ def naive_seconds_per_point(sweep: NeuronSweep, points, sample: int) -> float:
     return (time.perf_counter() - t0) / sample
 
 
+def load() -> float:
+    """The machine's 1-minute load average: runnable processes, ours included."""
+    return os.getloadavg()[0]
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 10_000, 100_000])
@@ -141,7 +153,8 @@ def main(argv=None) -> int:
             t0 = time.perf_counter()
             out = run_sweep(grid, sweep, tmp / f"{engine}-{n}.zarr", NeuronSweep.OUTPUTS,
                             chunk_points=chunk, progress=False)
-            row[engine] = work / (time.perf_counter() - t0)
+            row[f"{engine}_s"] = time.perf_counter() - t0
+            row[engine] = work / row[f"{engine}_s"]
             counts[engine] = out.data.spike_count.values.ravel()
         t0 = time.perf_counter()
         numba_counts = run_numba(kernel, base, points)
@@ -151,8 +164,10 @@ def main(argv=None) -> int:
         row["same_count_numba"] = float(np.mean(diff == 0))
         row["naive"] = steps / naive_seconds_per_point(base, points, args.naive_sample)
         rows.append(row)
-        print(f"  {n:>7,} points: standalone {row['standalone']:.3g}, numba {row['numba']:.3g}, "
-              f"naive {row['naive']:.3g} neuron-steps/s", flush=True)
+        print(f"  {n:>9,} points: standalone {row['standalone']:.3g}, numba {row['numba']:.3g}, "
+              f"naive {row['naive']:.3g} neuron-steps/s; the grid took "
+              f"{row['standalone_s']:.1f} s on one core (standalone, compile excluded; "
+              f"load average {load():.1f})", flush=True)
 
     print("\n## throughput (neuron-steps per second) and ratios, measured in this run")
     print(f"{'points':>8} {'standalone':>11} {'cython':>9} {'numpy':>9} {'numba':>9} "
@@ -173,17 +188,22 @@ def main(argv=None) -> int:
         grid = grid_of(max(args.sizes))
         work = grid.size * steps
         print(f"\n## scaling with Dask worker processes ({grid.size:,} points, standalone; "
-              "timed on a second run: cluster start and each worker's compile excluded)")
+              "timed on a second run: cluster start and each worker's compile excluded; "
+              f"{os.cpu_count()} cores, load average = runnable processes, 1 min)")
         first = None
         for w in args.workers:
             with dask_client(workers=w) as client:
                 for attempt in ("warm-up", "timed"):
+                    before = load()
                     t0 = time.perf_counter()
                     run_sweep(grid, base, tmp / f"dask-{w}.zarr", NeuronSweep.OUTPUTS,
                               chunk_points=chunk, client=client, progress=False, fresh=True)
-                    rate = work / (time.perf_counter() - t0)
+                    seconds = time.perf_counter() - t0
+            rate = work / seconds
             first = first or rate
-            print(f"  {w} worker(s): {rate:.3g} neuron-steps/s, {rate / first:.2f}x of 1 worker")
+            print(f"  {w} worker(s): {rate:.3g} neuron-steps/s, {rate / first:.2f}x of 1 worker, "
+                  f"{seconds:.1f} s for the grid; load average {before:.1f} before, "
+                  f"{load():.1f} after", flush=True)
     return 0
 
 

@@ -2,19 +2,21 @@
 
     store = SweepStore("out/tuning/results.zarr")
     done = store.prepare(coords, outputs, block_shape, attrs, fresh=False)  # pre-create or resume
-    store.write_chunk(chunk_id, region, {"spike_count": block})            # from any worker
+    store.write_chunk(chunk_id, region, {"spike_count": block})            # as blocks arrive
     ds = store.load()
 
 ``prepare`` writes the metadata of every variable (dims = the grid's axes, each a named
-coordinate) without data, so workers can write their own regions (``to_zarr(region=...)``)
-in parallel without locks: a sweep chunk is exactly one zarr chunk of every variable.
+coordinate) without data, so each chunk's results are written into their own region
+(``to_zarr(region=...)``) as they arrive: a sweep chunk is exactly one zarr chunk of every
+variable, so no write touches another chunk's files. Only the process that runs the sweep
+writes (Dask workers return their blocks to it), so a cluster needs no shared folder.
 
 After a chunk's data are written, its element of the ``chunk_done`` array (zarr chunks of
-one element, so workers never share a file; zarr's local store writes each file by an atomic
-rename) is set. A chunk without its mark is redone on resume, whatever part of its data had
-reached the disk; a marked chunk is never recomputed. The store's ``fingerprint`` attribute
-(grid, outputs, chunking and the study's resolved settings) must match to resume: a changed
-spec is refused, ``fresh=True`` starts over.
+one element; zarr's local store writes each file by an atomic rename) is set. A chunk without
+its mark is redone on resume, whatever part of its data had reached the disk; a marked chunk
+is never recomputed. The store's ``fingerprint`` attribute (grid, outputs, chunking and the
+study's resolved settings) must match to resume: a changed spec is refused, ``fresh=True``
+starts over.
 """
 from __future__ import annotations
 
@@ -158,7 +160,7 @@ class SweepStore:
         flags = zarr.open_array(self.path / DONE, mode="r")[:]
         return set(map(int, np.flatnonzero(flags)))
 
-    # -- writing (worker side) ------------------------------------------------------------------
+    # -- writing (the sweep's own process) ------------------------------------------------------
     def write_chunk(self, chunk_id: int, region: dict[str, slice], data: dict[str, np.ndarray]):
         """Write one chunk's block of every output, then mark the chunk done."""
         import xarray as xr

@@ -22,11 +22,12 @@ The public API is small:
   up front (empty or duplicated axis values, a result too big for memory, whatever
   ``for_grid`` refuses), pre-creates the store (``store.SweepStore``), skips chunks already
   finished, runs the rest (in this process when ``client`` is None, else as Dask tasks that
-  write their own regions of the store), shows a progress bar and returns a ``SweepOutcome``.
+  return their blocks to this process, which alone writes each into its region of the store
+  as it arrives), shows a progress bar and returns a ``SweepOutcome``.
 - ``dask_client(workers, scheduler)``: a context manager; ``scheduler="tcp://HOST:PORT"``
   attaches to an existing cluster, otherwise a LocalCluster of worker *processes* (Brian2
-  holds the GIL) is started and closed again. Workers must see the store's path (a shared
-  file system when the cluster spans machines).
+  holds the GIL) is started and closed again. Workers never open the store: a cluster
+  spanning machines needs no shared folder, only the snn_antenna package on every worker.
 - ``NeuronSweep``: the vectorised evaluator for Izhikevich neurons driven by the square-wave
   coder's input; axes may be any neuron parameter (``k, a, b, c, d``), the input frequency
   ``input_hz`` and amplitude ``I``. All points of a chunk are neurons of ONE NeuronGroup.
@@ -51,6 +52,7 @@ import copy
 import dataclasses
 import functools
 import hashlib
+import itertools
 import math
 import os
 import time
@@ -270,9 +272,11 @@ class SweepOutcome:
     workers: dict = dataclasses.field(default_factory=dict)  # worker → chunks it ran
 
 
-def _run_chunk(store_path: str, chunk_id: int, region: dict, points: dict, evaluate,
-               outputs: dict) -> tuple[int, float, str]:
-    """One task: evaluate a chunk, write its region, mark it done (runs on a worker)."""
+def _compute_chunk(chunk_id: int, region: dict, points: dict, evaluate,
+                   outputs: dict) -> tuple[int, dict[str, np.ndarray], float, str]:
+    """One task: evaluate a chunk and return its blocks (runs on a worker). It touches no
+    file: the client alone writes the store, so a worker on another machine needs no view
+    of the output folder."""
     t0 = time.perf_counter()
     results = evaluate(points)
     n = len(next(iter(points.values())))
@@ -285,8 +289,7 @@ def _run_chunk(store_path: str, chunk_id: int, region: dict, points: dict, evalu
         if value.dtype.kind == "f" and not np.all(np.isfinite(value)):
             raise ValueError(f"evaluate returned non-finite {name}: results are never NaN")
         blocks[name] = value.astype(out.dtype).reshape(shape)
-    SweepStore(store_path).write_chunk(chunk_id, region, blocks)
-    return chunk_id, time.perf_counter() - t0, f"{os.uname().nodename}:{os.getpid()}"
+    return chunk_id, blocks, time.perf_counter() - t0, f"{os.uname().nodename}:{os.getpid()}"
 
 
 def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
@@ -310,7 +313,7 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     check_memory(grid, outputs, int(np.prod(block_shape)),
                  getattr(evaluate, "bytes_per_point", 0))
     regions = grid.blocks(chunk_points)
-    store = SweepStore(Path(store_path).resolve())  # workers may run elsewhere
+    store = SweepStore(Path(store_path).resolve())
     settings = repr(evaluate) if settings is None else settings
     done = store.prepare(grid.coords(), outputs, block_shape, len(regions), attrs,
                          settings, fresh)
@@ -323,8 +326,9 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
         with _interruptible() as interrupted:
             if client is None:
                 for i in todo:
-                    _, _, who = _run_chunk(str(store.path), i, regions[i],
-                                           grid.points(regions[i]), evaluate, outputs)
+                    _, blocks, _, who = _compute_chunk(i, regions[i], grid.points(regions[i]),
+                                                       evaluate, outputs)
+                    store.write_chunk(i, regions[i], blocks)
                     workers[who] = workers.get(who, 0) + 1
                     bar.update()
                     if interrupted():
@@ -364,6 +368,12 @@ def _interruptible():
 
 def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, workers,
                  interrupted=lambda: False):
+    """Chunks run as Dask tasks that return their blocks; this process writes each block into
+    the store as it arrives (``distributed.as_completed``), so workers need no shared folder.
+
+    Only a window of tasks (two per worker thread) is submitted at a time and refilled as
+    chunks finish: finished blocks never pile up on the workers or here, whatever the grid's
+    size, while every worker still has a chunk queued behind the one it runs."""
     from distributed import as_completed
 
     if not todo:
@@ -371,19 +381,35 @@ def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, wor
     prepare_workers(client)
     evaluate_future = client.scatter(evaluate, broadcast=True)
     run = f"{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}"
-    futures = [client.submit(_run_chunk, str(store.path), i, regions[i],
-                             grid.points(regions[i]), evaluate_future, outputs,
-                             key=f"sweep-{run}-chunk-{i}", pure=False)
-               for i in todo]
+    waiting = iter(todo)
+    running: dict = {}  # future -> chunk id, cancelled if the sweep stops
+
+    def submit(count: int) -> list:
+        futures = []
+        for i in itertools.islice(waiting, max(0, count)):
+            future = client.submit(_compute_chunk, i, regions[i], grid.points(regions[i]),
+                                   evaluate_future, outputs, key=f"sweep-{run}-chunk-{i}",
+                                   pure=False)
+            running[future] = i
+            futures.append(future)
+        return futures
+
+    def window() -> int:  # asked again after every chunk: workers may join or leave
+        return max(2, 2 * sum(client.nthreads().values()))
+
+    completed = as_completed(submit(window()), loop=client.loop)
     try:
-        for future in as_completed(futures):
-            _, _, who = future.result()  # re-raises a worker's exception here
+        for future in completed:
+            running.pop(future)
+            chunk_id, blocks, _, who = future.result()  # re-raises a worker's exception here
+            store.write_chunk(chunk_id, regions[chunk_id], blocks)
             workers[who] = workers.get(who, 0) + 1
             bar.update()
             if interrupted():
                 raise KeyboardInterrupt
+            completed.update(submit(window() - len(running)))
     except BaseException:  # Ctrl-C or a failed chunk: finished chunks stay in the store
-        client.cancel(futures)
+        client.cancel(list(running))
         raise
 
 
@@ -409,8 +435,8 @@ def _prepare_worker_class():
         - stop Dask's statistical profiler, which deadlocks workers: every 10 ms it calls
           ``sys._current_frames()``, which holds the interpreter's thread-list lock while it
           allocates; a garbage collection there runs Brian2's weakref callbacks, and a task thread
-          starting a thread (zarr's I/O pool, when a chunk is written) then waits forever (seen:
-          a worker stuck in ``Thread.start`` with its main thread in Brian2's
+          starting a thread then waits forever (seen when workers still wrote their chunks:
+          one stuck in zarr's I/O pool's ``Thread.start`` with its main thread in Brian2's
           ``InstanceTrackerSet.remove`` under ``Worker.trigger_profile``; the sweep hung).
         """
 

@@ -313,6 +313,7 @@ def short_scene():
     with open(REPO / "stimuli/quickstart_scene.toml", "rb") as f:
         scene = tomllib.load(f)
     scene["duration_s"] = 0.6
+    scene["contacts"] = scene["contacts"][:1]  # the later contacts start after 0.6 s
     scene["contacts"][0].update(t_s=0.1, hold_s=0.5)
     return scene
 
