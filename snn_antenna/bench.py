@@ -31,7 +31,7 @@ import xarray as xr
 from . import antenna
 from .errors import SpecError, check
 from .signals import Event, Recording
-from .store import write_dataset
+from .store import read_dataset, write_dataset
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
 
@@ -198,26 +198,11 @@ def cached(path: Path, build: Callable[[], xr.Dataset], log=print, fresh: bool =
     path = Path(path)
     if path.exists() and not fresh:
         log(f"cache: reusing {path}")
-        return plain_strings(xr.open_zarr(path, consolidated=False).load())
+        return read_dataset(path)       # text comes back as plain numpy str
     ds = build()
     write_dataset(ds, path)
     log(f"cache: stored {path}")
     return ds
-
-
-def plain_strings(ds: xr.Dataset) -> xr.Dataset:
-    """Text read back from a Zarr v3 store comes as numpy's variable-width ``StringDType``,
-    which labels, ``sel`` and comparisons downstream do not all accept: make it fixed-width
-    unicode again, as the data set had before it was stored."""
-    out = ds.copy()
-    for name, var in ds.variables.items():
-        if var.dtype.kind in "TO":
-            text = np.asarray(var.values.tolist(), dtype=str)
-            if name in ds.coords:
-                out = out.assign_coords({name: (var.dims, text, var.attrs)})
-            else:
-                out[name] = (var.dims, text, var.attrs)
-    return out
 
 
 def load(spec: BenchSpec, log=print, fresh: bool = False) -> xr.Dataset:
@@ -251,5 +236,5 @@ def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
     return BenchSpec(seed=seed, **table)
 
 
-__all__ = ["BenchSpec", "generate", "load", "cached", "plain_strings", "event_recording", "spec_from_table",
+__all__ = ["BenchSpec", "generate", "load", "cached", "event_recording", "spec_from_table",
            "parallel_map", "source_hash", "PAPER_POSITIONS_CM"]
