@@ -10,7 +10,6 @@ import json
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -23,10 +22,8 @@ from snn_antenna.bridge import cli as bridge_cli
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
 from snn_antenna.bridge.online import EpisodeTracker, build_online, run_online
-from snn_antenna.bridge.protocol import Sample, encode_binary
-from snn_antenna.bridge.recorder import Recorder
+from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.source import Batch
 from snn_antenna.errors import PipelineError, SpecError
 from snn_antenna.readout import ContactDetector
 from snn_antenna.stimuli import Contact, RobotScene
@@ -42,17 +39,6 @@ ONE_WINDOW = ["--set", "readout.window_s=1.0", "--set", "preprocess.threshold=0.
 @pytest.fixture(scope="module")
 def one_window_counts():
     return RobotScene(duration_s=5.0, contacts=[Contact(2.05, 19.0)]).generate(seed=3).samples
-
-
-def write_recording(out: Path, counts: np.ndarray) -> Path:
-    """A recording as `record` writes it, without a port: every frame in one batch."""
-    recorder = Recorder(out, port="test://", wire_format="binary", baudrate=250000)
-    seq = np.arange(len(counts)) % 65536
-    raw = b"".join(encode_binary(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts))
-    samples = [Sample(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts)]
-    recorder.handle(Batch(time.time(), raw, samples, {"frames": len(samples)}))
-    recorder.close()
-    return out
 
 
 def assert_one_window_contact(report: dict) -> None:
@@ -138,7 +124,7 @@ def test_online_readout_is_total_and_agrees_with_offline(columns, max_gap, windo
 
 # -- the one-window contact through replay and stream ------------------------------------------
 def test_one_window_contact_replays(tmp_path, one_window_counts):
-    rec = write_recording(tmp_path / "rec", one_window_counts)
+    rec = record_counts(tmp_path / "rec", one_window_counts)
     result = subprocess.run([*CLI, "replay", str(rec), "--network", str(NETWORK), *ONE_WINDOW],
                             capture_output=True, text=True, timeout=300)
     assert result.returncode == 0, result.stderr
@@ -186,7 +172,7 @@ def broken_update(self, t_s, rates):
 
 def test_failure_in_the_network_operation_is_a_pipeline_error(tmp_path, monkeypatch,
                                                               one_window_counts):
-    rec = write_recording(tmp_path / "rec", one_window_counts[:1500])
+    rec = record_counts(tmp_path / "rec", one_window_counts[:1500])
     monkeypatch.setattr(EpisodeTracker, "update", broken_update)
     parts = build_online(NETWORK)
     with pytest.raises(PipelineError, match="ZeroDivisionError.*a bug in a read-out stage") as exc:

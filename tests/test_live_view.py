@@ -24,10 +24,8 @@ import pytest
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
 from snn_antenna.bridge.online import build_online, run_online
-from snn_antenna.bridge.protocol import Sample, encode_binary
-from snn_antenna.bridge.recorder import Recorder
+from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.source import Batch
 from snn_antenna.bridge.view import DISPLAY_EVERY, LiveView
 from snn_antenna.stimuli import Contact, RobotScene
 
@@ -42,17 +40,6 @@ CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 def scene_counts():
     """A robot driving, one contact at 2 s, 19 cm from the base; 6 s."""
     return RobotScene(duration_s=6.0, contacts=[Contact(2.0, 19.0)]).generate(seed=3).samples
-
-
-def write_recording(out: Path, counts: np.ndarray) -> Path:
-    """A recording as `record` writes it, without a port: every frame in one batch."""
-    recorder = Recorder(out, port="test://", wire_format="binary", baudrate=250000)
-    seq = np.arange(len(counts)) % 65536
-    raw = b"".join(encode_binary(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts))
-    samples = [Sample(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts)]
-    recorder.handle(Batch(time.time(), raw, samples, {"frames": len(samples)}))
-    recorder.close()
-    return out
 
 
 def get_json(url: str) -> dict:
@@ -96,7 +83,7 @@ def end(proc, timeout_s: float = 30.0) -> str:
 
 
 def test_state_json_advances_during_replay_and_shows_the_contact(tmp_path, scene_counts):
-    rec = write_recording(tmp_path / "rec", scene_counts)
+    rec = record_counts(tmp_path / "rec", scene_counts)
     proc = subprocess.Popen([*CLI, "replay", rec, "--network", NETWORK, *TH, "--realtime",
                              "--view", "--view-port", "0", "--view-hold", "300"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -224,7 +211,7 @@ def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene
     """In-process, a view whose server never runs (nobody empties its inbox, here of 8 items):
     the pipeline still runs to the end with the same result as without a view; the view keeps
     only the newest frames and counts the others as dropped."""
-    rec = write_recording(tmp_path / "rec", scene_counts[:3000])
+    rec = record_counts(tmp_path / "rec", scene_counts[:3000])
     parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
     plain = run_online(ReplaySource(rec, chunk_bytes=800).start(), parts,
                        no_data_timeout_s=1e9)

@@ -45,7 +45,6 @@ def test_rate_map_is_labelled_and_read_out_follows_the_input_frequency():
 def test_contact_detector_finds_the_shift_above_the_motion_band():
     hz = np.geomspace(7, 30, 24)
     # 30 windows: motion activity in the 7–8 Hz neurons, then a contact at 16 Hz (windows 20–24)
-    t = np.repeat(np.arange(30) * 0.1 + 0.05, 1)
     spikes_i, spikes_t = [], []
     for w in range(30):
         neuron = 1 if w < 20 or w >= 25 else int(np.argmin(np.abs(hz - 16)))

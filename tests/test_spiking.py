@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from snn_antenna import bench, neurons
-from snn_antenna.network import ResonatorArray
 from snn_antenna.signals import Recording
 from snn_antenna.spiking import (HIGH_BAND, LOW_BAND, CentroidDistance,
                                  DominantNeuronDistance, SpikingBank, spike_summary)

@@ -196,3 +196,21 @@ def load_recording(path) -> BridgeRecording:
                            y=records["y"].astype(np.int64),
                            host_time_s=records["host_time_s"].copy(),
                            gaps=find_gaps(seq), torn_bytes=torn)
+
+
+def record_counts(path, counts: np.ndarray) -> Path:
+    """Write ADC counts (samples × 2, e.g. a simulated scene's ``samples``) as a recording
+    that ``snn-antenna replay`` and :func:`load_recording` read, as ``record`` would have
+    written them from the board (binary frames, one batch), without a port."""
+    from .protocol import Sample, encode_binary
+
+    counts = np.asarray(counts)
+    if counts.ndim != 2 or counts.shape[1] != 2:
+        raise SpecError("counts", f"shape {counts.shape}", "ADC counts of shape (samples, 2)")
+    recorder = Recorder(path, port="test://", wire_format="binary", baudrate=250000)
+    seq = np.arange(len(counts)) % 65536
+    raw = b"".join(encode_binary(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts))
+    samples = [Sample(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts)]
+    recorder.handle(Batch(time.time(), raw, samples, {"frames": len(samples)}))
+    recorder.close()
+    return Path(path)

@@ -23,7 +23,6 @@ import logging
 import math
 import sys
 import threading
-import time
 from collections import deque
 from contextlib import contextmanager
 from itertools import chain

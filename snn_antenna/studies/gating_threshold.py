@@ -431,7 +431,6 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
 
 def _run(spec: dict, parts: dict, out_dir: Path, quick: bool, fresh: bool, client,
          log) -> dict:
-    seed = parts["seed"]
     sweep, gate, ev = parts["sweep"], parts["gate"], parts["evaluation"]
     thresholds, speeds = sweep["thresholds_g"], sweep["speeds_cm_s"]
     t_start = time.perf_counter()
