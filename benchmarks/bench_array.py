@@ -14,11 +14,11 @@ import time
 
 import numpy as np
 
-from snn_antenna import neurons
-from snn_antenna.network import ResonatorArray
+from snn_antenna.networks import neurons
+from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.signals import Recording
-from snn_antenna.stimuli import Contact, RobotScene
+from snn_antenna.sources.stimuli import Contact, RobotScene
 
 
 def python_loop(current, rate_hz, dt_ms, k, p):

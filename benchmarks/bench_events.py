@@ -16,10 +16,10 @@ import time
 
 import numpy as np
 
-from snn_antenna import bench
-from snn_antenna.network import ResonatorArray
+from snn_antenna.sources import bench
+from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.signals import Recording
-from snn_antenna.spiking import LOW_BAND, SpikingBank
+from snn_antenna.readout.spiking import LOW_BAND, SpikingBank
 
 
 def main() -> None:

@@ -38,8 +38,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from snn_antenna import neurons  # noqa: E402
-from snn_antenna.sweep import Grid, NeuronSweep, dask_client, run_sweep  # noqa: E402
+from snn_antenna.networks import neurons
+from snn_antenna.engine.sweep import Grid, NeuronSweep, dask_client, run_sweep
 
 
 def grid_of(n_points: int) -> Grid:
@@ -95,7 +95,7 @@ def run_numba(kernel, sweep: NeuronSweep, points):
 
 def naive_seconds_per_point(sweep: NeuronSweep, points, sample: int) -> float:
     """One Brian2 run per point (numpy target), on ``sample`` points spread over the grid."""
-    from snn_antenna.stimuli import square
+    from snn_antenna.sources.stimuli import square
 
     n = len(points["k"])
     idx = np.linspace(0, n - 1, sample).astype(int)

@@ -8,12 +8,10 @@ with status 2; they never show a traceback from deep inside Brian2 or numpy.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import traceback
 from pathlib import Path
 
-from .errors import NumericalInstabilityError, PipelineError, SpecError
+from .errors import SpecError, guarded
 
 
 def _run(args) -> int:
@@ -31,7 +29,7 @@ def _run(args) -> int:
     folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)
     estimate = plan(spec)
     if estimate is not None:
-        from .sweep import LONG_SWEEP_S
+        from .engine.sweep import LONG_SWEEP_S
 
         print(f"sweep: {estimate.describe()}", file=sys.stderr, flush=True)
         if estimate.seconds > LONG_SWEEP_S and not args.yes:
@@ -87,42 +85,6 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
     return guarded(args.func, args, "snn-antenna")
-
-
-def guarded(func, args, prog: str) -> int:
-    """Run a command; whatever goes wrong is one line on stderr and an exit status.
-
-    Catching everything here also keeps Brian2's temporary files (``brian_debug_*``,
-    ``brian_script_*``) from piling up: Brian2 keeps them only when an exception reaches its
-    ``sys.excepthook``. A failure that is not the user's (a bug) names its place in the code;
-    ``SNN_ANTENNA_TRACEBACK=1`` prints the whole traceback.
-    """
-    try:
-        return func(args)
-    except SpecError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 2
-    except NumericalInstabilityError as exc:
-        print(f"{prog}: numerical instability: {exc}", file=sys.stderr)
-        return 3
-    except KeyboardInterrupt:
-        print(f"{prog}: interrupted", file=sys.stderr)
-        return 130
-    except PipelineError as exc:
-        print(f"{prog}: error: {exc}", file=sys.stderr)
-        return 1
-    except OSError as exc:
-        print(f"{prog}: error: {exc.strerror or exc}"
-              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
-        return 1
-    except Exception as exc:                            # a bug: say where, briefly
-        if os.environ.get("SNN_ANTENNA_TRACEBACK"):
-            traceback.print_exc()
-        frame = traceback.extract_tb(exc.__traceback__)[-1]
-        print(f"{prog}: internal error: {type(exc).__name__}: {exc} (at "
-              f"{Path(frame.filename).name}:{frame.lineno}; SNN_ANTENNA_TRACEBACK=1 shows the "
-              "traceback; please report it)", file=sys.stderr)
-        return 1
 
 
 if __name__ == "__main__":

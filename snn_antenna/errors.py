@@ -4,6 +4,11 @@ Every error a user can cause names the field, the value and what is accepted, an
 before any long work starts.
 """
 
+import os
+import sys
+import traceback
+from pathlib import Path
+
 
 class SpecError(ValueError):
     """A parameter, spec field or input is outside what the toolkit accepts."""
@@ -79,3 +84,39 @@ def is_integer(value) -> bool:
     import numpy as np
 
     return isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+
+
+def guarded(func, args, prog: str) -> int:
+    """Run a command; whatever goes wrong is one line on stderr and an exit status.
+
+    Catching everything here also keeps Brian2's temporary files (``brian_debug_*``,
+    ``brian_script_*``) from piling up: Brian2 keeps them only when an exception reaches its
+    ``sys.excepthook``. A failure that is not the user's (a bug) names its place in the code;
+    ``SNN_ANTENNA_TRACEBACK=1`` prints the whole traceback.
+    """
+    try:
+        return func(args)
+    except SpecError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 2
+    except NumericalInstabilityError as exc:
+        print(f"{prog}: numerical instability: {exc}", file=sys.stderr)
+        return 3
+    except KeyboardInterrupt:
+        print(f"{prog}: interrupted", file=sys.stderr)
+        return 130
+    except PipelineError as exc:
+        print(f"{prog}: error: {exc}", file=sys.stderr)
+        return 1
+    except OSError as exc:
+        print(f"{prog}: error: {exc.strerror or exc}"
+              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        return 1
+    except Exception as exc:                            # a bug: say where, briefly
+        if os.environ.get("SNN_ANTENNA_TRACEBACK"):
+            traceback.print_exc()
+        frame = traceback.extract_tb(exc.__traceback__)[-1]
+        print(f"{prog}: internal error: {type(exc).__name__}: {exc} (at "
+              f"{Path(frame.filename).name}:{frame.lineno}; SNN_ANTENNA_TRACEBACK=1 shows the "
+              "traceback; please report it)", file=sys.stderr)
+        return 1

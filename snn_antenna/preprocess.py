@@ -20,7 +20,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 
-from .antenna import ADC
+from .sources.antenna import ADC
 from .errors import SpecError, check
 from .signals import validate_samples
 

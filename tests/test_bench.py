@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna import bench
+from snn_antenna.sources import bench
 from snn_antenna.errors import SpecError
 
 SMALL = dict(materials=("wood", "aluminium"), positions_cm=(10.0, 30.0), repetitions=3,
@@ -75,7 +75,7 @@ def test_the_cache_key_follows_the_antenna_physics(monkeypatch):
     """A change in antenna.py's source (the physics) makes a new data set."""
     import inspect
 
-    from snn_antenna import antenna
+    from snn_antenna.sources import antenna
     spec = bench.BenchSpec(**SMALL)
     before = spec.key()
     real = inspect.getsource

@@ -4,10 +4,22 @@ import binascii
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from snn_antenna.bridge.protocol import (ENCODED_FRAME_LEN, SEQ_MODULUS, CobsError, Decoder,
-                                         Gap, Sample, cobs_decode, cobs_encode, crc16_xmodem,
-                                         decode_all, encode_ascii, encode_binary, find_gaps,
-                                         frame_payload)
+from snn_antenna.bridge.protocol import (
+    ENCODED_FRAME_LEN,
+    SEQ_MODULUS,
+    CobsError,
+    Decoder,
+    Gap,
+    Sample,
+    cobs_decode,
+    cobs_encode,
+    crc16_xmodem,
+    decode_all,
+    encode_ascii,
+    encode_binary,
+    find_gaps,
+    frame_payload,
+)
 from snn_antenna.errors import SpecError
 
 samples_st = st.lists(st.tuples(st.integers(0, SEQ_MODULUS - 1), st.integers(0, 1023),

@@ -12,8 +12,8 @@ from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
 from snn_antenna.bridge.online import CalibratedChain, EpisodeTracker, build_online
 from snn_antenna.errors import SpecError
-from snn_antenna.readout import ContactDetector
-from snn_antenna.stimuli import Contact, RobotScene
+from snn_antenna.readout.contacts import ContactDetector
+from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "resonator_array.toml"

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from snn_antenna import antenna
+from snn_antenna.sources import antenna
 
 RATE = 2000.0
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna import events
+from snn_antenna.readout import events
 from snn_antenna.errors import SpecError
 
 RATE = 2000.0

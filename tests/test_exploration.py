@@ -8,10 +8,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from snn_antenna import assembly
+from snn_antenna.networks import assembly
 from snn_antenna.cli import main
 from snn_antenna.errors import SpecError
-from snn_antenna.scenes import OnlineAntenna
+from snn_antenna.sources.scenes import OnlineAntenna
 
 ROOT = Path(__file__).resolve().parents[1]
 CPG_GATE_CONTROL = {"cpg", "cpg_ring", "speed_population", "readout", "plastic", "teacher",

@@ -3,12 +3,12 @@ import numpy as np
 import pytest
 
 from snn_antenna.errors import SpecError
-from snn_antenna.gate import SpeedGate
-from snn_antenna.gating import Score, run_codings, score
-from snn_antenna.network import ResonatorArray
+from snn_antenna.networks.gate import SpeedGate
+from snn_antenna.readout.scoring import Score, run_codings, score
+from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
-from snn_antenna.readout import ContactDetector, ContactEstimate
-from snn_antenna.scenes import CourseScene, Obstacle
+from snn_antenna.readout.contacts import ContactDetector, ContactEstimate
+from snn_antenna.sources.scenes import CourseScene, Obstacle
 from snn_antenna.signals import Event
 
 # Recalled Th within a factor 1.6 of Th* on speeds never trained: one step of the gating

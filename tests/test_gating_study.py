@@ -67,9 +67,14 @@ def test_the_read_out_never_sees_the_ground_truth():
     generation: the study's read-outs (fixed Th, and a per-sample Th from the speed command)
     give the same detections and rate maps; only the scores change."""
     from snn_antenna.signals import Event
-    from snn_antenna.scenes import SpeedProfile
-    from snn_antenna.studies.gating_threshold import (Codings, condition, make_scene,
-                                                      scene_detections, score_detections)
+    from snn_antenna.sources.scenes import SpeedProfile
+    from snn_antenna.studies.gating_threshold import (
+        Codings,
+        condition,
+        make_scene,
+        scene_detections,
+        score_detections,
+    )
 
     spec, parts = _quick_parts("sweep.scene_s=5.0")
     scene = make_scene(parts, SpeedProfile("ramp", points=[[0, 0.0], [5, 27.0]]), 11)
@@ -97,7 +102,7 @@ def test_the_read_out_never_sees_the_ground_truth():
 def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
     """The chain is fitted on a separate drive without posts, never on a scored scene: the
     conditioned signal of a scene's first seconds does not depend on what comes later."""
-    from snn_antenna.scenes import SpeedProfile
+    from snn_antenna.sources.scenes import SpeedProfile
     from snn_antenna.studies.gating_threshold import calibrated_chain, condition, make_scene
 
     _, parts = _quick_parts()
@@ -137,9 +142,13 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     a second run computes nothing, a changed gate reuses it, a changed sweep is refused."""
     from snn_antenna import spec as specs
     from snn_antenna.errors import SpecError
-    from snn_antenna.studies.gating_threshold import (SWEEP_OUTPUTS, ThresholdSweep, build,
-                                                      sweep_settings)
-    from snn_antenna.sweep import Grid, run_sweep
+    from snn_antenna.studies.gating_threshold import (
+        SWEEP_OUTPUTS,
+        ThresholdSweep,
+        build,
+        sweep_settings,
+    )
+    from snn_antenna.engine.sweep import Grid, run_sweep
 
     def sweep(*overrides):
         spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
@@ -167,7 +176,7 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     gate: the scores and rate maps must be those of running the same batches here."""
     from snn_antenna import spec as specs
     from snn_antenna.studies.gating_threshold import Codings, build, sweep_scene
-    from snn_antenna.sweep import dask_client
+    from snn_antenna.engine.sweep import dask_client
 
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=3.0", "sweep.codings_per_run=3"],

@@ -293,7 +293,7 @@ def test_a_failed_run_leaves_no_brian2_temp_files(tmp_path):
     temp.mkdir()
     code = ("import sys, numpy as np\n"
             "from snn_antenna import neurons\n"
-            "from snn_antenna.cli import guarded\n"
+            "from snn_antenna.errors import guarded\n"
             "def boom(args):\n"
             "    neurons.simulate('resonator', np.full(100, 0.1), record_traces='v')\n"
             "    raise IndexError('injected')\n"
@@ -324,7 +324,7 @@ DRIVE = np.full(200, 0.15)
     ({"input_index": [0.5]}, "input_index"),
 ])
 def test_simulate_refuses_bad_arguments_by_name(kwargs, name):
-    from snn_antenna import neurons
+    from snn_antenna.networks import neurons
 
     kwargs = dict(kwargs)
     current = kwargs.pop("current", DRIVE if "input_index" not in kwargs
@@ -340,7 +340,7 @@ def test_simulate_refuses_bad_arguments_by_name(kwargs, name):
     ({"force": "yes"}, "force"),
 ])
 def test_resonator_array_refuses_bad_arguments_by_name(kwargs, name):
-    from snn_antenna.network import ResonatorArray
+    from snn_antenna.networks.resonators import ResonatorArray
 
     with pytest.raises(SpecError) as err:
         ResonatorArray(**kwargs)
@@ -352,7 +352,7 @@ def test_resonator_array_refuses_bad_arguments_by_name(kwargs, name):
     ({"max_gap_windows": True}, "max_gap_windows"),
 ])
 def test_contact_detector_refuses_bad_arguments_by_name(kwargs, name):
-    from snn_antenna.readout import ContactDetector
+    from snn_antenna.readout.contacts import ContactDetector
 
     with pytest.raises(SpecError) as err:
         ContactDetector(**kwargs)
@@ -374,7 +374,7 @@ def test_record_and_stream_refuse_an_out_that_is_not_new_or_empty(tmp_path, caps
 
 
 def test_resonator_array_run_refuses_bad_arguments_by_name():
-    from snn_antenna.network import ResonatorArray
+    from snn_antenna.networks.resonators import ResonatorArray
     from snn_antenna.signals import Recording
 
     coded = Recording(np.zeros(100), 1000.0, units="coded")

@@ -25,8 +25,8 @@ from snn_antenna.bridge.online import EpisodeTracker, build_online, run_online
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.errors import PipelineError, SpecError
-from snn_antenna.readout import ContactDetector
-from snn_antenna.stimuli import Contact, RobotScene
+from snn_antenna.readout.contacts import ContactDetector
+from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "resonator_array.toml"

@@ -27,7 +27,7 @@ from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.view import DISPLAY_EVERY, LiveView
-from snn_antenna.stimuli import Contact, RobotScene
+from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "resonator_array.toml"

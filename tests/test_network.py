@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 
 from snn_antenna.errors import SpecError
-from snn_antenna.network import ResonatorArray, rate_map
-from snn_antenna.readout import ContactDetector, centroid_hz, dominant_hz
+from snn_antenna.networks.resonators import ResonatorArray, rate_map
+from snn_antenna.readout.contacts import ContactDetector, centroid_hz, dominant_hz
 from snn_antenna.signals import Recording
-from snn_antenna import stimuli
+from snn_antenna.sources import stimuli
 
 
 def coded_test_input():

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from snn_antenna import neurons
+from snn_antenna.networks import neurons
 from snn_antenna.errors import NumericalInstabilityError, SpecError
-from snn_antenna.network import ResonatorArray
+from snn_antenna.networks.resonators import ResonatorArray
 
 
 def reference_euler(current, dt_ms, k, preset="resonator"):

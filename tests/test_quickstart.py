@@ -9,11 +9,12 @@ import pytest
 
 from dataclasses import replace
 
-from snn_antenna import antenna, spec as specs
+from snn_antenna.sources import antenna
+from snn_antenna import spec as specs
 from snn_antenna.errors import SpecError
 from snn_antenna.preprocess import fit_warmup
 from snn_antenna.signals import Event
-from snn_antenna.stimuli import RobotScene
+from snn_antenna.sources.stimuli import RobotScene
 from snn_antenna.studies import quickstart
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -18,11 +18,12 @@ import tomllib
 import numpy as np
 import pytest
 
-from snn_antenna import accuracy, neurons, reference
-from snn_antenna.control import ControlLayer
+from snn_antenna.readout import accuracy
+from snn_antenna.networks import neurons, reference
+from snn_antenna.networks.control import ControlLayer
 from snn_antenna.errors import SpecError
-from snn_antenna.network import ResonatorArray
-from snn_antenna.stimuli import square
+from snn_antenna.networks.resonators import ResonatorArray
+from snn_antenna.sources.stimuli import square
 
 ROOT = Path(__file__).resolve().parents[1]
 TOLERANCE_MS = {"euler": 0.42, "rk2": 0.30, "rk4": 0.42, "izhikevich": 0.85}

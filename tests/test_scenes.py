@@ -5,10 +5,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna import antenna
+from snn_antenna.sources import antenna
 from snn_antenna.errors import SpecError
-from snn_antenna.scenes import (CourseScene, Obstacle, OnlineAntenna, SpeedProfile,
-                                random_course, rod_touch, scene_from_spec)
+from snn_antenna.sources.scenes import (
+    CourseScene,
+    Obstacle,
+    OnlineAntenna,
+    SpeedProfile,
+    random_course,
+    rod_touch,
+    scene_from_spec,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 

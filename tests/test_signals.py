@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna import antenna, stimuli
+from snn_antenna.sources import antenna, stimuli
 from snn_antenna.errors import SpecError
 from snn_antenna.signals import Recording
 

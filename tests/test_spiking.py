@@ -4,11 +4,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from snn_antenna import bench, neurons
+from snn_antenna.sources import bench
+from snn_antenna.networks import neurons
 from snn_antenna.signals import Recording
-from snn_antenna.spiking import (HIGH_BAND, LOW_BAND, CentroidDistance,
-                                 DominantNeuronDistance, SpikingBank, spike_summary)
-from snn_antenna.stimuli import square
+from snn_antenna.readout.spiking import (
+    HIGH_BAND,
+    LOW_BAND,
+    CentroidDistance,
+    DominantNeuronDistance,
+    SpikingBank,
+)
+from snn_antenna.networks.neurons import spike_summary
+from snn_antenna.sources.stimuli import square
 
 RATE = 2000.0
 
@@ -98,7 +105,7 @@ def test_spike_summary_known_answer():
 def test_binned_counts_known_answer():
     """Spikes per neuron before 0.1 s, in [0.1, 0.2), and from 0.2 s on (an edge belongs to
     the bin it opens)."""
-    from snn_antenna.spiking import binned_spike_counts
+    from snn_antenna.networks.neurons import binned_spike_counts
     binned = binned_spike_counts(np.array([0, 0, 0, 2, 2]),
                                  np.array([0.05, 0.1, 0.25, 0.2, 0.19]), 3, (0.1, 0.2))
     assert binned.tolist() == [[1, 1, 1], [0, 0, 0], [0, 1, 1]]

@@ -16,7 +16,7 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import NumericalInstabilityError, PipelineError, SpecError
+from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .protocol import WIRE_FORMATS
 from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
 from .view import add_view_args, live_view
@@ -347,8 +347,6 @@ def _check_duration(duration) -> None:
 
 
 def main(argv=None) -> int:
-    from ..cli import guarded
-
     parser = argparse.ArgumentParser(prog="snn-antenna", description="snn-antenna serial bridge")
     add_subcommands(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)

@@ -37,8 +37,17 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpecError
-from .protocol import (ADC_MAX, ENCODED_FRAME_LEN, SEQ_MODULUS, Sample, cobs_encode,
-                       encoder_for, find_gaps, frame_payload, DELIMITER)
+from .protocol import (
+    ADC_MAX,
+    ENCODED_FRAME_LEN,
+    SEQ_MODULUS,
+    Sample,
+    cobs_encode,
+    encoder_for,
+    find_gaps,
+    frame_payload,
+    DELIMITER,
+)
 
 FAULT_KINDS = ("garbage", "drop", "bitflip", "range", "stall", "disconnect")
 
@@ -442,7 +451,7 @@ class Emulator:
 
 def default_scene_counts(duration_s: float = 8.0, seed: int = 0) -> np.ndarray:
     """A robot scene with two contacts (19 cm and 27 cm), as (n, 2) ADC counts."""
-    from ..stimuli import Contact, RobotScene
+    from ..sources.stimuli import Contact, RobotScene
 
     scene = RobotScene(duration_s=duration_s, contacts=[Contact(2.0, 19.0), Contact(5.0, 27.0)])
     return scene.generate(seed).samples
@@ -454,7 +463,7 @@ def stimulus_counts(path: str | os.PathLike | None, seed: int = 0) -> np.ndarray
         return default_scene_counts(seed=seed)
     import tomllib
 
-    from ..stimuli import scene_from_spec
+    from ..sources.stimuli import scene_from_spec
 
     path = Path(path)
     if not path.is_file():

@@ -2,7 +2,7 @@
 map and contact events, while the recorder keeps everything.
 
 All spiking is Brian2: the array runs in runtime mode through
-:meth:`snn_antenna.network.ResonatorArray.stream`, which pulls coded samples from the generator
+:meth:`snn_antenna.networks.resonators.ResonatorArray.stream`, which pulls coded samples from the generator
 built here. What this module adds on top of the foundation's streaming API:
 
 - calibration: the PCA alignment needs a fit, so the first ``calibration_s`` of samples fit the
@@ -11,7 +11,7 @@ built here. What this module adds on top of the foundation's streaming API:
   latency from arrival to the rate map, and the time spent waiting for the port is subtracted
   from the wall time, giving the real-time factor of the computation itself;
 - online contact episodes, read out by the foundation's
-  :class:`~snn_antenna.readout.ContactDetector`.
+  :class:`~snn_antenna.readout.contacts.ContactDetector`.
 
 Gaps in the stream are not filled: the network sees the received samples back to back.
 """
@@ -28,9 +28,9 @@ import xarray as xr
 
 from .. import spec as specs
 from ..errors import SpecError
-from ..network import ResonatorArray
+from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain, partial_transform, reset
-from ..readout import ContactDetector, ContactEstimate
+from ..readout.contacts import ContactDetector, ContactEstimate
 from ..studies import check_spec
 from .source import SourceLoop
 

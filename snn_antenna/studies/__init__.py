@@ -119,7 +119,7 @@ def _check_network_rate(spec, rate, rate_key, user_keys) -> None:
     band = table["band_hz"]
     if not (isinstance(band, (list, tuple)) and len(band) == 2 and all(map(_number, band))):
         return                  # the type check names it
-    from ..network import MIN_SAMPLES_PER_CYCLE
+    from ..networks.resonators import MIN_SAMPLES_PER_CYCLE
 
     top = rate / MIN_SAMPLES_PER_CYCLE
     if float(band[1]) <= top:
@@ -141,7 +141,7 @@ def _check_workers(spec) -> None:
     table = spec.get("sweep")
     if not isinstance(table, dict) or "workers" not in table:
         return
-    from ..sweep import max_workers
+    from ..engine.sweep import max_workers
 
     workers, limit = table["workers"], max_workers()
     check(isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= limit,
@@ -158,7 +158,7 @@ def plan(spec: dict):
     """
     if spec.get("study") != "tuning_sweep":
         return None
-    from ..sweep import NeuronSweep, check_memory, estimate
+    from ..engine.sweep import NeuronSweep, check_memory, estimate
 
     neuron, grid, settings, _ = runner("tuning_sweep").build(spec)
     block = grid.block_shape(settings.chunk_points)

@@ -16,8 +16,9 @@ import numpy as np
 import xarray as xr
 from threadpoolctl import threadpool_limits
 
-from .. import baseline as bl
-from .. import bench, events
+from ..readout import baselines as bl
+from ..sources import bench
+from ..readout import events
 from .. import spec as specs
 from .. import stats
 from ..errors import SpecError, check
@@ -84,7 +85,7 @@ class SpikingPlan:
 
 
 def build_spiking(spec: dict):
-    from ..spiking import Band, SpikingBank
+    from ..readout.spiking import Band, SpikingBank
 
     if "spiking" not in spec:
         return None, None
@@ -311,7 +312,9 @@ SPIKING_TASKS = {"distance", "material"}
 def load_spiking(data: xr.Dataset, bank, bench_spec, log=print, fresh: bool = False
                  ) -> xr.Dataset:
     """Spiking features of every event, cached by the data set and the bank's spec."""
-    from .. import neurons, preprocess, spiking
+    from ..networks import neurons
+    from .. import preprocess
+    from ..readout import spiking
 
     key = bench.source_hash({"bench": bench_spec.key(), "bank": _bank_dict(bank)},
                             spiking, neurons, preprocess)
@@ -394,7 +397,7 @@ def spiking_baselines(spikes: xr.Dataset, mlp: bl.Mlp, material_mlp: bl.Mlp) -> 
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
-    from ..spiking import CentroidDistance, DominantNeuronDistance
+    from ..readout.spiking import CentroidDistance, DominantNeuronDistance
 
     bands = set(spikes["band"].values.astype(str))
     out = []
@@ -467,7 +470,7 @@ def run_designs(data, feats, bank, plan, evaluation, log=print) -> list[dict]:
     """Array variants (one band changed at a time) on a subset: accuracy and cost of each."""
     from dataclasses import replace
 
-    from ..spiking import Band
+    from ..readout.spiking import Band
 
     subset = feats.isel(event=np.flatnonzero(feats["repetition"].values
                                              < plan.design_repetitions))

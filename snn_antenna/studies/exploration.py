@@ -27,16 +27,16 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import antenna
+from ..sources import antenna
 from .. import spec as specs
-from ..assembly import build as build_network, configure
-from ..cpg import cycle_periods, phase_lag_deg
+from ..networks.assembly import build as build_network, configure
+from ..networks.cpg import cycle_periods, phase_lag_deg
 from ..errors import SpecError, check
-from ..network import rate_map
+from ..networks.resonators import rate_map
 from ..preprocess import make_chain
-from ..readout import ContactDetector
+from ..readout.contacts import ContactDetector
 from ..report import Calibrated, Predicted, Report, draw_rate_map
-from ..scenes import CourseScene, OnlineAntenna, scene_from_spec
+from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
 from ..signals import Event
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
@@ -193,7 +193,7 @@ def close_loop(parts: dict, seed: int, log=print) -> tuple[dict, OnlineAntenna]:
 
 def score(robot: dict, contacts, parts: dict) -> dict:
     """The robot's detections and stop against the world's contacts, after the run."""
-    from ..gating import score as score_detections
+    from ..readout.scoring import score as score_detections
     from .quickstart import first_match
 
     array = parts["configured"]["resonators"]

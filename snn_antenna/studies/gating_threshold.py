@@ -50,19 +50,19 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import antenna
+from ..sources import antenna
 from .. import spec as specs
 from ..errors import SpecError, check
-from ..gate import SpeedGate
-from ..gating import Score, run_codings, score
-from ..network import ResonatorArray
+from ..networks.gate import SpeedGate
+from ..readout.scoring import Score, run_codings, score
+from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain
-from ..readout import ContactDetector
+from ..readout.contacts import ContactDetector
 from ..report import Calibrated, Predicted, Report, draw_rate_map
-from ..scenes import CourseScene, SpeedProfile, random_course, scene_from_spec
+from ..sources.scenes import CourseScene, SpeedProfile, random_course, scene_from_spec
 from ..stats import mean_interval, paired_difference, seeds_needed
 from ..store import Output
-from ..sweep import Grid, executor, prepare_workers, run_sweep
+from ..engine.sweep import Grid, executor, prepare_workers, run_sweep
 
 SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",
             "gate", "evaluation")
@@ -1079,7 +1079,7 @@ def _draw_map(fig, ax, rates, rec, detections, parts, title, cax=None):
         fig.colorbar(mesh, ax=ax, label="rate (Hz)", pad=0.01)
     else:
         fig.colorbar(mesh, cax=cax, label="rate (Hz)")
-    from ..gating import visible
+    from ..readout.scoring import visible
     for c in rec.contacts:
         ok = visible(c, parts["detector"], parts["array"])
         ax.axvline(c.t_s, color="tab:cyan" if ok else "0.6", ls="--", lw=0.8)

@@ -23,16 +23,17 @@ import numpy as np
 import xarray as xr
 from scipy import stats
 
-from .. import antenna, neurons
+from ..sources import antenna
+from ..networks import neurons
 from .. import spec as specs
 from ..errors import check
-from ..gating import score as score_detections
-from ..network import ResonatorArray
+from ..readout.scoring import score as score_detections
+from ..networks.resonators import ResonatorArray
 from ..preprocess import fit_warmup, make_chain
-from ..readout import ContactDetector, ContactEstimate, centroid_hz, dominant_hz
+from ..readout.contacts import ContactDetector, ContactEstimate, centroid_hz, dominant_hz
 from ..report import Calibrated, Predicted, Report, draw_rate_map
 from ..signals import Recording
-from ..stimuli import RobotScene, scene_from_spec
+from ..sources.stimuli import RobotScene, scene_from_spec
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout")
 

@@ -3,7 +3,7 @@
 For each scene (the array's tuning stimuli, the quickstart robot scene, a bench contact) the
 resonator array runs in Brian2 for every integration method × dt (the main sweep), and for
 a few settings across code targets × float precision × array size (the cost sweep). Each run
-is timed and compared with the scene's reference (``snn_antenna.reference``: solve_ivp with
+is timed and compared with the scene's reference (``snn_antenna.networks.reference``: solve_ivp with
 exact threshold crossings and resets, piecewise between input switches): spike-time error,
 spike-count error, rate-map error and, for contact scenes, decoded-distance error and
 detection F1 of the quickstart read-out. The report shows the Pareto fronts (error vs wall
@@ -24,16 +24,24 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import accuracy, neurons, reference
+from ..readout import accuracy
+from ..networks import neurons, reference
 from .. import spec as specs
 from ..errors import NumericalInstabilityError, check
-from ..network import ResonatorArray, rate_map
+from ..networks.resonators import ResonatorArray, rate_map
 from ..preprocess import make_chain
-from ..readout import ContactDetector
-from ..report import (FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, Calibrated, LogFile, Predicted,
-                      Report, fmt)
+from ..readout.contacts import ContactDetector
+from ..report import (
+    FLOAT32_CHECK,
+    UNSTABLE_ON_PURPOSE,
+    Calibrated,
+    LogFile,
+    Predicted,
+    Report,
+    fmt,
+)
 from ..signals import Recording
-from ..stimuli import RobotScene, scene_from_spec, square
+from ..sources.stimuli import RobotScene, scene_from_spec, square
 from ..store import write_dataset
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",

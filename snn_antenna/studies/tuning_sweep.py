@@ -18,11 +18,11 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from .. import neurons
+from ..networks import neurons
 from .. import spec as specs
 from ..errors import check
 from ..report import Calibrated, LogFile, Predicted, Report, fmt, provenance
-from ..sweep import NEURON_AXES, Grid, NeuronSweep, executor, run_sweep
+from ..engine.sweep import NEURON_AXES, Grid, NeuronSweep, executor, run_sweep
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
 

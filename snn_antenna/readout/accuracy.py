@@ -1,6 +1,6 @@
 """How far a Brian2 run is from the reference, and where each integration method stays sane.
 
-Errors of a run against its reference (``snn_antenna.reference``) on the same input:
+Errors of a run against its reference (``snn_antenna.networks.reference``) on the same input:
 
 - ``spike_time_error_ms``: mean distance from each spike to the nearest spike of the same
   neuron in the other train, both ways, capped at ``cap_ms`` (a missing or extra spike costs
@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from . import neurons, reference
-from .errors import check
+from ..networks import neurons, reference
+from ..errors import check
 
 ACCURATE, INACCURATE, NON_FINITE = 0, 1, 2
 CLASSES = {ACCURATE: "accurate", INACCURATE: "inaccurate but finite",

@@ -28,8 +28,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import antenna, neurons
-from .errors import SpecError, check
+from ..sources import antenna
+from . import neurons
+from ..errors import SpecError, check
 
 
 @dataclass
@@ -180,8 +181,6 @@ class MaterialUnit:
         that turns each window's resonator spikes into the neurons' inputs."""
         import brian2 as b2
 
-        from .spiking import spike_summary
-
         self._check_fitted()
         n_res = len(resonators)
         check(self.readout_.n_features_in_ == 3 * n_res, "network.material",
@@ -202,37 +201,7 @@ class MaterialUnit:
             if end <= 0 or len(i) < self.min_spikes:
                 unit.p = 0.0
                 return
-            counts, latency, span = spike_summary(i, t_s, n_res, self.window_s)
+            counts, latency, span = neurons.spike_summary(i, t_s, n_res, self.window_s)
             unit.p = self.probabilities(np.r_[counts, latency, span][None])[0]
 
         return {"material": unit, "material_listen": listen, "material_read": read}
-
-
-def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Spike features of the network's own resonator array (``network``: a network spec
-    table) for coded events (samples, events) played back to back, one window each:
-    rows as ``SpikeFeatures.matrix()`` (counts, latencies, spans), what ``MaterialUnit``
-    reads in the network. Fitting on these, not on ``spiking.SpikingBank``'s offline runs,
-    keeps training and use on the same Brian2 code path."""
-    import brian2 as b2
-
-    from .assembly import build
-    from .spiking import spike_summary
-
-    resonators_only = {"parts": ["resonators"], "inputs": ["antenna"],
-                       "resonators": network.get("resonators", {})}
-    asm = build(resonators_only)
-    group = asm.objects["resonators"]
-    n_samples, n_events = coded.shape
-    window_s = n_samples / rate_hz
-    feed = b2.TimedArray(np.ascontiguousarray(coded.T.ravel()), dt=b2.second / rate_hz)
-    group.run_regularly("I_ext = coded_input(t)", dt=b2.second / rate_hz)
-    monitor = b2.SpikeMonitor(group)
-    asm.network.add(monitor)
-    asm.network.run(n_events * window_s * b2.second, namespace={"coded_input": feed})
-    i, t = np.asarray(monitor.i[:]), np.asarray(monitor.t_[:])
-    event = np.minimum((t // window_s).astype(int), n_events - 1)
-    n = len(group)
-    counts, latency, span = spike_summary(event * n + i, t - event * window_s, n * n_events,
-                                          window_s)
-    return np.hstack([x.reshape(n_events, n) for x in (counts, latency, span)]).astype(float)

@@ -12,8 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import antenna
-from .errors import SpecError, check
-from .signals import Event, Recording
+from ..errors import SpecError, check
+from ..signals import Event, Recording
 
 
 def _time(duration_s: float, rate_hz: float) -> np.ndarray:
@@ -202,7 +202,7 @@ def scene_from_spec(spec: dict) -> RobotScene:
     kind = spec.pop("kind", "robot")
     if kind != "robot":
         raise SpecError("stimulus.kind", kind, "'robot'")
-    from .spec import check_section
+    from ..spec import check_section
 
     contacts = []
     for i, table in enumerate(spec.pop("contacts", [])):

@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import NumericalInstabilityError, SpecError, check, is_integer, is_number
-from .signals import validate_samples
+from ..errors import NumericalInstabilityError, SpecError, check, is_integer, is_number
+from ..signals import validate_samples
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ METHODS = ("euler", "rk2", "rk4", "izhikevich")
 
 # Largest k·dt (model milliseconds per step) at which each method stays finite for every
 # constant drive I in [-50, 50], started from the reset point: the stability map of
-# studies/speed_accuracy.toml (``snn_antenna.accuracy.stability_map``, 25 log-spaced k·dt from
+# studies/speed_accuracy.toml (``snn_antenna.readout.accuracy.stability_map``, 25 log-spaced k·dt from
 # 0.01 to 50; the next grid point, 1.43x larger, went non-finite for some drive). Measured
 # on the resonator; tests/test_stability.py re-checks both sides of each limit. Specs beyond
 # it are refused unless forced. Finite is not accurate: see the study's map for that.
@@ -370,3 +370,24 @@ def instability_guard(group, preset: str, dt_ms: float, method: str,
                 else None)
 
     return b2.NetworkOperation(check_state, dt=every_ms * b2.ms, name="instability_guard")
+
+
+def spike_summary(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
+                  duration_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per neuron: spike count, first spike time (``duration_s`` if none), last − first."""
+    counts = np.bincount(spike_i, minlength=n_neurons)
+    first = np.full(n_neurons, float(duration_s))
+    np.minimum.at(first, spike_i, spike_t_s)
+    last = first.copy()
+    np.maximum.at(last, spike_i, spike_t_s)
+    return counts, first, last - first
+
+
+def binned_spike_counts(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
+                        inner_edges_s) -> np.ndarray:
+    """(neurons, len(inner_edges_s) + 1): spikes before the first edge, between edges, and
+    at or after the last."""
+    bins = np.searchsorted(np.asarray(inner_edges_s, dtype=float), spike_t_s, side="right")
+    n_bins = len(inner_edges_s) + 1
+    flat = np.bincount(np.asarray(spike_i) * n_bins + bins, minlength=n_neurons * n_bins)
+    return flat.reshape(n_neurons, n_bins)

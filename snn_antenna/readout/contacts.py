@@ -12,8 +12,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
-from . import antenna
-from .errors import SpecError, check, is_integer, is_number
+from ..sources import antenna
+from ..errors import SpecError, check, is_integer, is_number
 
 
 def dominant_hz(rates: xr.DataArray, tie: float = 0.9) -> xr.DataArray:

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from . import antenna
-from .errors import SpecError, check
-from .signals import Recording
+from ..errors import SpecError, check
+from ..signals import Recording
 from .stimuli import Contact, RobotScene
 
 SPEED_RANGE_CM_S = (0.0, antenna.SPEED_LIMIT_CM_S)
@@ -282,7 +282,7 @@ def random_course(rng: np.random.Generator, length_cm: float, spacing_cm: float 
 def scene_from_spec(spec: dict) -> RobotScene:
     """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` or ``kind = "course"``."""
     from . import stimuli
-    from .spec import check_section
+    from ..spec import check_section
 
     spec = dict(spec)
     kind = spec.get("kind", "robot")

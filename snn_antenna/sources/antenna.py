@@ -73,7 +73,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import SpecError, check
+from ..errors import SpecError, check
 
 ROD_LENGTH_CM = 41.3          # total feeler length (paper: 413 mm)
 CALIBRATED_RANGE_CM = (8.0, 37.5)  # where the paper measured the frequency laws

@@ -18,12 +18,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from . import spec as specs
+from .. import spec as specs
 from .cpg import CPG
 from .control import ControlLayer, MaterialUnit
-from .errors import SpecError, check
+from ..errors import SpecError, check
 from .gate import SpeedGate
-from .network import ResonatorArray
+from .resonators import ResonatorArray
 
 INPUTS = ("antenna", "speed_command")
 # part → (what it needs: scene inputs or other parts)

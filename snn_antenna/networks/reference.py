@@ -21,8 +21,8 @@ import time
 import numpy as np
 
 from . import neurons
-from .errors import NumericalInstabilityError, SpecError, check
-from .signals import Recording, validate_samples
+from ..errors import NumericalInstabilityError, SpecError, check
+from ..signals import Recording, validate_samples
 
 DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-9
@@ -137,7 +137,7 @@ def simulate(preset: str = "resonator", current=None, k=1.0, *, input_dt_ms: flo
 def run_array(array, coded: Recording, window_s: float = 0.1, rtol: float = DEFAULT_RTOL,
               atol: float = DEFAULT_ATOL):
     """The reference of ``ResonatorArray.run``: the same ``ArrayResult`` from exact spikes."""
-    from .network import ArrayResult
+    from .resonators import ArrayResult
 
     samples = np.asarray(validate_samples(coded.samples, "coded.samples"), dtype=float)
     if samples.ndim != 1:

@@ -63,9 +63,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from . import neurons
-from .errors import NumericalInstabilityError, SpecError, check, is_integer
-from .store import Output, SweepStore
+from ..networks import neurons
+from ..errors import NumericalInstabilityError, SpecError, check, is_integer
+from ..store import Output, SweepStore
 
 __all__ = ["Grid", "axis_values", "run_sweep", "SweepOutcome", "dask_client", "executor",
            "NeuronSweep", "SceneSweep", "Output", "memory_budget_bytes", "max_workers",
@@ -633,7 +633,7 @@ def _parameters(sweep, points: dict[str, np.ndarray], names) -> dict[str, np.nda
 
 def _runtime_counts(sweep: NeuronSweep, p: dict[str, np.ndarray]) -> np.ndarray:
     """All points as one group through ``neurons.simulate`` (2-D input + input_index)."""
-    from .stimuli import square
+    from ..sources.stimuli import square
 
     pairs = np.stack([p["input_hz"], p["I"]], axis=1)
     unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
@@ -698,9 +698,9 @@ class SceneSweep:
         NeuronSweep(preset=self.preset, dt_ms=self.dt_ms, method=self.method)  # same checks
 
     def _scene_and_chain(self, values: dict):
-        from .preprocess import make_chain
-        from .spec import set_field
-        from .stimuli import scene_from_spec
+        from ..preprocess import make_chain
+        from ..spec import set_field
+        from ..sources.stimuli import scene_from_spec
 
         spec = {"stimulus": copy.deepcopy(self.stimulus),
                 "preprocess": copy.deepcopy(self.preprocess)}

@@ -41,7 +41,7 @@ import numpy as np
 import xarray as xr
 
 from . import neurons
-from .errors import SpecError, check
+from ..errors import SpecError, check
 
 CLASS1_RHEOBASE = 22.56  # class1 preset (5v + 140, b = -0.1): the fixed point vanishes above
 

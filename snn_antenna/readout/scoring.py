@@ -30,11 +30,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from . import antenna, neurons
-from .errors import check
-from .network import ResonatorArray, rate_map
-from .readout import ContactDetector, ContactEstimate
-from .signals import Event
+from ..sources import antenna
+from ..networks import neurons
+from ..errors import check
+from ..networks.resonators import ResonatorArray, rate_map
+from .contacts import ContactDetector, ContactEstimate
+from ..signals import Event
 
 
 def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,

@@ -29,9 +29,9 @@ import numpy as np
 import xarray as xr
 
 from . import antenna
-from .errors import SpecError, check
-from .signals import Event, Recording
-from .store import read_dataset, write_dataset
+from ..errors import SpecError, check
+from ..signals import Event, Recording
+from ..store import read_dataset, write_dataset
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
 
@@ -226,7 +226,7 @@ def event_recording(ds: xr.Dataset, i: int) -> Recording:
 
 def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
     """Build a BenchSpec from the ``[stimulus]`` table of a study spec (``kind = "bench"``)."""
-    from .spec import check_section
+    from ..spec import check_section
 
     table = dict(table)
     kind = table.pop("kind", "bench")

@@ -39,11 +39,13 @@ import numpy as np
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
-from . import antenna, neurons
-from .errors import SpecError, check
-from .network import ResonatorArray
-from .antenna import ADC
-from .preprocess import make_chain
+from ..sources import antenna
+from ..networks import neurons
+from ..networks.neurons import binned_spike_counts, spike_summary
+from ..errors import SpecError, check
+from ..networks.resonators import ResonatorArray
+from ..sources.antenna import ADC
+from ..preprocess import make_chain
 
 
 @dataclass
@@ -246,27 +248,6 @@ def align_events(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.n
     return np.einsum("esi,ei->se", centred, axis)
 
 
-def spike_summary(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
-                  duration_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per neuron: spike count, first spike time (``duration_s`` if none), last − first."""
-    counts = np.bincount(spike_i, minlength=n_neurons)
-    first = np.full(n_neurons, float(duration_s))
-    np.minimum.at(first, spike_i, spike_t_s)
-    last = first.copy()
-    np.maximum.at(last, spike_i, spike_t_s)
-    return counts, first, last - first
-
-
-def binned_spike_counts(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,
-                        inner_edges_s) -> np.ndarray:
-    """(neurons, len(inner_edges_s) + 1): spikes before the first edge, between edges, and
-    at or after the last."""
-    bins = np.searchsorted(np.asarray(inner_edges_s, dtype=float), spike_t_s, side="right")
-    n_bins = len(inner_edges_s) + 1
-    flat = np.bincount(np.asarray(spike_i) * n_bins + bins, minlength=n_neurons * n_bins)
-    return flat.reshape(n_neurons, n_bins)
-
-
 class DominantNeuronDistance(RegressorMixin, BaseEstimator):
     """The paper's decoder (Fig. 10E) as an estimator: the most active neuron's preferred
     frequency → distance through the inverse low-mode law. Nothing is learnt; ``fit`` only
@@ -301,7 +282,7 @@ class CentroidDistance(DominantNeuronDistance):
     def predict(self, X):
         import xarray as xr
 
-        from .readout import centroid_hz
+        from .contacts import centroid_hz
 
         rates = xr.DataArray(np.asarray(X, dtype=float), dims=("event", "neuron_hz"),
                              coords={"neuron_hz": np.asarray(self.neuron_hz, dtype=float)})
@@ -310,3 +291,31 @@ class CentroidDistance(DominantNeuronDistance):
         out[f > 0] = antenna.distance_from_low_hz(f[f > 0])
         return out
 
+
+def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndarray:
+    """Spike features of the network's own resonator array (``network``: a network spec
+    table) for coded events (samples, events) played back to back, one window each:
+    rows as ``SpikeFeatures.matrix()`` (counts, latencies, spans), what ``MaterialUnit``
+    reads in the network. Fitting on these, not on ``spiking.SpikingBank``'s offline runs,
+    keeps training and use on the same Brian2 code path."""
+    import brian2 as b2
+
+    from ..networks.assembly import build
+
+    resonators_only = {"parts": ["resonators"], "inputs": ["antenna"],
+                       "resonators": network.get("resonators", {})}
+    asm = build(resonators_only)
+    group = asm.objects["resonators"]
+    n_samples, n_events = coded.shape
+    window_s = n_samples / rate_hz
+    feed = b2.TimedArray(np.ascontiguousarray(coded.T.ravel()), dt=b2.second / rate_hz)
+    group.run_regularly("I_ext = coded_input(t)", dt=b2.second / rate_hz)
+    monitor = b2.SpikeMonitor(group)
+    asm.network.add(monitor)
+    asm.network.run(n_events * window_s * b2.second, namespace={"coded_input": feed})
+    i, t = np.asarray(monitor.i[:]), np.asarray(monitor.t_[:])
+    event = np.minimum((t // window_s).astype(int), n_events - 1)
+    n = len(group)
+    counts, latency, span = spike_summary(event * n + i, t - event * window_s, n * n_events,
+                                          window_s)
+    return np.hstack([x.reshape(n_events, n) for x in (counts, latency, span)]).astype(float)

@@ -37,8 +37,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .errors import check
-from .signals import validate_samples
+from ..errors import check
+from ..signals import validate_samples
 
 PARAMETERS = ("F_low", "A_low", "tau_low", "F_high", "A_high", "tau_high")
 SKIP_REASONS = ("no_onset", "clipped", "no_decay_fit")
@@ -218,7 +218,7 @@ def main_axis_g(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.nd
     The axis's sign is arbitrary per event; neither the spectrum nor the rectified decay
     depends on it.
     """
-    from .preprocess import CountsToG, PCAAlign
+    from ..preprocess import CountsToG, PCAAlign
 
     g = CountsToG(adc_bits, full_scale_g).fit(counts).transform(counts)
     return PCAAlign().fit(g).transform(g)
@@ -254,7 +254,7 @@ def process(ds: xr.Dataset, processor: EventProcessor, n_jobs: int = 1, block: i
             log=print) -> xr.Dataset:
     """Features of every event of a bench data set: ``spectrum`` (event, freq_hz),
     ``params`` (event, parameter) and ``skipped`` (event: '' or the reason)."""
-    from .bench import parallel_map
+    from ..sources.bench import parallel_map
 
     check(float(ds.attrs["rate_hz"]) == processor.rate_hz, "processor.rate_hz",
           processor.rate_hz, f"the data set's rate, {ds.attrs['rate_hz']} Hz")

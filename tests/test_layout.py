@@ -1,0 +1,129 @@
+"""The package's layout shows its data flow, and imports follow it.
+
+sources → preprocess → networks → readout → engine → report → studies → bridge → cli, over a
+core (errors, signals, spec, stats, store) every stage may use. A module may import from its
+own stage or an earlier one, never from a later one, and no two modules import each other,
+directly or through others (imports inside functions count: a lazy import is still a
+dependency).
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "snn_antenna"
+
+# Stages in data-flow order; a module belongs to the first prefix it matches.
+STAGES = [
+    ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.spec",
+              "snn_antenna.stats", "snn_antenna.store"]),
+    ("sources", ["snn_antenna.sources"]),
+    ("preprocess", ["snn_antenna.preprocess"]),
+    ("networks", ["snn_antenna.networks"]),
+    ("readout", ["snn_antenna.readout"]),
+    ("engine", ["snn_antenna.engine"]),
+    ("report", ["snn_antenna.report", "snn_antenna.outputs"]),
+    ("studies", ["snn_antenna.studies"]),
+    ("bridge", ["snn_antenna.bridge"]),
+    ("cli", ["snn_antenna.cli"]),
+]
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def stage_of(module: str) -> int:
+    best = None
+    for index, (_, prefixes) in enumerate(STAGES):
+        for prefix in prefixes:
+            if module == prefix or module.startswith(prefix + ".") and prefix != "snn_antenna":
+                if best is None or len(prefix) > best[1]:
+                    best = (index, len(prefix))
+    assert best is not None, f"{module} belongs to no stage: add it to STAGES"
+    return best[0]
+
+
+def import_graph() -> dict[str, set[str]]:
+    """Module → the package modules it imports (at the top or inside functions)."""
+    modules = {module_name(p): p for p in PACKAGE.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        targets = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base = package.split(".")
+                    base = base[:len(base) - node.level + 1]
+                    target = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    target = node.module or ""
+                candidates = [f"{target}.{a.name}" for a in node.names] + [target]
+            elif isinstance(node, ast.Import):
+                candidates = [a.name for a in node.names]
+            else:
+                continue
+            for candidate in candidates:
+                if candidate in modules:
+                    targets.add(candidate)
+                    break
+        targets.discard(name)
+        graph[name] = targets
+    return graph
+
+
+def test_every_module_belongs_to_a_stage():
+    for name in import_graph():
+        stage_of(name)
+
+
+def test_imports_point_along_the_data_flow():
+    graph = import_graph()
+    against = [f"{src} ({STAGES[stage_of(src)][0]}) imports {dst} ({STAGES[stage_of(dst)][0]})"
+               for src, targets in graph.items() for dst in sorted(targets)
+               if stage_of(dst) > stage_of(src)]
+    assert not against, "imports against the data flow:\n" + "\n".join(against)
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    state: dict[str, int] = {}               # 1: on the current path, 2: finished
+    path: list[str] = []
+
+    def visit(node):
+        state[node] = 1
+        path.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if nxt == "snn_antenna":         # the package's __init__ (its version) only
+                continue
+            if state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            if nxt not in state and (found := visit(nxt)):
+                return found
+        path.pop()
+        state[node] = 2
+        return None
+
+    for start in sorted(graph):
+        if start not in state and (found := visit(start)):
+            return found
+    return None
+
+
+def test_no_import_cycles():
+    cycle = find_cycle(import_graph())
+    assert cycle is None, "import cycle: " + " → ".join(cycle)
+
+
+def test_the_checks_catch_what_they_forbid():
+    """The graph walk sees real edges, and both checks fire on a planted violation."""
+    graph = import_graph()
+    assert "snn_antenna.networks.neurons" in graph["snn_antenna.networks.resonators"]
+    assert "snn_antenna.engine.sweep" in graph["snn_antenna.studies.tuning_sweep"]
+    planted = {**graph, "snn_antenna.networks.neurons":
+               graph["snn_antenna.networks.neurons"] | {"snn_antenna.networks.resonators"}}
+    assert find_cycle(planted) is not None
+    assert stage_of("snn_antenna.studies.quickstart") > stage_of("snn_antenna.readout.contacts")
