@@ -15,7 +15,6 @@ import os
 import platform
 import re
 import sys
-import tempfile
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -23,41 +22,7 @@ from typing import Any
 
 import numpy as np
 
-
-def atomic_write(path: str | Path, data: bytes | str) -> None:
-    """Write to a temporary file beside ``path`` and rename it into place.
-
-    The file gets the mode any new file would get (0644 under the usual umask 022):
-    ``mkstemp`` creates its file 0600, which would keep a shared report from its readers.
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    mode = "wb" if isinstance(data, bytes) else "w"
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o666 & ~_umask())
-        with os.fdopen(fd, mode, encoding=None if isinstance(data, bytes) else "utf-8") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
-def _umask() -> int:
-    """The process's umask, read without changing it where the system says (Linux)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except OSError:
-        pass
-    mask = os.umask(0o022)   # elsewhere: set and restore at once
-    os.umask(mask)
-    return mask
+from .files import current_umask, atomic_write
 
 
 def _jsonable(obj: Any):
@@ -570,7 +535,7 @@ class LogFile:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "a", encoding="utf-8")
         try:
-            os.chmod(self.path, 0o666 & ~_umask())
+            os.chmod(self.path, 0o666 & ~current_umask())
         except OSError:
             pass
         self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "

@@ -1,7 +1,7 @@
 """The package's layout shows its data flow, and imports follow it.
 
 sources → preprocess → networks → readout → engine → report → studies → bridge → cli, over a
-core (errors, signals, spec, stats, store) every stage may use. A module may import from its
+core (errors, signals, spec, stats, store, files, parallel) every stage may use. A module may import from its
 own stage or an earlier one, never from a later one, and no two modules import each other,
 directly or through others (imports inside functions count: a lazy import is still a
 dependency).
@@ -16,7 +16,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "snn_antenna"
 # Stages in data-flow order; a module belongs to the first prefix it matches.
 STAGES = [
     ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.spec",
-              "snn_antenna.stats", "snn_antenna.store"]),
+              "snn_antenna.stats", "snn_antenna.store", "snn_antenna.files",
+              "snn_antenna.parallel"]),
     ("sources", ["snn_antenna.sources"]),
     ("preprocess", ["snn_antenna.preprocess"]),
     ("networks", ["snn_antenna.networks"]),

@@ -24,13 +24,13 @@ import pytest
 import xarray as xr
 
 from snn_antenna import report as rp
+from snn_antenna.files import atomic_write
 from snn_antenna.report import (
     Calibrated,
     LogFile,
     Predicted,
     Report,
     UNSTABLE_ON_PURPOSE,
-    atomic_write,
     draw_rate_map,
     fmt,
     label,

@@ -320,7 +320,7 @@ def short_scene():
 
 def test_scene_axes_group_points_by_scene_and_match_single_runs(tmp_path):
     from snn_antenna.preprocess import make_chain
-    from snn_antenna.sources.stimuli import scene_from_spec
+    from snn_antenna.sources.scenes import scene_from_spec
     from snn_antenna.engine.sweep import SceneSweep
 
     sweep = SceneSweep(stimulus=short_scene(), preprocess={"coder_amplitude": 0.3},

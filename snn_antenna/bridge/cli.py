@@ -294,8 +294,8 @@ def cmd_emulate(args) -> int:
                    "expected_counts": log.expected_counts(), "stopped": ended,
                    "faults": [list(f) for f in log.faults]}
         if args.log:                    # whoever stopped first, the log says what was sent
-            from .recorder import write_json_atomically
-            write_json_atomically(Path(args.log), summary)
+            from ..files import write_json
+            write_json(Path(args.log), summary)
     if ended:
         raise PortError(ended)
     print(json.dumps({k: v for k, v in summary.items() if k not in ("faults", "stopped")}),

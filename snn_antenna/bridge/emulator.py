@@ -463,7 +463,7 @@ def stimulus_counts(path: str | os.PathLike | None, seed: int = 0) -> np.ndarray
         return default_scene_counts(seed=seed)
     import tomllib
 
-    from ..sources.stimuli import scene_from_spec
+    from ..sources.scenes import scene_from_spec
 
     path = Path(path)
     if not path.is_file():

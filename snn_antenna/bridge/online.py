@@ -30,7 +30,7 @@ from .. import spec as specs
 from ..errors import SpecError
 from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain, partial_transform, reset
-from ..readout.contacts import ContactDetector, ContactEstimate
+from ..readout.contacts import ContactDetector, ContactEstimate, detector_from_spec
 from ..studies import check_spec
 from .source import SourceLoop
 
@@ -80,11 +80,7 @@ def build_online(network_path, overrides=(), rate_hz: float = RATE_HZ) -> Online
         pre = specs.check_section(spec, "preprocess", make_chain,
                                   exclude=["rate_hz", "adc_bits", "full_scale_g"])
         chain = make_chain(rate_hz, ADC_BITS, FULL_SCALE_G, **pre)
-    with specs.section("readout"):
-        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
-        window_s = float(read.pop("window_s", 0.1))
-        detector = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
-                                      for k, v in read.items()})
+    detector, window_s = detector_from_spec(spec)
     return OnlineParts(array, chain, detector, window_s, spec)
 
 

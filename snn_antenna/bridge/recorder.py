@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__ as package_version
+from ..files import write_json
 from ..errors import SpecError
 from ..signals import Recording
 from .protocol import Gap, find_gaps
@@ -35,15 +36,6 @@ RAW_FILE, SAMPLES_FILE, META_FILE = "raw.bin", "samples.bin", "meta.json"
 FORMAT_VERSION = 1
 COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
                 "reconnects")
-
-
-def write_json_atomically(path: Path, data: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w") as f:
-        json.dump(data, f, indent=1)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
 
 
 class Recorder:
@@ -132,7 +124,7 @@ class Recorder:
         self.meta["counts"] = dict(self.counts)
         self.meta["n_samples_written"] = self.n_samples
         self.meta["raw_bytes_written"] = self.raw_bytes
-        write_json_atomically(self.dir / META_FILE, self.meta)
+        write_json(self.dir / META_FILE, self.meta)
 
 
 @dataclass

@@ -700,7 +700,7 @@ class SceneSweep:
     def _scene_and_chain(self, values: dict):
         from ..preprocess import make_chain
         from ..spec import set_field
-        from ..sources.stimuli import scene_from_spec
+        from ..sources.scenes import scene_from_spec
 
         spec = {"stimulus": copy.deepcopy(self.stimulus),
                 "preprocess": copy.deepcopy(self.preprocess)}
@@ -816,8 +816,7 @@ def _standalone_project(sweep: NeuronSweep, n: int):
         # stimuli.square, evaluated with the same floating-point operations
         group = b2.NeuronGroup(
             n, neurons.equations(sweep.preset, SQUARE_INPUT, SQUARE_INPUT_VARIABLES),
-            threshold=f"v >= {neurons.V_PEAK}",
-            reset="v = c; u = u + d; spike_count += int(t >= settle)",
+            threshold=neurons.THRESHOLD, reset=neurons.reset("spike_count += int(t >= settle)"),
             method=neurons.brian_method(sweep.method), dt=sweep.dt_ms * b2.ms, name="neurons",
             namespace={"input_rate": sweep.input_rate_hz * b2.Hz,
                        "input_rate_value": float(sweep.input_rate_hz),

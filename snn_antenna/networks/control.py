@@ -81,7 +81,7 @@ def class1_group(n: int, bias, tau_syn_ms: float, dt_ms: float, name: str,
     eqs = neurons.equations("class1", "bias + I_syn" + input_terms,
                             "dI_syn/dt = -I_syn / tau_syn : 1\nbias : 1 (constant)\n" + extra)
     class1 = neurons.PRESETS["class1"]
-    g = b2.NeuronGroup(n, eqs, threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
+    g = b2.NeuronGroup(n, eqs, threshold=neurons.THRESHOLD, reset=neurons.reset(),
                        method="euler",
                        namespace={"tau_syn": tau_syn_ms * b2.ms, **(namespace or {})},
                        dt=dt_ms * b2.ms, name=name)

@@ -148,7 +148,7 @@ class SpeedGate:
                 f"speed_offset + peak_current * exp(-(({speed_expr}) - preferred)**2 "
                 "/ (2*sigma**2))",
                 f"preferred : 1 (constant)\ncopy : integer (constant)\n{extra}"),
-            threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
+            threshold=neurons.THRESHOLD, reset=neurons.reset(),
             method="euler", namespace=ns, dt=dt, name="speed_population")
         readout = b2.NeuronGroup(
             n_copies,
@@ -158,9 +158,9 @@ class SpeedGate:
             dr_teacher/dt = -r_teacher / tau_trace : 1
             dr_read/dt = -r_read / tau_read : 1
             bias : 1 (constant)"""),
-            threshold=f"v >= {neurons.V_PEAK}",
-            reset=f"v = c; u = u + d; r_out += {1 / self.tau_trace_s!r}; "
-                  f"r_read += {1 / self.tau_read_s!r}",
+            threshold=neurons.THRESHOLD,
+            reset=neurons.reset(f"r_out += {1 / self.tau_trace_s!r}",
+                                f"r_read += {1 / self.tau_read_s!r}"),
             method="euler", namespace=ns, dt=dt, name="readout")
         for group in (speed_pop, readout):
             group.k = 1.0

@@ -50,6 +50,14 @@ PRESETS: dict[str, Preset] = {
 }
 
 V_PEAK = 30.0  # spike cut-off, the model's threshold
+# Every Brian2 group of Izhikevich neurons spikes and resets by these two (``reset`` adds
+# what a group also does on a spike, e.g. count it).
+THRESHOLD = f"v >= {V_PEAK}"
+
+
+def reset(*also: str) -> str:
+    """The model's reset (v → c, u → u + d), then ``also`` (Brian2 statements) in order."""
+    return "; ".join(("v = c", "u = u + d") + also)
 
 # Integration methods whose results this project has measured (studies/speed_accuracy.toml):
 # Brian2's own, and "izhikevich", the update order of Izhikevich's published code (v in two
@@ -296,7 +304,7 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
     b2.defaultclock.dt = dt_ms * b2.ms
     drive = b2.TimedArray(current, dt=input_dt_ms * b2.ms, name="drive")
     group = b2.NeuronGroup(n_neurons, equations(preset_obj, input_expr, extra),
-                           threshold=f"v >= {V_PEAK}", reset="v = c; u = u + d",
+                           threshold=THRESHOLD, reset=reset(),
                            method=brian_method(method), namespace={"drive": drive},
                            name="neurons")
     for name, arr in values.items():

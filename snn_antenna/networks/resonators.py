@@ -90,8 +90,7 @@ class ResonatorArray:
         group = b2.NeuronGroup(
             self.n_neurons,
             neurons.equations("resonator", input_expr, extra) + "\nspike_count : integer",
-            threshold=f"v >= {neurons.V_PEAK}",
-            reset="v = c; u = u + d; spike_count += 1",
+            threshold=neurons.THRESHOLD, reset=neurons.reset("spike_count += 1"),
             method=neurons.brian_method(self.method), namespace=namespace,
             dt=self.dt_ms * b2.ms,
             name="resonators")

@@ -110,7 +110,7 @@ def run_drives(method: str, k_dt, drives, steps: int, *, preset: str = "resonato
     group = b2.NeuronGroup(
         kk.size, neurons.equations(p, "drive(t, input_index)",
                                    "input_index : integer (constant)\nblown : boolean"),
-        threshold=f"v >= {neurons.V_PEAK}", reset="v = c; u = u + d",
+        threshold=neurons.THRESHOLD, reset=neurons.reset(),
         method=neurons.brian_method(method), namespace={"drive": drive},
         dt=1 * b2.ms, name="neurons")
     group.k, group.a, group.b, group.c, group.d = kk, p.a, b, p.c, p.d

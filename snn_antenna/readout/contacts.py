@@ -153,3 +153,18 @@ def band_activity_hz(rates: xr.DataArray, t0_s: float, t1_s: float,
         inside = (sub.neuron_hz >= band_hz[0]) & (sub.neuron_hz <= band_hz[1])
         sub = sub.where(inside, 0)
     return float(centroid_hz(sub, dim=("neuron_hz", "window_s")))
+
+
+def detector_from_spec(spec: dict) -> tuple["ContactDetector", float]:
+    """The ``[readout]`` table of a spec → (``ContactDetector``, rate-map window in s).
+
+    Every study and the live pipeline read the section here, so its keys, defaults and
+    errors are the same everywhere (``window_s`` defaults to 0.1 s)."""
+    from .. import spec as specs
+
+    with specs.section("readout"):
+        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
+        window_s = float(read.pop("window_s", 0.1))
+        detector = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
+                                      for k, v in read.items()})
+    return detector, window_s

@@ -254,7 +254,7 @@ def process(ds: xr.Dataset, processor: EventProcessor, n_jobs: int = 1, block: i
             log=print) -> xr.Dataset:
     """Features of every event of a bench data set: ``spectrum`` (event, freq_hz),
     ``params`` (event, parameter) and ``skipped`` (event: '' or the reason)."""
-    from ..sources.bench import parallel_map
+    from ..parallel import parallel_map
 
     check(float(ds.attrs["rate_hz"]) == processor.rate_hz, "processor.rate_hz",
           processor.rate_hz, f"the data set's rate, {ds.attrs['rate_hz']} Hz")

@@ -20,15 +20,15 @@ from __future__ import annotations
 import hashlib
 import inspect
 import json
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
+from typing import Sequence
 
 import numpy as np
 import xarray as xr
 
 from . import antenna
+from ..parallel import parallel_map
 from ..errors import SpecError, check
 from ..signals import Event, Recording
 from ..store import read_dataset, write_dataset
@@ -128,35 +128,6 @@ def _counts_dtype(bits: int):
     return np.uint16 if bits <= 16 else np.int32
 
 
-def _star(args):
-    fn, a = args
-    return fn(*a)
-
-
-def parallel_map(fn: Callable, args: Iterable[tuple], n_jobs: int = 1, desc: str = "",
-                 total: int | None = None) -> list:
-    """``[fn(*a) for a in args]`` in order, on ``n_jobs`` processes, with a progress bar."""
-    from tqdm.auto import tqdm
-
-    args = list(args)
-    bar = tqdm(total=total or len(args), desc=desc, unit="block", leave=False)
-    try:
-        if n_jobs == 1:
-            out = []
-            for a in args:
-                out.append(fn(*a))
-                bar.update()
-            return out
-        with ProcessPoolExecutor(n_jobs) as pool:
-            out = []
-            for res in pool.map(_star, [(fn, a) for a in args]):
-                out.append(res)
-                bar.update()
-            return out
-    finally:
-        bar.close()
-
-
 def generate(spec: BenchSpec, log=print) -> xr.Dataset:
     """Make the data set (no cache): ``counts`` (event, sample, axis) with labels per event."""
     spec.validate()
@@ -237,4 +208,4 @@ def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
 
 
 __all__ = ["BenchSpec", "generate", "load", "cached", "event_recording", "spec_from_table",
-           "parallel_map", "source_hash", "PAPER_POSITIONS_CM"]
+           "source_hash", "PAPER_POSITIONS_CM"]

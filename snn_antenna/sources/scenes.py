@@ -280,24 +280,24 @@ def random_course(rng: np.random.Generator, length_cm: float, spacing_cm: float 
 
 
 def scene_from_spec(spec: dict) -> RobotScene:
-    """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` or ``kind = "course"``."""
-    from . import stimuli
+    """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` (a ``RobotScene``, the
+    default) or ``kind = "course"`` (a ``CourseScene``: obstacles, a speed profile). The one
+    way every study, sweep and the emulator turn a stimulus table into a scene."""
     from ..spec import check_section
 
     spec = dict(spec)
-    kind = spec.get("kind", "robot")
-    if kind == "robot":
-        return stimuli.scene_from_spec(spec)
-    if kind != "course":
-        raise SpecError("stimulus.kind", kind, "'robot' or 'course'")
-    spec.pop("kind")
-    check_section({"stimulus": spec}, "stimulus", CourseScene)
+    kind = spec.pop("kind", "robot")
+    check(kind in ("robot", "course"), "stimulus.kind", kind, "'robot' or 'course'")
+    if kind == "course":
+        check_section({"stimulus": spec}, "stimulus", CourseScene)
     if spec.get("stop_after_contact_s") == "never":   # TOML has no null
         spec["stop_after_contact_s"] = None
     contacts = []
     for i, table in enumerate(spec.pop("contacts", [])):
         check_section({f"contacts[{i}]": table}, f"contacts[{i}]", Contact)
         contacts.append(Contact(**table))
+    if kind == "robot":
+        return RobotScene(contacts=contacts, **spec)
     obstacles = []
     for i, table in enumerate(spec.pop("obstacles", [])):
         check_section({f"obstacles[{i}]": table}, f"obstacles[{i}]", Obstacle)

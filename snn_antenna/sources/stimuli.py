@@ -192,20 +192,3 @@ class RobotScene:
         return Recording(adc.to_counts(xy), self.rate_hz, tuple(events), units="counts",
                          meta={"adc_bits": self.adc_bits, "full_scale_g": self.full_scale_g,
                                "speed_cm_s": speed})
-
-
-def scene_from_spec(spec: dict) -> RobotScene:
-    """Build a scene from the ``[stimulus]`` table of a spec (already schema-checked)."""
-    spec = dict(spec)
-    if spec.get("stop_after_contact_s") == "never":   # TOML has no null
-        spec["stop_after_contact_s"] = None
-    kind = spec.pop("kind", "robot")
-    if kind != "robot":
-        raise SpecError("stimulus.kind", kind, "'robot'")
-    from ..spec import check_section
-
-    contacts = []
-    for i, table in enumerate(spec.pop("contacts", [])):
-        check_section({f"contacts[{i}]": table}, f"contacts[{i}]", Contact)
-        contacts.append(Contact(**table))
-    return RobotScene(contacts=contacts, **spec)

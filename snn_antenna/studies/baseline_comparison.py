@@ -22,7 +22,8 @@ from ..readout import events
 from .. import spec as specs
 from .. import stats
 from ..errors import SpecError, check
-from ..report import Calibrated, Predicted, Report, atomic_write
+from ..files import atomic_write
+from ..report import Calibrated, Predicted, Report
 
 SECTIONS = ("stimulus", "events", "evaluation", "spiking")
 

@@ -34,7 +34,7 @@ from ..networks.cpg import cycle_periods, phase_lag_deg
 from ..errors import SpecError, check
 from ..networks.resonators import rate_map
 from ..preprocess import make_chain
-from ..readout.contacts import ContactDetector
+from ..readout.contacts import ContactDetector, detector_from_spec
 from ..report import Calibrated, Predicted, Report, draw_rate_map
 from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
 from ..signals import Event
@@ -86,11 +86,7 @@ def build(spec: dict) -> dict:
         pre = specs.check_section(spec, "preprocess", make_chain,
                                   exclude=["rate_hz", "adc_bits", "full_scale_g", "threshold"])
         parts["chain"] = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
-    with specs.section("readout"):
-        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
-        parts["window_s"] = float(read.pop("window_s", 0.1))
-        parts["detector"] = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
-                                               for k, v in read.items()})
+    parts["detector"], parts["window_s"] = detector_from_spec(spec)
     with specs.section("gate_training"):
         gt = {**_gate_training(), **specs.check_section(spec, "gate_training", _gate_training)}
         if gt["from_summary"] is not None:       # replaces the spec's own list

@@ -57,7 +57,7 @@ from ..networks.gate import SpeedGate
 from ..readout.scoring import Score, run_codings, score
 from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain
-from ..readout.contacts import ContactDetector
+from ..readout.contacts import ContactDetector, detector_from_spec
 from ..report import Calibrated, Predicted, Report, draw_rate_map
 from ..sources.scenes import CourseScene, SpeedProfile, random_course, scene_from_spec
 from ..stats import mean_interval, paired_difference, seeds_needed
@@ -117,11 +117,7 @@ def build(spec: dict) -> dict:
         check(float(cal["speed_cm_s"]) > 0, "speed_cm_s", cal["speed_cm_s"],
               "a speed > 0 cm/s (standing still, the axes see only sensor noise to align on)")
         parts["calibration"] = cal
-    with specs.section("readout"):
-        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
-        parts["window_s"] = float(read.pop("window_s", 0.1))
-        parts["detector"] = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
-                                               for k, v in read.items()})
+    parts["detector"], parts["window_s"] = detector_from_spec(spec)
     with specs.section("course"):
         parts["course"] = {**_course_settings(),
                            **specs.check_section(spec, "course", _course_settings)}

@@ -30,10 +30,17 @@ from ..errors import check
 from ..readout.scoring import score as score_detections
 from ..networks.resonators import ResonatorArray
 from ..preprocess import fit_warmup, make_chain
-from ..readout.contacts import ContactDetector, ContactEstimate, centroid_hz, dominant_hz
+from ..readout.contacts import (
+    ContactDetector,
+    ContactEstimate,
+    centroid_hz,
+    detector_from_spec,
+    dominant_hz,
+)
 from ..report import Calibrated, Predicted, Report, draw_rate_map
 from ..signals import Recording
-from ..sources.stimuli import RobotScene, scene_from_spec
+from ..sources.scenes import scene_from_spec
+from ..sources.stimuli import RobotScene
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout")
 
@@ -79,11 +86,7 @@ def build(spec: dict) -> Parts:
         check(np.isfinite(warmup_s) and 0 < warmup_s <= first, "warmup_s", warmup_s,
               f"a warm-up in (0, {first:g}] s: it must end before the scene's first contact")
         chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
-    with specs.section("readout"):
-        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
-        window_s = float(read.pop("window_s", 0.1))
-        detector = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
-                                      for k, v in read.items()})
+    detector, window_s = detector_from_spec(spec)
     with specs.section("network"):
         array.check_rate(scene.rate_hz)
     return Parts(array, scene, chain, detector, window_s, warmup_s)

@@ -30,7 +30,7 @@ from .. import spec as specs
 from ..errors import NumericalInstabilityError, check
 from ..networks.resonators import ResonatorArray, rate_map
 from ..preprocess import make_chain
-from ..readout.contacts import ContactDetector
+from ..readout.contacts import ContactDetector, detector_from_spec
 from ..report import (
     FLOAT32_CHECK,
     UNSTABLE_ON_PURPOSE,
@@ -41,7 +41,8 @@ from ..report import (
     fmt,
 )
 from ..signals import Recording
-from ..sources.stimuli import RobotScene, scene_from_spec, square
+from ..sources.scenes import scene_from_spec
+from ..sources.stimuli import RobotScene, square
 from ..store import write_dataset
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
@@ -168,11 +169,7 @@ def build(spec: dict):
                                   exclude=["rate_hz", "adc_bits", "full_scale_g"])
         for scene in scenes.values():
             make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
-    with specs.section("readout"):
-        read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
-        window_s = float(read.pop("window_s", 0.1))
-        detector = ContactDetector(**{k: tuple(v) if isinstance(v, list) else v
-                                      for k, v in read.items()})
+    detector, window_s = detector_from_spec(spec)
     parts = {}
     for name, cls in (("tuning", Tuning), ("sweep", Sweep), ("cost", Cost),
                       ("stability", Stability), ("reference", ReferenceSettings),
