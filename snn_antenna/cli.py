@@ -29,7 +29,7 @@ def _run(args) -> int:
     folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)
     estimate = plan(spec)
     if estimate is not None:
-        from .engine.sweep import LONG_SWEEP_S
+        from .engine.cost import LONG_SWEEP_S
 
         print(f"sweep: {estimate.describe()}", file=sys.stderr, flush=True)
         if estimate.seconds > LONG_SWEEP_S and not args.yes:

@@ -123,7 +123,7 @@ def test_the_checks_catch_what_they_forbid():
     """The graph walk sees real edges, and both checks fire on a planted violation."""
     graph = import_graph()
     assert "snn_antenna.networks.neurons" in graph["snn_antenna.networks.resonators"]
-    assert "snn_antenna.engine.sweep" in graph["snn_antenna.studies.tuning_sweep"]
+    assert "snn_antenna.engine.standalone" in graph["snn_antenna.engine.evaluators"]
     planted = {**graph, "snn_antenna.networks.neurons":
                graph["snn_antenna.networks.neurons"] | {"snn_antenna.networks.resonators"}}
     assert find_cycle(planted) is not None

@@ -16,7 +16,10 @@ import pytest
 from snn_antenna.networks import neurons
 from snn_antenna.errors import SpecError
 from snn_antenna.store import Output, SweepStore
-from snn_antenna.engine.sweep import Grid, NeuronSweep, axis_values, check_memory, run_sweep
+from snn_antenna.engine.cost import check_memory
+from snn_antenna.engine.evaluators import NeuronSweep
+from snn_antenna.engine.grid import Grid, axis_values
+from snn_antenna.engine.sweep import run_sweep
 
 REPO = Path(__file__).resolve().parents[1]
 SMALL = {"k": [0.5, 1.0], "I": [0.15, 0.5], "input_hz": [6.0, 10.0, 14.0, 18.0, 22.0, 26.0]}
@@ -220,7 +223,7 @@ def _profiler_callbacks(dask_worker):
 
 
 def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
-    from snn_antenna.engine.sweep import dask_client
+    from snn_antenna.engine.executor import dask_client
 
     grid = Grid(SMALL)
     serial = run_sweep(grid, FAST, tmp_path / "serial.zarr", NeuronSweep.OUTPUTS,
@@ -232,7 +235,7 @@ def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
             parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,
                                  chunk_points=6, client=client, progress=False)
             # The sweep stopped Dask's statistical profiler on the workers it used: it
-            # deadlocked a worker writing its chunk (see sweep._PrepareWorker).
+            # deadlocked a worker writing its chunk (see executor._PrepareWorker).
             assert set(map(tuple, client.run(_profiler_callbacks).values())) == {()}
     assert parallel.chunks_computed and len(parallel.workers) >= 1
     assert all(str(os.getpid()) not in w for w in parallel.workers)  # really other processes
@@ -243,7 +246,9 @@ def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
 
 KILLED_SWEEP = textwrap.dedent("""
     import sys
-    from snn_antenna.engine.sweep import Grid, NeuronSweep, run_sweep
+    from snn_antenna.engine.evaluators import NeuronSweep
+    from snn_antenna.engine.grid import Grid
+    from snn_antenna.engine.sweep import run_sweep
     grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
     run_sweep(grid, NeuronSweep(duration_s=0.4, settle_s=0.1, engine="numpy"), sys.argv[1],
               NeuronSweep.OUTPUTS, chunk_points=4, progress=False)
@@ -321,7 +326,7 @@ def short_scene():
 def test_scene_axes_group_points_by_scene_and_match_single_runs(tmp_path):
     from snn_antenna.preprocess import make_chain
     from snn_antenna.sources.scenes import scene_from_spec
-    from snn_antenna.engine.sweep import SceneSweep
+    from snn_antenna.engine.evaluators import SceneSweep
 
     sweep = SceneSweep(stimulus=short_scene(), preprocess={"coder_amplitude": 0.3},
                        engine="numpy", count_from_s=0.1)
@@ -356,7 +361,7 @@ def test_a_killed_dask_worker_loses_nothing(tmp_path, whole_sweep):
     """SIGKILL one worker process mid-sweep: Dask reruns its chunk elsewhere, same numbers."""
     import threading
 
-    from snn_antenna.engine.sweep import dask_client
+    from snn_antenna.engine.executor import dask_client
 
     grid = Grid({"k": [0.5, 0.75, 1.0, 1.25, 1.5, 2.0], "input_hz": [8.0, 14.0, 20.0, 26.0]})
     path = tmp_path / "k.zarr"

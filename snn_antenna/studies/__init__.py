@@ -141,7 +141,7 @@ def _check_workers(spec) -> None:
     table = spec.get("sweep")
     if not isinstance(table, dict) or "workers" not in table:
         return
-    from ..engine.sweep import max_workers
+    from ..engine.cost import max_workers
 
     workers, limit = table["workers"], max_workers()
     check(isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= limit,
@@ -158,7 +158,8 @@ def plan(spec: dict):
     """
     if spec.get("study") != "tuning_sweep":
         return None
-    from ..engine.sweep import NeuronSweep, check_memory, estimate
+    from ..engine.cost import check_memory, estimate
+    from ..engine.evaluators import NeuronSweep
 
     neuron, grid, settings, _ = runner("tuning_sweep").build(spec)
     block = grid.block_shape(settings.chunk_points)

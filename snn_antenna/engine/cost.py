@@ -1,0 +1,105 @@
+"""What a sweep will cost before it starts: memory, worker processes, wall time.
+
+A grid whose results (loaded for the report) or chunks would not fit in memory is refused
+(``check_memory``); ``estimate`` sizes a neuron sweep from the grid's shape alone, so the CLI
+can say how long a sweep will take (and ask for ``--yes`` beyond ``LONG_SWEEP_S``).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import check
+from ..store import Output
+from .grid import Grid
+
+
+def memory_budget_bytes() -> int:
+    """A quarter of the memory available now: what a sweep may hold at once."""
+    try:
+        import psutil
+        available = psutil.virtual_memory().available
+    except ImportError:  # psutil comes with distributed; this is a fallback
+        available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    return int(available) // 4
+
+
+def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
+                 bytes_per_point_in_chunk: int = 0, budget: int | None = None) -> None:
+    """Refuse a grid whose results (loaded for the report) or chunks would not fit."""
+    budget = memory_budget_bytes() if budget is None else budget
+    per_point = sum(np.dtype(o.dtype).itemsize for o in outputs.values())
+    need = grid.size * per_point
+    check(need <= budget, "axes", grid.describe(),
+          f"a grid whose results fit in memory: {need / 1e9:.3g} GB needed, "
+          f"{budget / 1e9:.3g} GB allowed (a quarter of the memory available); "
+          "shrink an axis or split the sweep")
+    chunk = min(chunk_points, grid.size) * bytes_per_point_in_chunk
+    check(chunk <= budget, "sweep.chunk_points", chunk_points,
+          f"chunks that fit in memory: {chunk / 1e9:.3g} GB per chunk, "
+          f"{budget / 1e9:.3g} GB allowed; lower chunk_points")
+
+
+
+# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
+# compile excluded). numpy: measured with the quick tuning sweep (9.4e6 neuron-steps in 4.3 s on
+# a loaded 2-core machine, `snn-antenna run studies/tuning_sweep.toml --quick`); cython and
+# standalone from the ratios benchmarks/bench_sweep.py measured (standalone 6-16x numpy,
+# 2.5-7.5x cython), at their low ends so the estimate errs long.
+MEASURED_STEPS_PER_S = {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 1.3e7}
+STANDALONE_COMPILE_S = 20.0        # one-off per worker process and group size (cached on disk)
+WORKER_MEMORY_BYTES = 500 * 2**20  # one worker process with Brian2 and Dask imported
+LONG_SWEEP_S = 3600.0              # beyond this the CLI asks for --yes
+
+
+def max_workers() -> int:
+    """Worker processes this machine can run: one per core, and no more than fit in the
+    memory available now (two at least, so the parallel path runs on any machine)."""
+    cores = os.cpu_count() or 1
+    by_memory = (memory_budget_bytes() * 4) // WORKER_MEMORY_BYTES
+    return max(2, min(cores, by_memory))
+
+
+@dataclass
+class Estimate:
+    """A sweep's size and expected cost, computed from the grid's shape alone (nothing is
+    materialised, so a grid of 10^9 points is sized in microseconds)."""
+    points: int
+    neuron_steps: int
+    workers: int
+    seconds: float
+    result_bytes: int
+    chunk_bytes: int
+    engine: str
+
+    def describe(self) -> str:
+        return (f"{self.points:,} points, {self.neuron_steps:.3g} neuron-steps on "
+                f"{self.workers} worker(s) ({self.engine}): about {_duration(self.seconds)} at "
+                f"{MEASURED_STEPS_PER_S[self.engine]:.3g} neuron-steps/s per worker, "
+                f"{self.result_bytes / 1e6:.3g} MB of results, "
+                f"{self.chunk_bytes / 1e6:.3g} MB per chunk")
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.0f} s"
+    if seconds < 7200:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+def estimate(grid: Grid, sweep, chunk_points: int, workers: int) -> Estimate:
+    """Points, neuron-steps, expected wall time and memory of ``sweep`` (an
+    ``evaluators.NeuronSweep``) over ``grid``."""
+    workers = min(workers or os.cpu_count() or 1, max_workers())
+    steps = int(round(sweep.duration_s * 1000 / sweep.dt_ms))
+    neuron_steps = grid.size * steps
+    seconds = neuron_steps / (MEASURED_STEPS_PER_S[sweep.engine] * workers)
+    if sweep.engine == "standalone":
+        seconds += STANDALONE_COMPILE_S
+    per_point = sum(np.dtype(o.dtype).itemsize for o in sweep.OUTPUTS.values())
+    chunk = min(chunk_points, grid.size) * sweep.bytes_per_point
+    return Estimate(grid.size, neuron_steps, workers, seconds, grid.size * per_point, chunk,
+                    sweep.engine)

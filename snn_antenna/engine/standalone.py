@@ -1,0 +1,113 @@
+"""The compiled cpp_standalone project of a ``NeuronSweep`` (engine ``"standalone"``).
+
+Brian2 compiles the model once per process and group size into a project directory kept on
+disk (``SNN_ANTENNA_CACHE``, default ``~/.cache/snn_antenna``); every chunk re-runs it with its
+own parameters (``run_args``). The square-wave input is computed inside the model, so the
+project does not depend on the chunk's values.
+"""
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import NumericalInstabilityError
+from ..networks import neurons
+
+
+# One compiled standalone project per process (Brian2's device is process-global); a worker
+# keeps it across chunks, so only its first chunk pays for compiling.
+_PROJECT: dict = {}
+
+
+def _standalone_dir(key: str) -> tuple[Path, Any]:
+    """A project directory this process holds alone (a lock per slot), kept across runs so
+    an unchanged model is not recompiled next time."""
+    import fcntl
+
+    base = Path(os.environ.get("SNN_ANTENNA_CACHE", Path.home() / ".cache" / "snn_antenna"))
+    base = base / "brian2_standalone"
+    base.mkdir(parents=True, exist_ok=True)
+    for slot in range(1024):
+        lock = open(base / f"{key}-{slot}.lock", "w")
+        try:
+            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            lock.close()
+            continue
+        return base / f"{key}-{slot}", lock
+    raise RuntimeError(f"no free Brian2 standalone directory under {base}")
+
+
+SQUARE_INPUT = ("I_amp * (1 - 2*(int(floor((2*f_in)*(floor(t*input_rate + 1e-6)"
+                "/input_rate_value))) % 2))")
+SQUARE_INPUT_VARIABLES = "f_in : 1 (constant)\nI_amp : 1 (constant)\nspike_count : integer"
+
+
+def _standalone_project(sweep, n: int):
+    import brian2 as b2
+    from brian2.devices.device import get_device, reset_device, set_device
+
+    structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dt_ms,
+                 sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, n)
+    if _PROJECT.get("structure") == structure:
+        return _PROJECT
+    key = hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
+    directory, lock = _standalone_dir(key)
+    if _PROJECT:
+        _PROJECT["device"].reinit()
+        _PROJECT["lock"].close()
+        _PROJECT.clear()
+    set_device("cpp_standalone", build_on_run=False, directory=str(directory),
+               with_output=False)
+    device = get_device()
+    try:
+        # sample n of the coder's input holds from n/rate to (n+1)/rate: the square wave of
+        # stimuli.square, evaluated with the same floating-point operations
+        group = b2.NeuronGroup(
+            n, neurons.equations(sweep.preset, SQUARE_INPUT, SQUARE_INPUT_VARIABLES),
+            threshold=neurons.THRESHOLD, reset=neurons.reset("spike_count += int(t >= settle)"),
+            method=neurons.brian_method(sweep.method), dt=sweep.dt_ms * b2.ms, name="neurons",
+            namespace={"input_rate": sweep.input_rate_hz * b2.Hz,
+                       "input_rate_value": float(sweep.input_rate_hz),
+                       "settle": sweep.settle_s * b2.second})
+        net = b2.Network(group)
+        net.run(sweep.duration_s * b2.second, namespace={})
+        device.build(run=False, directory=str(directory), with_output=False)
+    finally:
+        reset_device()  # runtime code elsewhere in this process keeps working
+    _PROJECT.update(structure=structure, device=device, group=group, lock=lock)
+    return _PROJECT
+
+
+def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
+    """Spike counts of ``sweep`` (a ``NeuronSweep``) at parameters ``p``: one run of the
+    compiled project, padded to its group size."""
+    n = len(p["k"])
+    size = max(n, sweep.group_size or n)
+    project = _standalone_project(sweep, size)
+    group = project["group"]
+    v0, u0 = sweep.initial_state(p)
+    pad = size - n  # a short last chunk repeats its first point instead of recompiling
+    values = {"k": p["k"], "a": p["a"], "b": p["b"], "c": p["c"], "d": p["d"],
+              "f_in": p["input_hz"], "I_amp": p["I"], "v": v0, "u": u0}
+    run_args = {getattr(group, name): np.r_[arr, np.repeat(arr[:1], pad)]
+                for name, arr in values.items()}
+    device = project["device"]
+    device.run(run_args=run_args, with_output=False)
+    for name in device.run_args_arrays:  # this chunk's parameter files: not needed again
+        Path(device.project_dir, "static_arrays", name).unlink(missing_ok=True)
+    v = np.asarray(group.v[:])
+    u = np.asarray(group.u[:])
+    ok = np.isfinite(v) & np.isfinite(u) & (np.abs(v) < neurons.RUNAWAY_LIMIT) \
+        & (np.abs(u) < neurons.RUNAWAY_LIMIT)
+    if not ok[:n].all():
+        i = int(np.argmin(ok[:n]))
+        raise NumericalInstabilityError(
+            neuron=i, params={k: float(values[k][i]) for k in ("k", "a", "b", "c", "d")},
+            dt_ms=sweep.dt_ms, method=sweep.method, t_ms=sweep.duration_s * 1000,
+            safe_dt_ms=neurons.max_stable_dt_ms(values["k"][i], sweep.method))
+    return np.asarray(group.spike_count[:], dtype=np.int64)
