@@ -2,7 +2,8 @@
 
 ``summary.json`` holds the numbers and the provenance (resolved spec, seed, package and
 library versions, Brian2's code-generation target) so any figure can be regenerated. Files
-are written atomically: a reader never sees half a report.
+are written atomically: a reader never sees half a report. Figure parts (the rate map) are
+in ``figures``, the run's log (``run.log``) in ``logfile``.
 """
 from __future__ import annotations
 
@@ -10,19 +11,20 @@ import base64
 import datetime as _dt
 import html
 import json
-import logging
-import os
 import platform
-import re
 import sys
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .files import current_umask, atomic_write
+from .files import atomic_write
+
+# Re-exported only while the study modules that import them from here are pointed at their
+# homes (figures, logfile); then these lines go.
+from .figures import draw_rate_map  # noqa: F401
+from .logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile  # noqa: F401
 
 
 def _jsonable(obj: Any):
@@ -410,42 +412,6 @@ def _summary_statistic(d: dict, digits: int) -> str | None:
     return None
 
 
-def draw_rate_map(ax, rates, colorbar: bool | str = False, **mesh_kwargs):
-    """Draw a rate map (the paper's frequency map, Fig. 10H) on ``ax``; returns the mesh.
-
-    Neurons sit on a log-frequency axis, each cell spanning halfway to its neighbours, so a
-    log-spaced array draws as equal rows labelled by frequency. ``colorbar=True`` adds the
-    colour scale ("spike rate (Hz)"; a string replaces that label) beside ``ax``: a rate map
-    without one cannot be read. ``mesh_kwargs`` (e.g. ``vmax``) go to ``pcolormesh``.
-    """
-    w = float(rates.attrs["window_s"])
-    hz = rates.neuron_hz.values
-    if len(hz) > 1:
-        edges_hz = np.r_[hz[0] / np.sqrt(hz[1] / hz[0]), np.sqrt(hz[:-1] * hz[1:]),
-                         hz[-1] * np.sqrt(hz[-1] / hz[-2])]
-    else:
-        edges_hz = np.array([hz[0] * 0.9, hz[0] * 1.1])
-    edges_t = np.r_[rates.window_s.values, rates.window_s.values[-1] + w]
-    mesh = ax.pcolormesh(edges_t, edges_hz, rates.values,
-                         **{"cmap": "magma", "shading": "flat", **mesh_kwargs})
-    ax.set_yscale("log")
-    ticks = [f for f in (5, 7, 10, 15, 20, 30, 50, 100, 200, 500) if edges_hz[0] <= f <= edges_hz[-1]]
-    ax.set_yticks(ticks)
-    ax.set_yticklabels([str(f) for f in ticks])
-    ax.minorticks_off()
-    ax.set_ylabel("neuron (Hz)")
-    if colorbar:
-        rate_colorbar(ax, mesh, colorbar if isinstance(colorbar, str) else "spike rate (Hz)")
-    return mesh
-
-
-def rate_colorbar(ax, mesh, label_text: str = "spike rate (Hz)"):
-    """The colour scale of a rate map (or any mesh) beside ``ax``, labelled with its unit."""
-    bar = ax.figure.colorbar(mesh, ax=ax, pad=0.02, fraction=0.05)
-    bar.set_label(label_text)
-    return bar
-
-
 def _table_html(rows: list[dict], caption: str = "") -> str:
     cols = list(dict.fromkeys(c for r in rows for c in r))
     numeric = {c for c in cols if all(r.get(c) is None or _is_number(r.get(c)) for r in rows)}
@@ -481,128 +447,3 @@ def _cell_html(value) -> str:
     text = html.escape(_fmt(value))
     kind = "num" if _is_number(value) else "text"
     return f'<td class="{kind}">{text}</td>'
-
-
-# -- the run's log ----------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Expected:
-    """Warnings a study knows it causes: ``patterns`` (regular expressions searched in the
-    message) and ``why`` they are harmless, said once on the terminal instead of the warnings."""
-    why: str
-    patterns: tuple[str, ...]
-
-
-# Warnings the toolkit causes on purpose or harmlessly (use with ``LogFile.expected``).
-UNSTABLE_ON_PURPOSE = Expected(
-    "the stability map runs each integrator past its stable step on purpose; the NaN and "
-    "overflow it meets are what it measures (the red cells)",
-    (r"has NaN, very large values", r"overflow encountered", r"invalid value encountered"))
-FLOAT32_CHECK = Expected(
-    "Brian2 checks float32 state against 1e50, a number float32 cannot hold; the cast in "
-    "that check overflows, the state itself is finite",
-    (r"overflow encountered in cast",))
-CPG_TOKEN_ORDER = Expected(
-    "the CPG's ring writes every neuron's token when one neuron fires; only the token's "
-    "holder fires, so two writes never meet in one step and the order cannot matter",
-    (r"abstract code block that may not be\s+well-defined.*token_post",))
-
-
-class LogFile:
-    """``OUT/run.log``: everything a run says, whole; the terminal gets the same minus the
-    warnings the study declared expected, each explained in one line instead.
-
-        with LogFile(out_dir, log) as log:          # log(...) prints and keeps the line
-            log("[1/3] sweeping")
-            with log.expected(UNSTABLE_ON_PURPOSE):
-                smap = accuracy.stability_map(...)
-
-    Brian2's log messages and Python warnings (which Brian2 routes through ``logging``) are
-    written to the file as they come. A re-run appends, under a line naming its start.
-    """
-
-    def __init__(self, out_dir: str | Path, echo=print, name: str = "run.log"):
-        self.path = Path(out_dir) / name
-        self.echo = echo
-        self._active: list[list] = []    # [Expected, count] of the open ``expected`` blocks
-        self._file = None
-        self._handler = None
-        self._filter = _ExpectedFilter(self)
-        self._consoles: list[logging.Handler] = []
-
-    def __enter__(self) -> "LogFile":
-        from brian2.utils.logger import BrianLogger   # its console handler prints warnings
-
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "a", encoding="utf-8")
-        try:
-            os.chmod(self.path, 0o666 & ~current_umask())
-        except OSError:
-            pass
-        self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "
-                    f"({' '.join(sys.argv)})")
-        # Python warnings through logging (as Brian2 sets up at import), re-armed in case
-        # someone (a test runner, a notebook) replaced warnings.showwarning since
-        logging.captureWarnings(False)
-        logging.captureWarnings(True)
-        self._handler = logging.StreamHandler(self._file)
-        self._handler.setLevel(logging.INFO)
-        self._handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
-        for name in ("brian2", "py.warnings"):
-            logging.getLogger(name).addHandler(self._handler)
-        self._consoles = [h for h in (BrianLogger.console_handler, logging.lastResort)
-                          if h is not None]
-        for h in self._consoles:
-            h.addFilter(self._filter)
-        return self
-
-    def __exit__(self, *exc) -> bool:
-        for h in self._consoles:
-            h.removeFilter(self._filter)
-        for name in ("brian2", "py.warnings"):
-            logging.getLogger(name).removeHandler(self._handler)
-        if exc[0] is not None:
-            import traceback
-            self._write("".join(traceback.format_exception(*exc)))
-        self._file.close()
-        return False
-
-    def __call__(self, *message) -> None:
-        text = " ".join(str(m) for m in message)
-        self.echo(text)
-        self._write(text)
-
-    def _write(self, text: str) -> None:
-        if self._file is not None and not self._file.closed:
-            self._file.write(text + "\n")
-            self._file.flush()
-
-    @contextmanager
-    def expected(self, *kinds: Expected):
-        """Within: warnings matching ``kinds`` go to the file only; one line says why."""
-        entries = [[kind, 0] for kind in kinds]
-        self._active.extend(entries)
-        try:
-            yield self
-        finally:
-            for entry in entries:
-                self._active.remove(entry)
-                kind, count = entry
-                if count:
-                    self(f"  ({count} expected warning{'s' * (count > 1)} kept in "
-                         f"{self.path}: {kind.why})")
-
-    def _swallow(self, message: str) -> bool:
-        for entry in self._active:
-            if any(re.search(p, message, re.S) for p in entry[0].patterns):
-                entry[1] += 1
-                return True
-        return False
-
-
-class _ExpectedFilter(logging.Filter):
-    def __init__(self, owner: LogFile):
-        super().__init__()
-        self.owner = owner
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return not self.owner._swallow(record.getMessage())

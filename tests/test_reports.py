@@ -23,15 +23,18 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from snn_antenna import report as rp
+from snn_antenna.figures import draw_rate_map
 from snn_antenna.files import atomic_write
+from snn_antenna.logfile import (
+    CPG_TOKEN_ORDER,
+    FLOAT32_CHECK,
+    UNSTABLE_ON_PURPOSE,
+    LogFile,
+)
 from snn_antenna.report import (
     Calibrated,
-    LogFile,
     Predicted,
     Report,
-    UNSTABLE_ON_PURPOSE,
-    draw_rate_map,
     fmt,
     label,
 )
@@ -335,17 +338,17 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
 def test_the_known_expected_warnings_match_what_brian2_prints():
     """Messages as a quick run printed them (exploration, speed_accuracy)."""
     seen = {
-        rp.CPG_TOKEN_ORDER: "Came across an abstract code block that may not be well-defined: "
-                            "the outcome may depend on the order of execution. You can ignore "
-                            "this warning if you are sure that the order of operations does not "
-                            "matter. Abstract code: 'token_post = int(j == ((i + 1) % n_ring))'",
-        rp.UNSTABLE_ON_PURPOSE: "neurons's variable 'v' has NaN, very large values, or "
-                                "encountered an error in numerical integration.",
-        rp.FLOAT32_CHECK: "/brian2/groups/group.py:1226: RuntimeWarning: overflow encountered "
-                          "in cast",
+        CPG_TOKEN_ORDER: "Came across an abstract code block that may not be well-defined: "
+                         "the outcome may depend on the order of execution. You can ignore "
+                         "this warning if you are sure that the order of operations does not "
+                         "matter. Abstract code: 'token_post = int(j == ((i + 1) % n_ring))'",
+        UNSTABLE_ON_PURPOSE: "neurons's variable 'v' has NaN, very large values, or "
+                             "encountered an error in numerical integration.",
+        FLOAT32_CHECK: "/brian2/groups/group.py:1226: RuntimeWarning: overflow encountered "
+                       "in cast",
     }
     for kind, message in seen.items():
         assert any(re.search(p, message, re.S) for p in kind.patterns), kind.why
     # an order warning about any other variable is not explained away
-    other = seen[rp.CPG_TOKEN_ORDER].replace("token_post", "v_post")
-    assert not any(re.search(p, other, re.S) for p in rp.CPG_TOKEN_ORDER.patterns)
+    other = seen[CPG_TOKEN_ORDER].replace("token_post", "v_post")
+    assert not any(re.search(p, other, re.S) for p in CPG_TOKEN_ORDER.patterns)
