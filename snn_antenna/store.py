@@ -1,7 +1,7 @@
 """The result store of a sweep: one xarray Dataset in one zarr store, written chunk by chunk.
 
     store = SweepStore("out/tuning/results.zarr")
-    done = store.prepare(coords, outputs, block_shape, attrs, fresh=False)  # pre-create or resume
+    done = store.prepare(coords, outputs, block_shape, n_chunks, attrs=attrs)  # or reopen
     store.write_chunk(chunk_id, region, {"spike_count": block})            # as blocks arrive
     ds = store.load()
 
@@ -113,7 +113,7 @@ class SweepStore:
         self.path = Path(path)
 
     # -- set-up (client side) -----------------------------------------------------------------
-    def prepare(self, coords: dict, outputs: dict[str, Output], block_shape, n_chunks: int,
+    def prepare(self, coords: dict, outputs: dict[str, Output], block_shape, n_chunks: int, *,
                 attrs: dict | None = None, settings=None, fresh: bool = False) -> set[int]:
         """Create the store, or reopen a matching one; return the ids of finished chunks."""
         import dask.array as da

@@ -99,31 +99,24 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     regions = grid.blocks(chunk_points)
     store = SweepStore(Path(store_path).resolve())
     settings = repr(evaluate) if settings is None else settings
-    done = store.prepare(grid.coords(), outputs, block_shape, len(regions), attrs,
-                         settings, fresh)
+    done = store.prepare(grid.coords(), outputs, block_shape, len(regions), attrs=attrs,
+                         settings=settings, fresh=fresh)
     todo = [i for i in range(len(regions)) if i not in done]
     t0 = time.perf_counter()
-    workers: dict[str, int] = {}
     bar = tqdm(total=len(regions), initial=len(done), unit="chunk", desc=desc,
                disable=not progress, smoothing=0.1)
     try:
         with _interruptible() as interrupted:
+            chunks = _Chunks(grid=grid, regions=regions, evaluate=evaluate, outputs=outputs,
+                             store=store, bar=bar, interrupted=interrupted)
             if client is None:
-                for i in todo:
-                    _, blocks, _, who = _compute_chunk(i, regions[i], grid.points(regions[i]),
-                                                       evaluate, outputs)
-                    store.write_chunk(i, regions[i], blocks)
-                    workers[who] = workers.get(who, 0) + 1
-                    bar.update()
-                    if interrupted():
-                        raise KeyboardInterrupt
+                chunks.run_here(todo)
             else:
-                _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar,
-                             workers, interrupted)
+                chunks.run_on_dask(client, todo)
     finally:
         bar.close()
     return SweepOutcome(store.load(), len(regions), todo, sorted(done),
-                        time.perf_counter() - t0, workers)
+                        time.perf_counter() - t0, chunks.workers)
 
 
 @contextmanager
@@ -150,48 +143,71 @@ def _interruptible():
         signal.signal(signal.SIGINT, previous)
 
 
-def _run_on_dask(client, store, grid, regions, todo, evaluate, outputs, bar, workers,
-                 interrupted=lambda: False):
-    """Chunks run as Dask tasks that return their blocks; this process writes each block into
-    the store as it arrives (``distributed.as_completed``), so workers need no shared folder.
+@dataclass
+class _Chunks:
+    """The chunks of one ``run_sweep`` call: how each is computed, and what happens as each
+    finishes (its blocks written to the store, counted per worker, the bar advanced)."""
+    grid: Grid
+    regions: list[dict]
+    evaluate: Callable
+    outputs: dict[str, Output]
+    store: SweepStore
+    bar: Any
+    interrupted: Callable[[], bool]
+    workers: dict[str, int] = dataclasses.field(default_factory=dict)  # worker → chunks run
 
-    Only a window of tasks (two per worker thread) is submitted at a time and refilled as
-    chunks finish: finished blocks never pile up on the workers or here, whatever the grid's
-    size, while every worker still has a chunk queued behind the one it runs."""
-    from distributed import as_completed
+    def finished(self, chunk_id: int, blocks: dict[str, np.ndarray], who: str) -> None:
+        self.store.write_chunk(chunk_id, self.regions[chunk_id], blocks)
+        self.workers[who] = self.workers.get(who, 0) + 1
+        self.bar.update()
+        if self.interrupted():
+            raise KeyboardInterrupt
 
-    if not todo:
-        return
-    prepare_workers(client)
-    evaluate_future = client.scatter(evaluate, broadcast=True)
-    run = f"{hashlib.sha1(str(store.path).encode()).hexdigest()[:8]}-{time.time_ns()}"
-    waiting = iter(todo)
-    running: dict = {}  # future -> chunk id, cancelled if the sweep stops
+    def run_here(self, todo: list[int]) -> None:
+        for i in todo:
+            _, blocks, _, who = _compute_chunk(i, self.regions[i],
+                                               self.grid.points(self.regions[i]),
+                                               self.evaluate, self.outputs)
+            self.finished(i, blocks, who)
 
-    def submit(count: int) -> list:
-        futures = []
-        for i in itertools.islice(waiting, max(0, count)):
-            future = client.submit(_compute_chunk, i, regions[i], grid.points(regions[i]),
-                                   evaluate_future, outputs, key=f"sweep-{run}-chunk-{i}",
-                                   pure=False)
-            running[future] = i
-            futures.append(future)
-        return futures
+    def run_on_dask(self, client, todo: list[int]) -> None:
+        """Chunks run as Dask tasks that return their blocks; this process writes each block
+        into the store as it arrives (``distributed.as_completed``), so workers need no shared
+        folder.
 
-    def window() -> int:  # asked again after every chunk: workers may join or leave
-        return max(2, 2 * sum(client.nthreads().values()))
+        Only a window of tasks (two per worker thread) is submitted at a time and refilled as
+        chunks finish: finished blocks never pile up on the workers or here, whatever the
+        grid's size, while every worker still has a chunk queued behind the one it runs."""
+        from distributed import as_completed
 
-    completed = as_completed(submit(window()), loop=client.loop)
-    try:
-        for future in completed:
-            running.pop(future)
-            chunk_id, blocks, _, who = future.result()  # re-raises a worker's exception here
-            store.write_chunk(chunk_id, regions[chunk_id], blocks)
-            workers[who] = workers.get(who, 0) + 1
-            bar.update()
-            if interrupted():
-                raise KeyboardInterrupt
-            completed.update(submit(window() - len(running)))
-    except BaseException:  # Ctrl-C or a failed chunk: finished chunks stay in the store
-        client.cancel(list(running))
-        raise
+        if not todo:
+            return
+        prepare_workers(client)
+        evaluate_future = client.scatter(self.evaluate, broadcast=True)
+        run = f"{hashlib.sha1(str(self.store.path).encode()).hexdigest()[:8]}-{time.time_ns()}"
+        waiting = iter(todo)
+        running: dict = {}  # future -> chunk id, cancelled if the sweep stops
+
+        def submit(count: int) -> list:
+            futures = []
+            for i in itertools.islice(waiting, max(0, count)):
+                future = client.submit(_compute_chunk, i, self.regions[i],
+                                       self.grid.points(self.regions[i]), evaluate_future,
+                                       self.outputs, key=f"sweep-{run}-chunk-{i}", pure=False)
+                running[future] = i
+                futures.append(future)
+            return futures
+
+        def window() -> int:  # asked again after every chunk: workers may join or leave
+            return max(2, 2 * sum(client.nthreads().values()))
+
+        completed = as_completed(submit(window()), loop=client.loop)
+        try:
+            for future in completed:
+                running.pop(future)
+                chunk_id, blocks, _, who = future.result()  # re-raises a worker's exception
+                self.finished(chunk_id, blocks, who)
+                completed.update(submit(window() - len(running)))
+        except BaseException:  # Ctrl-C or a failed chunk: finished chunks stay in the store
+            client.cancel(list(running))
+            raise
