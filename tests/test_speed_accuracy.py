@@ -1,11 +1,13 @@
 """The speed/accuracy study end to end (quick profile) and its spec checks."""
 import json
 
-import numpy as np
 import pytest
 
 from snn_antenna import spec as specs
+from snn_antenna.engine.runlog import RUN_IDENTITY, RunLog
 from snn_antenna.errors import SpecError
+from snn_antenna.networks import neurons
+from snn_antenna.readout import tradeoff
 from snn_antenna.studies import runner
 from snn_antenna.studies import speed_accuracy as study
 
@@ -58,59 +60,39 @@ def test_bad_specs_are_refused_before_any_work(override, field):
     assert info.value.field == field
 
 
-def test_pareto_front_and_recommendation_pick_the_cheapest_sufficient_runs():
-    rows = [dict(scene="s", method="euler", dt_ms=dt, status="ok", cpu_s=c, rate_map_error=e,
-                 readout_matches=m)
-            for dt, c, e, m in ((0.01, 10.0, 0.01, True), (0.1, 1.0, 0.04, True),
-                                (0.5, 0.5, 0.2, False), (1.0, 0.6, 0.3, True))]
-    front = study.pareto_front(rows, "rate_map_error")
-    assert [r["dt_ms"] for r in front] == [0.5, 0.1, 0.01]
-    forced = dict(rows[2], dt_ms=0.7, cpu_s=0.1, readout_matches=True, rate_map_error=0.0,
-                  beyond_stable_limit=True)
-    recs = {r["criterion"]: r["dt_ms"] for r in study.recommend(rows + [forced], study.Match())}
-    assert recs["read-out matches the reference"] == 1.0        # cheapest that matches
-    assert recs["rate map within 5%"] == 0.1
-    assert recs["read-out matches at this dt and every finer one"] == 0.1   # 0.5 breaks it
-
-
-def _row(status="ok", **errors):
-    return dict(sweep="main", scene="bench", method="euler", dt_ms=0.1, status=status,
-                **{e: errors.get(e, 0.1) for e in study.ERRORS}, distance_cm=25.0)
-
-
-def test_a_run_with_a_non_finite_value_but_no_exception_is_marked_and_counted():
-    finite = study.Run(np.array([0, 1]), np.array([1.0, 2.0]), 0.1, 0.1)
-    silent = study.Run(np.array([0, 1]), np.array([1.0, np.nan]), 0.1, 0.1)
-    ok = study._check_finite(_row(), finite)
-    assert ok["status"] == "ok" and ok["nonfinite_without_exception"] is False
-    bad = study._check_finite(_row(), silent)
-    assert bad["nonfinite_without_exception"] is True and "spike times" in bad["status"]
-    score = study._check_finite(_row(rate_map_error=float("inf")), finite)
-    assert score["rate_map_error"] is None and "rate_map_error" in score["status"]
-    raised = _row(status="non-finite (raised NumericalInstabilityError)")
-    counts = study.count_nonfinite([ok, bad, score, raised])
-    assert counts == {"nonfinite_without_exception": 2, "raised_instability": 1}
+def test_the_run_log_resumes_the_same_spec_and_starts_over_for_another(tmp_path):
+    path = tmp_path / "runs.jsonl"
+    row = dict(sweep="main", scene="bench", method="euler", dt_ms=0.1, target="numpy",
+               dtype="float64", n_neurons=24, cpu_s=1.0)
+    RunLog(path, {"seed": 1}).add(row)
+    with open(path, "a") as f:
+        f.write('{"sweep": "main", "sce')          # a line cut short by an interruption
+    again = RunLog(path, {"seed": 1})
+    assert again.get(**{k: row[k] for k in RUN_IDENTITY}) == row
+    assert again.get(**dict({k: row[k] for k in RUN_IDENTITY}, dt_ms=0.5)) is None
+    assert RunLog(path, {"seed": 2}).rows == {}
+    assert RunLog(path, {"seed": 2}, fresh=True).rows == {}
 
 
 def test_the_reference_verdict_says_what_was_measured():
-    rows = [_row(spike_time_error_ms=0.6), _row(spike_time_error_ms=2.0)]
+    rows = [dict(sweep="main", scene="bench", method="euler", dt_ms=0.1, status="ok",
+                 spike_time_error_ms=e) for e in (0.6, 2.0)]
     base = dict(same_spike_counts=True, scene="bench", rtol=1e-10, check_rtol=1e-12)
-    far = dict(base, max_shift_ms=1e-5)
-    far.update(study._convergence_verdict(far, rows))
-    assert far["far_below"] and "converged far below" in study._convergence_text(far)
-    near = dict(base, max_shift_ms=0.1)
-    near.update(study._convergence_verdict(near, rows))
-    text = study._convergence_text(near)
-    assert not near["far_below"] and "far below" not in text and "only 6×" in text
-    moved = dict(base, same_spike_counts=False, max_shift_ms=3.0)
-    moved.update(study._convergence_verdict(moved, rows))
-    assert "not converged" in study._convergence_text(moved)
+
+    def text(**shift):
+        conv = dict(base, **shift)
+        return study.convergence_text(dict(conv, **tradeoff.convergence_verdict(conv, rows)))
+
+    assert "converged far below" in text(max_shift_ms=1e-5)
+    near = text(max_shift_ms=0.1)
+    assert "far below" not in near and "only 6×" in near
+    assert "not converged" in text(same_spike_counts=False, max_shift_ms=3.0)
 
 
 def test_the_quick_banner_names_the_methods_the_quick_sweep_leaves_out():
     spec = specs.load(SPEC, quick=True)
-    *_, parts = study.build(spec)
-    note = study.quick_note(parts["sweep"], parts, parts["sweep"].scenes)
-    missing = [m for m in study.neurons.METHODS if m not in parts["sweep"].methods]
+    plan = study.build(spec)
+    note = study.quick_note(plan.sweep, plan.stability)
+    missing = [m for m in neurons.METHODS if m not in plan.sweep.methods]
     assert missing and all(m in note for m in missing)
     assert note.startswith("quick profile")

@@ -9,6 +9,10 @@ Errors of a run against its reference (``snn_antenna.networks.reference``) on th
 - ``spike_count_error``: total |Δ count| per neuron over the reference's total count.
 - ``rate_map_error``: L1 distance of the rate maps over the reference's L1 norm.
 
+``compare_array`` and ``compare_tuning`` score a whole run against its reference read-out
+(``Match`` says when a read-out counts as the reference's); ``reference_shift`` measures how
+far the reference itself moves when its tolerance is tightened.
+
 ``stability_map`` classifies (method, k·dt, constant drive I) as accurate, inaccurate but
 finite, or non-finite. It uses the model's time-scale invariance: the discrete update
 depends on k and dt only through k·dt, so one group per method at dt = 1 ms with k set to
@@ -16,15 +20,28 @@ each k·dt value covers the whole axis in one vectorised run.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 import xarray as xr
 
 from ..networks import neurons, reference
+from ..networks.resonators import rate_map
 from ..errors import check
 
 ACCURATE, INACCURATE, NON_FINITE = 0, 1, 2
 CLASSES = {ACCURATE: "accurate", INACCURATE: "inaccurate but finite",
            NON_FINITE: "non-finite or runaway"}
+
+
+@dataclass
+class SpikeTrains:
+    """Every spike of a group: neuron index and time (ms)."""
+    spike_i: np.ndarray
+    spike_t_ms: np.ndarray
+
+    def counts(self, n_neurons: int) -> np.ndarray:
+        return np.bincount(self.spike_i, minlength=n_neurons)
 
 
 def spike_time_error_ms(spike_i, spike_t_ms, ref_i, ref_t_ms, n_neurons: int,
@@ -73,6 +90,104 @@ def window_f1(hit, ref_hit) -> float:
     tp = int((hit & ref_hit).sum())
     fp, fn = int((hit & ~ref_hit).sum()), int((~hit & ref_hit).sum())
     return 1.0 if tp + fp + fn == 0 else 2 * tp / (2 * tp + fp + fn)
+
+
+@dataclass
+class Match:
+    """When a run's read-out counts as the reference's."""
+    distance_cm: float = 0.1       # decoded distances within this
+    detection_f1: float = 1.0      # contact windows identical
+    rate_map_error: float = 0.05   # for the "rate map within" recommendation
+
+
+@dataclass
+class ArrayReadout:
+    """What the quickstart read-out makes of an array run: rates, contact windows and the
+    distance decoded for the scene's true contact (None without one or without a detection)."""
+    rates: np.ndarray
+    windows: np.ndarray
+    distance_cm: float | None
+
+
+def array_readout(spikes: SpikeTrains, neuron_hz, duration_s: float, window_s: float,
+                  detector, true_contact=None) -> ArrayReadout:
+    """Rate map, contact windows and decoded distance (the detection nearest the true
+    contact's onset among those that end after it) of one array run."""
+    rates = rate_map(spikes.spike_i, spikes.spike_t_ms / 1000.0, neuron_hz, duration_s,
+                     window_s)
+    decoded = None
+    if true_contact is not None:
+        after = [d for d in detector.detect(rates) if d.end_s > true_contact.t_s]
+        if after:
+            decoded = min(after, key=lambda d: abs(d.onset_s - true_contact.t_s)).distance_cm
+    return ArrayReadout(rates.values, detector.contact_windows(rates).values, decoded)
+
+
+def compare_array(run: SpikeTrains, ref: SpikeTrains, out: ArrayReadout, ref_out: ArrayReadout,
+                  n_neurons: int, match: Match) -> dict:
+    """Every error of an array run against its reference, and whether its read-out (decoded
+    distance and contact windows) matches the reference's."""
+    row = {
+        "spike_time_error_ms": spike_time_error_ms(run.spike_i, run.spike_t_ms, ref.spike_i,
+                                                   ref.spike_t_ms, n_neurons),
+        "spike_count_error": spike_count_error(run.counts(n_neurons), ref.counts(n_neurons)),
+        "rate_map_error": rate_map_error(out.rates, ref_out.rates),
+        "detection_f1": window_f1(out.windows, ref_out.windows),
+        "distance_cm": out.distance_cm,
+    }
+    d, d_ref = out.distance_cm, ref_out.distance_cm
+    row["distance_error_cm"] = abs(d - d_ref) if d is not None and d_ref is not None else None
+    same_distance = (d is None and d_ref is None) or (
+        row["distance_error_cm"] is not None and row["distance_error_cm"] <= match.distance_cm)
+    row["readout_matches"] = bool(same_distance and row["detection_f1"] >= match.detection_f1)
+    return row
+
+
+@dataclass
+class TuningReadout:
+    """Rates (neuron × stimulus frequency) and each neuron's preferred stimulus (-1: silent)."""
+    rates: np.ndarray
+    preferred: np.ndarray
+
+
+def tuning_readout(spikes: SpikeTrains, n_neurons: int, n_freqs: int,
+                   duration_s: float) -> TuningReadout:
+    """Neuron j × n_freqs + f of the run is neuron j driven at stimulus frequency f."""
+    counts = spikes.counts(n_neurons * n_freqs).reshape(n_neurons, n_freqs)
+    preferred = np.where(counts.max(axis=1) > 0, np.argmax(counts, axis=1), -1)
+    return TuningReadout(counts / duration_s, preferred)
+
+
+def compare_tuning(run: SpikeTrains, ref: SpikeTrains, out: TuningReadout,
+                   ref_out: TuningReadout) -> dict:
+    """Errors of a tuning run; its read-out matches when every neuron prefers the same
+    stimulus as in the reference."""
+    return {
+        "spike_time_error_ms": spike_time_error_ms(run.spike_i, run.spike_t_ms, ref.spike_i,
+                                                   ref.spike_t_ms, out.rates.size),
+        "spike_count_error": spike_count_error(out.rates, ref_out.rates),
+        "rate_map_error": rate_map_error(out.rates, ref_out.rates),
+        "detection_f1": None, "distance_error_cm": None, "distance_cm": None,
+        "readout_matches": bool(np.array_equal(out.preferred, ref_out.preferred)),
+    }
+
+
+def reference_shift(ref: SpikeTrains, tight: SpikeTrains, n_neurons: int) -> dict:
+    """How far a reference moves at a tighter tolerance: whether every neuron fires the same
+    number of spikes, and the largest spike-time shift (the capped spike-time error when the
+    counts differ)."""
+    same_counts = np.array_equal(ref.counts(n_neurons), tight.counts(n_neurons))
+    shift = 0.0
+    if same_counts:
+        for j in range(n_neurons):
+            a = np.sort(ref.spike_t_ms[ref.spike_i == j])
+            b = np.sort(tight.spike_t_ms[tight.spike_i == j])
+            if len(a):
+                shift = max(shift, float(np.max(np.abs(a - b))))
+    else:
+        shift = spike_time_error_ms(ref.spike_i, ref.spike_t_ms, tight.spike_i,
+                                    tight.spike_t_ms, n_neurons)
+    return {"same_spike_counts": bool(same_counts), "max_shift_ms": shift}
 
 
 # -- stability map ---------------------------------------------------------------------------
@@ -200,3 +315,71 @@ def _largest_passing(k_dt: np.ndarray, passing: np.ndarray) -> float:
             break
         best = float(k_dt[j])
     return best
+
+
+@dataclass
+class StabilityGrid:
+    """The stability map's grid: ``n_k_dt`` log-spaced k·dt × constant ``drives``, each run
+    for ``model_ms`` of model time at the finest k·dt; accurate within ``rate_tolerance``."""
+    k_dt_min: float = 0.01
+    k_dt_max: float = 50.0
+    n_k_dt: int = 25
+    drives: list = field(default_factory=lambda: [
+        -50, -40, -30, -20, -10, -5, -1, -0.5, -0.15, 0, 0.15, 0.5, 1, 2, 5, 10, 20, 30, 40,
+        50])
+    model_ms: float = 400.0
+    rate_tolerance: float = 0.05
+
+    def map(self, methods, b: float | None = None) -> xr.Dataset:
+        return stability_map(methods, np.geomspace(self.k_dt_min, self.k_dt_max, self.n_k_dt),
+                             np.asarray(self.drives, float), b=b, model_ms=self.model_ms,
+                             rate_tolerance=self.rate_tolerance)
+
+
+def stability_limits(smap: xr.Dataset, k_max: float) -> dict:
+    """Per method: the shipped largest stable k·dt beside the measured ones, and the largest
+    dt the shipped limit allows for a band whose fastest neuron has ``k_max``."""
+    return {m: {"shipped_max_stable_k_dt": neurons.MAX_STABLE_K_DT[m],
+                "measured_max_stable_k_dt": float(smap.max_stable_k_dt.sel(integrator=m)),
+                "measured_max_accurate_k_dt": float(smap.max_accurate_k_dt.sel(integrator=m)),
+                "max_dt_ms_for_band": neurons.MAX_STABLE_K_DT[m] / k_max}
+            for m in smap.integrator.values}
+
+
+STATUS_COLOURS = ("#4caf50", "#ffc107", "#d32f2f")   # accurate, inaccurate, non-finite
+
+
+def stability_figure(smap: xr.Dataset):
+    """One panel per method: the status of every (constant drive, k·dt) cell."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    methods = list(smap.integrator.values)
+    fig, axes = plt.subplots(1, len(methods), figsize=(3.3 * len(methods) + 0.8, 4.0),
+                             sharey=True, squeeze=False, layout="constrained")
+    k_dt, drives = smap.k_dt.values, smap.I.values
+    for ax, m in zip(axes[0], methods):
+        ax.pcolormesh(np.arange(len(drives) + 1), np.arange(len(k_dt) + 1),
+                      smap.status.sel(integrator=m).values, cmap=ListedColormap(STATUS_COLOURS),
+                      vmin=ACCURATE, vmax=NON_FINITE, edgecolors="white", linewidth=0.3)
+        limit = float(smap.max_stable_k_dt.sel(integrator=m))
+        ax.set_title(f"{m} (finite to k·dt {limit:.3g})", fontsize=9)
+        _cell_ticks(ax.set_xticks, ax.set_xticklabels, drives, most=7)
+        ax.set_xlabel("constant drive I")
+        _cell_ticks(ax.set_yticks, ax.set_yticklabels, k_dt, most=13)
+    axes[0][0].set_ylabel("k·dt (model ms per step)")
+    fig.legend(handles=[Patch(color=c, label=CLASSES[status])
+                        for status, c in enumerate(STATUS_COLOURS)],
+               loc="outside lower center", ncol=3, fontsize=8, frameon=False)
+    return fig
+
+
+def _cell_ticks(set_ticks, set_labels, values, most: int) -> None:
+    """A tick at the centre of every cell, or of every few cells when there are many."""
+    step = max(1, int(np.ceil(len(values) / most)))
+    idx = np.arange(0, len(values), step)
+    set_ticks(idx + 0.5)
+    set_labels([f"{values[i]:.3g}" for i in idx], fontsize=7)
