@@ -233,3 +233,22 @@ def design_rows(designs: list[dict]) -> list[dict]:
              "neurons": d["n_neurons"], "distance (mm)": f"{d['distance_rmse_mm']:.2f}",
              "material (%)": f"{100 * d['material_accuracy']:.1f}",
              "µs/event": f"{d['wall_us_per_event']:.0f}"} for d in designs]
+
+
+def spiking_cost_text(summary: dict) -> str:
+    sp = summary["spiking"]
+    c = sp.get("cost") or {}
+    return (f"Spiking cost, measured in this run on {c.get('events_measured')} events: "
+            f"{c.get('features_us_per_event', 0):.0f} µs per event for the whole bank "
+            f"({sp['neurons_per_event']} resonators, coding + Brian2 {c.get('target')}), "
+            f"{c.get('neuron_steps_per_event', 0):.3g} neuron-steps per event, "
+            f"{c.get('ns_per_neuron_step', 0):.1f} ns per neuron-step; dt {sp['dt_ms']} ms, "
+            f"{sp['duration_s']} s per event.")
+
+
+def data_text(summary: dict) -> str:
+    d, sk = summary["data"], summary["data"]["skipped"]
+    return (f"Data: {d['n_events']} generated events, {d['n_processed']} processed; "
+            f"skipped: {sk.get('no_onset', 0)} without an onset, {sk.get('clipped', 0)} "
+            f"clipped, {sk.get('no_decay_fit', 0)} without a decay fit; spectrum of "
+            f"{d['n_bins']} bins at {d['rate_hz']:g} Hz.")

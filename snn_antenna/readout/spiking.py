@@ -196,6 +196,12 @@ class SpikingBank:
     def n_neurons(self) -> int:
         return sum(b.n_neurons for b in self.bands.values())
 
+    def description(self) -> dict:
+        """What a report says of the bank: its size, bands, Brian2 target and time step."""
+        return {"neurons_per_event": self.n_neurons,
+                "bands": {k: asdict(v) for k, v in self.bands.items()},
+                "target": self.target, "dt_ms": self.dt_ms, "duration_s": self.duration_s}
+
     def code(self, counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float
              ) -> np.ndarray:
         """Coded inputs (n_samples, n_events × n_bands), column e·n_bands + j for event e

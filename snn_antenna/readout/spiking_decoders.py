@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import xarray as xr
 
+from .. import spec as specs
 from ..errors import check
 from . import baselines as bl
 from .spiking import (Band, CentroidDistance, DominantNeuronDistance, SpikingBank,
@@ -146,7 +147,32 @@ class Design:
         return replace(bank, bands={self.band: self.band_of(bank)})
 
 
-def run_designs(data: xr.Dataset, features: xr.Dataset, bank: SpikingBank, designs: list,
+@dataclass
+class SpikingPlan:
+    """The spiking read-out to compare (a study's ``[spiking]`` table).
+
+    ``bank`` holds ``spiking.SpikingBank`` fields (its bands as ``[spiking.bank.bands.NAME]``);
+    ``designs`` is a list of array variants, each ``{name, band, ...Band fields}``, run on the
+    events of the first ``design_repetitions`` repetitions and decoded on the first split;
+    ``cost_sample_events`` events are timed for the cost per event.
+    """
+    bank: dict = field(default_factory=dict)
+    designs: list = field(default_factory=list)
+    design_repetitions: int = 10
+    cost_sample_events: int = 400
+
+    def build(self, rate_hz: float) -> tuple[SpikingBank, list[Design]]:
+        """The bank and its designs, checked (for input sampled at ``rate_hz``)."""
+        with specs.section("bank"):
+            bank = SpikingBank(**self.bank)
+        designs = [Design.from_table(d, i, bank) for i, d in enumerate(self.designs)]
+        check(isinstance(self.design_repetitions, int) and self.design_repetitions >= 2,
+              "design_repetitions", self.design_repetitions, "an integer >= 2")
+        bank.check_rate(rate_hz)
+        return bank, designs
+
+
+def run_designs(data: xr.Dataset, features: xr.Dataset, bank: SpikingBank, designs: list, *,
                 repetitions: int, evaluation: bl.Evaluation, log=print) -> list[dict]:
     """Each design on the events of the first ``repetitions`` repetitions: distance rmse and
     material accuracy on the first seed's split, and its cost per event."""

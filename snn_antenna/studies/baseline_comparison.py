@@ -8,23 +8,23 @@ by repetition for several seeds. The report puts every number beside the paper's
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from .. import spec as specs
-from ..errors import SpecError, check
+from ..errors import SpecError
 from ..files import write_json
 from ..readout import baselines as bl
 from ..readout import comparison_figures as figures
 from ..readout import events
 from ..readout.comparison import Comparison, interval, label
-from ..readout.comparison import (cost_rows, design_rows, result_rows, spiking_distance_rows,
-                                  spiking_rows)
+from ..readout.comparison import (cost_rows, data_text, design_rows, result_rows,
+                                  spiking_cost_text, spiking_distance_rows, spiking_rows)
 from ..readout.confusion import confusion, confusion_sentence, error_rates
 from ..readout.spiking import SpikingBank, cached_features, run_cost
-from ..readout.spiking_decoders import (TRAINING_FREE, Design, decoder_inputs,
+from ..readout.spiking_decoders import (TRAINING_FREE, Design, SpikingPlan, decoder_inputs,
                                         neurons_per_input, run_designs, spiking_baselines)
 from ..report import Calibrated, Predicted, Report
 from ..sources import bench
@@ -39,20 +39,6 @@ QUICK_NOTE = ("Quick profile: 10 contacts per material and site, 2 seeds. The si
               "paper's test) are comparable with the full run; every classifier and regressor "
               "here trained on a tenth of the contacts, so accuracies, rmse and the confusion "
               "matrix are too small to compare with the paper or the full run.")
-
-
-@dataclass
-class SpikingPlan:
-    """The spiking read-out to compare (``[spiking]``; absent: FFT baselines only).
-
-    ``bank`` holds ``spiking.SpikingBank`` fields (its bands as ``[spiking.bank.bands.NAME]``);
-    ``designs`` is a list of array variants, each ``{name, band, ...Band fields}``, run on the
-    events of the first ``design_repetitions`` repetitions and decoded on the first split.
-    """
-    bank: dict = field(default_factory=dict)
-    designs: list = field(default_factory=list)
-    design_repetitions: int = 10
-    cost_sample_events: int = 400
 
 
 @dataclass
@@ -72,13 +58,7 @@ def _spiking_part(spec: dict, rate_hz: float) -> tuple:
         return None, None, []
     with specs.section("spiking"):
         plan = SpikingPlan(**specs.check_section(spec, "spiking", SpikingPlan))
-        with specs.section("bank"):
-            bank = SpikingBank(**plan.bank)
-        designs = [Design.from_table(d, i, bank) for i, d in enumerate(plan.designs)]
-        check(isinstance(plan.design_repetitions, int) and plan.design_repetitions >= 2,
-              "design_repetitions", plan.design_repetitions, "an integer >= 2")
-        bank.check_rate(rate_hz)
-    return plan, bank, designs
+        return (plan, *plan.build(rate_hz))
 
 
 def build(spec: dict) -> StudySpec:
@@ -104,22 +84,7 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
     parts = build(spec)
     out_dir, t_start = Path(out_dir), time.perf_counter()
     stages = 5 if parts.bank is not None else 4
-    log(f"[1/{stages}] bench data set: {parts.bench.n_events} events at "
-        f"{parts.bench.rate_hz:g} Hz")
-    data, everything = events.load_features(parts.bench, parts.processor, log, fresh)
-    data_s = time.perf_counter() - t_start
-    skipped = events.skip_counts(everything)
-    feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
-    log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
-    log(f"[2/{stages}] calibration against the paper's signal measurements")
-    signal = events.signal_statistics(feats)
-    log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
-        f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
-    n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
-    costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
-    cmp = Comparison(feats, signal, {}, skipped, costs, data={
-        "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
-        "bench_key": parts.bench.key()})
+    data, cmp, data_s = _signal_stage(parts, stages, log, fresh)
     extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh)
     log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
         "repetition")
@@ -127,7 +92,8 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
     cmp.results = bl.evaluate(cmp.features, chosen, parts.evaluation, log)
     if parts.designs:
         cmp.designs = run_designs(data, cmp.features, parts.bank, parts.designs,
-                                  parts.plan.design_repetitions, parts.evaluation, log)
+                                  repetitions=parts.plan.design_repetitions,
+                                  evaluation=parts.evaluation, log=log)
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
@@ -142,6 +108,29 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
     return summary
 
 
+def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
+    """The bench data set, its processed events and their statistics beside the paper's,
+    and the FFT's cost per event: (data, a Comparison with no results yet, the seconds
+    spent making or loading the data and its features)."""
+    log(f"[1/{stages}] bench data set: {parts.bench.n_events} events at "
+        f"{parts.bench.rate_hz:g} Hz")
+    t0 = time.perf_counter()
+    data, everything = events.load_features(parts.bench, parts.processor, log, fresh)
+    data_s = time.perf_counter() - t0
+    skipped = events.skip_counts(everything)
+    feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
+    log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
+    log(f"[2/{stages}] calibration against the paper's signal measurements")
+    signal = events.signal_statistics(feats)
+    log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
+        f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
+    n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
+    costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
+    return data, Comparison(feats, signal, {}, skipped, costs, data={
+        "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
+        "bench_key": parts.bench.key()}), data_s
+
+
 def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh) -> list:
     """Run the bank over every event (cached), add its decoder inputs to ``cmp.features``,
     measure its cost; the spiking decoders to evaluate with the baselines."""
@@ -154,9 +143,7 @@ def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fre
     spikes = cached_features(data, bank, parts.bench, log, fresh)
     cmp.features = decoder_inputs(cmp.features, spikes)
     cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
-    cmp.spiking = {"neurons_per_event": bank.n_neurons, "neurons": neurons_per_input(spikes),
-                   "bands": {k: asdict(v) for k, v in bank.bands.items()},
-                   "target": bank.target, "dt_ms": bank.dt_ms, "duration_s": bank.duration_s}
+    cmp.spiking = {**bank.description(), "neurons": neurons_per_input(spikes)}
     return spiking_baselines(spikes, parts.evaluation)
 
 
@@ -199,7 +186,7 @@ def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
     report.calibrated(*rows)
 
 
-def _measured(quantity: str, values, unit: str, paper, scale: float = 1.0,
+def _measured(quantity: str, values, unit: str, paper, scale: float = 1.0, *,
               source: str = SOURCE, note: str = "") -> Predicted:
     """A prediction from per-seed values: ``scale`` × their mean, with its interval."""
     values = np.asarray(values, dtype=float)
@@ -231,9 +218,9 @@ def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:
                            r.note) for r in error_rates(cm, cmp.materials)]
     for name, row in (summary.get("spiking") or {}).get("against_fft", {}).items():
         pred.append(_measured(f"8 materials, {label(name)}", results[name].values("accuracy"),
-                              "%", None, 100, "this run (no spiking material result in the "
-                              "paper)", f"{100 * row['fraction_of_fft_mlp']:.0f} % of the "
-                              "full-spectrum MLP"))
+                              "%", None, 100, source="this run (no spiking material result in "
+                              "the paper)", note=f"{100 * row['fraction_of_fft_mlp']:.0f} % of "
+                              "the full-spectrum MLP"))
     report.predicted(*pred)
 
 
@@ -267,7 +254,7 @@ def _write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) ->
     free = [k for k in TRAINING_FREE if k in results]
     if free:
         report.table([{"decoder": label(k), "distance rmse (mm)":
-                       f"{results[k].summary['rmse_mm']:.2f}"} for k in free],
+                       f"{summary['distance_rmse_mm'][k]['mean']:.2f}"} for k in free],
                      "Self-consistency, not a result: these decoders learn nothing and invert "
                      "the generator's own frequency law, so they show the simulator agreeing "
                      "with itself; they are not compared with the paper.")
@@ -280,11 +267,7 @@ def _write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) ->
                   "are keyed in the table below.")
     report.table(cost_rows(summary), "Cost: inference per event and training wall time "
                                      "(mean over seeds)")
-    d, sk = summary["data"], summary["data"]["skipped"]
-    report.text(f"Data: {d['n_events']} generated events, {d['n_processed']} processed; "
-                f"skipped: {sk.get('no_onset', 0)} without an onset, {sk.get('clipped', 0)} "
-                f"clipped, {sk.get('no_decay_fit', 0)} without a decay fit; spectrum of "
-                f"{d['n_bins']} bins at {cmp.features.attrs['rate_hz']:g} Hz.")
+    report.text(data_text(summary))
 
 
 def _write_materials(report: Report, summary: dict, cmp: Comparison) -> None:
@@ -308,7 +291,6 @@ def _write_materials(report: Report, summary: dict, cmp: Comparison) -> None:
 
 
 def _write_spiking(report: Report, summary: dict) -> None:
-    sp = summary["spiking"]
     report.heading("Spiking read-out beside the FFT")
     report.table(spiking_rows(summary),
                  "8-material accuracy on the same contacts and splits; fraction of the "
@@ -316,13 +298,7 @@ def _write_spiking(report: Report, summary: dict) -> None:
                  "as resonators, paired by seed. Cost: coding + Brian2, charged by the "
                  "read-out's share of the bank's resonators.")
     report.table(spiking_distance_rows(summary), "Distance from spiking features (MLP 20-5)")
-    c = sp.get("cost") or {}
-    report.text(f"Spiking cost, measured in this run on {c.get('events_measured')} events: "
-                f"{c.get('features_us_per_event', 0):.0f} µs per event for the whole bank "
-                f"({sp['neurons_per_event']} resonators, coding + Brian2 {c.get('target')}), "
-                f"{c.get('neuron_steps_per_event', 0):.3g} neuron-steps per event, "
-                f"{c.get('ns_per_neuron_step', 0):.1f} ns per neuron-step; dt {sp['dt_ms']} ms, "
-                f"{sp['duration_s']} s per event.")
-    if sp.get("designs"):
-        report.table(design_rows(sp["designs"]), "Array designs (one band changed at a time, "
-                     "first split, events of the first repetitions only)")
+    report.text(spiking_cost_text(summary))
+    if summary["spiking"].get("designs"):
+        report.table(design_rows(summary["spiking"]["designs"]), "Array designs (one band "
+                     "changed at a time, first split, events of the first repetitions only)")
