@@ -10,8 +10,8 @@ runs once per batch, never once per event.
 Two bands (``Band``):
 
 - ``low``: the paper's array (its 7–30 Hz widened to the bench's 8–50 Hz low mode), input
-  low-passed below the band's top; the most active neuron's frequency gives the distance
-  through the inverse low-mode law (the paper's Fig. 10E).
+  low-passed below the band's top; the dominant neuron's frequency (``contacts.dominant_hz``)
+  gives the distance through the inverse low-mode law (the paper's Fig. 10E).
 - ``high``: resonators over the high mode (55–500 Hz: k up to ~20, so dt ≤ 0.4 ms for
   ``euler``), input band-passed to 50–900 Hz. A resonator keeps firing while its mode rings
   above the coder's threshold, so how long each fires carries the decay time, which is where
