@@ -7,6 +7,7 @@ import pytest
 from snn_antenna import spec as specs
 from snn_antenna.cli import main
 from snn_antenna.errors import SpecError
+from snn_antenna.readout.spiking_decoders import TRAINING_FREE
 from snn_antenna.studies import baseline_comparison as study
 
 SPEC = "studies/baseline_comparison.toml"
@@ -83,7 +84,7 @@ def test_report_numbers_are_recomputed_from_the_predictions(tiny_run):
             rmse = [10 * np.sqrt(np.mean((np.array(f["predicted"]) - f["true"]) ** 2))
                     for f in folds]
             assert stored["distance_rmse_mm"][name]["mean"] == pytest.approx(np.mean(rmse))
-            if name in study.TRAINING_FREE:   # shown once, as a self-consistency check
+            if name in TRAINING_FREE:   # shown once, as a self-consistency check
                 table = html[html.index("Self-consistency"):][:3000]
                 assert f"{np.mean(rmse):.2f}" in table
             else:
@@ -117,5 +118,7 @@ def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
         study.build(specs.load(SPEC, ["spiking.bank.bin_edges_s=[0.3,0.1]"]))
     with pytest.raises(SpecError, match="stimulus.material"):
         study.build(specs.load(SPEC, ["stimulus.materials=['wood','granite']"]))
+    with pytest.raises(SpecError, match=r"spiking.designs\[0\]"):
+        study.build(specs.load(SPEC, ["spiking.designs=[{name='x', band='low', bogus=1}]"]))
     assert main(["run", SPEC, "--out", str(tmp_path), "--set", "events.split_hz=5000"]) == 2
     assert "events.split_hz" in capsys.readouterr().err

@@ -94,6 +94,26 @@ def test_spiking_decoders_recover_distance_on_positions_not_trained_on():
     assert 10 * np.sqrt(np.mean(err ** 2)) < 0.35 * spread_mm
 
 
+def test_the_dominant_neuron_is_the_read_outs_one_rule():
+    """Spike counts follow ``contacts.dominant_hz``: a plateau of tied neurons gives its
+    centre (a plain argmax would give its lowest neuron), silence gives 0 Hz."""
+    import xarray as xr
+
+    from snn_antenna.readout.contacts import dominant_hz
+    from snn_antenna.readout.spiking import SpikeFeatures
+
+    hz = np.array([8.0, 10.0, 12.0, 14.0, 16.0])
+    counts = np.array([[0, 5, 5, 5, 0], [0, 0, 0, 0, 0], [1, 2, 3, 2, 1]])
+    feats = SpikeFeatures(counts, np.zeros_like(counts, float), np.zeros_like(counts, float),
+                          hz, np.array(["low"] * 5), 0.5)
+    assert feats.dominant_hz("low").tolist() == [12.0, 0.0, 12.0]
+    rates = xr.DataArray(counts.astype(float), dims=("event", "neuron_hz"),
+                         coords={"neuron_hz": hz})
+    assert np.array_equal(feats.dominant_hz("low"), dominant_hz(rates).values)
+    law = DominantNeuronDistance(hz).fit(counts).predict(counts)
+    assert law[0] == law[2] and law[0] != law[1]
+
+
 def test_spike_summary_known_answer():
     counts, first, span = spike_summary(np.array([1, 1, 1, 3]), np.array([0.1, 0.3, 0.2, 0.4]),
                                         4, 0.5)

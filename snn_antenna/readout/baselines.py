@@ -31,6 +31,12 @@ from ..errors import SpecError, check
 from .events import PARAMETERS
 
 NMF_DIMENSIONS = (3, 5, 9, 15, 30, 45, 60)
+# The paper's hidden layers: 20-5 for distance, 51 for the eight materials, 8 for its
+# two-output (distance, wood/aluminium) network.
+DISTANCE_HIDDEN = (20, 5)
+MATERIAL_HIDDEN = (51,)
+TWO_MATERIAL_HIDDEN = (8,)
+TASKS = ("distance", "material", "two_material")
 
 
 def columns(index) -> FunctionTransformer:
@@ -114,12 +120,22 @@ class Baseline:
     paper: float | None = None       # the paper's number for this pipeline (mm or fraction)
 
 
+def regressor_pipeline(mlp: Mlp, hidden, seed: int, *steps) -> TransformedTargetRegressor:
+    """``steps`` (e.g. a column selection), scaled inputs, an MLP regressor; the target is
+    scaled too, so the MLP learns at one rate across cm and %."""
+    return TransformedTargetRegressor(
+        make_pipeline(*steps, StandardScaler(), mlp.regressor(hidden, seed)),
+        transformer=StandardScaler())
+
+
+def classifier_pipeline(mlp: Mlp, hidden, seed: int, *steps):
+    """``steps`` (e.g. an NMF filter bank), scaled inputs, an MLP classifier."""
+    return make_pipeline(*steps, StandardScaler(), mlp.classifier(hidden, seed))
+
+
 def distance_baselines(n_bins: int, mlp: Mlp = Mlp()) -> list[Baseline]:
-    def scaled_mlp(select, hidden=(20, 5)):
-        # The target is scaled too: the MLP then learns at one rate across cm and %.
-        return lambda seed: TransformedTargetRegressor(
-            make_pipeline(select, StandardScaler(), mlp.regressor(hidden, seed)),
-            transformer=StandardScaler())
+    def scaled_mlp(select):
+        return lambda seed: regressor_pipeline(mlp, DISTANCE_HIDDEN, seed, select)
     return [
         Baseline("linear_low_peak", "distance", "params",
                  lambda seed: make_pipeline(columns(_param("F_low")), FunctionTransformer(np.log10),
@@ -142,14 +158,13 @@ def distance_baselines(n_bins: int, mlp: Mlp = Mlp()) -> list[Baseline]:
 def material_baselines(nmf_dims=NMF_DIMENSIONS, mlp: Mlp = Mlp(),
                        nmf_max_iter: int = 400) -> list[Baseline]:
     out = [Baseline("mlp_spectrum_material", "material", "spectrum",
-                    lambda seed: make_pipeline(StandardScaler(), mlp.classifier((51,), seed)),
+                    lambda seed: classifier_pipeline(mlp, MATERIAL_HIDDEN, seed),
                     "MLP with 51 hidden on the full spectrum, 8 materials", 0.942)]
     for n in nmf_dims:
         out.append(Baseline(
             f"nmf_{n}", "material", "spectrum",
-            lambda seed, n=n: make_pipeline(
-                NMFFilterBank(n, nmf_max_iter, random_state=seed),
-                StandardScaler(), mlp.classifier((51,), seed)),
+            lambda seed, n=n: classifier_pipeline(
+                mlp, MATERIAL_HIDDEN, seed, NMFFilterBank(n, nmf_max_iter, random_state=seed)),
             f"NMF to {n} band-pass filters, then the 51-hidden MLP",
             0.86 if n == 30 else None))
     return out
@@ -159,11 +174,58 @@ def two_material_baseline(mlp: Mlp = Mlp()) -> Baseline:
     """The paper's 5-8-2 network: parametric inputs, outputs distance and material."""
     return Baseline(
         "mlp_5_8_2", "two_material", "params",
-        lambda seed: TransformedTargetRegressor(
-            make_pipeline(columns(_param("A_low", "F_low", "A_high", "F_high", "tau_low")),
-                          StandardScaler(), mlp.regressor((8,), seed)),
-            transformer=StandardScaler()),
+        lambda seed: regressor_pipeline(
+            mlp, TWO_MATERIAL_HIDDEN, seed,
+            columns(_param("A_low", "F_low", "A_high", "F_high", "tau_low"))),
         "MLP 5-8-2 (A, F of both modes and τ_low) → distance and wood/aluminium")
+
+
+@dataclass
+class Evaluation:
+    """How the baselines are trained and tested (keys of a study's ``[evaluation]``)."""
+    seeds: list = field(default_factory=lambda: [0, 1, 2])
+    test_fraction: float = 0.3
+    nmf_dims: list = field(default_factory=lambda: list(NMF_DIMENSIONS))
+    nmf_max_iter: int = 400
+    mlp_max_iter: int = 300
+    # The 8-material MLPs stop improving early and cost most per epoch, so they get their
+    # own, smaller epoch budget (the study's spec says where it was measured).
+    material_max_iter: int = 60
+    pipelines: list = field(default_factory=lambda: list(TASKS))
+
+    def __post_init__(self):
+        check(isinstance(self.seeds, list) and len(self.seeds) >= 1 and
+              all(isinstance(s, int) and s >= 0 for s in self.seeds), "seeds", self.seeds,
+              "a non-empty list of integer seeds >= 0")
+        check(0 < self.test_fraction < 1, "test_fraction", self.test_fraction,
+              "a fraction in (0, 1)")
+        check(isinstance(self.nmf_dims, list) and all(isinstance(n, int) and n >= 1
+                                                      for n in self.nmf_dims),
+              "nmf_dims", self.nmf_dims, "a list of integers >= 1")
+        for name in ("nmf_max_iter", "mlp_max_iter", "material_max_iter"):
+            value = getattr(self, name)
+            check(isinstance(value, int) and value >= 1, name, value, "an integer >= 1")
+        check(set(self.pipelines) <= set(TASKS), "pipelines", self.pipelines,
+              f"a list of task groups out of {sorted(TASKS)}")
+
+    @property
+    def mlp(self) -> Mlp:
+        return Mlp(max_iter=self.mlp_max_iter)
+
+    @property
+    def material_mlp(self) -> Mlp:
+        return Mlp(max_iter=self.material_max_iter)
+
+    def baselines(self, n_bins: int) -> list[Baseline]:
+        """The FFT and parametric pipelines of the chosen task groups."""
+        chosen = []
+        if "distance" in self.pipelines:
+            chosen += distance_baselines(n_bins, self.mlp)
+        if "material" in self.pipelines:
+            chosen += material_baselines(self.nmf_dims, self.material_mlp, self.nmf_max_iter)
+        if "two_material" in self.pipelines:
+            chosen.append(two_material_baseline(self.mlp))
+        return chosen
 
 
 # -- splits ---------------------------------------------------------------------------------
@@ -256,6 +318,66 @@ def summarise(folds: list[dict]) -> dict:
     return out
 
 
-__all__ = ["Baseline", "Mlp", "distance_baselines", "material_baselines",
-           "two_material_baseline", "split_by_repetition", "fit_fold", "score", "summarise",
-           "inputs_of", "targets_of", "columns", "NMF_DIMENSIONS", "NMFFilterBank"]
+@dataclass
+class BaselineResult:
+    """One baseline over every seed's split: its folds, their scores and their summary;
+    ``event`` and ``y`` are the event ids and targets the folds index into."""
+    baseline: Baseline
+    folds: list[Fold]
+    scores: list[dict]
+    summary: dict
+    event: np.ndarray
+    y: np.ndarray
+
+    def values(self, key: str) -> np.ndarray:
+        """One score (``rmse_mm`` or ``accuracy``) per seed."""
+        return np.array([s[key] for s in self.scores], dtype=float)
+
+
+def evaluate(features: xr.Dataset, baselines: list[Baseline], evaluation: Evaluation,
+             log=print) -> dict[str, BaselineResult]:
+    """Train and test every baseline on every seed's split by repetition."""
+    from threadpoolctl import threadpool_limits
+    from tqdm.auto import tqdm
+
+    materials = sorted(set(features["material"].values.astype(str)))
+    results = {}
+    bar = tqdm(total=len(baselines) * len(evaluation.seeds), desc="baselines", unit="fit")
+    # One BLAS thread: on a shared machine, threads spin against other processes (the
+    # material MLP ran several times slower with the default thread count).
+    with threadpool_limits(1):
+        for b in baselines:
+            results[b.name] = _evaluate_one(b, features, materials, evaluation, bar.update)
+            log(f"  {b.name:24s} " + ", ".join(
+                f"{k} {v:.4g}" for k, v in results[b.name].summary.items()
+                if not k.endswith("_sd") and k != "n_seeds"))
+    bar.close()
+    return results
+
+
+def _evaluate_one(b: Baseline, features: xr.Dataset, materials: list[str],
+                  evaluation: Evaluation, tick) -> BaselineResult:
+    keep = np.ones(features.sizes["event"], dtype=bool)
+    if b.task == "two_material":
+        keep = np.isin(features["material"].values.astype(str), ["wood", "aluminium"])
+    sub = features.isel(event=np.flatnonzero(keep))
+    X, y = inputs_of(sub, b.inputs), targets_of(sub, b.task, materials)
+    folds, scores = [], []
+    for seed in evaluation.seeds:
+        train, test = split_by_repetition(sub["repetition"].values, evaluation.test_fraction,
+                                          seed)
+        fold = fit_fold(b, X, y, train, test, seed)
+        folds.append(fold)
+        scores.append(score(b.task, y[test], fold.prediction))
+        tick()
+    summary = summarise(scores)
+    summary["fit_s"] = float(np.mean([f.fit_s for f in folds]))
+    summary["predict_us_per_event"] = float(1e6 * np.mean([f.predict_s_per_event
+                                                           for f in folds]))
+    return BaselineResult(b, folds, scores, summary, sub["event"].values, y)
+
+
+__all__ = ["Baseline", "BaselineResult", "Evaluation", "Mlp", "distance_baselines",
+           "material_baselines", "two_material_baseline", "regressor_pipeline",
+           "classifier_pipeline", "split_by_repetition", "fit_fold", "score", "summarise",
+           "evaluate", "inputs_of", "targets_of", "columns", "NMF_DIMENSIONS", "NMFFilterBank"]

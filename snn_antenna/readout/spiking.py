@@ -10,8 +10,8 @@ runs once per batch, never once per event.
 Two bands (``Band``):
 
 - ``low``: the paper's array (its 7–30 Hz widened to the bench's 8–50 Hz low mode), input
-  low-passed below the band's top; the most active neuron's frequency gives the distance
-  through the inverse low-mode law (the paper's Fig. 10E).
+  low-passed below the band's top; the dominant neuron's frequency (``contacts.dominant_hz``)
+  gives the distance through the inverse low-mode law (the paper's Fig. 10E).
 - ``high``: resonators over the high mode (55–500 Hz: k up to ~20, so dt ≤ 0.4 ms for
   ``euler``), input band-passed to 50–900 Hz. A resonator keeps firing while its mode rings
   above the coder's threshold, so how long each fires carries the decay time, which is where
@@ -33,9 +33,11 @@ neurons' preferred frequencies.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
 
 import numpy as np
+import xarray as xr
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
@@ -46,6 +48,7 @@ from ..errors import SpecError, check
 from ..networks.resonators import ResonatorArray
 from ..sources.antenna import ADC
 from ..preprocess import make_chain
+from .contacts import centroid_hz, dominant_hz
 
 
 @dataclass
@@ -111,10 +114,31 @@ class SpikeFeatures:
                              else self.binned_counts[:, keep])
 
     def dominant_hz(self, band: str = "low") -> np.ndarray:
-        """Preferred frequency of each event's most active neuron in ``band`` (0: silent)."""
+        """Preferred frequency of each event's dominant neuron in ``band`` (0: silent), by
+        ``contacts.dominant_hz``'s rule (ties go to the plateau's centre)."""
         sub = self.select([band])
-        best = np.argmax(sub.counts, axis=1)
-        return np.where(sub.counts.max(axis=1) > 0, sub.neuron_hz[best], 0.0)
+        return dominant_of_counts(sub.counts, sub.neuron_hz)
+
+    def to_dataset(self, event, bin_edges_s) -> xr.Dataset:
+        """The features as a data set (event × neuron), as ``cached_features`` stores them."""
+        return xr.Dataset(
+            {"counts": (("event", "neuron"), self.counts.astype(np.int32)),
+             "latency_s": (("event", "neuron"), self.latency_s),
+             "span_s": (("event", "neuron"), self.span_s),
+             "binned_counts": (("event", "neuron", "time_bin"),
+                               self.binned_counts.astype(np.int32))},
+            coords={"event": np.asarray(event), "neuron_hz": ("neuron", self.neuron_hz),
+                    "band": ("neuron", self.band.astype(str)),
+                    "bin_start_s": ("time_bin", [0.0, *bin_edges_s])},
+            attrs={"simulation_wall_s": self.wall_s, "neuron_steps": self.neuron_steps})
+
+
+def dominant_of_counts(counts, neuron_hz) -> np.ndarray:
+    """Dominant neuron's preferred frequency per row of spike ``counts`` (events × neurons
+    tuned to ``neuron_hz``): ``contacts.dominant_hz`` on them, 0 where all stayed silent."""
+    rates = xr.DataArray(np.asarray(counts, dtype=float), dims=("event", "neuron_hz"),
+                         coords={"neuron_hz": np.asarray(neuron_hz, dtype=float)})
+    return dominant_hz(rates).values
 
 
 @dataclass
@@ -171,6 +195,12 @@ class SpikingBank:
     @property
     def n_neurons(self) -> int:
         return sum(b.n_neurons for b in self.bands.values())
+
+    def description(self) -> dict:
+        """What a report says of the bank: its size, bands, Brian2 target and time step."""
+        return {"neurons_per_event": self.n_neurons,
+                "bands": {k: asdict(v) for k, v in self.bands.items()},
+                "target": self.target, "dt_ms": self.dt_ms, "duration_s": self.duration_s}
 
     def code(self, counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float
              ) -> np.ndarray:
@@ -249,10 +279,10 @@ def align_events(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.n
 
 
 class DominantNeuronDistance(RegressorMixin, BaseEstimator):
-    """The paper's decoder (Fig. 10E) as an estimator: the most active neuron's preferred
-    frequency → distance through the inverse low-mode law. Nothing is learnt; ``fit`` only
-    checks the input width. X holds spike counts of neurons tuned to ``neuron_hz``; an event
-    where all stayed silent gets the middle of the calibrated range."""
+    """The paper's decoder (Fig. 10E) as an estimator: the dominant neuron's preferred
+    frequency (``contacts.dominant_hz``) → distance through the inverse low-mode law. Nothing
+    is learnt; ``fit`` only checks the input width. X holds spike counts of neurons tuned to
+    ``neuron_hz``; an event where all stayed silent gets the middle of the calibrated range."""
 
     def __init__(self, neuron_hz=None):
         self.neuron_hz = neuron_hz
@@ -264,12 +294,7 @@ class DominantNeuronDistance(RegressorMixin, BaseEstimator):
         return self
 
     def predict(self, X):
-        X = np.asarray(X)
-        hz = np.asarray(self.neuron_hz, dtype=float)[np.argmax(X, axis=1)]
-        out = np.full(len(X), float(np.mean(antenna.CALIBRATED_RANGE_CM)))
-        fired = X.max(axis=1) > 0
-        out[fired] = antenna.distance_from_low_hz(hz[fired])
-        return out
+        return _distance_from_hz(dominant_of_counts(X, self.neuron_hz))
 
 
 class CentroidDistance(DominantNeuronDistance):
@@ -280,16 +305,16 @@ class CentroidDistance(DominantNeuronDistance):
     above its centroid."""
 
     def predict(self, X):
-        import xarray as xr
-
-        from .contacts import centroid_hz
-
         rates = xr.DataArray(np.asarray(X, dtype=float), dims=("event", "neuron_hz"),
                              coords={"neuron_hz": np.asarray(self.neuron_hz, dtype=float)})
-        f = centroid_hz(rates).values
-        out = np.full(len(f), float(np.mean(antenna.CALIBRATED_RANGE_CM)))
-        out[f > 0] = antenna.distance_from_low_hz(f[f > 0])
-        return out
+        return _distance_from_hz(centroid_hz(rates).values)
+
+
+def _distance_from_hz(f: np.ndarray) -> np.ndarray:
+    """Inverse low-mode law; 0 Hz (silent) → the middle of the calibrated range."""
+    out = np.full(len(f), float(np.mean(antenna.CALIBRATED_RANGE_CM)))
+    out[f > 0] = antenna.distance_from_low_hz(f[f > 0])
+    return out
 
 
 def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndarray:
@@ -319,3 +344,57 @@ def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndar
     counts, latency, span = spike_summary(event * n + i, t - event * window_s, n * n_events,
                                           window_s)
     return np.hstack([x.reshape(n_events, n) for x in (counts, latency, span)]).astype(float)
+
+
+# -- whole bench data sets: cached features and measured cost ------------------------------
+def cached_features(data: xr.Dataset, bank: SpikingBank, bench_spec, log=print,
+                    fresh: bool = False) -> xr.Dataset:
+    """Spiking features of every event of a bench data set (``bench_spec`` made it), cached
+    on disk, keyed by the data set, the bank and the source of the code that simulates."""
+    import sys
+
+    from .. import preprocess
+    from ..sources import bench
+
+    key = bench.source_hash({"bench": bench_spec.key(), "bank": _bank_fields(bank)},
+                            sys.modules[__name__], neurons, preprocess)
+    path = Path(bench_spec.cache_dir) / f"spiking-{key}.zarr"
+
+    def compute():
+        f = bank.run(data["counts"].values, *recording_attrs(data))
+        log(f"      {data.sizes['event']} events: {f.neuron_steps:.3g} neuron-steps in "
+            f"{f.wall_s:.1f} s of simulation")
+        return f.to_dataset(data["event"].values, bank.bin_edges_s)
+    return bench.cached(path, compute, log, fresh)
+
+
+def _bank_fields(bank: SpikingBank) -> dict:
+    d = asdict(bank)
+    d["bands"] = {k: {kk: (list(vv) if isinstance(vv, tuple) else vv) for kk, vv in v.items()}
+                  for k, v in d["bands"].items()}
+    return d
+
+
+def recording_attrs(data: xr.Dataset) -> tuple[float, int, float]:
+    """(rate_hz, adc_bits, full_scale_g) of a bench data set, as ``SpikingBank.run`` takes."""
+    return (float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"]),
+            float(data.attrs["full_scale_g"]))
+
+
+def run_cost(data: xr.Dataset, bank: SpikingBank, n_events: int) -> dict:
+    """Wall time (coding + Brian2) and neuron-steps per event, measured now on ``n_events``
+    events spread over the data set, in one batch (after a warm-up run on two of them:
+    code generation, compiling)."""
+    ids = np.linspace(0, data.sizes["event"] - 1, n_events).astype(int)
+    sample = data["counts"].values[ids]
+    one = replace(bank, batch_events=max(bank.batch_events, n_events))
+    attrs = recording_attrs(data)
+    one.run(sample[:2], *attrs, progress=False)
+    t0 = time.perf_counter()
+    f = one.run(sample, *attrs, progress=False)
+    total = time.perf_counter() - t0
+    return {"features_us_per_event": 1e6 * total / n_events,
+            "simulation_us_per_event": 1e6 * f.wall_s / n_events,
+            "neuron_steps_per_event": f.neuron_steps / n_events,
+            "ns_per_neuron_step": 1e9 * f.wall_s / f.neuron_steps,
+            "events_measured": n_events, "target": bank.target}

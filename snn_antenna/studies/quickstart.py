@@ -21,12 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 import xarray as xr
-from scipy import stats
 
 from ..sources import antenna
 from ..networks import neurons
 from .. import spec as specs
 from ..errors import check
+from ..readout.matches import contact_rows, poisson_interval
 from ..readout.scoring import score as score_detections
 from ..networks.resonators import ResonatorArray
 from ..preprocess import fit_warmup, make_chain
@@ -113,39 +113,16 @@ def read_out(samples: np.ndarray, rate_hz: float, parts: Parts) -> ReadOut:
                    int(len(result.spike_i)), result.wall_s)
 
 
-def first_match(detections: list[ContactEstimate], contact, window_s: float):
-    """The detection that scores ``contact`` (``gating.score``'s rule: the first one starting
-    between one window before the contact and the end of its hold), or None."""
-    hits = [d for d in detections
-            if contact.t_s - window_s <= d.onset_s < contact.t_s + max(contact.duration_s,
-                                                                       window_s)]
-    return min(hits, key=lambda d: d.onset_s) if hits else None
-
-
 def score(readout: ReadOut, contacts, duration_s: float, parts: Parts) -> dict:
     """Score the read-out against the ground truth, after it has run."""
     s = score_detections(readout.detections, contacts, duration_s, parts.detector,
                          parts.array, parts.window_s, settle_s=parts.warmup_s)
-    minutes = s.minutes
-    # Exact (Garwood) 95 % interval of a Poisson count, from scipy's chi² quantiles.
-    low = stats.chi2.ppf(0.025, 2 * s.fp) / 2 if s.fp else 0.0
-    high = stats.chi2.ppf(0.975, 2 * s.fp + 2) / 2
-    per_contact = []
-    for c in sorted(contacts, key=lambda c: c.t_s):
-        if c.t_s < parts.warmup_s:
-            continue
-        m = first_match(readout.detections, c, parts.window_s)
-        per_contact.append({
-            "true_t_s": c.t_s, "true_distance_cm": c.distance_cm, "material": c.material,
-            "detected_s": m.onset_s if m else None,
-            "latency_s": (m.onset_s + parts.window_s - c.t_s) if m else None,
-            "frequency_hz": m.frequency_hz if m else None,
-            "distance_cm": m.distance_cm if m else None,
-            "distance_error_cm": (m.distance_cm - c.distance_cm) if m else None,
-            "dominant_hz": readout.dominant_hz[readout.detections.index(m)] if m else None})
+    low, high = poisson_interval(s.fp)
+    per_contact = contact_rows(readout.detections, readout.dominant_hz, contacts,
+                               parts.window_s, parts.warmup_s)
     errors = [abs(p["distance_error_cm"]) for p in per_contact if p["distance_cm"] is not None]
-    return {**s.as_dict(), "scored_minutes": minutes,
-            "fp_per_min_interval": [low / minutes, high / minutes],
+    return {**s.as_dict(), "scored_minutes": s.minutes,
+            "fp_per_min_interval": [low / s.minutes, high / s.minutes],
             "mean_abs_distance_error_cm": float(np.mean(errors)) if errors else None,
             "contacts": per_contact}
 

@@ -1,0 +1,254 @@
+"""The read-outs of the bench data set side by side: summary, intervals, costs, tables.
+
+A ``Comparison`` holds what one run produced (the processed events, their signal statistics,
+every baseline's result over seeds, the measured feature costs and the spiking bank's
+description); from it come the summary (every number mean ± sd over seeds, intervals where
+two seeds or more allow one), every test prediction (so any number can be recomputed) and
+the rows of the report's tables.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import xarray as xr
+
+from .. import stats
+from .baselines import BaselineResult
+from .events import PAPER_SIGNAL
+from .spiking_decoders import TRAINING_FREE, input_of
+
+LABELS = {
+    "linear_low_peak": "linear regression, low peak",
+    "mlp_parametric": "MLP on 2 peaks (F, A)",
+    "mlp_spectrum": "MLP, full spectrum",
+    "mlp_spectrum_sub10": "MLP, every 10th bin",
+    "mlp_low_half": "MLP, lower half of spectrum",
+    "mlp_spectrum_material": "MLP 51, full spectrum",
+    "mlp_5_8_2": "5-8-2 MLP, wood/aluminium",
+    "spiking_dominant": "dominant resonator",
+    "spiking_centroid": "rate centroid",
+    "spiking_mlp_distance_low": "spiking MLP, low band",
+    "spiking_mlp_distance": "spiking MLP, low + high",
+    "spiking_mlp_material_high": "spiking MLP, high band",
+    "spiking_mlp_material": "spiking MLP, low + high",
+    "spiking_mlp_material_rod": "spiking MLP, + rod band, time bins",
+}
+FULL_SPECTRUM = "mlp_spectrum_material"    # the material read-out the others are held to
+
+
+def label(name: str) -> str:
+    if name.startswith("nmf_"):
+        return f"NMF-{name.split('_')[1]} → MLP"
+    return LABELS.get(name, name.replace("_", " "))
+
+
+def interval(values) -> tuple[tuple | None, int]:
+    """The 95 % t interval of the mean of per-seed values, or None below two seeds; and n."""
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return None, len(values)
+    iv = stats.mean_interval(values)
+    return (iv.low, iv.high), iv.n
+
+
+def _mean_sd(summary: dict, key: str, **more) -> dict:
+    return {"mean": summary[key], "sd": summary[f"{key}_sd"], **more}
+
+
+@dataclass
+class Comparison:
+    """What one run produced; ``spiking`` describes the bank (None: FFT baselines only)."""
+    features: xr.Dataset
+    signal: dict
+    results: dict[str, BaselineResult]
+    skipped: dict
+    costs: dict
+    data: dict
+    spiking: dict | None = None
+    designs: list = field(default_factory=list)
+
+    @property
+    def materials(self) -> list[str]:
+        return sorted(set(self.features["material"].values.astype(str)))
+
+    def of_task(self, task: str) -> dict[str, dict]:
+        return {k: r.summary for k, r in self.results.items() if r.baseline.task == task}
+
+    def summary(self, timing: dict) -> dict:
+        """Every number of the run (``timing``: wall times of its stages)."""
+        dist, mat = self.of_task("distance"), self.of_task("material")
+        nmf = [{"n": int(k.split("_")[1]), "accuracy": v["accuracy"],
+                "accuracy_sd": v["accuracy_sd"]} for k, v in mat.items() if k.startswith("nmf_")]
+        two = next(iter(self.of_task("two_material").values()), None)
+        out = {
+            "materials": self.materials,
+            "calibration": {"ours": self.signal, "paper": PAPER_SIGNAL},
+            "distance_rmse_mm": {k: _mean_sd(v, "rmse_mm", n_seeds=v["n_seeds"])
+                                 for k, v in dist.items()},
+            "material_accuracy": {**{k: _mean_sd(v, "accuracy", n_seeds=v["n_seeds"])
+                                     for k, v in mat.items() if not k.startswith("nmf_")},
+                                  "nmf_curve": sorted(nmf, key=lambda r: r["n"])},
+            "two_material": ({k: two[k] for k in ("rmse_mm", "rmse_mm_sd", "accuracy",
+                                                  "accuracy_sd")} if two else None),
+            "timing": {**timing, **{k: {"fit_s": r.summary["fit_s"],
+                                        "predict_us_per_event": r.summary["predict_us_per_event"]}
+                                    for k, r in self.results.items()}},
+            "data": {**self.data, "n_processed": int(self.features.sizes["event"]),
+                     "skipped": self.skipped, "n_bins": int(self.features.sizes["freq_hz"])},
+            "cost_us_per_event": self.cost_per_event(),
+            "feature_costs": self.costs,
+        }
+        if self.spiking is not None:
+            out["spiking"] = self._spiking_summary(dist, mat)
+        return out
+
+    def _spiking_summary(self, dist: dict, mat: dict) -> dict:
+        return {
+            "distance_rmse_mm": {k: _mean_sd(v, "rmse_mm") for k, v in dist.items()
+                                 if k.startswith("spiking_")},
+            "material_accuracy": {k: _mean_sd(v, "accuracy") for k, v in mat.items()
+                                  if k.startswith("spiking_")},
+            "against_fft": self.against_fft(),
+            "cost": self.costs.get("spiking"), **self.spiking,
+            "designs": list(self.designs)}
+
+    def cost_per_event(self) -> dict[str, float]:
+        """Feature extraction + decoder, µs per event. The bank runs every band at once;
+        each spiking read-out is charged its bands' share (the cost per neuron-step is the
+        same across bands: they share one NeuronGroup)."""
+        neurons = (self.spiking or {}).get("neurons", {})
+        total = (self.spiking or {}).get("neurons_per_event", 1)
+        out = {}
+        for k, r in self.results.items():
+            kind = "spiking" if k.startswith("spiking_") else "fft"
+            front = self.costs.get(kind, {}).get("features_us_per_event", 0.0)
+            if kind == "spiking":
+                front *= neurons.get(input_of(k), total) / total
+            out[k] = front + r.summary["predict_us_per_event"]
+        return out
+
+    def against_fft(self) -> dict:
+        """Each spiking material read-out as a fraction of the full-spectrum MLP (per seed,
+        then mean and interval) and against NMF with as many filters as it has resonators
+        (paired by seed: the difference, its interval and verdict)."""
+        fft = self.results.get(FULL_SPECTRUM)
+        neurons = (self.spiking or {}).get("neurons", {})
+        out = {}
+        for name, r in self.results.items():
+            if not (name.startswith("spiking_") and r.baseline.task == "material") or not fft:
+                continue
+            acc = r.values("accuracy")
+            row = {"input": input_of(name), "neurons": neurons.get(input_of(name)),
+                   "accuracy": float(acc.mean())}
+            ratio = acc / fft.values("accuracy")
+            row["fraction_of_fft_mlp"] = float(ratio.mean())
+            if len(acc) >= 2:
+                row["fraction_interval"] = stats.mean_interval(ratio).as_dict()
+            nmf = self.results.get(f"nmf_{row['neurons']}")
+            if nmf is not None:
+                row["nmf_same_n"] = float(nmf.values("accuracy").mean())
+                if len(acc) >= 2:
+                    row["minus_nmf_same_n"] = stats.paired_difference(
+                        acc, nmf.values("accuracy")).as_dict()
+            out[name] = row
+        return out
+
+    def predictions(self) -> dict:
+        """Every test prediction, with each event's repetition, so a reader can recompute
+        any number and check that no contact of a test repetition was trained on."""
+        folds = {}
+        for name, r in self.results.items():
+            folds[name] = [{
+                "seed": f.seed, "test_event": r.event[f.test_index].tolist(),
+                "train_event": r.event[f.train_index].tolist(),
+                "true": np.asarray(r.y[f.test_index]).tolist(),
+                "predicted": np.asarray(f.prediction).tolist()} for f in r.folds]
+        repetition = zip(self.features["event"].values.tolist(),
+                         self.features["repetition"].values.tolist())
+        return {"task": {n: r.baseline.task for n, r in self.results.items()}, "folds": folds,
+                "repetition": {str(k): int(v) for k, v in repetition}}
+
+
+# -- table rows -----------------------------------------------------------------------------
+def result_rows(summary: dict) -> list[dict]:
+    """Mean ± sd over seeds of every trained read-out."""
+    rows = [{"pipeline": label(k), "task": "distance rmse (mm)",
+             "ours": f"{v['mean']:.2f} ± {v['sd']:.2f}"}
+            for k, v in summary["distance_rmse_mm"].items() if k not in TRAINING_FREE]
+    for k, v in summary["material_accuracy"].items():
+        if k == "nmf_curve":
+            rows += [{"pipeline": label(f"nmf_{r['n']}"), "task": "8 materials (%)",
+                      "ours": f"{100 * r['accuracy']:.1f} ± {100 * r['accuracy_sd']:.1f}"}
+                     for r in v]
+        else:
+            rows.append({"pipeline": label(k), "task": "8 materials (%)",
+                         "ours": f"{100 * v['mean']:.1f} ± {100 * v['sd']:.1f}"})
+    two = summary["two_material"]
+    if two:
+        rows.append({"pipeline": label("mlp_5_8_2"), "task": "distance (mm), material (%)",
+                     "ours": f"{two['rmse_mm']:.2f}, {100 * two['accuracy']:.1f}"})
+    return rows
+
+
+def cost_items(summary: dict) -> list[tuple[str, dict]]:
+    """(pipeline, its fit and predict times), in the order of the cost table's numbers."""
+    return [(k, v) for k, v in summary["timing"].items() if isinstance(v, dict)]
+
+
+def cost_rows(summary: dict) -> list[dict]:
+    task = {k: "distance" for k in summary["distance_rmse_mm"]} | {"mlp_5_8_2": "wood/aluminium"}
+    return [{"#": i + 1, "pipeline": label(k), "task": task.get(k, "material"),
+             "features + decoder (µs/event)": summary["cost_us_per_event"][k],
+             "fit (s)": v["fit_s"]} for i, (k, v) in enumerate(cost_items(summary))]
+
+
+def spiking_rows(summary: dict) -> list[dict]:
+    """Each spiking material read-out beside the full-spectrum MLP and NMF of its size."""
+    rows, cost = [], summary["cost_us_per_event"]
+    for k, row in summary["spiking"].get("against_fft", {}).items():
+        diff, frac = row.get("minus_nmf_same_n"), row.get("fraction_interval")
+        rows.append({
+            "read-out": label(k), "resonators": row["neurons"],
+            "accuracy (%)": f"{100 * row['accuracy']:.1f}",
+            "of FFT-MLP": (f"{100 * row['fraction_of_fft_mlp']:.0f} %" + (
+                f" ({100 * frac['low']:.0f}–{100 * frac['high']:.0f})" if frac else "")),
+            "NMF, same n (%)": (f"{100 * row['nmf_same_n']:.1f}" if "nmf_same_n" in row
+                                else "—"),
+            "minus NMF": (f"{100 * diff['mean']:+.1f} ({diff['verdict']}, n {diff['n']})"
+                          if diff else "—"),
+            "µs/event": f"{cost.get(k, 0):.0f}"})
+    return rows
+
+
+def spiking_distance_rows(summary: dict) -> list[dict]:
+    cost = summary["cost_us_per_event"]
+    return [{"read-out": label(k), "distance rmse (mm)": f"{v['mean']:.2f} ± {v['sd']:.2f}",
+             "µs/event": f"{cost.get(k, 0):.0f}"}
+            for k, v in summary["spiking"]["distance_rmse_mm"].items() if k not in TRAINING_FREE]
+
+
+def design_rows(designs: list[dict]) -> list[dict]:
+    return [{"design": d["design"], "band": d["band"], "change": d["change"],
+             "neurons": d["n_neurons"], "distance (mm)": f"{d['distance_rmse_mm']:.2f}",
+             "material (%)": f"{100 * d['material_accuracy']:.1f}",
+             "µs/event": f"{d['wall_us_per_event']:.0f}"} for d in designs]
+
+
+def spiking_cost_text(summary: dict) -> str:
+    sp = summary["spiking"]
+    c = sp.get("cost") or {}
+    return (f"Spiking cost, measured in this run on {c.get('events_measured')} events: "
+            f"{c.get('features_us_per_event', 0):.0f} µs per event for the whole bank "
+            f"({sp['neurons_per_event']} resonators, coding + Brian2 {c.get('target')}), "
+            f"{c.get('neuron_steps_per_event', 0):.3g} neuron-steps per event, "
+            f"{c.get('ns_per_neuron_step', 0):.1f} ns per neuron-step; dt {sp['dt_ms']} ms, "
+            f"{sp['duration_s']} s per event.")
+
+
+def data_text(summary: dict) -> str:
+    d, sk = summary["data"], summary["data"]["skipped"]
+    return (f"Data: {d['n_events']} generated events, {d['n_processed']} processed; "
+            f"skipped: {sk.get('no_onset', 0)} without an onset, {sk.get('clipped', 0)} "
+            f"clipped, {sk.get('no_decay_fit', 0)} without a decay fit; spectrum of "
+            f"{d['n_bins']} bins at {d['rate_hz']:g} Hz.")

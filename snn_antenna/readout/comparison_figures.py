@@ -1,0 +1,194 @@
+"""Figures of the read-out comparison on the bench data set (the paper's Figs. 2C, 4B, 5D,
+6D, 7A, 7B) and its cost–accuracy Pareto plot, each from a ``comparison.Comparison``'s parts
+or its summary; each returns a matplotlib figure.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .comparison import cost_items, label
+from .confusion import confusion
+from .events import PAPER_SIGNAL
+from .spiking_decoders import TRAINING_FREE
+
+# Half-width (cm) of the horizontal jitter that separates the contacts of one site.
+SITE_JITTER_CM = 0.3
+
+
+def _plt():
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def frequency_laws(feats, cal):
+    """Peak frequency vs distance, both modes, our fit and the paper's law (Fig. 2C)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    d = feats["distance_cm"].values
+    dd = np.linspace(d.min(), d.max(), 50)
+    for mode, colour in (("low", "tab:blue"), ("high", "tab:red")):
+        f = feats["params"].sel(parameter=f"F_{mode}").values
+        jitter = np.random.default_rng(0).uniform(-SITE_JITTER_CM, SITE_JITTER_CM, len(d))
+        ax.scatter(d + jitter, f, s=2, alpha=0.25, color=colour, label=f"{mode} peak")
+        s, i = cal[f"{mode}_law"]
+        ax.plot(dd, 10 ** (s * dd + i), color=colour)
+        ps, pi = PAPER_SIGNAL[f"{mode}_law"]
+        ax.plot(dd, 10 ** (ps * dd + pi), color="k", ls="--", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xlabel("contact distance (cm)")
+    ax.set_ylabel("peak frequency (Hz)")
+    ax.legend(markerscale=5)
+    return fig
+
+
+def decay_times(feats):
+    """τ_low vs distance for wood and aluminium, mean ± sd per site (Fig. 5D)."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(6.5, 3.8))
+    m = feats["material"].values.astype(str)
+    tau = feats["params"].sel(parameter="tau_low").values
+    d = feats["distance_cm"].values
+    for name, colour in (("wood", "tab:brown"), ("aluminium", "tab:gray")):
+        sel = m == name
+        if not sel.any():
+            continue
+        sites = np.unique(d[sel])
+        mean = [tau[sel & (d == s)].mean() for s in sites]
+        sd = [tau[sel & (d == s)].std() for s in sites]
+        ax.errorbar(sites, 1e3 * np.array(mean), 1e3 * np.array(sd), color=colour,
+                    marker="o", ms=3, capsize=2, label=name)
+    ax.set_xlabel("contact distance (cm)")
+    ax.set_ylabel("τ_low (ms)")
+    ax.legend()
+    return fig
+
+
+def predicted_distance(results, names):
+    """Small multiples, three to a row, so the page keeps its width (Fig. 4B)."""
+    plt = _plt()
+    cols = min(3, len(names))
+    rows = int(np.ceil(len(names) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(3.0 * cols, 2.8 * rows), sharex=True,
+                             sharey=True, squeeze=False)
+    for ax, name in zip(axes.ravel(), names):
+        r = results[name]
+        f = r.folds[0]
+        y = r.y[f.test_index]
+        ax.scatter(y, f.prediction, s=2, alpha=0.3,
+                   color="tab:red" if name.startswith("spiking_") else "tab:blue")
+        ax.plot([8, 38], [8, 38], "k--", lw=0.8)
+        ax.set_title(f"{label(name)}: {r.summary['rmse_mm']:.2f} mm", fontsize=8)
+    for ax in axes.ravel()[len(names):]:
+        ax.set_visible(False)
+    for ax in axes[-1]:
+        ax.set_xlabel("true (cm)")
+    for ax in axes[:, 0]:
+        ax.set_ylabel("predicted (cm)")
+    fig.tight_layout()
+    return fig
+
+
+def confusion_matrix(result, materials):
+    """Rows normalised: the share of each true class predicted as each class (Fig. 6D)."""
+    plt = _plt()
+    cm = confusion(result, len(materials))
+    frac = cm / np.maximum(cm.sum(axis=1, keepdims=True), 1)
+    fig, ax = plt.subplots(figsize=(6, 5))
+    im = ax.imshow(frac, cmap="Blues", vmin=0, vmax=1)
+    for i in range(len(materials)):
+        for j in range(len(materials)):
+            ax.text(j, i, f"{100 * frac[i, j]:.0f}", ha="center", va="center", fontsize=7,
+                    color="w" if frac[i, j] > 0.5 else "k")
+    ax.set_xticks(range(len(materials)), materials, rotation=45, ha="right", fontsize=8)
+    ax.set_yticks(range(len(materials)), materials, fontsize=8)
+    ax.set_xlabel("predicted")
+    ax.set_ylabel("true")
+    fig.colorbar(im, label="fraction of true class")
+    return fig
+
+
+def nmf_basis(result, feats):
+    """The first seed's NMF basis vectors as band-pass filters (Fig. 7A)."""
+    plt = _plt()
+    nmf = result.folds[0].estimator.steps[0][1]  # the NMFFilterBank
+    freq = feats["freq_hz"].values
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    for k, comp in enumerate(nmf.components_):
+        ax.plot(freq, comp / comp.max(), lw=0.8, label=f"{k + 1}")
+    ax.set_xscale("log")
+    ax.set_xlim(2, freq.max())
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("weight (normalised)")
+    ax.legend(fontsize=6, ncol=3)
+    return fig
+
+
+def nmf_accuracy(summary):
+    """Material accuracy vs NMF dimension, the full-spectrum MLP and the spiking read-outs
+    at their number of resonators (Fig. 7B)."""
+    plt = _plt()
+    curve = summary["material_accuracy"]["nmf_curve"]
+    fig, ax = plt.subplots(figsize=(5.5, 3.5))
+    ax.errorbar([r["n"] for r in curve], [100 * r["accuracy"] for r in curve],
+                [100 * r["accuracy_sd"] for r in curve], marker="o", capsize=3, label="NMF → MLP")
+    full = summary["material_accuracy"].get("mlp_spectrum_material")
+    if full:
+        ax.axhline(100 * full["mean"], color="k", ls="--", label="full spectrum")
+    spiking = (summary.get("spiking") or {}).get("against_fft", {})
+    for name, row in spiking.items():
+        if row.get("neurons"):
+            ax.scatter(row["neurons"], 100 * row["accuracy"], color="tab:red", zorder=3)
+            ax.annotate(label(name).replace("spiking MLP, ", ""), (row["neurons"],
+                        100 * row["accuracy"]), fontsize=7, xytext=(4, -10),
+                        textcoords="offset points", color="tab:red")
+    if spiking:
+        ax.scatter([], [], color="tab:red", label="spiking (x: resonators)")
+    ax.set_xlabel("filters: NMF dimension, or resonators (spiking)")
+    ax.set_ylabel("8-material accuracy (%)")
+    ax.legend()
+    return fig
+
+
+def pareto(summary):
+    """Accuracy vs cost per event of every trained pipeline, with the Pareto front."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.2))
+    cost = summary["cost_us_per_event"]
+    number = {k: i + 1 for i, (k, _) in enumerate(cost_items(summary))}
+    panels = ((axes[0], summary["distance_rmse_mm"], "distance rmse (mm)", False),
+              (axes[1], {k: v for k, v in summary["material_accuracy"].items()
+                         if k != "nmf_curve"} | {f"nmf_{r['n']}": {"mean": r["accuracy"]}
+                                                 for r in summary["material_accuracy"]
+                                                 ["nmf_curve"]},
+               "8-material accuracy", True))
+    for ax, table, ylabel, higher in panels:
+        pts = sorted((cost[k], v["mean"], k) for k, v in table.items()
+                     if k in cost and k not in TRAINING_FREE)
+        if not pts:
+            continue
+        # Pipelines sharing a front end share a cost: their labels alternate sides, in
+        # order of the y value, so neighbours do not print over each other.
+        for rank, (c, a, k) in enumerate(sorted(pts, key=lambda p: (round(p[0], -1), p[1]))):
+            colour = "tab:red" if k.startswith("spiking_") else "tab:blue"
+            ax.scatter(c, a, color=colour, s=22, zorder=3)
+            ax.annotate(str(number.get(k, "")), (c, a), fontsize=7,
+                        xytext=(5, -3) if rank % 2 == 0 else (-15, -3),
+                        textcoords="offset points", color=colour)
+        front, best = [], None
+        for c, a, k in pts:
+            if best is None or (a > best if higher else a < best):
+                front.append((c, a))
+                best = a
+        ax.plot(*zip(*front), color="k", lw=0.8, drawstyle="steps-post")
+        ax.set_xscale("log")
+        ax.margins(x=0.12)   # room for the labels on the left of the cheapest points
+        costs = [c for c, _, _ in pts]
+        if max(costs) / min(costs) > 10:   # within one decade the minor ticks are the labels
+            ax.xaxis.set_minor_formatter(plt.NullFormatter())
+        ax.set_xlabel("cost per event (µs: features + decoder)")
+        ax.set_ylabel(ylabel)
+    axes[0].set_title("blue: FFT pipelines, red: spiking; numbers: cost table", fontsize=8)
+    fig.tight_layout()
+    return fig
