@@ -13,7 +13,8 @@ import pytest
 import serial
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator, FaultPlan, PtyLink, SerialLink
+from snn_antenna.bridge.emulator import Emulator, FaultPlan
+from snn_antenna.bridge.links import PtyLink, SerialLink
 from snn_antenna.bridge.protocol import encode_binary
 from snn_antenna.bridge.recorder import Recorder
 from snn_antenna.bridge.replay import ReplaySource

@@ -7,12 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import xarray as xr
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
-from snn_antenna.bridge.online import CalibratedChain, EpisodeTracker, build_online
+from snn_antenna.bridge.emulator import Emulator
+from snn_antenna.bridge.links import PeerGone, PtyLink
+from snn_antenna.bridge.online import CalibratedChain, build_online
 from snn_antenna.errors import SpecError
-from snn_antenna.readout.contacts import ContactDetector
+from snn_antenna.readout.contacts import ContactDetector, EpisodeTracker
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,15 +65,24 @@ def test_stream_detects_a_contact_live_and_records_everything(tmp_path):
 
 
 def test_online_contact_rule_matches_the_readout(tmp_path):
+    """The live pipeline's episodes come from the read-out's EpisodeTracker, whose rule is the
+    one stated in ContactDetector's docstring: checked here against that statement written
+    out independently, over a whole rate map."""
     rng = np.random.default_rng(0)
     detector = ContactDetector()
     neuron_hz = np.geomspace(7, 30, 24)
-    tracker = EpisodeTracker(detector, neuron_hz, 0.1)
     rates = rng.exponential(20, (24, 300)) * rng.integers(0, 2, (24, 300))
-    frame = tracker._frame(list(rates.T), list(np.arange(300) * 0.1))
-    offline = detector.contact_windows(frame).values
-    assert offline.any() and not offline.all()
-    assert [tracker.is_contact_window(r) for r in rates.T] == offline.tolist()
+    frame = xr.DataArray(rates, dims=("neuron_hz", "window_s"),
+                         coords={"neuron_hz": neuron_hz, "window_s": np.arange(300) * 0.1})
+    above = frame.neuron_hz > detector.motion_band_hz[1]
+    high, low = frame.where(above, 0).sum("neuron_hz"), frame.where(~above, 0).sum("neuron_hz")
+    stated = ((high >= detector.min_rate_hz) & (high > low)).values
+    assert stated.any() and not stated.all()
+    assert detector.contact_windows(frame).values.tolist() == stated.tolist()
+    tracker = EpisodeTracker(detector, neuron_hz, 0.1)
+    onsets = [e[1] for t, r in zip(frame.window_s.values, rates.T)
+              if (e := tracker.update(float(t), r)) and e[0] == "onset"]
+    assert onsets == pytest.approx([e.onset_s for e in detector.detect(frame)])
 
 
 def test_bad_network_spec_fails_before_the_port_opens(tmp_path):

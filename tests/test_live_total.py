@@ -20,12 +20,13 @@ from hypothesis import strategies as st
 
 from snn_antenna.bridge import cli as bridge_cli
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
-from snn_antenna.bridge.online import EpisodeTracker, build_online, run_online
+from snn_antenna.bridge.emulator import Emulator
+from snn_antenna.bridge.links import PeerGone, PtyLink
+from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.errors import PipelineError, SpecError
-from snn_antenna.readout.contacts import ContactDetector
+from snn_antenna.readout.contacts import ContactDetector, EpisodeTracker
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -22,7 +22,8 @@ import numpy as np
 import pytest
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator, PeerGone, PtyLink
+from snn_antenna.bridge.emulator import Emulator
+from snn_antenna.bridge.links import PeerGone, PtyLink
 from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource

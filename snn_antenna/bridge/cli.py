@@ -55,10 +55,10 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--link", default=None,
                    help="with --pty: a symlink path to the pty that survives disconnect faults")
     p.add_argument("--stimulus", default=None,
-                   help="stimuli/NAME.toml scene to stream (default: a robot scene with "
-                        "contacts at 19 and 27 cm)")
+                   help="stimuli/NAME.toml to stream: a scene, or the bench's contact events "
+                        "back to back (default: a robot scene with contacts at 19 and 27 cm)")
     p.add_argument("--frames", type=int, default=None,
-                   help="frames to send (default: the scene's length; the scene loops)")
+                   help="frames to send (default: the stimulus's length; a scene loops)")
     p.add_argument("--faults", default="", help="e.g. garbage=3,drop=2,bitflip=2,range=1,"
                                                 "stall=1,disconnect=1,stall_s=0.2,outage_s=0.5")
     p.add_argument("--seed", type=int, default=0)
@@ -66,8 +66,8 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--fast", action="store_true", help="as fast as the link takes, not 1 kHz")
     p.add_argument("--peer-timeout", type=float, default=None,
                    help="give up if nobody opens the pty within this many seconds")
-    p.add_argument("--log", default=None, help="write the injected faults and expected counts "
-                                                "(JSON) to this file")
+    p.add_argument("--log", default=None, help="write the injected faults, expected counts and "
+                                                "the stimulus's labelled contacts (JSON) here")
     p.set_defaults(func=cmd_emulate)
 
     p = subparsers.add_parser("stream", help="run the network live on a serial stream")
@@ -250,8 +250,10 @@ def cmd_replay(args) -> int:
 
 @_guarded
 def cmd_emulate(args) -> int:
-    """Emulate the board."""
-    from .emulator import Emulator, FaultPlan, PeerGone, PtyLink, SerialLink, stimulus_counts
+    """Emulate the board: stream a stimulus (labelled in ``--log``) to a pty or a port."""
+    from .emulator import Emulator, FaultPlan
+    from .links import PeerGone
+    from .stimulus import played_events, stimulus_recording
 
     # Everything checked before the pty exists or a byte is written.
     plan = FaultPlan.parse(args.faults)
@@ -264,23 +266,17 @@ def cmd_emulate(args) -> int:
                         "0 unless the emulator owns a pty with a stable --link path")
     if args.log:
         _check_output_file("log", args.log)
-    emulator = Emulator(stimulus_counts(args.stimulus, args.seed), faults=plan, seed=args.seed,
+    stimulus = stimulus_recording(args.stimulus, args.seed, args.frames)
+    emulator = Emulator(stimulus.samples, rate_hz=stimulus.rate_hz, faults=plan, seed=args.seed,
                         wire_format=args.format)
-    emulator.schedule(args.frames or len(emulator.counts))
-    if args.pty:
-        link = PtyLink(args.link)
-    else:
-        try:
-            link = SerialLink(args.port)
-        except Exception as exc:       # pyserial's open errors, as for a reader
-            from .source import describe_open_error
-            raise describe_open_error(args.port, exc) from exc
+    n_frames = args.frames or len(emulator.counts)
+    emulator.schedule(n_frames)
+    link = _emulator_link(args)
     print(link.path, flush=True)
-    stop = stop_on_signals()
     t0 = time.monotonic()
     ended = None
     try:
-        emulator.run(link, args.frames, realtime=not args.fast, stop=stop,
+        emulator.run(link, n_frames, realtime=not args.fast, stop=stop_on_signals(),
                      peer_timeout_s=args.peer_timeout)
     except PeerGone as exc:
         ended = f"emulator stopped: {exc}"
@@ -292,15 +288,29 @@ def cmd_emulate(args) -> int:
         summary = {"path": link.path, "seconds": round(time.monotonic() - t0, 3),
                    "frames_written": len(log.written), "injected": log.injected(),
                    "expected_counts": log.expected_counts(), "stopped": ended,
-                   "faults": [list(f) for f in log.faults]}
+                   "faults": [list(f) for f in log.faults],
+                   "events": played_events(stimulus, log.frames_due)}
         if args.log:                    # whoever stopped first, the log says what was sent
             from ..files import write_json
             write_json(Path(args.log), summary)
     if ended:
         raise PortError(ended)
-    print(json.dumps({k: v for k, v in summary.items() if k not in ("faults", "stopped")}),
-          flush=True)
+    shown = {k: v for k, v in summary.items() if k not in ("faults", "stopped", "events")}
+    print(json.dumps({**shown, "events": len(summary["events"])}), flush=True)
     return 0
+
+
+def _emulator_link(args):
+    """The pty the emulator creates (``--pty``), or the port or URL it writes to."""
+    from .links import PtyLink, SerialLink
+
+    if args.pty:
+        return PtyLink(args.link)
+    try:
+        return SerialLink(args.port)
+    except Exception as exc:       # pyserial's open errors, as for a reader
+        from .source import describe_open_error
+        raise describe_open_error(args.port, exc) from exc
 
 
 def _check_recording_dir(path) -> None:

@@ -10,8 +10,9 @@ built here. What this module adds on top of the foundation's streaming API:
 - timing: each sample's host arrival time is kept until its window is published, giving the
   latency from arrival to the rate map, and the time spent waiting for the port is subtracted
   from the wall time, giving the real-time factor of the computation itself;
-- online contact episodes, read out by the foundation's
-  :class:`~snn_antenna.readout.contacts.ContactDetector`.
+- online contact episodes: each window goes to the read-out's
+  :class:`~snn_antenna.readout.contacts.EpisodeTracker`, the episode logic that
+  ``ContactDetector.detect`` runs offline, so live and offline detections are the same.
 
 Gaps in the stream are not filled: the network sees the received samples back to back.
 """
@@ -24,18 +25,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import xarray as xr
 
 from .. import spec as specs
 from ..errors import SpecError
 from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain, partial_transform, reset
-from ..readout.contacts import ContactDetector, ContactEstimate, detector_from_spec
+from ..readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
 from ..studies import check_spec
+from .protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
 from .source import SourceLoop
 
-RATE_HZ = 1000.0
-ADC_BITS, FULL_SCALE_G = 10, 18.0       # the board: ADXL321 (±18 g) into a 10-bit ADC
 SECTIONS = ("network", "preprocess", "readout")
 
 
@@ -48,7 +47,7 @@ class OnlineParts:
     spec: dict
 
 
-def build_online(network_path, overrides=(), rate_hz: float = RATE_HZ) -> OnlineParts:
+def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ) -> OnlineParts:
     """The parts the ``--network`` file names, checked before any port is opened.
 
     A network file (``networks/*.toml``, the fields of ResonatorArray) or a study-style file
@@ -79,7 +78,7 @@ def build_online(network_path, overrides=(), rate_hz: float = RATE_HZ) -> Online
     with specs.section("preprocess"):
         pre = specs.check_section(spec, "preprocess", make_chain,
                                   exclude=["rate_hz", "adc_bits", "full_scale_g"])
-        chain = make_chain(rate_hz, ADC_BITS, FULL_SCALE_G, **pre)
+        chain = make_chain(rate_hz, BOARD_ADC_BITS, BOARD_FULL_SCALE_G, **pre)
     detector, window_s = detector_from_spec(spec)
     return OnlineParts(array, chain, detector, window_s, spec)
 
@@ -87,7 +86,7 @@ def build_online(network_path, overrides=(), rate_hz: float = RATE_HZ) -> Online
 def warm_up(parts: OnlineParts) -> None:
     """Run the array on 50 ms of silence, so that Brian2 generates and compiles its code (cached
     on disk afterwards) before a port is opened and samples start to queue up."""
-    parts.array.stream(iter([np.zeros(int(0.05 * RATE_HZ))]), RATE_HZ, window_s=0.05)
+    parts.array.stream(iter([np.zeros(int(0.05 * BOARD_RATE_HZ))]), BOARD_RATE_HZ, window_s=0.05)
 
 
 class CalibratedChain:
@@ -132,56 +131,6 @@ class ArrivalClock:
         while self._chunks and self._chunks[0][0] <= index:
             self._chunks.popleft()
         return self._chunks[0][1]
-
-
-class EpisodeTracker:
-    """Online contact episodes: onset as soon as a contact window appears, the estimate when the
-    episode has ended (``detector.max_gap_windows`` quiet windows later)."""
-
-    def __init__(self, detector: ContactDetector, neuron_hz: np.ndarray, window_s: float):
-        self.detector, self.neuron_hz, self.window_s = detector, neuron_hz, window_s
-        self._rates: list[np.ndarray] = []
-        self._starts: list[float] = []
-        self._quiet = 0
-        self.estimates: list[ContactEstimate] = []
-
-    def _frame(self, rates: list[np.ndarray], starts: list[float]) -> xr.DataArray:
-        return xr.DataArray(np.column_stack(rates), dims=("neuron_hz", "window_s"),
-                            coords={"neuron_hz": self.neuron_hz, "window_s": starts},
-                            attrs={"window_s": self.window_s})
-
-    def is_contact_window(self, rates: np.ndarray) -> bool:
-        """``ContactDetector.contact_windows`` for one window, in numpy: building a DataArray
-        ten times a second cost more than the network (a test keeps the two in step)."""
-        above = self.neuron_hz > self.detector.motion_band_hz[1]
-        high, low = rates[above].sum(), rates[~above].sum()
-        return bool(high >= self.detector.min_rate_hz and high > low)
-
-    def update(self, t_s: float, rates: np.ndarray) -> tuple[str, object] | None:
-        """Feed one window; returns ("onset", t_s), ("contact", ContactEstimate) or None."""
-        hit = self.is_contact_window(rates)
-        if not self._rates:
-            if hit:
-                self._rates, self._starts, self._quiet = [rates], [t_s], 0
-                return "onset", t_s
-            return None
-        self._rates.append(rates)
-        self._starts.append(t_s)
-        self._quiet = 0 if hit else self._quiet + 1
-        if self._quiet > self.detector.max_gap_windows:
-            return self.close()
-        return None
-
-    def close(self) -> tuple[str, ContactEstimate] | None:
-        if not self._rates:
-            return None
-        keep = len(self._rates) - self._quiet
-        found = self.detector.detect(self._frame(self._rates[:keep], self._starts[:keep]))
-        self._rates, self._starts, self._quiet = [], [], 0
-        if not found:
-            return None
-        self.estimates.append(found[0])
-        return "contact", found[0]
 
 
 BARS = " ▁▂▃▄▅▆▇█"
@@ -254,6 +203,22 @@ class OnlineReport:
             return float("nan")
         return (s1 - s0) / max((t1 - t0) - (w1 - w0), 1e-9)
 
+    def window_published(self, end_s: float, waiting_s: float, arrived: float | None,
+                         window_s: float) -> float | None:
+        """Note a rate-map window ending at ``end_s`` (stream time) as it is published;
+        returns its latency (ms) from the host arrival of its last sample (``arrived``, None
+        when the source is not live)."""
+        now = time.time()
+        if self.first_window is None:           # steady state starts here (Brian2 is built)
+            self.first_window = self.last_window = (time.perf_counter(), waiting_s, end_s)
+        latency_ms = None if arrived is None else (now - arrived) * 1e3
+        if latency_ms is not None:
+            self.latencies_ms.append(latency_ms)
+        if not self.caught_up_at and waiting_s - self.last_window[1] > 0.1 * window_s:
+            # The pipeline had to wait for the port: any start-up backlog is gone.
+            self.caught_up_at = len(self.latencies_ms)
+        return latency_ms
+
     def as_dict(self, parts: OnlineParts, counts: dict) -> dict:
         def summary(values):
             if not len(values):
@@ -300,41 +265,16 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     if display:
         display.header(neuron_hz)
 
-    def coded_chunks():
-        chain = CalibratedChain(parts.chain, int(calibration_s * RATE_HZ))
-        waiting: list = []
-        for batch in loop:
-            if batch.samples:
-                waiting += batch.samples
-                clock.add(len(batch.samples), batch.host_time_s)
-            # A live port delivers a frame or two per read; the chain costs the same for one
-            # sample as for a hundred, so take everything already queued in one go.
-            if not waiting or source.pending():
-                continue
-            coded = chain.push(np.asarray(waiting, dtype=float)[:, 1:])
-            waiting = []
-            if coded is not None:
-                yield coded
-
     def on_window(t_s: float, spike_counts: np.ndarray) -> None:
-        now = time.time()
-        if report.first_window is None:         # steady state starts here (Brian2 is built)
-            report.first_window = report.last_window = (time.perf_counter(), loop.waiting_s,
-                                                        t_s + parts.window_s)
         # ResonatorArray.stream publishes a window once its last sample has been integrated,
         # before it asks for the next one.
-        last_integrated = int(round((t_s + parts.window_s) * RATE_HZ)) - 1
-        arrived = clock.arrival(max(last_integrated, 0))
-        latency_ms = (now - arrived) * 1e3 if live else None
-        if live:
-            report.latencies_ms.append(latency_ms)
-        waited_s = loop.waiting_s - report.last_window[1]
-        if not report.caught_up_at and waited_s > 0.1 * parts.window_s:
-            # The pipeline had to wait for the port: any start-up backlog is gone.
-            report.caught_up_at = len(report.latencies_ms)
+        end_s = t_s + parts.window_s
+        arrived = clock.arrival(max(int(round(end_s * BOARD_RATE_HZ)) - 1, 0))
+        latency_ms = report.window_published(end_s, loop.waiting_s, arrived if live else None,
+                                             parts.window_s)
         rates = spike_counts / parts.window_s
         event = tracker.update(t_s, rates)
-        report.last_window = (time.perf_counter(), loop.waiting_s, t_s + parts.window_s)
+        report.last_window = (time.perf_counter(), loop.waiting_s, end_s)
         if view is not None:
             view.window(t_s, rates, event, report.realtime_factor, latency_ms)
         if display:
@@ -342,7 +282,9 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
             display.window(t_s, rates, neuron_hz, report.realtime_factor, latency_ms)
 
     t0 = report.started = time.perf_counter()
-    stats = parts.array.stream(coded_chunks(), RATE_HZ, window_s=parts.window_s,
+    chunks = coded_chunks(loop, source, CalibratedChain(
+        parts.chain, int(calibration_s * BOARD_RATE_HZ)), clock)
+    stats = parts.array.stream(chunks, BOARD_RATE_HZ, window_s=parts.window_s,
                                on_window=on_window)
     report.wall_s = time.perf_counter() - t0
     report.waiting_s = loop.waiting_s
@@ -357,6 +299,24 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
             print(file=display.out)
     report.contacts = [e.as_dict() for e in tracker.estimates]
     return report.as_dict(parts, source.counts())
+
+
+def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: ArrivalClock):
+    """The coded input for the network, chunk by chunk, from the source's batches (noting
+    each sample's arrival on ``clock``)."""
+    waiting: list = []
+    for batch in loop:
+        if batch.samples:
+            waiting += batch.samples
+            clock.add(len(batch.samples), batch.host_time_s)
+        # A live port delivers a frame or two per read; the chain costs the same for one
+        # sample as for a hundred, so take everything already queued in one go.
+        if not waiting or source.pending():
+            continue
+        coded = chain.push(np.asarray(waiting, dtype=float)[:, 1:])
+        waiting = []
+        if coded is not None:
+            yield coded
 
 
 def show(display: LiveDisplay, event) -> None:

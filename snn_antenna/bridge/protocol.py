@@ -16,8 +16,14 @@ from typing import NamedTuple
 
 from ..errors import SpecError
 
+# The sensor board: an ADXL321 (±18 g) into a 10-bit ADC, sampled at 1 kHz. Every part of the
+# bridge that needs to know what the board sends (the decoder's range check, the emulator, the
+# recorder's rate, the online pipeline's chain) takes it from here.
+BOARD_RATE_HZ = 1000.0
+BOARD_ADC_BITS = 10
+BOARD_FULL_SCALE_G = 18.0
 SEQ_MODULUS = 65536
-ADC_MAX = 1023
+ADC_MAX = 2 ** BOARD_ADC_BITS - 1
 DELIMITER = b"\x00"
 PAYLOAD = struct.Struct("<HHH")
 FRAME = struct.Struct("<HHHH")          # payload + crc

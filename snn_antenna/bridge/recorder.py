@@ -27,8 +27,8 @@ from .. import __version__ as package_version
 from ..files import write_json
 from ..errors import SpecError
 from ..signals import Recording
-from .protocol import Gap, find_gaps
-from .source import Batch
+from .protocol import BOARD_RATE_HZ, Gap, find_gaps
+from .source import DEFAULT_BAUDRATE, Batch
 
 SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("pad", "<u2"),
                          ("host_time_s", "<f8")])
@@ -42,7 +42,7 @@ class Recorder:
     """Writes :class:`~snn_antenna.bridge.source.Batch` objects into a recording directory."""
 
     def __init__(self, out_dir, *, port: str, wire_format: str, baudrate: int,
-                 rate_hz: float = 1000.0, flush_interval_s: float = 0.05,
+                 rate_hz: float = BOARD_RATE_HZ, flush_interval_s: float = 0.05,
                  fsync_interval_s: float = 1.0, meta_interval_s: float = 0.5,
                  extra_meta: dict | None = None):
         self.dir = Path(out_dir)
@@ -199,7 +199,7 @@ def record_counts(path, counts: np.ndarray) -> Path:
     counts = np.asarray(counts)
     if counts.ndim != 2 or counts.shape[1] != 2:
         raise SpecError("counts", f"shape {counts.shape}", "ADC counts of shape (samples, 2)")
-    recorder = Recorder(path, port="test://", wire_format="binary", baudrate=250000)
+    recorder = Recorder(path, port="test://", wire_format="binary", baudrate=DEFAULT_BAUDRATE)
     seq = np.arange(len(counts)) % 65536
     raw = b"".join(encode_binary(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts))
     samples = [Sample(int(s), int(x), int(y)) for s, (x, y) in zip(seq, counts)]

@@ -13,7 +13,7 @@ oldest view frames are overwritten (counted in ``view_frames_dropped``), never a
 the recorder has already written. The server thread (Tornado's IO loop, its own thread) drains
 that inbox into a 10 s history every 50 ms; each open page pulls what is new in the history
 every 100 ms. A browser that stalls only queues messages on its own websocket (closed after the
-ping timeout); a closed one ends its session.
+ping timeout); a closed one ends its session. The page itself is ``bridge/page.py``.
 """
 from __future__ import annotations
 
@@ -25,14 +25,16 @@ import sys
 import threading
 from collections import deque
 from contextlib import contextmanager
+from functools import partial
 from itertools import chain
 
 import numpy as np
 
 from ..errors import SpecError
+from .page import build_page
+from .protocol import BOARD_RATE_HZ
 
 HISTORY_S = 10.0                # what the plots keep
-PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
 DRAIN_MS = 50                   # the server thread empties the pipeline's inbox
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
 INBOX_ITEMS = 4096              # seconds of port reads even at one frame a read; drained each 50 ms
@@ -145,7 +147,7 @@ class LiveView:
     to the inbox. Server side: the Bokeh page and ``/state.json`` on their own thread."""
 
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
-                 history_s: float = HISTORY_S, rate_hz: float = 1000.0,
+                 history_s: float = HISTORY_S, rate_hz: float = BOARD_RATE_HZ,
                  inbox_items: int = INBOX_ITEMS):
         from sklearn.base import clone
 
@@ -264,6 +266,11 @@ class LiveView:
         return np.column_stack([index[keep] / self.rate_hz, values[keep]])
 
     @property
+    def counts(self) -> dict:
+        """The link's latest counters (frames, CRC errors, gaps, ...)."""
+        return self._counts
+
+    @property
     def dropped(self) -> int:
         return max(0, self._pushed - self.drained - len(self._inbox))
 
@@ -344,7 +351,7 @@ class LiveView:
             origins = [f"localhost:{port}", f"127.0.0.1:{port}"]
             if self.host not in LOOPBACK:   # exposed deliberately: any name of this machine
                 origins.append(f"*:{port}")
-            app = BokehTornado({"/": Application(FunctionHandler(self._page))},
+            app = BokehTornado({"/": Application(FunctionHandler(partial(build_page, self)))},
                                extra_websocket_origins=origins,
                                extra_patterns=[(r"/state\.json", _state_handler(), {"view": self})],
                                websocket_ping_interval=10, websocket_ping_timeout=10)
@@ -363,155 +370,6 @@ class LiveView:
         ready.set()
         loop.start()
         loop.close(all_fds=True)
-
-    # ---- the page ------------------------------------------------------------------------
-    def _page(self, doc) -> None:
-        """One browser page (a Bokeh session): its own sources, fed from the history."""
-        from bokeh.layouts import column
-        from bokeh.models import (ColorBar, ColumnDataSource, Div, FixedTicker, LabelSet,
-                                  LinearAxis, LinearColorMapper, Range1d)
-        from bokeh.palettes import Viridis256
-        from bokeh.plotting import figure
-
-        self.sessions += 1
-        doc.on_session_destroyed(lambda _ctx: setattr(self, "sessions", self.sessions - 1))
-        x_range = Range1d(0, self.history_s, name="time")
-        # The same borders on every plot keep their time axes aligned.
-        common = dict(x_range=x_range, height=210, sizing_mode="stretch_width",
-                      tools="pan,wheel_zoom,reset,save", toolbar_location="right",
-                      min_border_left=70, min_border_right=110)
-        src_xy = ColumnDataSource({"t": [], "x": [], "y": []}, name="xy")
-        src_in = ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [], "coded": []})
-        src_map = ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []})
-        src_contacts = ColumnDataSource({"t": [], "label": []}, name="contacts")
-
-        antenna = figure(title="Antenna: the two accelerometer axes", y_axis_label="g",
-                         **common)
-        antenna.line("t", "x", source=src_xy, color="#1f77b4", legend_label="x")
-        antenna.line("t", "y", source=src_xy, color="#ff7f0e", legend_label="y")
-
-        coded = figure(title="Coded input: filtered signal, the gate's threshold ±Th, and the "
-                             "square wave fed to the resonators", y_axis_label="signal (g)",
-                       **common)
-        coded.line("t", "signal", source=src_in, color="#555555", legend_label="signal")
-        coded.line("t", "th", source=src_in, color="#d62728", line_dash="dashed",
-                   legend_label="±Th")
-        coded.line("t", "neg_th", source=src_in, color="#d62728", line_dash="dashed")
-        amplitude = self.coder_amplitude
-        coded.extra_y_ranges = {"coded": Range1d(-1.3 * amplitude, 1.3 * amplitude)}
-        coded.add_layout(LinearAxis(y_range_name="coded", axis_label="coded input"), "right")
-        coded.step("t", "coded", source=src_in, y_range_name="coded", color="#2ca02c",
-                   mode="after", alpha=0.8, legend_label="coded")
-
-
-        # One image (a row per resonator, a column per window) rather than a rectangle per
-        # cell: the browser redraws it ten times a second, and it competes for the same cores.
-        n = len(self.neuron_hz)
-        mapper = LinearColorMapper(palette=Viridis256, low=0, high=self.peak_rate_hz)
-        rate_map = figure(title="Rate map: resonators (tuning frequency) × time",
-                          y_axis_label="resonator tuning (Hz)", x_axis_label="stream time (s)",
-                          y_range=Range1d(-0.5, n - 0.5), **{**common, "height": 260})
-        rate_map.image(image="image", x="x", y="y", dw="dw", dh="dh", source=src_map,
-                       color_mapper=mapper)
-        ticks = list(range(0, n, max(1, n // 8)))
-        rate_map.yaxis.ticker = FixedTicker(ticks=ticks)
-        rate_map.yaxis.major_label_overrides = {i: f"{self.neuron_hz[i]:.1f}" for i in ticks}
-        rate_map.add_layout(ColorBar(color_mapper=mapper, title="rate (spikes/s)",
-                                     width=12), "right")
-
-        for fig in (antenna, coded):
-            fig.legend.location, fig.legend.orientation = "top_right", "horizontal"
-            fig.legend.background_fill_alpha = 0.7
-        for fig in (antenna, coded, rate_map):
-            fig.vspan(x="t", source=src_contacts, line_color="#d62728", line_width=2)
-            fig.add_layout(LabelSet(x="t", y=5, y_units="screen", text="label", x_offset=4,
-                                    source=src_contacts, text_color="#d62728",
-                                    text_font_style="bold", text_font_size="13px",
-                                    background_fill_color="white",
-                                    background_fill_alpha=0.75))
-        # A fixed height: new text then never re-lays the page out (ten times a second).
-        counters = Div(text="", sizing_mode="stretch_width", height=80)
-        doc.add_root(column(counters, antenna, coded, rate_map, sizing_mode="stretch_width"))
-        doc.title = "snn-antenna live view"
-
-        cursor = {"xy": 0, "coded": 0, "windows": 0, "contacts": 0}
-        shown = {"counters": None, "contacts": None}
-        rollover_samples = self.xy.capacity
-
-        def update() -> None:
-            new_xy = self.xy.since(cursor["xy"])
-            cursor["xy"] = self.xy.total
-            if len(new_xy):
-                src_xy.stream({"t": new_xy[:, 0], "x": new_xy[:, 1], "y": new_xy[:, 2]},
-                              rollover=rollover_samples)
-            new_in = self.coded.since(cursor["coded"])
-            cursor["coded"] = self.coded.total
-            if len(new_in):
-                src_in.stream({"t": new_in[:, 0], "signal": new_in[:, 1], "th": new_in[:, 2],
-                               "neg_th": -new_in[:, 2], "coded": new_in[:, 3]},
-                              rollover=rollover_samples)
-            if cursor["windows"] != self.windows.total:
-                cursor["windows"] = self.windows.total
-                shown_windows = self.windows.rows
-                # The windows of one stream follow each other; a new stream starts again at 0.
-                restart = np.flatnonzero(np.diff(shown_windows[:, 0]) <= 0)
-                if len(restart):
-                    shown_windows = shown_windows[restart[-1] + 1:]
-                src_map.data = {"image": [np.ascontiguousarray(shown_windows[:, 1:].T)],
-                                "x": [shown_windows[0, 0]], "y": [-0.5],
-                                "dw": [len(shown_windows) * self.window_s], "dh": [n]}
-                if mapper.high != self.peak_rate_hz:
-                    mapper.high = self.peak_rate_hz
-            marks = self._contact_marks()
-            if marks != shown["contacts"]:
-                shown["contacts"] = marks
-                src_contacts.data = {"t": [m[0] for m in marks], "label": [m[1] for m in marks]}
-            html = self._counters_html()
-            if html != shown["counters"]:
-                shown["counters"] = counters.text = html
-            end = max(self.t_s, self.history_s)
-            if x_range.end != end:
-                x_range.start, x_range.end = end - self.history_s, end
-
-        update()
-        doc.add_periodic_callback(update, PAGE_UPDATE_MS)
-
-    def _contact_marks(self) -> list[tuple[float, str]]:
-        marks = [(c["onset_s"], _contact_label(c)) for c in self.contacts]
-        if self.open_onset_s is not None:
-            marks.append((self.open_onset_s, "contact…"))
-        return marks
-
-    def _counters_html(self) -> str:
-        s = self.state_counters()
-        cells = "".join(f"<td style='padding:0 14px 0 0'><b>{name}</b> {value}</td>"
-                        for name, value in s)
-        rows = "".join(
-            f"<li>{c['onset_s']:.2f}–{c['end_s']:.2f} s: ringing {c['frequency_hz']:.1f} Hz "
-            f"→ <b>{_contact_label(c)}</b></li>" for c in self.contacts[-5:])
-        listing = (f"<ul style='margin:2px 0'>{rows}</ul>" if rows
-                   else "<div>no contact yet</div>")
-        return (f"<table style='font-family:sans-serif;font-size:14px'><tr>{cells}</tr></table>"
-                f"<div style='font-family:sans-serif;font-size:14px'>contacts "
-                f"({len(self.contacts)}):{listing}</div>")
-
-    def state_counters(self) -> list[tuple[str, str]]:
-        counts = self._counts
-        rtf = "–" if self.realtime_factor is None else f"×{self.realtime_factor:.1f}"
-        lat = "–" if self.latency_ms is None else f"{self.latency_ms:.1f} ms"
-        return [("stream time", f"{self.t_s:.1f} s"), ("real-time factor", rtf),
-                ("latency", lat), ("Th", f"{self.th_g:.3g} g"),
-                ("frames", counts.get("frames", 0)), ("CRC errors", counts.get("crc_errors", 0)),
-                ("gaps", counts.get("gaps", 0)), ("lost samples", counts.get("lost_samples", 0)),
-                ("reconnects", counts.get("reconnects", 0)),
-                ("view frames dropped", self.dropped)]
-
-
-def _contact_label(contact: dict) -> str:
-    label = f"{contact['distance_cm']:.1f} cm"
-    if contact.get("material"):         # networks with a material unit name it
-        label += f", {contact['material']}"
-    return label
 
 
 def _finite(value):

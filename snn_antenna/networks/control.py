@@ -1,9 +1,15 @@
 """The control layer in Brian2: class-I neurons that act on contacts (the paper's Fig. 3).
 
 - ``contact`` unit: one class-I neuron excited by the resonators tuned above the self-motion
-  band and inhibited by those in it, each through an exponential synaptic current. Self-motion
-  alone keeps it below rheobase; a contact shifts activity above the band and it fires: the
-  spiking form of ``readout.ContactDetector``'s rule (above-band activity beating the band).
+  band and inhibited by those in and below it, each through an exponential synaptic current.
+  Self-motion alone keeps it below rheobase; a contact shifts activity above the band and it
+  fires: the spiking form of the contact rule (``readout.contacts.ContactDetector``:
+  above-band activity beating the rest). The decision is the neuron's, inside Brian2, so it
+  shares the rule's definition rather than calling it: the same band
+  (``resonators.SELF_MOTION_BAND_HZ``) and the same split of the array
+  (``resonators.tuned_above``). The rule's ``min_rate_hz`` has no one-to-one counterpart: here
+  the margin between ``bias`` and rheobase, over ``w_above`` and ``tau_syn_ms``, sets how much
+  above-band activity it takes.
 - ``motor`` unit: one class-I neuron excited by the contact unit; its first spike is the stop
   command to the wheels (the closed loop sets the speed command to 0). Once the robot stops
   its self-motion ends and the resonators fall silent (Fig. 10H).
@@ -31,15 +37,22 @@ import numpy as np
 from ..sources import antenna
 from . import neurons
 from ..errors import SpecError, check
+from .resonators import SELF_MOTION_BAND_HZ, tuned_above
+
+# Time constant (ms) of the exponential synaptic current into every class-I unit (contact,
+# motor, material): short against the read-out's 0.1 s window, so a unit follows the activity
+# window by window as the read-out does, and long enough for the spikes of several resonators
+# to add up.
+CLASS1_TAU_SYN_MS = 20.0
 
 
 @dataclass
 class ControlLayer:
-    motion_band_hz: tuple = (7.0, 10.5)   # as readout.ContactDetector
+    motion_band_hz: tuple = SELF_MOTION_BAND_HZ   # the contact rule's band
     w_above: float = 2.0                  # current per above-band resonator spike
     w_band: float = 2.0                   # inhibition per in-band resonator spike
     w_motor: float = 40.0                 # contact unit → motor unit
-    tau_syn_ms: float = 20.0
+    tau_syn_ms: float = CLASS1_TAU_SYN_MS
     bias: float = 20.0                    # just below the class-I rheobase (22.6)
     dt_ms: float = 0.1
 
@@ -59,8 +72,8 @@ class ControlLayer:
         for name in ("contact", "motor"):
             units[name] = class1_group(1, self.bias, self.tau_syn_ms, self.dt_ms,
                                        f"control_{name}")
-        above = np.flatnonzero(np.asarray(neuron_hz) > self.motion_band_hz[1])
-        band = np.flatnonzero(np.asarray(neuron_hz) <= self.motion_band_hz[1])
+        is_above = tuned_above(neuron_hz, self.motion_band_hz)
+        above, band = np.flatnonzero(is_above), np.flatnonzero(~is_above)
         sense = b2.Synapses(resonators, units["contact"], "w : 1", on_pre="I_syn_post += w",
                             dt=dt, name="control_sense")
         sense.connect(i=np.r_[above, band].astype(int), j=0)
@@ -72,7 +85,7 @@ class ControlLayer:
                 "control_sense": sense, "control_act": act}
 
 
-def class1_group(n: int, bias, tau_syn_ms: float, dt_ms: float, name: str,
+def class1_group(n: int, bias, tau_syn_ms: float, dt_ms: float, name: str, *,
                  input_terms: str = "", extra: str = "", namespace: dict | None = None):
     """``n`` class-I neurons driven by ``bias`` + an exponential synaptic current ``I_syn``
     (+ ``input_terms``, whose variables ``extra`` declares)."""
@@ -186,8 +199,9 @@ class MaterialUnit:
         check(self.readout_.n_features_in_ == 3 * n_res, "network.material",
               f"{self.readout_.n_features_in_} features", f"3 per resonator ({3 * n_res}): "
               "fit on SpikeFeatures of this network's array")
-        unit = class1_group(len(self.classes), self.bias, 20.0, self.dt_ms, "material",
-                            " + drive * p", "p : 1", {"drive": self.drive})
+        unit = class1_group(len(self.classes), self.bias, CLASS1_TAU_SYN_MS, self.dt_ms,
+                            "material", input_terms=" + drive * p", extra="p : 1",
+                            namespace={"drive": self.drive})
         listen = b2.SpikeMonitor(resonators, name="material_listen")
         seen = {"n": 0}
 

@@ -21,6 +21,19 @@ from ..signals import Recording, validate_samples
 
 MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice
 
+# The band of preferred frequencies that a driving robot's self-motion keeps busy: the probe's
+# free self-oscillation (``antenna.NATURAL_HZ``) and the neighbours that its tuning plateau
+# reaches. A contact clamps the rod and shifts activity above it. The contact rule reads the
+# array through this split twice, offline and live (``readout.contacts.ContactDetector``) and as
+# spiking synapses (``networks.control.ControlLayer``): both take the band and the split here.
+SELF_MOTION_BAND_HZ = (7.0, 10.5)
+
+
+def tuned_above(neuron_hz, band_hz=SELF_MOTION_BAND_HZ) -> np.ndarray:
+    """Which resonators are tuned above ``band_hz`` (a bool per neuron): the ones a contact
+    drives and self-motion does not."""
+    return np.asarray(neuron_hz, dtype=float) > band_hz[1]
+
 
 @dataclass
 class ResonatorArray:

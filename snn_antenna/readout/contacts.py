@@ -12,8 +12,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
-from ..sources import antenna
 from ..errors import SpecError, check, is_integer, is_number
+from ..networks.resonators import SELF_MOTION_BAND_HZ, tuned_above
+from ..sources import antenna
 
 
 def dominant_hz(rates: xr.DataArray, tie: float = 0.9) -> xr.DataArray:
@@ -60,11 +61,14 @@ class ContactEstimate:
 class ContactDetector:
     """Find contacts as windows where activity above the self-motion band dominates.
 
-    A window is a contact window when the summed rate of neurons tuned above
-    ``motion_band_hz[1]`` exceeds ``min_rate_hz`` and the summed rate in and below the band.
-    Contact windows separated by at most ``max_gap_windows`` silent windows form one episode.
+    The contact rule, the one definition that the offline read-out, the live pipeline
+    (``bridge.online``) and, as synapses, the control layer (``networks.control``) follow:
+    a window is a contact window when the summed rate of the neurons tuned above
+    ``motion_band_hz[1]`` (``resonators.tuned_above``) reaches ``min_rate_hz`` and exceeds the
+    summed rate in and below the band. Contact windows separated by at most
+    ``max_gap_windows`` other windows form one episode (:class:`EpisodeTracker`).
     """
-    motion_band_hz: tuple[float, float] = (7.0, 10.5)
+    motion_band_hz: tuple[float, float] = SELF_MOTION_BAND_HZ
     min_rate_hz: float = 20.0
     max_gap_windows: int = 1
 
@@ -79,14 +83,37 @@ class ContactDetector:
         check(is_integer(self.max_gap_windows) and self.max_gap_windows >= 0,
               "max_gap_windows", self.max_gap_windows, "an integer >= 0")
 
+    def is_contact_window(self, rates: np.ndarray, above: np.ndarray) -> bool:
+        """The rule for one window: ``rates`` (Hz, one per neuron), ``above`` the neurons'
+        ``tuned_above`` mask. Always called on one window's contiguous rates, offline and live,
+        so the sums (and any tie) come out the same bit for bit."""
+        high, low = rates[above].sum(), rates[~above].sum()
+        return bool(high >= self.min_rate_hz and high > low)
+
     def contact_windows(self, rates: xr.DataArray) -> xr.DataArray:
-        above = rates.neuron_hz > self.motion_band_hz[1]
-        high = rates.where(above, 0).sum("neuron_hz")
-        low = rates.where(~above, 0).sum("neuron_hz")
-        return (high >= self.min_rate_hz) & (high > low)
+        """The rule over a rate map: a bool per window (dim ``window_s``)."""
+        values = np.asarray(rates.transpose("neuron_hz", "window_s").values, dtype=float)
+        above = tuned_above(rates.neuron_hz.values, self.motion_band_hz)
+        hit = [self.is_contact_window(np.ascontiguousarray(values[:, j]), above)
+               for j in range(values.shape[1])]
+        return xr.DataArray(np.array(hit, dtype=bool), dims=("window_s",),
+                            coords={"window_s": rates.window_s.values})
+
+    def estimate(self, rates: np.ndarray, neuron_hz: np.ndarray, starts_s: list[float],
+                 window_s: float) -> ContactEstimate:
+        """One episode's estimate from its contact windows' ``rates`` (neuron × window):
+        the centroid of the above-band activity, and the distance whose low mode rings there."""
+        episode = xr.DataArray(rates, dims=("neuron_hz", "window_s"),
+                               coords={"neuron_hz": neuron_hz, "window_s": starts_s})
+        above = xr.DataArray(tuned_above(neuron_hz, self.motion_band_hz), dims="neuron_hz",
+                             coords={"neuron_hz": neuron_hz})
+        f = float(centroid_hz(episode.where(above, 0), dim=("neuron_hz", "window_s")))
+        return ContactEstimate(onset_s=float(starts_s[0]), end_s=float(starts_s[-1] + window_s),
+                               frequency_hz=f, distance_cm=float(antenna.distance_from_low_hz(f)))
 
     def detect(self, rates: xr.DataArray, window_s: float | None = None) -> list[ContactEstimate]:
-        """Contact episodes of a rate map, first to last.
+        """Contact episodes of a rate map, first to last: its windows fed in order to the
+        :class:`EpisodeTracker` the live pipeline feeds as they come.
 
         Total over every rate map with dims ``neuron_hz`` and ``window_s``: no window, one
         window, gaps between windows, a contact in the first or the last window. The window's
@@ -101,30 +128,12 @@ class ContactDetector:
         check(bool(np.all(np.isfinite(rates.values))) and not bool(np.any(rates.values < 0)),
               "rates", "non-finite or negative rates", "finite rates >= 0 Hz")
         window = self._window_width(rates, window_s)
-        hit = self.contact_windows(rates).transpose("window_s").values
-        starts = rates.window_s.values
-        episodes, current, gap = [], [], 0
-        for j, h in enumerate(hit):
-            if h:
-                current.append(j)
-                gap = 0
-            elif current:
-                gap += 1
-                if gap > self.max_gap_windows:
-                    episodes.append(current)
-                    current, gap = [], 0
-        if current:
-            episodes.append(current)
-        out = []
-        above = rates.neuron_hz > self.motion_band_hz[1]
-        for ep in episodes:
-            sub = rates.isel(window_s=ep).where(above, 0)
-            f = float(centroid_hz(sub, dim=("neuron_hz", "window_s")))
-            out.append(ContactEstimate(onset_s=float(starts[ep[0]]),
-                                       end_s=float(starts[ep[-1]] + window),
-                                       frequency_hz=f,
-                                       distance_cm=float(antenna.distance_from_low_hz(f))))
-        return out
+        tracker = EpisodeTracker(self, rates.neuron_hz.values, window)
+        values = np.asarray(rates.transpose("neuron_hz", "window_s").values, dtype=float)
+        for t_s, j in zip(rates.window_s.values, range(values.shape[1])):
+            tracker.update(float(t_s), np.ascontiguousarray(values[:, j]))
+        tracker.close()
+        return tracker.estimates
 
     @staticmethod
     def _window_width(rates: xr.DataArray, window_s: float | None) -> float:
@@ -143,6 +152,52 @@ class ContactDetector:
         check(is_number(window_s) and window_s > 0, "window_s", window_s,
               "a window width > 0 s")
         return float(window_s)
+
+
+class EpisodeTracker:
+    """Contact episodes, window by window: the one episode logic, fed offline by
+    :meth:`ContactDetector.detect` and live by ``bridge.online``.
+
+    ``update`` reports the onset as soon as an episode's first contact window arrives, and the
+    estimate once ``max_gap_windows`` + 1 windows in a row were not contact windows (or at
+    ``close``). An episode's estimate uses its contact windows only; the bridged ones between
+    them count for nothing but holding it open.
+    """
+
+    def __init__(self, detector: ContactDetector, neuron_hz, window_s: float):
+        self.detector, self.window_s = detector, window_s
+        self.neuron_hz = np.asarray(neuron_hz, dtype=float)
+        self._above = tuned_above(self.neuron_hz, detector.motion_band_hz)
+        self._rates: list[np.ndarray] = []      # the open episode's contact windows
+        self._starts: list[float] = []
+        self._quiet = 0                         # windows since its last contact window
+        self.estimates: list[ContactEstimate] = []
+
+    def update(self, t_s: float, rates: np.ndarray) -> tuple[str, object] | None:
+        """Feed one window (its start, a rate per neuron); returns ("onset", t_s),
+        ("contact", ContactEstimate) or None."""
+        if self.detector.is_contact_window(rates, self._above):
+            onset = not self._rates
+            self._rates.append(rates)
+            self._starts.append(t_s)
+            self._quiet = 0
+            return ("onset", t_s) if onset else None
+        if not self._rates:
+            return None
+        self._quiet += 1
+        return self.close() if self._quiet > self.detector.max_gap_windows else None
+
+    def close(self) -> tuple[str, ContactEstimate] | None:
+        """End the open episode, if any: ("contact", its estimate)."""
+        if not self._rates:
+            return None
+        # Neuron × window with each window's rates contiguous: the layout a rate map's
+        # selected windows have, so the centroid's sums run in the same order, to the last bit.
+        found = self.detector.estimate(np.array(self._rates).T, self.neuron_hz, self._starts,
+                                       self.window_s)
+        self._rates, self._starts, self._quiet = [], [], 0
+        self.estimates.append(found)
+        return "contact", found
 
 
 def band_activity_hz(rates: xr.DataArray, t0_s: float, t1_s: float,

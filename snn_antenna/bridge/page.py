@@ -1,0 +1,192 @@
+"""The live view's browser page: Bokeh figures fed from a :class:`~snn_antenna.bridge.view.LiveView`'s
+history.
+
+Each open page is one Bokeh session with its own data sources; a periodic callback (every
+``PAGE_UPDATE_MS``) pulls what is new in the view's history since that page's cursor, so a page
+that falls behind or closes costs the pipeline nothing.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
+CONTACT_COLOUR = "#d62728"
+
+
+def build_page(view, doc) -> None:
+    """Lay out one browser page for ``view`` in the Bokeh document ``doc`` and keep it fed."""
+    from bokeh.layouts import column
+    from bokeh.models import ColumnDataSource, Div, Range1d
+
+    view.sessions += 1
+    doc.on_session_destroyed(lambda _ctx: setattr(view, "sessions", view.sessions - 1))
+    x_range = Range1d(0, view.history_s, name="time")
+    # The same borders on every plot keep their time axes aligned.
+    common = dict(x_range=x_range, height=210, sizing_mode="stretch_width",
+                  tools="pan,wheel_zoom,reset,save", toolbar_location="right",
+                  min_border_left=70, min_border_right=110)
+    sources = {"xy": ColumnDataSource({"t": [], "x": [], "y": []}, name="xy"),
+               "coded": ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [],
+                                          "coded": []}),
+               "map": ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []}),
+               "contacts": ColumnDataSource({"t": [], "label": []}, name="contacts")}
+    antenna = _antenna_figure(sources["xy"], common)
+    coded = _coded_figure(sources["coded"], common, view.coder_amplitude)
+    rate_map, mapper = _rate_map_figure(sources["map"], common, view.neuron_hz,
+                                        view.peak_rate_hz)
+    for fig in (antenna, coded):
+        fig.legend.location, fig.legend.orientation = "top_right", "horizontal"
+        fig.legend.background_fill_alpha = 0.7
+    for fig in (antenna, coded, rate_map):
+        _mark_contacts(fig, sources["contacts"])
+    # A fixed height: new text then never re-lays the page out (ten times a second).
+    counters = Div(text="", sizing_mode="stretch_width", height=80)
+    doc.add_root(column(counters, antenna, coded, rate_map, sizing_mode="stretch_width"))
+    doc.title = "snn-antenna live view"
+    update = _updater(view, sources, mapper, counters, x_range)
+    update()
+    doc.add_periodic_callback(update, PAGE_UPDATE_MS)
+
+
+def _antenna_figure(source, common):
+    from bokeh.plotting import figure
+
+    fig = figure(title="Antenna: the two accelerometer axes", y_axis_label="g", **common)
+    fig.line("t", "x", source=source, color="#1f77b4", legend_label="x")
+    fig.line("t", "y", source=source, color="#ff7f0e", legend_label="y")
+    return fig
+
+
+def _coded_figure(source, common, amplitude: float):
+    from bokeh.models import LinearAxis, Range1d
+    from bokeh.plotting import figure
+
+    fig = figure(title="Coded input: filtered signal, the gate's threshold ±Th, and the "
+                       "square wave fed to the resonators", y_axis_label="signal (g)", **common)
+    fig.line("t", "signal", source=source, color="#555555", legend_label="signal")
+    fig.line("t", "th", source=source, color=CONTACT_COLOUR, line_dash="dashed",
+             legend_label="±Th")
+    fig.line("t", "neg_th", source=source, color=CONTACT_COLOUR, line_dash="dashed")
+    fig.extra_y_ranges = {"coded": Range1d(-1.3 * amplitude, 1.3 * amplitude)}
+    fig.add_layout(LinearAxis(y_range_name="coded", axis_label="coded input"), "right")
+    fig.step("t", "coded", source=source, y_range_name="coded", color="#2ca02c",
+             mode="after", alpha=0.8, legend_label="coded")
+    return fig
+
+
+def _rate_map_figure(source, common, neuron_hz: np.ndarray, peak_rate_hz: float):
+    """One image (a row per resonator, a column per window) rather than a rectangle per cell:
+    the browser redraws it ten times a second, and it competes for the same cores."""
+    from bokeh.models import ColorBar, FixedTicker, LinearColorMapper, Range1d
+    from bokeh.palettes import Viridis256
+    from bokeh.plotting import figure
+
+    n = len(neuron_hz)
+    mapper = LinearColorMapper(palette=Viridis256, low=0, high=peak_rate_hz)
+    fig = figure(title="Rate map: resonators (tuning frequency) × time",
+                 y_axis_label="resonator tuning (Hz)", x_axis_label="stream time (s)",
+                 y_range=Range1d(-0.5, n - 0.5), **{**common, "height": 260})
+    fig.image(image="image", x="x", y="y", dw="dw", dh="dh", source=source, color_mapper=mapper)
+    ticks = list(range(0, n, max(1, n // 8)))
+    fig.yaxis.ticker = FixedTicker(ticks=ticks)
+    fig.yaxis.major_label_overrides = {i: f"{neuron_hz[i]:.1f}" for i in ticks}
+    fig.add_layout(ColorBar(color_mapper=mapper, title="rate (spikes/s)", width=12), "right")
+    return fig, mapper
+
+
+def _mark_contacts(fig, source) -> None:
+    """A vertical line and a label at every contact's onset."""
+    from bokeh.models import LabelSet
+
+    fig.vspan(x="t", source=source, line_color=CONTACT_COLOUR, line_width=2)
+    fig.add_layout(LabelSet(x="t", y=5, y_units="screen", text="label", x_offset=4,
+                            source=source, text_color=CONTACT_COLOUR, text_font_style="bold",
+                            text_font_size="13px", background_fill_color="white",
+                            background_fill_alpha=0.75))
+
+
+def _updater(view, sources: dict, mapper, counters, x_range):
+    """The page's periodic callback: stream what is new since this page's cursors."""
+    cursor = {"xy": 0, "coded": 0, "windows": 0}
+    shown = {"counters": None, "contacts": None}
+    rollover = view.xy.capacity
+
+    def update() -> None:
+        new_xy = view.xy.since(cursor["xy"])
+        cursor["xy"] = view.xy.total
+        if len(new_xy):
+            sources["xy"].stream({"t": new_xy[:, 0], "x": new_xy[:, 1], "y": new_xy[:, 2]},
+                                 rollover=rollover)
+        new_in = view.coded.since(cursor["coded"])
+        cursor["coded"] = view.coded.total
+        if len(new_in):
+            sources["coded"].stream({"t": new_in[:, 0], "signal": new_in[:, 1],
+                                     "th": new_in[:, 2], "neg_th": -new_in[:, 2],
+                                     "coded": new_in[:, 3]}, rollover=rollover)
+        if cursor["windows"] != view.windows.total:
+            cursor["windows"] = view.windows.total
+            sources["map"].data = _rate_image(view.windows.rows, view.window_s)
+            if mapper.high != view.peak_rate_hz:
+                mapper.high = view.peak_rate_hz
+        marks = contact_marks(view)
+        if marks != shown["contacts"]:
+            shown["contacts"] = marks
+            sources["contacts"].data = {"t": [m[0] for m in marks], "label": [m[1] for m in marks]}
+        html = counters_html(view)
+        if html != shown["counters"]:
+            shown["counters"] = counters.text = html
+        end = max(view.t_s, view.history_s)
+        if x_range.end != end:
+            x_range.start, x_range.end = end - view.history_s, end
+
+    return update
+
+
+def _rate_image(windows: np.ndarray, window_s: float) -> dict:
+    """The rate map's image data from the kept windows (rows: t_s, rates...). The windows of one
+    stream follow each other; a new stream starts again at 0, and only the latest is shown."""
+    restart = np.flatnonzero(np.diff(windows[:, 0]) <= 0)
+    if len(restart):
+        windows = windows[restart[-1] + 1:]
+    return {"image": [np.ascontiguousarray(windows[:, 1:].T)], "x": [windows[0, 0]],
+            "y": [-0.5], "dw": [len(windows) * window_s], "dh": [windows.shape[1] - 1]}
+
+
+def contact_marks(view) -> list[tuple[float, str]]:
+    """(onset, label) of every contact so far, and of the one still open."""
+    marks = [(c["onset_s"], contact_label(c)) for c in view.contacts]
+    if view.open_onset_s is not None:
+        marks.append((view.open_onset_s, "contact…"))
+    return marks
+
+
+def counters_html(view) -> str:
+    cells = "".join(f"<td style='padding:0 14px 0 0'><b>{name}</b> {value}</td>"
+                    for name, value in shown_counters(view))
+    rows = "".join(
+        f"<li>{c['onset_s']:.2f}–{c['end_s']:.2f} s: ringing {c['frequency_hz']:.1f} Hz "
+        f"→ <b>{contact_label(c)}</b></li>" for c in view.contacts[-5:])
+    listing = f"<ul style='margin:2px 0'>{rows}</ul>" if rows else "<div>no contact yet</div>"
+    return (f"<table style='font-family:sans-serif;font-size:14px'><tr>{cells}</tr></table>"
+            f"<div style='font-family:sans-serif;font-size:14px'>contacts "
+            f"({len(view.contacts)}):{listing}</div>")
+
+
+def shown_counters(view) -> list[tuple[str, str]]:
+    """The page's counter line: (name, formatted value)."""
+    counts = view.counts
+    rtf = "–" if view.realtime_factor is None else f"×{view.realtime_factor:.1f}"
+    lat = "–" if view.latency_ms is None else f"{view.latency_ms:.1f} ms"
+    return [("stream time", f"{view.t_s:.1f} s"), ("real-time factor", rtf),
+            ("latency", lat), ("Th", f"{view.th_g:.3g} g"),
+            ("frames", counts.get("frames", 0)), ("CRC errors", counts.get("crc_errors", 0)),
+            ("gaps", counts.get("gaps", 0)), ("lost samples", counts.get("lost_samples", 0)),
+            ("reconnects", counts.get("reconnects", 0)),
+            ("view frames dropped", view.dropped)]
+
+
+def contact_label(contact: dict) -> str:
+    label = f"{contact['distance_cm']:.1f} cm"
+    if contact.get("material"):         # networks with a material unit name it
+        label += f", {contact['material']}"
+    return label
