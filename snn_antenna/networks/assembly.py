@@ -99,7 +99,7 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
     objects = {}
     if "resonators" in configured:
         array = configured["resonators"]
-        group = array._build("I_ext", "I_ext : 1", {})
+        group = array.build_group("I_ext", "I_ext : 1", {})
         objects["resonators"] = group
         objects["resonator_guard"] = neurons.instability_guard(group, "resonator", array.dt_ms,
                                                                array.method)

@@ -96,7 +96,11 @@ class ResonatorArray:
               f"{self.band_hz[1]:g} Hz ({MIN_SAMPLES_PER_CYCLE} samples per cycle)")
 
     # -- building ---------------------------------------------------------------------------
-    def _build(self, input_expr: str, extra: str, namespace: dict):
+    def build_group(self, input_expr: str, extra: str = "", namespace: dict | None = None):
+        """The array as one Brian2 NeuronGroup named "resonators", tuned and at rest, driven by
+        ``input_expr`` (``extra``: further variable definitions; ``namespace``: what the
+        expression refers to). ``run``, ``stream``, ``assembly.build`` and the speed/accuracy
+        drivers all build it here."""
         import brian2 as b2
 
         b2.prefs.codegen.target = self.target
@@ -104,7 +108,7 @@ class ResonatorArray:
             self.n_neurons,
             neurons.equations("resonator", input_expr, extra) + "\nspike_count : integer",
             threshold=neurons.THRESHOLD, reset=neurons.reset("spike_count += 1"),
-            method=neurons.brian_method(self.method), namespace=namespace,
+            method=neurons.brian_method(self.method), namespace=namespace or {},
             dt=self.dt_ms * b2.ms,
             name="resonators")
         preset = neurons.PRESETS["resonator"]
@@ -138,7 +142,7 @@ class ResonatorArray:
         self.check_rate(coded.rate_hz)
         b2.start_scope()
         drive = b2.TimedArray(samples, dt=b2.second / coded.rate_hz, name="drive")
-        group = self._build("drive(t)", "", {"drive": drive})
+        group = self.build_group("drive(t)", "", {"drive": drive})
         spikes = b2.SpikeMonitor(group, name="spikes")
         guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method,
                                           check_every_ms)
@@ -171,7 +175,7 @@ class ResonatorArray:
         check(samples_per_window >= 1, "window_s", window_s,
               f"a window of at least one sample (1/{rate_hz:g} s)")
         b2.start_scope()
-        group = self._build("I_ext", "I_ext : 1", {})
+        group = self.build_group("I_ext", "I_ext : 1", {})
         guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method)
         I_ext = group.variables["I_ext"].get_value()  # the array behind the variable
         counts = group.variables["spike_count"].get_value()
