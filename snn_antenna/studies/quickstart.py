@@ -37,7 +37,8 @@ from ..readout.contacts import (
     detector_from_spec,
     dominant_hz,
 )
-from ..report import Calibrated, Predicted, Report, draw_rate_map
+from ..figures import draw_rate_map
+from ..report import Calibrated, Predicted, Report
 from ..signals import Recording
 from ..sources.scenes import scene_from_spec
 from ..sources.stimuli import RobotScene

@@ -33,8 +33,8 @@ from ..preprocess import make_chain
 from ..readout import accuracy, tradeoff
 from ..readout.accuracy import Match, StabilityGrid
 from ..readout.contacts import detector_from_spec
-from ..report import (FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, Calibrated, LogFile, Predicted,
-                      Report, fmt)
+from ..logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
+from ..report import Calibrated, Predicted, Report, fmt
 from ..sources.scenes import scene_from_spec
 from ..sources.stimuli import RobotScene
 from ..store import write_dataset

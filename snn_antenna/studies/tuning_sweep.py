@@ -20,12 +20,16 @@ from pathlib import Path
 from typing import NamedTuple
 
 from .. import spec as specs
-from ..engine.sweep import NEURON_AXES, Grid, NeuronSweep, executor, run_sweep
+from ..engine.evaluators import NEURON_AXES, NeuronSweep
+from ..engine.executor import executor
+from ..engine.grid import Grid
+from ..engine.sweep import run_sweep
 from ..errors import check
 from ..networks import neurons
 from ..readout import tuning
 from ..readout.tuning import ReadPoint
-from ..report import Calibrated, LogFile, Predicted, Report, fmt, provenance
+from ..logfile import LogFile
+from ..report import Calibrated, Predicted, Report, fmt, provenance
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
 
