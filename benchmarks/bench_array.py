@@ -95,7 +95,7 @@ def main():
     rows.append(("numba kernel (hand-written)", time.perf_counter() - t0, int(counts.sum())))
     n_py = int(args.python_seconds * rec.rate_hz)
     t0 = time.perf_counter()
-    spikes = python_loop(coded.samples[:n_py], rec.rate_hz, array.dt_ms, list(array.k), p)
+    python_loop(coded.samples[:n_py], rec.rate_hz, array.dt_ms, list(array.k), p)
     scale = len(coded.samples) / n_py
     rows.append((f"plain Python loop (x{scale:.0f} extrapolated)",
                  (time.perf_counter() - t0) * scale, None))

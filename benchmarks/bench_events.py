@@ -17,7 +17,6 @@ import time
 import numpy as np
 
 from snn_antenna.sources import bench
-from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.signals import Recording
 from snn_antenna.readout.spiking import LOW_BAND, SpikingBank
 

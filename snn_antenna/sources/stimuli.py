@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import antenna
-from ..errors import SpecError, check
+from ..errors import check
 from ..signals import Event, Recording
 
 

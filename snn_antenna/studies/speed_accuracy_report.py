@@ -1,0 +1,130 @@
+"""The speed/accuracy study's report: what ``speed_accuracy.run`` measured, as the reader's
+page (reference convergence, recommendation, Pareto fronts, cost, stability map, every run)
+and the short summary printed at the end."""
+from __future__ import annotations
+
+from ..networks import neurons
+from ..readout import accuracy, tradeoff
+from ..report import Calibrated, Predicted, Report, fmt
+
+
+def convergence_text(conv: dict) -> str:
+    head = (f"Each scene's reference is solve_ivp (DOP853, rtol {conv['rtol']:g}) from input "
+            f"switch to switch with exact threshold crossings and resets. Re-run at rtol "
+            f"{conv['check_rtol']:g} on the {conv['scene']} scene, ")
+    if not conv["same_spike_counts"]:
+        return head + (f"some neurons fire a different number of spikes (spike-time "
+                       f"difference {fmt(conv['max_shift_ms'])} ms): the reference is not "
+                       f"converged at rtol {conv['rtol']:g}, and Brian2 errors of that size "
+                       f"or smaller say nothing.")
+    text = (head + f"every neuron fires the same number of spikes and spike times move by at "
+            f"most {fmt(conv['max_shift_ms'])} ms. ")
+    if conv["smallest_brian2_error_ms"] is None:
+        return text + "No Brian2 run finished to compare that with."
+    compare = (f"The smallest Brian2 spike-time error here is "
+               f"{fmt(conv['smallest_brian2_error_ms'])} ms ({conv['smallest_error_setting']})")
+    if conv["max_shift_ms"] == 0:
+        return text + compare + ": the reference did not move at all."
+    ratio = fmt(conv["error_over_shift"], digits=2)
+    if conv["far_below"]:
+        return text + compare + f", {ratio}× the reference's shift: the reference is " \
+            "converged far below every Brian2 error reported here."
+    return text + compare + f", only {ratio}× the reference's shift: errors near that size " \
+        "are partly the reference's own, read them with that margin."
+
+
+def _provenance_rows(report: Report, summary: dict) -> None:
+    """The shipped stability limits are set from this map (calibrated); the integration
+    errors are measured against the reference (predicted; the paper has none)."""
+    for m, v in summary["stability_limits"].items():
+        report.calibrated(Calibrated(
+            f"largest stable k·dt, {m}", value=v["shipped_max_stable_k_dt"],
+            target=v["measured_max_stable_k_dt"], unit="model ms per step",
+            source="this run's stability map; the shipped value is the full profile's "
+                   "largest finite grid point, rounded down",
+            how="neurons.MAX_STABLE_K_DT (refuses a coarser dt unless force=True)"))
+    d = summary["shipped_default"]
+    for r in d["default_rows"]:
+        if r.get("rate_map_error") is not None:
+            report.predicted(Predicted(
+                f"rate-map error of the shipped default ({d['method']}, dt {d['dt_ms']:g} "
+                f"ms), {r['scene']} scene", value=r["rate_map_error"], unit="relative",
+                source="this run against the solve_ivp reference", n=1,
+                note="one scene run with one seed (deterministic); the paper reports no "
+                     "integration error"))
+
+
+def _recommendation_section(report: Report, summary: dict) -> None:
+    report.heading("Recommendation")
+    if report.quick:
+        report.text("Quick profile: the settings below are the best of the few the quick "
+                    "sweep ran (see the banner), not a recommendation for the toolkit.")
+    q = summary["quickstart_fastest_matching"]
+    if q:
+        report.text(
+            f"Quickstart scene: the fastest setting whose decoded distance and detection match "
+            f"the reference is {q['method']} at dt = {q['dt_ms']:g} ms ({q['target']}, "
+            f"{q['dtype']}): {fmt(q['cpu_s'], 's')} CPU ({fmt(q['wall_s'], 's')} wall), "
+            f"{q['speedup_vs_reference']:.0f}× faster than the reference "
+            f"({fmt(q['reference_cpu_s'], 's')} CPU) and "
+            f"{q['speedup_vs_slowest_brian2']:.0f}× faster than the slowest Brian2 setting "
+            f"({q['slowest_brian2_setting']}).")
+    cols = ("scene", "criterion", "method", "dt_ms", "target", "dtype", "cpu_s", "wall_s",
+            "speedup_vs_reference") + tradeoff.ERRORS
+    report.table([{c: r.get(c) for c in cols} for r in summary["recommendations"]],
+                 "Recommended settings per scene, with their measured cost and error")
+    d = summary["shipped_default"]
+    report.table([dict(setting=f"{d['method']} dt={d['dt_ms']:g} ms", **r)
+                  for r in d["default_rows"]], "The shipped default, as measured")
+
+
+def write_report(report: Report, summary: dict, smap) -> None:
+    rows = summary["rows"]
+    _provenance_rows(report, summary)
+    report.heading("Reference")
+    report.text(convergence_text(summary["reference_convergence"]))
+    report.table([{k: r[k] for k in ("scene", "cpu_s", "wall_s", "n_spikes", "distance_cm")}
+                  for r in summary["references"]], "Reference runs")
+    _recommendation_section(report, summary)
+    report.heading("Pareto fronts")
+    report.figure(tradeoff.pareto_figure(rows), "pareto",
+                  "Error against CPU time per scene (main sweep): colour is the method, the "
+                  "marker's shape the step dt; the black line is the Pareto front. Runs that "
+                  "raised NumericalInstabilityError are not drawn. CPU time, not wall time, "
+                  "ranks runs: the machine is shared.")
+    report.heading("Cost: targets, precision, array size")
+    cost_cols = ("method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s", "wall_s",
+                 "compile_s", "rate_map_error", "readout_matches", "status")
+    report.table([{c: r.get(c) for c in cost_cols} for r in rows if r["sweep"] == "cost"],
+                 "Cost sweep (errors only where a reference of the same size exists)")
+    report.heading("Stability map")
+    report.figure(accuracy.stability_figure(smap), "stability_map",
+                  "Constant drive I against k·dt, from the reset point: accurate (steady rate "
+                  "within tolerance of the reference), inaccurate but finite, non-finite or "
+                  f"runaway (|v| or |u| above {neurons.RUNAWAY_LIMIT:g} at any step).")
+    report.table([dict(method=m, **v) for m, v in summary["stability_limits"].items()],
+                 "Stability limits (k·dt in model ms per step)")
+    n_silent = summary["nonfinite_without_exception"]
+    report.text(
+        f"{summary['raised_instability']} run(s) raised NumericalInstabilityError (shown as "
+        f"non-finite); {n_silent} run(s) finished without an exception yet produced a "
+        f"non-finite spike time or score" + (" (listed below)." if n_silent else "."))
+    report.heading("All runs")
+    all_cols = ("sweep", "scene", "method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s",
+                "wall_s", "status") + tradeoff.ERRORS
+    report.table([{c: r.get(c) for c in all_cols} for r in rows], "Every configuration")
+
+
+def human_summary(s: dict, out_dir) -> str:
+    lines = []
+    q = s["quickstart_fastest_matching"]
+    if q:
+        lines.append(f"quickstart: fastest setting matching the reference read-out: "
+                     f"{q['method']} dt={q['dt_ms']:g} ms ({q['target']}, {q['dtype']}), "
+                     f"{q['cpu_s']:.2f} s CPU, {q['speedup_vs_reference']:.0f}x faster than the "
+                     f"reference")
+    for m, v in s["stability_limits"].items():
+        lines.append(f"{m}: finite to k·dt {v['measured_max_stable_k_dt']:.3g} "
+                     f"(shipped limit {v['shipped_max_stable_k_dt']:g})")
+    lines.append(f"report in {out_dir}/report.html ({s['total_wall_s']:.0f} s)")
+    return "\n".join(lines)
