@@ -190,3 +190,25 @@ def score(detections: list[ContactEstimate], contacts, duration_s: float,
         s.latencies_s.append(d.onset_s + window_s - contacts[i].t_s)
     s.misses = int(sum(1 for m, v in zip(matched, seen) if v and not m))
     return s
+
+
+def score_run(readout: BlindReadOut, detections: list, contacts, duration_s: float,
+              stopped_at_s: float | None = None) -> dict:
+    """One run's detections (and the robot's stop) against its contacts, after the run: the
+    counts of ``score`` and, for the first contact, its decoded distance, latency and how
+    long after it the robot stopped."""
+    s = readout.score(detections, contacts, duration_s)
+    first = min(contacts, key=lambda c: c.t_s) if contacts else None
+    out = {**s.as_dict(), "scored_minutes": s.minutes, "first_contact": None}
+    if first is None:
+        return out
+    match = first_match(detections, first, readout.window_s)
+    f_first = float(antenna.low_mode_hz(first.distance_cm))
+    out["first_contact"] = {
+        "t_s": first.t_s, "true_distance_cm": first.distance_cm, "material": first.material,
+        "low_mode_hz": f_first, "within_array_band": bool(f_first <= float(readout.array.band_hz[1])),
+        "decoded_distance_cm": match.distance_cm if match else None,
+        "distance_error_cm": (match.distance_cm - first.distance_cm) if match else None,
+        "latency_s": (match.onset_s + readout.window_s - first.t_s) if match else None,
+        "stopped_after_s": (stopped_at_s - first.t_s) if stopped_at_s is not None else None}
+    return out
