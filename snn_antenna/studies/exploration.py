@@ -92,7 +92,7 @@ def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     summary = summarize(robot, world, scored, parts)
     summary["total_wall_s"] = time.perf_counter() - t_start
     summary["built_objects"] = robot.built
-    summary = write_report(spec, parts, robot, world, summary, out_dir, quick)
+    summary = write_report(spec, parts, robot, summary, out_dir, quick)
     log(human_summary(summary, out_dir))
     return summary
 
@@ -153,8 +153,8 @@ def _score_rows(sc: dict) -> list[dict]:
     return [{"quantity": q, "value": v} for q, v in rows]
 
 
-def write_report(spec: dict, parts: ClosedLoop, robot: RobotRecord, world: OnlineAntenna,
-                 summary: dict, out_dir, quick: bool) -> dict:
+def write_report(spec: dict, parts: ClosedLoop, robot: RobotRecord, summary: dict, out_dir,
+                 quick: bool) -> dict:
     array, first = parts.configured["resonators"], summary["score"]["first_contact"]
     rep = Report(out_dir, "snn-antenna: active exploration, closed loop", quick=quick,
                  quick_note="quick profile: a shorter loop, a briefly trained gate and the "
@@ -172,7 +172,8 @@ def write_report(spec: dict, parts: ClosedLoop, robot: RobotRecord, world: Onlin
                  "distance saturates at the array's edge and it is not scored.")
     rep.table(summary["contacts"], "The world's contacts (ground truth)")
     rep.table(summary["detections"], "Every detection of the read-out (blind)")
-    rep.figure(_figure(robot, parts.scene, world), "exploration",
+    rep.figure(_figure(robot, parts.scene, [c["t_s"] for c in summary["contacts"]]),
+               "exploration",
                "Joint angles from the CPG, robot speed and the gate's Th, the rate map (dashed: "
                "true contacts, green: detections, red: stop) and the tip's path in the plane "
                "with the posts.")
@@ -238,7 +239,7 @@ def human_summary(s: dict, out_dir) -> str:
         f"report in {out_dir}/report.html ({s['total_wall_s']:.0f} s)"])
 
 
-def _figure(robot: RobotRecord, scene: CourseScene, world: OnlineAntenna):
+def _figure(robot: RobotRecord, scene: CourseScene, contact_times_s: list):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -261,8 +262,8 @@ def _figure(robot: RobotRecord, scene: CourseScene, world: OnlineAntenna):
     mesh = draw_rate_map(a2, robot.rates)
     fig.colorbar(mesh, ax=a2, label="rate (Hz)", pad=0.01)
     a2.set_xlabel("time (s)")
-    for c in world.contacts:
-        a2.axvline(c.t_s, color="tab:cyan", ls="--")
+    for t_s in contact_times_s:
+        a2.axvline(t_s, color="tab:cyan", ls="--")
     for d in robot.detections:
         a2.axvline(d.onset_s, color="tab:green")
     if stopped is not None:

@@ -478,49 +478,55 @@ def evaluate(evaluation: Evaluation, log) -> SeedPlan:
     return SeedPlan(ev.pilot_seeds, needed, used, ev.max_seeds, ev.margin_f1)
 
 
+@dataclass
+class Results:
+    """Every stage's output: what the summary and the report are made from."""
+    outcome: object           # the sweep's ``SweepOutcome``; ``outcome.data`` is fitted
+    fit: ThStarFit
+    fig9: dict
+    recall: GateRecall
+    seeds: SeedPlan
+    comparison: dict
+    example: dict | None      # a ramp scene's online Th and rate map
+
+
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         scheduler: str | None = None, log=print) -> dict:
-    parts = build(spec)
+    parts, out_dir, t_start = build(spec), Path(out_dir), time.perf_counter()
     # One Dask client (or none: ``sweep.workers = 1``) serves every Brian2 stage.
     with executor(parts.sweep.workers, scheduler, log) as client:
-        return _run(spec, parts, Path(out_dir), quick, fresh, client, log)
-
-
-def _run(spec: dict, parts: Parts, out_dir: Path, quick: bool, fresh: bool, client,
-         log) -> dict:
-    t_start = time.perf_counter()
-    outcome, fit = sweep(spec, parts, out_dir, fresh, client, log)
-    codings = ScoredCodings(parts.readout, parts.sweep.codings_per_run, client)
-    where = "on the Dask workers" if client is not None else "after the gate"
-    log(f"[2/5] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed (runs {where})")
-    fig9, fig9_runs = submit_fig9(parts, fit, codings)
-    # The fixed thresholds worth evaluating: the grid around Th*'s range (outside it F1 only
-    # falls, see the sweep's curves) and the one chosen on the sweep. Their codings need no
-    # gate, so the pilot's start now and run while the gate learns.
-    th = parts.sweep.thresholds_g
-    lo, hi = fit.th_star_g.min() / 2, fit.th_star_g.max() * 2
-    fixed_th = np.unique(np.r_[th[(th >= lo) & (th <= hi)], fit.sweep_fixed_th_g])
-    evaluation = Evaluation(parts, fixed_th, codings)
-    evaluation.add_slots(range(parts.evaluation.pilot_seeds))
-    evaluation.recall = recall = train_gate(parts, fit, log)
-    log(f"[4/5] evaluation on new scenes, pilot of {parts.evaluation.pilot_seeds} seed(s): "
-        f"{len(evaluation.scores.categories)} scenes each "
-        f"({', '.join(dict.fromkeys(evaluation.scores.categories))}); "
-        f"{len(fixed_th)} fixed Th, the lookup table and the gate")
-    collect_fig9(fig9, fig9_runs, codings)
-    seeds = evaluate(evaluation, log)
-    summary = summarize(parts, outcome, fit, fig9, recall, seeds,
-                        compare(evaluation.scores, fixed_th, fit.sweep_fixed_th_g))
+        outcome, fit = sweep(spec, parts, out_dir, fresh, client, log)
+        codings = ScoredCodings(parts.readout, parts.sweep.codings_per_run, client)
+        where = "on the Dask workers" if client is not None else "after the gate"
+        log(f"[2/5] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed (runs {where})")
+        fig9, fig9_runs = submit_fig9(parts, fit, codings)
+        # The fixed thresholds worth evaluating: the grid around Th*'s range (outside it F1
+        # only falls, see the sweep's curves) and the one chosen on the sweep. Their codings
+        # need no gate, so the pilot's start now and run while the gate learns.
+        th = parts.sweep.thresholds_g
+        lo, hi = fit.th_star_g.min() / 2, fit.th_star_g.max() * 2
+        fixed_th = np.unique(np.r_[th[(th >= lo) & (th <= hi)], fit.sweep_fixed_th_g])
+        evaluation = Evaluation(parts, fixed_th, codings)
+        evaluation.add_slots(range(parts.evaluation.pilot_seeds))
+        evaluation.recall = recall = train_gate(parts, fit, log)
+        categories = evaluation.scores.categories
+        log(f"[4/5] evaluation on new scenes, pilot of {parts.evaluation.pilot_seeds} seed(s): "
+            f"{len(categories)} scenes each ({', '.join(dict.fromkeys(categories))}); "
+            f"{len(fixed_th)} fixed Th, the lookup table and the gate")
+        collect_fig9(fig9, fig9_runs, codings)
+        seeds = evaluate(evaluation, log)
+    results = Results(outcome, fit, fig9, recall, seeds,
+                      compare(evaluation.scores, fixed_th, fit.sweep_fixed_th_g),
+                      evaluation.example)
+    summary = summarize(parts, results)
     summary["total_wall_s"] = time.perf_counter() - t_start
-    write_report(Figures(out_dir, spec, parts, outcome.data, fig9, recall, evaluation.example),
-                 summary, quick)
+    write_report(out_dir, spec, parts, results, summary, quick)
     log(human_summary(summary, out_dir))
     return summary
 
 
-def summarize(parts: Parts, outcome, fit: ThStarFit, fig9: dict, recall: GateRecall,
-              seeds: SeedPlan, comparison: dict) -> dict:
-    ds, speeds = outcome.data, fit.speeds_cm_s
+def summarize(parts: Parts, r: Results) -> dict:
+    ds, speeds, fit, outcome = r.outcome.data, r.fit.speeds_cm_s, r.fit, r.outcome
     i12, i27 = (int(np.argmin(np.abs(speeds - v))) for v in LOW_HIGH_CM_S)
     return {
         "th_star": {f"{v:g}": float(t) for v, t in zip(speeds, fit.th_star_g)},
@@ -529,18 +535,18 @@ def summarize(parts: Parts, outcome, fit: ThStarFit, fig9: dict, recall: GateRec
         "fp_per_min_at_th0_while_driving": float(ds.fp_per_min.isel(threshold_g=0)
                                                  .values[speeds > 0].mean()),
         "highest_th_misses_all": bool(ds.tp.isel(threshold_g=-1).sum() == 0),
-        "recall_ratio": {f"{v:g}": float(r) for v, r in zip(speeds, recall.ratio)},
-        "recall_error_factor_held_out": recall.error_factor(held_out=True),
-        "recall_error_factor_trained": recall.error_factor(held_out=False),
+        "recall_ratio": {f"{v:g}": float(x) for v, x in zip(speeds, r.recall.ratio)},
+        "recall_error_factor_held_out": r.recall.error_factor(held_out=True),
+        "recall_error_factor_trained": r.recall.error_factor(held_out=False),
         "train_speeds_cm_s": parts.train_speeds.tolist(),
         "gate_tau_read_s": parts.gate.tau_read_s,
         "calibration_checks": {
             "th_star_ratio_27_to_12": float(fit.th_star_g[i27] / fit.th_star_g[i12]),
             "tp_at_th_star_vs_double": {f"{v:g}": [row.scores[1].tp, row.scores[2].tp]
-                                        for v, row in fig9.items()}},
-        "seeds": {"pilot": seeds.pilot, "needed": seeds.needed, "used": seeds.used,
-                  "budget": seeds.budget, "margin_f1": seeds.margin_f1},
-        **comparison,
+                                        for v, row in r.fig9.items()}},
+        "seeds": {"pilot": r.seeds.pilot, "needed": r.seeds.needed, "used": r.seeds.used,
+                  "budget": r.seeds.budget, "margin_f1": r.seeds.margin_f1},
+        **r.comparison,
         "sweep_chunks": {"computed": len(outcome.chunks_computed),
                          "reused": len(outcome.chunks_skipped), "workers": outcome.workers},
         "sweep_wall_s": outcome.wall_s,
@@ -567,18 +573,6 @@ def quick_note(parts: Parts) -> str:
             "coarse grid (it may sit at one threshold at every speed), the gate is barely "
             "trained, and the F1 intervals over so few seeds are wide or missing. Run the full "
             "profile for any number worth reading.")
-
-
-@dataclass
-class Figures:
-    """What the report draws besides the summary."""
-    out_dir: Path
-    spec: dict
-    parts: Parts
-    ds: object           # the fitted sweep (``fit_th_star`` added F1, Th*)
-    fig9: dict
-    recall: GateRecall
-    example: dict | None
 
 
 def _ci(d):
@@ -662,14 +656,15 @@ def _headline(s: dict, parts: Parts) -> str:
         f"{seeds['budget']}).")
 
 
-def write_report(f: Figures, s: dict, quick: bool) -> None:
-    parts, ds = f.parts, f.ds
-    rep = Report(f.out_dir, "snn-antenna: gating threshold and the learned speed gate",
+def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
+                 quick: bool) -> None:
+    ds = r.outcome.data
+    rep = Report(out_dir, "snn-antenna: gating threshold and the learned speed gate",
                  quick=quick, quick_note=quick_note(parts))
     ok, why = earns_its_place(s)
     rep.calibrated(*_calibrated(s, parts))
     rep.predicted(*_predicted(s, parts))
-    rep.text(f.spec.get("description", ""))
+    rep.text(spec.get("description", ""))
     rep.heading("Headline: the gate on new scenes")
     rep.text(_headline(s, parts))
     rep.text(f"Verdict: the gate {'earns' if ok else 'does not earn'} its place — {why}.")
@@ -689,8 +684,8 @@ def write_report(f: Figures, s: dict, quick: bool) -> None:
     rep.figure(figures.f1_methods(s), "f1_methods",
                "F1 over all evaluation scenes for each fixed Th evaluated (mean over seeds, "
                "95 % CI), with the gate and the lookup table (line: mean, band: 95 % CI).")
-    if f.example is not None and "map" in f.example:
-        rep.figure(_fig_ramp(f.example, parts), "ramp_example",
+    if r.example is not None and "map" in r.example:
+        rep.figure(_fig_ramp(r.example, parts), "ramp_example",
                    "A ramp scene: speed command, the gate's online Th (and the lookup), and "
                    "the rate map under the gated Th; dashed lines: true contacts (cyan: in the "
                    "array's band, grey: outside it), green: detections.")
@@ -703,20 +698,20 @@ def write_report(f: Figures, s: dict, quick: bool) -> None:
                zip(ds.speed_cm_s.values, ds.best_th_g.values, ds.th_star_g.values)],
               "Th*(speed) from the sweep: each speed's best Th and their monotone fit")
     rep.heading("Fig. 9 in kind (calibrated: see above)")
-    rep.figure(_fig9(f.fig9, parts), "fig9_rate_maps",
+    rep.figure(_fig9(r.fig9, parts), "fig9_rate_maps",
                "Rate maps of one scene at low and high speed for Th = 0, Th* and 2·Th*; "
                "dashed lines mark true contacts (cyan: in the array's band, grey: outside it), "
                "green lines detections.")
     rep.table([{"speed (cm/s)": v, "Th": lab, "Th (g)": th, **sc.as_dict()}
-               for v, row in f.fig9.items()
+               for v, row in r.fig9.items()
                for lab, th, sc in zip(("0", "Th*", "2·Th*"), row.thresholds, row.scores)],
               "Detections pooled over the sweep's scenes")
     rep.heading("The speed gate (Brian2 associative memory)")
-    rep.figure(figures.gate_recall(f.recall), "gate",
+    rep.figure(figures.gate_recall(r.recall), "gate",
                "Left: learning curves, recall error factor exp(mean |log(recalled/Th*)|) on "
                "trained and held-out speeds. Right: Th* from the sweep, the gate's recall and "
                "the lookup table.")
-    rep.write(s, f.spec, parts.array.target)
+    rep.write(s, spec, parts.array.target)
 
 
 def _sweep_row(ds, v, best, th_star) -> dict:
@@ -728,18 +723,17 @@ def _sweep_row(ds, v, best, th_star) -> dict:
             "out of the array's band": int(at_zero.out_of_band_contacts.sum())}
 
 
-def _draw_map(fig, ax, rates, rec, parts: Parts, title, cax=None):
+def _draw_map(ax, rates, rec, parts: Parts, title: str):
+    """A rate map with the true contacts (cyan: in the array's band, grey: outside it) and
+    the detections (green); returns the mesh for its colour bar."""
     mesh = draw_rate_map(ax, rates)
-    if cax is None:
-        fig.colorbar(mesh, ax=ax, label="rate (Hz)", pad=0.01)
-    else:
-        fig.colorbar(mesh, cax=cax, label="rate (Hz)")
     for c in rec.contacts:
         ok = visible(c, parts.readout.detector, parts.array)
         ax.axvline(c.t_s, color="tab:cyan" if ok else "0.6", ls="--", lw=0.8)
     for d in parts.readout.detector.detect(rates):
         ax.axvline(d.onset_s, color="tab:green", lw=1.2)
     ax.set_title(title, fontsize=9)
+    return mesh
 
 
 def _fig9(fig9: dict, parts: Parts):
@@ -748,7 +742,8 @@ def _fig9(fig9: dict, parts: Parts):
     for r, (v, row) in enumerate(fig9.items()):
         for c, (lab, th, rates) in enumerate(zip(("Th", "Th*", "2·Th*"), row.thresholds,
                                                  row.maps)):
-            _draw_map(fig, axes[r, c], rates, row.rec, parts, f"{v:g} cm/s, {lab} = {th:.3g} g")
+            mesh = _draw_map(axes[r, c], rates, row.rec, parts, f"{v:g} cm/s, {lab} = {th:.3g} g")
+            fig.colorbar(mesh, ax=axes[r, c], label="rate (Hz)", pad=0.01)
         axes[r, 0].set_ylabel("neuron (Hz)")
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
@@ -771,7 +766,7 @@ def _fig_ramp(example: dict, parts: Parts):
     figures.th_axis(a1, np.r_[example["gated_th"], example["lookup_th"]])
     a1.set_ylabel("Th (g)")
     a1.legend(fontsize=8)
-    _draw_map(fig, a2, example["map"], rec, parts, "gated", cax=cax)
+    fig.colorbar(_draw_map(a2, example["map"], rec, parts, "gated"), cax=cax, label="rate (Hz)")
     a2.set_ylabel("neuron (Hz)")
     a2.set_xlabel("time (s)")
     fig.tight_layout()
