@@ -28,7 +28,8 @@ trains the gate (``Codings`` over ``engine.batches.Batches``).
 
 Seeds: every draw comes from ``numpy.random.SeedSequence(seed, spawn_key=(stream, ...))``, one
 stream per sweep scene (shared by all speeds, so speeds are compared on the same courses) and
-per evaluation scene, so no two scenes share a seed whatever the counts.
+per evaluation scene (``evaluation.scene_stream`` picks another family of them: validation
+scenes), so no two scenes share a seed whatever the counts.
 
 Outputs: report.html, summary.json, figures, and ``sweep.zarr`` (the scored grid, dims
 speed_cm_s × scene × threshold_g).
@@ -107,8 +108,13 @@ class EvaluationSettings:
     speeds_cm_s: list | None = None   # default: the swept speeds the gate is not trained on
     n_steps: int = 4              # random speed steps per scene
     other_terrain: str = "flat"
+    # Which family of evaluation scenes: 0 gives the reported ones; any other integer draws
+    # scenes never used for them (validation seeds, to tune settings on).
+    scene_stream: int = 0
 
     def __post_init__(self):
+        check(isinstance(self.scene_stream, int) and self.scene_stream >= 0, "scene_stream",
+              self.scene_stream, "an integer >= 0")
         for name in ("pilot_seeds", "max_seeds", "n_steps"):
             value = getattr(self, name)
             check(isinstance(value, int) and value >= 1, name, value, "an integer >= 1")
@@ -394,7 +400,8 @@ class Evaluation:
         v, length = self.parts.sweep.speeds_cm_s, self.parts.sweep.scene_s
         lo, hi, terrain = float(v.min()), float(v.max()), self.parts.scene.terrain
         rng = np.random.default_rng(np.random.SeedSequence(
-            self.parts.seed, spawn_key=(EVALUATION_STEPS, slot)))
+            self.parts.seed, spawn_key=(EVALUATION_STEPS, self.parts.evaluation.scene_stream,
+                                        slot)))
         steps = random_steps(rng, lo, hi, length, self.parts.evaluation.n_steps)
         up, other = ramp(lo, hi, length), self.parts.evaluation.other_terrain
         out = [("held-out speeds", f"{x:g} cm/s", SpeedProfile("constant", float(x)), terrain)
@@ -412,8 +419,8 @@ class Evaluation:
         for slot in slots:
             self.scenes[slot] = []
             for i, (_, _, profile, terrain) in enumerate(self.profiles(slot)):
-                scene, seed = make_scene(self.parts, profile, (EVALUATION_SCENES, slot, i),
-                                         terrain)
+                key = (EVALUATION_SCENES, self.parts.evaluation.scene_stream, slot, i)
+                scene, seed = make_scene(self.parts, profile, key, terrain)
                 rec = scene.generate(seed)
                 x, coder = condition(self.parts, rec)
                 self.scenes[slot].append((rec, x, coder))
