@@ -145,12 +145,8 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     a second run computes nothing, a changed gate reuses it, a changed sweep is refused."""
     from snn_antenna import spec as specs
     from snn_antenna.errors import SpecError
-    from snn_antenna.studies.gating_threshold import (
-        SWEEP_OUTPUTS,
-        ThresholdSweep,
-        build,
-        sweep_settings,
-    )
+    from snn_antenna.readout.scoring import SCORE_OUTPUTS
+    from snn_antenna.studies.gating_threshold import ThresholdSweep, build, sweep_settings
     from snn_antenna.engine.sweep import Grid, run_sweep
 
     def sweep(*overrides):
@@ -160,7 +156,7 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
         build(spec)
         # scene 4: a course whose shaking at 27 cm/s makes false positives at Th = 0
         grid = Grid({"speed_cm_s": [27.0], "scene": [4.0], "threshold_g": [0.0, 0.3, 100.0]})
-        return run_sweep(grid, ThresholdSweep(spec), tmp_path / "sweep.zarr", SWEEP_OUTPUTS,
+        return run_sweep(grid, ThresholdSweep(spec), tmp_path / "sweep.zarr", SCORE_OUTPUTS,
                          settings=sweep_settings(spec), progress=False)
 
     first = sweep()

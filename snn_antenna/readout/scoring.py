@@ -7,9 +7,11 @@ the array per coding, each copy reading its own column of a 2-D TimedArray throu
 ``neurons.simulate``), and ``score`` compares the read-out's detections with the labelled
 contacts.
 
-The read-out (``run_codings`` then ``ContactDetector.detect``) sees only the coded signal, as
-a robot would; ``score`` compares its detections with the ground truth afterwards, and is the
-only place the ground truth enters.
+The read-out (``run_codings`` then ``ContactDetector.detect``, together ``BlindReadOut``) sees
+only the coded signal, as a robot would; ``score`` compares its detections with the ground
+truth afterwards, and is the only place the ground truth enters (``score_run`` adds the first
+contact's decoded distance, latency and the robot's stop; ``score_columns`` turns scores into
+the counts of ``SCORE_OUTPUTS`` that a sweep's store holds).
 
 Scoring, per contact: a detection whose first window starts between one window before the
 contact and the end of its hold is a true positive (latency: from the contact to the end of

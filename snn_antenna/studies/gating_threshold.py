@@ -59,7 +59,6 @@ from ..report import Calibrated, Predicted, Report, draw_rate_map
 from ..sources import antenna
 from ..sources.scenes import (CourseLayout, CourseScene, SpeedProfile, course_drive, drive,
                               ramp, random_steps, scene_from_spec)
-from ..store import Output
 
 SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",
             "gate", "evaluation")
@@ -67,7 +66,6 @@ LOW_HIGH_CM_S = (12.0, 27.0)  # the paper's two speeds (Fig. 9)
 # Seed streams (first entry of every spawn key) and, within a scene's stream, its two draws.
 SWEEP_SCENES, EVALUATION_SCENES, EVALUATION_STEPS = 0, 1, 2
 COURSE_DRAW, NOISE_DRAW = 0, 1
-SWEEP_OUTPUTS: dict[str, Output] = SCORE_OUTPUTS
 
 
 # -- the spec ------------------------------------------------------------------------------
@@ -321,7 +319,7 @@ def sweep(spec: dict, parts: Parts, out_dir: Path, fresh: bool, client, log):
     grid = Grid({"speed_cm_s": speeds, "scene": np.arange(sw.n_scenes),
                  "threshold_g": thresholds}, {"speed_cm_s": "cm/s", "threshold_g": "g"})
     outcome = run_sweep(grid, ThresholdSweep(specs.resolved(spec)), out_dir / "sweep.zarr",
-                        SWEEP_OUTPUTS, client=client, fresh=fresh,
+                        SCORE_OUTPUTS, client=client, fresh=fresh,
                         chunk_points=sw.codings_per_run, settings=sweep_settings(spec),
                         attrs={"description": "Th x speed sweep: detections scored per "
                                               "contact", "spec": specs.resolved(spec)})
