@@ -37,7 +37,8 @@ def _errorbar(ax, x, intervals, **kw):
     mean = np.array([np.nan if d["mean"] is None else d["mean"] for d in intervals])
     low = np.array([m if d.get("low") is None else d["low"] for m, d in zip(mean, intervals)])
     high = np.array([m if d.get("high") is None else d["high"] for m, d in zip(mean, intervals)])
-    ax.errorbar(x, mean, yerr=[mean - low, high - mean], capsize=3, **kw)
+    # yerr as one (2, n) array: a list of two length-1 arrays is read as scalars (deprecated)
+    ax.errorbar(x, mean, yerr=np.array([mean - low, high - mean]), capsize=3, **kw)
 
 
 def f1_per_category(comparison: dict):
