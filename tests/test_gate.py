@@ -132,7 +132,7 @@ def test_study_spec_refuses_bad_speeds_before_any_work():
 
 
 def test_th_star_is_the_monotone_fit_of_each_speeds_best_threshold():
-    from snn_antenna.studies.gating_threshold import choose_th_star, monotone_th_star
+    from snn_antenna.readout.thresholds import choose_th_star, monotone_th_star
     speeds = np.array([0.0, 6.0, 12.0, 18.0, 24.0])
     rising = np.array([0.03, 0.05, 0.1, 0.3, 0.6])
     assert monotone_th_star(speeds, rising, np.ones(5)) == pytest.approx(rising)

@@ -66,19 +66,14 @@ def test_the_read_out_never_sees_the_ground_truth():
     """Replace a scene's labels (contacts, and the robot's true path) with garbage after
     generation: the study's read-outs (fixed Th, and a per-sample Th from the speed command)
     give the same detections and rate maps; only the scores change."""
+    from snn_antenna.engine.batches import ScoredCodings
     from snn_antenna.signals import Event
     from snn_antenna.sources.scenes import SpeedProfile
-    from snn_antenna.studies.gating_threshold import (
-        Codings,
-        condition,
-        make_scene,
-        scene_detections,
-        score_detections,
-    )
+    from snn_antenna.studies.gating_threshold import condition, make_scene
 
     spec, parts = _quick_parts("sweep.scene_s=5.0")
-    scene = make_scene(parts, SpeedProfile("ramp", points=[[0, 0.0], [5, 27.0]]), 11)
-    rec = scene.generate(11)
+    scene, seed = make_scene(parts, SpeedProfile("ramp", points=[[0, 0.0], [5, 27.0]]), (11,))
+    rec = scene.generate(seed)
     assert len(rec.contacts) >= 2
     rng = np.random.default_rng(0)
     garbage = tuple(Event("contact", float(t), 1.0, float(d)) for t, d in
@@ -87,16 +82,23 @@ def test_the_read_out_never_sees_the_ground_truth():
                    meta={**rec.meta, "robot_x_cm": rng.normal(size=rec.n_samples),
                          "pan_deg": rng.normal(size=rec.n_samples)})
     speed_th = 0.03 + 0.02 * rec.meta["speed_cm_s"]          # a Th from the speed command
-    real = scene_detections(parts, rec, speed_th)
-    assert real and scene_detections(parts, fake, speed_th) == real
+
+    def detections(recording):
+        x, coder = condition(parts, recording)
+        coded = coder.partial_transform(x, threshold=speed_th)[:, None]
+        return parts.readout.detect(coded)[0][0]
+
+    real = detections(rec)
+    assert real and detections(fake) == real
     # The study's batch path: the same coded column under true and garbage labels.
     x, coder = condition(parts, fake)
     coded = coder.partial_transform(x, threshold=0.1)
-    (s_real, s_fake), (m_real, m_fake) = Codings(spec).run([(rec, coded), (fake, coded)])
+    codings = ScoredCodings(parts.readout, parts.sweep.codings_per_run)
+    (s_real, s_fake), (m_real, m_fake) = codings.run([(rec, coded), (fake, coded)])
     assert m_real.equals(m_fake)
     assert s_real != s_fake    # the labels do reach the scoring, afterwards
-    assert s_real == score_detections(parts, parts["detector"].detect(m_real), rec.contacts,
-                                      rec.duration_s)
+    assert s_real == parts.readout.score(parts.readout.detector.detect(m_real), rec.contacts,
+                                         rec.duration_s)
 
 
 def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
@@ -106,7 +108,8 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
     from snn_antenna.studies.gating_threshold import calibrated_chain, condition, make_scene
 
     _, parts = _quick_parts()
-    rec = make_scene(parts, SpeedProfile("constant", 27.0), 5).generate(5)
+    scene, seed = make_scene(parts, SpeedProfile("constant", 27.0), (5,))
+    rec = scene.generate(seed)
     assert rec.contacts
     cut = int(2.0 * rec.rate_hz)
     first = condition(parts, rec)[0][:cut]
@@ -126,7 +129,7 @@ def test_evaluation_speeds_must_be_held_out_from_the_gate():
     with pytest.raises(SpecError, match="calibration.speed_cm_s"):
         _quick_parts("calibration.speed_cm_s=0.0")
     _, parts = _quick_parts("gate.train_speeds_cm_s=[0.0, 27.0]")
-    assert parts["evaluation"]["speeds_cm_s"].tolist() == [12.0]   # default: the untrained
+    assert parts.held_out_speeds.tolist() == [12.0]   # default: the untrained
 
 
 def test_bad_speed_in_the_spec_fails_fast_with_one_line(tmp_path, capsys):
@@ -142,12 +145,8 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     a second run computes nothing, a changed gate reuses it, a changed sweep is refused."""
     from snn_antenna import spec as specs
     from snn_antenna.errors import SpecError
-    from snn_antenna.studies.gating_threshold import (
-        SWEEP_OUTPUTS,
-        ThresholdSweep,
-        build,
-        sweep_settings,
-    )
+    from snn_antenna.readout.scoring import SCORE_OUTPUTS
+    from snn_antenna.studies.gating_threshold import ThresholdSweep, build, sweep_settings
     from snn_antenna.engine.sweep import Grid, run_sweep
 
     def sweep(*overrides):
@@ -155,8 +154,9 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
                           ["sweep.scene_s=5.0", "sweep.speeds_cm_s=[0.0, 27.0]", *overrides],
                           quick=True)
         build(spec)
-        grid = Grid({"speed_cm_s": [27.0], "scene": [0.0], "threshold_g": [0.0, 0.3, 100.0]})
-        return run_sweep(grid, ThresholdSweep(spec), tmp_path / "sweep.zarr", SWEEP_OUTPUTS,
+        # scene 4: a course whose shaking at 27 cm/s makes false positives at Th = 0
+        grid = Grid({"speed_cm_s": [27.0], "scene": [4.0], "threshold_g": [0.0, 0.3, 100.0]})
+        return run_sweep(grid, ThresholdSweep(spec), tmp_path / "sweep.zarr", SCORE_OUTPUTS,
                          settings=sweep_settings(spec), progress=False)
 
     first = sweep()
@@ -175,8 +175,9 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     """Fig. 9 and the evaluation run on the study's Dask workers while this process trains the
     gate: the scores and rate maps must be those of running the same batches here."""
     from snn_antenna import spec as specs
-    from snn_antenna.studies.gating_threshold import Codings, build, sweep_scene
+    from snn_antenna.engine.batches import ScoredCodings
     from snn_antenna.engine.sweep import dask_client
+    from snn_antenna.studies.gating_threshold import build, coded_at, sweep_scene
 
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=3.0", "sweep.codings_per_run=3"],
@@ -184,14 +185,13 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     parts = build(spec)
     items = []
     for speed in (0.0, 27.0):
-        rec, x, coder = sweep_scene(parts, speed, 0)
-        coded = coder.partial_transform(np.c_[x, x, x], threshold=np.array([[0.0, 0.3, 100.0]]))
-        items += [(rec, coded[:, j]) for j in range(3)]
-    here_scores, here_maps = Codings(spec).run(items)
+        rec, x, coder = sweep_scene(parts, speed, 1)   # scene 1: a false positive at Th = 0
+        items += [(rec, c) for c in coded_at(coder, x, [0.0, 0.3, 100.0])]
+    here_scores, here_maps = ScoredCodings(parts.readout, 3).run(items)
     with dask_client(workers=2) as client:
-        codings = Codings(spec, client)
+        codings = ScoredCodings(parts.readout, 3, client)
         pending = codings.submit(items)          # two batches, returned before they finish
-        assert len(pending) == 2
+        assert len(pending.runs) == 2
         there_scores, there_maps = codings.collect(pending)
     assert there_scores == here_scores
     assert all(a.equals(b) for a, b in zip(there_maps, here_maps))

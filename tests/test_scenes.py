@@ -188,3 +188,20 @@ def test_course_impacts_sit_between_the_self_motion_at_low_and_high_speed():
     median = np.median(amplitudes)
     assert len(amplitudes) > 30
     assert antenna.self_motion_rms_g(12.0) < median < 2 * antenna.self_motion_rms_g(27.0)
+
+
+def test_a_course_drive_lays_posts_for_the_whole_drive_from_its_own_stream():
+    from snn_antenna.sources.scenes import (COURSE_MARGIN_CM, CourseLayout, course_drive, ramp,
+                                            random_steps)
+
+    base = CourseScene(duration_s=2.0)
+    layout = CourseLayout(spacing_cm=30.0, materials=("wood", "brass"))
+    speed = ramp(0.0, 20.0, 10.0)
+    scene = course_drive(base, speed, 10.0, layout, np.random.default_rng(1))
+    assert scene.duration_s == 10.0 and scene.contacts == [] and scene.stop_after_contact_s is None
+    assert max(o.x_cm for o in scene.obstacles) >= 20.0 * 10.0 + COURSE_MARGIN_CM - 1.3 * 30.0
+    again = course_drive(base, speed, 10.0, layout, np.random.default_rng(1), terrain="rough")
+    assert again.obstacles == scene.obstacles and again.terrain == "rough"
+    steps = random_steps(np.random.default_rng(2), 5.0, 25.0, 8.0, 4)
+    assert [p[0] for p in steps.points] == [0.0, 2.0, 4.0, 6.0]
+    assert all(5.0 <= p[1] <= 25.0 for p in steps.points)

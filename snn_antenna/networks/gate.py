@@ -150,18 +150,7 @@ class SpeedGate:
                 f"preferred : 1 (constant)\ncopy : integer (constant)\n{extra}"),
             threshold=neurons.THRESHOLD, reset=neurons.reset(),
             method="euler", namespace=ns, dt=dt, name="speed_population")
-        readout = b2.NeuronGroup(
-            n_copies,
-            neurons.equations("class1", "bias + I_syn", """
-            dI_syn/dt = -I_syn / tau_syn : 1
-            dr_out/dt = -r_out / tau_trace : 1
-            dr_teacher/dt = -r_teacher / tau_trace : 1
-            dr_read/dt = -r_read / tau_read : 1
-            bias : 1 (constant)"""),
-            threshold=neurons.THRESHOLD,
-            reset=neurons.reset(f"r_out += {1 / self.tau_trace_s!r}",
-                                f"r_read += {1 / self.tau_read_s!r}"),
-            method="euler", namespace=ns, dt=dt, name="readout")
+        readout = self._readout_group(n_copies, ns, dt)
         for group in (speed_pop, readout):
             group.k = 1.0
             group.a, group.b, group.c, group.d = class1.a, class1.b, class1.c, class1.d
@@ -188,6 +177,24 @@ class SpeedGate:
         teaching.connect(j="i")
         return {"speed_population": speed_pop, "readout": readout, "plastic": plastic,
                 "teacher": teacher, "teaching": teaching}
+
+    def _readout_group(self, n_copies: int, namespace: dict, dt):
+        """The read-out neuron of each copy, with the synaptic current and the rate traces
+        the learning rule (r_out, r_teacher) and the online Th (r_read) use."""
+        import brian2 as b2
+
+        return b2.NeuronGroup(
+            n_copies,
+            neurons.equations("class1", "bias + I_syn", """
+            dI_syn/dt = -I_syn / tau_syn : 1
+            dr_out/dt = -r_out / tau_trace : 1
+            dr_teacher/dt = -r_teacher / tau_trace : 1
+            dr_read/dt = -r_read / tau_read : 1
+            bias : 1 (constant)"""),
+            threshold=neurons.THRESHOLD,
+            reset=neurons.reset(f"r_out += {1 / self.tau_trace_s!r}",
+                                f"r_read += {1 / self.tau_read_s!r}"),
+            method="euler", namespace=namespace, dt=dt, name="readout")
 
     def _network(self, speed_cm_s: np.ndarray, teacher_hz: np.ndarray, learning: np.ndarray,
                  step_s: float, weights: np.ndarray, record_read_every_s: float | None = None):

@@ -7,9 +7,11 @@ the array per coding, each copy reading its own column of a 2-D TimedArray throu
 ``neurons.simulate``), and ``score`` compares the read-out's detections with the labelled
 contacts.
 
-The read-out (``run_codings`` then ``ContactDetector.detect``) sees only the coded signal, as
-a robot would; ``score`` compares its detections with the ground truth afterwards, and is the
-only place the ground truth enters.
+The read-out (``run_codings`` then ``ContactDetector.detect``, together ``BlindReadOut``) sees
+only the coded signal, as a robot would; ``score`` compares its detections with the ground
+truth afterwards, and is the only place the ground truth enters (``score_run`` adds the first
+contact's decoded distance, latency and the robot's stop; ``score_columns`` turns scores into
+the counts of ``SCORE_OUTPUTS`` that a sweep's store holds).
 
 Scoring, per contact: a detection whose first window starts between one window before the
 contact and the end of its hold is a true positive (latency: from the contact to the end of
@@ -36,6 +38,7 @@ from ..errors import check
 from ..networks.resonators import ResonatorArray, rate_map
 from .contacts import ContactDetector, ContactEstimate
 from ..signals import Event
+from ..store import Output
 
 
 def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
@@ -55,6 +58,31 @@ def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
     t_s = result.spike_t_ms / 1000.0
     return [rate_map(result.spike_i[copy == c] - c * n, t_s[copy == c], array.neuron_hz,
                      duration_s, window_s) for c in range(n_codings)]
+
+
+@dataclass(frozen=True)
+class BlindReadOut:
+    """The read-out a robot has, and the scoring that comes after it.
+
+    ``detect`` sees only coded columns (``run_codings`` then the detector on each rate map);
+    ``score`` compares its detections with a recording's labelled contacts, afterwards. It
+    pickles, so the detection half can run on a Dask worker while the labels stay here.
+    """
+    array: ResonatorArray
+    detector: ContactDetector
+    window_s: float
+    rate_hz: float
+    settle_s: float = 1.0
+    target: str | None = None
+
+    def detect(self, coded: np.ndarray) -> tuple[list, list[xr.DataArray]]:
+        """(detections, rate map) of each column of ``coded``."""
+        maps = run_codings(self.array, coded, self.rate_hz, self.window_s, self.target)
+        return [self.detector.detect(rates) for rates in maps], maps
+
+    def score(self, detections: list, contacts, duration_s: float) -> "Score":
+        return score(detections, contacts, duration_s, self.detector, self.array,
+                     self.window_s, self.settle_s)
 
 
 @dataclass
@@ -96,6 +124,38 @@ class Score:
                 "f1": self.f1, "fp_per_min": self.fp_per_min, "latency_s": self.latency_s}
 
 
+SCORE_OUTPUTS = {
+    "tp": Output("i4", "1", "contacts detected (true positives)"),
+    "fp": Output("i4", "1", "detections away from any contact (false positives)"),
+    "misses": Output("i4", "1", "scored contacts without a detection"),
+    "duplicates": Output("i4", "1", "further detections within a detected contact"),
+    "out_of_band_contacts": Output("i4", "1", "contacts outside the array's band"),
+    "out_of_band_hits": Output("i4", "1", "detections on contacts outside the array's band"),
+    "latency_sum_s": Output("f8", "s", "summed latency of the true positives"),
+    "minutes": Output("f8", "min", "scored time"),
+}
+
+
+def score_columns(scores: list[Score]) -> dict[str, np.ndarray]:
+    """Scores as the columns of ``SCORE_OUTPUTS`` (a sweep's store holds counts, not lists)."""
+    out = {name: np.array([getattr(s, name) for s in scores], dtype=o.dtype)
+           for name, o in SCORE_OUTPUTS.items() if name != "latency_sum_s"}
+    out["latency_sum_s"] = np.array([float(np.sum(s.latencies_s)) for s in scores])
+    return out
+
+
+def first_match(detections: list[ContactEstimate], contact, window_s: float):
+    """The detection that scores ``contact`` under ``score``'s rule (the first one starting
+    between one window before the contact and the end of its hold), or None."""
+    hits = [d for d in detections if _falls_on(d, contact, window_s)]
+    return min(hits, key=lambda d: d.onset_s) if hits else None
+
+
+def _falls_on(detection: ContactEstimate, contact, window_s: float) -> bool:
+    return (contact.t_s - window_s <= detection.onset_s
+            < contact.t_s + max(contact.duration_s, window_s))
+
+
 def visible(contact: Event, detector: ContactDetector, array: ResonatorArray) -> bool:
     """Can the array see this contact at all (its low mode in the band above self-motion)?
 
@@ -116,8 +176,7 @@ def score(detections: list[ContactEstimate], contacts, duration_s: float,
     for d in sorted(detections, key=lambda d: d.onset_s):
         if d.onset_s < settle_s:
             continue
-        hits = [i for i, c in enumerate(contacts)
-                if c.t_s - window_s <= d.onset_s < c.t_s + max(c.duration_s, window_s)]
+        hits = [i for i, c in enumerate(contacts) if _falls_on(d, c, window_s)]
         if not hits:
             s.fp += 1
             continue
@@ -133,3 +192,25 @@ def score(detections: list[ContactEstimate], contacts, duration_s: float,
         s.latencies_s.append(d.onset_s + window_s - contacts[i].t_s)
     s.misses = int(sum(1 for m, v in zip(matched, seen) if v and not m))
     return s
+
+
+def score_run(readout: BlindReadOut, detections: list, contacts, duration_s: float,
+              stopped_at_s: float | None = None) -> dict:
+    """One run's detections (and the robot's stop) against its contacts, after the run: the
+    counts of ``score`` and, for the first contact, its decoded distance, latency and how
+    long after it the robot stopped."""
+    s = readout.score(detections, contacts, duration_s)
+    first = min(contacts, key=lambda c: c.t_s) if contacts else None
+    out = {**s.as_dict(), "scored_minutes": s.minutes, "first_contact": None}
+    if first is None:
+        return out
+    match = first_match(detections, first, readout.window_s)
+    f_first = float(antenna.low_mode_hz(first.distance_cm))
+    out["first_contact"] = {
+        "t_s": first.t_s, "true_distance_cm": first.distance_cm, "material": first.material,
+        "low_mode_hz": f_first, "within_array_band": bool(f_first <= float(readout.array.band_hz[1])),
+        "decoded_distance_cm": match.distance_cm if match else None,
+        "distance_error_cm": (match.distance_cm - first.distance_cm) if match else None,
+        "latency_s": (match.onset_s + readout.window_s - first.t_s) if match else None,
+        "stopped_after_s": (stopped_at_s - first.t_s) if stopped_at_s is not None else None}
+    return out

@@ -279,6 +279,58 @@ def random_course(rng: np.random.Generator, length_cm: float, spacing_cm: float 
             for px, py in posts]
 
 
+@dataclass(frozen=True)
+class CourseLayout:
+    """How posts are laid out along a course (``random_course``'s settings, a spec table)."""
+    spacing_cm: float = 45.0
+    lateral_cm: tuple = (8.0, 30.0)
+    materials: tuple = ("wood",)
+    first_reach_cm: tuple = (12.0, 28.0)
+    first_angle_deg: tuple = (20.0, 60.0)
+
+    def posts(self, rng: np.random.Generator, length_cm: float) -> list[Obstacle]:
+        return random_course(rng, length_cm, self.spacing_cm, tuple(self.lateral_cm),
+                             tuple(self.materials), tuple(self.first_reach_cm),
+                             tuple(self.first_angle_deg))
+
+
+# Posts are laid this far beyond the distance driven: the rod reaches ahead of the robot.
+COURSE_MARGIN_CM = 80.0
+PROFILE_SAMPLES = 50   # points at which a profile's top speed is read to size the course
+
+
+def drive(base: CourseScene, speed: SpeedProfile, duration_s: float,
+          obstacles: list[Obstacle], terrain: str | None = None) -> CourseScene:
+    """``base`` driven along ``speed`` for ``duration_s`` past ``obstacles``: no scripted
+    contacts and no stop after a contact (the scene is scored, not steered)."""
+    return replace(base, duration_s=float(duration_s), speed=speed,
+                   speed_cm_s=float(speed.at(0.0)), obstacles=list(obstacles), contacts=[],
+                   stop_after_contact_s=None, terrain=base.terrain if terrain is None else terrain)
+
+
+def course_drive(base: CourseScene, speed: SpeedProfile, duration_s: float,
+                 layout: CourseLayout, rng: np.random.Generator,
+                 terrain: str | None = None) -> CourseScene:
+    """``drive`` along a new random course (``layout``) long enough for the whole drive."""
+    top = float(np.max(speed.at(np.linspace(0, duration_s, PROFILE_SAMPLES))))
+    return drive(base, speed, duration_s, layout.posts(rng, top * duration_s + COURSE_MARGIN_CM),
+                 terrain)
+
+
+def ramp(low_cm_s: float, high_cm_s: float, duration_s: float) -> SpeedProfile:
+    """From ``low_cm_s`` at the start to ``high_cm_s`` at ``duration_s``."""
+    return SpeedProfile("ramp", points=[[0.0, float(low_cm_s)], [float(duration_s),
+                                                                float(high_cm_s)]])
+
+
+def random_steps(rng: np.random.Generator, low_cm_s: float, high_cm_s: float,
+                 duration_s: float, n_steps: int) -> SpeedProfile:
+    """``n_steps`` equally long speeds drawn uniformly from [low, high]."""
+    times = np.linspace(0.0, duration_s, n_steps + 1)[:-1]
+    speeds = rng.uniform(low_cm_s, high_cm_s, n_steps)
+    return SpeedProfile("steps", points=[[float(t), float(v)] for t, v in zip(times, speeds)])
+
+
 def scene_from_spec(spec: dict) -> RobotScene:
     """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` (a ``RobotScene``, the
     default) or ``kind = "course"`` (a ``CourseScene``: obstacles, a speed profile). The one
