@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
-from snn_antenna.sources import bench
-from snn_antenna.signals import Recording
 from snn_antenna.readout.spiking import LOW_BAND, SpikingBank
+from snn_antenna.signals import Recording
+from snn_antenna.sources import bench
 
 
 def main() -> None:

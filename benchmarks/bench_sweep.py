@@ -38,11 +38,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from snn_antenna.networks import neurons
 from snn_antenna.engine.evaluators import NeuronSweep
 from snn_antenna.engine.executor import dask_client
 from snn_antenna.engine.grid import Grid
 from snn_antenna.engine.sweep import run_sweep
+from snn_antenna.networks import neurons
 
 
 def grid_of(n_points: int) -> Grid:

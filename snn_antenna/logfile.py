@@ -65,7 +65,7 @@ class LogFile:
         self._consoles: list[logging.Handler] = []
 
     def __enter__(self) -> "LogFile":
-        from brian2.utils.logger import BrianLogger   # its console handler prints warnings
+        from brian2.utils.logger import BrianLogger  # its console handler prints warnings
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "a", encoding="utf-8")

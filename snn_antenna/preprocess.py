@@ -20,9 +20,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 
-from .sources.antenna import ADC
 from .errors import SpecError, check
 from .signals import validate_samples
+from .sources.antenna import ADC
 
 
 class _Causal(TransformerMixin, BaseEstimator):

@@ -21,11 +21,6 @@ import numpy as np
 
 from .files import atomic_write
 
-# Re-exported only while the study modules that import them from here are pointed at their
-# homes (figures, logfile); then these lines go.
-from .figures import draw_rate_map  # noqa: F401
-from .logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile  # noqa: F401
-
 
 def _jsonable(obj: Any):
     if hasattr(obj, "as_dict") and callable(obj.as_dict):   # stats.Interval and the like

@@ -82,3 +82,11 @@ def binomial_interval(successes: int, trials: int, level: float = 0.95) -> tuple
     check(trials > 0, "trials", trials, "at least one trial")
     ci = stats.binomtest(int(successes), int(trials)).proportion_ci(level, method="wilson")
     return float(ci.low), float(ci.high)
+
+
+def poisson_interval(count: int, level: float = 0.95) -> tuple[float, float]:
+    """Exact (Garwood) interval of a Poisson count (e.g. false positives in a run), from
+    scipy's chi² quantiles."""
+    alpha = 1 - level
+    low = stats.chi2.ppf(alpha / 2, 2 * count) / 2 if count else 0.0
+    return float(low), float(stats.chi2.ppf(1 - alpha / 2, 2 * count + 2) / 2)

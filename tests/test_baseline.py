@@ -4,8 +4,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from snn_antenna.readout import baselines as bl
 from snn_antenna.errors import SpecError
+from snn_antenna.readout import baselines as bl
 
 
 @settings(max_examples=30, deadline=None)

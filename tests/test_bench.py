@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from snn_antenna.sources import bench
 from snn_antenna.errors import SpecError
+from snn_antenna.sources import bench
 
 SMALL = dict(materials=("wood", "aluminium"), positions_cm=(10.0, 30.0), repetitions=3,
              duration_s=0.3)

@@ -2,7 +2,8 @@
 import binascii
 
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from snn_antenna.bridge.protocol import (
     ENCODED_FRAME_LEN,

@@ -18,11 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.errors import NumericalInstabilityError, SpecError
-from snn_antenna.store import Output, SweepStore
 from snn_antenna.engine.evaluators import NeuronSweep
 from snn_antenna.engine.grid import Grid
 from snn_antenna.engine.sweep import run_sweep
+from snn_antenna.errors import NumericalInstabilityError, SpecError
+from snn_antenna.store import Output, SweepStore
 
 REPO = Path(__file__).resolve().parents[1]
 FAST = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="numpy")

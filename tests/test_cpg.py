@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from snn_antenna.networks.cpg import CPG, cycle_periods, phase_lag_deg
 from snn_antenna.errors import SpecError
+from snn_antenna.networks.cpg import CPG, cycle_periods, phase_lag_deg
 
 
 @pytest.fixture(scope="module")

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from snn_antenna.readout import events
 from snn_antenna.errors import SpecError
+from snn_antenna.readout import events
 
 RATE = 2000.0
 

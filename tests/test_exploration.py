@@ -1,16 +1,15 @@
 """Scene composition (only listed parts are built) and the closed exploration loop."""
 import json
 import tomllib
-from pathlib import Path
-
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from snn_antenna.networks import assembly
 from snn_antenna.cli import main
 from snn_antenna.errors import SpecError
+from snn_antenna.networks import assembly
 from snn_antenna.sources.scenes import OnlineAntenna
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -4,12 +4,12 @@ import pytest
 
 from snn_antenna.errors import SpecError
 from snn_antenna.networks.gate import SpeedGate
-from snn_antenna.readout.scoring import Score, run_codings, score
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.readout.contacts import ContactDetector, ContactEstimate
-from snn_antenna.sources.scenes import CourseScene, Obstacle
+from snn_antenna.readout.scoring import Score, run_codings, score
 from snn_antenna.signals import Event
+from snn_antenna.sources.scenes import CourseScene, Obstacle
 
 # Recalled Th within a factor 1.6 of Th* on speeds never trained: one step of the gating
 # study's threshold grid, i.e. the resolution at which Th* itself is known.

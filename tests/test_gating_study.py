@@ -144,10 +144,11 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     """The Th × speed sweep runs on the shared sweep engine: its counts land in a zarr store,
     a second run computes nothing, a changed gate reuses it, a changed sweep is refused."""
     from snn_antenna import spec as specs
+    from snn_antenna.engine.grid import Grid
+    from snn_antenna.engine.sweep import run_sweep
     from snn_antenna.errors import SpecError
     from snn_antenna.readout.scoring import SCORE_OUTPUTS
     from snn_antenna.studies.gating_threshold import ThresholdSweep, build, sweep_settings
-    from snn_antenna.engine.sweep import Grid, run_sweep
 
     def sweep(*overrides):
         spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
@@ -176,7 +177,7 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     gate: the scores and rate maps must be those of running the same batches here."""
     from snn_antenna import spec as specs
     from snn_antenna.engine.batches import ScoredCodings
-    from snn_antenna.engine.sweep import dask_client
+    from snn_antenna.engine.executor import dask_client
     from snn_antenna.studies.gating_threshold import build, coded_at, sweep_scene
 
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",

@@ -6,11 +6,10 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from snn_antenna.networks import assembly
-from snn_antenna.sources import bench
-from snn_antenna.readout.spiking import window_features
 from snn_antenna.errors import SpecError
-from snn_antenna.readout.spiking import HIGH_BAND, SpikingBank
+from snn_antenna.networks import assembly
+from snn_antenna.readout.spiking import HIGH_BAND, SpikingBank, window_features
+from snn_antenna.sources import bench
 from snn_antenna.stats import binomial_interval
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from snn_antenna.networks import neurons
 from snn_antenna.errors import NumericalInstabilityError, SpecError
+from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
 
 

@@ -1,7 +1,8 @@
 """Preprocessing: offline and streaming forms agree exactly; each stage does its job."""
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from sklearn.base import clone
 
 from snn_antenna import preprocess as pp

@@ -5,10 +5,11 @@ import resource
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from snn_antenna.networks import neurons
 from snn_antenna.errors import NumericalInstabilityError, SpecError
+from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.signals import Recording

@@ -2,18 +2,17 @@
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from dataclasses import replace
-
-from snn_antenna.sources import antenna
 from snn_antenna import spec as specs
 from snn_antenna.errors import SpecError
 from snn_antenna.preprocess import fit_warmup
 from snn_antenna.signals import Event
+from snn_antenna.sources import antenna
 from snn_antenna.sources.stimuli import RobotScene
 from snn_antenna.studies import quickstart
 

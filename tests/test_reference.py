@@ -12,17 +12,17 @@ that the next-worse choice (another method, or twice the step) exceeds. Errors m
     izhikevich   0.716       1.181         0.85
     class I, euler: 0.377 at 0.1 ms, 0.544 at 0.2 ms -> 0.45 (control layer, gate)
 """
-from pathlib import Path
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from snn_antenna.readout import accuracy
+from snn_antenna.errors import SpecError
 from snn_antenna.networks import neurons, reference
 from snn_antenna.networks.control import ControlLayer
-from snn_antenna.errors import SpecError
 from snn_antenna.networks.resonators import ResonatorArray
+from snn_antenna.readout import accuracy
 from snn_antenna.sources.stimuli import square
 
 ROOT = Path(__file__).resolve().parents[1]

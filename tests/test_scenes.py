@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.sources import antenna
 from snn_antenna.errors import SpecError
+from snn_antenna.sources import antenna
 from snn_antenna.sources.scenes import (
     CourseScene,
     Obstacle,
@@ -191,8 +191,13 @@ def test_course_impacts_sit_between_the_self_motion_at_low_and_high_speed():
 
 
 def test_a_course_drive_lays_posts_for_the_whole_drive_from_its_own_stream():
-    from snn_antenna.sources.scenes import (COURSE_MARGIN_CM, CourseLayout, course_drive, ramp,
-                                            random_steps)
+    from snn_antenna.sources.scenes import (
+        COURSE_MARGIN_CM,
+        CourseLayout,
+        course_drive,
+        ramp,
+        random_steps,
+    )
 
     base = CourseScene(duration_s=2.0)
     layout = CourseLayout(spacing_cm=30.0, materials=("wood", "brass"))

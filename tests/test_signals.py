@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from snn_antenna.sources import antenna, stimuli
 from snn_antenna.errors import SpecError
 from snn_antenna.signals import Recording
+from snn_antenna.sources import antenna, stimuli
 
 
 def peak_hz(x, rate_hz):

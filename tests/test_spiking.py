@@ -4,9 +4,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from snn_antenna.sources import bench
 from snn_antenna.networks import neurons
-from snn_antenna.signals import Recording
+from snn_antenna.networks.neurons import spike_summary
 from snn_antenna.readout.spiking import (
     HIGH_BAND,
     LOW_BAND,
@@ -14,7 +13,8 @@ from snn_antenna.readout.spiking import (
     DominantNeuronDistance,
     SpikingBank,
 )
-from snn_antenna.networks.neurons import spike_summary
+from snn_antenna.signals import Recording
+from snn_antenna.sources import bench
 from snn_antenna.sources.stimuli import square
 
 RATE = 2000.0

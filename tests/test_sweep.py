@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.networks import neurons
-from snn_antenna.errors import SpecError
-from snn_antenna.store import Output, SweepStore
 from snn_antenna.engine.cost import check_memory
 from snn_antenna.engine.evaluators import NeuronSweep
 from snn_antenna.engine.grid import Grid, axis_values
 from snn_antenna.engine.sweep import run_sweep
+from snn_antenna.errors import SpecError
+from snn_antenna.networks import neurons
+from snn_antenna.store import Output, SweepStore
 
 REPO = Path(__file__).resolve().parents[1]
 SMALL = {"k": [0.5, 1.0], "I": [0.15, 0.5], "input_hz": [6.0, 10.0, 14.0, 18.0, 22.0, 26.0]}
@@ -324,9 +324,9 @@ def short_scene():
 
 
 def test_scene_axes_group_points_by_scene_and_match_single_runs(tmp_path):
+    from snn_antenna.engine.evaluators import SceneSweep
     from snn_antenna.preprocess import make_chain
     from snn_antenna.sources.scenes import scene_from_spec
-    from snn_antenna.engine.evaluators import SceneSweep
 
     sweep = SceneSweep(stimulus=short_scene(), preprocess={"coder_amplitude": 0.3},
                        engine="numpy", count_from_s=0.1)

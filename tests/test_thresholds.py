@@ -4,8 +4,13 @@ import pytest
 import xarray as xr
 
 from snn_antenna.readout.scoring import Score
-from snn_antenna.readout.thresholds import (LookupTable, MethodScores, compare, fit_th_star,
-                                            fixed_method)
+from snn_antenna.readout.thresholds import (
+    LookupTable,
+    MethodScores,
+    compare,
+    fit_th_star,
+    fixed_method,
+)
 
 
 def sweep_counts(tp, fp, misses):

@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from .. import __version__ as package_version
-from ..files import write_json
 from ..errors import SpecError
+from ..files import write_json
 from ..signals import Recording
 from .protocol import BOARD_RATE_HZ, Gap, find_gaps
 from .source import DEFAULT_BAUDRATE, Batch

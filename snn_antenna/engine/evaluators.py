@@ -33,7 +33,6 @@ from ..store import Output
 from .grid import Grid
 from .standalone import standalone_counts
 
-
 NEURON_AXES = {"k": "", "a": "", "b": "", "c": "", "d": "", "input_hz": "Hz", "I": ""}
 
 
@@ -220,8 +219,8 @@ class SceneSweep:
 
     def _scene_and_chain(self, values: dict):
         from ..preprocess import make_chain
-        from ..spec import set_field
         from ..sources.scenes import scene_from_spec
+        from ..spec import set_field
 
         spec = {"stimulus": copy.deepcopy(self.stimulus),
                 "preprocess": copy.deepcopy(self.preprocess)}

@@ -17,7 +17,6 @@ import numpy as np
 from ..errors import NumericalInstabilityError
 from ..networks import neurons
 
-
 # One compiled standalone project per process (Brian2's device is process-global); a worker
 # keeps it across chunks, so only its first chunk pays for compiling.
 _PROJECT: dict = {}

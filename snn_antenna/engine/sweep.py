@@ -39,12 +39,6 @@ from .cost import check_memory
 from .executor import prepare_workers
 from .grid import Grid
 
-# Re-exported only while the study modules and tests that import them from here are pointed
-# at their homes (cost, evaluators, executor); then these lines go.
-from .cost import LONG_SWEEP_S  # noqa: F401
-from .evaluators import NEURON_AXES, NeuronSweep, SceneSweep  # noqa: F401
-from .executor import dask_client, executor  # noqa: F401
-
 
 @dataclass
 class SweepOutcome:

@@ -19,9 +19,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .. import spec as specs
-from .cpg import CPG
-from .control import ControlLayer, MaterialUnit
 from ..errors import SpecError, check
+from .control import ControlLayer, MaterialUnit
+from .cpg import CPG
 from .gate import SpeedGate
 from .resonators import ResonatorArray
 

@@ -34,9 +34,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import SpecError, check
 from ..sources import antenna
 from . import neurons
-from ..errors import SpecError, check
 from .resonators import SELF_MOTION_BAND_HZ, tuned_above
 
 # Time constant (ms) of the exponential synaptic current into every class-I unit (contact,

@@ -40,8 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from . import neurons
 from ..errors import SpecError, check
+from . import neurons
 
 CLASS1_RHEOBASE = 22.56  # class1 preset (5v + 140, b = -0.1): the fixed point vanishes above
 

@@ -20,9 +20,9 @@ import time
 
 import numpy as np
 
-from . import neurons
 from ..errors import NumericalInstabilityError, SpecError, check
 from ..signals import Recording, validate_samples
+from . import neurons
 
 DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-9

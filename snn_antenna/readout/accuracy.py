@@ -25,9 +25,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from ..errors import check
 from ..networks import neurons, reference
 from ..networks.resonators import rate_map
-from ..errors import check
 
 ACCURATE, INACCURATE, NON_FINITE = 0, 1, 2
 CLASSES = {ACCURATE: "accurate", INACCURATE: "inaccurate but finite",

@@ -32,13 +32,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from ..sources import antenna
-from ..networks import neurons
 from ..errors import check
+from ..networks import neurons
 from ..networks.resonators import ResonatorArray, rate_map
-from .contacts import ContactDetector, ContactEstimate
 from ..signals import Event
+from ..sources import antenna
 from ..store import Output
+from .contacts import ContactDetector, ContactEstimate
 
 
 def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
@@ -154,6 +154,26 @@ def first_match(detections: list[ContactEstimate], contact, window_s: float):
 def _falls_on(detection: ContactEstimate, contact, window_s: float) -> bool:
     return (contact.t_s - window_s <= detection.onset_s
             < contact.t_s + max(contact.duration_s, window_s))
+
+
+def contact_rows(detections: list[ContactEstimate], dominant_hz: list[float], contacts,
+                 window_s: float, settle_s: float) -> list[dict]:
+    """One row per contact after ``settle_s``, first to last: its truth beside its match
+    (``dominant_hz``: each detection's dominant neuron; None where the contact was missed)."""
+    rows = []
+    for c in sorted(contacts, key=lambda c: c.t_s):
+        if c.t_s < settle_s:
+            continue
+        m = first_match(detections, c, window_s)
+        rows.append({
+            "true_t_s": c.t_s, "true_distance_cm": c.distance_cm, "material": c.material,
+            "detected_s": m.onset_s if m else None,
+            "latency_s": (m.onset_s + window_s - c.t_s) if m else None,
+            "frequency_hz": m.frequency_hz if m else None,
+            "distance_cm": m.distance_cm if m else None,
+            "distance_error_cm": (m.distance_cm - c.distance_cm) if m else None,
+            "dominant_hz": dominant_hz[detections.index(m)] if m else None})
+    return rows
 
 
 def visible(contact: Event, detector: ContactDetector, array: ResonatorArray) -> bool:

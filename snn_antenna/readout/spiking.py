@@ -41,13 +41,13 @@ import xarray as xr
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
-from ..sources import antenna
+from ..errors import SpecError, check
 from ..networks import neurons
 from ..networks.neurons import binned_spike_counts, spike_summary
-from ..errors import SpecError, check
 from ..networks.resonators import ResonatorArray
-from ..sources.antenna import ADC
 from ..preprocess import make_chain
+from ..sources import antenna
+from ..sources.antenna import ADC
 from .contacts import centroid_hz, dominant_hz
 
 

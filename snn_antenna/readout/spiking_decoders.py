@@ -22,8 +22,7 @@ import xarray as xr
 from .. import spec as specs
 from ..errors import check
 from . import baselines as bl
-from .spiking import (Band, CentroidDistance, DominantNeuronDistance, SpikingBank,
-                      recording_attrs)
+from .spiking import Band, CentroidDistance, DominantNeuronDistance, SpikingBank, recording_attrs
 
 # The spiking input sets: which bands, and whether the time-binned counts are included.
 SPIKING_SETS = {

@@ -27,11 +27,11 @@ from typing import Callable, Sequence
 import numpy as np
 import xarray as xr
 
-from . import antenna
-from ..parallel import parallel_map
 from ..errors import SpecError, check
+from ..parallel import parallel_map
 from ..signals import Event, Recording
 from ..store import read_dataset, write_dataset
+from . import antenna
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
 

@@ -33,9 +33,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from . import antenna
 from ..errors import SpecError, check
 from ..signals import Recording
+from . import antenna
 from .stimuli import Contact, RobotScene
 
 SPEED_RANGE_CM_S = (0.0, antenna.SPEED_LIMIT_CM_S)

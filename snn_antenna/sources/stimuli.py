@@ -11,9 +11,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import antenna
 from ..errors import check
 from ..signals import Event, Recording
+from . import antenna
 
 
 def _time(duration_s: float, rate_hz: float) -> np.ndarray:

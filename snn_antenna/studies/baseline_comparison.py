@@ -19,13 +19,29 @@ from ..files import write_json
 from ..readout import baselines as bl
 from ..readout import comparison_figures as figures
 from ..readout import events
-from ..readout.comparison import Comparison, interval, label
-from ..readout.comparison import (cost_rows, data_text, design_rows, result_rows,
-                                  spiking_cost_text, spiking_distance_rows, spiking_rows)
+from ..readout.comparison import (
+    Comparison,
+    cost_rows,
+    data_text,
+    design_rows,
+    interval,
+    label,
+    result_rows,
+    spiking_cost_text,
+    spiking_distance_rows,
+    spiking_rows,
+)
 from ..readout.confusion import confusion, confusion_sentence, error_rates
 from ..readout.spiking import SpikingBank, cached_features, run_cost
-from ..readout.spiking_decoders import (TRAINING_FREE, Design, SpikingPlan, decoder_inputs,
-                                        neurons_per_input, run_designs, spiking_baselines)
+from ..readout.spiking_decoders import (
+    TRAINING_FREE,
+    Design,
+    SpikingPlan,
+    decoder_inputs,
+    neurons_per_input,
+    run_designs,
+    spiking_baselines,
+)
 from ..report import Calibrated, Predicted, Report
 from ..sources import bench
 

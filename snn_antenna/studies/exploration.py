@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import spec as specs
 from ..errors import SpecError, check
+from ..figures import draw_rate_map
 from ..networks.assembly import configure
 from ..networks.cpg import cycle_periods, phase_lag_deg
 from ..preprocess import make_chain
@@ -26,7 +27,7 @@ from ..readout.closed_loop import ClosedLoop, LoopSettings, RobotRecord
 from ..readout.contacts import detector_from_spec
 from ..readout.scoring import BlindReadOut, score_run
 from ..readout.thresholds import th_star_from_summary
-from ..report import Calibrated, Predicted, Report, draw_rate_map
+from ..report import Calibrated, Predicted, Report
 from ..signals import Event
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec

@@ -22,12 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from ..sources import antenna
-from ..networks import neurons
 from .. import spec as specs
 from ..errors import check
-from ..readout.matches import contact_rows, poisson_interval
-from ..readout.scoring import score as score_detections
+from ..figures import draw_rate_map
+from ..networks import neurons
 from ..networks.resonators import ResonatorArray
 from ..preprocess import fit_warmup, make_chain
 from ..readout.contacts import (
@@ -37,11 +35,14 @@ from ..readout.contacts import (
     detector_from_spec,
     dominant_hz,
 )
-from ..figures import draw_rate_map
+from ..readout.scoring import contact_rows
+from ..readout.scoring import score as score_detections
 from ..report import Calibrated, Predicted, Report
 from ..signals import Recording
+from ..sources import antenna
 from ..sources.scenes import scene_from_spec
 from ..sources.stimuli import RobotScene
+from ..stats import poisson_interval
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout")
 

@@ -25,10 +25,10 @@ from ..engine.executor import executor
 from ..engine.grid import Grid
 from ..engine.sweep import run_sweep
 from ..errors import check
+from ..logfile import LogFile
 from ..networks import neurons
 from ..readout import tuning
 from ..readout.tuning import ReadPoint
-from ..logfile import LogFile
 from ..report import Calibrated, Predicted, Report, fmt, provenance
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")

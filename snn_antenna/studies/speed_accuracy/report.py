@@ -3,9 +3,9 @@ page (reference convergence, recommendation, Pareto fronts, cost, stability map,
 and the short summary printed at the end."""
 from __future__ import annotations
 
-from ..networks import neurons
-from ..readout import accuracy, tradeoff
-from ..report import Calibrated, Predicted, Report, fmt
+from ...networks import neurons
+from ...readout import accuracy, tradeoff
+from ...report import Calibrated, Predicted, Report, fmt
 
 
 def convergence_text(conv: dict) -> str:

@@ -2,8 +2,9 @@
 import pytest
 
 from snn_antenna.readout.contacts import ContactEstimate
-from snn_antenna.readout.matches import contact_rows, first_match, poisson_interval
+from snn_antenna.readout.scoring import contact_rows, first_match
 from snn_antenna.signals import Event
+from snn_antenna.stats import poisson_interval
 
 
 def test_poisson_interval_known_answers():

@@ -21,24 +21,32 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import spec as specs
-from ..engine.devices import (DTYPES, RUNTIME_TARGETS, TARGETS, ArrayWorkload, Setting,
-                              TuningStimuli, TuningWorkload, reference_convergence,
-                              solve_reference)
-from ..engine.runlog import Measurements, RunLog
-from ..errors import check
-from ..networks import neurons, reference
-from ..networks.resonators import ResonatorArray
-from ..preprocess import make_chain
-from ..readout import accuracy, tradeoff
-from ..readout.accuracy import Match, StabilityGrid
-from ..readout.contacts import detector_from_spec
-from ..logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
-from ..report import Report, fmt
-from ..sources.scenes import scene_from_spec
-from ..sources.stimuli import RobotScene
-from ..store import write_dataset
-from .speed_accuracy_report import human_summary, write_report
+from ... import spec as specs
+from ...engine.devices import (
+    DTYPES,
+    RUNTIME_TARGETS,
+    TARGETS,
+    ArrayWorkload,
+    Setting,
+    TuningStimuli,
+    TuningWorkload,
+    reference_convergence,
+    solve_reference,
+)
+from ...engine.runlog import Measurements, RunLog
+from ...errors import check
+from ...logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
+from ...networks import neurons, reference
+from ...networks.resonators import ResonatorArray
+from ...preprocess import make_chain
+from ...readout import accuracy, tradeoff
+from ...readout.accuracy import Match, StabilityGrid
+from ...readout.contacts import detector_from_spec
+from ...report import Report, fmt
+from ...sources.scenes import scene_from_spec
+from ...sources.stimuli import RobotScene
+from ...store import write_dataset
+from .report import human_summary, write_report
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
             "stability", "reference", "match")

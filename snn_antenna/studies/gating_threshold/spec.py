@@ -1,0 +1,275 @@
+"""The gating study's spec (sections as dataclasses, checked before any work) and its scenes:
+seeded courses, the calibration drive that fits the chain, the Th × speed sweep's evaluator."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ... import spec as specs
+from ...engine.batches import ScoredCodings
+from ...errors import SpecError, check
+from ...networks.gate import SpeedGate
+from ...networks.resonators import ResonatorArray
+from ...preprocess import make_chain
+from ...readout.contacts import detector_from_spec
+from ...readout.scoring import BlindReadOut, score_columns
+from ...sources import antenna
+from ...sources.scenes import (
+    CourseLayout,
+    CourseScene,
+    SpeedProfile,
+    course_drive,
+    drive,
+    ramp,
+    scene_from_spec,
+)
+
+SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",
+            "gate", "evaluation")
+LOW_HIGH_CM_S = (12.0, 27.0)  # the paper's two speeds (Fig. 9)
+# Seed streams (first entry of every spawn key) and, within a scene's stream, its two draws.
+SWEEP_SCENES, EVALUATION_SCENES, EVALUATION_STEPS = 0, 1, 2
+COURSE_DRAW, NOISE_DRAW = 0, 1
+
+
+# -- the spec ------------------------------------------------------------------------------
+@dataclass
+class SweepSettings:
+    thresholds_g: list = (0.0, 0.1)
+    speeds_cm_s: list = (0.0, 12.0)
+    n_scenes: int = 3
+    scene_s: float = 15.0
+    settle_s: float = 1.0
+    target: str | None = None
+    codings_per_run: int = 200
+    workers: int = 0          # Dask worker processes (0: one per core; 1: this process)
+
+    def __post_init__(self):
+        th = self.thresholds_g = np.asarray(self.thresholds_g, dtype=float)
+        check(th.ndim == 1 and len(th) >= 2 and np.all(np.isfinite(th)) and np.all(th >= 0)
+              and np.all(np.diff(th) > 0), "thresholds_g", th.tolist(),
+              "at least two increasing thresholds >= 0 g")
+        v = self.speeds_cm_s = np.asarray(self.speeds_cm_s, dtype=float)
+        if v.ndim != 1 or len(v) < 2 or not np.all(np.isfinite(v)) or np.any(v < 0):
+            raise SpecError("speeds_cm_s", v.tolist(), "at least two finite speeds >= 0 cm/s")
+        check(np.all(np.diff(v) > 0), "speeds_cm_s", v.tolist(), "increasing speeds")
+        for name in ("n_scenes", "codings_per_run"):
+            value = getattr(self, name)
+            check(isinstance(value, int) and value >= 1, name, value, "an integer >= 1")
+        check(0 <= self.settle_s < self.scene_s, "settle_s", self.settle_s,
+              "a time in [0, scene_s) s")
+        check(isinstance(self.workers, int) and self.workers >= 0, "workers", self.workers,
+              "an integer >= 0 (0: one Dask worker per CPU core; 1: this process)")
+
+
+@dataclass
+class EvaluationSettings:
+    pilot_seeds: int = 5
+    max_seeds: int = 20
+    margin_f1: float = 0.02       # the F1 difference the comparison must resolve
+    speeds_cm_s: list | None = None   # default: the swept speeds the gate is not trained on
+    n_steps: int = 4              # random speed steps per scene
+    other_terrain: str = "flat"
+    # Which family of evaluation scenes: 0 gives the reported ones; any other integer draws
+    # scenes never used for them (validation seeds, to tune settings on).
+    scene_stream: int = 0
+
+    def __post_init__(self):
+        check(isinstance(self.scene_stream, int) and self.scene_stream >= 0, "scene_stream",
+              self.scene_stream, "an integer >= 0")
+        for name in ("pilot_seeds", "max_seeds", "n_steps"):
+            value = getattr(self, name)
+            check(isinstance(value, int) and value >= 1, name, value, "an integer >= 1")
+        check(self.max_seeds >= self.pilot_seeds, "max_seeds", self.max_seeds,
+              f"at least pilot_seeds ({self.pilot_seeds})")
+        check(np.isfinite(self.margin_f1) and 0 < self.margin_f1 < 1, "margin_f1",
+              self.margin_f1, "an F1 difference in (0, 1) to resolve")
+        antenna.terrain_noise_rms_g(0.0, self.other_terrain)   # refuses an unknown terrain
+
+    def held_out(self, swept: np.ndarray, trained: np.ndarray) -> np.ndarray:
+        """The speeds to evaluate: the spec's, or the swept ones the gate does not learn,
+        failing those halfway between the trained ones."""
+        if self.speeds_cm_s is not None:
+            held = np.asarray(self.speeds_cm_s, dtype=float)
+        else:
+            held = swept[~np.isin(swept, trained)]
+            if len(held) == 0:
+                t = np.unique(trained)
+                held = (t[:-1] + t[1:]) / 2 if len(t) > 1 else t + 1.0
+        if held.ndim != 1 or len(held) < 1 or not np.all(np.isfinite(held)):
+            raise SpecError("speeds_cm_s", self.speeds_cm_s, "a list of finite speeds")
+        check(not np.any(np.isin(held, trained)), "speeds_cm_s", held.tolist(),
+              f"speeds the gate is not trained on (trained: {trained.tolist()})")
+        return held
+
+
+@dataclass
+class CalibrationSettings:
+    """The drive the preprocessing is fitted on: in the open, never a scored scene."""
+    speed_cm_s: float = 15.0
+    duration_s: float = 5.0
+    seed: int = 99991
+
+    def __post_init__(self):
+        check(np.isfinite(self.duration_s) and self.duration_s >= 1.0, "duration_s",
+              self.duration_s, "a calibration drive of at least 1 s")
+        check(isinstance(self.seed, int), "seed", self.seed, "an integer seed")
+        check(float(self.speed_cm_s) > 0, "speed_cm_s", self.speed_cm_s,
+              "a speed > 0 cm/s (standing still, the axes see only sensor noise to align on)")
+
+
+@dataclass
+class Parts:
+    seed: int
+    array: ResonatorArray
+    scene: CourseScene
+    preprocess: dict
+    calibration: CalibrationSettings
+    readout: BlindReadOut
+    course: CourseLayout
+    sweep: SweepSettings
+    gate: SpeedGate
+    train_speeds: np.ndarray
+    evaluation: EvaluationSettings
+    held_out_speeds: np.ndarray
+    chain: object = None      # fitted on first use (``calibrated_chain``)
+
+
+def _section(spec: dict, name: str, target, **kw):
+    return target(**specs.check_section(spec, name, target, **kw))
+
+
+def build(spec: dict) -> Parts:
+    """Check the whole spec and build every part before any simulation runs."""
+    specs.check_top_level(spec, SECTIONS)
+    with specs.section("network"):
+        array = _section(spec, "network", ResonatorArray)
+    with specs.section("stimulus"):
+        scene = scene_from_spec(spec.get("stimulus", {"kind": "course"}))
+        if not isinstance(scene, CourseScene):
+            raise SpecError("stimulus.kind", "robot", "'course' (scenes with obstacles)")
+        scene.validate()
+    with specs.section("preprocess"):
+        pre = specs.check_section(spec, "preprocess", make_chain,
+                                  exclude=["rate_hz", "adc_bits", "full_scale_g", "threshold"])
+        make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
+    with specs.section("calibration"):
+        cal = _section(spec, "calibration", CalibrationSettings)
+        drive(scene, SpeedProfile("constant", float(cal.speed_cm_s)), 1.0, []).validate()
+    detector, window_s = detector_from_spec(spec)
+    with specs.section("course"):
+        course = _section(spec, "course", CourseLayout)
+    with specs.section("sweep"):
+        sweep = _section(spec, "sweep", SweepSettings)
+        v = sweep.speeds_cm_s
+        drive(scene, ramp(v.min(), v.max(), 1.0), 1.0, []).validate()
+    with specs.section("gate"):
+        table = dict(specs.check_section(spec, "gate", SpeedGate, extra=["train_speeds_cm_s"]))
+        train = np.asarray(table.pop("train_speeds_cm_s", v[::2]), dtype=float)
+        missing = sorted(set(train.tolist()) - set(v.tolist()))
+        if missing:
+            raise SpecError("train_speeds_cm_s", train.tolist(),
+                            f"speeds of the sweep (not swept: {missing})")
+        table["speed_range_cm_s"] = tuple(table.get("speed_range_cm_s",
+                                                    (float(v.min()), float(v.max()))))
+        table.setdefault("seed", int(spec.get("seed", 0)))
+        gate = SpeedGate(**table)
+        gate.check_speeds(v, "sweep.speeds_cm_s")
+    with specs.section("evaluation"):
+        ev = _section(spec, "evaluation", EvaluationSettings)
+        held = gate.check_speeds(ev.held_out(v, train), "speeds_cm_s")
+    with specs.section("network"):
+        array.check_rate(scene.rate_hz)
+    readout = BlindReadOut(array, detector, window_s, scene.rate_hz, sweep.settle_s,
+                           sweep.target)
+    return Parts(int(spec.get("seed", 0)), array, scene, pre, cal, readout, course, sweep,
+                 gate, train, ev, held)
+
+
+def sweep_settings(spec: dict) -> dict:
+    """What makes two sweeps the same (the store's fingerprint): not the gate or evaluation
+    settings, nor where it runs, so changing those reuses a finished sweep."""
+    resolved = specs.resolved(spec)
+    settings = {k: resolved.get(k) for k in ("seed", "network", "stimulus", "preprocess",
+                                             "readout", "course", "sweep")}
+    settings["sweep"] = {k: v for k, v in (settings["sweep"] or {}).items() if k != "workers"}
+    return settings
+
+
+# -- scenes and the blind read-out ----------------------------------------------------------
+def make_scene(parts: Parts, speed: SpeedProfile, key: tuple, terrain: str | None = None
+               ) -> tuple[CourseScene, np.random.SeedSequence]:
+    """A new course scene along ``speed`` and the seed of its recording, both from the
+    stream ``key`` of the study's seed."""
+    course_rng = np.random.default_rng(np.random.SeedSequence(parts.seed,
+                                                              spawn_key=(*key, COURSE_DRAW)))
+    scene = course_drive(parts.scene, speed, parts.sweep.scene_s, parts.course, course_rng,
+                         terrain)
+    return scene, np.random.SeedSequence(parts.seed, spawn_key=(*key, NOISE_DRAW))
+
+
+def calibrated_chain(parts: Parts):
+    """The preprocessing chain fitted on a separate calibration drive, never on a test scene:
+    ``calibration.duration_s`` at ``calibration.speed_cm_s`` in the open (no posts, so no
+    contact can leak in); the scenes are then transformed causally from their first sample."""
+    if parts.chain is None:
+        cal, scene = parts.calibration, parts.scene
+        rec = drive(scene, SpeedProfile("constant", float(cal.speed_cm_s)), cal.duration_s,
+                    []).generate(cal.seed)
+        assert not rec.contacts   # an open-space drive: nothing to touch
+        parts.chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g,
+                                 **parts.preprocess).fit(rec.samples)
+    return parts.chain
+
+
+def condition(parts: Parts, rec):
+    """The recording's signal just before the coder (g, one channel) and the coder: only
+    ``rec.samples`` is read."""
+    chain = calibrated_chain(parts)
+    x = rec.samples
+    for _, step in chain.steps[:-1]:
+        x = step.transform(x)
+    return x, chain.named_steps["coder"]
+
+
+def sweep_scene(parts: Parts, speed_cm_s: float, scene: int):
+    """The sweep's course scene ``scene`` at a constant speed: recording, conditioned signal,
+    coder. The same course and noise at every speed (speeds are compared on equal scenes)."""
+    course, seed = make_scene(parts, SpeedProfile("constant", float(speed_cm_s)),
+                              (SWEEP_SCENES, int(scene)))
+    rec = course.generate(seed)
+    return (rec, *condition(parts, rec))
+
+
+def coded_at(coder, x: np.ndarray, thresholds) -> list[np.ndarray]:
+    """``x`` coded at each of ``thresholds``: one column each."""
+    th = np.asarray(thresholds, dtype=float)
+    coded = coder.partial_transform(np.repeat(x[:, None], len(th), axis=1), threshold=th[None, :])
+    return [coded[:, j] for j in range(len(th))]
+
+
+@dataclass(frozen=True)
+class ThresholdSweep:
+    """The Th × speed sweep as a ``run_sweep`` evaluator over speed_cm_s × scene ×
+    threshold_g: each (speed, scene) of a chunk is generated and conditioned once, coded at
+    its thresholds, and the chunk's codings run as one Brian2 group. It holds the resolved
+    spec, so it pickles; ``build`` re-checks it on the worker (milliseconds)."""
+    spec: dict
+
+    def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        parts = build(self.spec)
+        items, order = [], []
+        pairs = np.stack([points["speed_cm_s"], points["scene"]], axis=1)
+        for v, scene in np.unique(pairs, axis=0):
+            idx = np.flatnonzero((pairs[:, 0] == v) & (pairs[:, 1] == scene))
+            rec, x, coder = sweep_scene(parts, v, scene)
+            items += [(rec, c) for c in coded_at(coder, x, points["threshold_g"][idx])]
+            order += list(idx)
+        scores, _ = ScoredCodings(parts.readout, parts.sweep.codings_per_run).run(items)
+        ordered = [None] * len(order)
+        for i, sc in zip(order, scores):
+            ordered[i] = sc
+        return score_columns(ordered)
+
+
