@@ -105,7 +105,7 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
     """The chain is fitted on a separate drive without posts, never on a scored scene: the
     conditioned signal of a scene's first seconds does not depend on what comes later."""
     from snn_antenna.sources.scenes import SpeedProfile
-    from snn_antenna.studies.gating_threshold import calibrated_chain, condition, make_scene
+    from snn_antenna.studies.gating_threshold.spec import calibrated_chain, condition, make_scene
 
     _, parts = _quick_parts()
     scene, seed = make_scene(parts, SpeedProfile("constant", 27.0), (5,))

@@ -37,7 +37,6 @@ speed_cm_s × scene × threshold_g).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -63,7 +62,10 @@ from .spec import (
     EVALUATION_SCENES,
     EVALUATION_STEPS,
     LOW_HIGH_CM_S,
+    Fig9Row,
     Parts,
+    Results,
+    SeedPlan,
     ThresholdSweep,
     build,
     coded_at,
@@ -98,15 +100,6 @@ def sweep(spec: dict, parts: Parts, out_dir: Path, fresh: bool, client, log):
     log("      Th*(speed), monotone: " + ", ".join(f"{v:g}: {t:.3g}"
                                                    for v, t in zip(speeds, fit.th_star_g)))
     return outcome, fit
-
-
-@dataclass
-class Fig9Row:
-    """One speed of Fig. 9: Th = 0, Th* and 2·Th*, pooled over the sweep's scenes."""
-    thresholds: list
-    rec: object                # the first scene's recording (drawn)
-    scores: list | None = None
-    maps: list | None = None   # the first scene's rate maps
 
 
 def submit_fig9(parts: Parts, fit: ThStarFit, codings: ScoredCodings):
@@ -218,15 +211,6 @@ class Evaluation:
         self.pending = []
 
 
-@dataclass
-class SeedPlan:
-    pilot: int
-    needed: int
-    used: int
-    budget: int
-    margin_f1: float
-
-
 def evaluate(evaluation: Evaluation, log) -> SeedPlan:
     """Stages 4–5: the pilot's spread sets how many seeds run (up to the budget)."""
     ev = evaluation.parts.evaluation
@@ -247,18 +231,6 @@ def evaluate(evaluation: Evaluation, log) -> SeedPlan:
     else:
         log("[5/5] no further seeds needed")
     return SeedPlan(ev.pilot_seeds, needed, used, ev.max_seeds, ev.margin_f1)
-
-
-@dataclass
-class Results:
-    """Every stage's output: what the summary and the report are made from."""
-    outcome: object           # the sweep's ``SweepOutcome``; ``outcome.data`` is fitted
-    fit: ThStarFit
-    fig9: dict
-    recall: GateRecall
-    seeds: SeedPlan
-    comparison: dict
-    example: dict | None      # a ramp scene's online Th and rate map
 
 
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,

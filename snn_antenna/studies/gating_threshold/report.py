@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -17,10 +16,7 @@ from ...readout.thresholds import (
     table_cell,
 )
 from ...report import Calibrated, Predicted, Report
-from .spec import Parts
-
-if TYPE_CHECKING:
-    from . import Results
+from .spec import Parts, Results
 
 
 # -- report --------------------------------------------------------------------------------
