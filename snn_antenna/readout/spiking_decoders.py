@@ -1,6 +1,6 @@
 """Decoders of the spiking read-out, in the same framework as the FFT baselines.
 
-The spiking features of a bench data set (``spiking.cached_features``) become decoder inputs
+The spiking features of a bench data set (``engine.events.cached_features``) become decoder inputs
 (``decoder_inputs``): per resonator its spike count, first-spike latency and firing span, for
 one band or several, and for ``spiking_rod`` also its counts in the time bins. Each input set
 is read by an MLP (``spiking_baselines``), so the spiking and FFT pipelines are trained and

@@ -133,33 +133,28 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
 
 def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh,
                    scheduler) -> list:
-    """Run the bank over every event (cached) and the array designs, on ``[spiking] workers``
-    Dask processes or the cluster at ``scheduler``; add the bank's decoder inputs to
-    ``cmp.features``, measure its cost; the spiking decoders to evaluate with the baselines."""
+    """The bank over every event (cached) and the designs, on ``[spiking] workers`` or at
+    ``scheduler``; decoder inputs into ``cmp.features``, cost; the spiking decoders."""
     bank = parts.bank
     if bank is None:
         return []
-    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event "
-        f"({', '.join(bank.bands)}), Brian2 {bank.target}, dt {bank.dt_ms:g} ms, "
-        f"{bank.batch_events} events per chunk")
+    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event ({', '.join(bank.bands)})"
+        f", Brian2 {bank.target}, {bank.batch_events} events per chunk")
     with executor(parts.plan.workers, scheduler, log) as client:
         spikes = cached_features(data, bank, parts.bench, log, fresh, client)
         cmp.features = decoder_inputs(cmp.features, spikes)
         if parts.designs:
-            cmp.designs = run_designs(
-                data, cmp.features, bank, parts.designs, evaluation=parts.evaluation,
-                run=partial(run_bank, client=client, progress=False),
-                repetitions=parts.plan.design_repetitions, log=log)
+            cmp.designs = run_designs(data, cmp.features, bank, parts.designs, log=log,
+                                      run=partial(run_bank, client=client, progress=False),
+                                      repetitions=parts.plan.design_repetitions,
+                                      evaluation=parts.evaluation)
     cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
     cmp.spiking = {**bank.description(), "neurons": neurons_per_input(spikes)}
     return spiking_baselines(spikes, parts.evaluation)
 
 
 # -- report ---------------------------------------------------------------------------------
-def _pair(x) -> str:
-    return f"{x[0]:.4f}, {x[1]:.3f}"
-
-
+_pair = "{0[0]:.4f}, {0[1]:.3f}".format  # a law's (slope, intercept)
 def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
     """What the generator was set to match, apart from what it predicts."""
     s, paper = cmp.signal, events.PAPER_SIGNAL
