@@ -121,7 +121,8 @@ def main(argv=None) -> int:
         whole[w] = seconds
         print(f"whole bench set, {len(counts):,} events on {w} Dask worker(s): {seconds:5.2f} s, "
               f"{len(counts) / seconds:,.0f} events/s, {1e9 * seconds / f.neuron_steps:.2f} ns "
-              f"per neuron-step of wall time ({load()})", flush=True)
+              f"per neuron-step of wall time; Brian2 {f.wall_s:.1f} s summed over the workers "
+              f"({1e9 * f.wall_s / f.neuron_steps:.2f} ns per neuron-step) ({load()})", flush=True)
 
     print("\n## summary (measured in this run)")
     print(f"  event engine / sweep engine, ns per neuron-step: whole run {ns_whole / ref:.2f}x, "
