@@ -1,73 +1,138 @@
-"""Events per second of the spiking read-out: one NeuronGroup for many events vs one run each.
+"""Bench read-out on the sweep engine: the whole bench set, per neuron-step beside the sweeps.
 
-    python benchmarks/bench_events.py [--target cython] [--naive 20] [--batch 400]
+    python benchmarks/bench_events.py [--events 12800] [--workers 2] [--runtime-events 400]
 
-Both paths use the same coded inputs (the real preprocessing chain) and the same 24-neuron
-low band at dt 0.1 ms; the naive path calls ``ResonatorArray.run`` once per event (a Brian2
-``run()`` per event), the vectorised path puts ``--batch`` events × 24 neurons in ONE group
-(``SpikingBank.run`` → ``neurons.simulate`` with a 2-D input and ``input_index``). Each is
-warmed up once (code generation, cython compilation) before it is timed. The spike counts of
-the events both paths ran are compared, so the speed-up is for the same answer.
+Every event (the real preprocessing chain, 0.5 s at 2 kHz) drives the 24-resonator low band
+at dt 0.1 ms (``engine.events.run_bank``: grid event × neuron, ``batch_events`` events per
+chunk). Measured in one run and printed side by side, each with the machine's load average:
+
+- ``sweep engine``: ``bench_sweep.py``'s standalone ``NeuronSweep`` (a 10^4-point grid, the
+  same duration and dt) in this process: the reference cost per neuron-step;
+- ``event engine, this process``: the bench events through ``run_bank`` with target
+  ``standalone`` in this process: per neuron-step for the whole run (coding, Brian2, store
+  writes) and for Brian2 alone (the compiled binary's runs);
+- ``runtime path``: the same events with target ``cython`` (``neurons.simulate``, one group
+  per chunk with a 2-D input and ``input_index``: the read-out's path before the engine),
+  for the ratio; the spike counts of both paths are compared neuron by neuron;
+- ``whole bench set``: all ``--events`` events on a Dask LocalCluster of ``--workers``
+  processes (timed on a second run: cluster start and each worker's compile excluded).
+
+Every timed run follows a warm-up (code generation, compiling; cached on disk).
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import os
+import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
-from snn_antenna.readout.spiking import LOW_BAND, SpikingBank
-from snn_antenna.signals import Recording
-from snn_antenna.sources import bench
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench_sweep import grid_of  # noqa: E402  (this folder)
+
+from snn_antenna.engine.evaluators import NeuronSweep  # noqa: E402
+from snn_antenna.engine.events import run_bank  # noqa: E402
+from snn_antenna.engine.executor import dask_client  # noqa: E402
+from snn_antenna.engine.sweep import run_sweep  # noqa: E402
+from snn_antenna.readout.spiking import LOW_BAND, SpikingBank  # noqa: E402
+from snn_antenna.sources import bench  # noqa: E402
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--target", default="cython", choices=["numpy", "cython"])
-    parser.add_argument("--naive", type=int, default=20, help="events run one by one")
-    parser.add_argument("--batch", type=int, default=400, help="events in one NeuronGroup")
-    parser.add_argument("--duration", type=float, default=0.5, help="seconds per event")
-    args = parser.parse_args()
+def load() -> str:
+    return f"load average {os.getloadavg()[0]:.1f}"
 
-    spec = bench.BenchSpec(repetitions=max(1, -(-args.batch // 128)), n_jobs=1)
+
+def sweep_reference(duration_s: float, points: int, tmp: Path) -> float:
+    """ns per neuron-step of the standalone NeuronSweep (bench_sweep.py's grid), compile
+    excluded, store writes included."""
+    sweep = NeuronSweep(duration_s=duration_s, settle_s=duration_s / 4)
+    grid = grid_of(points)
+    run_sweep(grid, sweep, tmp / "warm.zarr", NeuronSweep.OUTPUTS, chunk_points=10_000,
+              progress=False)
+    t0 = time.perf_counter()
+    run_sweep(grid, sweep, tmp / "sweep.zarr", NeuronSweep.OUTPUTS, chunk_points=10_000,
+              progress=False)
+    steps = grid.size * duration_s * 1000 / sweep.dt_ms
+    return 1e9 * (time.perf_counter() - t0) / steps
+
+
+def timed(bank, counts, attrs, warm_events: int = 2, **kw):
+    run_bank(bank, counts[:warm_events], *attrs, progress=False, **kw)  # warm-up
+    t0 = time.perf_counter()
+    f = run_bank(bank, counts, *attrs, progress=False, **kw)
+    return f, time.perf_counter() - t0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--events", type=int, default=12_800, help="events of the whole set")
+    ap.add_argument("--workers", type=int, nargs="+", default=[2])
+    ap.add_argument("--runtime-events", type=int, default=400,
+                    help="events run by both this process's paths (counts compared)")
+    ap.add_argument("--batch", type=int, default=400, help="events per chunk (one Brian2 run)")
+    ap.add_argument("--duration", type=float, default=0.5, help="seconds per event")
+    ap.add_argument("--sweep-points", type=int, default=10_000)
+    args = ap.parse_args(argv)
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_events_"))
+    spec = bench.BenchSpec(repetitions=max(1, -(-args.events // 128)), n_jobs=2)
     data = bench.generate(spec, log=lambda *_: None)
-    counts = data["counts"].values[:args.batch]
-    rate, bits, fs = spec.rate_hz, spec.adc_bits, spec.full_scale_g
-    bank = SpikingBank(bands={"low": LOW_BAND}, duration_s=args.duration, target=args.target,
+    counts = data["counts"].values[:args.events]
+    attrs = (spec.rate_hz, spec.adc_bits, spec.full_scale_g)
+    bank = SpikingBank(bands={"low": LOW_BAND}, duration_s=args.duration, target="standalone",
                        batch_events=args.batch)
-    coded = bank.code(counts, rate, bits, fs)          # (samples, events): same for both paths
-    array = LOW_BAND.array(bank.dt_ms, bank.method, args.target)
+    steps_per_event = LOW_BAND.n_neurons * args.duration * 1000 / bank.dt_ms
+    print(f"# {os.cpu_count()} CPU cores; {LOW_BAND.n_neurons} resonators per event, dt "
+          f"{bank.dt_ms} ms, {args.duration} s per event = {steps_per_event:,.0f} neuron-steps; "
+          f"{args.batch} events per chunk")
 
-    def naive(n):
-        out = []
-        for e in range(n):
-            res = array.run(Recording(np.ascontiguousarray(coded[:, e]), rate, units="coded"))
-            out.append(np.bincount(res.spike_i, minlength=array.n_neurons))
-        return np.array(out)
+    ref = sweep_reference(args.duration, args.sweep_points, tmp)
+    print(f"sweep engine (NeuronSweep, standalone, {args.sweep_points:,} points): "
+          f"{ref:5.2f} ns per neuron-step ({load()})", flush=True)
 
-    naive(1)                                           # warm-up: code generation, compiling
-    t0 = time.perf_counter()
-    naive_counts = naive(args.naive)
-    naive_s = time.perf_counter() - t0
+    sample = counts[:args.runtime_events]
+    fs, fs_s = timed(bank, sample, attrs)
+    ns_whole, ns_brian = 1e9 * fs_s / fs.neuron_steps, 1e9 * fs.wall_s / fs.neuron_steps
+    print(f"event engine, this process ({len(sample)} events): {ns_whole:5.2f} ns per "
+          f"neuron-step (coding + Brian2 + store), {ns_brian:.2f} in Brian2 ({load()})",
+          flush=True)
+    fr, fr_s = timed(dataclasses.replace(bank, target="cython"), sample, attrs)
+    ns_runtime = 1e9 * fr_s / fr.neuron_steps
+    print(f"runtime path, cython ({len(sample)} events):    {ns_runtime:5.2f} ns per neuron-step "
+          f"(coding + Brian2 + store), {1e9 * fr.wall_s / fr.neuron_steps:.2f} in Brian2 "
+          f"({load()})", flush=True)
+    diff = np.abs(fs.counts - fr.counts)
+    print(f"spike counts, standalone vs cython on {len(sample)} shared events: "
+          f"{int((diff == 0).sum())} of {diff.size} neurons equal, max |Δ| {int(diff.max())}, "
+          f"{int(diff.sum())} spikes of {int(fr.counts.sum())} differ; first-spike times "
+          f"equal for {100 * np.mean(fs.latency_s == fr.latency_s):.2f} % of neurons")
 
-    bank.run(counts[:2], rate, bits, fs, progress=False)  # warm-up
-    t0 = time.perf_counter()
-    feats = bank.run(counts, rate, bits, fs, progress=False)
-    vector_s = time.perf_counter() - t0
+    whole = {}
+    for w in args.workers:
+        with dask_client(workers=w) as client:
+            # warm-up: two chunks per worker, so each compiles (or loads) its project
+            f, seconds = timed(bank, counts, attrs, warm_events=2 * w * args.batch,
+                               client=client)
+        whole[w] = seconds
+        print(f"whole bench set, {len(counts):,} events on {w} Dask worker(s): {seconds:5.2f} s, "
+              f"{len(counts) / seconds:,.0f} events/s, {1e9 * seconds / f.neuron_steps:.2f} ns "
+              f"per neuron-step of wall time; Brian2 {f.wall_s:.1f} s summed over the workers "
+              f"({1e9 * f.wall_s / f.neuron_steps:.2f} ns per neuron-step) ({load()})", flush=True)
 
-    same = np.abs(feats.counts[:args.naive] - naive_counts).sum()
-    naive_rate, vector_rate = args.naive / naive_s, len(counts) / vector_s
-    steps = feats.neuron_steps / len(counts)
-    print(f"target {args.target}, {array.n_neurons} resonators per event, dt {bank.dt_ms} ms, "
-          f"{args.duration} s per event ({steps:.3g} neuron-steps per event)")
-    print(f"naive  (one Brian2 run per event, {args.naive} events): {naive_rate:8.2f} events/s")
-    print(f"vector ({len(counts)} events in one NeuronGroup):      {vector_rate:8.2f} events/s "
-          f"({1e9 * feats.wall_s / feats.neuron_steps:.1f} ns per neuron-step in Brian2, "
-          f"coding included in events/s)")
-    print(f"speed-up {vector_rate / naive_rate:.1f}x; spike-count difference on the "
-          f"{args.naive} shared events: {same} spikes of {naive_counts.sum()}")
-    print(f"whole bench set (12,800 events) at this rate: {12800 / vector_rate:.0f} s")
+    print("\n## summary (measured in this run)")
+    print(f"  event engine / sweep engine, ns per neuron-step: whole run {ns_whole / ref:.2f}x, "
+          f"Brian2 alone {ns_brian / ref:.2f}x")
+    print(f"  runtime path / event engine: {ns_runtime / ns_whole:.1f}x slower "
+          f"({ns_runtime:.2f} vs {ns_whole:.2f} ns per neuron-step)")
+    for w, seconds in whole.items():
+        print(f"  whole bench set on {w} worker(s): {seconds:.1f} s (aim: <= 8 s)")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -14,7 +14,7 @@ SPEC = "studies/baseline_comparison.toml"
 TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
         "stimulus.repetitions=6", "stimulus.n_jobs=1", "evaluation.seeds=[0,1]",
         "evaluation.nmf_dims=[3,24,30]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
-        "evaluation.material_max_iter=30", "spiking.bank.target=numpy",
+        "evaluation.material_max_iter=30", "spiking.bank.target=numpy", "spiking.workers=1",
         "spiking.bank.duration_s=0.3",
         "spiking.design_repetitions=3",
         "spiking.cost_sample_events=6",

@@ -4,6 +4,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from snn_antenna.engine.events import run_bank
 from snn_antenna.networks import neurons
 from snn_antenna.networks.neurons import spike_summary
 from snn_antenna.readout.spiking import (
@@ -57,7 +58,7 @@ def test_batched_coding_equals_the_chain_per_event(wood_events):
 def test_one_group_for_many_events_gives_the_spikes_of_one_run_per_event(wood_events):
     counts = wood_events["counts"].values[[0, 20, 45]]
     bank = SpikingBank(bands={"low": LOW_BAND}, duration_s=0.3, target="numpy")
-    feats = bank.run(counts, RATE, 16, 10.0, progress=False)
+    feats = run_bank(bank, counts, RATE, 16, 10.0, progress=False)
     coded = bank.code(counts, RATE, 16, 10.0)
     array = LOW_BAND.array(bank.dt_ms, bank.method, "numpy")
     for e in range(len(counts)):
@@ -76,7 +77,7 @@ def test_spiking_decoders_recover_distance_on_positions_not_trained_on():
     events = bench.generate(bench.BenchSpec(materials=("wood",), repetitions=6,
                                             duration_s=0.45), log=lambda *_: None)
     bank = SpikingBank(bands={"low": LOW_BAND}, duration_s=0.45, target="numpy")
-    feats = bank.run(events["counts"].values, RATE, 16, 10.0, progress=False)
+    feats = run_bank(bank, events["counts"].values, RATE, 16, 10.0, progress=False)
     d = events["distance_cm"].values
     spread_mm = 10 * d.std()   # ≈ 92 mm: what always guessing the mean would give
     # the paper's map (no training) on every event
@@ -141,3 +142,13 @@ def test_bad_banks_are_refused():
         SpikingBank(bands={"low": dataclasses.replace(LOW_BAND, spacing="cubic")})
     with pytest.raises(SpecError, match="bin_edges_s"):
         SpikingBank(bands={"low": LOW_BAND}, bin_edges_s=(0.2, 0.1))
+    with pytest.raises(SpecError, match="target"):
+        SpikingBank(bands={"low": LOW_BAND}, target="cpp")
+    # a band's own dt is checked against its own k, not the bank's dt
+    with pytest.raises(SpecError, match="bands.high.dt_ms"):
+        SpikingBank(bands={"high": dataclasses.replace(HIGH_BAND, dt_ms=0.5)}, dt_ms=0.05)
+    with pytest.raises(SpecError, match="bands.low.method"):
+        SpikingBank(bands={"low": dataclasses.replace(LOW_BAND, method="heun")})
+    fine = SpikingBank(bands={"high": dataclasses.replace(HIGH_BAND, dt_ms=0.05)}, dt_ms=0.5,
+                       bin_edges_s=())
+    assert fine.arrays()["high"].dt_ms == 0.05

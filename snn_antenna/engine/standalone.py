@@ -1,9 +1,11 @@
-"""The compiled cpp_standalone project of a ``NeuronSweep`` (engine ``"standalone"``).
+"""Compiled cpp_standalone projects of the sweep engine (engine ``"standalone"``).
 
-Brian2 compiles the model once per process and group size into a project directory kept on
-disk (``SNN_ANTENNA_CACHE``, default ``~/.cache/snn_antenna``); every chunk re-runs it with its
-own parameters (``run_args``). The square-wave input is computed inside the model, so the
-project does not depend on the chunk's values.
+Brian2 compiles a model once per process and structure (group sizes, dt, method, duration)
+into a project directory kept on disk (``SNN_ANTENNA_CACHE``, default
+``~/.cache/snn_antenna``); every chunk re-runs it with its own parameters and inputs
+(``run_args``). ``project`` / ``run_project`` hold and run the process's one project;
+``NeuronSweep``'s is here (its square-wave input is computed inside the model, so the project
+does not depend on the chunk's values), ``EventSweep``'s in ``engine.events``.
 """
 from __future__ import annotations
 
@@ -46,12 +48,19 @@ SQUARE_INPUT = ("I_amp * (1 - 2*(int(floor((2*f_in)*(floor(t*input_rate + 1e-6)"
 SQUARE_INPUT_VARIABLES = "f_in : 1 (constant)\nI_amp : 1 (constant)\nspike_count : integer"
 
 
-def _standalone_project(sweep, n: int):
-    import brian2 as b2
+def project(structure: tuple, build) -> dict:
+    """This process's compiled cpp_standalone project for ``structure`` (anything with a
+    repr that names what the compiled code depends on: sizes, dt, method, duration).
+
+    ``build()`` creates the Brian2 objects and runs the network once (nothing runs: the
+    device defers it) and returns them as a dict; the project is then compiled into a
+    directory this process holds alone. Brian2's device is process-global, so a process
+    keeps ONE project: asking for another structure replaces it (the old directory stays on
+    disk, so coming back regenerates code but recompiles nothing that did not change).
+    ``NeuronSweep`` and ``EventSweep`` share this slot.
+    """
     from brian2.devices.device import get_device, reset_device, set_device
 
-    structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dt_ms,
-                 sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, n)
     if _PROJECT.get("structure") == structure:
         return _PROJECT
     key = hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
@@ -64,6 +73,34 @@ def _standalone_project(sweep, n: int):
                with_output=False)
     device = get_device()
     try:
+        objects = build()
+        device.build(run=False, directory=str(directory), with_output=False)
+    except BaseException:
+        device.reinit()
+        lock.close()
+        raise
+    finally:
+        reset_device()  # runtime code elsewhere in this process keeps working
+    _PROJECT.update(objects, structure=structure, device=device, lock=lock)
+    return _PROJECT
+
+
+def run_project(project: dict, run_args: dict) -> None:
+    """One run of the compiled ``project`` with ``run_args`` (Brian2 ``device.run``): new
+    values of group variables and TimedArrays, no recompiling."""
+    device = project["device"]
+    device.run(run_args=run_args, with_output=False)
+    for name in device.run_args_arrays:  # this run's value files: not needed again
+        Path(device.project_dir, "static_arrays", name).unlink(missing_ok=True)
+
+
+def _standalone_project(sweep, n: int):
+    import brian2 as b2
+
+    structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method,
+                 sweep.dt_ms, sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, n)
+
+    def build():
         # sample n of the coder's input holds from n/rate to (n+1)/rate: the square wave of
         # stimuli.square, evaluated with the same floating-point operations
         group = b2.NeuronGroup(
@@ -73,13 +110,10 @@ def _standalone_project(sweep, n: int):
             namespace={"input_rate": sweep.input_rate_hz * b2.Hz,
                        "input_rate_value": float(sweep.input_rate_hz),
                        "settle": sweep.settle_s * b2.second})
-        net = b2.Network(group)
-        net.run(sweep.duration_s * b2.second, namespace={})
-        device.build(run=False, directory=str(directory), with_output=False)
-    finally:
-        reset_device()  # runtime code elsewhere in this process keeps working
-    _PROJECT.update(structure=structure, device=device, group=group, lock=lock)
-    return _PROJECT
+        b2.Network(group).run(sweep.duration_s * b2.second, namespace={})
+        return {"group": group}
+
+    return project(structure, build)
 
 
 def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
@@ -95,10 +129,7 @@ def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
               "f_in": p["input_hz"], "I_amp": p["I"], "v": v0, "u": u0}
     run_args = {getattr(group, name): np.r_[arr, np.repeat(arr[:1], pad)]
                 for name, arr in values.items()}
-    device = project["device"]
-    device.run(run_args=run_args, with_output=False)
-    for name in device.run_args_arrays:  # this chunk's parameter files: not needed again
-        Path(device.project_dir, "static_arrays", name).unlink(missing_ok=True)
+    run_project(project, run_args)
     v = np.asarray(group.v[:])
     u = np.asarray(group.u[:])
     ok = np.isfinite(v) & np.isfinite(u) & (np.abs(v) < neurons.RUNAWAY_LIMIT) \

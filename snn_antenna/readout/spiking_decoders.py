@@ -1,6 +1,6 @@
 """Decoders of the spiking read-out, in the same framework as the FFT baselines.
 
-The spiking features of a bench data set (``spiking.cached_features``) become decoder inputs
+The spiking features of a bench data set (``engine.events.cached_features``) become decoder inputs
 (``decoder_inputs``): per resonator its spike count, first-spike latency and firing span, for
 one band or several, and for ``spiking_rod`` also its counts in the time bins. Each input set
 is read by an MLP (``spiking_baselines``), so the spiking and FFT pipelines are trained and
@@ -153,12 +153,15 @@ class SpikingPlan:
     ``bank`` holds ``spiking.SpikingBank`` fields (its bands as ``[spiking.bank.bands.NAME]``);
     ``designs`` is a list of array variants, each ``{name, band, ...Band fields}``, run on the
     events of the first ``design_repetitions`` repetitions and decoded on the first split;
-    ``cost_sample_events`` events are timed for the cost per event.
+    ``cost_sample_events`` events are timed for the cost per event. ``workers``: Dask worker
+    processes for the bank's runs (0: one per core; 1: this process; ``--scheduler`` attaches
+    to a running cluster instead).
     """
     bank: dict = field(default_factory=dict)
     designs: list = field(default_factory=list)
     design_repetitions: int = 10
     cost_sample_events: int = 400
+    workers: int = 1
 
     def build(self, rate_hz: float) -> tuple[SpikingBank, list[Design]]:
         """The bank and its designs, checked (for input sampled at ``rate_hz``)."""
@@ -167,14 +170,19 @@ class SpikingPlan:
         designs = [Design.from_table(d, i, bank) for i, d in enumerate(self.designs)]
         check(isinstance(self.design_repetitions, int) and self.design_repetitions >= 2,
               "design_repetitions", self.design_repetitions, "an integer >= 2")
+        check(isinstance(self.workers, int) and not isinstance(self.workers, bool)
+              and self.workers >= 0, "workers", self.workers,
+              "an integer >= 0 (0: one Dask worker per core; 1: this process)")
         bank.check_rate(rate_hz)
         return bank, designs
 
 
 def run_designs(data: xr.Dataset, features: xr.Dataset, bank: SpikingBank, designs: list, *,
-                repetitions: int, evaluation: bl.Evaluation, log=print) -> list[dict]:
+                run, repetitions: int, evaluation: bl.Evaluation, log=print) -> list[dict]:
     """Each design on the events of the first ``repetitions`` repetitions: distance rmse and
-    material accuracy on the first seed's split, and its cost per event."""
+    material accuracy on the first seed's split, and its cost per event. ``run(bank, counts,
+    rate_hz, adc_bits, full_scale_g) -> SpikeFeatures`` runs a bank over events (the sweep
+    engine's ``engine.events.run_bank``, which this stage comes before)."""
     from threadpoolctl import threadpool_limits
 
     subset = features.isel(event=np.flatnonzero(features["repetition"].values < repetitions))
@@ -189,8 +197,7 @@ def run_designs(data: xr.Dataset, features: xr.Dataset, bank: SpikingBank, desig
     with threadpool_limits(1):   # as in baselines.evaluate
         for design in designs:
             t0 = time.perf_counter()
-            f = design.bank(bank).run(data["counts"].values[ids], *recording_attrs(data),
-                                      progress=False)
+            f = run(design.bank(bank), data["counts"].values[ids], *recording_attrs(data))
             row = {"design": design.name, "band": design.band,
                    "change": ", ".join(f"{k} = {v}" for k, v in design.changes.items()),
                    "n_neurons": design.band_of(bank).n_neurons,

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 
 from .. import spec as specs
+from ..engine.events import cached_features, run_bank, run_cost
+from ..engine.executor import executor
 from ..errors import SpecError
 from ..files import write_json
 from ..readout import baselines as bl
@@ -32,7 +35,7 @@ from ..readout.comparison import (
     spiking_rows,
 )
 from ..readout.confusion import confusion, confusion_sentence, error_rates
-from ..readout.spiking import SpikingBank, cached_features, run_cost
+from ..readout.spiking import SpikingBank
 from ..readout.spiking_decoders import (
     TRAINING_FREE,
     Design,
@@ -96,20 +99,17 @@ def build(spec: dict) -> StudySpec:
                      *_spiking_part(spec, bench_spec.rate_hz))
 
 
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print) -> dict:
+def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
+        scheduler: str | None = None, log=print) -> dict:
     parts = build(spec)
     out_dir, t_start = Path(out_dir), time.perf_counter()
     stages = 5 if parts.bank is not None else 4
     data, cmp, data_s = _signal_stage(parts, stages, log, fresh)
-    extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh)
+    extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
     log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
         "repetition")
     chosen = parts.evaluation.baselines(cmp.features.sizes["freq_hz"]) + extra
     cmp.results = bl.evaluate(cmp.features, chosen, parts.evaluation, log)
-    if parts.designs:
-        cmp.designs = run_designs(data, cmp.features, parts.bank, parts.designs,
-                                  repetitions=parts.plan.design_repetitions,
-                                  evaluation=parts.evaluation, log=log)
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
@@ -147,27 +147,30 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
         "bench_key": parts.bench.key()}), data_s
 
 
-def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh) -> list:
-    """Run the bank over every event (cached), add its decoder inputs to ``cmp.features``,
-    measure its cost; the spiking decoders to evaluate with the baselines."""
+def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh,
+                   scheduler) -> list:
+    """The bank over every event (cached) and the designs, on ``[spiking] workers`` or at
+    ``scheduler``; decoder inputs into ``cmp.features``, cost; the spiking decoders."""
     bank = parts.bank
     if bank is None:
         return []
-    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event "
-        f"({', '.join(bank.bands)}), Brian2 {bank.target}, dt {bank.dt_ms:g} ms, "
-        f"{bank.batch_events} events per NeuronGroup")
-    spikes = cached_features(data, bank, parts.bench, log, fresh)
-    cmp.features = decoder_inputs(cmp.features, spikes)
+    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event ({', '.join(bank.bands)})"
+        f", Brian2 {bank.target}, {bank.batch_events} events per chunk")
+    with executor(parts.plan.workers, scheduler, log) as client:
+        spikes = cached_features(data, bank, parts.bench, log, fresh, client)
+        cmp.features = decoder_inputs(cmp.features, spikes)
+        if parts.designs:
+            cmp.designs = run_designs(data, cmp.features, bank, parts.designs, log=log,
+                                      run=partial(run_bank, client=client, progress=False),
+                                      repetitions=parts.plan.design_repetitions,
+                                      evaluation=parts.evaluation)
     cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
     cmp.spiking = {**bank.description(), "neurons": neurons_per_input(spikes)}
     return spiking_baselines(spikes, parts.evaluation)
 
 
 # -- report ---------------------------------------------------------------------------------
-def _pair(x) -> str:
-    return f"{x[0]:.4f}, {x[1]:.3f}"
-
-
+_pair = "{0[0]:.4f}, {0[1]:.3f}".format  # a law's (slope, intercept)
 def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
     """What the generator was set to match, apart from what it predicts."""
     s, paper = cmp.signal, events.PAPER_SIGNAL
