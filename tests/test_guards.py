@@ -292,7 +292,7 @@ def test_a_failed_run_leaves_no_brian2_temp_files(tmp_path):
     temp = tmp_path / "tmp"
     temp.mkdir()
     code = ("import sys, numpy as np\n"
-            "from snn_antenna import neurons\n"
+            "from snn_antenna.networks import neurons\n"
             "from snn_antenna.errors import guarded\n"
             "def boom(args):\n"
             "    neurons.simulate('resonator', np.full(100, 0.1), record_traces='v')\n"
