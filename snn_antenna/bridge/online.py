@@ -186,7 +186,8 @@ class OnlineReport:
     started: float = 0.0                # perf_counter when the pipeline started
     latencies_ms: list[float] = field(default_factory=list)
     contacts: list[dict] = field(default_factory=list)
-    # (perf_counter, waiting_s, simulated_s) at the first and the latest published window
+    # (perf_counter, waiting_s, simulated_s, process_time) at the first and the latest
+    # published window
     first_window: tuple | None = None
     last_window: tuple | None = None
     caught_up_at: int = 0               # index of the first window after the start-up backlog
@@ -198,10 +199,20 @@ class OnlineReport:
         for the port excluded."""
         if self.first_window is None:
             return float("nan")
-        (t0, w0, s0), (t1, w1, s1) = self.first_window, self.last_window
+        (t0, w0, s0, _), (t1, w1, s1, _) = self.first_window, self.last_window
         if s1 <= s0:
             return float("nan")
         return (s1 - s0) / max((t1 - t0) - (w1 - w0), 1e-9)
+
+    @property
+    def cpu_realtime_factor(self) -> float:
+        """Simulated seconds per CPU second of this process (all its threads) in the steady
+        state: what the pipeline would reach on a core of its own, however loaded the machine
+        is with other work."""
+        if self.first_window is None or self.last_window[2] <= self.first_window[2]:
+            return float("nan")
+        (_, _, s0, c0), (_, _, s1, c1) = self.first_window, self.last_window
+        return (s1 - s0) / max(c1 - c0, 1e-9)
 
     def window_published(self, end_s: float, waiting_s: float, arrived: float | None,
                          window_s: float) -> float | None:
@@ -210,7 +221,8 @@ class OnlineReport:
         when the source is not live)."""
         now = time.time()
         if self.first_window is None:           # steady state starts here (Brian2 is built)
-            self.first_window = self.last_window = (time.perf_counter(), waiting_s, end_s)
+            self.first_window = self.last_window = (time.perf_counter(), waiting_s, end_s,
+                                                    time.process_time())
         latency_ms = None if arrived is None else (now - arrived) * 1e3
         if latency_ms is not None:
             self.latencies_ms.append(latency_ms)
@@ -234,8 +246,8 @@ class OnlineReport:
             "waiting_s": round(self.waiting_s, 3),
             "startup_s": (round(self.first_window[0] - self.started, 3) if self.first_window
                           else None),
-            "realtime_factor": (round(self.realtime_factor, 2)
-                                if np.isfinite(self.realtime_factor) else None),
+            "realtime_factor": _rounded(self.realtime_factor),
+            "cpu_realtime_factor": _rounded(self.cpu_realtime_factor),
             # From a sample's arrival on the host to the rate-map window that includes it:
             # all windows, and those after the start-up backlog was worked off (live only).
             "latency_ms": summary(self.latencies_ms),
@@ -246,6 +258,10 @@ class OnlineReport:
                         "target": parts.array.target, "method": parts.array.method},
             "contacts": self.contacts, "counts": counts,
         }
+
+
+def _rounded(value: float) -> float | None:
+    return round(value, 2) if np.isfinite(value) else None
 
 
 def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | None = None,
@@ -274,7 +290,7 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
                                              parts.window_s)
         rates = spike_counts / parts.window_s
         event = tracker.update(t_s, rates)
-        report.last_window = (time.perf_counter(), loop.waiting_s, end_s)
+        report.last_window = (time.perf_counter(), loop.waiting_s, end_s, time.process_time())
         if view is not None:
             view.window(t_s, rates, event, report.realtime_factor, latency_ms)
         if display:

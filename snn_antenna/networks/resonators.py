@@ -199,21 +199,23 @@ class ResonatorArray:
         period = self.steps_per_sample(rate_hz) * block
         group = self.build_group(f"drive((t_in_timesteps % {period}) * dt)", "",
                                  {"drive": ring})
-        # The guard's clock ticks once a block; the feed shares it (one clock beside the
-        # group's: Brian2's loop pays per clock and per object at every step).
-        guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method,
-                                          every_ms=1e3 * block / rate_hz)
+        # One clock for everything: Brian2's loop pays for every further clock at every step
+        # (a third of the run at dt 0.5 ms). The feed runs on the group's clock and returns at
+        # once except at block boundaries, where it also calls the instability check.
+        guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method)
         feeder = _BlockFeeder(_Feed(chunks), ring.values, group, samples_per_window, rate_hz,
-                              on_window)
-        feed = b2.NetworkOperation(feeder, clock=guard.clock, when="start", name="feed")
-        net = b2.Network(group, guard, feed)
+                              on_window, period, guard.function)
+        feed = b2.NetworkOperation(feeder, clock=group.clock, when="start", name="feed")
+        net = b2.Network(group, feed)
         feeder.net = net
+        # Brian2 warns about an operation it never ran; this one runs inside the feed.
+        guard._network = net.id
         t0 = time.perf_counter()
         net.run(max_duration_s * b2.second, namespace={})
         # A last, partial block: its first step ran when the feed stopped the network.
         rest = feeder.tail * self.steps_per_sample(rate_hz) - 1
         if rest > 0 and not feeder.failed:
-            feed.active = guard.active = False
+            feed.active = False
             net.run(rest * self.dt_ms * b2.ms, namespace={})
             guard.function()
         stats = feeder.stats
@@ -231,20 +233,27 @@ def _block_samples(samples_per_window: int, most: float) -> int:
 
 
 class _BlockFeeder:
-    """The stream's NetworkOperation: at every block boundary, publish the window that just
-    ended (every step before this one has been integrated), then put the next block of
-    samples into the ring. Errors are kept and re-raised once Brian2 has stopped cleanly."""
+    """The stream's NetworkOperation, called at every step and busy only at block boundaries
+    (every ``period`` steps): it publishes the window that just ended (every step before this
+    one has been integrated), checks the state, then puts the next block of samples into the
+    ring. Errors are kept and re-raised once Brian2 has stopped cleanly."""
 
-    def __init__(self, feed, ring, group, samples_per_window, rate_hz, on_window):
+    def __init__(self, feed, ring, group, samples_per_window, rate_hz, on_window, period,
+                 check_state):
         self.feed, self.ring, self.net = feed, ring, None
         self.counts = group.variables["spike_count"].get_value()
         self.samples_per_window, self.rate_hz = samples_per_window, rate_hz
-        self.on_window = on_window
+        self.on_window, self.period, self.check_state = on_window, period, check_state
         self.stats = StreamStats()
         self.failed: list[BaseException] = []
         self.tail = 0
+        self._wait = 0
 
     def __call__(self):  # no ``t`` argument: Brian2 would build a Quantity for it each call
+        if self._wait:
+            self._wait -= 1
+            return
+        self._wait = self.period - 1
         stats = self.stats
         try:
             if stats.samples and stats.samples % self.samples_per_window == 0:
@@ -253,6 +262,7 @@ class _BlockFeeder:
                     self.on_window(stats.samples / self.rate_hz
                                    - self.samples_per_window / self.rate_hz, self.counts.copy())
                 self.counts[:] = 0
+            self.check_state()
             n = self.feed.take(self.ring)
         except Exception as exc:
             self.failed.append(exc)
@@ -261,17 +271,6 @@ class _BlockFeeder:
         if n < len(self.ring):        # the stream ended: integrate what came, then stop
             self.tail = n
             self.net.stop()
-
-
-def _as_project_error(exc: Exception, t_s: float) -> Exception:
-    """The project's own errors (bad input, a lost port, instability) pass unchanged; anything
-    else from the source or the window callback becomes a PipelineError naming where it broke."""
-    if type(exc).__module__.startswith("snn_antenna") or isinstance(exc, SpecError):
-        return exc
-    error = PipelineError("the live pipeline", f"{type(exc).__name__} at {t_s:.2f} s of "
-                                               f"input: {exc}")
-    error.__cause__ = exc
-    return error
 
 
 class _Feed:
