@@ -226,6 +226,17 @@ class ResonatorArray:
         return stats
 
 
+def _as_project_error(exc: Exception, t_s: float) -> Exception:
+    """The project's own errors (bad input, a lost port, instability) pass unchanged; anything
+    else from the source or the window callback becomes a PipelineError naming where it broke."""
+    if type(exc).__module__.startswith("snn_antenna") or isinstance(exc, SpecError):
+        return exc
+    error = PipelineError("the live pipeline", f"{type(exc).__name__} at {t_s:.2f} s of "
+                                               f"input: {exc}")
+    error.__cause__ = exc
+    return error
+
+
 def _block_samples(samples_per_window: int, most: float) -> int:
     """The largest divisor of the window (in samples) not above ``most`` (at least 1)."""
     return max(b for b in range(1, samples_per_window + 1)
