@@ -74,8 +74,9 @@ def add_subcommands(subparsers) -> None:
     p = subparsers.add_parser("stream", help="run the network live on a serial stream")
     _port_args(p)
     p.add_argument("--network", required=True,
-                   help="networks/NAME.toml; networks/live.toml is the array set for live use "
-                        "(rk2 at dt 0.5 ms: 5x fewer steps than resonator_array.toml, same read-out)")
+                   help="networks/NAME.toml; networks/live.toml is the array set for live "
+                        "use (rk2 at dt 0.5 ms: 5x fewer steps than resonator_array.toml, "
+                        "the same read-out)")
     p.add_argument("--out", default=None,
                    help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
