@@ -1,13 +1,18 @@
 """Online pipeline benchmark: real-time factor and sample-to-rate-map latency, one run each.
 
-    python benchmarks/bench_stream.py [--network networks/resonator_array.toml]
-                                      [--seconds 8] [--set network.dt_ms=0.25 ...] [--view]
+    python benchmarks/bench_stream.py [--network networks/live.toml] [--seconds 8]
+                                      [--set network.dt_ms=0.25 ...]
+                                      [--baseline networks/resonator_array.toml] [--view]
 
 1. Throughput: the emulator (its own process) writes a robot scene (contacts at 19 and 27 cm)
    into a pseudo-terminal as fast as the reader takes it; serial source → decoder →
    preprocessing → Brian2 array → rate map. The real-time factor is simulated seconds per
    second of computation in the steady state (Brian2's build and the time spent waiting for
-   bytes excluded).
+   bytes excluded); per CPU second, it is simulated seconds per CPU second of the pipeline's
+   own process (its threads, not the emulator's), which other jobs on the machine leave
+   alone. The same throughput run on ``--baseline`` (the offline array, dt 0.1 ms;
+   ``--baseline none`` skips it) gives the ratio of the two settings measured in one run, which
+   a machine loaded by other jobs leaves more telling than either factor alone.
 2. Latency: the emulator runs as its own process at 1 kHz real time on a pseudo-terminal; the
    pipeline streams from it. The latency is from a sample's arrival on the host to the
    publication of the rate-map window that contains it (steady state, after the start-up
@@ -75,7 +80,9 @@ def _stop_when_consumed(source, n_frames):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--network", default=str(ROOT / "networks" / "resonator_array.toml"))
+    ap.add_argument("--network", default=str(ROOT / "networks" / "live.toml"))
+    ap.add_argument("--baseline", default=str(ROOT / "networks" / "resonator_array.toml"),
+                    help="a second network, throughput only, for the ratio ('none': skip)")
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--view", action="store_true",
@@ -93,7 +100,10 @@ def main(argv=None) -> int:
     fast = stream_from_emulator(parts, args.seconds, fast=True)
     print(f"real-time factor: {fast['realtime_factor']:.1f}x "
           f"({fast['simulated_s']:.1f} s of 1 kHz input; Brian2 start-up {fast['startup_s']:.1f} s "
-          f"not included)")
+          f"not included); per CPU second of the pipeline's process: "
+          f"{fast['cpu_realtime_factor']:.1f}x")
+    if args.baseline != "none":
+        compare_baseline(args, overrides, fast)
     live = stream_from_emulator(parts, args.seconds, fast=False)
     steady = live["steady_latency_ms"]
     print(f"live at 1 kHz: real-time factor {live['realtime_factor']:.1f}x, "
@@ -111,6 +121,18 @@ def main(argv=None) -> int:
     if args.view:
         compare_view(args, overrides)
     return 0
+
+
+def compare_baseline(args, overrides, fast) -> None:
+    """The throughput run on the baseline network, right after the shipped one's."""
+    base_parts = build_online(args.baseline, overrides)
+    warm_up(base_parts)
+    base = stream_from_emulator(base_parts, args.seconds, fast=True)
+    print(f"  baseline {Path(args.baseline).name} (dt {base_parts.array.dt_ms} ms, "
+          f"{base_parts.array.method}): {base['realtime_factor']:.1f}x "
+          f"({base['cpu_realtime_factor']:.1f}x per CPU second); shipped / baseline "
+          f"{fast['realtime_factor'] / base['realtime_factor']:.2f} (load "
+          f"{os.getloadavg()[0]:.1f})")
 
 
 def compare_view(args, overrides) -> None:

@@ -1,4 +1,7 @@
 """The resonator array: offline and streaming agree; rate maps and read-out."""
+import tomllib
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -7,6 +10,8 @@ from snn_antenna.networks.resonators import ResonatorArray, rate_map
 from snn_antenna.readout.contacts import ContactDetector, centroid_hz, dominant_hz
 from snn_antenna.signals import Recording
 from snn_antenna.sources import stimuli
+
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def coded_test_input():
@@ -28,6 +33,45 @@ def test_streaming_gives_the_same_spikes_as_offline():
     assert stats.samples == coded.n_samples and stats.windows == 30
     np.testing.assert_array_equal(streamed, offline.values)
     assert offline.values.sum() > 20
+
+
+def live_array() -> ResonatorArray:
+    """The array the live pipeline ships (networks/live.toml), as it runs there."""
+    with open(ROOT / "networks" / "live.toml", "rb") as f:
+        return ResonatorArray(**tomllib.load(f))
+
+
+def test_streaming_gives_the_same_spikes_as_offline_at_the_live_setting():
+    """Every spike, to the input sample: 1 ms windows (one sample per block) and the live
+    100 ms windows (blocks of 25); chunks of any length; a last, partial block."""
+    array = live_array()
+    rng = np.random.default_rng(1)
+    t = np.arange(6_037) / 1000.0
+    freq = np.where(t < 3.0, 8.0, 17.0)               # self-motion, then a "contact"
+    x = 0.15 * np.sign(np.sin(2 * np.pi * np.cumsum(freq) / 1000.0))
+    x[rng.random(len(x)) < 0.03] = 0.0                 # below the coder's threshold now and then
+    coded = Recording(x, 1000.0, units="coded")
+    cuts = np.sort(rng.choice(np.arange(1, len(x)), 25, replace=False))
+    for window_s in (0.001, 0.1):
+        offline = array.run(coded, window_s=window_s).rate_map.values * window_s
+        windows = []
+        stats = array.stream(iter(np.split(x, cuts)), 1000.0, window_s=window_s,
+                             on_window=lambda t_s, counts: windows.append(counts))
+        assert stats.samples == len(x) and stats.windows == offline.shape[1]
+        np.testing.assert_array_equal(np.stack(windows, axis=1), offline)
+    assert offline.sum() > 100 and offline[array.neuron_hz > 12].sum() > 10
+
+
+def test_a_spike_on_a_window_edge_counts_in_the_window_it_starts():
+    """53 * 0.1 > 5.3 in floating point: binning by edges put a spike at 5.3 s in [5.2, 5.3)."""
+    rates = rate_map(np.array([0, 0]), np.array([5.3, 0.2]), [8.0], 6.0, 0.1)
+    assert rates.sel(window_s=5.3, method="nearest").item() == 10.0
+    assert rates.sel(window_s=0.2, method="nearest").item() == 10.0 and rates.sum() == 20.0
+
+
+def test_streaming_needs_a_step_that_divides_the_sample_interval():
+    with pytest.raises(SpecError, match="dt_ms.*divides the sample interval"):
+        ResonatorArray(target="numpy", dt_ms=0.3).stream(iter([np.zeros(10)]), 1000.0)
 
 
 def test_rate_map_is_labelled_and_read_out_follows_the_input_frequency():

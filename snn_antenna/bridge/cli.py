@@ -42,7 +42,8 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--realtime", action="store_true",
                    help="pace at the recorded sample rate (default: as fast as possible)")
     p.add_argument("--network", default=None,
-                   help="networks/NAME.toml: run the online pipeline on the replay")
+                   help="networks/NAME.toml: run the online pipeline on the replay "
+                        "(networks/live.toml: the live setting)")
     _set_arg(p)
     add_view_args(p)
     p.set_defaults(func=cmd_replay)
@@ -72,7 +73,10 @@ def add_subcommands(subparsers) -> None:
 
     p = subparsers.add_parser("stream", help="run the network live on a serial stream")
     _port_args(p)
-    p.add_argument("--network", required=True, help="networks/NAME.toml")
+    p.add_argument("--network", required=True,
+                   help="networks/NAME.toml; networks/live.toml is the array set for live "
+                        "use (rk2 at dt 0.5 ms: 5x fewer steps than resonator_array.toml, "
+                        "the same read-out)")
     p.add_argument("--out", default=None,
                    help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
     p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")

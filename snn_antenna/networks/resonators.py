@@ -3,8 +3,9 @@
 One ``NeuronGroup`` of Izhikevich resonators, neuron j tuned to ``neuron_hz[j]`` through its
 time scale k_j. Both forms build the same group from the same equations and drive it with
 the coded signal held constant over each input sample, so they give the same spikes on the
-same data: offline reads the samples from a ``TimedArray``, streaming writes each new sample
-into the array behind ``I_ext`` from a ``NetworkOperation`` (runtime mode only).
+same data: offline reads the samples from a ``TimedArray`` of the whole recording, streaming
+from a ring ``TimedArray`` that a ``NetworkOperation`` refills block by block (runtime mode
+only). Both evaluate the same arithmetic on the same values, bit for bit.
 """
 from __future__ import annotations
 
@@ -20,6 +21,9 @@ from ..signals import Recording, validate_samples
 from . import neurons
 
 MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice
+# Streaming hands Brian2 this much input per Python call (25 samples at 1 kHz): a window is
+# published at most one block's computing time after its last sample came.
+STREAM_BLOCK_S = 0.025
 
 # The band of preferred frequencies that a driving robot's self-motion keeps busy: the probe's
 # free self-oscillation (``antenna.NATURAL_HZ``) and the neighbours that its tuning plateau
@@ -156,63 +160,69 @@ class ResonatorArray:
                            window_s, wall_s=wall)
 
     # -- streaming --------------------------------------------------------------------------
+    def steps_per_sample(self, rate_hz: float) -> int:
+        """Integration steps per input sample: the stream needs a whole number of them."""
+        steps = 1.0 / (rate_hz * self.dt_ms * 1e-3)
+        check(steps >= 1 - 1e-9 and abs(steps - round(steps)) < 1e-6, "dt_ms", self.dt_ms,
+              f"a step that divides the sample interval ({1e3 / rate_hz:g} ms) for streaming")
+        return int(round(steps))
+
     def stream(self, chunks: Iterable[np.ndarray], rate_hz: float, window_s: float = 0.1,
                on_window: Callable[[float, np.ndarray], None] | None = None,
-               max_duration_s: float = 365 * 86400.0) -> "StreamStats":
+               max_duration_s: float = 365 * 86400.0,
+               block_s: float = STREAM_BLOCK_S) -> "StreamStats":
         """Run the array live on coded samples as they arrive.
 
         ``chunks`` yields 1-D arrays of coded samples (any length, blocking until data come;
         the stream ends when it is exhausted). Every ``window_s`` of input, ``on_window(t_s,
         counts)`` receives the spike counts per neuron of that window: memory stays bounded
         however long the stream runs. Runtime mode only (NetworkOperation).
+
+        One Python call per block of samples (at most ``block_s``, dividing the window) writes
+        them into a ring ``TimedArray`` that the group reads at its own steps: the same
+        arithmetic as ``run``'s ``drive(t)``, so the same spikes. A block waits for its last
+        sample before it is integrated; a window is published as soon as its last block is.
         """
         import brian2 as b2
 
         check(is_number(rate_hz) and rate_hz > 0, "rate_hz", rate_hz, "a sample rate > 0 Hz")
         check(is_number(window_s) and window_s > 0, "window_s", window_s, "a window > 0 s")
+        check(is_number(block_s) and block_s > 0, "block_s", block_s, "a block > 0 s")
         self.check_rate(rate_hz)
         samples_per_window = int(round(window_s * rate_hz))
         check(samples_per_window >= 1, "window_s", window_s,
               f"a window of at least one sample (1/{rate_hz:g} s)")
+        block = _block_samples(samples_per_window, block_s * rate_hz)
         b2.start_scope()
-        group = self.build_group("I_ext", "I_ext : 1", {})
+        # The ring holds the current block; the group reads slot (step // steps) % block.
+        ring = b2.TimedArray(np.zeros(block), dt=b2.second / rate_hz, name="drive")
+        period = self.steps_per_sample(rate_hz) * block
+        group = self.build_group(f"drive((t_in_timesteps % {period}) * dt)", "",
+                                 {"drive": ring})
+        # One clock for everything: Brian2's loop pays for every further clock at every step
+        # (a third of the run at dt 0.5 ms). The feed runs on the group's clock and returns at
+        # once except at block boundaries, where it also calls the instability check.
         guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method)
-        I_ext = group.variables["I_ext"].get_value()  # the array behind the variable
-        counts = group.variables["spike_count"].get_value()
-        feed = _Feed(chunks)
-        stats = StreamStats()
-        failed: list[BaseException] = []
-
-        # when="start": the new sample is in place before this step's integration, exactly
-        # as the TimedArray of the offline form switches value at the sample boundary.
-        # No ``t`` argument: Brian2 would build a Quantity for it on every call (~1 kHz).
-        @b2.network_operation(dt=b2.second / rate_hz, when="start")
-        def next_sample():
-            try:
-                # Every step before this one has been integrated: a window that ends at this
-                # sample boundary is complete.
-                if stats.samples and stats.samples % samples_per_window == 0:
-                    stats.windows += 1
-                    if on_window is not None:
-                        on_window(stats.samples / rate_hz - window_s, counts.copy())
-                    counts[:] = 0
-                x = feed.next()
-            except Exception as exc:     # re-raised below, once Brian2 has stopped cleanly
-                failed.append(exc)
-                x = None
-            if x is None:
-                net.stop()
-                return
-            I_ext[:] = x
-            stats.samples += 1
-
-        net = b2.Network(group, guard, next_sample)
+        feeder = _BlockFeeder(_Feed(chunks), ring.values, group, samples_per_window, rate_hz,
+                              on_window, period, guard.function)
+        feed = b2.NetworkOperation(feeder, clock=group.clock, when="start", name="feed")
+        net = b2.Network(group, feed)
+        feeder.net = net
+        # Brian2 warns about an operation it never ran; this one runs inside the feed.
+        guard._network = net.id
         t0 = time.perf_counter()
         net.run(max_duration_s * b2.second, namespace={})
+        # A last, partial block: its first step ran when the feed stopped the network.
+        rest = feeder.tail * self.steps_per_sample(rate_hz) - 1
+        if rest > 0 and not feeder.failed:
+            feed.active = False
+            net.run(rest * self.dt_ms * b2.ms, namespace={})
+            guard.function()
+        stats = feeder.stats
         stats.wall_s = time.perf_counter() - t0
         stats.simulated_s = stats.samples / rate_hz
-        if failed:
-            raise _as_project_error(failed[0], stats.samples / rate_hz)
+        if feeder.failed:
+            raise _as_project_error(feeder.failed[0], stats.samples / rate_hz)
         return stats
 
 
@@ -227,28 +237,85 @@ def _as_project_error(exc: Exception, t_s: float) -> Exception:
     return error
 
 
+def _block_samples(samples_per_window: int, most: float) -> int:
+    """The largest divisor of the window (in samples) not above ``most`` (at least 1)."""
+    return max(b for b in range(1, samples_per_window + 1)
+               if samples_per_window % b == 0 and b <= max(most, 1))
+
+
+class _BlockFeeder:
+    """The stream's NetworkOperation, called at every step and busy only at block boundaries
+    (every ``period`` steps): it publishes the window that just ended (every step before this
+    one has been integrated), checks the state, then puts the next block of samples into the
+    ring. Errors are kept and re-raised once Brian2 has stopped cleanly."""
+
+    def __init__(self, feed, ring, group, samples_per_window, rate_hz, on_window, period,
+                 check_state):
+        self.feed, self.ring, self.net = feed, ring, None
+        self.counts = group.variables["spike_count"].get_value()
+        self.samples_per_window, self.rate_hz = samples_per_window, rate_hz
+        self.on_window, self.period, self.check_state = on_window, period, check_state
+        self.stats = StreamStats()
+        self.failed: list[BaseException] = []
+        self.tail = 0
+        self._wait = 0
+
+    def __call__(self):  # no ``t`` argument: Brian2 would build a Quantity for it each call
+        if self._wait:
+            self._wait -= 1
+            return
+        self._wait = self.period - 1
+        stats = self.stats
+        try:
+            if stats.samples and stats.samples % self.samples_per_window == 0:
+                stats.windows += 1
+                if self.on_window is not None:
+                    self.on_window(stats.samples / self.rate_hz
+                                   - self.samples_per_window / self.rate_hz, self.counts.copy())
+                self.counts[:] = 0
+            self.check_state()
+            n = self.feed.take(self.ring)
+        except Exception as exc:
+            self.failed.append(exc)
+            n = 0
+        stats.samples += n
+        if n < len(self.ring):        # the stream ended: integrate what came, then stop
+            self.tail = n
+            self.net.stop()
+
+
 class _Feed:
-    """One sample at a time from an iterator of chunks."""
+    """Blocks of samples from an iterator of chunks."""
 
     def __init__(self, chunks: Iterable[np.ndarray]):
         self._chunks: Iterator = iter(chunks)
         self._buf = np.empty(0)
         self._pos = 0
 
-    def next(self):
-        while self._pos >= len(self._buf):
-            try:
-                self._buf = np.asarray(next(self._chunks), dtype=float).ravel()
-            except StopIteration:
-                return None
-            self._pos = 0
-            if len(self._buf) and not np.all(np.isfinite(self._buf)):
-                raise SpecError("stream sample", "non-finite value",
-                                "finite coded samples (the preprocessing chain never "
-                                "produces NaN; check the source)")
-        x = self._buf[self._pos]
-        self._pos += 1
-        return x
+    def take(self, out: np.ndarray) -> int:
+        """Fill ``out`` with the next samples (waiting for them); how many, fewer only when
+        the stream ended."""
+        n = 0
+        while n < len(out):
+            if self._pos >= len(self._buf) and not self._next_chunk():
+                return n
+            m = min(len(out) - n, len(self._buf) - self._pos)
+            out[n:n + m] = self._buf[self._pos:self._pos + m]
+            n += m
+            self._pos += m
+        return n
+
+    def _next_chunk(self) -> bool:
+        try:
+            self._buf = np.asarray(next(self._chunks), dtype=float).ravel()
+        except StopIteration:
+            return False
+        self._pos = 0
+        if len(self._buf) and not np.all(np.isfinite(self._buf)):
+            raise SpecError("stream sample", "non-finite value",
+                            "finite coded samples (the preprocessing chain never "
+                            "produces NaN; check the source)")
+        return True
 
 
 @dataclass
@@ -287,8 +354,13 @@ def rate_map(spike_i, spike_t_s, neuron_hz, duration_s: float,
           f"a window in (0, {duration_s:g}] s")
     n_windows = int(np.floor(duration_s / window_s + 1e-9))
     edges = np.arange(n_windows + 1) * window_s
-    counts, _, _ = np.histogram2d(spike_i, spike_t_s,
-                                  bins=[np.arange(len(neuron_hz) + 1) - 0.5, edges])
+    # A spike belongs to the window its step starts in, counted as the stream counts it: a
+    # spike at exactly 5.3 s is in [5.3, 5.4) although 53 * 0.1 > 5.3 in floating point.
+    window = np.floor(np.asarray(spike_t_s, dtype=float) / window_s + 1e-9).astype(int)
+    neuron = np.asarray(spike_i, dtype=int)
+    keep = (window >= 0) & (window < n_windows) & (neuron >= 0) & (neuron < len(neuron_hz))
+    counts = np.zeros((len(neuron_hz), n_windows))
+    np.add.at(counts, (neuron[keep], window[keep]), 1)
     return xr.DataArray(
         counts / window_s, dims=("neuron_hz", "window_s"),
         coords={"neuron_hz": ("neuron_hz", np.asarray(neuron_hz, dtype=float),
