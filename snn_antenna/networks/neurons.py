@@ -353,13 +353,21 @@ def instability_guard(group, preset: str, dt_ms: float, method: str,
     """A NetworkOperation that raises NumericalInstabilityError during the run.
 
     Brian2 checks for NaN only after a run, as a warning; this stops the run within
-    ``every_ms`` of simulated time and names the neuron. It reads the arrays behind the
-    variables directly (no unit handling), so it costs microseconds per check.
+    ``every_ms`` of simulated time and names the neuron (``instability_check``).
     """
     check(is_number(every_ms) and every_ms > 0, "check_every_ms", every_ms,
           "an interval > 0 ms between instability checks")
     import brian2 as b2
 
+    return b2.NetworkOperation(instability_check(group, preset, dt_ms, method),
+                               dt=every_ms * b2.ms, name="instability_guard")
+
+
+def instability_check(group, preset: str, dt_ms: float, method: str):
+    """A function that raises NumericalInstabilityError, naming the neuron, its parameters and
+    a safe dt, when any neuron of ``group`` is non-finite or running away; for a caller that
+    already runs Python on the group's clock (the live feed). It reads the arrays behind the
+    variables directly (no unit handling), so it costs microseconds per call."""
     v_arr = group.variables["v"].get_value
     u_arr = group.variables["u"].get_value
 
@@ -377,7 +385,7 @@ def instability_guard(group, preset: str, dt_ms: float, method: str,
                 safe_dt_ms=max_stable_dt_ms(params["k"], method) if method in MAX_STABLE_K_DT
                 else None)
 
-    return b2.NetworkOperation(check_state, dt=every_ms * b2.ms, name="instability_guard")
+    return check_state
 
 
 def spike_summary(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: int,

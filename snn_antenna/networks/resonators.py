@@ -202,14 +202,12 @@ class ResonatorArray:
         # One clock for everything: Brian2's loop pays for every further clock at every step
         # (a third of the run at dt 0.5 ms). The feed runs on the group's clock and returns at
         # once except at block boundaries, where it also calls the instability check.
-        guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method)
+        check_state = neurons.instability_check(group, "resonator", self.dt_ms, self.method)
         feeder = _BlockFeeder(_Feed(chunks), ring.values, group, samples_per_window, rate_hz,
-                              on_window, period, guard.function)
+                              on_window, period, check_state)
         feed = b2.NetworkOperation(feeder, clock=group.clock, when="start", name="feed")
         net = b2.Network(group, feed)
         feeder.net = net
-        # Brian2 warns about an operation it never ran; this one runs inside the feed.
-        guard._network = net.id
         t0 = time.perf_counter()
         net.run(max_duration_s * b2.second, namespace={})
         # A last, partial block: its first step ran when the feed stopped the network.
@@ -217,7 +215,7 @@ class ResonatorArray:
         if rest > 0 and not feeder.failed:
             feed.active = False
             net.run(rest * self.dt_ms * b2.ms, namespace={})
-            guard.function()
+            check_state()
         stats = feeder.stats
         stats.wall_s = time.perf_counter() - t0
         stats.simulated_s = stats.samples / rate_hz
