@@ -27,12 +27,12 @@ def test_bench_bands_are_the_baseline_studys():
 def test_accurate_limit_is_accurate_and_the_next_grid_point_is_not(method):
     limit = bands.ACCURATE_K_DT[method]
     beyond = K_DT_GRID[K_DT_GRID > 1.1 * limit][0]
-    # As many steps as the study's map ran (400 model-ms at its finest k·dt, 0.01)
-    smap = accuracy.stability_map([method], [limit, beyond], MAP_DRIVES,
-                                  model_ms=400.0 * limit / 0.01)
+    # The map's own conditions: its finest k·dt (0.01) sets 40,000 steps over 400 model-ms
+    smap = accuracy.stability_map([method], [0.01, limit, beyond], MAP_DRIVES, model_ms=400.0)
     status = smap.status.sel(integrator=method).values
-    assert (status[0] == accuracy.ACCURATE).all()
-    assert (status[1] != accuracy.ACCURATE).any()
+    assert (status[:2] == accuracy.ACCURATE).all()
+    assert (status[2] != accuracy.ACCURATE).any()
+    assert float(smap.max_accurate_k_dt.sel(integrator=method)) == pytest.approx(limit, rel=1e-3)
 
 
 @pytest.mark.parametrize("name", list(bands.BENCH_BANDS))
