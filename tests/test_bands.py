@@ -113,3 +113,10 @@ def test_bad_settings_are_refused_naming_the_field(kwargs, field):
 def test_band_study_refuses_unknown_bands():
     with pytest.raises(SpecError, match="bands"):
         bands.BandStudy(bands=["ultra"])
+
+
+@pytest.mark.parametrize("name", list(bands.BENCH_BANDS))
+def test_chosen_settings_are_inside_the_accurate_range(name):
+    setting = bands.CHOSEN[name]
+    _, k_dt = bands.k_dt_range(bands.BENCH_BANDS[name], setting)
+    assert k_dt <= bands.ACCURATE_K_DT[setting.method]

@@ -10,6 +10,7 @@ from snn_antenna.networks import neurons
 from snn_antenna.readout import tradeoff
 from snn_antenna.studies import runner
 from snn_antenna.studies import speed_accuracy as study
+from snn_antenna.studies.speed_accuracy_report import convergence_text
 
 SPEC = "studies/speed_accuracy.toml"
 
@@ -81,7 +82,7 @@ def test_the_reference_verdict_says_what_was_measured():
 
     def text(**shift):
         conv = dict(base, **shift)
-        return study.convergence_text(dict(conv, **tradeoff.convergence_verdict(conv, rows)))
+        return convergence_text(dict(conv, **tradeoff.convergence_verdict(conv, rows)))
 
     assert "converged far below" in text(max_shift_ms=1e-5)
     near = text(max_shift_ms=0.1)

@@ -82,6 +82,19 @@ class BandSetting:
 
 BEFORE = BandSetting("euler", 0.1)   # what every bench band ran at (studies/baseline_comparison)
 
+# Chosen by ``run_study`` (studies/speed_accuracy.toml [bands], full profile: 8 events, 4
+# materials x 10/30 cm, cython, 48 events per timed group, load ~3-5 on 2 cores): for each
+# band the cheapest method at its accurate step whose rate map is within 5 % of the reference.
+#   band  before (euler 0.1 ms)                 chosen
+#   low   k·dt ≤ 0.267, rate map 14.0 %, 5.7 ms  euler 0.005 ms, k·dt ≤ 0.0133, 2.9 %, 34 ms/event
+#   high  k·dt ≤ 2.04, rate map 437 %, 6.7 ms    euler 0.0005 ms, k·dt ≤ 0.0107, 0 %, 315 ms/event
+#   rod   k·dt ≤ 1.71, rate map 35.8 %, 10 ms    euler 0.001 ms, k·dt ≤ 0.0153, 2.7 %, 147 ms/event
+# hz_per_k of high and rod from the driven tuning sweep at rk4, their accurate step (120
+# square-wave frequencies, 1 s each): 23.46 (coder amplitude 0.15) and 27.49 (0.2).
+CHOSEN = {"low": BandSetting("euler", 0.005),
+          "high": BandSetting("euler", 0.0005, 23.46),
+          "rod": BandSetting("euler", 0.001, 27.49)}
+
 
 def array_of(band: Band, setting: BandSetting = BEFORE, target: str = "numpy") -> ResonatorArray:
     """The band's resonators at ``setting`` (forced: settings beyond the stable limit are
