@@ -8,7 +8,9 @@ spike-count and rate-map error and, for contact scenes, decoded-distance error a
 F1 of the quickstart read-out. The report shows the Pareto fronts (error vs CPU time), a
 recommendation per scene, and the stability map (method × k·dt × drive).
 
-Stages: workloads → references → main sweep → cost sweep → stability map → report. Settings
+Stages: workloads → references → main sweep → cost sweep → stability map → bench bands
+(``readout.bands``: each band of the bench's spiking read-out before and at a setting inside
+the accurate range, against the reference, with its cost) → report. Settings
 loop in this process (``engine.devices``): timing needs the machine to itself, and the knobs
 (method, target, dtype) are build settings rather than the numeric axes of a sweep grid.
 Finished runs are kept in ``OUT/runs.jsonl`` (``engine.runlog``): an interrupted run resumes.
@@ -41,6 +43,8 @@ from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
 from ...readout import accuracy, tradeoff
 from ...readout.accuracy import Match, StabilityGrid
+from ...readout.bands import BandStudy
+from ...readout.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
 from ...report import Report, fmt
 from ...sources.scenes import scene_from_spec
@@ -49,7 +53,7 @@ from ...store import write_dataset
 from .report import human_summary, write_report
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
-            "stability", "reference", "match")
+            "stability", "reference", "match", "bands")
 SCENES = ("tuning", "quickstart", "bench")
 
 
@@ -132,6 +136,7 @@ class Plan:
     stability: StabilityGrid
     reference: ReferenceSettings
     match: Match
+    bands: BandStudy
 
 
 def build(spec: dict) -> Plan:
@@ -155,7 +160,7 @@ def build(spec: dict) -> Plan:
     parts = {}
     for name, cls in (("tuning", TuningStimuli), ("sweep", Sweep), ("cost", Cost),
                       ("stability", StabilityGrid), ("reference", ReferenceSettings),
-                      ("match", Match)):
+                      ("match", Match), ("bands", BandStudy)):
         with specs.section(name):
             parts[name] = cls(**specs.check_section(spec, name, cls))
     for scene in robot_scenes.values():
@@ -254,29 +259,32 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         t_start = time.perf_counter()
         seed = int(spec.get("seed", 0))
         sweep, stab = plan.sweep, plan.stability
-        log(f"[1/5] scenes ({', '.join(dict.fromkeys(sweep.scenes + [plan.cost.scene]))}, "
+        log(f"[1/6] scenes ({', '.join(dict.fromkeys(sweep.scenes + [plan.cost.scene]))}, "
             f"seed {seed})")
         workloads = prepare_workloads(plan, seed, log)
-        log(f"[2/5] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
+        log(f"[2/6] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
         refs, ref_rows, convergence = solve_references(plan, workloads, log)
         runs = Measurements(workloads, refs, RunLog(out_dir / "runs.jsonl", spec, fresh), log)
         main = [(name, Setting(m, dt, sweep.target, sweep.dtype)) for name in sweep.scenes
                 for m in sweep.methods for dt in sorted(sweep.dt_ms)]
-        log(f"[3/5] main sweep: {len(main)} runs ({sweep.target}, {sweep.dtype})")
+        log(f"[3/6] main sweep: {len(main)} runs ({sweep.target}, {sweep.dtype})")
         with log.expected(UNSTABLE_ON_PURPOSE):   # coarse steps are forced past their limits
             rows = runs.sweep("main", main)
         recommendations = tradeoff.recommend(rows, plan.match)
         cost = cost_pairs(plan, recommendations, workloads[plan.cost.scene].n_neurons)
-        log(f"[4/5] cost sweep on {plan.cost.scene}: {len(cost)} runs "
+        log(f"[4/6] cost sweep on {plan.cost.scene}: {len(cost)} runs "
             f"(targets × dtypes × sizes)")
         with log.expected(FLOAT32_CHECK):
             rows += runs.sweep("cost", cost)
-        log(f"[5/5] stability map ({len(sweep.methods)} methods × {stab.n_k_dt} k·dt × "
-            f"{len(stab.drives)} drives) and report")
+        log(f"[5/6] stability map ({len(sweep.methods)} methods × {stab.n_k_dt} k·dt × "
+            f"{len(stab.drives)} drives)")
         with log.expected(UNSTABLE_ON_PURPOSE):
             smap = stab.map(sweep.methods, b=plan.net.get("b", ResonatorArray.b))
         write_dataset(smap, out_dir / "stability_map.zarr")
+        log(f"[6/6] bench bands ({', '.join(plan.bands.bands)}) against the reference; report")
+        bands = run_band_study(plan.bands, seed, log)
         summary = summarise(plan, rows, (ref_rows, convergence), recommendations, smap)
+        summary["bands"] = bands
         summary["total_wall_s"] = time.perf_counter() - t_start
         report = Report(out_dir, "snn-antenna: speed vs accuracy of the resonator array",
                         quick=quick, quick_note=quick_note(plan.sweep, plan.stability))

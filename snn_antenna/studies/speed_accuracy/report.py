@@ -109,14 +109,54 @@ def write_report(report: Report, summary: dict, smap) -> None:
         f"{summary['raised_instability']} run(s) raised NumericalInstabilityError (shown as "
         f"non-finite); {n_silent} run(s) finished without an exception yet produced a "
         f"non-finite spike time or score" + (" (listed below)." if n_silent else "."))
+    bands_section(report, summary["bands"], smap)
     report.heading("All runs")
     all_cols = ("sweep", "scene", "method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s",
                 "wall_s", "status") + tradeoff.ERRORS
     report.table([{c: r.get(c) for c in all_cols} for r in rows], "Every configuration")
 
 
+BAND_COLS = ("role", "setting", "k_dt_min", "k_dt_max", "accurate_k_dt", "inside_accurate_range",
+             "spike_count_error", "rate_map_error", "spike_time_error_ms", "n_spikes",
+             "reference_spikes", "cpu_ms_per_event", "ns_per_neuron_step", "events_timed",
+             "status")
+
+
+def bands_section(report: Report, bands: dict, smap) -> None:
+    """Each bench band before (euler, dt 0.1 ms) and at the settings inside the accurate
+    range: k·dt, errors against the reference, cost; the recalibrated tuning."""
+    report.heading("Bands of the bench's spiking read-out")
+    measured = {m: float(smap.max_accurate_k_dt.sel(integrator=m)) for m in smap.integrator.values}
+    report.text(
+        "The accurate range is the stability map's: the largest k·dt up to which every "
+        f"constant drive keeps its steady rate within tolerance (shipped, from the full map: "
+        f"{fmt(bands['accurate_k_dt'])}; this run's map: {fmt(measured)}). Each band runs "
+        f"{bands['n_events']} sample bench events through its own chain, all events × neurons "
+        "in one group, against the exact reference at the same Hz per unit k. Errors: spike "
+        "counts per event-neuron and the rate map (event-neuron × 50 ms windows), relative "
+        "to the reference's; cost: CPU ms per event in a group of events_timed events.")
+    for name, b in bands["bands"].items():
+        report.table([{c: r.get(c) for c in BAND_COLS} for r in b["rows"]],
+                     f"{name} band: before, each method at its accurate step, chosen")
+        cut = "; ".join(f"{t['window_s']:g} s: {fmt(t['rate_map_error'])}" for t in b["truncation"])
+        report.text(f"{b['apply']}. A shorter window would cost this rate-map error even with "
+                    f"exact integration (reference spikes after it): {cut}.")
+        if "tuning" in b:
+            t = b["tuning"]
+            report.table([dict(stage=k, **{c: v for c, v in t[k].items()
+                                           if c != "peak_offset_channels"})
+                          for k in ("before", "calibration", "after") if k in t],
+                         f"{name} band: driven tuning (square waves as the coder makes them, "
+                         f"{len(t['freqs_hz'])} frequencies); peak offsets in channels")
+            stages = [k for k in ("before", "calibration", "after") if k in t]
+            report.table([{"neuron": j, **{k: t[k]["peak_offset_channels"][j] for k in stages}}
+                          for j in range(len(t["before"]["peak_offset_channels"]))],
+                         f"{name} band: each neuron's peak, channels above (+) or below (-) "
+                         "its target frequency")
+
+
 def human_summary(s: dict, out_dir) -> str:
-    lines = []
+    lines = [b["apply"] for b in s.get("bands", {}).get("bands", {}).values()]
     q = s["quickstart_fastest_matching"]
     if q:
         lines.append(f"quickstart: fastest setting matching the reference read-out: "
