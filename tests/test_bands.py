@@ -115,8 +115,35 @@ def test_band_study_refuses_unknown_bands():
         bands.BandStudy(bands=["ultra"])
 
 
-@pytest.mark.parametrize("name", list(bands.BENCH_BANDS))
-def test_chosen_settings_are_inside_the_accurate_range(name):
-    setting = bands.CHOSEN[name]
-    _, k_dt = bands.k_dt_range(bands.BENCH_BANDS[name], setting)
-    assert k_dt <= bands.ACCURATE_K_DT[setting.method]
+@pytest.mark.parametrize("name", list(bands.CHOSEN))
+def test_the_shipped_bands_run_at_the_chosen_settings(name):
+    """What the bank runs is what was measured, and it is a candidate the study tries."""
+    setting, band = bands.CHOSEN[name], bands.BENCH_BANDS[name]
+    assert (band.method, band.dt_ms, band.hz_per_k) == (setting.method, setting.dt_ms,
+                                                        setting.hz_per_k)
+    assert setting.dt_ms in bands.candidate_steps(band, setting.method, setting.hz_per_k,
+                                                  bands.BandStudy().coarser_steps)
+    assert band.array(0.1, "euler", "numpy").dt_ms == setting.dt_ms   # not the bank's step
+
+
+def test_candidates_start_at_the_maps_step_and_go_coarser():
+    band = bands.BENCH_BANDS["high"]
+    fine = bands.accurate_dt_ms(band, "rk4")
+    steps = bands.candidate_steps(band, "rk4", None, 2)
+    assert steps[0] == fine and len(steps) == 3 and steps == sorted(steps)
+    assert bands.candidate_steps(band, "rk4", None, 0) == [fine]
+
+
+def test_choice_follows_the_measured_error_not_the_map():
+    """A coarser step outside the map's constant-drive range is chosen when the run against
+    the reference says it is within tolerance and it is cheaper; never the "before" row."""
+    rows = [dict(status="ok", role="before", rate_map_error=0.0, cpu_ms_per_event=1.0,
+                 inside_accurate_range=False),
+            dict(status="ok", role="candidate", rate_map_error=0.01, cpu_ms_per_event=300.0,
+                 inside_accurate_range=True),
+            dict(status="ok", role="candidate", rate_map_error=0.03, cpu_ms_per_event=80.0,
+                 inside_accurate_range=False),
+            dict(status="ok", role="candidate", rate_map_error=0.2, cpu_ms_per_event=10.0,
+                 inside_accurate_range=False)]
+    assert bands.choose(rows, 0.05) is rows[2]
+    assert bands.choose(rows, 0.005) is None

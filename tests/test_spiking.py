@@ -134,8 +134,9 @@ def test_binned_counts_known_answer():
 
 def test_bad_banks_are_refused():
     from snn_antenna.errors import SpecError
+    on_the_banks_step = dataclasses.replace(HIGH_BAND, dt_ms=None, method=None)
     with pytest.raises(SpecError, match="bands.high.dt_ms"):
-        SpikingBank(bands={"high": HIGH_BAND}, dt_ms=0.5)
+        SpikingBank(bands={"high": on_the_banks_step}, dt_ms=0.5)
     with pytest.raises(SpecError, match="bands.high.rate_hz"):
         SpikingBank(bands={"high": HIGH_BAND}).check_rate(1000.0)
     with pytest.raises(SpecError, match="bands.low.spacing"):
@@ -149,6 +150,7 @@ def test_bad_banks_are_refused():
         SpikingBank(bands={"high": dataclasses.replace(HIGH_BAND, dt_ms=0.5)}, dt_ms=0.05)
     with pytest.raises(SpecError, match="bands.low.method"):
         SpikingBank(bands={"low": dataclasses.replace(LOW_BAND, method="heun")})
-    fine = SpikingBank(bands={"high": dataclasses.replace(HIGH_BAND, dt_ms=0.05)}, dt_ms=0.5,
+    fine = SpikingBank(bands={"high": dataclasses.replace(HIGH_BAND, dt_ms=0.05, method="euler")},
+                       dt_ms=0.5,
                        bin_edges_s=())
     assert fine.arrays()["high"].dt_ms == 0.05
