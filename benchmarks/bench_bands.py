@@ -1,0 +1,55 @@
+"""The bench bands' settings against the exact reference: error and cost side by side.
+
+    python benchmarks/bench_bands.py [--bands high rod] [--target cython]
+
+For each band of the bench's spiking read-out (``readout.bands.BENCH_BANDS``), on the same
+8 sample bench events (4 materials × 10/30 cm, 0.5 s each): the setting every band ran at
+before (``bands.BEFORE``: euler 0.1 ms, 24.52 Hz per k), the shipped one (``bands.CHOSEN``)
+and the stability map's accurate step for euler and rk4, each against the exact reference
+(``networks.reference``, solve_ivp) at the shipped Hz per unit k: k·dt, spike-count and
+rate-map error, CPU ms per event and the cost ratio to "before", measured in one run with the
+load average printed. The speed/accuracy study's "bands" section chooses ``CHOSEN``; this
+prints the trade for a reader without the whole study.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+
+from snn_antenna.readout import bands
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bands", nargs="+", default=list(bands.CHOSEN), choices=list(bands.CHOSEN))
+    ap.add_argument("--target", default="cython", choices=["numpy", "cython"])
+    ap.add_argument("--cost-events", type=int, default=48, help="events per timed group")
+    args = ap.parse_args()
+    study = bands.BandStudy()
+    data = bands.sample_data(study.materials, study.positions_cm, study.repetitions)
+    print(f"# {data.sizes['event']} bench events, {study.duration_s} s each, target "
+          f"{args.target}; load average {os.getloadavg()[0]:.1f}")
+    for name in args.bands:
+        band, shipped = bands.BENCH_BANDS[name], bands.CHOSEN[name]
+        events = bands.code_events(name, band, data, study.duration_s)
+        ref = bands.reference_spikes(events, shipped.hz_per_k)
+        settings = [("before", bands.BEFORE), ("shipped", shipped)] + [
+            (f"map-accurate {m}", bands.BandSetting(m, bands.accurate_dt_ms(band, m,
+                                                                           shipped.hz_per_k),
+                                                    shipped.hz_per_k))
+            for m in ("euler", "rk4")]
+        base = None
+        print(f"\n{name} band {band.band_hz[0]:g}-{band.band_hz[1]:g} Hz")
+        print(f"  {'setting':<34} {'k·dt max':>9} {'counts':>8} {'rate map':>9} "
+              f"{'ms/event':>9} {'cost':>6}")
+        for role, setting in settings:
+            row = bands.measure(events, setting, ref, args.target, args.cost_events)
+            base = base or row["cpu_ms_per_event"]
+            print(f"  {role + ': ' + setting.label():<34} {row['k_dt_max']:>9.3g} "
+                  f"{row['spike_count_error']:>8.1%} {row['rate_map_error']:>9.1%} "
+                  f"{row['cpu_ms_per_event']:>9.1f} {row['cpu_ms_per_event'] / base:>5.1f}x")
+    print(f"\nload average {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
