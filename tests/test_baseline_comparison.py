@@ -65,7 +65,10 @@ def test_report_folder_and_summary_keys(tiny_run):
     spiking = stored["spiking"]
     assert {"spiking_dominant", "spiking_centroid", "spiking_mlp_distance"} <= set(spiking["distance_rmse_mm"])
     assert "spiking_mlp_material" in spiking["material_accuracy"]
-    assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(72 * 0.3 / 1e-4)
+    # 0.3 s per event: the low band at the bank's 0.1 ms, the high and rod bands at their own
+    # 0.005 ms
+    assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(
+        24 * 0.3 / 1e-4 + 2 * 24 * 0.3 / 5e-6)
     assert [d["design"] for d in spiking["designs"]] == ["low_8"]
     assert (out / "pareto_cost_accuracy.png").is_file()
     assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3, 24, 30]
