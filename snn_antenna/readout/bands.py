@@ -394,7 +394,7 @@ def recalibrate(study: BandStudy, band: Band, rate_hz: float, log=print) -> tupl
 
 
 def study_band(study: BandStudy, name: str, data, log=print) -> dict:
-    """One band: its error and cost at ``BEFORE``, each method at its accurate step (at the
+    """One band: its error and cost at ``BEFORE``, each method at ``candidate_steps`` (at the
     recalibrated Hz per unit k), the cheapest of those within the rate-map tolerance, and the
     tuning at the chosen setting."""
     band = BENCH_BANDS[name]
