@@ -140,7 +140,8 @@ def bands_section(report: Report, bands: dict, smap) -> None:
         "to the reference's; cost: CPU ms per event in a group of events_timed events.")
     for name, b in bands["bands"].items():
         report.table([{c: r.get(c) for c in BAND_COLS} for r in b["rows"]],
-                     f"{name} band: before, each method from its accurate step to coarser ones, chosen")
+                     f"{name} band: before, each method from its accurate step to coarser "
+                     "ones, chosen")
         cut = "; ".join(f"{t['window_s']:g} s: {fmt(t['rate_map_error'])}" for t in b["truncation"])
         report.text(f"{b['apply']}. A shorter window would cost this rate-map error even with "
                     f"exact integration (reference spikes after it): {cut}.")
