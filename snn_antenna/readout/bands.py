@@ -9,7 +9,8 @@ reference (``networks.reference``) on sample bench events coded through the band
 
 - ``measure``: spike-count, rate-map and spike-time error of every (event, neuron) against
   the reference, and the cost (CPU seconds per event, ns per neuron-step) of one batch of
-  events in one NeuronGroup, as ``SpikingBank.run`` runs them, compiled before it is timed;
+  events in one NeuronGroup (the runtime path of ``engine.events.run_bank``), compiled before
+  it is timed;
 - ``accurate_dt_ms``: the largest step (from ``DT_STEPS_MS``, each dividing the bench's 0.5 ms
   input interval) that keeps the band's largest k·dt inside a method's accurate range;
 - ``driven_tuning`` / ``peak_hz_per_k`` / ``peak_offsets``: square waves as the coder makes
@@ -200,7 +201,7 @@ def reference_spikes(events: BandEvents, hz_per_k: float | None = None,
 
 def brian_spikes(events: BandEvents, setting: BandSetting, target: str = "cython",
                  repeat: int = 1) -> Spikes:
-    """All events × neurons as ONE group through ``neurons.simulate`` (as ``SpikingBank.run``
+    """All events × neurons as ONE group through ``neurons.simulate`` (as ``engine.events``
     does), over the setting's window; compiled on a few steps first, then timed. With
     ``repeat`` > 1 the events run that many times over in the group (a batch of the bank's
     size, for its cost); the spikes returned are those of the first copy."""
