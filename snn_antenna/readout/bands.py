@@ -85,14 +85,9 @@ class BandSetting:
 # 0.1 ms and the small-signal Hz per unit k; measured again each run, beside the candidates.
 BEFORE = BandSetting("euler", 0.1, neurons.LINEAR_HZ_PER_K)
 
-# Shipped (readout.spiking.HIGH_BAND, ROD_BAND above; low unchanged), from runs against the
-# exact reference on 8 bench events (4 materials x 10/30 cm, cython, 48 events per timed group,
-# idle machine), rate-map error and CPU per event:
-#   band  before (euler 0.1 ms, 24.52 Hz/k)   map-accurate step (k·dt <= ACCURATE_K_DT)   shipped
-#   high  474 %, 6.1 ms                        euler 0.0005 ms: 0 %, 315 ms                rk4 0.005 ms: 2.0 %, 86 ms
-#   rod   37 %, 6.2 ms                         euler 0.001 ms: 2.7 %, 147 ms               rk2 0.005 ms: 3.5 %, 50 ms
-# hz_per_k of high and rod from the driven tuning sweep at rk4, its map-accurate step (120
-# square-wave frequencies, 1 s each): 23.46 (coder amplitude 0.15) and 27.49 (0.2).
+# Shipped (readout.spiking.HIGH_BAND, ROD_BAND above; low unchanged): the cheapest settings within
+# 5 % of the exact reference's rate map on the study's sample events, with hz_per_k from the driven
+# tuning sweep; benchmarks/bench_bands.py prints their error and cost beside the alternatives.
 CHOSEN = {"high": BandSetting("rk4", 0.005, 23.46),
           "rod": BandSetting("rk2", 0.005, 27.49)}
 
