@@ -2,7 +2,7 @@
 
     python benchmarks/bench_bands.py [--bands high rod] [--target cython]
 
-For each band of the bench's spiking read-out (``readout.bands.BENCH_BANDS``), on the same
+For each band of the bench's spiking read-out (``evaluation.bands.BENCH_BANDS``), on the same
 8 sample bench events (4 materials × 10/30 cm, 0.5 s each): the setting every band ran at
 before (``bands.BEFORE``: euler 0.1 ms, 24.52 Hz per k), the shipped one (``bands.CHOSEN``)
 and the stability map's accurate step for euler and rk4, each against the exact reference
@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 import os
 
-from snn_antenna.readout import bands
+from snn_antenna.evaluation import bands
 
 
 def main() -> None:

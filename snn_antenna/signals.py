@@ -1,7 +1,9 @@
-"""Recordings: sampled signals that carry their sample rate and labelled events.
+"""Recordings: sampled signals that carry their sample rate, units and ground truth.
 
 A Recording is what every source produces (the antenna model, scenes, the serial bridge, a
 replay) and what every stage consumes, so a stage never has to guess the rate or the units.
+Its ground truth (``truth``, a ``truth.GroundTruth``) travels with it for scoring, afterwards;
+read-outs never read it (``truth``'s docstring says how that is enforced).
 """
 from __future__ import annotations
 
@@ -10,23 +12,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import SpecError, check
-
-
-@dataclass(frozen=True)
-class Event:
-    """A labelled moment in a recording, e.g. a contact.
-
-    ``kind`` is ``"contact"`` for contacts; ``t_s`` the onset, ``duration_s`` how long it is
-    held; contacts carry ``distance_cm`` and ``material``.
-    """
-    kind: str
-    t_s: float
-    duration_s: float = 0.0
-    distance_cm: float | None = None
-    material: str | None = None
-
-    def as_dict(self) -> dict:
-        return {k: v for k, v in self.__dict__.items() if v is not None}
+from .truth import GroundTruth
 
 
 @dataclass(frozen=True)
@@ -39,12 +25,14 @@ class Recording:
     """
     samples: np.ndarray
     rate_hz: float
-    events: tuple[Event, ...] = ()
+    truth: GroundTruth = GroundTruth()
     units: str = "g"
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
         validate_samples(self.samples, "samples")
+        check(isinstance(self.truth, GroundTruth), "truth", type(self.truth).__name__,
+              "a truth.GroundTruth (labelled events for scoring)")
         check(np.isfinite(self.rate_hz) and self.rate_hz > 0, "rate_hz", self.rate_hz,
               "a finite sample rate > 0 Hz")
 
@@ -60,12 +48,8 @@ class Recording:
     def t_s(self) -> np.ndarray:
         return np.arange(self.n_samples) / self.rate_hz
 
-    @property
-    def contacts(self) -> tuple[Event, ...]:
-        return tuple(e for e in self.events if e.kind == "contact")
-
     def with_samples(self, samples: np.ndarray, units: str | None = None) -> "Recording":
-        """The same recording (rate, events) with new samples, e.g. after a processing stage."""
+        """The same recording (rate, truth) with new samples, e.g. after a processing stage."""
         return replace(self, samples=np.asarray(samples), units=units or self.units)
 
 

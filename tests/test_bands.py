@@ -7,7 +7,7 @@ import pytest
 import xarray as xr
 
 from snn_antenna.errors import SpecError
-from snn_antenna.readout import accuracy, bands
+from snn_antenna.evaluation import accuracy, bands
 from snn_antenna.readout.spiking import Band
 
 K_DT_GRID = np.geomspace(0.01, 50, 25)      # the study's stability-map grid

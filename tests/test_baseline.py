@@ -5,6 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from snn_antenna.errors import SpecError
+from snn_antenna.evaluation import crossval as cv
 from snn_antenna.readout import baselines as bl
 
 
@@ -14,12 +15,12 @@ def test_no_repetition_is_in_both_train_and_test(reps, fraction, seed):
     # Every (material, position) has the same repetitions 0..reps-1.
     repetition = np.tile(np.arange(reps), 6)
     group = np.repeat(np.arange(6), reps)
-    train, test = bl.split_by_repetition(repetition, fraction, seed)
+    train, test = cv.split_by_repetition(repetition, fraction, seed)
     assert not (train & test).any() and (train | test).all()
     assert not set(repetition[train]) & set(repetition[test])
     for g in range(6):   # every class and position is on both sides
         assert train[group == g].any() and test[group == g].any()
-    again = bl.split_by_repetition(repetition, fraction, seed)
+    again = cv.split_by_repetition(repetition, fraction, seed)
     assert np.array_equal(again[1], test)
 
 
@@ -34,10 +35,10 @@ def test_nmf_filter_bank_is_a_dot_product_with_non_negative_filters():
 
 
 def test_scores_are_computed_from_predictions():
-    assert bl.score("distance", np.array([10.0, 20.0]), np.array([10.3, 19.6]))["rmse_mm"] \
+    assert cv.score("distance", np.array([10.0, 20.0]), np.array([10.3, 19.6]))["rmse_mm"] \
         == pytest.approx(10 * np.sqrt((0.09 + 0.16) / 2))
-    assert bl.score("material", np.array([0, 1, 2, 2]), np.array([0, 1, 1, 2]))["accuracy"] == 0.75
-    s = bl.summarise([{"accuracy": 0.5}, {"accuracy": 0.7}])
+    assert cv.score("material", np.array([0, 1, 2, 2]), np.array([0, 1, 1, 2]))["accuracy"] == 0.75
+    s = cv.summarise([{"accuracy": 0.5}, {"accuracy": 0.7}])
     assert s["accuracy"] == pytest.approx(0.6) and s["accuracy_sd"] == pytest.approx(0.1414, 1e-3)
 
 
@@ -46,4 +47,4 @@ def test_a_material_not_in_the_table_is_refused():
     feats = xr.Dataset(coords={"material": ("event", ["wood", "granite"]),
                                "distance_cm": ("event", [10.0, 12.0])})
     with pytest.raises(SpecError, match="granite"):
-        bl.targets_of(feats, "material", ["wood", "aluminium"])
+        cv.targets_of(feats, "material", ["wood", "aluminium"])

@@ -43,7 +43,7 @@ def test_cache_is_reused_and_keyed_by_the_spec(tmp_path):
 def test_event_recording_carries_its_contact():
     ds = bench.generate(bench.BenchSpec(**SMALL), log=lambda *_: None)
     rec = bench.event_recording(ds, 4)
-    (contact,) = rec.contacts
+    (contact,) = rec.truth.contacts
     assert contact.material == str(ds["material"].values[4])
     assert contact.distance_cm == float(ds["distance_cm"].values[4])
     assert rec.rate_hz == 2000.0 and rec.samples.shape[1] == 2

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna.readout.confusion import confusion_sentence, error_rates, most_confused_pair
+from snn_antenna.evaluation.confusion import confusion_sentence, error_rates, most_confused_pair
 
 MATERIALS = ["aluminium", "brass", "pvc", "wood"]
 # true × predicted: brass and wood taken for each other 10 and 5 times of 50 each

@@ -2,8 +2,8 @@
 import pytest
 
 from snn_antenna.readout.contacts import ContactEstimate
-from snn_antenna.readout.scoring import contact_rows, first_match
-from snn_antenna.signals import Event
+from snn_antenna.evaluation.scoring import contact_rows, first_match
+from snn_antenna.truth import Event
 from snn_antenna.stats import poisson_interval
 
 

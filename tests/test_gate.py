@@ -7,8 +7,9 @@ from snn_antenna.networks.gate import SpeedGate
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.readout.contacts import ContactDetector, ContactEstimate
-from snn_antenna.readout.scoring import Score, run_codings, score
-from snn_antenna.signals import Event
+from snn_antenna.evaluation.scoring import Score, score
+from snn_antenna.readout.detection import run_codings
+from snn_antenna.truth import Event
 from snn_antenna.sources.scenes import CourseScene, Obstacle
 
 # Recalled Th within a factor 1.6 of Th* on speeds never trained: one step of the gating
@@ -64,7 +65,7 @@ def test_threshold_beyond_the_signal_gives_no_detections_not_an_error():
     scene = CourseScene(duration_s=4.0, speed_cm_s=12.0, stop_after_contact_s=None,
                         obstacles=[Obstacle(30.0, 12.0)])
     rec = scene.generate(seed=2)
-    assert rec.contacts
+    assert rec.truth.contacts
     chain = make_chain(rec.rate_hz).fit(rec.samples)
     x = rec.samples
     for _, step in chain.steps[:-1]:
@@ -76,7 +77,7 @@ def test_threshold_beyond_the_signal_gives_no_detections_not_an_error():
     assert float(low.sum()) > 0 and float(huge.sum()) == 0
     detector = ContactDetector()
     assert detector.detect(huge) == []
-    s = score([], rec.contacts, rec.duration_s, detector, array, 0.1, settle_s=0.5)
+    s = score([], rec.truth.contacts, rec.duration_s, detector, array, 0.1, settle_s=0.5)
     assert s.tp == 0 and s.fp == 0 and s.f1 in (0.0, None)
 
 
@@ -132,7 +133,7 @@ def test_study_spec_refuses_bad_speeds_before_any_work():
 
 
 def test_th_star_is_the_monotone_fit_of_each_speeds_best_threshold():
-    from snn_antenna.readout.thresholds import choose_th_star, monotone_th_star
+    from snn_antenna.evaluation.thresholds import choose_th_star, monotone_th_star
     speeds = np.array([0.0, 6.0, 12.0, 18.0, 24.0])
     rising = np.array([0.03, 0.05, 0.1, 0.3, 0.6])
     assert monotone_th_star(speeds, rising, np.ones(5)) == pytest.approx(rising)

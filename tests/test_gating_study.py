@@ -67,18 +67,20 @@ def test_the_read_out_never_sees_the_ground_truth():
     generation: the study's read-outs (fixed Th, and a per-sample Th from the speed command)
     give the same detections and rate maps; only the scores change."""
     from snn_antenna.engine.batches import ScoredCodings
-    from snn_antenna.signals import Event
+    from snn_antenna.evaluation.scoring import score_with
+    from test_blind import scrambles
+    from snn_antenna.truth import Event, GroundTruth
     from snn_antenna.sources.scenes import SpeedProfile
     from snn_antenna.studies.gating_threshold import condition, make_scene
 
     spec, parts = _quick_parts("sweep.scene_s=5.0")
     scene, seed = make_scene(parts, SpeedProfile("ramp", points=[[0, 0.0], [5, 27.0]]), (11,))
     rec = scene.generate(seed)
-    assert len(rec.contacts) >= 2
+    assert len(rec.truth.contacts) >= 2
     rng = np.random.default_rng(0)
     garbage = tuple(Event("contact", float(t), 1.0, float(d)) for t, d in
                     zip(rng.uniform(1, 4, 4), rng.uniform(15, 40, 4)))
-    fake = replace(rec, events=garbage,
+    fake = replace(rec, truth=GroundTruth(garbage),
                    meta={**rec.meta, "robot_x_cm": rng.normal(size=rec.n_samples),
                          "pan_deg": rng.normal(size=rec.n_samples)})
     speed_th = 0.03 + 0.02 * rec.meta["speed_cm_s"]          # a Th from the speed command
@@ -90,6 +92,8 @@ def test_the_read_out_never_sees_the_ground_truth():
 
     real = detections(rec)
     assert real and detections(fake) == real
+    for how, lies in scrambles(rec.truth, rec.duration_s).items():   # moved, deleted, invented
+        assert detections(replace(rec, truth=lies)) == real, how
     # The study's batch path: the same coded column under true and garbage labels.
     x, coder = condition(parts, fake)
     coded = coder.partial_transform(x, threshold=0.1)
@@ -97,8 +101,8 @@ def test_the_read_out_never_sees_the_ground_truth():
     (s_real, s_fake), (m_real, m_fake) = codings.run([(rec, coded), (fake, coded)])
     assert m_real.equals(m_fake)
     assert s_real != s_fake    # the labels do reach the scoring, afterwards
-    assert s_real == parts.readout.score(parts.readout.detector.detect(m_real), rec.contacts,
-                                         rec.duration_s)
+    assert s_real == score_with(parts.readout, parts.readout.detector.detect(m_real),
+                                rec.truth.contacts, rec.duration_s)
 
 
 def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
@@ -110,7 +114,7 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
     _, parts = _quick_parts()
     scene, seed = make_scene(parts, SpeedProfile("constant", 27.0), (5,))
     rec = scene.generate(seed)
-    assert rec.contacts
+    assert rec.truth.contacts
     cut = int(2.0 * rec.rate_hz)
     first = condition(parts, rec)[0][:cut]
     later = rec.samples.copy()
@@ -147,7 +151,7 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     from snn_antenna.engine.grid import Grid
     from snn_antenna.engine.sweep import run_sweep
     from snn_antenna.errors import SpecError
-    from snn_antenna.readout.scoring import SCORE_OUTPUTS
+    from snn_antenna.evaluation.scoring import SCORE_OUTPUTS
     from snn_antenna.studies.gating_threshold import ThresholdSweep, build, sweep_settings
 
     def sweep(*overrides):

@@ -1,10 +1,15 @@
 """The package's layout shows its data flow, and imports follow it.
 
-sources → preprocess → networks → readout → engine → report → studies → bridge → cli, over a
-core (errors, signals, spec, stats, store, files, parallel) every stage may use. A module may import from its
+sources → preprocess → networks → readout → evaluation → engine → report → studies → bridge →
+cli, over a core (errors, signals, truth, spec, stats, store, files, parallel) every stage may
+use. A module may import from its
 own stage or an earlier one, never from a later one, and no two modules import each other,
 directly or through others (imports inside functions count: a lazy import is still a
 dependency).
+
+Read-outs are blind by construction: no module of ``snn_antenna.readout`` imports
+``snn_antenna.truth`` (where a recording's labels live), reads an attribute named ``truth`` or
+names one of the bench's labels (``truth.BENCH_LABELS``) in its code.
 """
 from __future__ import annotations
 
@@ -15,13 +20,15 @@ PACKAGE = Path(__file__).resolve().parents[1] / "snn_antenna"
 
 # Stages in data-flow order; a module belongs to the first prefix it matches.
 STAGES = [
-    ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.spec",
+    ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.truth",
+              "snn_antenna.spec",
               "snn_antenna.stats", "snn_antenna.store", "snn_antenna.files",
               "snn_antenna.parallel"]),
     ("sources", ["snn_antenna.sources"]),
     ("preprocess", ["snn_antenna.preprocess"]),
     ("networks", ["snn_antenna.networks"]),
     ("readout", ["snn_antenna.readout"]),
+    ("evaluation", ["snn_antenna.evaluation"]),
     ("engine", ["snn_antenna.engine"]),
     ("report", ["snn_antenna.report", "snn_antenna.outputs", "snn_antenna.figures",
                 "snn_antenna.logfile"]),
@@ -129,3 +136,62 @@ def test_the_checks_catch_what_they_forbid():
                graph["snn_antenna.networks.neurons"] | {"snn_antenna.networks.resonators"}}
     assert find_cycle(planted) is not None
     assert stage_of("snn_antenna.studies.quickstart") > stage_of("snn_antenna.readout.contacts")
+
+
+# -- read-outs are blind -----------------------------------------------------------------------
+def peeks(path: Path) -> list[str]:
+    """Where a module's code reaches ground truth: an import of ``snn_antenna.truth``, an
+    attribute named ``truth``, a bench label looked up (``ds["material"]``,
+    ``ds.sel(repetition=0)``) or read as an attribute (``ds.material``; ``distance_cm`` is
+    also a decoded distance's name, so only its look-ups count)."""
+    from snn_antenna.truth import BENCH_LABELS
+
+    attributes = {"truth"} | set(BENCH_LABELS) - {"distance_cm"}
+    selectors = {"sel", "isel", "where", "query", "drop_sel", "assign_coords", "groupby"}
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        where = f"{path.name}:{getattr(node, 'lineno', '?')}"
+        if isinstance(node, ast.ImportFrom):
+            names = [node.module or ""] + [a.name for a in node.names]
+            if any(n == "truth" or n.endswith(".truth") for n in names):
+                found.append(f"{where} imports truth")
+        elif isinstance(node, ast.Import):
+            if any(a.name.endswith(".truth") for a in node.names):
+                found.append(f"{where} imports truth")
+        elif isinstance(node, ast.Attribute) and node.attr in attributes:
+            found.append(f"{where} reads .{node.attr}")
+        elif (isinstance(node, ast.Subscript) and isinstance(node.slice, ast.Constant)
+              and node.slice.value in BENCH_LABELS):
+            found.append(f"{where} looks up the label {node.slice.value!r}")
+        elif (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+              and node.func.attr in selectors):
+            labels = [k.arg for k in node.keywords if k.arg in BENCH_LABELS]
+            labels += [a.value for a in node.args
+                       if isinstance(a, ast.Constant) and a.value in BENCH_LABELS]
+            if labels:
+                found.append(f"{where} selects by {labels}")
+    return found
+
+
+def readout_modules() -> list[Path]:
+    return sorted((PACKAGE / "readout").rglob("*.py"))
+
+
+def test_read_outs_never_reach_ground_truth():
+    found = [p for path in readout_modules() for p in peeks(path)]
+    assert not found, "a read-out reaches ground truth:\n" + "\n".join(found)
+
+
+def test_the_blindness_check_catches_a_peek(tmp_path):
+    """Each way of peeking is caught (a planted module), and the real read-outs are scanned."""
+    assert len(readout_modules()) >= 7
+    planted = tmp_path / "peek.py"
+    for code in ("from ..truth import GroundTruth", "import snn_antenna.truth",
+                 "from .. import truth", "x = recording.truth.contacts", "y = ds['material']",
+                 "d = ds['distance_cm'].values", "z = features.repetition",
+                 "w = ds.sel(position=3)", "g = ds.groupby('material')"):
+        planted.write_text(code + "\n")
+        assert peeks(planted), code
+    planted.write_text("from .contacts import ContactDetector\nx = rates.sel(neuron_hz=8)\n"
+                       "d = estimate.distance_cm\ntask = 'material'\n")
+    assert not peeks(planted)

@@ -11,7 +11,7 @@ import pytest
 from snn_antenna import spec as specs
 from snn_antenna.errors import SpecError
 from snn_antenna.preprocess import fit_warmup
-from snn_antenna.signals import Event
+from snn_antenna.truth import Event, GroundTruth
 from snn_antenna.sources import antenna
 from snn_antenna.sources.stimuli import RobotScene
 from snn_antenna.studies import quickstart
@@ -69,7 +69,7 @@ def test_the_read_out_never_sees_the_ground_truth(tmp_path, monkeypatch):
 
     def garbled(self, seed=0):
         rec = generate(self, seed)
-        return replace(rec, events=_garble(rec.events, rng))
+        return replace(rec, truth=GroundTruth(_garble(rec.truth.events, rng)))
 
     monkeypatch.setattr(RobotScene, "generate", garbled)
     lied_to = quickstart.run(spec, tmp_path / "garbage", log=lambda *_: None)

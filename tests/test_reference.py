@@ -22,7 +22,7 @@ from snn_antenna.errors import SpecError
 from snn_antenna.networks import neurons, reference
 from snn_antenna.networks.control import ControlLayer
 from snn_antenna.networks.resonators import ResonatorArray
-from snn_antenna.readout import accuracy
+from snn_antenna.evaluation import accuracy
 from snn_antenna.sources.stimuli import square
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -44,7 +44,7 @@ def test_a_post_is_touched_where_the_rod_meets_it():
     assert contact.distance_cm == pytest.approx((y + 0.6 * c) / s, abs=0.05)
     assert contact.hold_s == 1.0
     rec = scene.generate(seed=1)
-    (event,) = rec.contacts
+    (event,) = rec.truth.contacts
     assert event.t_s == contact.t_s and event.distance_cm == contact.distance_cm
     assert rec.samples.shape == (10000, 2) and rec.units == "counts"
 
@@ -149,7 +149,7 @@ def test_stimulus_specs_load_and_generate(name):
     assert rec.n_samples == int(scene.duration_s * scene.rate_hz)
     speed = rec.meta["speed_cm_s"]
     assert speed.min() >= 0 and speed.max() <= 30
-    for c in rec.contacts:
+    for c in rec.truth.contacts:
         assert 0 < c.distance_cm < antenna.ROD_LENGTH_CM
 
 

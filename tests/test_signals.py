@@ -93,7 +93,7 @@ def test_robot_scene_labels_contacts_and_goes_quiet_after_stopping():
     rec = scene.generate(seed=3)
     assert rec.samples.shape == (5000, 2) and rec.units == "counts"
     assert rec.samples.min() >= 0 and rec.samples.max() <= 1023
-    (c,) = rec.contacts
+    (c,) = rec.truth.contacts
     assert (c.t_s, c.distance_cm, c.material, c.duration_s) == (2.0, 25.0, "brass", 1.0)
     g = antenna.ADC().to_g(rec.samples)
     moving, stopped = g[1000:2000].std(0).max(), g[4000:].std(0).max()

@@ -7,7 +7,7 @@ from snn_antenna import spec as specs
 from snn_antenna.engine.runlog import RUN_IDENTITY, RunLog
 from snn_antenna.errors import SpecError
 from snn_antenna.networks import neurons
-from snn_antenna.readout import tradeoff
+from snn_antenna.evaluation import tradeoff
 from snn_antenna.studies import runner
 from snn_antenna.studies import speed_accuracy as study
 from snn_antenna.studies.speed_accuracy import report as study_report

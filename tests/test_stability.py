@@ -5,7 +5,7 @@ import pytest
 from snn_antenna.errors import NumericalInstabilityError, SpecError
 from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
-from snn_antenna.readout import accuracy
+from snn_antenna.evaluation import accuracy
 
 # The study's map grid; each limit is its largest finite point, rounded down.
 K_DT_GRID = np.geomspace(0.01, 50, 25)

@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from snn_antenna.readout.scoring import Score
-from snn_antenna.readout.thresholds import (
+from snn_antenna.evaluation.scoring import Score
+from snn_antenna.evaluation.thresholds import (
     LookupTable,
     MethodScores,
     compare,

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from snn_antenna.engine.devices import Run
-from snn_antenna.readout import accuracy, tradeoff
-from snn_antenna.readout.accuracy import Match, SpikeTrains
+from snn_antenna.evaluation import accuracy, tradeoff
+from snn_antenna.evaluation.accuracy import Match, SpikeTrains
 
 
 def test_pareto_front_and_recommendation_pick_the_cheapest_sufficient_runs():

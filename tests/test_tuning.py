@@ -5,7 +5,7 @@ import pytest
 import xarray as xr
 
 from snn_antenna.networks import neurons
-from snn_antenna.readout import tuning
+from snn_antenna.evaluation import tuning
 
 F = np.geomspace(2.0, 60.0, 41)
 

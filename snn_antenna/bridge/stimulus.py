@@ -12,7 +12,7 @@ Every file in ``stimuli/`` can be streamed (``snn-antenna emulate --stimulus sti
   the board's rate behind an anti-aliasing filter, the board's ADC). Only as many events as the
   frames asked for are converted; without ``--frames`` the whole bench plays once.
 
-Either way the result is a :class:`~snn_antenna.signals.Recording` whose ``events`` label each
+Either way the result is a :class:`~snn_antenna.signals.Recording` whose ``truth`` labels each
 contact; :func:`played_events` lists those that fall in the frames actually streamed (the
 emulator's ``--log`` keeps them, since a recording of the stream has no labels of its own).
 """
@@ -26,7 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SpecError, check
-from ..signals import Event, Recording
+from ..signals import Recording
+from ..truth import Event, GroundTruth
 from ..sources import antenna
 from .protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
 
@@ -104,7 +105,7 @@ def bench_on_board(table: dict, seed: int, n_frames: int | None = None,
     materials, distances = data["material"].values, data["distance_cm"].values
     events = tuple(Event("contact", k * event_len / BOARD_RATE_HZ + pre_s, ring_s,
                          float(distances[i]), str(materials[i])) for k, i in enumerate(order))
-    return Recording(counts, BOARD_RATE_HZ, events, units="counts",
+    return Recording(counts, BOARD_RATE_HZ, GroundTruth(events), units="counts",
                      meta={"adc_bits": BOARD_ADC_BITS, "full_scale_g": BOARD_FULL_SCALE_G,
                            "bench_events": order.tolist()})
 
@@ -131,7 +132,7 @@ def played_events(recording: Recording, n_frames: int) -> list[dict]:
     rate, n = recording.rate_hz, recording.n_samples
     played = []
     for lap in range(math.ceil(n_frames / n)):
-        for event in recording.events:
+        for event in recording.truth.events:
             frame = lap * n + int(round(event.t_s * rate))
             if frame < n_frames:
                 played.append({"frame": frame, **event.as_dict(), "t_s": frame / rate})

@@ -22,7 +22,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..readout.scoring import BlindReadOut
+from ..evaluation.scoring import score_with
+from ..readout.detection import BlindReadOut
 
 
 @dataclass
@@ -101,11 +102,11 @@ class ScoredCodings:
 
     def submit(self, items: list) -> Submitted:
         return Submitted(self.batches.submit([coded for _, coded in items]),
-                         [(rec.contacts, rec.duration_s) for rec, _ in items])
+                         [(rec.truth.contacts, rec.duration_s) for rec, _ in items])
 
     def collect(self, submitted: Submitted, desc: str | None = None) -> tuple[list, list]:
         results = self.batches.collect(submitted.runs, desc)
-        scores = [self.readout.score(detections, contacts, duration_s)
+        scores = [score_with(self.readout, detections, contacts, duration_s)
                   for (detections, _), (contacts, duration_s) in zip(results, submitted.labels)]
         return scores, [rates for _, rates in results]
 

@@ -28,9 +28,9 @@ import numpy as np
 from ..errors import NumericalInstabilityError, check
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
-from ..readout import accuracy
-from ..readout.accuracy import Match, SpikeTrains
-from ..readout.tradeoff import ERRORS, RAISED, check_finite
+from ..evaluation import accuracy
+from ..evaluation.accuracy import Match, SpikeTrains
+from ..evaluation.tradeoff import ERRORS, RAISED, check_finite
 from ..signals import Recording
 from ..sources.stimuli import square
 
@@ -163,7 +163,7 @@ class ArrayWorkload:
                  match: Match):
         self.name, self.coded, self.net = name, coded, net
         self.detector, self.window_s, self.match = detector, window_s, match
-        self.true = coded.contacts[0] if coded.contacts else None
+        self.true = coded.truth.contacts[0] if coded.truth.contacts else None
         self.n_neurons = self.array().n_neurons
         self.k_max = float(np.max(self.array().k))
 

@@ -12,7 +12,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from ..readout.tradeoff import describe
+from ..evaluation.tradeoff import describe
 from .devices import Setting, measure
 
 # What names one measured run in the log

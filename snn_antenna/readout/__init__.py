@@ -1,14 +1,17 @@
-"""What the networks' spikes mean, and how well: rate maps to contacts, distances, materials.
+"""What the networks' spikes and the sensor's samples mean: decisions a robot can make now.
+
+Everything here sees only what a robot has at that moment (samples, coded signals, spikes,
+rate maps); none of it reads ground truth (``snn_antenna.truth``): ``tests/test_layout.py``
+fails when a module here imports it, reads a recording's ``truth`` or names a bench label.
+How good the decisions were is ``snn_antenna.evaluation``'s work, afterwards.
 
 - ``contacts``: dominant neuron, centroid, the contact rule (``ContactDetector`` offline,
   ``EpisodeTracker`` window by window live: the same code), ``detector_from_spec``.
-- ``scoring``: detections against ground truth after the run (``score``, ``first_match``,
-  ``contact_rows``, ``BlindReadOut``); ``thresholds`` and ``threshold_figures``: Th*(speed),
-  lookup table and gate comparisons with intervals; ``closed_loop``: the exploration loop.
+- ``detection``: the blind read-out of coded scenes (``run_codings``: many codings as one
+  Brian2 group; ``BlindReadOut``: coded columns in, detections out).
+- ``closed_loop``: the exploration loop, the robot deciding as it drives.
+- ``events``: the paper's FFT/parametric features of a contact event, from its counts only.
 - ``spiking`` and ``spiking_decoders``: spike features of contact events from resonator banks
-  and the decoders that read them; ``events``: the paper's FFT/parametric event features;
-  ``baselines``: scikit-learn baselines (MLPs, NMF, perceptrons); ``comparison``,
-  ``confusion``, ``comparison_figures``: the baseline comparison's tables and figures.
-- ``accuracy``: error against the exact reference and the stability map; ``tradeoff``: Pareto
-  fronts and recommendations; ``tuning``: tuning curves and the k → frequency calibration.
+  and the decoders that read them; ``baselines``: the paper's scikit-learn pipelines (MLPs,
+  NMF filter bank, perceptrons) as estimators.
 """

@@ -28,7 +28,7 @@ from ..networks.assembly import build as build_network
 from ..networks.resonators import rate_map
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna
-from .scoring import BlindReadOut
+from .detection import BlindReadOut
 
 # The freeze reflex: once the motor unit fires, this inhibitory hold on the CPG ring pulls
 # every neuron's rest (drive + token − hold) far below its threshold of 1, so the sweep stops.

@@ -82,7 +82,7 @@ LOW_BAND = Band()
 # 0.1 ms (k·dt up to 2 model-ms) its rate map was 4.7 times the exact reference's. rk4 at
 # 0.005 ms is the cheapest setting found within 5 % of the reference on bench events, and
 # its Hz per unit k comes from a driven tuning sweep at an accurate step (the speed/accuracy
-# study's "bands" section, ``readout.bands``, measures both). Its input is band-passed
+# study's "bands" section, ``evaluation.bands``, measures both). Its input is band-passed
 # (50-900 Hz): the square-wave coder codes only the sign, so with the low mode still in the
 # signal the high mode would show only near the low mode's zero crossings.
 HIGH_BAND_HZ_PER_K = 23.46

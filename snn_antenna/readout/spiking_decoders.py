@@ -4,16 +4,15 @@ The spiking features of a bench data set (``engine.events.cached_features``) bec
 (``decoder_inputs``): per resonator its spike count, first-spike latency and firing span, for
 one band or several, and for ``spiking_rod`` also its counts in the time bins. Each input set
 is read by an MLP (``spiking_baselines``), so the spiking and FFT pipelines are trained and
-tested on the same contacts and splits by ``baselines.evaluate``. Two decoders learn nothing
+tested on the same contacts and splits by ``evaluation.crossval.evaluate``. Two decoders learn nothing
 (``TRAINING_FREE``): they invert the generator's own frequency law.
 
 Array designs (``Design``) change one band of the bank at a time and are run and decoded on
-a subset of the events (``run_designs``), to see what the number, spacing or input of the
+a subset of the events (``evaluation.crossval.run_designs``), to see what the number, spacing or input of the
 resonators buys.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
@@ -22,7 +21,7 @@ import xarray as xr
 from .. import spec as specs
 from ..errors import check
 from . import baselines as bl
-from .spiking import Band, CentroidDistance, DominantNeuronDistance, SpikingBank, recording_attrs
+from .spiking import Band, CentroidDistance, DominantNeuronDistance, SpikingBank
 
 # The spiking input sets: which bands, and whether the time-binned counts are included.
 SPIKING_SETS = {
@@ -80,8 +79,9 @@ def neurons_per_input(spikes: xr.Dataset) -> dict:
             for name, (wanted, _) in _available(spikes).items()}
 
 
-def spiking_baselines(spikes: xr.Dataset, evaluation: bl.Evaluation) -> list[bl.Baseline]:
-    """Every spiking decoder the bank's bands allow."""
+def spiking_baselines(spikes: xr.Dataset, evaluation) -> list[bl.Baseline]:
+    """Every spiking decoder the bank's bands allow (``evaluation``: the MLP settings of an
+    ``evaluation.crossval.Evaluation``)."""
     out = []
     bands = spikes["band"].values.astype(str)
     if "low" in set(bands):
@@ -101,7 +101,7 @@ def spiking_baselines(spikes: xr.Dataset, evaluation: bl.Evaluation) -> list[bl.
     return out
 
 
-def mlp_baseline(name: str, task: str, inputs: str, evaluation: bl.Evaluation,
+def mlp_baseline(name: str, task: str, inputs: str, evaluation,
                  description: str = "") -> bl.Baseline:
     """An MLP on spiking features: 20-5 for distance, 51 hidden for material (the FFT
     pipelines' layers, with their epoch budgets)."""
@@ -175,49 +175,3 @@ class SpikingPlan:
               "an integer >= 0 (0: one Dask worker per core; 1: this process)")
         bank.check_rate(rate_hz)
         return bank, designs
-
-
-def run_designs(data: xr.Dataset, features: xr.Dataset, bank: SpikingBank, designs: list, *,
-                run, repetitions: int, evaluation: bl.Evaluation, log=print) -> list[dict]:
-    """Each design on the events of the first ``repetitions`` repetitions: distance rmse and
-    material accuracy on the first seed's split, and its cost per event. ``run(bank, counts,
-    rate_hz, adc_bits, full_scale_g) -> SpikeFeatures`` runs a bank over events (the sweep
-    engine's ``engine.events.run_bank``, which this stage comes before)."""
-    from threadpoolctl import threadpool_limits
-
-    subset = features.isel(event=np.flatnonzero(features["repetition"].values < repetitions))
-    ids = subset["event"].values
-    seed = evaluation.seeds[0]
-    split = bl.split_by_repetition(subset["repetition"].values, evaluation.test_fraction, seed)
-    targets = {"distance": subset["distance_cm"].values.astype(float),
-               "material": bl.targets_of(subset, "material",
-                                         sorted(set(subset["material"].values.astype(str))))}
-    log(f"      array designs on {len(ids)} events (repetitions < {repetitions})")
-    rows = []
-    with threadpool_limits(1):   # as in baselines.evaluate
-        for design in designs:
-            t0 = time.perf_counter()
-            f = run(design.bank(bank), data["counts"].values[ids], *recording_attrs(data))
-            row = {"design": design.name, "band": design.band,
-                   "change": ", ".join(f"{k} = {v}" for k, v in design.changes.items()),
-                   "n_neurons": design.band_of(bank).n_neurons,
-                   "wall_us_per_event": 1e6 * (time.perf_counter() - t0) / len(ids),
-                   "neuron_steps_per_event": f.neuron_steps / len(ids)}
-            row.update(_design_scores(f.matrix().astype(np.float32), targets, split,
-                                      evaluation, seed))
-            log(f"      {design.name:22s} {row['n_neurons']:3d} neurons: "
-                f"{row['distance_rmse_mm']:.2f} mm, {100 * row['material_accuracy']:.1f} %, "
-                f"{row['wall_us_per_event']:.0f} µs/event")
-            rows.append(row)
-    return rows
-
-
-def _design_scores(X, targets: dict, split, evaluation: bl.Evaluation, seed: int) -> dict:
-    train, test = split
-    out = {}
-    for task, key in (("distance", "distance_rmse_mm"), ("material", "material_accuracy")):
-        y = targets[task]
-        base = mlp_baseline(f"design_{task}", task, "spiking", evaluation)
-        fold = bl.fit_fold(base, X, y, train, test, seed)
-        out[key] = next(iter(bl.score(task, y[test], fold.prediction).values()))
-    return out

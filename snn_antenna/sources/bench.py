@@ -29,7 +29,8 @@ import xarray as xr
 
 from ..errors import SpecError, check
 from ..parallel import parallel_map
-from ..signals import Event, Recording
+from ..signals import Recording
+from ..truth import Event, GroundTruth
 from ..store import read_dataset, write_dataset
 from . import antenna
 
@@ -190,7 +191,7 @@ def event_recording(ds: xr.Dataset, i: int) -> Recording:
                     ev.sizes["sample"] / ds.attrs["rate_hz"] - ds.attrs["pre_trigger_s"],
                     float(ev.distance_cm), str(ev.material.values))
     return Recording(np.asarray(ev.counts.values, dtype=np.int32), float(ds.attrs["rate_hz"]),
-                     (contact,), units="counts",
+                     GroundTruth((contact,)), units="counts",
                      meta={"adc_bits": int(ds.attrs["adc_bits"]),
                            "full_scale_g": float(ds.attrs["full_scale_g"])})
 

@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import check
-from ..signals import Event, Recording
+from ..signals import Recording
+from ..truth import Event, GroundTruth
 from . import antenna
 
 
@@ -189,6 +190,6 @@ class RobotScene:
         xy = antenna.project(main, self.orientation_deg)
         xy += rng.standard_normal(xy.shape) * self.sensor_noise_g
         adc = antenna.ADC(self.adc_bits, self.full_scale_g)
-        return Recording(adc.to_counts(xy), self.rate_hz, tuple(events), units="counts",
+        return Recording(adc.to_counts(xy), self.rate_hz, GroundTruth(events), units="counts",
                          meta={"adc_bits": self.adc_bits, "full_scale_g": self.full_scale_g,
                                "speed_cm_s": speed})

@@ -19,10 +19,11 @@ from ..engine.events import cached_features, run_bank, run_cost
 from ..engine.executor import executor
 from ..errors import SpecError
 from ..files import write_json
-from ..readout import baselines as bl
-from ..readout import comparison_figures as figures
+from ..evaluation import comparison_figures as figures
+from ..evaluation import crossval as cv
+from ..evaluation import signal as bench_signal
 from ..readout import events
-from ..readout.comparison import (
+from ..evaluation.comparison import (
     Comparison,
     cost_rows,
     data_text,
@@ -34,7 +35,7 @@ from ..readout.comparison import (
     spiking_distance_rows,
     spiking_rows,
 )
-from ..readout.confusion import confusion, confusion_sentence, error_rates
+from ..evaluation.confusion import confusion, confusion_sentence, error_rates
 from ..readout.spiking import SpikingBank
 from ..readout.spiking_decoders import (
     TRAINING_FREE,
@@ -42,7 +43,6 @@ from ..readout.spiking_decoders import (
     SpikingPlan,
     decoder_inputs,
     neurons_per_input,
-    run_designs,
     spiking_baselines,
 )
 from ..report import Calibrated, Predicted, Report
@@ -65,7 +65,7 @@ class StudySpec:
     """The whole spec, every part built and checked before any long work."""
     bench: bench.BenchSpec
     processor: events.EventProcessor
-    evaluation: bl.Evaluation
+    evaluation: cv.Evaluation
     plan: SpikingPlan | None = None
     bank: SpikingBank | None = None
     designs: list[Design] = field(default_factory=list)
@@ -90,7 +90,7 @@ def build(spec: dict) -> StudySpec:
         table = specs.check_section(spec, "events", events.EventProcessor, exclude=["rate_hz"])
         processor = events.EventProcessor(rate_hz=bench_spec.rate_hz, **table)
     with specs.section("evaluation"):
-        evaluation = bl.Evaluation(**specs.check_section(spec, "evaluation", bl.Evaluation))
+        evaluation = cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
     if "two_material" in evaluation.pipelines and \
             not {"wood", "aluminium"} <= set(bench_spec.materials):
         raise SpecError("stimulus.materials", list(bench_spec.materials),
@@ -109,7 +109,7 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
     log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
         "repetition")
     chosen = parts.evaluation.baselines(cmp.features.sizes["freq_hz"]) + extra
-    cmp.results = bl.evaluate(cmp.features, chosen, parts.evaluation, log)
+    cmp.results = cv.evaluate(cmp.features, chosen, parts.evaluation, log)
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
@@ -131,13 +131,13 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     log(f"[1/{stages}] bench data set: {parts.bench.n_events} events at "
         f"{parts.bench.rate_hz:g} Hz")
     t0 = time.perf_counter()
-    data, everything = events.load_features(parts.bench, parts.processor, log, fresh)
+    data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
     data_s = time.perf_counter() - t0
     skipped = events.skip_counts(everything)
     feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
     log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
     log(f"[2/{stages}] calibration against the paper's signal measurements")
-    signal = events.signal_statistics(feats)
+    signal = bench_signal.signal_statistics(feats)
     log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
         f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
     n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
@@ -160,7 +160,7 @@ def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fre
         spikes = cached_features(data, bank, parts.bench, log, fresh, client)
         cmp.features = decoder_inputs(cmp.features, spikes)
         if parts.designs:
-            cmp.designs = run_designs(data, cmp.features, bank, parts.designs, log=log,
+            cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
                                       run=partial(run_bank, client=client, progress=False),
                                       repetitions=parts.plan.design_repetitions,
                                       evaluation=parts.evaluation)
@@ -173,7 +173,7 @@ def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fre
 _pair = "{0[0]:.4f}, {0[1]:.3f}".format  # a law's (slope, intercept)
 def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
     """What the generator was set to match, apart from what it predicts."""
-    s, paper = cmp.signal, events.PAPER_SIGNAL
+    s, paper = cmp.signal, bench_signal.PAPER_SIGNAL
     rows = [
         Calibrated("r² of the low-mode law", s["r2_low"], 0.995, "", SOURCE,
                    "low-mode scatter LOW_SCATTER_DEX; antenna.py, see docs/materials.md"),
@@ -186,7 +186,7 @@ def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
         Calibrated("high law (slope, intercept)", _pair(s["high_law"]),
                    _pair(paper["high_law"]), "", SOURCE, "the generator uses the paper's law"),
         Calibrated("CV of τ_low within a site (median)", 100 * s["tau_low_cv_median"],
-                   "< 1", "%", SOURCE, "TAU_LOW_CV and the decay fit (events.py)")]
+                   "< 1", "%", SOURCE, "TAU_LOW_CV and the decay fit (readout/events.py)")]
     if "wood_aluminium_sites" in s:
         rows.append(Calibrated(
             "sites where wood and aluminium τ_low differ (t-test, 10 each)",

@@ -25,10 +25,11 @@ from ..networks.cpg import cycle_periods, phase_lag_deg
 from ..preprocess import make_chain
 from ..readout.closed_loop import ClosedLoop, LoopSettings, RobotRecord
 from ..readout.contacts import detector_from_spec
-from ..readout.scoring import BlindReadOut, score_run
-from ..readout.thresholds import th_star_from_summary
+from ..evaluation.scoring import score_run
+from ..readout.detection import BlindReadOut
+from ..evaluation.thresholds import th_star_from_summary
 from ..report import Calibrated, Predicted, Report
-from ..signals import Event
+from ..truth import Event
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
 

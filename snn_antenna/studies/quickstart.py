@@ -35,8 +35,8 @@ from ..readout.contacts import (
     detector_from_spec,
     dominant_hz,
 )
-from ..readout.scoring import contact_rows
-from ..readout.scoring import score as score_detections
+from ..evaluation.scoring import contact_rows
+from ..evaluation.scoring import score as score_detections
 from ..report import Calibrated, Predicted, Report
 from ..signals import Recording
 from ..sources import antenna
@@ -142,7 +142,7 @@ def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
         f"{array.band_hz[1]:g} Hz) in Brian2 ({array.target}, dt {array.dt_ms:g} ms)")
     out = read_out(rec.samples, rec.rate_hz, parts)
     log("[3/4] scoring every detection against the scene's contacts")
-    scored = score(out, rec.contacts, rec.duration_s, parts)
+    scored = score(out, rec.truth.contacts, rec.duration_s, parts)
     log("[4/4] writing the report")
 
     first = scored["contacts"][0] if scored["contacts"] else None
@@ -283,7 +283,7 @@ def _figure(rec, out: ReadOut, scored: dict, parts: Parts):
     mesh = draw_rate_map(ax2, out.rates)
     ax2.set_xlabel("time (s)")
     fig.colorbar(mesh, ax=[ax0, ax1, ax2], label="spike rate (Hz)", shrink=0.5)
-    for c in rec.contacts:
+    for c in rec.truth.contacts:
         for ax in (ax0, ax1, ax2):
             ax.axvline(c.t_s, color="tab:cyan", ls="--", lw=1)
     true_onsets = {c["detected_s"] for c in scored["contacts"] if c["detected_s"] is not None}

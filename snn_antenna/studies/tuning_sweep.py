@@ -3,7 +3,7 @@
 Every grid point is one resonator driven by the square-wave coder's output for a pure tone
 (±I at ``input_hz``); all points of a chunk are neurons of one Brian2 NeuronGroup, chunks run
 on Dask workers and land in ``OUT/results.zarr`` (resumable). From the tuning curves
-(``readout.tuning``):
+(``evaluation.tuning``):
 
 - peak frequency vs k: the calibration curve k → preferred frequency (``k_to_peak_hz``),
   checked against ``neurons.DRIVEN_HZ_PER_K`` (the foundation's constant);
@@ -27,8 +27,8 @@ from ..engine.sweep import run_sweep
 from ..errors import check
 from ..logfile import LogFile
 from ..networks import neurons
-from ..readout import tuning
-from ..readout.tuning import ReadPoint
+from ..evaluation import tuning
+from ..evaluation.tuning import ReadPoint
 from ..report import Calibrated, Predicted, Report, fmt, provenance
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")

@@ -3,7 +3,7 @@
 Every read-out is blind: the preprocessing chain is fitted once on a separate calibration
 drive without posts (``calibrated_chain``), the coder's Th is fixed or comes from the speed
 command only, and the array and detector see only the coded signal
-(``scoring.BlindReadOut``); detections are scored against the labelled contacts afterwards.
+(``readout.detection.BlindReadOut``); detections are scored against the labelled contacts afterwards.
 
 Stages (each prints a progress line):
 
@@ -46,8 +46,8 @@ from ...engine.batches import ScoredCodings
 from ...engine.executor import executor
 from ...engine.grid import Grid
 from ...engine.sweep import run_sweep
-from ...readout.scoring import SCORE_OUTPUTS, Score
-from ...readout.thresholds import (
+from ...evaluation.scoring import SCORE_OUTPUTS, Score
+from ...evaluation.thresholds import (
     GateRecall,
     LookupTable,
     MethodScores,

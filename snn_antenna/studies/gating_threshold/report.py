@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 
 from ...figures import draw_rate_map
-from ...readout import threshold_figures as figures
-from ...readout.scoring import visible
-from ...readout.thresholds import (
+from ...evaluation import threshold_figures as figures
+from ...evaluation.scoring import visible
+from ...evaluation.thresholds import (
     describe_difference,
     describe_interval,
     earns_its_place,
@@ -193,7 +193,7 @@ def _draw_map(ax, rates, rec, parts: Parts, title: str):
     """A rate map with the true contacts (cyan: in the array's band, grey: outside it) and
     the detections (green); returns the mesh for its colour bar."""
     mesh = draw_rate_map(ax, rates)
-    for c in rec.contacts:
+    for c in rec.truth.contacts:
         ok = visible(c, parts.readout.detector, parts.array)
         ax.axvline(c.t_s, color="tab:cyan" if ok else "0.6", ls="--", lw=0.8)
     for d in parts.readout.detector.detect(rates):

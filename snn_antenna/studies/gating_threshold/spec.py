@@ -14,8 +14,9 @@ from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
 from ...readout.contacts import detector_from_spec
-from ...readout.scoring import BlindReadOut, score_columns
-from ...readout.thresholds import GateRecall, ThStarFit
+from ...evaluation.scoring import score_columns
+from ...readout.detection import BlindReadOut
+from ...evaluation.thresholds import GateRecall, ThStarFit
 from ...sources import antenna
 from ...sources.scenes import (
     CourseLayout,
@@ -219,7 +220,7 @@ def calibrated_chain(parts: Parts):
         cal, scene = parts.calibration, parts.scene
         rec = drive(scene, SpeedProfile("constant", float(cal.speed_cm_s)), cal.duration_s,
                     []).generate(cal.seed)
-        assert not rec.contacts   # an open-space drive: nothing to touch
+        assert not rec.truth.contacts   # an open-space drive: nothing to touch
         parts.chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g,
                                  **parts.preprocess).fit(rec.samples)
     return parts.chain

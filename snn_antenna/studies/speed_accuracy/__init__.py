@@ -9,7 +9,7 @@ F1 of the quickstart read-out. The report shows the Pareto fronts (error vs CPU 
 recommendation per scene, and the stability map (method × k·dt × drive).
 
 Stages: workloads → references → main sweep → cost sweep → stability map → bench bands
-(``readout.bands``: each band of the bench's spiking read-out before and at a setting inside
+(``evaluation.bands``: each band of the bench's spiking read-out before and at a setting inside
 the accurate range, against the reference, with its cost) → report. Settings
 loop in this process (``engine.devices``): timing needs the machine to itself, and the knobs
 (method, target, dtype) are build settings rather than the numeric axes of a sweep grid.
@@ -41,10 +41,10 @@ from ...logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
-from ...readout import accuracy, tradeoff
-from ...readout.accuracy import Match, StabilityGrid
-from ...readout.bands import BandStudy
-from ...readout.bands import run_study as run_band_study
+from ...evaluation import accuracy, tradeoff
+from ...evaluation.accuracy import Match, StabilityGrid
+from ...evaluation.bands import BandStudy
+from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
 from ...report import Report, fmt
 from ...sources.scenes import scene_from_spec
@@ -184,7 +184,7 @@ def prepare_workloads(plan: Plan, seed: int, log) -> dict:
         workloads[name] = ArrayWorkload(name, coded, plan.net, plan.detector, plan.window_s,
                                         plan.match)
         log(f"  {name}: {scene.duration_s:g} s at {scene.rate_hz:g} Hz, "
-            f"{len(rec.contacts)} contact(s)")
+            f"{len(rec.truth.contacts)} contact(s)")
     return workloads
 
 

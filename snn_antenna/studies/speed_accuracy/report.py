@@ -4,7 +4,7 @@ and the short summary printed at the end."""
 from __future__ import annotations
 
 from ...networks import neurons
-from ...readout import accuracy, tradeoff
+from ...evaluation import accuracy, tradeoff
 from ...report import Calibrated, Predicted, Report, fmt
 
 

@@ -32,7 +32,7 @@ from ..errors import NumericalInstabilityError, check, is_number
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
 from .accuracy import rate_map_error, spike_count_error, spike_time_error_ms
-from .spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
+from ..readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
 
 # Largest k·dt (model ms per step) up to which every constant drive of the stability map
 # (studies/speed_accuracy.toml, 25 k·dt log-spaced over 0.01-50, 20 drives in [-50, 50])
@@ -158,7 +158,7 @@ def sample_data(materials, positions_cm, repetitions: int = 1, seed: int = 0):
 def code_events(name: str, band: Band, data, duration_s: float = 0.5) -> BandEvents:
     """The events of a bench data set through ``band``'s chain, ``duration_s`` each, as
     ``SpikingBank.code`` makes them for the bank."""
-    from .spiking import recording_attrs
+    from ..readout.spiking import recording_attrs
 
     bank = SpikingBank(bands={name: band}, duration_s=duration_s)
     rate_hz, bits, full_scale = recording_attrs(data)

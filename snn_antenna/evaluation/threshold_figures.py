@@ -1,6 +1,6 @@
 """Figures of a Th × speed study: F1 curves of the sweep, the gate's recall, F1 per method.
 
-Plain matplotlib over ``readout.thresholds``' results (a fitted sweep dataset, a
+Plain matplotlib over ``evaluation.thresholds``' results (a fitted sweep dataset, a
 ``GateRecall``, the ``compare`` dict); the figures that draw rate maps stay with the report.
 """
 from __future__ import annotations

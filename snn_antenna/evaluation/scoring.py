@@ -1,17 +1,11 @@
-"""Contact detection under a coder threshold Th: many codings at once, scored per contact.
+"""Detections scored against the ground truth, after the read-out, per contact.
 
-The square-wave coder's threshold Th hides the robot's self-motion but, set too high, hides
-contacts too (the paper's Fig. 9). Measuring that trade needs the resonator array run on many
-codings of many scenes: ``run_codings`` runs them all as ONE Brian2 NeuronGroup (one copy of
-the array per coding, each copy reading its own column of a 2-D TimedArray through
-``neurons.simulate``), and ``score`` compares the read-out's detections with the labelled
-contacts.
-
-The read-out (``run_codings`` then ``ContactDetector.detect``, together ``BlindReadOut``) sees
-only the coded signal, as a robot would; ``score`` compares its detections with the ground
-truth afterwards, and is the only place the ground truth enters (``score_run`` adds the first
-contact's decoded distance, latency and the robot's stop; ``score_columns`` turns scores into
-the counts of ``SCORE_OUTPUTS`` that a sweep's store holds).
+The read-out (``readout.detection``: ``run_codings`` then ``ContactDetector.detect``, together
+``BlindReadOut``) sees only the coded signal, as a robot would; ``score`` compares its
+detections with a recording's ground truth (``truth.GroundTruth``) afterwards, and is the only
+place contacts enter (``score_with`` scores a ``BlindReadOut``'s detections, ``score_run`` adds
+the first contact's decoded distance, latency and the robot's stop; ``score_columns`` turns
+scores into the counts of ``SCORE_OUTPUTS`` that a sweep's store holds).
 
 Scoring, per contact: a detection whose first window starts between one window before the
 contact and the end of its hold is a true positive (latency: from the contact to the end of
@@ -30,59 +24,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import xarray as xr
 
 from ..errors import check
-from ..networks import neurons
-from ..networks.resonators import ResonatorArray, rate_map
-from ..signals import Event
+from ..networks.resonators import ResonatorArray
+from ..readout.contacts import ContactDetector, ContactEstimate
+from ..readout.detection import BlindReadOut
 from ..sources import antenna
 from ..store import Output
-from .contacts import ContactDetector, ContactEstimate
-
-
-def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
-                window_s: float = 0.1, target: str | None = None) -> list[xr.DataArray]:
-    """Rate maps of the array driven by each column of ``coded`` (n_samples, n_codings)."""
-    coded = np.asarray(coded, dtype=float)
-    if coded.ndim == 1:
-        coded = coded[:, None]
-    array.check_rate(rate_hz)
-    n_codings, n = coded.shape[1], array.n_neurons
-    result = neurons.simulate(
-        "resonator", coded, dt_ms=array.dt_ms, k=np.tile(array.k, n_codings), b=array.b,
-        method=array.method, input_index=np.repeat(np.arange(n_codings), n),
-        input_dt_ms=1000.0 / rate_hz, target=target or array.target, force=array.force)
-    duration_s = coded.shape[0] / rate_hz
-    copy = result.spike_i // n
-    t_s = result.spike_t_ms / 1000.0
-    return [rate_map(result.spike_i[copy == c] - c * n, t_s[copy == c], array.neuron_hz,
-                     duration_s, window_s) for c in range(n_codings)]
-
-
-@dataclass(frozen=True)
-class BlindReadOut:
-    """The read-out a robot has, and the scoring that comes after it.
-
-    ``detect`` sees only coded columns (``run_codings`` then the detector on each rate map);
-    ``score`` compares its detections with a recording's labelled contacts, afterwards. It
-    pickles, so the detection half can run on a Dask worker while the labels stay here.
-    """
-    array: ResonatorArray
-    detector: ContactDetector
-    window_s: float
-    rate_hz: float
-    settle_s: float = 1.0
-    target: str | None = None
-
-    def detect(self, coded: np.ndarray) -> tuple[list, list[xr.DataArray]]:
-        """(detections, rate map) of each column of ``coded``."""
-        maps = run_codings(self.array, coded, self.rate_hz, self.window_s, self.target)
-        return [self.detector.detect(rates) for rates in maps], maps
-
-    def score(self, detections: list, contacts, duration_s: float) -> "Score":
-        return score(detections, contacts, duration_s, self.detector, self.array,
-                     self.window_s, self.settle_s)
+from ..truth import Event
 
 
 @dataclass
@@ -214,12 +163,18 @@ def score(detections: list[ContactEstimate], contacts, duration_s: float,
     return s
 
 
+def score_with(readout: BlindReadOut, detections: list, contacts, duration_s: float) -> Score:
+    """``score`` with a blind read-out's own detector, array, window and settling time."""
+    return score(detections, contacts, duration_s, readout.detector, readout.array,
+                 readout.window_s, readout.settle_s)
+
+
 def score_run(readout: BlindReadOut, detections: list, contacts, duration_s: float,
               stopped_at_s: float | None = None) -> dict:
     """One run's detections (and the robot's stop) against its contacts, after the run: the
     counts of ``score`` and, for the first contact, its decoded distance, latency and how
     long after it the robot stopped."""
-    s = readout.score(detections, contacts, duration_s)
+    s = score_with(readout, detections, contacts, duration_s)
     first = min(contacts, key=lambda c: c.t_s) if contacts else None
     out = {**s.as_dict(), "scored_minutes": s.minutes, "first_contact": None}
     if first is None:

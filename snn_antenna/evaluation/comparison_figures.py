@@ -8,8 +8,8 @@ import numpy as np
 
 from .comparison import cost_items, label
 from .confusion import confusion
-from .events import PAPER_SIGNAL
-from .spiking_decoders import TRAINING_FREE
+from .signal import PAPER_SIGNAL
+from ..readout.spiking_decoders import TRAINING_FREE
 
 # Half-width (cm) of the horizontal jitter that separates the contacts of one site.
 SITE_JITTER_CM = 0.3

@@ -14,9 +14,9 @@ import numpy as np
 import xarray as xr
 
 from .. import stats
-from .baselines import BaselineResult
-from .events import PAPER_SIGNAL
-from .spiking_decoders import TRAINING_FREE, input_of
+from .crossval import BaselineResult
+from .signal import PAPER_SIGNAL
+from ..readout.spiking_decoders import TRAINING_FREE, input_of
 
 LABELS = {
     "linear_low_peak": "linear regression, low peak",

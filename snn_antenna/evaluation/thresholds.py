@@ -1,6 +1,6 @@
 """Th*(speed): the coder threshold that speed calls for, and how well each way of setting it does.
 
-From a scored Th × speed sweep (``readout.scoring``'s counts with dims speed_cm_s × scene ×
+From a scored Th × speed sweep (``evaluation.scoring``'s counts with dims speed_cm_s × scene ×
 threshold_g): each speed's best Th maximises F1 over the pooled scenes of that speed, smoothed
 over neighbouring thresholds (``choose_th_star``), and Th*(speed) is their monotone fit
 (``monotone_th_star``): the shaking that Th must hide only grows with speed, and a few
