@@ -1,11 +1,10 @@
 """Each band of the bench's spiking read-out at an integration setting inside the accurate range.
 
-The bench's bands (``spiking.LOW_BAND``, ``HIGH_BAND`` and the baseline study's rod band,
-``ROD_BAND`` here) used to integrate all at euler, dt 0.1 ms: k·dt reaches 2 model-ms in the
-high band, far outside the range where the speed/accuracy study's stability map calls a
-method accurate (``ACCURATE_K_DT``). Here each band gets its own setting (``BandSetting``:
-method, dt, Hz per unit k, simulated window) and is measured there against the exact
-reference (``networks.reference``) on sample bench events coded through the band's own chain:
+At euler, dt 0.1 ms, k·dt reaches 2 model-ms in the high band, far outside the range where
+the speed/accuracy study's stability map calls a method accurate (``ACCURATE_K_DT``). So each
+band (``spiking.LOW_BAND``, ``HIGH_BAND``, the baseline study's ``ROD_BAND``) gets its own
+setting (``BandSetting``: method, dt, Hz per unit k, simulated window), measured against the
+exact reference (``networks.reference``) on sample bench events coded by the band's chain:
 
 - ``measure``: spike-count, rate-map and spike-time error of every (event, neuron) against
   the reference, and the cost (CPU seconds per event, ns per neuron-step) of one batch of
@@ -18,8 +17,8 @@ reference (``networks.reference``) on sample bench events coded through the band
   neuron's peak frequency, the Hz per unit k that puts the peaks on their targets, and how
   many channels each peak lands from its target.
 
-The settings chosen from these measurements are ``CHOSEN`` (see ``studies/speed_accuracy``'s
-"bands" section for the numbers that justify them).
+The settings chosen from these measurements are ``CHOSEN`` (the numbers that justify them:
+``studies/speed_accuracy``'s "bands" section).
 """
 from __future__ import annotations
 

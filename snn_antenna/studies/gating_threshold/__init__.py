@@ -57,15 +57,12 @@ from ...evaluation.thresholds import (
     fixed_method,
 )
 from ...sources.scenes import SpeedProfile, ramp, random_steps
-from .report import human_summary, write_report
+from .report import Fig9Row, Results, SeedPlan, human_summary, write_report
 from .spec import (
     EVALUATION_SCENES,
     EVALUATION_STEPS,
     LOW_HIGH_CM_S,
-    Fig9Row,
     Parts,
-    Results,
-    SeedPlan,
     ThresholdSweep,
     build,
     coded_at,

@@ -1,6 +1,7 @@
 """The gating study's report: calibrated and predicted rows, headline, figures, summary line."""
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,8 +16,40 @@ from ...evaluation.thresholds import (
     f1_at,
     table_cell,
 )
+from ...evaluation.thresholds import GateRecall, ThStarFit
 from ...report import Calibrated, Predicted, Report
-from .spec import Parts, Results
+from .spec import Parts
+
+
+# -- what the stages return ----------------------------------------------------------------
+@dataclass
+class Fig9Row:
+    """One speed of Fig. 9: Th = 0, Th* and 2·Th*, pooled over the sweep's scenes."""
+    thresholds: list
+    rec: object                # the first scene's recording (drawn)
+    scores: list | None = None
+    maps: list | None = None   # the first scene's rate maps
+
+
+@dataclass
+class SeedPlan:
+    pilot: int
+    needed: int
+    used: int
+    budget: int
+    margin_f1: float
+
+
+@dataclass
+class Results:
+    """Every stage's output: what the summary and the report are made from."""
+    outcome: object           # the sweep's ``SweepOutcome``; ``outcome.data`` is fitted
+    fit: ThStarFit
+    fig9: dict
+    recall: GateRecall
+    seeds: SeedPlan
+    comparison: dict
+    example: dict | None      # a ramp scene's online Th and rate map
 
 
 # -- report --------------------------------------------------------------------------------

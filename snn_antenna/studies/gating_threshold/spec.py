@@ -1,6 +1,6 @@
 """The gating study's spec (sections as dataclasses, checked before any work), its scenes
-(seeded courses, the calibration drive that fits the chain, the Th × speed sweep's evaluator)
-and the dataclasses its stages return (``Results``: what the summary and report are made of)."""
+(seeded courses, the calibration drive that fits the chain, the Th × speed sweep's evaluator;
+the dataclasses its stages return are in ``report``: what the summary and report are made of)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -16,7 +16,6 @@ from ...preprocess import make_chain
 from ...readout.contacts import detector_from_spec
 from ...evaluation.scoring import score_columns
 from ...readout.detection import BlindReadOut
-from ...evaluation.thresholds import GateRecall, ThStarFit
 from ...sources import antenna
 from ...sources.scenes import (
     CourseLayout,
@@ -274,34 +273,3 @@ class ThresholdSweep:
         for i, sc in zip(order, scores):
             ordered[i] = sc
         return score_columns(ordered)
-
-
-# -- what the stages return ----------------------------------------------------------------
-@dataclass
-class Fig9Row:
-    """One speed of Fig. 9: Th = 0, Th* and 2·Th*, pooled over the sweep's scenes."""
-    thresholds: list
-    rec: object                # the first scene's recording (drawn)
-    scores: list | None = None
-    maps: list | None = None   # the first scene's rate maps
-
-
-@dataclass
-class SeedPlan:
-    pilot: int
-    needed: int
-    used: int
-    budget: int
-    margin_f1: float
-
-
-@dataclass
-class Results:
-    """Every stage's output: what the summary and the report are made from."""
-    outcome: object           # the sweep's ``SweepOutcome``; ``outcome.data`` is fitted
-    fit: ThStarFit
-    fig9: dict
-    recall: GateRecall
-    seeds: SeedPlan
-    comparison: dict
-    example: dict | None      # a ramp scene's online Th and rate map

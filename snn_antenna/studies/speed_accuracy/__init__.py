@@ -46,11 +46,11 @@ from ...evaluation.accuracy import Match, StabilityGrid
 from ...evaluation.bands import BandStudy
 from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
-from ...report import Report, fmt
+from ...report import Report
 from ...sources.scenes import scene_from_spec
 from ...sources.stimuli import RobotScene
 from ...store import write_dataset
-from .report import human_summary, write_report
+from .report import human_summary, quick_note, write_report
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
             "stability", "reference", "match", "bands")
@@ -293,19 +293,3 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         report.write(summary, spec, sweep.target)
         log(human_summary(summary, out_dir))
     return summary
-
-
-# -- report ---------------------------------------------------------------------------------
-def quick_note(sweep: Sweep, stab: StabilityGrid) -> str:
-    """What the quick profile leaves out, from the settings that ran."""
-    missing = [m for m in neurons.METHODS if m not in sweep.methods]
-    note = (f"quick profile: too small to choose a setting. Methods "
-            f"{', '.join(sweep.methods)} at dt {fmt(sorted(sweep.dt_ms))} ms on the "
-            f"{', '.join(sweep.scenes)} scene{'s' * (len(sweep.scenes) > 1)} "
-            f"({sweep.target} target)")
-    if missing:
-        note += (f"; {', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not in the "
-                 f"quick sweep, so a recommendation here is only the best of these")
-    return note + (f". The stability map has {stab.n_k_dt} k·dt steps × {len(stab.drives)} "
-                   f"drives (the full map {StabilityGrid.n_k_dt} × {len(StabilityGrid().drives)}): "
-                   f"its limits are grid points, not the shipped ones.")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from ...networks import neurons
 from ...evaluation import accuracy, tradeoff
+from ...evaluation.accuracy import StabilityGrid
 from ...report import Calibrated, Predicted, Report, fmt
 
 
@@ -172,3 +173,18 @@ def human_summary(s: dict, out_dir) -> str:
                      f"(shipped limit {v['shipped_max_stable_k_dt']:g})")
     lines.append(f"report in {out_dir}/report.html ({s['total_wall_s']:.0f} s)")
     return "\n".join(lines)
+
+
+def quick_note(sweep, stab: StabilityGrid) -> str:
+    """What the quick profile leaves out, from the settings that ran."""
+    missing = [m for m in neurons.METHODS if m not in sweep.methods]
+    note = (f"quick profile: too small to choose a setting. Methods "
+            f"{', '.join(sweep.methods)} at dt {fmt(sorted(sweep.dt_ms))} ms on the "
+            f"{', '.join(sweep.scenes)} scene{'s' * (len(sweep.scenes) > 1)} "
+            f"({sweep.target} target)")
+    if missing:
+        note += (f"; {', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not in the "
+                 f"quick sweep, so a recommendation here is only the best of these")
+    return note + (f". The stability map has {stab.n_k_dt} k·dt steps × {len(stab.drives)} "
+                   f"drives (the full map {StabilityGrid.n_k_dt} × {len(StabilityGrid().drives)}): "
+                   f"its limits are grid points, not the shipped ones.")

@@ -1,29 +1,11 @@
-"""Baseline comparison: the paper's FFT, parametric and NMF read-outs on the bench data set.
-
-Generates (or reuses) the bench contacts, processes every event as the paper did, checks the
-generated signal against the paper's measurements of the signal (calibration), then trains
-and tests each scikit-learn pipeline, and the spiking read-out's decoders, on the same splits
-by repetition for several seeds. The report puts every number beside the paper's.
-"""
+"""The baseline comparison's report: what was calibrated, what is predicted, tables, figures."""
 from __future__ import annotations
-
-import time
-from dataclasses import dataclass, field
-from functools import partial
-from pathlib import Path
 
 import numpy as np
 
-from .. import spec as specs
-from ..engine.events import cached_features, run_bank, run_cost
-from ..engine.executor import executor
-from ..errors import SpecError
-from ..files import write_json
-from ..evaluation import comparison_figures as figures
-from ..evaluation import crossval as cv
-from ..evaluation import signal as bench_signal
-from ..readout import events
-from ..evaluation.comparison import (
+from ...evaluation import comparison_figures as figures
+from ...evaluation import signal as bench_signal
+from ...evaluation.comparison import (
     Comparison,
     cost_rows,
     data_text,
@@ -35,141 +17,11 @@ from ..evaluation.comparison import (
     spiking_distance_rows,
     spiking_rows,
 )
-from ..evaluation.confusion import confusion, confusion_sentence, error_rates
-from ..readout.spiking import SpikingBank
-from ..readout.spiking_decoders import (
-    TRAINING_FREE,
-    Design,
-    SpikingPlan,
-    decoder_inputs,
-    neurons_per_input,
-    spiking_baselines,
-)
-from ..report import Calibrated, Predicted, Report
-from ..sources import bench
+from ...evaluation.confusion import confusion, confusion_sentence, error_rates
+from ...readout.spiking_decoders import TRAINING_FREE
+from ...report import Calibrated, Predicted, Report
 
-SECTIONS = ("stimulus", "events", "evaluation", "spiking")
 SOURCE = "paper (docs/reference.md)"
-# Events timed for the FFT's cost per event when the spec has no [spiking] section.
-COST_SAMPLE_EVENTS = 200
-
-QUICK_NOTE = ("Quick profile: 10 contacts per material and site, 2 seeds. The signal statistics "
-              "(r², precision, CV of τ_low, wood/aluminium sites: ten contacts each, as the "
-              "paper's test) are comparable with the full run; every classifier and regressor "
-              "here trained on a tenth of the contacts, so accuracies, rmse and the confusion "
-              "matrix are too small to compare with the paper or the full run.")
-
-
-@dataclass
-class StudySpec:
-    """The whole spec, every part built and checked before any long work."""
-    bench: bench.BenchSpec
-    processor: events.EventProcessor
-    evaluation: cv.Evaluation
-    plan: SpikingPlan | None = None
-    bank: SpikingBank | None = None
-    designs: list[Design] = field(default_factory=list)
-
-
-def _spiking_part(spec: dict, rate_hz: float) -> tuple:
-    """(plan, bank, designs) of ``[spiking]``, or Nones when the spec has none."""
-    if "spiking" not in spec:
-        return None, None, []
-    with specs.section("spiking"):
-        plan = SpikingPlan(**specs.check_section(spec, "spiking", SpikingPlan))
-        return (plan, *plan.build(rate_hz))
-
-
-def build(spec: dict) -> StudySpec:
-    """Check the whole spec before any long work; return its parts."""
-    specs.check_top_level(spec, SECTIONS)
-    with specs.section("stimulus"):
-        bench_spec = bench.spec_from_table(spec.get("stimulus", {}), int(spec.get("seed", 0)))
-        bench_spec.validate()
-    with specs.section("events"):
-        table = specs.check_section(spec, "events", events.EventProcessor, exclude=["rate_hz"])
-        processor = events.EventProcessor(rate_hz=bench_spec.rate_hz, **table)
-    with specs.section("evaluation"):
-        evaluation = cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
-    if "two_material" in evaluation.pipelines and \
-            not {"wood", "aluminium"} <= set(bench_spec.materials):
-        raise SpecError("stimulus.materials", list(bench_spec.materials),
-                        "a list that holds wood and aluminium for the two-material network")
-    return StudySpec(bench_spec, processor, evaluation,
-                     *_spiking_part(spec, bench_spec.rate_hz))
-
-
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
-        scheduler: str | None = None, log=print) -> dict:
-    parts = build(spec)
-    out_dir, t_start = Path(out_dir), time.perf_counter()
-    stages = 5 if parts.bank is not None else 4
-    data, cmp, data_s = _signal_stage(parts, stages, log, fresh)
-    extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
-    log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
-        "repetition")
-    chosen = parts.evaluation.baselines(cmp.features.sizes["freq_hz"]) + extra
-    cmp.results = cv.evaluate(cmp.features, chosen, parts.evaluation, log)
-    log(f"[{stages}/{stages}] report")
-    summary = cmp.summary({"data_and_features_s": data_s,
-                           "total_s": time.perf_counter() - t_start})
-    out_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
-    report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",
-                    quick=quick, quick_note=QUICK_NOTE)
-    _write_report(report, spec, summary, cmp)
-    summary = report.write(summary, spec, parts.bank.target if parts.bank
-                           else "none (no spiking part)")
-    log(f"report in {out_dir}/report.html ({summary['timing']['total_s']:.0f} s)")
-    return summary
-
-
-def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
-    """The bench data set, its processed events and their statistics beside the paper's,
-    and the FFT's cost per event: (data, a Comparison with no results yet, the seconds
-    spent making or loading the data and its features)."""
-    log(f"[1/{stages}] bench data set: {parts.bench.n_events} events at "
-        f"{parts.bench.rate_hz:g} Hz")
-    t0 = time.perf_counter()
-    data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
-    data_s = time.perf_counter() - t0
-    skipped = events.skip_counts(everything)
-    feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
-    log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
-    log(f"[2/{stages}] calibration against the paper's signal measurements")
-    signal = bench_signal.signal_statistics(feats)
-    log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
-        f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
-    n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
-    costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
-    return data, Comparison(feats, signal, {}, skipped, costs, data={
-        "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
-        "bench_key": parts.bench.key()}), data_s
-
-
-def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh,
-                   scheduler) -> list:
-    """The bank over every event (cached) and the designs, on ``[spiking] workers`` or at
-    ``scheduler``; decoder inputs into ``cmp.features``, cost; the spiking decoders."""
-    bank = parts.bank
-    if bank is None:
-        return []
-    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event ({', '.join(bank.bands)})"
-        f", Brian2 {bank.target}, {bank.batch_events} events per chunk")
-    with executor(parts.plan.workers, scheduler, log) as client:
-        spikes = cached_features(data, bank, parts.bench, log, fresh, client)
-        cmp.features = decoder_inputs(cmp.features, spikes)
-        if parts.designs:
-            cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
-                                      run=partial(run_bank, client=client, progress=False),
-                                      repetitions=parts.plan.design_repetitions,
-                                      evaluation=parts.evaluation)
-    cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
-    cmp.spiking = {**bank.description(), "neurons": neurons_per_input(spikes)}
-    return spiking_baselines(spikes, parts.evaluation)
-
-
-# -- report ---------------------------------------------------------------------------------
 _pair = "{0[0]:.4f}, {0[1]:.3f}".format  # a law's (slope, intercept)
 def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
     """What the generator was set to match, apart from what it predicts."""
@@ -243,7 +95,7 @@ def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:
     report.predicted(*pred)
 
 
-def _write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> None:
+def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> None:
     _calibrated(report, cmp, summary)
     _predicted(report, cmp, summary)
     results, feats = cmp.results, cmp.features
