@@ -33,11 +33,10 @@ from ..networks.resonators import ResonatorArray
 from .accuracy import rate_map_error, spike_count_error, spike_time_error_ms
 from ..readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
 
-# Largest k·dt (model ms per step) up to which every constant drive of the stability map
-# (studies/speed_accuracy.toml, 25 k·dt log-spaced over 0.01-50, 20 drives in [-50, 50])
-# kept its steady rate within 5 % of the reference, per method: the accurate range. The next
-# grid point (1.43x) failed for at least one drive. Measured with the full map
-# (``accuracy.StabilityGrid().map``); tests/test_bands.py re-checks both sides for euler.
+# Largest k·dt (model ms per step) up to which every constant drive of the full stability map
+# (``accuracy.StabilityGrid().map``: 25 k·dt over 0.01-50, 20 drives in [-50, 50]) kept its
+# steady rate within 5 % of the reference, per method; the next grid point (1.43x) failed for
+# a drive. tests/test_bands.py re-checks both sides for euler.
 ACCURATE_K_DT = {"euler": 0.02034, "rk2": 0.02034, "rk4": 0.02900, "izhikevich": 0.01426}
 
 # Steps a band may take (ms): each divides the bench's 0.5 ms input interval.
@@ -80,8 +79,8 @@ class BandSetting:
         return text + (f", {self.duration_s:g} s" if self.duration_s is not None else "")
 
 
-# What every bench band ran at before issue 20 (studies/baseline_comparison): the bank's euler
-# 0.1 ms and the small-signal Hz per unit k; measured again each run, beside the candidates.
+# What every bench band ran at before issue 20: the bank's euler 0.1 ms and the small-signal
+# Hz per unit k (measured again each run, beside the candidates).
 BEFORE = BandSetting("euler", 0.1, neurons.LINEAR_HZ_PER_K)
 
 # Shipped (readout.spiking.HIGH_BAND, ROD_BAND above; low unchanged): the cheapest settings within
@@ -428,9 +427,9 @@ def choose(rows: list[dict], tolerance: float) -> dict | None:
     """The cheapest candidate whose rate map, measured against the exact reference on the
     band's own events, is within ``tolerance`` (None if none is). Accuracy is what that run
     measures; the stability map's range (``inside_accurate_range``) is reported beside it."""
-    ok = [r for r in rows if r.get("status") == "ok" and r.get("role") != "before"
-          and r["rate_map_error"] <= tolerance]
-    return min(ok, key=lambda r: r["cpu_ms_per_event"]) if ok else None
+    return min((r for r in rows if r.get("status") == "ok" and r.get("role") != "before"
+                and r["rate_map_error"] <= tolerance), key=lambda r: r["cpu_ms_per_event"],
+               default=None)
 
 
 def apply_line(name: str, chosen: dict | None) -> str:
