@@ -42,8 +42,7 @@ ACCURATE_K_DT = {"euler": 0.02034, "rk2": 0.02034, "rk4": 0.02900, "izhikevich":
 # Steps a band may take (ms): each divides the bench's 0.5 ms input interval.
 DT_STEPS_MS = (0.1, 0.05, 0.025, 0.02, 0.01, 0.005, 0.0025, 0.002, 0.001, 0.0005, 0.00025)
 
-# The baseline study's rod band (studies/baseline_comparison.toml [spiking.bank.bands.rod]);
-# tests/test_bands.py keeps the two equal.
+# The rod band of studies/baseline_comparison.toml (tests/test_bands.py keeps the two equal).
 ROD_BAND = Band(n_neurons=24, band_hz=(90.0, 420.0), coder_amplitude=0.2, threshold_g=0.006,
                 lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=27.49, dt_ms=0.005, method="rk2")
 BENCH_BANDS = {"low": LOW_BAND, "high": HIGH_BAND, "rod": ROD_BAND}
