@@ -1,4 +1,9 @@
-"""The baseline comparison study: a tiny run end to end; its numbers are the computed ones."""
+"""The baseline comparison study: a tiny run end to end; its numbers are the computed ones.
+
+The default suite runs the FFT/parametric half of the study (``fft_run``: no ``[spiking]``
+table, 10 s); the whole study with its spiking bank at the bands' own steps (``tiny_run``,
+``tiny_quick_run``: minutes of Brian2 at 0.005 ms) runs under ``-m slow``. The spiking read-out's
+parts are covered in the default suite by test_event_engine, test_spiking and test_blind."""
 import json
 
 import numpy as np
@@ -22,6 +27,22 @@ TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_c
 
 
 @pytest.fixture(scope="module")
+def fft_run(tmp_path_factory):
+    """The study without its spiking read-out: the FFT and parametric pipelines only."""
+    out = tmp_path_factory.mktemp("baseline_fft")
+    spec = specs.load(SPEC, [o for o in TINY if not o.startswith("spiking.")]
+                      + [f"stimulus.cache_dir={out / 'cache'}"])
+    del spec["spiking"]
+    summary = study.run(spec, out / "report", log=lambda *_: None)
+    return out / "report", summary
+
+
+@pytest.fixture(params=["fft_run", pytest.param("tiny_run", marks=pytest.mark.slow)])
+def any_run(request):
+    return request.getfixturevalue(request.param)
+
+
+@pytest.fixture(scope="module")
 def tiny_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("baseline")
     spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={out / 'cache'}"])
@@ -39,6 +60,7 @@ def tiny_quick_run(tmp_path_factory):
     return out / "report", summary
 
 
+@pytest.mark.slow
 def test_quick_and_full_profiles_report_the_same_kinds_of_numbers(tiny_run, tiny_quick_run):
     (full_dir, _), (quick_dir, _) = tiny_run, tiny_quick_run
     full = json.loads((full_dir / "summary.json").read_text())
@@ -52,6 +74,22 @@ def test_quick_and_full_profiles_report_the_same_kinds_of_numbers(tiny_run, tiny
     assert "Quick profile" not in (full_dir / "report.html").read_text()
 
 
+def test_fft_half_writes_its_report_and_keys(fft_run):
+    out, _ = fft_run
+    for name in ("report.html", "summary.json", "fig2c_frequency_laws.png",
+                 "fig4b_predicted_distance.png", "fig6d_confusion.png", "fig7a_nmf_basis.png",
+                 "fig7b_nmf_accuracy.png", "predictions.json", "pareto_cost_accuracy.png"):
+        assert (out / name).is_file(), name
+    stored = json.loads((out / "summary.json").read_text())
+    for key in ("calibration", "distance_rmse_mm", "material_accuracy", "two_material", "timing",
+                "cost_us_per_event"):
+        assert key in stored
+    assert not stored.get("spiking")
+    assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3, 24, 30]
+    assert stored["data"]["n_events"] == 54
+
+
+@pytest.mark.slow
 def test_report_folder_and_summary_keys(tiny_run):
     out, summary = tiny_run
     for name in ("report.html", "summary.json", "fig2c_frequency_laws.png",
@@ -76,8 +114,8 @@ def test_report_folder_and_summary_keys(tiny_run):
     assert sum(stored["data"]["skipped"].values()) + stored["data"]["n_processed"] == 54
 
 
-def test_report_numbers_are_recomputed_from_the_predictions(tiny_run):
-    out, _ = tiny_run
+def test_report_numbers_are_recomputed_from_the_predictions(any_run):
+    out, _ = any_run
     stored = json.loads((out / "summary.json").read_text())
     preds = json.loads((out / "predictions.json").read_text())
     html = (out / "report.html").read_text()
@@ -100,11 +138,11 @@ def test_report_numbers_are_recomputed_from_the_predictions(tiny_run):
                 np.mean(rmse))
 
 
-def test_no_test_repetition_was_trained_on(tiny_run):
+def test_no_test_repetition_was_trained_on(any_run):
     """Per fold, the repetitions of the training contacts and of the test contacts are
     disjoint (so no contact, nor its repetition's twin at another site, leaks), and every
     contact of the pipeline's events is on one side."""
-    out, _ = tiny_run
+    out, _ = any_run
     preds = json.loads((out / "predictions.json").read_text())
     rep = {int(k): v for k, v in preds["repetition"].items()}
     for name, folds in preds["folds"].items():
