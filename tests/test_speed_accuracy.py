@@ -15,8 +15,13 @@ from snn_antenna.studies.speed_accuracy import report as study_report
 SPEC = "studies/speed_accuracy.toml"
 
 
-def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tmp_path):
-    spec = specs.load(SPEC, quick=True)
+@pytest.mark.parametrize("overrides", [
+    ["bands.bands=[]"],    # the default suite: every stage but the bands' 0.001-0.002 ms runs
+    pytest.param([], marks=pytest.mark.slow),   # the whole quick profile (bands: +75 s)
+])
+def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tmp_path,
+                                                                              overrides):
+    spec = specs.load(SPEC, overrides, quick=True)
     summary = runner("speed_accuracy").run(spec, tmp_path, quick=True, log=lambda *a: None)
     for name in ("report.html", "summary.json", "pareto.png", "stability_map.png"):
         assert (tmp_path / name).is_file(), name
