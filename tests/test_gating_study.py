@@ -92,8 +92,8 @@ def test_the_read_out_never_sees_the_ground_truth():
 
     real = detections(rec)
     assert real and detections(fake) == real
-    for how, lies in scrambles(rec.truth, rec.duration_s).items():   # moved, deleted, invented
-        assert detections(replace(rec, truth=lies)) == real, how
+    # ``fake`` deleted the true contacts and invented others; also move them
+    assert detections(replace(rec, truth=scrambles(rec.truth, rec.duration_s)["moved"])) == real
     # The study's batch path: the same coded column under true and garbage labels.
     x, coder = condition(parts, fake)
     coded = coder.partial_transform(x, threshold=0.1)

@@ -262,18 +262,23 @@ def test_emulate_on_a_port_that_vanishes_is_one_line(tmp_path):
     os.close(slave)
     emu = subprocess.Popen([*CLI, "emulate", "--port", name, "--frames", "20000"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    time.sleep(0.5)
+    received = []
 
     def drain():
         try:
-            while os.read(master, 4096):
-                pass
+            while chunk := os.read(master, 4096):
+                received.append(len(chunk))
         except OSError:
             pass
 
     threading.Thread(target=drain, daemon=True).start()
-    time.sleep(2.0)
-    os.close(master)                    # the device disappears
+    # the device disappears once the emulator has opened it and is streaming (a fixed sleep
+    # raced the emulator's start-up on a loaded machine: the port was gone before it opened)
+    deadline = time.monotonic() + 60
+    while not received and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert received, "the emulator never wrote to the port"
+    os.close(master)
     out, err = emu.communicate(timeout=60)
     assert emu.returncode == 1 and "Traceback" not in err, err
     assert "failed" in err
