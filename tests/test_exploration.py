@@ -55,16 +55,20 @@ def test_unknown_parts_and_settings_are_refused():
         assembly.build({"parts": ["cpg"], "inputs": ["speed_command"], "cpg": {"colour": 1}})
 
 
-def test_the_closed_loop_stops_the_robot_at_a_post_without_seeing_the_ground_truth(
-        tmp_path, monkeypatch):
-    """A fresh seed, run twice: once as the world generates it, once with the world's
-    contact record replaced by garbage after every step. The loop and its read-out (stop,
-    detections, joint angles) are unchanged; only the score changes."""
-    out = tmp_path / "exploration"
-    seed = ["--set", "seed=17"]
+SEED = ["--set", "seed=17"]
+
+
+@pytest.fixture(scope="module")
+def closed_loop_run(tmp_path_factory):
+    """One quick exploration run on a fresh seed, shared by the two tests below."""
+    out = tmp_path_factory.mktemp("exploration")
     assert main(["run", str(ROOT / "studies" / "exploration.toml"), "--out", str(out),
-                 "--quick", *seed]) == 0
-    s = json.loads((out / "summary.json").read_text())
+                 "--quick", *SEED]) == 0
+    return out, json.loads((out / "summary.json").read_text())
+
+
+def test_the_closed_loop_stops_the_robot_at_a_post(closed_loop_run):
+    out, s = closed_loop_run
     assert s["contact_t_s"] is not None, "the sweeping antenna should meet the first post"
     assert 0 <= s["stopped_after_contact_s"] <= STOP_WITHIN_S
     first = s["score"]["first_contact"]
@@ -80,6 +84,16 @@ def test_the_closed_loop_stops_the_robot_at_a_post_without_seeing_the_ground_tru
     assert s["calibrated"] and s["predicted"] and s["quick"] is True
     assert (out / "report.html").is_file() and (out / "exploration.png").is_file()
 
+
+# A second closed-loop run (~30 s); the default suite's blind checks of the live read-outs
+# are in test_blind.py.
+@pytest.mark.slow
+def test_the_closed_loop_runs_without_seeing_the_ground_truth(closed_loop_run, tmp_path,
+                                                              monkeypatch):
+    """The same seed run again with the world's contact record replaced by garbage after
+    every step. The loop and its read-out (stop, detections, joint angles) are unchanged;
+    only the score changes."""
+    _, s = closed_loop_run
     step = OnlineAntenna.step
     rng = np.random.default_rng(1)
 
@@ -93,7 +107,7 @@ def test_the_closed_loop_stops_the_robot_at_a_post_without_seeing_the_ground_tru
     monkeypatch.setattr(OnlineAntenna, "step", step_then_lie)
     garbage = tmp_path / "garbage"
     assert main(["run", str(ROOT / "studies" / "exploration.toml"), "--out", str(garbage),
-                 "--quick", *seed]) == 0
+                 "--quick", *SEED]) == 0
     g = json.loads((garbage / "summary.json").read_text())
     for key in ("detections", "stopped_at_s", "pan_range_deg", "tilt_range_deg",
                 "cpg_period_s", "gate_th_g_while_driving"):
