@@ -1,4 +1,4 @@
-"""Sweep throughput: vectorised Brian2 grids vs a naive per-point loop vs a numba kernel.
+"""Sweep throughput: vectorised Brian2 grids vs a naive per-point loop vs numba kernels.
 
     python benchmarks/bench_sweep.py                 # 10^3, 10^4, 10^5 points
     python benchmarks/bench_sweep.py --sizes 1000 --workers 1 2 --duration-s 0.5
@@ -15,6 +15,9 @@ per second (points × steps / wall time):
   timed on a sample of points and EXTRAPOLATED to the grid (said so in the table);
 - ``numba``: a hand-written Euler kernel of the same equations and input (neuron-outer loop,
   one thread), compile time excluded; its spike counts are compared with Brian2's;
+- ``floor64`` / ``floor32``: the best kernel written by hand (``floor_kernel``: blocks of 64
+  neurons kept in L1 for the whole run, lanes innermost, branch-free, fastmath, one thread),
+  in float64 and float32; spike counts compared with Brian2's; ours / floor printed per size;
 - scaling: the largest grid on a Dask LocalCluster of 1, 2, ... worker processes (the
   workers return their blocks; this process writes the store, as on a cluster without a
   shared folder). Each row prints the machine's load average (1 min) before and after it:
@@ -84,6 +87,63 @@ def numba_kernel():
     return euler_counts
 
 
+FLOORS = {"floor64": np.float64, "floor32": np.float32}
+BLOCK = 64  # neurons per block: v, u, parameters and counts of a block stay in L1 all run
+
+
+def floor_kernel(dtype):
+    """The honest floor: the same Euler equations and input, written for the machine.
+
+    Blocks of ``BLOCK`` neurons run the whole simulation while their state stays in L1;
+    lanes are the innermost loop; threshold and reset are selects (branch-free), so LLVM
+    vectorises the lane loop (``fastmath``: the same licence as ``-ffast-math``). The
+    input's sign is computed once per input sample, not per step. One thread."""
+    import numba
+
+    @numba.njit(fastmath=True, cache=True, error_model="numpy")
+    def blocked_counts(k, a, b, c, d, f_in, I_amp, v0, u0, n_steps, dt, per_sample, rate,
+                       settle_step, p2, p1, p0, v_peak):
+        n = k.shape[0]
+        counts = np.zeros(n, np.int32)
+        v = np.empty(BLOCK, dtype); u = np.empty(BLOCK, dtype)
+        kk = np.empty(BLOCK, dtype); ak = np.empty(BLOCK, dtype); bb = np.empty(BLOCK, dtype)
+        cc = np.empty(BLOCK, dtype); dd = np.empty(BLOCK, dtype)
+        drive = np.empty(BLOCK, dtype); cnt = np.empty(BLOCK, np.int32)
+        two_f = np.empty(BLOCK, np.float64); amp = np.empty(BLOCK, dtype)
+        dt_, p2_, p1_, p0_, vp = dtype(dt), dtype(p2), dtype(p1), dtype(p0), dtype(v_peak)
+        n_samples = (n_steps + per_sample - 1) // per_sample
+        for start in range(0, n, BLOCK):
+            m = min(BLOCK, n - start)
+            for j in range(BLOCK):      # pad the last block with copies of its first lane
+                i = start + (j if j < m else 0)
+                v[j] = v0[i]; u[j] = u0[i]; kk[j] = k[i]; ak[j] = a[i] * k[i]
+                bb[j] = b[i]; cc[j] = c[i]; dd[j] = d[i]; two_f[j] = 2.0 * f_in[i]
+                amp[j] = I_amp[i]; cnt[j] = 0
+            for sample in range(n_samples):
+                t_in = sample / rate
+                for j in range(BLOCK):
+                    half = math.floor(two_f[j] * t_in)
+                    drive[j] = amp[j] * dtype(1 - 2 * (int(half) & 1))
+                first = sample * per_sample
+                for step in range(first, min(first + per_sample, n_steps)):
+                    counting = np.int32(step >= settle_step)
+                    for j in range(BLOCK):
+                        vj = v[j]; uj = u[j]
+                        dv = kk[j] * (p2_ * vj * vj + p1_ * vj + p0_ - uj + drive[j])
+                        du = ak[j] * (bb[j] * vj - uj)
+                        vj += dt_ * dv
+                        uj += dt_ * du
+                        fired = vj >= vp
+                        v[j] = cc[j] if fired else vj
+                        u[j] = uj + dd[j] if fired else uj
+                        cnt[j] += np.int32(fired) * counting
+            for j in range(m):
+                counts[start + j] = cnt[j]
+        return counts
+
+    return blocked_counts
+
+
 def run_numba(kernel, sweep: NeuronSweep, points):
     p = sweep.parameters(points)
     v0, u0 = sweep.initial_state(p)
@@ -136,6 +196,9 @@ def main(argv=None) -> int:
           f"{base.duration_s:g} s per point at dt {base.dt_ms:g} ms = {steps:,} steps")
     kernel = numba_kernel()
     run_numba(kernel, base, grid_of(40).points())  # compile outside the timings
+    floors = {name: floor_kernel(dtype) for name, dtype in FLOORS.items()}
+    for floor in floors.values():
+        run_numba(floor, base, grid_of(40).points())
 
     chunk = args.chunk_points
     rows = []
@@ -165,6 +228,13 @@ def main(argv=None) -> int:
         diff = np.abs(numba_counts - counts["standalone"])
         row["max_count_diff_numba"] = int(diff.max())
         row["same_count_numba"] = float(np.mean(diff == 0))
+        for name, floor in floors.items():
+            t0 = time.perf_counter()
+            floor_counts = run_numba(floor, base, points)
+            row[name] = work / (time.perf_counter() - t0)
+            diff = np.abs(floor_counts - counts["standalone"])
+            row[f"max_count_diff_{name}"] = int(diff.max())
+            row[f"same_count_{name}"] = float(np.mean(diff == 0))
         row["naive"] = steps / naive_seconds_per_point(base, points, args.naive_sample)
         rows.append(row)
         print(f"  {n:>9,} points: standalone {row['standalone']:.3g}, numba {row['numba']:.3g}, "
@@ -186,6 +256,18 @@ def main(argv=None) -> int:
           "points timed and extrapolated to the grid")
     print("  sweep engines run in this process (one core) after a warm-up chunk: the one-off "
           "compiles (standalone, cython) are excluded; store writes are included")
+
+    print("\n## the floor: hand-written blocked kernels (numba, fastmath, blocks of "
+          f"{BLOCK} neurons in L1, lanes innermost, branch-free; one core)")
+    print(f"{'points':>8} {'floor f64':>10} {'floor f32':>10} {'sa/floor64':>11} "
+          f"{'floor64=sa counts':>18} {'max |Δ|':>8} {'floor32=sa counts':>18} {'max |Δ|':>8}")
+    for r in rows:
+        print(f"{r['points']:>8,} {r['floor64']:>10.3g} {r['floor32']:>10.3g} "
+              f"{r['floor64'] / r['standalone']:>10.2f}x "
+              f"{r['same_count_floor64'] * 100:>17.1f}% {r['max_count_diff_floor64']:>8} "
+              f"{r['same_count_floor32'] * 100:>17.1f}% {r['max_count_diff_floor32']:>8}")
+    print("  sa/floor64: how many times slower the standalone engine (float64) is than the "
+          "float64 floor (ours / floor, in time)")
 
     if args.workers:
         grid = grid_of(max(args.sizes))

@@ -43,21 +43,41 @@ def any_run(request):
 
 
 @pytest.fixture(scope="module")
-def tiny_run(tmp_path_factory):
+def bench_cache(tmp_path_factory):
+    """One bench cache for both runs: the quick run reuses the data the full run generated
+    when its stimulus is the same (the cache key covers the spec, so a differing one is not)."""
+    return tmp_path_factory.mktemp("baseline_cache")
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory, bench_cache):
     out = tmp_path_factory.mktemp("baseline")
-    spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={out / 'cache'}"])
+    spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={bench_cache}"])
     summary = study.run(spec, out / "report", log=lambda *_: None)
     return out / "report", summary
 
 
 @pytest.fixture(scope="module")
-def tiny_quick_run(tmp_path_factory):
+def tiny_quick_run(tmp_path_factory, bench_cache):
     """The spec's quick profile on the same tiny data (its own NMF sizes and designs)."""
     out = tmp_path_factory.mktemp("baseline_quick")
     keep = [o for o in TINY if not o.startswith(("evaluation.nmf_dims", "spiking.designs"))]
-    spec = specs.load(SPEC, keep + [f"stimulus.cache_dir={out / 'cache'}"], quick=True)
+    spec = specs.load(SPEC, keep + [f"stimulus.cache_dir={bench_cache}"], quick=True)
     summary = study.run(spec, out / "report", quick=True, log=lambda *_: None)
     return out / "report", summary
+
+
+def test_the_quick_profile_changes_values_not_the_kind_of_spec():
+    """Fast twin of the slow end-to-end check below: the quick profile sets only keys the
+    full spec has, so both profiles run the same parts and report the same quantities."""
+    full, quick = specs.load(SPEC), specs.load(SPEC, quick=True)
+
+    def keys(tree, prefix=""):
+        return {prefix + k for k, v in tree.items()} | {
+            x for k, v in tree.items() if isinstance(v, dict) for x in keys(v, prefix + k + ".")}
+
+    assert keys(quick) == keys(full)
+    assert quick != full
 
 
 @pytest.mark.slow

@@ -85,7 +85,7 @@ def test_a_scene_at_speed_zero_gives_no_self_motion_activity():
     array, detector = ResonatorArray(target="numpy"), ContactDetector()
 
     def spikes_in_motion_band(speed):
-        rec = CourseScene(duration_s=4.0, speed_cm_s=speed, pan_amplitude_deg=40.0,
+        rec = CourseScene(duration_s=2.0, speed_cm_s=speed, pan_amplitude_deg=40.0,
                           terrain="rough").generate(seed=4)
         chain = make_chain(rec.rate_hz, threshold=0.03).fit(rec.samples)
         rates = array.run(rec.with_samples(chain.transform(rec.samples), "coded")).rate_map
