@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .protocol import WIRE_FORMATS
+from .recorder import COUNT_FIELDS
 from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
 from .view import add_view_args, live_view
 
@@ -140,8 +141,7 @@ def open_source(args) -> SerialSource:
                         reconnect_timeout_s=args.reconnect_timeout).start()
 
 
-SHOWN_COUNTS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps",
-                "lost_samples", "reconnects")
+SHOWN_COUNTS = COUNT_FIELDS
 
 
 def format_counts(counts: dict) -> str:

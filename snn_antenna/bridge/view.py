@@ -38,7 +38,8 @@ HISTORY_S = 10.0                # what the plots keep
 DRAIN_MS = 50                   # the server thread empties the pipeline's inbox
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
 INBOX_ITEMS = 4096              # seconds of port reads even at one frame a read; drained each 50 ms
-SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "reconnects")
+SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
+                  "reconnects")
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
