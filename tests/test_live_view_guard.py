@@ -75,3 +75,21 @@ def test_listening_beyond_loopback_warns_and_prints_the_bound_address(capsys):
                       [f"Host: 127.0.0.2:{view.port}"]) == 200
     err = capsys.readouterr().err
     assert f"live view: http://127.0.0.2:{view.port}/" in err and "warning" in err
+
+
+def test_a_drain_of_runs_too_short_to_plot_loses_nothing():
+    """Port reads of one or two samples between two shown points (every 4th sample is plotted)
+    used to raise in the server's drain (SpecError from to_g on no rows, a Tornado traceback)
+    after the items had been taken from the inbox: they were lost uncounted."""
+    from snn_antenna.bridge.protocol import Sample
+    from snn_antenna.bridge.source import Batch
+
+    view = LiveView(build_online(NETWORK), port=0)        # server not started: drain by hand
+    view.handle(Batch(0.0, samples=[Sample(0, 500, 500)]))
+    view.drain()
+    view.handle(Batch(0.0, samples=[Sample(1, 500, 500), Sample(2, 500, 500)]))
+    view.drain()                                         # indices 1, 2: nothing to plot
+    view.handle(Batch(0.0, samples=[Sample(3, 500, 500), Sample(4, 510, 500)]))
+    view.drain()
+    assert view.drained == 3 and view.dropped == 0
+    assert view.xy.total == 2 and view.xy.rows[-1, 0] == 4 / 1000

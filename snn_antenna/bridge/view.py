@@ -264,11 +264,13 @@ class LiveView:
         for first, batches in xy.runs():
             samples = np.asarray(list(chain.from_iterable(batches)), dtype=float)
             rows = self._rows(first, samples[:, 1:])
-            rows[:, 1:] = self.to_g.transform(rows[:, 1:])
-            self.xy.add(rows)
+            if len(rows):           # a run shorter than DISPLAY_EVERY may have no shown point
+                rows[:, 1:] = self.to_g.transform(rows[:, 1:])
+                self.xy.add(rows)
         for first, parts in coded.runs():
             self.coded.add(self._rows(first, np.concatenate(parts)))
-            self.th_g = float(self.coded.rows[-1, 2])
+            if self.coded.total:
+                self.th_g = float(self.coded.rows[-1, 2])
         if windows:
             self.windows.add(np.vstack(windows))
 
