@@ -21,6 +21,9 @@
    (bridge/view.py) and a page open on it (headless Chromium, when installed), ``--repeats``
    times each on ``--view-seconds`` of input; the real-time factors are printed side by side. Chromium renders in its own
    processes, on the same cores as the pipeline.
+4. ``--reload``: the live run at 1 kHz with the view, without and then with a client loading
+   ``GET /`` twice a second (a tab reloading); real-time factor, latency (median, p95) and the
+   samples lost or processed late are printed side by side.
 """
 from __future__ import annotations
 
@@ -90,6 +93,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="runs each, with --view")
     ap.add_argument("--view-seconds", type=float, default=30.0,
                     help="seconds of input per run, with --view (longer runs, steadier ratio)")
+    ap.add_argument("--reload", action="store_true",
+                    help="also compare live runs with the view, without / with a client "
+                         "loading the page twice a second")
     args = ap.parse_args(argv)
     overrides = ["preprocess.threshold=0.05", *args.set]
     parts = build_online(args.network, overrides)
@@ -120,6 +126,8 @@ def main(argv=None) -> int:
         f"{c['onset_s']:.1f} s → {c['distance_cm']:.1f} cm" for c in fast["contacts"]))
     if args.view:
         compare_view(args, overrides)
+    if args.reload:
+        compare_reload(args, overrides)
     return 0
 
 
@@ -165,6 +173,57 @@ def compare_view(args, overrides) -> None:
         print(f"  real-time factor {name:13s} {median:6.1f}x   (runs: "
               + ", ".join(f"{v:.1f}x" for v in runs) + ")")
     print(f"  with / without: {b / a:.2f} (median of {args.repeats} alternating runs each)")
+
+
+def compare_reload(args, overrides) -> None:
+    """Live (1 kHz) runs with the view: nobody reading it, then a client reloading the page."""
+    from snn_antenna.bridge.view import LiveView
+
+    rows = []
+    for reloading in (False, True):
+        parts = build_online(args.network, overrides)
+        view = LiveView(parts, port=0)
+        url = view.start()
+        reloader = Reloader(url) if reloading else None
+        try:
+            report = stream_from_emulator(parts, args.view_seconds, False, view)
+        finally:
+            if reloader:
+                reloader.close()
+            view.stop()
+        rows.append((reloading, report, reloader.loads if reloader else 0))
+    print(f"live view at 1 kHz, {args.view_seconds:g} s of input, without / with a page "
+          "loaded twice a second:")
+    for reloading, report, loads in rows:
+        steady = report["steady_latency_ms"]
+        latency = (f"latency median {steady['median']:6.1f} ms, p95 {steady['p95']:6.1f} ms"
+                   if steady["windows"] else "never caught up with real time")
+        print(f"  {'reloading' if reloading else 'no client':10s} ({loads:3d} loads): real-time "
+              f"factor {report['realtime_factor']:5.2f}x, {latency}, lost samples "
+              f"{report.get('counts', {}).get('lost_samples', 'n/a')}")
+
+
+class Reloader:
+    """A client loading the page twice a second over HTTP, in its own process (as a browser
+    tab is): it costs the pipeline's process only what serving the page costs."""
+
+    SCRIPT = ("import sys, time, urllib.request\n"
+              "while True:\n"
+              "    time.sleep(float(sys.argv[2]))\n"
+              "    try:\n"
+              "        urllib.request.urlopen(sys.argv[1], timeout=5).read()\n"
+              "        print('.', end='', flush=True)\n"
+              "    except OSError:\n"
+              "        pass\n")
+
+    def __init__(self, url: str, period_s: float = 0.5):
+        self.loads = 0
+        self._proc = subprocess.Popen([sys.executable, "-c", self.SCRIPT, url, str(period_s)],
+                                      stdout=subprocess.PIPE, text=True)
+
+    def close(self) -> None:
+        self._proc.terminate()
+        self.loads = self._proc.communicate(timeout=10)[0].count(".")
 
 
 def _rtf(parts, seconds: float, view=None) -> float:

@@ -21,7 +21,7 @@ from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.source import PortError, SerialSource, run_source
 
 COUNT_KEYS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
-              "reconnects")
+              "duplicates", "reordered", "late", "seq_restarts", "reconnects")
 
 
 def random_counts(n, seed=0):
@@ -58,7 +58,7 @@ class Session:
 
 
 def assert_recording_matches(rec, log):
-    sent = np.array([tuple(s) for s in log.written]).reshape(-1, 3)
+    sent = np.array([tuple(s) for s in log.in_order]).reshape(-1, 3)
     got = np.column_stack([rec.seq, rec.x, rec.y])
     assert got.shape == sent.shape
     assert np.array_equal(got, sent), "recorded samples differ from the valid frames sent"
@@ -124,6 +124,28 @@ def test_pty_stream_with_every_fault_is_recorded_exactly(tmp_path):
     assert events == ["opened", "lost", "reconnected"]
     # raw.bin holds every byte the port delivered.
     assert rec.raw_path.stat().st_size == rec.counts["bytes"]
+
+
+def test_duplicated_and_swapped_frames_over_a_pty_are_put_right_and_reconcile(tmp_path):
+    """A link that repeats and swaps frames (valid CRCs) across the 16-bit wrap: the recording
+    is the board's stream in order, and every frame the emulator wrote is accounted for."""
+    plan = FaultPlan(dup=30, swap=30, drop=3, garbage=2)
+    link = PtyLink(tmp_path / "ttyEMU")
+    emulator = Emulator(random_counts(1500, 4), faults=plan, seed=3, start_seq=65000)
+    session = Session(link.path, tmp_path / "rec")
+    log = emulator.run(link)
+    rec = session.finish()
+    link.close()
+    assert log.injected()["dup"] >= 25 and log.injected()["swap"] >= 25
+    assert_recording_matches(rec, log)
+    counts = rec.counts
+    assert counts["duplicates"] == log.injected()["dup"]
+    assert counts["reordered"] == log.injected()["swap"]
+    # Everything written: delivered, or dropped as a counted duplicate.
+    assert counts["frames"] + counts["duplicates"] + counts["late"] == len(log.written)
+    # Every frame the board produced: delivered, or lost (dropped on the way) and counted once.
+    assert counts["frames"] + counts["lost_samples"] == log.frames_due == 1500
+    assert counts["lost_samples"] == log.injected()["drop"] == 3
 
 
 def test_replay_reproduces_samples_and_counts(tmp_path):

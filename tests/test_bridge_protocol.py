@@ -7,6 +7,7 @@ from hypothesis import strategies as st
 
 from snn_antenna.bridge.protocol import (
     ENCODED_FRAME_LEN,
+    REORDER_WINDOW,
     SEQ_MODULUS,
     CobsError,
     Decoder,
@@ -23,8 +24,12 @@ from snn_antenna.bridge.protocol import (
 )
 from snn_antenna.errors import SpecError
 
-samples_st = st.lists(st.tuples(st.integers(0, SEQ_MODULUS - 1), st.integers(0, 1023),
-                                st.integers(0, 1023)), min_size=1, max_size=60)
+# A board's stream: sequence numbers only move forward (with gaps, across the 16-bit wrap).
+samples_st = st.builds(
+    lambda start, steps, values: [((start + sum(steps[:i + 1])) % SEQ_MODULUS, x, y)
+                                  for i, (x, y) in enumerate(values[:len(steps)])],
+    st.integers(0, SEQ_MODULUS - 1), st.lists(st.integers(1, 40), min_size=60, max_size=60),
+    st.lists(st.tuples(st.integers(0, 1023), st.integers(0, 1023)), min_size=1, max_size=60))
 
 
 def feed_in_chunks(decoder, data, cuts):
@@ -32,7 +37,7 @@ def feed_in_chunks(decoder, data, cuts):
     for cut in sorted(cuts) + [len(data)]:
         out += decoder.feed(data[start:cut])
         start = max(start, cut)
-    return out
+    return out + decoder.flush()
 
 
 def test_crc_is_xmodem_check_value():
@@ -114,7 +119,7 @@ def test_garbage_between_frames_costs_exactly_one_framing_error_per_run(
        st.sampled_from(["binary", "ascii"]))
 def test_arbitrary_bytes_never_raise_and_chunking_does_not_matter(data, cuts, wire_format):
     whole = Decoder(wire_format, synced=True)
-    expected = whole.feed(data)
+    expected = whole.feed(data) + whole.flush()
     chunked = Decoder(wire_format, synced=True)
     got = feed_in_chunks(chunked, data, [c % (len(data) + 1) for c in cuts])
     assert got == expected
@@ -163,7 +168,7 @@ def test_boot_noise_before_first_valid_frame_is_not_an_error():
     assert [s.seq for s in got] == [7, 8]
     assert decoder.stats.framing_errors == 0 and decoder.stats.noise_bytes > 0
     decoder.resync()                        # a reconnect: half a frame, then frames again
-    got = decoder.feed(frame[3:] + encode_binary(12, 1, 2))
+    got = decoder.feed(frame[3:] + encode_binary(12, 1, 2)) + decoder.flush()
     assert [s.seq for s in got] == [12] and decoder.stats.framing_errors == 0
     assert decoder.gap_list == [Gap(1, 8, 3)]   # continuity survives the resync
 
@@ -178,3 +183,75 @@ def test_ascii_lines_accept_crlf_and_count_bad_lines():
 def test_unknown_wire_format_names_the_choices():
     with pytest.raises(SpecError, match="format = 'hex'.*binary or ascii"):
         Decoder("hex")
+
+
+# -- sequence discipline: duplicates, reorders, gaps, restarts ----------------------------------
+def decode_seqs(seqs):
+    decoder = Decoder(synced=True)
+    got = decoder.feed(b"".join(encode_binary(s, s % 1024, 5) for s in seqs)) + decoder.flush()
+    return [s.seq for s in got], decoder.stats
+
+
+def test_a_duplicated_frame_is_dropped_and_counted_not_a_gap_of_65535():
+    got, stats = decode_seqs([7, 8, 8, 9])
+    assert got == [7, 8, 9]
+    assert (stats.duplicates, stats.gaps, stats.lost_samples) == (1, 0, 0)
+
+
+def test_a_swapped_pair_is_put_back_in_order_across_the_wrap():
+    got, stats = decode_seqs([65534, 0, 65535, 1, 1, 2])
+    assert got == [65534, 65535, 0, 1, 2]
+    assert (stats.reordered, stats.duplicates, stats.gaps, stats.lost_samples) == (1, 1, 0, 0)
+
+
+def test_a_hole_not_filled_within_the_window_is_one_gap_and_its_late_frame_is_dropped():
+    seqs = [10, 11] + list(range(13, 13 + REORDER_WINDOW + 2)) + [12]
+    got, stats = decode_seqs(seqs)
+    assert got == [10, 11] + list(range(13, 13 + REORDER_WINDOW + 2))
+    assert (stats.gaps, stats.lost_samples, stats.late, stats.reordered) == (1, 1, 1, 0)
+
+
+def test_a_counter_restart_is_not_a_gap_of_almost_65536():
+    got, stats = decode_seqs([500, 501, 0, 1, 2])
+    assert got == [500, 501, 0, 1, 2]
+    assert (stats.seq_restarts, stats.gaps, stats.lost_samples, stats.late) == (1, 0, 0, 0)
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(0, SEQ_MODULUS - 1), st.integers(30, 200),
+       st.sets(st.integers(0, 199)), st.sets(st.integers(1, 199)), st.sets(st.integers(1, 198)))
+def test_duplicates_and_swaps_deliver_the_clean_stream_with_every_fault_counted(
+        start, n, dups, swaps, drops):
+    """Whatever a misbehaving link repeats or swaps, what is delivered is the board's stream in
+    order; each fault is counted once; and every frame received is accounted for. (The very
+    first frame is never swapped: a receiver has nothing to order it against.)"""
+    clean = [(start + i) % SEQ_MODULUS for i in range(n)]
+    drops = {i for i in drops if 0 < i < n - 1}
+    wire, i, n_swaps = [], 0, 0
+    while i < n:
+        if i in swaps and i + 1 < n and not {i, i + 1} & drops:
+            wire += [clean[i + 1], clean[i]]
+            n_swaps += 1
+            i += 2
+            continue
+        if i not in drops:
+            wire += [clean[i]] * (2 if i in dups else 1)
+        i += 1
+    got, stats = decode_seqs(wire)
+    kept = [s for j, s in enumerate(clean) if j not in drops]
+    assert got == kept
+    assert stats.duplicates == len(wire) - len(set(wire))
+    assert stats.lost_samples == len(drops) and stats.late == stats.seq_restarts == 0
+    assert stats.reordered == n_swaps if not drops else stats.reordered <= n_swaps
+    assert stats.frames + stats.duplicates + stats.late == len(wire)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.integers(0, SEQ_MODULUS - 1), max_size=80))
+def test_every_counter_is_bounded_by_what_was_received(seqs):
+    got, stats = decode_seqs(seqs)
+    assert stats.frames + stats.duplicates + stats.late == len(seqs) == len(got) + \
+        stats.duplicates + stats.late
+    assert stats.gaps <= len(seqs) and stats.reordered <= len(seqs)
+    assert stats.seq_restarts <= len(seqs)
+    assert stats.lost_samples <= len(seqs) * (SEQ_MODULUS // 2)

@@ -136,7 +136,7 @@ def stall_and_close_clients(url: str):
     import socket
     host, port = url.split("//")[1].rstrip("/").split(":")
     raw = socket.create_connection((host, int(port)))
-    raw.sendall(b"GET / HTTP/1.1\r\nHost: localhost\r\n\r\n")
+    raw.sendall(f"GET / HTTP/1.1\r\nHost: {host}:{port}\r\n\r\n".encode())
     return stalled, raw
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .protocol import WIRE_FORMATS
+from .recorder import COUNT_FIELDS
 from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
 from .view import add_view_args, live_view
 
@@ -140,8 +141,7 @@ def open_source(args) -> SerialSource:
                         reconnect_timeout_s=args.reconnect_timeout).start()
 
 
-SHOWN_COUNTS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps",
-                "lost_samples", "reconnects")
+SHOWN_COUNTS = COUNT_FIELDS
 
 
 def format_counts(counts: dict) -> str:
@@ -222,6 +222,26 @@ def cmd_record(args) -> int:
 
 
 @_guarded
+def replay_overrides(args) -> list[str]:
+    """The ``--set`` a replay runs with: the ones the recording was streamed with (its
+    meta.json), then the explicit ones, which win. Said on stderr, so that a replay that
+    reports other contacts than the live run says why."""
+    from .recorder import META_FILE
+
+    meta_path = Path(args.recording) / META_FILE
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    recorded = [str(item) for item in meta.get("set") or []]
+    network = meta.get("network")
+    if network and Path(network).resolve() != Path(args.network).resolve():
+        print(f"replay: the recording was streamed with --network {network}; replaying with "
+              f"{args.network}", file=sys.stderr)
+    if recorded:
+        print(f"replay: applying the recording's --set {' '.join(recorded)} (from meta.json)"
+              + (f", then the explicit --set {' '.join(args.set)}" if args.set else ""),
+              file=sys.stderr)
+    return recorded + list(args.set)
+
+
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
     from .replay import ReplaySource
@@ -231,7 +251,7 @@ def cmd_replay(args) -> int:
     if args.network:
         from .online import LiveDisplay, build_online, run_online
 
-        parts = build_online(args.network, args.set)
+        parts = build_online(args.network, replay_overrides(args))
         with live_view(args, parts) as view:        # None without --view
             source = ReplaySource(args.recording, realtime=args.realtime).start()
             report = run_online(source, parts, no_data_timeout_s=1e9,

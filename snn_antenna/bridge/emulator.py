@@ -13,6 +13,8 @@ bitflip     one bit of a frame's content (payload or CRC) flipped: a CRC error a
 range       a frame with a valid CRC but x beyond 1023: a range error and a gap.
 stall       the link pauses for ``stall_s``; the board keeps sampling and the backlog follows in
             a burst: nothing is lost.
+dup         a frame is sent twice: one duplicate, nothing lost.
+swap        a frame and the next are sent in swapped order: one reordered frame, nothing lost.
 disconnect  the port vanishes for ``outage_s`` and comes back at the same path; the board keeps
             sampling, so the frames due meanwhile are lost: one gap per outage, one reconnect.
 
@@ -43,7 +45,7 @@ from .protocol import (
     frame_payload,
 )
 
-FAULT_KINDS = ("garbage", "drop", "bitflip", "range", "stall", "disconnect")
+FAULT_KINDS = ("garbage", "drop", "bitflip", "range", "stall", "dup", "swap", "disconnect")
 
 
 # -- faults ------------------------------------------------------------------------------------
@@ -55,6 +57,8 @@ class FaultPlan:
     bitflip: int = 0
     range: int = 0
     stall: int = 0
+    dup: int = 0
+    swap: int = 0
     disconnect: int = 0
     stall_s: float = 0.2
     outage_s: float = 0.3
@@ -96,6 +100,7 @@ class FaultPlan:
 class EmulatorLog:
     """What the emulator did: every valid frame written, and every fault with its frame index."""
     written: list[Sample] = field(default_factory=list)
+    in_order: list[Sample] = field(default_factory=list)     # written, less dups, swaps undone
     write_times_s: list[float] = field(default_factory=list)     # time.time() after each write
     faults: list[tuple[str, int, int]] = field(default_factory=list)   # (kind, frame, seq)
     framing_errors: int = 0
@@ -106,12 +111,13 @@ class EmulatorLog:
 
     def expected_counts(self) -> dict:
         """The counts a correct receiver reports for this stream."""
-        gaps = find_gaps([s.seq for s in self.written])
+        gaps = find_gaps([s.seq for s in self.in_order])
         injected = self.injected()
-        return {"frames": len(self.written), "crc_errors": injected["bitflip"],
+        return {"frames": len(self.in_order), "crc_errors": injected["bitflip"],
                 "framing_errors": self.framing_errors, "range_errors": injected["range"],
                 "gaps": len(gaps), "lost_samples": sum(g.length for g in gaps),
-                "reconnects": injected["disconnect"]}
+                "reconnects": injected["disconnect"], "duplicates": injected["dup"],
+                "reordered": injected["swap"], "late": 0, "seq_restarts": 0}
 
 
 def garbage_burst(rng: np.random.Generator) -> tuple[bytes, int]:
@@ -135,16 +141,18 @@ class _Outbox:
 
     def __init__(self, link, log: EmulatorLog, stop: threading.Event):
         self.link, self.log, self.stop = link, log, stop
-        self.data, self.samples = bytearray(), []
+        self.data, self.samples, self.in_order = bytearray(), [], []
 
     def flush(self) -> None:
         if self.data:
             self.link.write(bytes(self.data), self.stop)
             now = time.time()
             self.log.written += self.samples
+            self.log.in_order += self.in_order
             self.log.write_times_s += [now] * len(self.samples)
             self.data.clear()
             self.samples.clear()
+            self.in_order.clear()
 
 
 class Emulator:
@@ -221,7 +229,7 @@ class Emulator:
                 resyncing = True
                 continue
             self._frame(out, i, kind, rng)
-            i += 1
+            i += 2 if kind == "swap" else 1
             if len(out.data) >= 4096:
                 out.flush()
         out.flush()
@@ -250,9 +258,21 @@ class Emulator:
             bad_x = int(rng.integers(ADC_MAX + 1, 65536))
             out.data += (cobs_encode(frame_payload(seq, bad_x, y)) + DELIMITER
                          if self.wire_format == "binary" else f"{seq},{bad_x},{y}\n".encode())
+        elif kind == "swap":            # the next frame overtakes this one
+            after = self._sample(i + 1)
+            for sample in (after, Sample(seq, x, y)):
+                out.data += self.encode(*sample)
+                out.samples.append(sample)
+            out.in_order += [Sample(seq, x, y), after]
         else:
-            out.data += self.encode(seq, x, y)
-            out.samples.append(Sample(seq, x, y))
+            copies = 2 if kind == "dup" else 1
+            out.data += self.encode(seq, x, y) * copies
+            out.samples += [Sample(seq, x, y)] * copies
+            out.in_order.append(Sample(seq, x, y))
+
+    def _sample(self, i: int) -> Sample:
+        x, y = (int(v) for v in self.counts[i % len(self.counts)])
+        return Sample((self.start_seq + i) % SEQ_MODULUS, x, y)
 
     def _disconnect(self, link, out: _Outbox, i: int, t0: float, realtime: bool,
                     peer_timeout_s: float | None) -> int:

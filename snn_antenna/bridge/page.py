@@ -181,6 +181,7 @@ def shown_counters(view) -> list[tuple[str, str]]:
             ("latency", lat), ("Th", f"{view.th_g:.3g} g"),
             ("frames", counts.get("frames", 0)), ("CRC errors", counts.get("crc_errors", 0)),
             ("gaps", counts.get("gaps", 0)), ("lost samples", counts.get("lost_samples", 0)),
+            ("duplicates", counts.get("duplicates", 0)), ("reordered", counts.get("reordered", 0)),
             ("reconnects", counts.get("reconnects", 0)),
             ("view frames dropped", view.dropped)]
 

@@ -5,11 +5,17 @@ binary (default): one frame per sample, payload little-endian ``seq u16, x u16, 
 ascii (debug): lines ``seq,x,y`` ending in ``\\n`` or ``\\r\\n``.
 
 The :class:`Decoder` is fed whatever chunks the port returns and yields samples; it never fills a
-gap, it counts it. Nothing here touches a port, so every property is testable on bytes alone.
+gap, it counts it. Like an RTP receiver it keeps sequence discipline: a sequence number already
+delivered is a duplicate (dropped, counted); a frame arriving ahead of a hole is held for up to
+``REORDER_WINDOW`` frames so that a late frame can be put back in order (counted ``reordered``);
+a hole still open after that is a gap, its samples lost, counted once. A frame older than the
+window, or that falls in a hole already counted lost, is dropped (``late``); a step further
+back to numbers never delivered nor missed means the board restarted its counter (``seq_restarts``). Nothing here touches a port, so every property is testable on bytes alone.
 """
 from __future__ import annotations
 
 import binascii
+import collections
 import struct
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -32,6 +38,13 @@ ENCODED_FRAME_LEN = FRAME.size + 1      # COBS adds one byte to any block shorte
 # decoder stops buffering it (but still counts it once when the delimiter finally comes).
 MAX_SEGMENT = 64
 WIRE_FORMATS = ("binary", "ascii")
+# Sequence discipline. A hole is waited for during this many frames (8 ms at 1 kHz) before it
+# is declared a gap; a link that reorders further than that loses those frames, counted as late.
+REORDER_WINDOW = 8
+# Sequence numbers delivered this recently are recognised as duplicates; a number further back
+# than this (and more than half the 16-bit circle away) means the board restarted its counter.
+DUPLICATE_WINDOW = 1024
+HALF_MODULUS = 32768
 
 
 class Sample(NamedTuple):
@@ -57,6 +70,10 @@ class DecoderStats:
     gaps: int = 0
     lost_samples: int = 0       # sum of gap lengths
     noise_bytes: int = 0        # discarded while (re)synchronising after a port open
+    duplicates: int = 0         # a sequence number already delivered (or held), dropped
+    reordered: int = 0          # overtaken by a later frame, within the window: put back in order
+    late: int = 0               # arrived after its hole was declared a gap: dropped
+    seq_restarts: int = 0       # the counter jumped far back: the board restarted
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)      # dataclasses.asdict deep-copies: 10x slower per batch
@@ -165,7 +182,10 @@ class Decoder:
         self._buffer = bytearray()
         self._segment_len = 0           # true length of the unterminated segment, kept or not
         self._synced = synced
-        self._last_seq: int | None = None
+        self._last_seq: int | None = None     # the last sequence number delivered
+        self._held: dict[int, Sample] = {}      # frames ahead of a hole, by sequence number
+        self._recent: collections.deque[int] = collections.deque()
+        self._recent_set: set[int] = set()
 
     def resync(self) -> None:
         self.stats.noise_bytes += self._segment_len
@@ -219,12 +239,79 @@ class Decoder:
             self.stats.framing_errors += 1
 
     def _accept(self, sample: Sample, out: list[Sample]) -> None:
-        if self._last_seq is not None:
-            missing = (sample.seq - self._last_seq - 1) % SEQ_MODULUS
-            if missing:
-                self.stats.gaps += 1
-                self.stats.lost_samples += missing
-                self.gap_list.append(Gap(self.stats.frames - 1, self._last_seq, missing))
+        if self._last_seq is None:
+            self._deliver(sample, out)
+            return
+        ahead = (sample.seq - self._last_seq - 1) % SEQ_MODULUS   # 0: the one expected next
+        while REORDER_WINDOW < ahead < HALF_MODULUS and self._held:
+            # Too far ahead to wait for the oldest hole: it is a gap now.
+            self._release(out, give_up=True)
+            ahead = (sample.seq - self._last_seq - 1) % SEQ_MODULUS
+        if ahead == 0:
+            if self._held:
+                self.stats.reordered += 1       # it fills the hole the held frames wait on
+            self._deliver(sample, out)
+            self._release(out)
+        elif REORDER_WINDOW < ahead < HALF_MODULUS:
+            self._gap_to(sample.seq)            # too far ahead to be a reorder: a gap
+            self._deliver(sample, out)
+        elif ahead < HALF_MODULUS:
+            if sample.seq in self._held:
+                self.stats.duplicates += 1
+                return
+            if any((held - self._last_seq - 1) % SEQ_MODULUS > ahead for held in self._held):
+                self.stats.reordered += 1       # a later frame overtook it
+            self._held[sample.seq] = sample
+            if len(self._held) >= REORDER_WINDOW:
+                self._release(out, everything=False, give_up=True)
+        elif sample.seq in self._recent_set:
+            self.stats.duplicates += 1
+        elif SEQ_MODULUS - ahead <= REORDER_WINDOW + 1 or (
+                SEQ_MODULUS - ahead <= DUPLICATE_WINDOW and self._in_recent_gap(sample.seq)):
+            self.stats.late += 1                # overtaken beyond repair, or counted lost
+        else:
+            self.stats.seq_restarts += 1        # back to numbers never missed: a new count
+            self._release(out, everything=True)
+            self._deliver(sample, out)
+
+    def flush(self) -> list[Sample]:
+        """Deliver the frames held behind a hole: the stream ended or the link went down, so the
+        hole is a gap now."""
+        out: list[Sample] = []
+        self._release(out, everything=True)
+        return out
+
+    def _release(self, out: list[Sample], everything: bool = False,
+                 give_up: bool = False) -> None:
+        """Deliver the held frames that are next in line; with ``give_up`` the first hole is
+        declared a gap, with ``everything`` every hole is."""
+        while self._held:
+            expected = (self._last_seq + 1) % SEQ_MODULUS
+            if expected in self._held:
+                self._deliver(self._held.pop(expected), out)
+                continue
+            if not (everything or give_up):
+                return
+            first = min(self._held, key=lambda seq: (seq - expected) % SEQ_MODULUS)
+            self._gap_to(first)
+            self._deliver(self._held.pop(first), out)
+            give_up = False
+
+    def _in_recent_gap(self, seq: int) -> bool:
+        return any((seq - gap.after_seq - 1) % SEQ_MODULUS < gap.length
+                   for gap in self.gap_list[-16:])
+
+    def _gap_to(self, seq: int) -> None:
+        missing = (seq - self._last_seq - 1) % SEQ_MODULUS
+        self.stats.gaps += 1
+        self.stats.lost_samples += missing
+        self.gap_list.append(Gap(self.stats.frames - 1, self._last_seq, missing))
+
+    def _deliver(self, sample: Sample, out: list[Sample]) -> None:
+        if len(self._recent) == DUPLICATE_WINDOW:
+            self._recent_set.discard(self._recent.popleft())
+        self._recent.append(sample.seq)
+        self._recent_set.add(sample.seq)
         self._last_seq = sample.seq
         self.stats.frames += 1
         out.append(sample)
@@ -263,7 +350,7 @@ def decode_all(data: bytes, wire_format: str = "binary",
                synced: bool = True) -> tuple[list[Sample], Decoder]:
     """Decode a whole byte string at once (tests, replay of a file)."""
     decoder = Decoder(wire_format, synced=synced)
-    return decoder.feed(data), decoder
+    return decoder.feed(data) + decoder.flush(), decoder
 
 
 def find_gaps(seq) -> list[Gap]:

@@ -35,7 +35,7 @@ SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("pad", "<u
 RAW_FILE, SAMPLES_FILE, META_FILE = "raw.bin", "samples.bin", "meta.json"
 FORMAT_VERSION = 1
 COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
-                "reconnects")
+                "duplicates", "reordered", "late", "seq_restarts", "reconnects")
 
 
 class Recorder:

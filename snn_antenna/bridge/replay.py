@@ -62,10 +62,16 @@ class ReplaySource:
             if self._ended:
                 time.sleep(timeout or 0)
                 return None
+            held = self.decoder.flush()
+            if held:                    # frames held behind a hole: the file has no more
+                return Batch(time.time(), b"", held, self.counts())
             self._ended = True
             self.reconnects = len(self._reconnect_at)
             return Batch(time.time(), counts=self.counts(), event="end")
         if self._pos in self._resync_at:
+            held = self.decoder.flush()     # as the live source did when the link went down
+            if held:
+                return Batch(time.time(), b"", held, self.counts())
             self.decoder.resync()
         self.reconnects = sum(1 for o in self._reconnect_at if o <= self._pos)
         end = min(len(self._raw), self._pos + self.chunk_bytes,

@@ -166,7 +166,14 @@ class SerialSource:
             self._take_queued()         # unblocks a reader waiting on a full queue
             self._thread.join(timeout=0.05)
         self._take_queued()
+        self._release_held(self._leftover.append)
         self.transport.close()
+
+    def _release_held(self, put) -> None:
+        """Frames the decoder holds behind a hole are delivered once no more bytes can come."""
+        held = self.decoder.flush()
+        if held:
+            put(Batch(time.time(), b"", held, self.counts()))
 
     def _take_queued(self) -> None:
         while True:
@@ -201,6 +208,7 @@ class SerialSource:
             try:
                 raw = self.transport.read()
             except serial.SerialException as exc:
+                self._release_held(self._put)
                 self._put(Batch(time.time(), counts=self.counts(), event="lost", message=str(exc)))
                 self.transport.close()
                 if not self._reconnect():

@@ -38,7 +38,8 @@ HISTORY_S = 10.0                # what the plots keep
 DRAIN_MS = 50                   # the server thread empties the pipeline's inbox
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
 INBOX_ITEMS = 4096              # seconds of port reads even at one frame a read; drained each 50 ms
-SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "reconnects")
+SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
+                  "reconnects")
 LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
@@ -68,8 +69,12 @@ def live_view(args, parts):
         raise SpecError("view-port", args.view_port, "a port 1-65535, or 0 for any free port")
     if args.view_hold is not None and not args.view_hold >= 0:
         raise SpecError("view-hold", args.view_hold, "seconds >= 0")
+    check_view_host(args.view_host)
     view = LiveView(parts, host=args.view_host, port=args.view_port)
     url = view.start()
+    if args.view_host not in LOOPBACK:
+        print(f"warning: the live view listens on {args.view_host}, beyond this machine: anyone "
+              "who can reach it sees the stream", file=sys.stderr, flush=True)
     print(f"live view: {url}  (plain state: {url}state.json)", file=sys.stderr, flush=True)
     ended = False
     try:
@@ -79,6 +84,15 @@ def live_view(args, parts):
         if ended and args.view_hold != 0:
             _hold(url, args.view_hold)
         view.stop()
+
+
+def check_view_host(host: str) -> str:
+    """Listening beyond loopback takes an explicit address: an empty one would bind every
+    interface by accident."""
+    if not isinstance(host, str) or not host.strip():
+        raise SpecError("view-host", host, "an explicit address: 127.0.0.1 (this machine), "
+                                           "or e.g. 0.0.0.0 to expose the view deliberately")
+    return host
 
 
 def _hold(url: str, seconds: float | None) -> None:
@@ -250,11 +264,13 @@ class LiveView:
         for first, batches in xy.runs():
             samples = np.asarray(list(chain.from_iterable(batches)), dtype=float)
             rows = self._rows(first, samples[:, 1:])
-            rows[:, 1:] = self.to_g.transform(rows[:, 1:])
-            self.xy.add(rows)
+            if len(rows):           # a run shorter than DISPLAY_EVERY may have no shown point
+                rows[:, 1:] = self.to_g.transform(rows[:, 1:])
+                self.xy.add(rows)
         for first, parts in coded.runs():
             self.coded.add(self._rows(first, np.concatenate(parts)))
-            self.th_g = float(self.coded.rows[-1, 2])
+            if self.coded.total:
+                self.th_g = float(self.coded.rows[-1, 2])
         if windows:
             self.windows.add(np.vstack(windows))
 
@@ -336,6 +352,8 @@ class LiveView:
         from tornado.httpserver import HTTPServer
         from tornado.ioloop import IOLoop, PeriodicCallback
 
+        from .hostguard import HostGuard, allowed_hosts
+
         # A stalled tab's queued messages are the only thing a slow browser costs; "closed
         # the websocket" is the normal end of one.
         logging.getLogger("bokeh.server.views.ws").setLevel(logging.ERROR)
@@ -348,14 +366,13 @@ class LiveView:
                 raise SpecError("view-port", self.port,
                                 f"a free port on {self.host} ({exc.strerror}), or 0 for any "
                                 "free port") from exc
-            origins = [f"localhost:{port}", f"127.0.0.1:{port}"]
-            if self.host not in LOOPBACK:   # exposed deliberately: any name of this machine
-                origins.append(f"*:{port}")
+            bound = sockets[0].getsockname()[0]
+            allowed = allowed_hosts(self.host, port)
             app = BokehTornado({"/": Application(FunctionHandler(partial(build_page, self)))},
-                               extra_websocket_origins=origins,
+                               extra_websocket_origins=sorted(allowed),
                                extra_patterns=[(r"/state\.json", _state_handler(), {"view": self})],
                                websocket_ping_interval=10, websocket_ping_timeout=10)
-            http = HTTPServer(app)
+            http = HTTPServer(HostGuard(app, allowed))
             http.add_sockets(sockets)
             self._server = BaseServer(loop, app, http)
             self._server.start()
@@ -364,7 +381,7 @@ class LiveView:
             failed.append(exc)
             ready.set()
             return
-        shown = "127.0.0.1" if self.host in ("0.0.0.0", "") else self.host
+        shown = f"[{bound}]" if ":" in bound else bound
         self.port, self.url = port, f"http://{shown}:{port}/"
         self._loop = loop
         ready.set()

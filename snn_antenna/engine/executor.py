@@ -61,6 +61,39 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
+SCHEDULER_PROBE_S = 8.0
+
+
+def _probe_scheduler(address: str, timeout_s: float = SCHEDULER_PROBE_S) -> None:
+    """Ask ``address`` who it is, within ``timeout_s``, before a Client waits on it: a silent
+    port would hold the Client for minutes, and one that speaks first (an SSH or HTTP banner)
+    is read by Dask as a frame length of exabytes."""
+    import asyncio
+
+    from distributed.comm import connect
+
+    async def identity():
+        comm = await connect(address, timeout=timeout_s)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    accepted = "the address of a running Dask scheduler"
+    try:
+        reply = asyncio.run(asyncio.wait_for(identity(), timeout_s))
+    except (asyncio.TimeoutError, TimeoutError):
+        raise SpecError("--scheduler", address, f"{accepted} (no answer within "
+                        f"{timeout_s:g} s: not a Dask scheduler)") from None
+    except Exception as exc:        # refused, reset, or bytes that are not Dask's protocol
+        raise SpecError("--scheduler", address,
+                        f"{accepted} ({type(exc).__name__}: {str(exc)[:120]})") from None
+    if not (isinstance(reply, dict) and reply.get("type") == "Scheduler"):
+        raise SpecError("--scheduler", address,
+                        f"{accepted} (it answered as {str(reply)[:80]!r})")
+
+
 @contextmanager
 def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = True):
     """A Dask client: attach to ``scheduler`` (tcp://HOST:PORT) or start a local cluster.
@@ -75,6 +108,7 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
     if scheduler:
         check(isinstance(scheduler, str) and "://" in scheduler, "--scheduler", scheduler,
               "a Dask scheduler address such as tcp://HOST:8786")
+        _probe_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
