@@ -72,7 +72,9 @@ def material_unit_correct(train_seed: int, test_seed: int,
     return int(correct.sum()), int(n_events)
 
 
-@pytest.mark.slow   # 66 s: the bench's high band over 160 events
+# A known failure (strict xfail) that costs minutes of Brian2 runs: it is run with the thorough
+# checks (-m slow), where it still fails loudly once the unit works again.
+@pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
     "on the bench's contact physics of issue 16 the material sits in the rods' own bending "
     "modes (107-377 Hz, a few % of the impact), which the high-band unit's 0.15 s count/latency "
