@@ -51,6 +51,13 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
     ``max_fit_samples`` rows, drawn with ``random_state``, to bound its cost); ``transform``
     is, as in the paper, the dot product of each spectrum with each basis vector, a fixed
     linear filter bank rather than NMF's per-sample optimisation.
+
+    Each spectrum is first scaled to its own peak (fit and transform alike; it uses that
+    event's spectrum only). Unscaled, the peak amplitude varies 3× between events (impact
+    strength, distance) and is common to every filter's output, so the basis spent its parts
+    on the loudness and the filter outputs on one shared factor: on the quick bench set
+    (1,280 events, split by repetition, 30 parts, the 51-hidden MLP) the 8-material accuracy
+    was 19 % unscaled and 36 % scaled at 60 epochs, 22 % and 40 % at 300 (issue 31).
     """
 
     def __init__(self, n_components: int = 9, max_iter: int = 400,
@@ -66,6 +73,7 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
               "n_components", self.n_components, f"an integer in [1, {X.shape[1]}]")
         check(np.all(np.isfinite(X)) and X.min() >= 0, "X", "negative or non-finite values",
               "non-negative amplitude spectra")
+        X = peak_scaled(X)
         rng = np.random.default_rng(self.random_state)
         rows = rng.permutation(len(X))[:self.max_fit_samples]
         with warnings.catch_warnings():
@@ -76,7 +84,13 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
         return self
 
     def transform(self, X):
-        return np.asarray(X, dtype=float) @ self.components_.T
+        return peak_scaled(np.asarray(X, dtype=float)) @ self.components_.T
+
+
+def peak_scaled(spectra: np.ndarray) -> np.ndarray:
+    """Each row divided by its largest value (an all-zero row stays zero)."""
+    peak = spectra.max(axis=1, keepdims=True)
+    return spectra / np.where(peak > 0, peak, 1.0)
 
 
 def _param(*names) -> list[int]:
