@@ -16,7 +16,8 @@ from snn_antenna.studies import baseline_comparison as bc
 from snn_antenna.evaluation import signal, crossval as cv
 from snn_antenna.readout.baselines import NMFFilterBank
 
-s = specmod.load("studies/baseline_comparison.toml", quick=True)
+s = specmod.load("studies/baseline_comparison.toml", quick="--full" not in sys.argv)
+sys.argv = [a for a in sys.argv if a != "--full"]
 parts = bc.build(s)
 parts.bench.cache_dir = "/tmp/i31cache"
 data, f = signal.load_features(parts.bench, parts.processor)

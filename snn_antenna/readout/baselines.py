@@ -50,7 +50,13 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
     ``fit`` learns ``n_components`` non-negative spectra with scikit-learn's NMF (on at most
     ``max_fit_samples`` rows, drawn with ``random_state``, to bound its cost); ``transform``
     is, as in the paper, the dot product of each spectrum with each basis vector, a fixed
-    linear filter bank rather than NMF's per-sample optimisation.
+    linear filter bank rather than NMF's per-sample optimisation. The filter outputs are then
+    unmixed by the inverse of the basis's Gram matrix (W Wᵀ)⁻¹, a fixed linear map: broad,
+    overlapping basis vectors give strongly correlated outputs, and the unmixed ones are the
+    least-squares amplitudes of the parts (X ≈ H W gives H back), the same information
+    conditioned for the MLP. On the full bench set (12,799 events, split by repetition,
+    seed 0, 30 parts, 60 epochs) that took NMF-30 from 45 % to 65 % (72 % at 300 epochs;
+    NMF's own per-sample activations 69 %), ``benchmarks/nmf_scaling.py``.
 
     Each spectrum is first scaled to its own peak (fit and transform alike; it uses that
     event's spectrum only). Unscaled, the peak amplitude varies 3× between events (impact
@@ -81,10 +87,11 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
             self.nmf_ = NMF(n_components=self.n_components, init="nndsvda",
                             max_iter=self.max_iter, random_state=self.random_state).fit(X[rows])
         self.components_ = self.nmf_.components_
+        self.unmix_ = np.linalg.pinv(self.components_ @ self.components_.T)
         return self
 
     def transform(self, X):
-        return peak_scaled(np.asarray(X, dtype=float)) @ self.components_.T
+        return peak_scaled(np.asarray(X, dtype=float)) @ self.components_.T @ self.unmix_
 
 
 def peak_scaled(spectra: np.ndarray) -> np.ndarray:
