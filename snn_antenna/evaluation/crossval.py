@@ -18,7 +18,7 @@ spectrum MLP distance rmse for seeds 0, 1, 2: 3.35, 2.79, 3.81 mm with the Haswe
 (this machine's default), 3.24, 2.79, 4.11 with OPENBLAS_CORETYPE=SandyBridge, 3.24, 2.81,
 4.10 with Prescott (means 3.32, 3.38, 3.38). The spread over seeds (sd ≈ 0.5 mm, so ≈ 0.3 mm
 on a 3-seed mean) is the honest interval; a README number is comparable only within it.
-Repeated with one kernel (quick bench set, three runs): identical numbers.
+Repeated with one kernel (full set, twice; quick set, three times): identical numbers.
 """
 from __future__ import annotations
 
