@@ -9,6 +9,16 @@ it on the rest.
 Splits are by repetition: the repetitions 0…R−1 are shuffled with the split's seed and
 ``test_fraction`` of them form the test set for every material and position, so a contact is
 never in both sets and every class and position is in both. Several seeds give mean and spread.
+
+Reproducibility (issue 31). Data, splits and MLP initialisation are seeded and the fits run on
+one BLAS thread, yet a fit's result still depends on which OpenBLAS kernel the CPU selects:
+its summation order changes the float32 gradients in the last bits, and 300 epochs of
+mini-batch training carry that to the end. Measured on the full bench set (12,799 events),
+spectrum MLP distance rmse for seeds 0, 1, 2: 3.35, 2.79, 3.81 mm with the Haswell kernel
+(this machine's default), 3.24, 2.79, 4.11 with OPENBLAS_CORETYPE=SandyBridge, 3.24, 2.81,
+4.10 with Prescott (means 3.32, 3.38, 3.38). The spread over seeds (sd ≈ 0.5 mm, so ≈ 0.3 mm
+on a 3-seed mean) is the honest interval; a README number is comparable only within it.
+Repeated with one kernel (full set, twice; quick set, three times): identical numbers.
 """
 from __future__ import annotations
 
