@@ -12,7 +12,8 @@ from urllib.parse import urlsplit
 
 from tornado import httputil
 
-from .view import LOOPBACK
+# The addresses that reach only this machine: binding elsewhere needs an explicit address.
+LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 def allowed_hosts(host: str, port: int) -> set[str]:

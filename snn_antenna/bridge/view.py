@@ -40,7 +40,6 @@ DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period 
 INBOX_ITEMS = 4096              # seconds of port reads even at one frame a read; drained each 50 ms
 SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
                   "reconnects")
-LOOPBACK = ("127.0.0.1", "localhost", "::1")
 
 
 def add_view_args(parser) -> None:
@@ -70,6 +69,8 @@ def live_view(args, parts):
     if args.view_hold is not None and not args.view_hold >= 0:
         raise SpecError("view-hold", args.view_hold, "seconds >= 0")
     check_view_host(args.view_host)
+    from .hostguard import LOOPBACK   # with tornado, loaded only when a view is asked for
+
     view = LiveView(parts, host=args.view_host, port=args.view_port)
     url = view.start()
     if args.view_host not in LOOPBACK:
