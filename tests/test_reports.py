@@ -173,9 +173,18 @@ window.addEventListener("load", () => {
       e => !e.closest(".table-scroll, pre")
            && e.getBoundingClientRect().right > doc.clientWidth + 0.5).map(
       e => e.tagName.toLowerCase() + (e.className ? "." + e.className : ""));
+  // a box that hides overflow (scrolls or clips) with content wider than itself hides cells
+  const clipped = Array.from(document.body.querySelectorAll("*")).filter(e => {
+      const style = getComputedStyle(e);
+      return style.overflowX !== "visible" && e.clientWidth > 0
+             && e.scrollWidth > e.clientWidth + 1; }).map(
+      e => `${e.tagName.toLowerCase()}${e.className ? "." + e.className : ""} ` +
+           `${e.scrollWidth} px in ${e.clientWidth} px: ` +
+           e.innerText.slice(0, 80).replace(/\\s+/g, " "));
   const banner = document.querySelector(".quick-banner");
   const result = {
     clientWidth: doc.clientWidth, scrollWidth: doc.scrollWidth, outside: outside.slice(0, 8),
+    clipped: clipped.slice(0, 8),
     images: images.map(i => ({alt: i.alt, complete: i.complete, naturalWidth: i.naturalWidth,
                               shownWidth: Math.round(i.getBoundingClientRect().width)})),
     banner: banner && banner.getBoundingClientRect().height > 0 ? banner.innerText : null,
@@ -211,6 +220,7 @@ def assert_reads_cleanly(seen: dict, quick: bool) -> None:
     assert seen["clientWidth"] == WIDTH_PX
     assert seen["scrollWidth"] <= seen["clientWidth"], \
         f"page {seen['scrollWidth']} px wide; sticking out: {seen['outside']}"
+    assert not seen["clipped"], f"content hidden in boxes narrower than it: {seen['clipped']}"
     assert seen["images"], "no figure on the page"
     broken = [i["alt"] for i in seen["images"] if not (i["complete"] and i["naturalWidth"] > 0)]
     assert not broken, f"images not decoded: {broken}"
