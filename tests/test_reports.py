@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from snn_antenna import stats
 from snn_antenna.figures import draw_rate_map
 from snn_antenna.files import atomic_write
 from snn_antenna.logfile import (
@@ -343,6 +344,58 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
         assert (run.out / name).stat().st_mode & 0o044 == 0o044, f"{name} unreadable by others"
     print(f"{study}: {len(seen['images'])} images, page {seen['scrollWidth']} px, figures "
           f"shrunk to fit: {[(i['alt'], i['naturalWidth'], i['shownWidth']) for i in seen['images'] if i['naturalWidth'] > i['shownWidth']]}")
+
+
+# A quantity's range from its name: these can never be negative; F1 and fractions never pass 1.
+_NON_NEGATIVE = re.compile(r"rmse|f1|accuracy|fp_per_min|latency|rate|_hz|_mm|_s$|fraction",
+                           re.I)
+_AT_MOST_ONE = re.compile(r"(^|[_ .])f1", re.I)
+
+
+def claims_beyond_their_rules(obj, path: str = "") -> list[str]:
+    """Intervals that leave their quantity's range, and verdicts resting on too few values."""
+    bad = []
+    if isinstance(obj, dict):
+        name = path + " " + str(obj.get("quantity", ""))
+        low, high = obj.get("low"), obj.get("high")
+        if obj.get("interval") and "quantity" in obj:
+            low, high = obj["interval"]
+        if isinstance(low, (int, float)) and isinstance(high, (int, float)):
+            if _NON_NEGATIVE.search(name) and "minus" not in name and low < 0:
+                bad.append(f"{path}: {name} interval {low:g} to {high:g} below zero")
+            if _AT_MOST_ONE.search(name) and high > 1 + 1e-12:
+                bad.append(f"{path}: {name} interval {low:g} to {high:g} above one")
+        if str(obj.get("verdict", "")).startswith("resolved") and \
+                (obj.get("n") or 0) < stats.MIN_N_TO_RESOLVE:
+            bad.append(f"{path}: '{obj['verdict']}' on n = {obj.get('n')}")
+        for key, value in obj.items():
+            if key != "provenance":
+                bad += claims_beyond_their_rules(value, f"{path}.{key}")
+    elif isinstance(obj, list):
+        for i, value in enumerate(obj):
+            bad += claims_beyond_their_rules(value, f"{path}[{i}]")
+    return bad
+
+
+def test_the_claim_checker_catches_old_overclaims():
+    assert claims_beyond_their_rules(
+        {"predicted": [{"quantity": "distance rmse", "interval": [-107.8, 140.1], "n": 2}],
+         "diff": {"mean": 0.1, "low": 0.02, "high": 0.2, "n": 2, "verdict": "resolved above"},
+         "f1": {"gated": {"mean": 0.99, "low": 0.95, "high": 1.03, "n": 5}}}) and \
+        len(claims_beyond_their_rules(
+            {"predicted": [{"quantity": "distance rmse", "interval": [-107.8, 140.1]}],
+             "diff": {"low": 0.02, "high": 0.2, "n": 2, "verdict": "resolved above"},
+             "f1": {"gated": {"low": 0.95, "high": 1.03, "n": 5}}})) == 3
+    assert not claims_beyond_their_rules({"minus_nmf": {"low": -0.1, "high": 0.1, "n": 2,
+                                                        "verdict": "too small to resolve"}})
+
+
+@pytest.mark.parametrize("study", STUDIES)
+def test_a_quick_summary_claims_nothing_its_n_cannot_carry(quick_reports, study):
+    run = quick_reports.get(study)
+    assert run.summaries, f"{study}: no complete run: {run.failure}"
+    bad = claims_beyond_their_rules(run.summaries[-1])
+    assert not bad, f"{study}: {bad[:6]}"
 
 
 def test_the_known_expected_warnings_match_what_brian2_prints():
