@@ -340,8 +340,9 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
     assert run.summaries, f"{study}: no complete run to open: {run.failure}"
     seen = open_in_browser(chromium, run.report)
     assert_reads_cleanly(seen, quick=True)
-    for name in ("report.html", "summary.json"):
+    for name in ("report.html", "summary.json", "run.log"):   # README: a log in every folder
         assert (run.out / name).stat().st_mode & 0o044 == 0o044, f"{name} unreadable by others"
+    assert "=== run started" in (run.out / "run.log").read_text()
     print(f"{study}: {len(seen['images'])} images, page {seen['scrollWidth']} px, figures "
           f"shrunk to fit: {[(i['alt'], i['naturalWidth'], i['shownWidth']) for i in seen['images'] if i['naturalWidth'] > i['shownWidth']]}")
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import spec as specs
+from ..runlog import logged
 from ..errors import SpecError, check
 from ..figures import draw_rate_map
 from ..networks.assembly import configure
@@ -82,6 +83,7 @@ def build(spec: dict) -> ClosedLoop:
     return ClosedLoop(table, configured, scene, chain, readout, examples, loop)
 
 
+@logged
 def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     parts = build(spec)
     t_start = time.perf_counter()
