@@ -14,3 +14,17 @@ def test_quickstart_tells_the_scene_it_ran():
     text = _scene_text(quick, DESCRIPTION)
     assert "for 7 s" in text and "drives on for 4 s" in text and "9.5 s" not in text
     assert text.endswith("Self-motion drives the 7-8 Hz resonators.")
+
+
+def test_max_accurate_k_dt_ignores_drives_the_finest_step_already_misses():
+    import numpy as np
+
+    from snn_antenna.evaluation.accuracy import ACCURATE, INACCURATE, _largest_accurate
+
+    k_dt = np.array([0.01, 0.1, 0.5, 1.0])
+    status = np.full((4, 3), ACCURATE)
+    status[:, 2] = INACCURATE          # a near-threshold drive: wrong at every step
+    status[3, 0] = INACCURATE          # the first drive goes wrong at k·dt = 1
+    assert _largest_accurate(k_dt, status) == 0.5
+    status[0, :] = INACCURATE
+    assert _largest_accurate(k_dt, status) == 0.0
