@@ -1,9 +1,7 @@
 """Reports: every output folder holds report.html, summary.json and its figures as PNG.
 
-``summary.json`` holds the numbers and the provenance (resolved spec, seed, package and
-library versions, Brian2's code-generation target) so any figure can be regenerated. Files
-are written atomically: a reader never sees half a report. Figure parts (the rate map) are
-in ``figures``, the run's log (``run.log``) in ``logfile``.
+``summary.json`` holds the numbers and the provenance (spec, seed, versions, Brian2 target)
+so any figure can be regenerated; files are written atomically. Style: ``report_style``.
 """
 from __future__ import annotations
 
@@ -241,8 +239,7 @@ below each column name.</p>
 
 
 # -- formatting -------------------------------------------------------------------------------
-# Units a key may end with (``distance_rmse_mm``), longest first; the words between are the
-# name. Keys that are already words (with spaces) are left as they are.
+# Units a key may end with (``distance_rmse_mm``), longest first; the rest is the name.
 _UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per unit k",
           ("mm",): "mm", ("cm",): "cm", ("m",): "m", ("ms",): "ms", ("us",): "µs",
           ("s",): "s", ("hz",): "Hz", ("khz",): "kHz", ("g",): "g", ("pct",): "%",
@@ -250,7 +247,8 @@ _UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per 
           ("mb",): "MB", ("gb",): "GB"}
 _WORDS = {"f1": "F1", "rmse": "RMSE", "mae": "MAE", "cpu": "CPU", "snn": "SNN", "svm": "SVM",
           "nmf": "NMF", "fwhm": "FWHM", "ci": "CI", "adc": "ADC", "id": "ID", "dt": "dt",
-          "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP"}
+          "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP",
+          "pom": "POM", "pvc": "PVC"}   # materials: one spelling everywhere
 _NAMES = {"cpu_s": "CPU time (s)", "wall_s": "wall time (s)", "compile_s": "compile time (s)",
           "k_dt": "k·dt", "n": "n", "p_value": "p value"}
 
@@ -261,7 +259,7 @@ def label(key) -> str:
     if key in _NAMES:
         return _NAMES[key]
     if " " in key or "_" not in key:
-        return key
+        return _WORDS.get(key.lower(), key) if " " not in key else key
     words = key.split("_")
     unit = ""
     for suffix, name in sorted(_UNITS.items(), key=lambda kv: -len(kv[0])):
@@ -282,8 +280,17 @@ def fmt(value, unit: str = "", digits: int = 4) -> str:
     """``value`` as a reader wants it in a sentence or a cell: numbers to ``digits``
     significant figures (plus ``unit``), dicts as "name = value" pairs, lists inline,
     intervals with their n. Never Python's repr of a dict or a float's 17 digits."""
+    if unit and _is_number(value):
+        value, unit = _larger_unit(float(value), unit)
     text = _fmt(value, digits)
     return f"{text} {unit}" if unit and text and _is_number(value) else text
+
+
+def _larger_unit(value: float, unit: str) -> tuple[float, str]:   # 389946 µs -> 389.9 ms
+    base, _, per = unit.partition("/")
+    while base in _TIME_STEPS and abs(value) >= 1000:
+        value, base = value / 1000, _TIME_STEPS[base]
+    return value, base + ("/" + per if per else "")
 
 
 def _is_number(value) -> bool:
@@ -322,6 +329,7 @@ def _fmt(value, digits: int = 4) -> str:
 
 
 _MAX_ITEMS = 12
+_TIME_STEPS = {"ns": "µs", "µs": "ms", "ms": "s"}
 
 
 def _pair(key, value, digits) -> str:

@@ -28,3 +28,11 @@ def test_max_accurate_k_dt_ignores_drives_the_finest_step_already_misses():
     assert _largest_accurate(k_dt, status) == 0.5
     status[0, :] = INACCURATE
     assert _largest_accurate(k_dt, status) == 0.0
+
+
+def test_one_spelling_per_material_and_times_in_a_readable_unit():
+    from snn_antenna.report import fmt, label
+
+    assert label("pom") == "POM" and label("pvc") == "PVC" and fmt({"pvc": 0.9}) == "PVC = 0.9"
+    assert fmt(389946.0, "µs/event") == "389.9 ms/event" and fmt(12.5, "µs") == "12.5 µs"
+    assert fmt(2500.0, "ms") == "2.5 s"
