@@ -12,7 +12,7 @@ border-radius:4px;padding:.7em 1em;margin:1em 0}
 letter-spacing:.04em} .quick-banner span{display:block;font-weight:600;margin:.2em 0}
 .quick-banner small{display:block;color:#5c4a00}
 .table-scroll{max-width:100%;overflow-x:auto;margin:1em 0}
-table{border-collapse:collapse;font-size:.9em;max-width:100%}
+table{border-collapse:collapse;font-size:.9em;max-width:100%;overflow-wrap:break-word}
 caption{caption-side:top;text-align:left;color:#555;padding:.3em 0}
 td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right;vertical-align:top}
 th{background:#f3f3f3;font-weight:600}
