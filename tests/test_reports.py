@@ -362,7 +362,8 @@ def claims_beyond_their_rules(obj, path: str = "") -> list[str]:
         if obj.get("interval") and "quantity" in obj:
             low, high = obj["interval"]
         if isinstance(low, (int, float)) and isinstance(high, (int, float)):
-            if _NON_NEGATIVE.search(name) and "minus" not in name and low < 0:
+            signed = re.search(r"minus|−|differ", name)     # a paired difference a − b
+            if _NON_NEGATIVE.search(name) and not signed and low < 0:
                 bad.append(f"{path}: {name} interval {low:g} to {high:g} below zero")
             if _AT_MOST_ONE.search(name) and high > 1 + 1e-12:
                 bad.append(f"{path}: {name} interval {low:g} to {high:g} above one")
@@ -389,6 +390,8 @@ def test_the_claim_checker_catches_old_overclaims():
              "f1": {"gated": {"low": 0.95, "high": 1.03, "n": 5}}})) == 3
     assert not claims_beyond_their_rules({"minus_nmf": {"low": -0.1, "high": 0.1, "n": 2,
                                                         "verdict": "too small to resolve"}})
+    assert not claims_beyond_their_rules(
+        {"predicted": [{"quantity": "F1 gated − lookup table", "interval": [-0.2, -0.1]}]})
 
 
 @pytest.mark.parametrize("study", STUDIES)
