@@ -36,3 +36,11 @@ def test_one_spelling_per_material_and_times_in_a_readable_unit():
     assert label("pom") == "POM" and label("pvc") == "PVC" and fmt({"pvc": 0.9}) == "PVC = 0.9"
     assert fmt(389946.0, "µs/event") == "389.9 ms/event" and fmt(12.5, "µs") == "12.5 µs"
     assert fmt(2500.0, "ms") == "2.5 s"
+
+
+def test_the_band_advice_is_words_not_code():
+    from snn_antenna.evaluation.bands import apply_line
+
+    text = apply_line("high", {"dt_ms": 0.05, "method": "exponential_euler", "hz_per_k": 20.44})
+    assert text == "high band: step 0.05 ms, exponential_euler integration, 20.44 Hz per unit k"
+    assert "=" not in text and "Band(" not in text
