@@ -41,3 +41,9 @@ def rate_colorbar(ax, mesh, label_text: str = "spike rate (Hz)"):
     bar = ax.figure.colorbar(mesh, ax=ax, pad=0.02, fraction=0.05)
     bar.set_label(label_text)
     return bar
+
+
+def legend_outside(ax, **kwargs):
+    """A legend beside the axes, never over the data (savefig's bbox_inches="tight" keeps it)."""
+    return ax.legend(**{"loc": "upper left", "bbox_to_anchor": (1.01, 1), "borderaxespad": 0,
+                        **kwargs})

@@ -1,9 +1,7 @@
 """Reports: every output folder holds report.html, summary.json and its figures as PNG.
 
-``summary.json`` holds the numbers and the provenance (resolved spec, seed, package and
-library versions, Brian2's code-generation target) so any figure can be regenerated. Files
-are written atomically: a reader never sees half a report. Figure parts (the rate map) are
-in ``figures``, the run's log (``run.log``) in ``logfile``.
+``summary.json`` holds the numbers and the provenance (spec, seed, versions, Brian2 target)
+so any figure can be regenerated; files are written atomically. Style: ``report_style``.
 """
 from __future__ import annotations
 
@@ -20,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from .files import atomic_write
+from .report_style import CSS as _CSS
 
 
 def _jsonable(obj: Any):
@@ -239,38 +238,8 @@ below each column name.</p>
         return summary
 
 
-# The page never grows wider than its column: wide tables scroll inside their own box,
-# images shrink to fit, long words break.
-_CSS = """
-body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
-color:#222;line-height:1.4;overflow-wrap:anywhere}
-h1{font-size:1.6em} h2{margin-top:1.6em;border-bottom:1px solid #ddd}
-.quick-banner{background:#fff3cd;border:2px solid #e0a800;border-left-width:.6em;
-border-radius:4px;padding:.7em 1em;margin:1em 0}
-.quick-banner strong{display:block;font-size:1.15em;color:#7a5200;text-transform:uppercase;
-letter-spacing:.04em} .quick-banner span{display:block;font-weight:600;margin:.2em 0}
-.quick-banner small{display:block;color:#5c4a00}
-.table-scroll{max-width:100%;overflow-x:auto;margin:1em 0}
-table{border-collapse:collapse;font-size:.9em;overflow-wrap:normal}
-caption{caption-side:top;text-align:left;color:#555;padding:.3em 0}
-td,th{border:1px solid #ccc;padding:.25em .6em;text-align:right;vertical-align:top}
-th{background:#f3f3f3;font-weight:600}
-th .key{display:block;font-weight:normal;font-size:.72em;color:#888;font-family:monospace;
-white-space:nowrap}
-th.text,td.text{text-align:left} td.num{white-space:nowrap}
-table.wide{width:max-content} table.wide td.text{max-width:24em}
-table.nested{font-size:1em;margin:0;width:100%} table.nested td,table.nested th{border:0;
-border-bottom:1px solid #eee;padding:.05em .4em} table.nested th{background:none;
-text-align:left;color:#555;font-weight:normal;white-space:nowrap}
-img{max-width:100%;height:auto} figure{margin:1.2em 0}
-figcaption{color:#555;font-size:.9em}
-pre{background:#f7f7f7;padding:1em;overflow:auto;overflow-wrap:normal}
-"""
-
-
 # -- formatting -------------------------------------------------------------------------------
-# Units a key may end with (``distance_rmse_mm``), longest first; the words between are the
-# name. Keys that are already words (with spaces) are left as they are.
+# Units a key may end with (``distance_rmse_mm``), longest first; the rest is the name.
 _UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per unit k",
           ("mm",): "mm", ("cm",): "cm", ("m",): "m", ("ms",): "ms", ("us",): "µs",
           ("s",): "s", ("hz",): "Hz", ("khz",): "kHz", ("g",): "g", ("pct",): "%",
@@ -278,7 +247,8 @@ _UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per 
           ("mb",): "MB", ("gb",): "GB"}
 _WORDS = {"f1": "F1", "rmse": "RMSE", "mae": "MAE", "cpu": "CPU", "snn": "SNN", "svm": "SVM",
           "nmf": "NMF", "fwhm": "FWHM", "ci": "CI", "adc": "ADC", "id": "ID", "dt": "dt",
-          "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP"}
+          "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP",
+          "pom": "POM", "pvc": "PVC"}   # materials: one spelling everywhere
 _NAMES = {"cpu_s": "CPU time (s)", "wall_s": "wall time (s)", "compile_s": "compile time (s)",
           "k_dt": "k·dt", "n": "n", "p_value": "p value"}
 
@@ -289,7 +259,7 @@ def label(key) -> str:
     if key in _NAMES:
         return _NAMES[key]
     if " " in key or "_" not in key:
-        return key
+        return _WORDS.get(key.lower(), key) if " " not in key else key
     words = key.split("_")
     unit = ""
     for suffix, name in sorted(_UNITS.items(), key=lambda kv: -len(kv[0])):
@@ -310,8 +280,17 @@ def fmt(value, unit: str = "", digits: int = 4) -> str:
     """``value`` as a reader wants it in a sentence or a cell: numbers to ``digits``
     significant figures (plus ``unit``), dicts as "name = value" pairs, lists inline,
     intervals with their n. Never Python's repr of a dict or a float's 17 digits."""
+    if unit and _is_number(value):
+        value, unit = _larger_unit(float(value), unit)
     text = _fmt(value, digits)
     return f"{text} {unit}" if unit and text and _is_number(value) else text
+
+
+def _larger_unit(value: float, unit: str) -> tuple[float, str]:   # 389946 µs -> 389.9 ms
+    base, _, per = unit.partition("/")
+    while base in _TIME_STEPS and abs(value) >= 1000:
+        value, base = value / 1000, _TIME_STEPS[base]
+    return value, base + ("/" + per if per else "")
 
 
 def _is_number(value) -> bool:
@@ -350,6 +329,7 @@ def _fmt(value, digits: int = 4) -> str:
 
 
 _MAX_ITEMS = 12
+_TIME_STEPS = {"ns": "µs", "µs": "ms", "ms": "s"}
 
 
 def _pair(key, value, digits) -> str:
@@ -408,26 +388,52 @@ def _summary_statistic(d: dict, digits: int) -> str | None:
 
 
 def _table_html(rows: list[dict], caption: str = "") -> str:
+    """Rows as a table every cell of which is visible on a 1,000 px page and on A4.
+
+    Up to WIDE_COLUMNS columns fit with their text wrapped. A wider table with few rows is
+    transposed (one row per quantity); one with many rows too is split into column groups,
+    each repeating the first column so a reader knows which row a number belongs to."""
     cols = list(dict.fromkeys(c for r in rows for c in r))
+    cap = f"<caption>{html.escape(fmt(caption))}</caption>" if caption else ""
+    if len(cols) <= WIDE_COLUMNS:
+        return _plain_table(rows, cols, cap)
+    if len(rows) < WIDE_COLUMNS:
+        return _transposed_table(rows, cols, cap)
+    first, rest = cols[0], cols[1:]
+    step = WIDE_COLUMNS - 1
+    groups = [rest[i:i + step] for i in range(0, len(rest), step)]
+    return "".join(_plain_table(rows, [first] + g, cap if i == 0 else "")
+                   for i, g in enumerate(groups))
+
+
+def _plain_table(rows: list[dict], cols: list, cap: str) -> str:
     numeric = {c for c in cols if all(r.get(c) is None or _is_number(r.get(c)) for r in rows)}
     head = "".join(_header_html(c, c in numeric) for c in cols)
     body = "".join("<tr>" + "".join(_cell_html(r.get(c)) for c in cols) + "</tr>"
                    for r in rows)
-    cap = f"<caption>{html.escape(fmt(caption))}</caption>" if caption else ""
-    # Up to WIDE_COLUMNS columns fit the page with their text wrapped; wider tables keep
-    # their lines and scroll sideways inside their own box.
-    wide = ' class="wide"' if len(cols) > WIDE_COLUMNS else ""
-    return (f'<div class="table-scroll"><table{wide}>{cap}<thead><tr>{head}</tr></thead>'
+    return (f'<div class="table-scroll"><table>{cap}<thead><tr>{head}</tr></thead>'
             f"<tbody>{body}</tbody></table></div>")
+
+
+def _transposed_table(rows: list[dict], cols: list, cap: str) -> str:
+    head = "<th class=\"text\">quantity</th>" + "".join(
+        f'<th class="num">{"row " + str(i + 1) if len(rows) > 1 else "value"}</th>'
+        for i in range(len(rows)))
+    body = "".join("<tr>" + _header_html(c, False, row=True)
+                   + "".join(_cell_html(r.get(c)) for r in rows) + "</tr>" for c in cols)
+    return (f'<div class="table-scroll"><table class="transposed">{cap}<thead><tr>{head}'
+            f"</tr></thead><tbody>{body}</tbody></table></div>")
 
 
 WIDE_COLUMNS = 8
 
 
-def _header_html(key, numeric: bool) -> str:
+def _header_html(key, numeric: bool, row: bool = False) -> str:
     name = label(key)
     key_html = f'<span class="key">{html.escape(str(key))}</span>' if name != str(key) else ""
-    return f'<th class="{"num" if numeric else "text"}">{html.escape(name)}{key_html}</th>'
+    scope = ' scope="row"' if row else ""
+    return (f'<th class="{"num" if numeric else "text"}"{scope}>'
+            f"{html.escape(name)}{key_html}</th>")
 
 
 def _cell_html(value) -> str:

@@ -67,7 +67,7 @@ def test_high_band_inside_the_range_is_closer_to_the_reference_than_before():
     assert after["cpu_ms_per_event"] > 0 and after["ns_per_neuron_step"] > 0
     chosen = bands.choose([before, after], 0.05)
     assert chosen is after
-    assert "dt_ms=0.001, method='rk4'" in bands.apply_line("high", chosen)
+    assert "step 0.001 ms, rk4 integration" in bands.apply_line("high", chosen)
 
 
 def test_truncation_error_counts_the_reference_spikes_after_the_window():

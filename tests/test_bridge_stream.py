@@ -43,7 +43,7 @@ def test_stream_detects_a_contact_live_and_records_everything(tmp_path):
     try:
         result = subprocess.run(
             [*CLI, "stream", "--port", link.path, "--network", NETWORK, "--out",
-             tmp_path / "rec", "--duration", "8", "--set", "preprocess.threshold=0.05"],
+             tmp_path / "rec", "--duration", "8", "--json", "--set", "preprocess.threshold=0.05"],
             capture_output=True, text=True, timeout=150)
     finally:
         server.join(10)

@@ -154,7 +154,7 @@ def test_one_window_contact_streams(tmp_path, one_window_counts):
     try:
         result = subprocess.run(
             [*CLI, "stream", "--port", link.path, "--network", str(NETWORK), "--out",
-             str(tmp_path / "rec"), "--duration", "9", *ONE_WINDOW],
+             str(tmp_path / "rec"), "--duration", "9", "--json", *ONE_WINDOW],
             capture_output=True, text=True, timeout=300)
     finally:
         server.join(10)

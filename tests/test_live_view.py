@@ -154,7 +154,7 @@ def stream_from_emulator(tmp_path, counts, name, view: bool):
     server = threading.Thread(target=serve, daemon=True)
     server.start()
     cmd = [*CLI, "stream", "--port", link.path, "--network", NETWORK, "--out", tmp_path / name,
-           "--duration", "7", *TH]
+           "--duration", "7", "--json", *TH]
     clients = None
     try:
         if not view:

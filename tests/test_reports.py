@@ -23,6 +23,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
+from snn_antenna import stats
 from snn_antenna.figures import draw_rate_map
 from snn_antenna.files import atomic_write
 from snn_antenna.logfile import (
@@ -173,9 +174,18 @@ window.addEventListener("load", () => {
       e => !e.closest(".table-scroll, pre")
            && e.getBoundingClientRect().right > doc.clientWidth + 0.5).map(
       e => e.tagName.toLowerCase() + (e.className ? "." + e.className : ""));
+  // a box that hides overflow (scrolls or clips) with content wider than itself hides cells
+  const clipped = Array.from(document.body.querySelectorAll("*")).filter(e => {
+      const style = getComputedStyle(e);
+      return style.overflowX !== "visible" && e.clientWidth > 0
+             && e.scrollWidth > e.clientWidth + 1; }).map(
+      e => `${e.tagName.toLowerCase()}${e.className ? "." + e.className : ""} ` +
+           `${e.scrollWidth} px in ${e.clientWidth} px: ` +
+           e.innerText.slice(0, 80).replace(/\\s+/g, " "));
   const banner = document.querySelector(".quick-banner");
   const result = {
     clientWidth: doc.clientWidth, scrollWidth: doc.scrollWidth, outside: outside.slice(0, 8),
+    clipped: clipped.slice(0, 8),
     images: images.map(i => ({alt: i.alt, complete: i.complete, naturalWidth: i.naturalWidth,
                               shownWidth: Math.round(i.getBoundingClientRect().width)})),
     banner: banner && banner.getBoundingClientRect().height > 0 ? banner.innerText : null,
@@ -211,6 +221,7 @@ def assert_reads_cleanly(seen: dict, quick: bool) -> None:
     assert seen["clientWidth"] == WIDTH_PX
     assert seen["scrollWidth"] <= seen["clientWidth"], \
         f"page {seen['scrollWidth']} px wide; sticking out: {seen['outside']}"
+    assert not seen["clipped"], f"content hidden in boxes narrower than it: {seen['clipped']}"
     assert seen["images"], "no figure on the page"
     broken = [i["alt"] for i in seen["images"] if not (i["complete"] and i["naturalWidth"] > 0)]
     assert not broken, f"images not decoded: {broken}"
@@ -329,10 +340,66 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
     assert run.summaries, f"{study}: no complete run to open: {run.failure}"
     seen = open_in_browser(chromium, run.report)
     assert_reads_cleanly(seen, quick=True)
-    for name in ("report.html", "summary.json"):
+    for name in ("report.html", "summary.json", "run.log"):   # README: a log in every folder
         assert (run.out / name).stat().st_mode & 0o044 == 0o044, f"{name} unreadable by others"
+    assert "=== run started" in (run.out / "run.log").read_text()
     print(f"{study}: {len(seen['images'])} images, page {seen['scrollWidth']} px, figures "
           f"shrunk to fit: {[(i['alt'], i['naturalWidth'], i['shownWidth']) for i in seen['images'] if i['naturalWidth'] > i['shownWidth']]}")
+
+
+# A quantity's range from its name: these can never be negative; F1 and fractions never pass 1.
+_NON_NEGATIVE = re.compile(r"rmse|f1|accuracy|fp_per_min|latency|rate|_hz|_mm|_s$|fraction",
+                           re.I)
+_AT_MOST_ONE = re.compile(r"(^|[_ .])f1", re.I)
+
+
+def claims_beyond_their_rules(obj, path: str = "") -> list[str]:
+    """Intervals that leave their quantity's range, and verdicts resting on too few values."""
+    bad = []
+    if isinstance(obj, dict):
+        name = path + " " + str(obj.get("quantity", ""))
+        low, high = obj.get("low"), obj.get("high")
+        if obj.get("interval") and "quantity" in obj:
+            low, high = obj["interval"]
+        if isinstance(low, (int, float)) and isinstance(high, (int, float)):
+            signed = re.search(r"minus|−|differ", name)     # a paired difference a − b
+            if _NON_NEGATIVE.search(name) and not signed and low < 0:
+                bad.append(f"{path}: {name} interval {low:g} to {high:g} below zero")
+            if _AT_MOST_ONE.search(name) and high > 1 + 1e-12:
+                bad.append(f"{path}: {name} interval {low:g} to {high:g} above one")
+        if str(obj.get("verdict", "")).startswith("resolved") and \
+                (obj.get("n") or 0) < stats.MIN_N_TO_RESOLVE:
+            bad.append(f"{path}: '{obj['verdict']}' on n = {obj.get('n')}")
+        for key, value in obj.items():
+            if key != "provenance":
+                bad += claims_beyond_their_rules(value, f"{path}.{key}")
+    elif isinstance(obj, list):
+        for i, value in enumerate(obj):
+            bad += claims_beyond_their_rules(value, f"{path}[{i}]")
+    return bad
+
+
+def test_the_claim_checker_catches_old_overclaims():
+    assert claims_beyond_their_rules(
+        {"predicted": [{"quantity": "distance rmse", "interval": [-107.8, 140.1], "n": 2}],
+         "diff": {"mean": 0.1, "low": 0.02, "high": 0.2, "n": 2, "verdict": "resolved above"},
+         "f1": {"gated": {"mean": 0.99, "low": 0.95, "high": 1.03, "n": 5}}}) and \
+        len(claims_beyond_their_rules(
+            {"predicted": [{"quantity": "distance rmse", "interval": [-107.8, 140.1]}],
+             "diff": {"low": 0.02, "high": 0.2, "n": 2, "verdict": "resolved above"},
+             "f1": {"gated": {"low": 0.95, "high": 1.03, "n": 5}}})) == 3
+    assert not claims_beyond_their_rules({"minus_nmf": {"low": -0.1, "high": 0.1, "n": 2,
+                                                        "verdict": "too small to resolve"}})
+    assert not claims_beyond_their_rules(
+        {"predicted": [{"quantity": "F1 gated − lookup table", "interval": [-0.2, -0.1]}]})
+
+
+@pytest.mark.parametrize("study", STUDIES)
+def test_a_quick_summary_claims_nothing_its_n_cannot_carry(quick_reports, study):
+    run = quick_reports.get(study)
+    assert run.summaries, f"{study}: no complete run: {run.failure}"
+    bad = claims_beyond_their_rules(run.summaries[-1])
+    assert not bad, f"{study}: {bad[:6]}"
 
 
 def test_the_known_expected_warnings_match_what_brian2_prints():

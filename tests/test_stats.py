@@ -30,8 +30,46 @@ def test_interval_spanning_zero_is_not_resolved():
     assert iv.low < 0 < iv.high
     assert not iv.resolved and iv.verdict == "not resolved"
     assert "not resolved" in str(iv)
-    clear = stats.mean_interval([0.05, 0.06, 0.055, 0.052])
+    clear = stats.mean_interval([0.05, 0.06, 0.055, 0.052, 0.058])
     assert clear.resolved and clear.verdict == "resolved above zero"
+
+
+def test_no_verdict_below_the_documented_n():
+    # gating's old "p = 0.024: resolved" on 2 seeds
+    few = stats.paired_difference([0.91, 0.93], [0.80, 0.83])
+    assert few.n < stats.MIN_N_TO_RESOLVE and few.low > 0
+    assert not few.resolved and few.verdict.startswith("too small to resolve")
+    assert not stats.mean_interval([0.05, 0.06, 0.055, 0.052]).resolved
+    assert "MIN_N_TO_RESOLVE" in open("docs/reference.md").read() or \
+        f"n ≥ {stats.MIN_N_TO_RESOLVE}" in open("docs/reference.md").read()
+
+
+def test_a_positive_quantity_keeps_a_positive_interval():
+    # the old "distance rmse 16 mm (95 % CI -107.8 to 140.1, n = 2)"
+    rmse = [6.4, 25.9]
+    assert stats.mean_interval(rmse).low < 0           # Student t runs below zero
+    iv = stats.mean_interval(rmse, bounds=(0.0, np.inf))
+    assert 0 <= iv.low <= iv.mean <= iv.high
+    f1 = stats.mean_interval([0.97, 1.0, 0.99, 1.0, 0.98], bounds=(0.0, 1.0))
+    assert 0 <= f1.low and f1.high <= 1
+    assert stats.mean_interval(rmse, bounds=(0, np.inf)) == \
+        stats.mean_interval(rmse, bounds=(0, np.inf))   # seeded: reruns agree
+    with pytest.raises(SpecError, match="range"):
+        stats.mean_interval([-1.0, 2.0], bounds=(0.0, np.inf))
+
+
+def test_seeds_needed_is_exact_t_power():
+    diffs = [0.1, -0.05, 0.08, -0.02, 0.06]
+    sd = np.std(diffs, ddof=1)
+    n = stats.seeds_needed(diffs, 0.05)
+    assert stats.t_test_power(n, 0.05 / sd) >= 0.8 > stats.t_test_power(n - 1, 0.05 / sd)
+    z = sps.norm.ppf(0.975) + sps.norm.ppf(0.8)
+    assert n > np.ceil((z * sd / 0.05) ** 2)          # the normal approximation undercounts
+    # the noncentral-t power agrees with simulated paired t-tests
+    rng = np.random.default_rng(1)
+    sims = rng.normal(0.05, sd, (20000, n))
+    p = sps.ttest_1samp(sims, 0.0, axis=1).pvalue
+    assert np.mean(p < 0.05) == pytest.approx(stats.t_test_power(n, 0.05 / sd), abs=0.015)
 
 
 def test_seeds_needed_grows_with_spread_and_shrinks_with_margin():

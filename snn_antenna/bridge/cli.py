@@ -63,8 +63,10 @@ def add_subcommands(subparsers) -> None:
                    help="frames to send (default: the stimulus's length; a scene loops)")
     p.add_argument("--faults", default="", help="e.g. garbage=3,drop=2,bitflip=2,range=1,"
                                                 "stall=1,disconnect=1,stall_s=0.2,outage_s=0.5")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--format", choices=WIRE_FORMATS, default="binary")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the stimulus noise and of where faults fall (default 0)")
+    p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
+                   help="wire format of the frames (default binary)")
     p.add_argument("--fast", action="store_true", help="as fast as the link takes, not 1 kHz")
     p.add_argument("--peer-timeout", type=float, default=None,
                    help="give up if nobody opens the pty within this many seconds")
@@ -83,6 +85,9 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
     _set_arg(p)
     add_view_args(p)
+    p.add_argument("--json", action="store_true",
+                   help="end with the full run report as JSON (for machines) instead of the "
+                        "short summary")
     p.set_defaults(func=cmd_stream)
 
 
@@ -95,8 +100,10 @@ def _set_arg(p) -> None:
 def _port_args(p) -> None:
     p.add_argument("--port", required=True,
                    help="device path (/dev/ttyACM0) or pyserial URL (socket://host:port, ...)")
-    p.add_argument("--format", choices=WIRE_FORMATS, default="binary")
-    p.add_argument("--baudrate", type=int, default=DEFAULT_BAUDRATE)
+    p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
+                   help="wire format the board sends (default binary)")
+    p.add_argument("--baudrate", type=int, default=DEFAULT_BAUDRATE,
+                   help=f"serial speed in bit/s (default {DEFAULT_BAUDRATE}; ignored by URLs)")
     p.add_argument("--no-data-timeout", type=float, default=5.0,
                    help="fail when no valid frame arrives for this many seconds (default 5; a "
                         "board reset by opening the port is silent for 1-3 s)")
@@ -371,8 +378,25 @@ def cmd_stream(args) -> int:
         report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
                             stop=stop, display=LiveDisplay(sys.stdout), view=view)
-    print(json.dumps(report, indent=1))
+    print(json.dumps(report, indent=1) if args.json else stream_summary(report, args.out))
     return 0
+
+
+def stream_summary(report: dict, out) -> str:
+    """What a person wants at the end of a live run, in four lines (--json has the rest)."""
+    from ..report import fmt
+
+    lat = report["latency_ms"]
+    contacts = report.get("contacts")
+    n_contacts = len(contacts) if isinstance(contacts, (list, tuple)) else contacts
+    return "\n".join([
+        f"streamed {fmt(report['simulated_s'], 's')} of signal ({report['samples']} samples, "
+        f"{report['windows']} windows) in {fmt(report['wall_s'], 's')}: "
+        f"{fmt(report['realtime_factor'])}× real time",
+        f"latency, sample to rate map: median {fmt(lat['median'], 'ms')}, "
+        f"95th percentile {fmt(lat['p95'], 'ms')}, max {fmt(lat['max'], 'ms')}",
+        f"contacts: {fmt(n_contacts)}; link: {format_counts(report['counts'])}",
+        f"recording in {out} (--json prints the full report)"])
 
 
 def _check_duration(duration) -> None:

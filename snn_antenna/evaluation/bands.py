@@ -432,11 +432,11 @@ def choose(rows: list[dict], tolerance: float) -> dict | None:
 
 
 def apply_line(name: str, chosen: dict | None) -> str:
-    """What to set in ``readout.spiking`` (the Band's fields) for the chosen setting."""
+    """In words, what to set for the chosen setting (the fields of the readout.spiking band)."""
     if chosen is None:
         return f"{name}: no candidate setting met the rate-map tolerance"
-    return (f"set {name.upper()}_BAND = Band(..., dt_ms={chosen['dt_ms']:g}, "
-            f"method={chosen['method']!r}, hz_per_k={chosen['hz_per_k']:.4g})")
+    return (f"{name} band: step {chosen['dt_ms']:g} ms, {chosen['method']} integration, "
+            f"{chosen['hz_per_k']:.4g} Hz per unit k")
 
 
 def run_study(study: BandStudy, seed: int = 0, log=print) -> dict:

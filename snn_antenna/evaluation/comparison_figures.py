@@ -10,6 +10,7 @@ from .comparison import cost_items, label
 from .confusion import confusion
 from .signal import PAPER_SIGNAL
 from ..readout.spiking_decoders import TRAINING_FREE
+from ..figures import legend_outside
 
 # Half-width (cm) of the horizontal jitter that separates the contacts of one site.
 SITE_JITTER_CM = 0.3
@@ -39,7 +40,7 @@ def frequency_laws(feats, cal):
     ax.set_yscale("log")
     ax.set_xlabel("contact distance (cm)")
     ax.set_ylabel("peak frequency (Hz)")
-    ax.legend(markerscale=5)
+    legend_outside(ax, markerscale=5)
     return fig
 
 
@@ -61,7 +62,7 @@ def decay_times(feats):
                     marker="o", ms=3, capsize=2, label=name)
     ax.set_xlabel("contact distance (cm)")
     ax.set_ylabel("τ_low (ms)")
-    ax.legend()
+    legend_outside(ax)
     return fig
 
 
@@ -121,7 +122,7 @@ def nmf_basis(result, feats):
     ax.set_xlim(2, freq.max())
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("weight (normalised)")
-    ax.legend(fontsize=6, ncol=3)
+    legend_outside(ax, fontsize=6, ncol=3)
     return fig
 
 
@@ -147,7 +148,7 @@ def nmf_accuracy(summary):
         ax.scatter([], [], color="tab:red", label="spiking (x: resonators)")
     ax.set_xlabel("filters: NMF dimension, or resonators (spiking)")
     ax.set_ylabel("8-material accuracy (%)")
-    ax.legend()
+    legend_outside(ax)
     return fig
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .thresholds import GateRecall, f1_at
+from ..figures import legend_outside
 
 
 def pyplot():
@@ -56,7 +57,7 @@ def f1_per_category(comparison: dict):
     ax.set_xticks(range(len(rows)), [r["scenes"] for r in rows])
     ax.set_ylabel("F1 (mean over seeds, 95 % CI)")
     ax.set_ylim(-0.02, 1.02)
-    ax.legend(fontsize=8, loc="lower left")
+    legend_outside(ax, fontsize=8)
     fig.tight_layout()
     return fig
 
@@ -83,7 +84,8 @@ def f1_curves(ds):
         ax.set_xlabel("Th (g; leftmost point: Th = 0)")
         ax.set_ylabel(lab)
         ax.tick_params(axis="x", labelrotation=45)
-    axes[0].legend(title="cm/s", fontsize=7, ncol=2)
+    legend_outside(axes[-1], handles=axes[0].get_legend_handles_labels()[0], title="cm/s",
+                   fontsize=7, ncol=2)
     fig.tight_layout()
     return fig
 
@@ -99,7 +101,7 @@ def gate_recall(recall: GateRecall):
     th_axis(a0, np.exp(err.mean(1)))
     a0.set_xlabel("epoch")
     a0.set_ylabel("recall error factor (×)")
-    a0.legend()
+    a0.legend()   # the right-hand panel sits where an outside legend would go
     v, recalled = recall.speeds_cm_s, recall.recalled_g
     a1.plot(v, th_star, "k.-", label="Th* (sweep)")
     a1.plot(v[~held_out], recalled[~held_out], "o", color="tab:blue", label="gate, trained")
@@ -109,7 +111,7 @@ def gate_recall(recall: GateRecall):
     th_axis(a1, np.r_[th_star, recalled])
     a1.set_xlabel("speed (cm/s)")
     a1.set_ylabel("Th (g)")
-    a1.legend(fontsize=8)
+    legend_outside(a1, fontsize=8)
     fig.tight_layout()
     return fig
 
@@ -129,6 +131,6 @@ def f1_methods(comparison: dict):
     ax.set_ylim(max(-0.02, ax.get_ylim()[0]), min(1.02, ax.get_ylim()[1]))
     ax.set_xlabel("fixed Th (g)")
     ax.set_ylabel("F1 over all evaluation scenes")
-    ax.legend(fontsize=8)
+    legend_outside(ax, fontsize=8)
     fig.tight_layout()
     return fig

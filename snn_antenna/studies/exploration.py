@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import spec as specs
+from ..runlog import logged
 from ..errors import SpecError, check
 from ..figures import draw_rate_map
 from ..networks.assembly import configure
@@ -82,6 +83,7 @@ def build(spec: dict) -> ClosedLoop:
     return ClosedLoop(table, configured, scene, chain, readout, examples, loop)
 
 
+@logged
 def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     parts = build(spec)
     t_start = time.perf_counter()
@@ -253,7 +255,7 @@ def _figure(robot: RobotRecord, scene: CourseScene, contact_times_s: list):
     a0.plot(t, pan, label="pan")
     a0.plot(t, tilt, label="tilt")
     a0.set_ylabel("angle (deg)")
-    a0.legend(fontsize=8)
+    a0.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1), borderaxespad=0)
     a1 = fig.add_subplot(gs[1, 0], sharex=a0)
     a1.plot(t, robot.speed, color="k")
     a1.set_ylabel("speed (cm/s)")
@@ -275,13 +277,14 @@ def _figure(robot: RobotRecord, scene: CourseScene, contact_times_s: list):
     reach = antenna.ROD_LENGTH_CM * np.cos(np.deg2rad(tilt))
     tip_x = robot.x_cm + reach * np.cos(np.deg2rad(pan))
     tip_y = reach * np.sin(np.deg2rad(pan))
-    a3.scatter(tip_y, tip_x, c=t, s=3, cmap="viridis")
+    path = a3.scatter(tip_y, tip_x, c=t, s=3, cmap="viridis")
+    fig.colorbar(path, ax=a3, label="time (s)", shrink=0.6, pad=0.02)
     a3.plot(np.zeros_like(robot.x_cm), robot.x_cm, color="k", lw=2, label="robot path")
     for ob in scene.obstacles:
         a3.add_patch(plt.Circle((ob.y_cm, ob.x_cm), max(ob.radius_cm, 1.0), color="tab:brown"))
     a3.set_aspect("equal")
     a3.set_xlabel("left (cm)")
     a3.set_ylabel("forward (cm)")
-    a3.set_title("tip path (colour: time)", fontsize=9)
+    a3.set_title("antenna tip path", fontsize=9)
     fig.tight_layout()
     return fig

@@ -23,6 +23,7 @@ import numpy as np
 import xarray as xr
 
 from .. import spec as specs
+from ..runlog import logged
 from ..errors import check
 from ..figures import draw_rate_map
 from ..networks import neurons
@@ -129,6 +130,21 @@ def score(readout: ReadOut, contacts, duration_s: float, parts: Parts) -> dict:
             "contacts": per_contact}
 
 
+def _scene_text(scene, description: str) -> str:
+    """The scene this run drove (its profile's speed, contacts and length), then the spec's
+    description after its first sentence, which tells the full profile's scene."""
+    import re
+
+    touches = "; ".join(f"at {c.t_s:g} s on {c.material} {c.distance_cm:g} cm along the rod"
+                        for c in scene.contacts) or "nothing"
+    last = max((c.t_s for c in scene.contacts), default=0.0)
+    rest = re.split(r"\.\s+(?=[A-Z])", description, maxsplit=1)
+    return (f"A robot drives at {scene.speed_cm_s:g} cm/s for {scene.duration_s:g} s; its "
+            f"antenna touches {touches}, then it drives on for {scene.duration_s - last:g} s. "
+            + (rest[1] if len(rest) > 1 else ""))
+
+
+@logged
 def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
     parts = build(spec)
     scene, array = parts.scene, parts.array
@@ -166,7 +182,7 @@ def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
     report = Report(out_dir, "snn-antenna quickstart: contacts on a driving robot", quick=quick,
                     quick_note="quick profile: a shorter scene with fewer contacts; its "
                                "false-positive rate rests on too few minutes to compare")
-    report.text(spec.get("description", ""))
+    report.text(_scene_text(parts.scene, spec.get("description", "")))
     _provenance_rows(report, summary, parts)
     report.table([{"quantity": "true positives", "value": scored["tp"]},
                   {"quantity": "misses", "value": scored["misses"]},

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import spec as specs
+from ...runlog import logged
 from ...engine.events import cached_features, run_bank, run_cost
 from ...engine.executor import executor
 from ...errors import SpecError
@@ -85,6 +86,7 @@ def build(spec: dict) -> StudySpec:
                      *_spiking_part(spec, bench_spec.rate_hz))
 
 
+@logged
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         scheduler: str | None = None, log=print) -> dict:
     parts = build(spec)

@@ -10,7 +10,6 @@ from ...evaluation.comparison import (
     cost_rows,
     data_text,
     design_rows,
-    interval,
     label,
     result_rows,
     spiking_cost_text,
@@ -19,6 +18,7 @@ from ...evaluation.comparison import (
 )
 from ...evaluation.confusion import confusion, confusion_sentence, error_rates
 from ...readout.spiking_decoders import TRAINING_FREE
+from ... import stats
 from ...report import Calibrated, Predicted, Report
 
 SOURCE = "paper (docs/reference.md)"
@@ -59,10 +59,17 @@ def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
 
 def _measured(quantity: str, values, unit: str, paper, scale: float = 1.0, *,
               source: str = SOURCE, note: str = "") -> Predicted:
-    """A prediction from per-seed values: ``scale`` × their mean, with its interval."""
-    values = np.asarray(values, dtype=float)
-    return Predicted(quantity, scale * float(values.mean()), unit, paper, source,
-                     *interval(scale * values), note)
+    """A prediction from per-seed values: ``scale`` × their mean, with its interval. Every
+    quantity here (an rmse, an accuracy) is ≥ 0: its interval is the bounded one
+    (docs/reference.md, "Statistics rules"), and below the rule's n it carries no verdict."""
+    values = scale * np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return Predicted(quantity, float(values.mean()), unit, paper, source, None,
+                         len(values), note)
+    iv = stats.mean_interval(values, bounds=(0.0, np.inf))
+    if iv.n < stats.MIN_N_TO_RESOLVE:
+        note = "; ".join(filter(None, [note, iv.verdict]))
+    return Predicted(quantity, iv.mean, unit, paper, source, (iv.low, iv.high), iv.n, note)
 
 
 def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:

@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import spec as specs
+from ...runlog import logged
 from ...engine.batches import ScoredCodings
 from ...engine.executor import executor
 from ...engine.grid import Grid
@@ -230,6 +231,7 @@ def evaluate(evaluation: Evaluation, log) -> SeedPlan:
     return SeedPlan(ev.pilot_seeds, needed, used, ev.max_seeds, ev.margin_f1)
 
 
+@logged
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
         scheduler: str | None = None, log=print) -> dict:
     parts, out_dir, t_start = build(spec), Path(out_dir), time.perf_counter()

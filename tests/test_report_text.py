@@ -1,0 +1,46 @@
+"""Report prose comes from the run, not from the full profile's description."""
+from types import SimpleNamespace
+
+from snn_antenna.studies.quickstart import _scene_text
+
+DESCRIPTION = ("A robot drives at 12 cm/s and keeps driving; at 5.5 s its antenna touches an "
+               "obstacle 19 cm along the rod (the paper's Fig. 10), then it drives on for "
+               "9.5 s. Self-motion drives the 7-8 Hz resonators.")
+
+
+def test_quickstart_tells_the_scene_it_ran():
+    quick = SimpleNamespace(speed_cm_s=12.0, duration_s=7.0, contacts=[
+        SimpleNamespace(t_s=3.0, material="wood", distance_cm=19.0)])
+    text = _scene_text(quick, DESCRIPTION)
+    assert "for 7 s" in text and "drives on for 4 s" in text and "9.5 s" not in text
+    assert text.endswith("Self-motion drives the 7-8 Hz resonators.")
+
+
+def test_max_accurate_k_dt_ignores_drives_the_finest_step_already_misses():
+    import numpy as np
+
+    from snn_antenna.evaluation.accuracy import ACCURATE, INACCURATE, _largest_accurate
+
+    k_dt = np.array([0.01, 0.1, 0.5, 1.0])
+    status = np.full((4, 3), ACCURATE)
+    status[:, 2] = INACCURATE          # a near-threshold drive: wrong at every step
+    status[3, 0] = INACCURATE          # the first drive goes wrong at k·dt = 1
+    assert _largest_accurate(k_dt, status) == 0.5
+    status[0, :] = INACCURATE
+    assert _largest_accurate(k_dt, status) == 0.0
+
+
+def test_one_spelling_per_material_and_times_in_a_readable_unit():
+    from snn_antenna.report import fmt, label
+
+    assert label("pom") == "POM" and label("pvc") == "PVC" and fmt({"pvc": 0.9}) == "PVC = 0.9"
+    assert fmt(389946.0, "µs/event") == "389.9 ms/event" and fmt(12.5, "µs") == "12.5 µs"
+    assert fmt(2500.0, "ms") == "2.5 s"
+
+
+def test_the_band_advice_is_words_not_code():
+    from snn_antenna.evaluation.bands import apply_line
+
+    text = apply_line("high", {"dt_ms": 0.05, "method": "exponential_euler", "hz_per_k": 20.44})
+    assert text == "high band: step 0.05 ms, exponential_euler integration, 20.44 Hz per unit k"
+    assert "=" not in text and "Band(" not in text
