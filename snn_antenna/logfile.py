@@ -8,6 +8,7 @@ the toolkit causes.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import logging
 import os
 import re
@@ -141,3 +142,16 @@ class _ExpectedFilter(logging.Filter):
 
     def filter(self, record: logging.LogRecord) -> bool:
         return not self.owner._swallow(record.getMessage())
+
+
+# ``@logged``: a study's ``run`` keeps everything it says in ``OUT/run.log``; one decorator so
+# every output folder gets its log the same way, and a study that needs ``log.expected(...)``
+# blocks still gets a LogFile as its ``log``.
+def logged(run_study):
+    @functools.wraps(run_study)
+    def run(spec, out_dir, *args, log=print, **kwargs):
+        if isinstance(log, LogFile):      # already kept by the caller
+            return run_study(spec, out_dir, *args, log=log, **kwargs)
+        with LogFile(out_dir, log) as kept:
+            return run_study(spec, out_dir, *args, log=kept, **kwargs)
+    return run

@@ -1,8 +1,8 @@
 """The package's layout shows its data flow, and imports follow it.
 
 sources → preprocess → networks → readout → evaluation → engine → report → studies → bridge →
-cli, over a core (errors, signals, truth, spec, stats, store, files, parallel) every stage may
-use. A module may import from its
+cli, over a core (errors, signals, truth, spec, stats, store, files, parallel, figures) every
+stage may use. A module may import from its
 own stage or an earlier one, never from a later one, and no two modules import each other,
 directly or through others (imports inside functions count: a lazy import is still a
 dependency).
@@ -23,14 +23,14 @@ STAGES = [
     ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.truth",
               "snn_antenna.spec",
               "snn_antenna.stats", "snn_antenna.store", "snn_antenna.files",
-              "snn_antenna.parallel"]),
+              "snn_antenna.parallel", "snn_antenna.figures"]),
     ("sources", ["snn_antenna.sources"]),
     ("preprocess", ["snn_antenna.preprocess"]),
     ("networks", ["snn_antenna.networks"]),
     ("readout", ["snn_antenna.readout"]),
     ("evaluation", ["snn_antenna.evaluation"]),
     ("engine", ["snn_antenna.engine"]),
-    ("report", ["snn_antenna.report", "snn_antenna.outputs", "snn_antenna.figures",
+    ("report", ["snn_antenna.report", "snn_antenna.report_style", "snn_antenna.outputs",
                 "snn_antenna.logfile"]),
     ("studies", ["snn_antenna.studies"]),
     ("bridge", ["snn_antenna.bridge"]),

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import spec as specs
-from ..runlog import logged
+from ..logfile import logged
 from ..errors import SpecError, check
 from ..figures import draw_rate_map
 from ..networks.assembly import configure

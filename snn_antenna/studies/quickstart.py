@@ -23,7 +23,7 @@ import numpy as np
 import xarray as xr
 
 from .. import spec as specs
-from ..runlog import logged
+from ..logfile import logged
 from ..errors import check
 from ..figures import draw_rate_map
 from ..networks import neurons

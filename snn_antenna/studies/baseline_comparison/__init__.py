@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import spec as specs
-from ...runlog import logged
+from ...logfile import logged
 from ...engine.events import cached_features, run_bank, run_cost
 from ...engine.executor import executor
 from ...errors import SpecError

@@ -42,7 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from ... import spec as specs
-from ...runlog import logged
+from ...logfile import logged
 from ...engine.batches import ScoredCodings
 from ...engine.executor import executor
 from ...engine.grid import Grid
