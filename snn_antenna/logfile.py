@@ -66,8 +66,16 @@ class LogFile:
         self._consoles: list[logging.Handler] = []
 
     def __enter__(self) -> "LogFile":
+        # The file, its folder and the handlers come with the first line logged: a run refused
+        # while its spec is checked (before anything is said) leaves no folder and imports no
+        # Brian2.
+        self._started = False
+        return self
+
+    def _start(self) -> None:
         from brian2.utils.logger import BrianLogger  # its console handler prints warnings
 
+        self._started = True
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._file = open(self.path, "a", encoding="utf-8")
         try:
@@ -89,9 +97,10 @@ class LogFile:
                           if h is not None]
         for h in self._consoles:
             h.addFilter(self._filter)
-        return self
 
     def __exit__(self, *exc) -> bool:
+        if not self._started:
+            return False
         for h in self._consoles:
             h.removeFilter(self._filter)
         for name in ("brian2", "py.warnings"):
@@ -108,6 +117,8 @@ class LogFile:
         self._write(text)
 
     def _write(self, text: str) -> None:
+        if not getattr(self, "_started", True):
+            self._start()
         if self._file is not None and not self._file.closed:
             self._file.write(text + "\n")
             self._file.flush()
