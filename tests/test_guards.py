@@ -265,11 +265,18 @@ def test_emulate_on_a_port_that_vanishes_is_one_line(tmp_path):
     received = []
 
     def drain():
-        try:
-            while chunk := os.read(master, 4096):
-                received.append(len(chunk))
-        except OSError:
-            pass
+        end = time.monotonic() + 60
+        while time.monotonic() < end:
+            try:
+                chunk = os.read(master, 4096)
+            except OSError:            # EIO until the emulator opens the port; EBADF at the end
+                if received:
+                    return
+                time.sleep(0.05)
+                continue
+            if not chunk:
+                return
+            received.append(len(chunk))
 
     threading.Thread(target=drain, daemon=True).start()
     # the device disappears once the emulator has opened it and is streaming (a fixed sleep
