@@ -17,7 +17,7 @@ from .errors import SpecError, guarded
 def _run(args) -> int:
     from . import outputs
     from . import spec as specs
-    from .studies import check_spec, plan, runner
+    from .studies import check_spec, runner
 
     # Every check before any work: the spec as resolved, the rules joining its sections, the
     # size of a sweep, the output folder. Nothing here imports Brian2 or starts a worker.
@@ -26,7 +26,30 @@ def _run(args) -> int:
     module = runner(study)
     check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
     out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
-    folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)
+    folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)  # and lock it
+    try:
+        _check_cost(spec, args)
+        folder.clear()                  # --force: another study's files, now that all passed
+        outputs.claim(folder)
+    except BaseException:
+        outputs.release(folder)
+        raise
+    extra = {}
+    if getattr(args, "fresh", False):
+        extra["fresh"] = True
+    if getattr(args, "scheduler", None):
+        extra["scheduler"] = args.scheduler
+    try:
+        module.run(spec, out, quick=args.quick, **extra)
+    finally:
+        outputs.record(folder)          # what this run wrote, however it ended; unlock
+    return 0
+
+
+def _check_cost(spec: dict, args) -> None:
+    """A sweep expected to run beyond the limit is refused without ``--yes``."""
+    from .studies import plan
+
     estimate = plan(spec)
     if estimate is not None:
         from .engine.cost import LONG_SWEEP_S
@@ -37,18 +60,6 @@ def _run(args) -> int:
                             f"a sweep expected to take at most {LONG_SWEEP_S / 3600:g} h "
                             f"(this one: about {estimate.seconds / 3600:.3g} h); shrink an "
                             "axis, or pass --yes to run it anyway")
-    extra = {}
-    if getattr(args, "fresh", False):
-        extra["fresh"] = True
-    if getattr(args, "scheduler", None):
-        extra["scheduler"] = args.scheduler
-    folder.clear()                      # --force: another study's files, now that all passed
-    outputs.claim(folder)
-    try:
-        module.run(spec, out, quick=args.quick, **extra)
-    finally:
-        outputs.record(folder)          # what this run wrote, however it ended
-    return 0
 
 
 def build_parser() -> argparse.ArgumentParser:

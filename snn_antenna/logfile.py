@@ -10,14 +10,13 @@ from __future__ import annotations
 import datetime as _dt
 import functools
 import logging
-import os
 import re
 import sys
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from .files import current_umask
+from .files import open_append
 
 
 @dataclass(frozen=True)
@@ -75,13 +74,9 @@ class LogFile:
     def _start(self) -> None:
         from brian2.utils.logger import BrianLogger  # its console handler prints warnings
 
+        # never through a symlink, and an existing log keeps the mode its owner gave it
+        self._file = open_append(self.path)
         self._started = True
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = open(self.path, "a", encoding="utf-8")
-        try:
-            os.chmod(self.path, 0o666 & ~current_umask())
-        except OSError:
-            pass
         self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "
                     f"({' '.join(sys.argv)})")
         # Python warnings through logging (as Brian2 sets up at import), re-armed in case

@@ -1,34 +1,45 @@
-"""Output folders: what a study run may write into, and what it wrote.
+"""Output folders: what a study run may write into, what it wrote, and who is writing.
 
-A run never destroys what the user owns. Before a study starts, :func:`prepare` decides the
-folder:
+A run never destroys what the user owns. Ownership is kept by a write-ahead journal, never
+guessed: the folder's manifest, :data:`MANIFEST`, is written before anything else, and every
+name the run creates at the top of the folder is added to it *before* it is created (the
+toolkit's writers call ``files.declare``). A run killed at any instant leaves exactly the names
+it created listed; nothing else in the folder is ever taken as the toolkit's.
+
+Before a study starts, :func:`prepare` decides the folder:
 
 - a path that is a file, lies under a file, or cannot be written is refused (before any work);
+- a folder another run is writing (it holds the folder's lock) is refused, naming its PID and
+  start time; a lock left by a dead process is released by the kernel and simply taken;
 - a new or empty folder is used as it is;
 - a folder of this same study (its manifest says so) is reused: re-running a study into its own
-  folder updates its report and resumes its stores;
+  folder updates its report and resumes its stores (also after a killed run: its journal lists
+  what it made);
 - a folder holding another study's outputs, or files snn-antenna did not write, is refused,
-  unless ``force``: then the files the toolkit wrote there (listed in the manifest) are removed
-  (:meth:`OutputFolder.clear`, once every other check has passed) and the user's files are
-  kept.
+  unless ``force``: then the entries the manifest lists are removed (:meth:`OutputFolder.clear`,
+  once every other check has passed) and the user's files are kept. No symlink is followed: a
+  link where a listed entry was is refused, not removed through.
 
-After the run (also a failed or interrupted one), :func:`record` lists every top-level entry the
-run wrote in the folder's manifest, :data:`MANIFEST`, with the study's name. Only entries listed
-there are ever removed (``--force``), and ``--fresh`` discards only a store the toolkit created.
+:func:`claim` takes the folder's lock (``fcntl.flock`` on the folder itself, held for the run)
+and opens the journal; :func:`record` closes it, however the run ended.
 """
 from __future__ import annotations
 
+import datetime as _dt
+import fcntl
 import json
 import os
-import shutil
+import socket
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from . import files
 from .errors import SpecError
 
 MANIFEST = ".snn-antenna-manifest.json"
+_MANIFEST_TMP = MANIFEST + ".tmp"
 KIND = "snn-antenna output folder"
 
 
@@ -36,18 +47,19 @@ KIND = "snn-antenna output folder"
 class OutputFolder:
     path: Path
     study: str
-    before: dict = field(default_factory=dict)      # entry -> signature before the run
     listed: set = field(default_factory=set)        # entries the toolkit wrote before
     replace: set = field(default_factory=set)       # another study's entries, for --force
-    created: bool = False                           # the run made the folder (claim)
+    created: bool = False                           # the run made the folder
+    lock_fd: int | None = None                      # the folder's flock, held for the run
+    journal: files.Journal | None = None
+    started: str | None = None
 
     def clear(self) -> None:
         """Remove the other study's entries (``--force``): only what the manifest lists.
         Called once every check has passed, so a refused run removes nothing."""
         for entry in sorted(self.replace):
-            _remove(self.path / entry)
+            files.remove_entry(self.path / entry)
         self.replace = set()
-        self.before = _signatures(self.path)
 
 
 def check_writable(path) -> Path:
@@ -70,44 +82,51 @@ def check_writable(path) -> Path:
 
 
 def read_manifest(path) -> dict | None:
-    try:
-        data = json.loads((Path(path) / MANIFEST).read_text())
-    except (OSError, ValueError):
+    """The folder's manifest, ``None`` when there is none; a damaged one is named."""
+    target = Path(path) / MANIFEST
+    if not os.path.lexists(target):
         return None
+    files.refuse_symlink(target, "manifest")
+    try:
+        data = json.loads(target.read_text())
+    except (OSError, ValueError) as exc:
+        raise SpecError("--out", str(path),
+                        f"a folder whose {MANIFEST} is readable; it is damaged ({exc}): "
+                        "choose another --out (snn-antenna cannot tell which files there are "
+                        "its own)") from None
     if not isinstance(data, dict) or data.get("kind") != KIND \
             or not isinstance(data.get("files"), list):
-        return None
+        raise SpecError("--out", str(path),
+                        f"a folder whose {MANIFEST} is one snn-antenna wrote; this one is "
+                        "not: choose another --out")
     return data
 
 
-def _legacy_study(path: Path) -> str | None:
-    """A folder written before manifests existed: its summary.json names the study."""
-    try:
-        summary = json.loads((path / "summary.json").read_text())
-        return summary["provenance"]["spec"]["study"]
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
-
-
 def _entries(path: Path) -> list[str]:
-    return sorted(e for e in os.listdir(path) if e != MANIFEST) if path.is_dir() else []
+    if not path.is_dir():
+        return []
+    return sorted(e for e in os.listdir(path) if e not in (MANIFEST, _MANIFEST_TMP))
 
 
 def prepare(path, study: str, force: bool = False, fresh: bool = False) -> OutputFolder:
-    """Decide the output folder of a ``study`` run (see the module docstring); creates nothing."""
+    """Decide the output folder of a ``study`` run (see the module docstring) and take its
+    lock when the folder exists; creates nothing."""
     path = check_writable(path)
+    lock_fd = lock_folder(path) if path.is_dir() else None
+    try:
+        folder = _decide(path, study, force, fresh)
+    except BaseException:
+        _unlock(lock_fd)
+        raise
+    folder.lock_fd = lock_fd
+    return folder
+
+
+def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
     entries = _entries(path)
     manifest = read_manifest(path)
-    if manifest is not None:
-        owner, listed = manifest.get("study"), set(manifest["files"]) & set(entries)
-        if owner == study and manifest.get("status") == "running":
-            # a run of this study was killed before it could record what it wrote: the folder
-            # held only listed entries when it started (anything else was refused then), so
-            # what appeared since is that run's own partial output, to be resumed
-            listed = set(entries)
-    else:
-        owner = _legacy_study(path) if entries else None
-        listed = set(entries) if owner == study else set()
+    owner = manifest.get("study") if manifest else None
+    listed = set(manifest["files"]) & set(entries) if manifest else set()
     foreign = [e for e in entries if e not in listed]
     other_study = owner is not None and owner != study
     if (other_study or foreign) and not force:
@@ -129,80 +148,108 @@ def prepare(path, study: str, force: bool = False, fresh: bool = False) -> Outpu
     replace = set()
     if other_study and force:
         replace, listed = listed, set()
-    return OutputFolder(path, study, _signatures(path), listed, replace)
+    for entry in replace:
+        files.refuse_symlink(path / entry, "entry")      # before anything is removed
+    return OutputFolder(path, study, listed, replace)
 
 
-def _remove(target: Path) -> None:
-    if target.is_dir() and not target.is_symlink():
-        shutil.rmtree(target)
-    else:
-        target.unlink(missing_ok=True)
-
-
-def _signature(target: Path):
+# -- one writer per folder ----------------------------------------------------------------------
+def lock_folder(path: Path) -> int:
+    """An exclusive ``flock`` on the folder itself (no lock file to leave behind); refused at
+    once, naming the holder, when another run holds it. The kernel releases the lock of a
+    process that dies, so a killed run's folder is simply taken."""
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | os.O_CLOEXEC)
     try:
-        if target.is_dir() and not target.is_symlink():
-            latest, count = target.stat().st_mtime_ns, 0
-            for root, dirs, files in os.walk(target):
-                for name in dirs + files:
-                    latest = max(latest, os.lstat(os.path.join(root, name)).st_mtime_ns)
-                    count += 1
-            return ("dir", latest, count)
-        st = target.lstat()
-        return ("file", st.st_mtime_ns, st.st_size)
-    except OSError:
-        return None
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        try:
+            holder = json.loads((path / MANIFEST).read_text())
+            who = (f"run by PID {holder.get('pid')} on {holder.get('host')} since "
+                   f"{holder.get('started')} ({holder.get('study')})")
+        except (OSError, ValueError, AttributeError):
+            who = "run by another process"
+        raise SpecError("--out", str(path),
+                        f"a folder no other run is writing; it is being written by a "
+                        f"{who}: wait for it, or choose another --out") from None
+    return fd
 
 
-def _signatures(path: Path) -> dict:
-    return {e: _signature(path / e) for e in _entries(path)}
+def _unlock(fd: int | None) -> None:
+    if fd is not None:
+        os.close(fd)                        # closing releases the flock
+
+
+def release(folder: OutputFolder) -> None:
+    """Give up a prepared folder without running (a refusal after ``prepare``)."""
+    _unlock(folder.lock_fd)
+    folder.lock_fd = None
 
 
 def claim(folder: OutputFolder) -> None:
-    """Mark the folder as being written by this study before the run starts, so a run killed
-    outright (SIGKILL, power loss) leaves a folder its study may resume and no other may take."""
+    """Create and lock the folder, write its manifest before anything else, and open the
+    write-ahead journal that lists every name the run creates before it is created."""
     folder.created = not folder.path.exists()
     folder.path.mkdir(parents=True, exist_ok=True)
-    _write_manifest(folder.path, folder.study, set(folder.listed) & set(_entries(folder.path)),
-                    "running")
-    folder.before = _signatures(folder.path)
+    if folder.lock_fd is None:
+        folder.lock_fd = lock_folder(folder.path)
+    folder.started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    folder.listed &= set(_entries(folder.path))
+    folder.journal = files.Journal(
+        folder.path, lambda names: _write_manifest(folder, folder.listed | names, "running"),
+        owned=folder.listed)
+    _write_manifest(folder, folder.listed, "running")
+    files.open_journal(folder.journal)
 
 
 def record(folder: OutputFolder) -> None:
-    """Write the manifest: every entry this run created or changed, and the toolkit's earlier
-    entries that are still there. Atomic (a reader sees the old or the new manifest)."""
-    path = folder.path
-    if not path.is_dir():
-        return                          # the run failed before writing anything
-    written = set(folder.listed)
-    for entry, signature in _signatures(path).items():
-        if folder.before.get(entry) != signature:
-            written.add(entry)
-    written &= set(_entries(path))
-    if not written and folder.created:
-        # refused or failed before writing anything: leave no trace of a folder it made
-        (path / MANIFEST).unlink(missing_ok=True)
-        if not any(path.iterdir()):
-            path.rmdir()
-        return
-    _write_manifest(path, folder.study, written, "ended")
+    """Close the journal and write the manifest: every entry this run created and the
+    toolkit's earlier entries that are still there; release the lock. Atomic (a reader sees
+    the old or the new manifest)."""
+    try:
+        if folder.journal is not None:
+            files.close_journal(folder.journal)
+        path = folder.path
+        if not path.is_dir():
+            return                          # the run failed before writing anything
+        made = folder.journal.names if folder.journal else set()
+        written = (folder.listed | made) & set(_entries(path))
+        if not made & written and folder.created:
+            # refused or failed before writing anything: leave no trace of a folder it made
+            (path / MANIFEST).unlink(missing_ok=True)
+            if not any(path.iterdir()):
+                path.rmdir()
+            return
+        _write_manifest(folder, written, "ended")
+    finally:
+        release(folder)
 
 
-def _write_manifest(path: Path, study: str, files: set, status: str) -> None:
-    data = {"kind": KIND, "study": study, "files": sorted(files), "status": status,
-            "updated_unix_s": time.time()}
-    tmp = path / (MANIFEST + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1))
-    os.replace(tmp, path / MANIFEST)
+def _write_manifest(folder: OutputFolder, names: set, status: str) -> None:
+    data = {"kind": KIND, "study": folder.study, "files": sorted(names), "status": status,
+            "pid": os.getpid(), "host": socket.gethostname(),
+            "started": folder.started, "updated_unix_s": time.time()}
+    tmp = folder.path / _MANIFEST_TMP
+    files.refuse_symlink(folder.path / MANIFEST, "manifest")
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o666)
+    with os.fdopen(fd, "w", encoding="utf-8") as f:
+        f.write(json.dumps(data, indent=1))
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, folder.path / MANIFEST)
 
 
 @contextmanager
 def output_folder(path, study: str, force: bool = False, fresh: bool = False):
-    """``prepare`` and ``clear`` the folder, yield it, and ``record`` what the run wrote
-    however it ended."""
+    """``prepare`` and ``clear`` the folder, ``claim`` it, yield it, and ``record`` what the
+    run wrote however it ended."""
     folder = prepare(path, study, force=force, fresh=fresh)
-    folder.clear()
-    claim(folder)
+    try:
+        folder.clear()
+        claim(folder)
+    except BaseException:
+        release(folder)
+        raise
     try:
         yield folder
     finally:

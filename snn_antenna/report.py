@@ -49,11 +49,11 @@ def provenance(spec: dict, target: str | None = None) -> dict:
     import scipy
     import sklearn
 
-    from . import __version__
+    from .provenance import code_identity
     return {
         "spec": spec,
         "seed": spec.get("seed", 0),
-        "snn_antenna_version": __version__,
+        **code_identity(),             # version, source hash, git commit
         "brian2_version": brian2.__version__,
         "brian2_target": target or str(brian2.prefs.codegen.target),
         "numpy_version": np.__version__,

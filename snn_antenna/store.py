@@ -22,14 +22,15 @@ from __future__ import annotations
 
 import hashlib
 import json
-import shutil
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from . import files
 from .errors import SpecError
+from .provenance import code_hash, code_identity
 
 DONE = "chunk_done"
 
@@ -50,10 +51,13 @@ def write_dataset(ds, path: str | Path, **to_zarr) -> None:
     ds = ds.assign_coords({k: v for k, v in text.items() if k in ds.coords}).assign(
         {k: v for k, v in text.items() if k not in ds.coords})
     tmp = path.with_name(path.name + ".partial")
-    shutil.rmtree(tmp, ignore_errors=True)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    files.refuse_symlink(path, "store")
+    files.remove_entry(tmp)                         # a write interrupted before; never a link
+    files.make_folder(path.parent)
+    files.declare(tmp)
+    files.declare(path)
     ds.to_zarr(tmp, mode="w", zarr_format=3, consolidated=False, **to_zarr)
-    shutil.rmtree(path, ignore_errors=True)
+    files.remove_entry(path)
     tmp.rename(path)
 
 
@@ -68,10 +72,33 @@ def read_dataset(path: str | Path):
     """
     import xarray as xr
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        ds = xr.open_zarr(Path(path), consolidated=False).load()
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ds = xr.open_zarr(Path(path), consolidated=False).load()
+    except Exception as exc:          # zarr, numcodecs, OS: whatever broke, name the store
+        raise DamagedStore(path, exc) from None
     return plain_text(ds)
+
+
+class DamagedStore(SpecError):
+    """A zarr store that cannot be read back whole: named in one line with what to do."""
+
+    def __init__(self, path, reason, remedy: str = "pass --fresh to compute it again, or "
+                                                  "move it away"):
+        self.path, self.reason, self.remedy = path, reason, remedy
+        super().__init__("store", str(path), f"a store that reads back whole; this one is "
+                                             f"damaged ({short_reason(reason)}): {remedy}")
+
+    def __reduce__(self):
+        return type(self), (self.path, self.reason, self.remedy)
+
+
+def short_reason(reason) -> str:
+    text = f"{type(reason).__name__}: {reason}" if isinstance(reason, BaseException) \
+        else str(reason)
+    text = " ".join(text.split())
+    return text if len(text) <= 100 else text[:99] + "…"
 
 
 def plain_text(ds):
@@ -96,7 +123,9 @@ class Output:
 
 
 def fingerprint(coords: dict, outputs: dict, block_shape, settings) -> str:
-    h = hashlib.sha256()
+    """What makes two sweeps the same: the grid, the outputs, the chunking, the settings and
+    the code that computes them (``provenance.code_hash``)."""
+    h = hashlib.sha256(code_hash().encode())
     for name, values in coords.items():
         h.update(name.encode())
         h.update(np.ascontiguousarray(values, dtype=float).tobytes())
@@ -121,15 +150,21 @@ class SweepStore:
 
         attrs = dict(attrs or {})
         key = fingerprint(coords, outputs, block_shape, settings)
+        files.refuse_symlink(self.path, "store")
         if fresh and self.path.exists():
-            shutil.rmtree(self.path)
+            files.remove_entry(self.path)
         if self.path.exists():
             existing = self._read_attrs()
             if existing.get("fingerprint") != key:
+                other_code = existing.get("code_sha256") != code_hash()
+                what = (f"this one was computed by other code (snn-antenna "
+                        f"{existing.get('snn_antenna_version', '?')}, source "
+                        f"{existing.get('code_sha256', 'unrecorded')}; this is "
+                        f"{code_hash()})" if other_code else "this one holds a different sweep")
                 raise SpecError("store", str(self.path),
-                                "a store written by the same sweep (grid, outputs, chunking "
-                                "and settings all unchanged); this one holds a different "
-                                "sweep: pass --fresh to start over, or choose another --out")
+                                "a store written by the same sweep (grid, outputs, chunking, "
+                                f"settings and code all unchanged); {what}: pass --fresh to "
+                                "start over, or choose another --out")
             return self.done_chunks()
         dims = tuple(coords)
         shape = tuple(len(v) for v in coords.values())
@@ -141,7 +176,8 @@ class SweepStore:
                            {"long_name": "1 once the chunk's results are complete"})
         ds = xr.Dataset(data_vars, coords={name: (name, np.asarray(v)) for name, v in
                                            coords.items()},
-                        attrs={**{k: _attr(v) for k, v in attrs.items()}, "fingerprint": key,
+                        attrs={**{k: _attr(v) for k, v in attrs.items()}, **code_identity(),
+                               "fingerprint": key,
                                "block_shape": list(map(int, block_shape))})
         write_dataset(ds, self.path, compute=False)  # never a half-created store
         return set()
@@ -151,13 +187,14 @@ class SweepStore:
         try:
             return dict(zarr.open_group(self.path, mode="r").attrs)
         except Exception as exc:  # not a zarr store at all
-            raise SpecError("store", str(self.path),
-                            f"a zarr store written by a sweep ({exc}); pass --fresh to "
-                            "replace it") from None
+            raise DamagedStore(self.path, exc, "pass --fresh to replace it") from None
 
     def done_chunks(self) -> set[int]:
         import zarr
-        flags = zarr.open_array(self.path / DONE, mode="r")[:]
+        try:
+            flags = zarr.open_array(self.path / DONE, mode="r")[:]
+        except Exception as exc:
+            raise DamagedStore(self.path, exc) from None
         return set(map(int, np.flatnonzero(flags)))
 
     # -- writing (the sweep's own process) ------------------------------------------------------

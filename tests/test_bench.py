@@ -71,17 +71,21 @@ def test_a_reused_store_gives_back_plain_text_labels(tmp_path):
     assert again.sel(axis="x")["counts"].shape == made.sel(axis="x")["counts"].shape
 
 
-def test_the_cache_key_follows_the_antenna_physics(monkeypatch):
-    """A change in antenna.py's source (the physics) makes a new data set."""
-    import inspect
+def test_the_cache_key_follows_the_antenna_physics(monkeypatch, tmp_path):
+    """A change in antenna.py's source (the physics) makes a new data set: the key covers the
+    package's source (``provenance.code_hash``)."""
+    import shutil
 
-    from snn_antenna.sources import antenna
+    from snn_antenna import provenance
     spec = bench.BenchSpec(**SMALL)
     before = spec.key()
-    real = inspect.getsource
-
-    def edited(obj):
-        text = real(obj)
-        return text.replace("ROD_COUPLING = ", "ROD_COUPLING = 2 * ") if obj is antenna else text
-    monkeypatch.setattr(bench.inspect, "getsource", edited)
-    assert spec.key() != before
+    copy = tmp_path / "snn_antenna"
+    shutil.copytree(provenance.PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    physics = copy / "sources" / "antenna.py"
+    physics.write_text(physics.read_text().replace("ROD_COUPLING = ", "ROD_COUPLING = 2 * "))
+    monkeypatch.setattr(provenance, "PACKAGE", copy)
+    provenance.code_hash.cache_clear()
+    try:
+        assert spec.key() != before
+    finally:
+        provenance.code_hash.cache_clear()

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from snn_antenna import outputs
+from snn_antenna.files import atomic_write
 from snn_antenna.cli import main
 from snn_antenna.errors import SpecError
 
@@ -133,12 +134,14 @@ def test_out_that_cannot_be_written_is_refused(tmp_path, capsys):
 
 
 def fake_outputs(folder: Path, study: str, files=("report.html", "summary.json")) -> None:
-    folder.mkdir(parents=True, exist_ok=True)
-    for name in files:
-        (folder / name).write_text(study)
-    (folder / "results.zarr").mkdir()
-    (folder / "results.zarr" / "zarr.json").write_text("{}")
-    outputs.record(outputs.OutputFolder(folder, study))   # as the CLI does after a run
+    """A finished run of ``study`` into ``folder``, written as the toolkit writes (journaled)."""
+    from snn_antenna.files import atomic_write, make_folder
+
+    with outputs.output_folder(folder, study):
+        for name in files:
+            atomic_write(folder / name, study)
+        make_folder(folder / "results.zarr")
+        atomic_write(folder / "results.zarr" / "zarr.json", "{}")
 
 
 def snapshot(folder: Path) -> dict:
@@ -165,10 +168,11 @@ def test_force_clears_only_what_the_toolkit_wrote(tmp_path):
     fake_outputs(folder, "tuning_sweep")
     (folder / "notes.txt").write_text("my notes")
     prepared = outputs.prepare(folder, "quickstart", force=True)
-    assert (folder / "maps.png").exists() or (folder / "report.html").exists()  # not yet
+    assert (folder / "report.html").exists()             # not yet
     prepared.clear()
     assert sorted(p.name for p in folder.iterdir()) == [outputs.MANIFEST, "notes.txt"]
-    (folder / "report.html").write_text("new report")
+    outputs.claim(prepared)
+    atomic_write(folder / "report.html", "new report")
     outputs.record(prepared)
     manifest = outputs.read_manifest(folder)
     assert manifest["study"] == "quickstart" and manifest["files"] == ["report.html"]
@@ -179,7 +183,8 @@ def test_a_study_reruns_into_its_own_folder(tmp_path):
     fake_outputs(folder, "quickstart")
     prepared = outputs.prepare(folder, "quickstart")       # no refusal, nothing removed
     assert (folder / "results.zarr" / "zarr.json").is_file()
-    (folder / "rate_map.png").write_text("new figure")
+    outputs.claim(prepared)
+    atomic_write(folder / "rate_map.png", "new figure")
     outputs.record(prepared)
     assert outputs.read_manifest(folder)["files"] == ["rate_map.png", "report.html",
                                                       "results.zarr", "summary.json"]
@@ -401,13 +406,19 @@ def test_resonator_array_run_refuses_bad_arguments_by_name():
 def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(tmp_path):
     from snn_antenna import outputs
 
+    from snn_antenna.files import make_folder, open_append
+
     out = tmp_path / "sweep"
     folder = outputs.prepare(out, "tuning_sweep")
     outputs.claim(folder)
-    (out / "results.zarr").mkdir()           # the run is killed here: record never runs
-    (out / "run.log").write_text("started\n")
-    again = outputs.prepare(out, "tuning_sweep")
-    assert {"results.zarr", "run.log"} <= again.listed
+    make_folder(out / "results.zarr")
+    with open_append(out / "run.log") as f:
+        f.write("started\n")
+    outputs.release(folder)                  # the run is killed here: record never runs
+    (out / "notes.txt").write_text("mine")   # the user's, added after the kill
+    again = outputs.prepare(out, "tuning_sweep", force=True)
+    outputs.release(again)
+    assert again.listed == {"results.zarr", "run.log"}
     with pytest.raises(SpecError, match="tuning_sweep"):
         outputs.prepare(out, "quickstart")
 

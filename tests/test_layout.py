@@ -1,7 +1,8 @@
 """The package's layout shows its data flow, and imports follow it.
 
 sources → preprocess → networks → readout → evaluation → engine → report → studies → bridge →
-cli, over a core (errors, signals, truth, spec, stats, store, files, parallel, figures) every
+cli, over a core (errors, signals, truth, spec, stats, store, files, parallel, figures,
+provenance) every
 stage may use. A module may import from its
 own stage or an earlier one, never from a later one, and no two modules import each other,
 directly or through others (imports inside functions count: a lazy import is still a
@@ -23,7 +24,7 @@ STAGES = [
     ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.truth",
               "snn_antenna.spec",
               "snn_antenna.stats", "snn_antenna.store", "snn_antenna.files",
-              "snn_antenna.parallel", "snn_antenna.figures"]),
+              "snn_antenna.parallel", "snn_antenna.figures", "snn_antenna.provenance"]),
     ("sources", ["snn_antenna.sources"]),
     ("preprocess", ["snn_antenna.preprocess"]),
     ("networks", ["snn_antenna.networks"]),

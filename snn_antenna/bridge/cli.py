@@ -72,6 +72,7 @@ def add_subcommands(subparsers) -> None:
                    help="give up if nobody opens the pty within this many seconds")
     p.add_argument("--log", default=None, help="write the injected faults, expected counts and "
                                                 "the stimulus's labelled contacts (JSON) here")
+    p.add_argument("--force", action="store_true", help="replace an existing --log file")
     p.set_defaults(func=cmd_emulate)
 
     p = subparsers.add_parser("stream", help="run the network live on a serial stream")
@@ -296,7 +297,7 @@ def cmd_emulate(args) -> int:
         raise SpecError("faults.disconnect", plan.disconnect,
                         "0 unless the emulator owns a pty with a stable --link path")
     if args.log:
-        _check_output_file("log", args.log)
+        _check_output_file("log", args.log, args.force)
     stimulus = stimulus_recording(args.stimulus, args.seed, args.frames)
     emulator = Emulator(stimulus.samples, rate_hz=stimulus.rate_hz, faults=plan, seed=args.seed,
                         wire_format=args.format)
@@ -322,8 +323,8 @@ def cmd_emulate(args) -> int:
                    "faults": [list(f) for f in log.faults],
                    "events": played_events(stimulus, log.frames_due)}
         if args.log:                    # whoever stopped first, the log says what was sent
-            from ..files import write_json
-            write_json(Path(args.log), summary)
+            from ..files import write_new
+            write_new(args.log, json.dumps(summary, indent=1), force=args.force)
     if ended:
         raise PortError(ended)
     shown = {k: v for k, v in summary.items() if k not in ("faults", "stopped", "events")}
@@ -354,10 +355,18 @@ def _check_recording_dir(path) -> None:
                                           "other files are never written into)")
 
 
-def _check_output_file(name: str, path) -> None:
+def _check_output_file(name: str, path, force: bool = False) -> None:
+    """A new file in a writable folder; an existing one only with ``--force``; a symlink
+    never (the toolkit does not write through links)."""
+    from ..files import refuse_symlink
+
     path = Path(path)
+    refuse_symlink(path, "file")
     if path.is_dir() or not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
         raise SpecError(name, str(path), "a file path in a folder you can write to")
+    if path.exists() and not force:
+        raise SpecError(name, str(path), "a path that does not exist yet (this file would be "
+                                         "overwritten): choose another, or pass --force")
 
 
 @_guarded

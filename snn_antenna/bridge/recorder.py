@@ -25,7 +25,8 @@ import numpy as np
 
 from .. import __version__ as package_version
 from ..errors import SpecError
-from ..files import write_json
+from ..files import make_folder, open_append, refuse_symlink, write_json
+from ..outputs import lock_folder
 from ..signals import Recording
 from .protocol import BOARD_RATE_HZ, Gap, find_gaps
 from .source import DEFAULT_BAUDRATE, Batch
@@ -46,17 +47,20 @@ class Recorder:
                  fsync_interval_s: float = 1.0, meta_interval_s: float = 0.5,
                  extra_meta: dict | None = None):
         self.dir = Path(out_dir)
-        if (self.dir / META_FILE).exists():
+        if os.path.lexists(self.dir / META_FILE):
             raise SpecError("out", str(self.dir),
                             "a new or empty directory (an existing recording is never overwritten)")
         if self.dir.exists() and not self.dir.is_dir():
             raise SpecError("out", str(self.dir), "a directory path")
-        self.dir.mkdir(parents=True, exist_ok=True)
+        make_folder(self.dir)
+        self._lock = lock_folder(self.dir)        # one recorder per folder, held until close
+        for name in (RAW_FILE, SAMPLES_FILE):     # appending to a link would write elsewhere
+            refuse_symlink(self.dir / name)
         self.flush_interval_s = flush_interval_s
         self.fsync_interval_s = fsync_interval_s
         self.meta_interval_s = meta_interval_s
-        self._raw = open(self.dir / RAW_FILE, "ab")
-        self._samples = open(self.dir / SAMPLES_FILE, "ab")
+        self._raw = open_append(self.dir / RAW_FILE, binary=True)
+        self._samples = open_append(self.dir / SAMPLES_FILE, binary=True)
         self.raw_bytes = 0
         self.n_samples = 0
         self.counts = {name: 0 for name in COUNT_FIELDS}
@@ -119,6 +123,7 @@ class Recorder:
         self.meta.update(status=status, message=message, complete=complete,
                          stopped_unix_s=time.time())
         self._write_meta()
+        os.close(self._lock)
 
     def _write_meta(self) -> None:
         self.meta["counts"] = dict(self.counts)
@@ -175,8 +180,13 @@ def load_recording(path) -> BridgeRecording:
         raise SpecError("recording", str(path), accepted)
     try:
         meta = json.loads(meta_path.read_text())
-    except json.JSONDecodeError as exc:
-        raise SpecError("recording", str(path), f"{accepted}; meta.json is not JSON ({exc})")
+    except (ValueError, OSError) as exc:       # not JSON, not UTF-8, unreadable
+        raise SpecError("recording", str(path), f"{accepted}; its meta.json is damaged "
+                                                f"({type(exc).__name__}: {str(exc)[:80]}): "
+                                                "restore it, or rebuild it from raw.bin") from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("rate_hz"), (int, float)):
+        raise SpecError("recording", str(path), f"{accepted}; its meta.json is damaged (no "
+                                                "table with a rate_hz): restore it")
     if meta.get("format_version") != FORMAT_VERSION:
         raise SpecError("meta.json format_version", meta.get("format_version"),
                         f"{FORMAT_VERSION} (this version of snn-antenna)")

@@ -28,8 +28,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import shutil
-import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, replace
@@ -262,15 +260,13 @@ def run_bank(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: in
 def cached_features(data, bank: SpikingBank, bench_spec, log=print, fresh: bool = False,
                     client=None):
     """Spiking features of every event of a bench data set (``bench_spec`` made it), cached
-    on disk, keyed by the data set, the bank and the source of the code that simulates. The
-    run itself goes through a sweep store beside the cache, so an interrupted one resumes."""
-    from .. import preprocess
-    from ..readout import spiking
+    on disk, keyed by the data set, the bank and the package's source (``bench.cache_key``).
+    The run itself goes through a sweep store beside the cache, so an interrupted one
+    resumes."""
+    from ..files import remove_entry
     from ..sources import bench
-    from . import standalone
 
-    key = bench.source_hash({"bench": bench_spec.key(), "bank": _bank_fields(bank)},
-                            sys.modules[__name__], spiking, neurons, preprocess, standalone)
+    key = bench.cache_key({"bench": bench_spec.key(), "bank": _bank_fields(bank)})
     path = Path(bench_spec.cache_dir) / f"spiking-{key}.zarr"
     store = path.with_name(f"spiking-{key}.sweep.zarr")
 
@@ -281,7 +277,7 @@ def cached_features(data, bank: SpikingBank, bench_spec, log=print, fresh: bool 
             f"{f.wall_s:.1f} s of simulation")
         return f.to_dataset(data["event"].values, bank.bin_edges_s)
     out = bench.cached(path, compute, log, fresh)
-    shutil.rmtree(store, ignore_errors=True)
+    remove_entry(store)
     return out
 
 

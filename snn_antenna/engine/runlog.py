@@ -12,7 +12,10 @@ import hashlib
 import json
 from pathlib import Path
 
+from ..errors import SpecError
 from ..evaluation.tradeoff import describe
+from ..files import atomic_write, open_append, refuse_symlink
+from ..provenance import code_hash
 from .devices import Setting, measure
 
 # What names one measured run in the log
@@ -20,8 +23,9 @@ RUN_IDENTITY = ("sweep", "scene", "method", "dt_ms", "target", "dtype", "n_neuro
 
 
 def spec_key(spec: dict) -> str:
-    """A short hash of the spec: which log belongs to which run."""
-    text = json.dumps(spec, sort_keys=True, default=str)
+    """A short hash of the spec and of the code that measures: which log belongs to which
+    run (rows measured by other code are measured again)."""
+    text = json.dumps({"spec": spec, "code": code_hash()}, sort_keys=True, default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -33,22 +37,32 @@ class RunLog:
         self.path, self.identity = Path(path), tuple(identity)
         self.key = spec_key(spec)
         self.rows: dict[tuple, dict] = {}
+        refuse_symlink(self.path)
         if self.path.exists() and not fresh:
             self._load()
         if not self.rows:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.path.write_text(json.dumps({"spec_key": self.key}) + "\n")
+            atomic_write(self.path, json.dumps({"spec_key": self.key}) + "\n")
 
     def _load(self) -> None:
-        lines = self.path.read_text().splitlines()
-        if not lines or json.loads(lines[0]).get("spec_key") != self.key:
+        lines = self.path.read_text(errors="replace").splitlines()
+        try:
+            header = json.loads(lines[0]) if lines else None
+            known = isinstance(header, dict) and isinstance(header.get("spec_key"), str)
+        except ValueError:
+            known = False
+        if not known:
+            raise SpecError("run log", str(self.path),
+                            "a run log snn-antenna wrote (its first line names the spec it "
+                            "belongs to); this one is damaged: pass --fresh to measure again, "
+                            "or move the file away")
+        if header["spec_key"] != self.key:
             return
         for line in lines[1:]:
             try:
                 row = json.loads(line)
-            except ValueError:   # a line cut short by an interruption
+                self.rows[self._id(row)] = row
+            except (ValueError, KeyError, TypeError):  # a line cut short by an interruption
                 continue
-            self.rows[self._id(row)] = row
 
     def _id(self, row: dict) -> tuple:
         # 1 and 1.0 are equal and hash alike: a step read from TOML finds its JSON row
@@ -59,7 +73,7 @@ class RunLog:
 
     def add(self, row: dict) -> None:
         self.rows[self._id(row)] = row
-        with open(self.path, "a") as f:
+        with open_append(self.path) as f:
             f.write(json.dumps(row) + "\n")
 
 

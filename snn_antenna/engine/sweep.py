@@ -91,7 +91,7 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     check_memory(grid, outputs, int(np.prod(block_shape)),
                  getattr(evaluate, "bytes_per_point", 0))
     regions = grid.blocks(chunk_points)
-    store = SweepStore(Path(store_path).resolve())
+    store = SweepStore(Path(os.path.abspath(store_path)))   # never resolved: a link is refused, not followed
     settings = repr(evaluate) if settings is None else settings
     done = store.prepare(grid.coords(), outputs, block_shape, len(regions), attrs=attrs,
                          settings=settings, fresh=fresh)

@@ -22,13 +22,12 @@ from ..truth import bench_labels
 def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool = False
                   ) -> tuple[xr.Dataset, xr.Dataset]:
     """The bench data set of ``bench_spec`` (a ``bench.BenchSpec``) and its event features
-    with the events' labels joined; both cached on disk, keyed by their specs and the source
-    of the feature extraction."""
-    from ..readout import events
+    with the events' labels joined; both cached on disk, keyed by their specs and the
+    package's source (``bench.cache_key``)."""
     from ..sources import bench
 
     data = bench.load(bench_spec, log, fresh)
-    key = bench.source_hash({"bench": bench_spec.key(), "events": asdict(processor)}, events)
+    key = bench.cache_key({"bench": bench_spec.key(), "events": asdict(processor)})
     path = Path(bench_spec.cache_dir) / f"features-{key}.zarr"
     features = bench.cached(path, lambda: process(data, processor, bench_spec.n_jobs, log=log),
                             log, fresh)

@@ -18,7 +18,6 @@ the generator's source: a changed spec or changed physics makes a new data set.
 from __future__ import annotations
 
 import hashlib
-import inspect
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -31,7 +30,9 @@ from ..errors import SpecError, check
 from ..parallel import parallel_map
 from ..signals import Recording
 from ..truth import Event, GroundTruth
-from ..store import read_dataset, write_dataset
+from ..files import refuse_symlink
+from ..provenance import code_hash, code_identity
+from ..store import DamagedStore, short_reason, read_dataset, write_dataset
 from . import antenna
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
@@ -97,14 +98,14 @@ class BenchSpec:
         fields = {k: v for k, v in asdict(self).items() if k not in ("n_jobs", "cache_dir")}
         fields["materials"] = list(fields["materials"])
         fields["positions_cm"] = [float(x) for x in fields["positions_cm"]]
-        return source_hash(fields, antenna, _generate_block)
+        return cache_key(fields)
 
 
-def source_hash(fields: dict, *code) -> str:
-    """Hash of JSON-able ``fields`` and the source text of modules/functions ``code``."""
+def cache_key(fields: dict) -> str:
+    """Hash of JSON-able ``fields`` and of the code that computes from them (the whole
+    package's source, ``provenance.code_hash``): a cache made by other code is never found."""
     h = hashlib.sha256(json.dumps(fields, sort_keys=True).encode())
-    for obj in code:
-        h.update(inspect.getsource(obj).encode())
+    h.update(code_hash().encode())
     return h.hexdigest()[:16]
 
 
@@ -166,15 +167,36 @@ def cached(path: Path, build: Callable[[], xr.Dataset], log=print, fresh: bool =
 
     A store is written under a temporary name and renamed into place, so an interrupted run
     leaves no half store behind to be mistaken for a finished one.
+    Caches are disposable: a store that cannot be read back, holds non-finite numbers, or was
+    made by other code is rebuilt, and the log says so.
     """
     path = Path(path)
+    refuse_symlink(path, "cache")
     if path.exists() and not fresh:
-        log(f"cache: reusing {path}")
-        return read_dataset(path)       # text comes back as plain numpy str
+        try:
+            ds = read_dataset(path)     # text comes back as plain numpy str
+            problem = _cache_problem(ds)
+        except DamagedStore as exc:
+            problem = short_reason(exc.reason)
+        if problem is None:
+            log(f"cache: reusing {path}")
+            return ds
+        log(f"cache: {path} is unusable ({problem}); rebuilding it")
     ds = build()
-    write_dataset(ds, path)
+    ds.attrs.update({k: v for k, v in code_identity().items() if v is not None})
+    write_dataset(ds, path.absolute())
     log(f"cache: stored {path}")
     return ds
+
+
+def _cache_problem(ds: xr.Dataset) -> str | None:
+    if ds.attrs.get("code_sha256") != code_hash():
+        return (f"made by other code: source {ds.attrs.get('code_sha256', 'unrecorded')}, "
+                f"this is {code_hash()}")
+    for name, var in ds.data_vars.items():
+        if var.dtype.kind in "fc" and not np.isfinite(var.values).all():
+            return f"{name} holds NaN or infinite values"
+    return None
 
 
 def load(spec: BenchSpec, log=print, fresh: bool = False) -> xr.Dataset:
@@ -209,4 +231,4 @@ def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
 
 
 __all__ = ["BenchSpec", "generate", "load", "cached", "event_recording", "spec_from_table",
-           "source_hash", "PAPER_POSITIONS_CM"]
+           "cache_key", "PAPER_POSITIONS_CM"]

@@ -255,6 +255,7 @@ def summarise(plan: Plan, rows: list[dict], refs: tuple[list, dict], recommendat
 def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print) -> dict:
     plan = build(spec)
     out_dir = Path(out_dir)
+    runlog = RunLog(out_dir / "runs.jsonl", spec, fresh)   # a damaged log is said before work
     with LogFile(out_dir, log) as log:
         t_start = time.perf_counter()
         seed = int(spec.get("seed", 0))
@@ -264,7 +265,7 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         workloads = prepare_workloads(plan, seed, log)
         log(f"[2/6] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
         refs, ref_rows, convergence = solve_references(plan, workloads, log)
-        runs = Measurements(workloads, refs, RunLog(out_dir / "runs.jsonl", spec, fresh), log)
+        runs = Measurements(workloads, refs, runlog, log)
         main = [(name, Setting(m, dt, sweep.target, sweep.dtype)) for name in sweep.scenes
                 for m in sweep.methods for dt in sorted(sweep.dt_ms)]
         log(f"[3/6] main sweep: {len(main)} runs ({sweep.target}, {sweep.dtype})")
