@@ -190,12 +190,32 @@ class SweepStore:
             raise DamagedStore(self.path, exc, "pass --fresh to replace it") from None
 
     def done_chunks(self) -> set[int]:
+        """The chunks marked done whose data are all on disk. A marked chunk whose data file
+        of some output is missing (deleted, lost) is said in one line and computed again."""
+        import sys
+
         import zarr
         try:
             flags = zarr.open_array(self.path / DONE, mode="r")[:]
+            root = zarr.open_group(self.path, mode="r")
+            block = tuple(root.attrs["block_shape"])
+            shapes = {name: (arr.shape, arr.chunks) for name, arr in root.arrays()
+                      if name != DONE and tuple(arr.chunks) == block}   # the outputs
         except Exception as exc:
             raise DamagedStore(self.path, exc) from None
-        return set(map(int, np.flatnonzero(flags)))
+        done, lost = set(map(int, np.flatnonzero(flags))), {}
+        for name, (shape, chunks) in shapes.items():
+            counts = [-(-n // c) for n, c in zip(shape, chunks)]
+            for chunk in sorted(done):
+                index = np.unravel_index(chunk, counts)
+                key = self.path.joinpath(name, "c", *map(str, index))
+                if not key.is_file():
+                    lost.setdefault(chunk, name)
+        if lost:
+            print(f"store: {self.path}: {len(lost)} chunk(s) marked done have no data on disk "
+                  f"(e.g. chunk {min(lost)} of {lost[min(lost)]!r}); computing them again",
+                  file=sys.stderr, flush=True)
+        return done - set(lost)
 
     # -- writing (the sweep's own process) ------------------------------------------------------
     def write_chunk(self, chunk_id: int, region: dict[str, slice], data: dict[str, np.ndarray]):
@@ -207,7 +227,10 @@ class SweepStore:
         ds = xr.Dataset({name: (dims, np.asarray(block)) for name, block in data.items()})
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            ds.to_zarr(self.path, region=dict(region), mode="r+", consolidated=False)
+            # every chunk written, also one equal to the fill value, so that a done chunk
+            # without its file is known to be lost (``done_chunks``)
+            ds.to_zarr(self.path, region=dict(region), mode="r+", consolidated=False,
+                       write_empty_chunks=True)
         zarr.open_array(self.path / DONE, mode="r+")[chunk_id] = 1
 
     # -- reading --------------------------------------------------------------------------------

@@ -482,3 +482,15 @@ def test_the_issues_case_a_killed_quickstart_then_force_keeps_the_users_file(tmp
                           capture_output=True).returncode == 0
     assert untouched_state(out / "notes.txt") == mine
     assert outputs.read_manifest(out)["study"] == "exploration"
+
+
+def test_a_done_chunk_whose_data_were_deleted_is_computed_again(tmp_path, capsys):
+    path = tmp_path / "results.zarr"
+    store = _store(path)
+    store.write_chunk(0, {"k": slice(0, 2)}, {"rate": np.zeros(2)})   # equal to no fill
+    store.write_chunk(1, {"k": slice(2, 4)}, {"rate": np.ones(2)})
+    assert _store(path).done_chunks() == {0, 1}
+    (path / "rate" / "c" / "1").unlink()
+    assert _store(path).done_chunks() == {0}            # resumed: chunk 1 is redone
+    err = capsys.readouterr().err
+    assert "chunk 1" in err and str(path) in err
