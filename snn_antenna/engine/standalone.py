@@ -33,7 +33,10 @@ def _standalone_dir(key: str) -> tuple[Path, Any]:
     base = base / "brian2_standalone"
     base.mkdir(parents=True, exist_ok=True)
     for slot in range(1024):
-        lock = open(base / f"{key}-{slot}.lock", "w")
+        # never truncated, never through a link (a lock file holds nothing, only its flock)
+        lock = os.fdopen(os.open(base / f"{key}-{slot}.lock",
+                                 os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC,
+                                 0o666), "w")
         try:
             fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
