@@ -51,22 +51,24 @@ def tree(path: Path) -> dict:
 
 
 # -- ownership by journal ------------------------------------------------------------------------
-def _killed_child(folder: Path, study: str, writes, force=False, kill_at=None) -> int:
+def _killed_child(folder: Path, study: str, writes, force=False, kill_at=None,
+                  fresh=False) -> int:
     """Fork a run of ``study`` into ``folder`` that makes ``writes`` (names) through the
     toolkit's writers and is SIGKILLed before write ``kill_at``; the exit status or -9."""
     pid = os.fork()
     if pid == 0:                                        # the child: a run, as the CLI runs one
         code = 0
         try:
-            folder_ = outputs.prepare(folder, study, force=force)
+            folder_ = outputs.prepare(folder, study, force=force, fresh=fresh)
             folder_.clear()
             outputs.claim(folder_)
             for i, name in enumerate(writes):
                 if i == kill_at:
                     os.kill(os.getpid(), signal.SIGKILL)
-                if name.endswith(".zarr"):
-                    make_folder(folder / name)
-                    atomic_write(folder / name / "zarr.json", "{}")
+                if name.endswith(".zarr"):                  # a real sweep store
+                    SweepStore(folder / name).prepare({"k": np.arange(4.0)},
+                                                      {"rate": Output("f8")}, (2,), 2,
+                                                      fresh=fresh)
                 elif name.endswith(".log"):
                     with open_append(folder / name) as f:
                         f.write(f"{study} {i}\n")
@@ -402,7 +404,7 @@ TOOLKIT_NAMES = ["run.log", "report.html", "summary.json", "a.png", "results.zar
 action = st.one_of(
     st.tuples(st.just("run"), st.sampled_from(["quickstart", "tuning_sweep"]),
               st.lists(st.sampled_from(TOOLKIT_NAMES), min_size=1, max_size=4),
-              st.booleans(), st.one_of(st.none(), st.integers(0, 3))),
+              st.booleans(), st.one_of(st.none(), st.integers(0, 3)), st.booleans()),
     st.tuples(st.just("user_file"), st.sampled_from(["notes.txt", "report.html", "run.log",
                                                      "data.csv", "results.zarr"])),
     st.tuples(st.just("user_link"), st.sampled_from(["run.log", "summary.json", "results.zarr",
@@ -419,8 +421,8 @@ def check_users_files_survive(base: Path, actions) -> None:
     mine: dict[str, object] = {}
     for act in actions:
         if act[0] == "run":
-            _, study, writes, force, kill_at = act
-            _killed_child(out, study, writes, force=force, kill_at=kill_at)
+            _, study, writes, force, kill_at, fresh = act
+            _killed_child(out, study, writes, force=force, kill_at=kill_at, fresh=fresh)
         elif act[0] == "user_file":
             path = out / act[1]
             if not os.path.lexists(path):
