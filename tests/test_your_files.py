@@ -497,15 +497,3 @@ def test_a_done_chunk_whose_data_were_deleted_is_computed_again(tmp_path, capsys
     err = capsys.readouterr().err
     assert "chunk 1" in err and str(path) in err
 
-
-def test_emulate_link_never_replaces_a_users_file(tmp_path, capsys):
-    mine = tmp_path / "port"
-    kept = users_file(mine, "my file")
-    assert main(["emulate", "--pty", "--link", str(mine), "--frames", "10",
-                 "--peer-timeout", "0.5"]) == 2
-    assert "--link" in capsys.readouterr().err and untouched_state(mine) == kept
-    spare = tmp_path / "port2"
-    kept2 = users_file(tmp_path / "port2.new", "another file of mine")
-    assert main(["emulate", "--pty", "--link", str(spare), "--frames", "10",
-                 "--peer-timeout", "0.5"]) == 2
-    assert untouched_state(tmp_path / "port2.new") == kept2 and not os.path.lexists(spare)

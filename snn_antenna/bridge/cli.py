@@ -291,10 +291,6 @@ def cmd_emulate(args) -> int:
     plan = FaultPlan.parse(args.faults)
     if args.link and not args.pty:
         raise SpecError("link", args.link, "only with --pty")
-    if args.link:
-        from .links import check_link_path
-        check_link_path(args.link)
-        check_link_path(args.link + ".new")
     if args.frames is not None and not args.frames > 0:
         raise SpecError("frames", args.frames, "a number of frames > 0")
     if plan.disconnect and not args.link:

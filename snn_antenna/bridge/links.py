@@ -62,8 +62,6 @@ class PtyLink:
         os.set_blocking(self.master, False)
         if self.link is not None:
             tmp = self.link.with_name(self.link.name + ".new")
-            for path in (tmp, self.link):
-                check_link_path(path)
             tmp.unlink(missing_ok=True)
             os.symlink(self.slave_name, tmp)
             os.replace(tmp, self.link)
@@ -133,7 +131,7 @@ class PtyLink:
             time.sleep(0.005)
 
     def disconnect(self) -> None:
-        if self.link is not None and is_pty_link(self.link):
+        if self.link is not None and is_own_link(self.link):   # never a path the user took
             self.link.unlink()
         if self.master is not None:
             os.close(self.master)
@@ -210,18 +208,3 @@ class SerialLink:
     def close(self) -> None:
         if self._owned:
             self.port.close()
-
-
-def is_pty_link(path) -> bool:
-    """A symlink to a terminal device: what an emulator's ``--link`` makes (its own)."""
-    return os.path.islink(path) and os.readlink(path).startswith("/dev/")
-
-
-def check_link_path(path) -> None:
-    """``--link`` may name nothing yet or an earlier emulator's link to a pty; anything else
-    there is the user's and is never replaced or removed."""
-    from ..errors import SpecError
-
-    if os.path.lexists(path) and not is_pty_link(path):
-        raise SpecError("--link", str(path), "a path that is free or an emulator's link to a "
-                                             "pty; this one is a file of yours, which is kept")
