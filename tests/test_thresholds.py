@@ -67,3 +67,24 @@ def test_comparisons_pair_methods_by_seed_slot_and_pick_the_oracle_in_hindsight(
     assert [r["scenes"] for r in result["per_category"]] == ["ramp", "steps"]
     assert result["per_category"][0]["contacts scored"] == 9
     assert scores.seeds_needed("gated", ["lookup"], 0.5) >= 2
+
+
+def test_a_bounded_interval_is_the_bootstrap_not_a_clipped_t():
+    from snn_antenna.evaluation.thresholds import F1_BOUNDS, interval
+
+    d = interval([0.95, 1.0, 1.0], F1_BOUNDS)
+    # a t interval clipped at 1 would reach far below the lowest value (0.88 here)
+    assert 0.95 - 1e-12 <= d["low"] <= d["mean"] <= d["high"] <= 1.0 and d["n"] == 3
+
+
+def test_no_verdict_on_the_gate_from_too_few_seeds():
+    from snn_antenna.evaluation.thresholds import difference, earns_its_place
+
+    ahead = difference([0.9, 0.91], [0.5, 0.52])          # clearly ahead, but n = 2
+    s = {"differences": {"gated − best fixed in hindsight": ahead, "gated − lookup": ahead}}
+    earned, why = earns_its_place(s)
+    assert not earned and "too small to resolve" in why and "n = 2" in why
+    many = difference([0.9, 0.91, 0.92, 0.9, 0.93], [0.5, 0.52, 0.5, 0.51, 0.5])
+    level = difference([0.9, 0.91, 0.92, 0.9, 0.93], [0.91, 0.9, 0.93, 0.9, 0.92])
+    s = {"differences": {"gated − best fixed in hindsight": many, "gated − lookup": level}}
+    assert earns_its_place(s)[0]

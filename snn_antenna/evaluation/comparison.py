@@ -43,15 +43,6 @@ def label(name: str) -> str:
     return LABELS.get(name, name.replace("_", " "))
 
 
-def interval(values) -> tuple[tuple | None, int]:
-    """The 95 % t interval of the mean of per-seed values, or None below two seeds; and n."""
-    values = np.asarray(values, dtype=float)
-    if len(values) < 2:
-        return None, len(values)
-    iv = stats.mean_interval(values)
-    return (iv.low, iv.high), iv.n
-
-
 def _mean_sd(summary: dict, key: str, **more) -> dict:
     return {"mean": summary[key], "sd": summary[f"{key}_sd"], **more}
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from ..stats import mean_interval, paired_difference, seeds_needed
+from ..stats import MIN_N_TO_RESOLVE, mean_interval, paired_difference, seeds_needed
 from .scoring import Score
 
 F1_BOUNDS = (0.0, 1.0)
@@ -164,17 +164,16 @@ class MethodScores:
 
 
 def interval(values, bounds: tuple | None = None) -> dict:
-    """Mean with its 95 % t interval over seeds (n < 2: no interval), clipped to ``bounds``
-    for a bounded quantity (a t interval over few seeds can reach past F1 = 1)."""
+    """Mean with its 95 % interval over seeds (n < 2: no interval): Student t, or for a
+    quantity with ``bounds`` (an F1, a rate ≥ 0) the bounded bootstrap of
+    ``stats.mean_interval``, which never leaves the quantity's range (never a clipped t)."""
     x = np.asarray(values, dtype=float)
     x = x[np.isfinite(x)]
     if len(x) < 2:
         return {"mean": float(x.mean()) if len(x) else None, "low": None, "high": None,
                 "n": int(len(x))}
-    i = mean_interval(x)
-    lo, hi = (-np.inf, np.inf) if bounds is None else bounds
-    return {"mean": i.mean, "low": float(max(i.low, lo)), "high": float(min(i.high, hi)),
-            "n": i.n}
+    i = mean_interval(x, bounds=bounds)
+    return {"mean": i.mean, "low": i.low, "high": i.high, "n": i.n}
 
 
 def difference(a, b) -> dict:
@@ -295,8 +294,15 @@ def earns_its_place(s: dict) -> tuple[bool, str]:
     why not, in the summary's own numbers."""
     d_fixed = s["differences"]["gated − best fixed in hindsight"]
     d_lookup = s["differences"]["gated − lookup"]
-    above_fixed = d_fixed.get("low") is not None and d_fixed["low"] > 0
-    below_lookup = d_lookup.get("high") is not None and d_lookup["high"] < 0
+    # "resolved" carries the documented rule (n ≥ stats.MIN_N_TO_RESOLVE and the interval
+    # excludes zero): an interval over 2 seeds never decides either way
+    above_fixed = bool(d_fixed.get("resolved")) and d_fixed["low"] > 0
+    below_lookup = bool(d_lookup.get("resolved")) and d_lookup["high"] < 0
+    too_few = [d["n"] for d in (d_fixed, d_lookup)
+               if not d.get("resolved") and d.get("n", 0) < MIN_N_TO_RESOLVE]
+    if too_few:
+        return False, (f"too small to resolve (n = {min(too_few)} seeds; a verdict needs "
+                       f"n ≥ {MIN_N_TO_RESOLVE})")
     if above_fixed and not below_lookup:
         return True, ("the gate is resolved above the best single threshold (even one chosen "
                       "in hindsight on these scenes) and not resolved below the lookup table")
