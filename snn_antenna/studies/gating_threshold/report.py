@@ -53,10 +53,17 @@ class Results:
 
 
 # -- report --------------------------------------------------------------------------------
+def by_speed(values: dict, show) -> str:
+    """A speed → value mapping in one line, the one way every part of this report writes it:
+    ``12 cm/s: 0.0669 g · 27 cm/s: 0.35 g`` (speeds in order, as numbers, not JSON keys)."""
+    items = sorted((float(v), x) for v, x in values.items())
+    return " · ".join(f"{v:g} cm/s: {show(x)}" for v, x in items)
+
+
 def human_summary(s: dict, out_dir) -> str:
     ok, why = earns_its_place(s)
     return "\n".join([
-        "Th*: " + ", ".join(f"{v} cm/s {t:.3g} g" for v, t in s["th_star"].items()),
+        "Th*: " + by_speed(s["th_star"], lambda t: f"{t:.3g} g"),
         *(f"F1 {label}: {describe_interval(v)}" for label, v in s["f1"].items()),
         *(f"{label}: {describe_difference(v)}" for label, v in s["differences"].items()),
         f"the gate {'earns' if ok else 'does not earn'} its place: {why}",
@@ -87,7 +94,7 @@ def _calibrated(s: dict, parts: Parts) -> list:
                    "self-motion grows with speed² (antenna.self_motion_rms_g, "
                    "SELF_MOTION_G_AT_12) so that this ratio lands near 5: built in, not found"),
         Calibrated("true positives at Th* → 2·Th* (12 and 27 cm/s)",
-                   "; ".join(f"{v} cm/s: {a} → {b}" for v, (a, b) in tp.items()),
+                   by_speed(tp, lambda ab: f"{ab[0]} → {ab[1]}"),
                    "doubling Th* loses contacts (Fig. 9)", "", "docs/reference.md (Fig. 9)",
                    "antenna.IMPACT_TRANSFER, chosen so that impacts sit between the self-motion "
                    "at 12 and at 27 cm/s: built in, not found"),
@@ -95,8 +102,8 @@ def _calibrated(s: dict, parts: Parts) -> list:
                    "a separate calibration drive", "", "this study's [calibration] section",
                    f"{cal.duration_s:g} s at {cal.speed_cm_s:g} cm/s in the open, no posts; "
                    "never fitted on a scene that is scored"),
-        Calibrated("Th*(speed)", ", ".join(f"{v}: {t:.3g}" for v, t in s["th_star"].items()),
-                   "best F1 per speed on the sweep's scenes", "g", "this study's sweep",
+        Calibrated("Th*(speed)", by_speed(s["th_star"], lambda t: f"{t:.3g} g"),
+                   "best F1 per speed on the sweep's scenes", "", "this study's sweep",
                    "the training data of the gate and the lookup table (monotone fit of each "
                    "speed's best Th); the evaluation uses other seeds")]
 
