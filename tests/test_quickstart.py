@@ -40,6 +40,10 @@ def test_quickstart_command_writes_the_report(tmp_path):
     assert prov["seed"] == 1 and prov["brian2_target"] == "cython"
     assert prov["spec"]["network"]["n_neurons"] == 24  # the resolved spec, includes expanded
     assert prov["snn_antenna_version"] and prov["brian2_version"]
+    assert len(prov["code_sha256"]) == 16 and "git_commit" in prov     # which code made it
+    # the paper's 20.4 Hz per k is a reference for a prediction (tuning_sweep), never a target
+    targets = [c["target"] for c in summary["calibrated"]]
+    assert not any(isinstance(t, float) and abs(t - 7.0 / 0.3425) < 0.01 for t in targets)
     html = (out / "report.html").read_text()
     assert "Calibrated to" in html and "Predicted" in html
     assert "data:image/png;base64," in html and (out / "rate_map.png").stat().st_size > 10_000

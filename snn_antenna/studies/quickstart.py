@@ -222,9 +222,12 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
                    "optimal threshold's ratio", (27 / 12) ** 2, "> 5", "×",
                    "docs/reference.md, Fig. 9",
                    "antenna.SELF_MOTION_G_AT_12 (0.25 g, assumed) and the speed² law"),
-        Calibrated("hertz per unit k of a resonator", neurons.DRIVEN_HZ_PER_K, 7.0 / 0.3425,
-                   "Hz", "docs/reference.md, neuron model (paper: 7 Hz neuron k = 0.3425, "
-                   "Fig. 8)", "neurons.k_for_frequency, from this project's tuning curves"),
+        # set to this project's own measured tuning curve; the paper's 7 Hz neuron (k =
+        # 0.3425, 20.4 Hz per k) is never its target: tuning_sweep sets it beside a prediction
+        Calibrated("hertz per unit k of a resonator", neurons.DRIVEN_HZ_PER_K,
+                   "centroid of the driven k = 1 tuning curve", "Hz",
+                   "networks/neurons.py (measured; re-measured by studies/tuning_sweep.toml)",
+                   "neurons.k_for_frequency places each neuron's k with it"),
         Calibrated("coder threshold Th at 12 cm/s", parts.chain.named_steps["coder"].threshold,
                    "above sensor noise (0.01 g), below self-motion (0.25 g rms)", "g",
                    "studies/quickstart.toml", "set by hand"),
