@@ -53,6 +53,9 @@ class GateTraining:
         return v, th
 
 
+DISPLAY_MEAN_S = 0.5   # the rate map's running mean in the figure (not the read-out's)
+
+
 def build(spec: dict) -> ClosedLoop:
     """Check the whole spec and build every part of the loop before anything runs."""
     specs.check_top_level(spec, SECTIONS)
@@ -263,8 +266,15 @@ def _figure(robot: RobotRecord, scene: CourseScene, contact_times_s: list):
     a1b.plot(t, robot.th, color="tab:red", lw=0.8)
     a1b.set_ylabel("gate Th (g)", color="tab:red")
     a2 = fig.add_subplot(gs[2, 0], sharex=a0)
-    mesh = draw_rate_map(a2, robot.rates)
-    fig.colorbar(mesh, ax=a2, label="rate (Hz)", pad=0.01)
+    # A read-out window of 0.1 s holds 0 or 1 spike of a slow neuron: drawn as it is, every
+    # cell is 0 or 10 Hz and the colour scale saturates. The figure shows the running mean
+    # over DISPLAY_MEAN_S, labelled so (the read-out itself keeps its own window).
+    w = float(robot.rates.attrs["window_s"])
+    n = max(1, int(round(DISPLAY_MEAN_S / w)))
+    shown = robot.rates.rolling(window_s=n, center=True, min_periods=1).mean()
+    shown.attrs = dict(robot.rates.attrs)
+    mesh = draw_rate_map(a2, shown)
+    fig.colorbar(mesh, ax=a2, label=f"rate (Hz), mean over {n * w:g} s", pad=0.01)
     a2.set_xlabel("time (s)")
     for t_s in contact_times_s:
         a2.axvline(t_s, color="tab:cyan", ls="--")
