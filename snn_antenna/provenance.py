@@ -8,9 +8,12 @@ any edit of the package invalidates every cache.
 """
 from __future__ import annotations
 
+import datetime as _dt
 import functools
 import hashlib
+import platform
 import subprocess
+import sys
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
@@ -51,3 +54,27 @@ def code_identity() -> dict:
 
     return {"snn_antenna_version": __version__, "code_sha256": code_hash(),
             "git_commit": git_commit()}
+
+
+def provenance(spec: dict, target: str | None = None) -> dict:
+    """What ``summary.json`` records about a run: its resolved spec and seed, the code that
+    made it (``code_identity``), the libraries' versions, the Brian2 target, the command."""
+    import brian2
+    import numpy
+    import scipy
+    import sklearn
+
+    return {
+        "spec": spec,
+        "seed": spec.get("seed", 0),
+        **code_identity(),             # version, source hash, git commit
+        "brian2_version": brian2.__version__,
+        "brian2_target": target or str(brian2.prefs.codegen.target),
+        "numpy_version": numpy.__version__,
+        "scipy_version": scipy.__version__,
+        "sklearn_version": sklearn.__version__,
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "command": " ".join(sys.argv),
+    }

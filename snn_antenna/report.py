@@ -6,11 +6,8 @@ so any figure can be regenerated; files are written atomically. Style: ``report_
 from __future__ import annotations
 
 import base64
-import datetime as _dt
 import html
 import json
-import platform
-import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .files import atomic_write
+from .provenance import provenance
 from .report_style import CSS as _CSS
 
 
@@ -42,28 +40,6 @@ def _jsonable(obj: Any):
     if isinstance(obj, Path):
         return str(obj)
     return obj
-
-
-def provenance(spec: dict, target: str | None = None) -> dict:
-    import brian2
-    import scipy
-    import sklearn
-
-    from .provenance import code_identity
-    return {
-        "spec": spec,
-        "seed": spec.get("seed", 0),
-        **code_identity(),             # version, source hash, git commit
-        "brian2_version": brian2.__version__,
-        "brian2_target": target or str(brian2.prefs.codegen.target),
-        "numpy_version": np.__version__,
-        "scipy_version": scipy.__version__,
-        "sklearn_version": sklearn.__version__,
-        "python": sys.version.split()[0],
-        "platform": platform.platform(),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "command": " ".join(sys.argv),
-    }
 
 
 @dataclass
@@ -274,6 +250,13 @@ def unit_of(key) -> str:
     """The unit a key's name ends with ("" when none): ``rate_hz`` -> "Hz"."""
     text = label(key)
     return text[text.rfind("(") + 1:-1] if text.endswith(")") and "(" in text else ""
+
+
+def by_speed(values: dict, show) -> str:
+    """A speed → value mapping in one line, the one way reports write it:
+    ``12 cm/s: 0.0669 g · 27 cm/s: 0.35 g`` (speeds in order, as numbers, not JSON keys)."""
+    items = sorted((float(v), x) for v, x in values.items())
+    return " · ".join(f"{v:g} cm/s: {show(x)}" for v, x in items)
 
 
 def fmt(value, unit: str = "", digits: int = 4) -> str:

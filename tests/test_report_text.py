@@ -47,7 +47,7 @@ def test_the_band_advice_is_words_not_code():
 
 
 def test_speed_to_value_mappings_are_written_one_way():
-    from snn_antenna.studies.gating_threshold.report import by_speed
+    from snn_antenna.report import by_speed
 
     line = by_speed({"27.0": 0.35, "12": 0.0669, "0": 0.03}, lambda t: f"{t:.3g} g")
     assert line == "0 cm/s: 0.03 g · 12 cm/s: 0.0669 g · 27 cm/s: 0.35 g"

@@ -29,7 +29,7 @@ from ..readout.contacts import detector_from_spec
 from ..evaluation.scoring import score_run
 from ..readout.detection import BlindReadOut
 from ..evaluation.thresholds import th_star_from_summary
-from ..report import Calibrated, Predicted, Report
+from ..report import Calibrated, Predicted, Report, by_speed
 from ..truth import Event
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
@@ -207,8 +207,8 @@ def _provenance_rows(rep: Report, s: dict, parts: ClosedLoop) -> None:
                    "horizontal centred 40° to the side, 90° vertical centred 10° up)",
                    "network cpg pan/tilt centre and amplitude"),
         Calibrated("gate's Th*(speed) training examples",
-                   ", ".join(f"{a:g}: {b:g}" for a, b in zip(v, th)), "Th* of the gating study",
-                   "cm/s: g", "studies/gating_threshold.toml (seed 3), as listed in "
+                   by_speed(dict(zip(v, th)), lambda t: f"{t:.3g} g"),
+                   "Th* of the gating study", "", "studies/gating_threshold.toml (seed 3), as listed in "
                    "studies/exploration.toml", "gate_training"),
     )
     rep.predicted(

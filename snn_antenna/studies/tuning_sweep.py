@@ -29,7 +29,8 @@ from ..logfile import LogFile
 from ..networks import neurons
 from ..evaluation import tuning
 from ..evaluation.tuning import ReadPoint
-from ..report import Calibrated, Predicted, Report, fmt, provenance
+from ..provenance import provenance
+from ..report import Calibrated, Predicted, Report, fmt
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
 

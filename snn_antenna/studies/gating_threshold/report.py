@@ -17,7 +17,7 @@ from ...evaluation.thresholds import (
     table_cell,
 )
 from ...evaluation.thresholds import GateRecall, ThStarFit
-from ...report import Calibrated, Predicted, Report
+from ...report import Calibrated, Predicted, Report, by_speed
 from .spec import Parts
 
 
@@ -53,13 +53,6 @@ class Results:
 
 
 # -- report --------------------------------------------------------------------------------
-def by_speed(values: dict, show) -> str:
-    """A speed → value mapping in one line, the one way every part of this report writes it:
-    ``12 cm/s: 0.0669 g · 27 cm/s: 0.35 g`` (speeds in order, as numbers, not JSON keys)."""
-    items = sorted((float(v), x) for v, x in values.items())
-    return " · ".join(f"{v:g} cm/s: {show(x)}" for v, x in items)
-
-
 def human_summary(s: dict, out_dir) -> str:
     ok, why = earns_its_place(s)
     return "\n".join([
