@@ -51,3 +51,21 @@ def test_speed_to_value_mappings_are_written_one_way():
 
     line = by_speed({"27.0": 0.35, "12": 0.0669, "0": 0.03}, lambda t: f"{t:.3g} g")
     assert line == "0 cm/s: 0.03 g · 12 cm/s: 0.0669 g · 27 cm/s: 0.35 g"
+
+
+def test_speed_accuracy_lists_only_the_shipped_limits_its_map_supports(tmp_path):
+    from snn_antenna.report import Report
+    from snn_antenna.studies.speed_accuracy.report import _provenance_rows
+
+    summary = {"stability_limits": {
+        "euler": {"shipped_max_stable_k_dt": 0.5, "measured_max_stable_k_dt": 0.6},
+        "izhikevich": {"shipped_max_stable_k_dt": 1.4, "measured_max_stable_k_dt": 0.5}},
+        "shipped_default": {"method": "euler", "dt_ms": 0.1, "default_rows": []}}
+    quick = Report(tmp_path, "t", quick=True)
+    _provenance_rows(quick, summary)
+    assert [c.quantity for c in quick._calibrated] == ["largest stable k·dt, euler"]
+    assert any("izhikevich" in part and "not checked" in part for part in quick._parts)
+    full = Report(tmp_path, "t")
+    _provenance_rows(full, summary)                 # a full map below the shipped value: said
+    izh = [c for c in full._calibrated if "izhikevich" in c.quantity][0]
+    assert "NOT supported" in izh.how
