@@ -39,6 +39,8 @@ def _run(args) -> int:
         extra["fresh"] = True
     if getattr(args, "scheduler", None):
         extra["scheduler"] = args.scheduler
+    from .networks.neurons import raise_on_ctrl_c
+    raise_on_ctrl_c()                   # Ctrl-C stops the study, never just one Brian2 run
     try:
         module.run(spec, out, quick=args.quick, **extra)
     finally:

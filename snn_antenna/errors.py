@@ -4,6 +4,7 @@ Every error a user can cause names the field, the value and what is accepted, an
 before any long work starts.
 """
 
+import logging
 import os
 import sys
 import traceback
@@ -103,6 +104,10 @@ def guarded(func, args, prog: str) -> int:
         print(f"{prog}: numerical instability: {exc}", file=sys.stderr)
         return 3
     except KeyboardInterrupt:
+        # the objects of a run cut short are deleted on the way out, and Brian2 warns about
+        # each ("getting deleted, but was never included in a network") like a traceback:
+        # noise after a Ctrl-C, so its logger says only errors from here on
+        logging.getLogger("brian2").setLevel(logging.ERROR)
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
     except PipelineError as exc:

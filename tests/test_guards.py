@@ -2,6 +2,7 @@
 (or the documented behaviour), no traceback, and no file of the user's touched."""
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -431,3 +432,43 @@ def test_a_refused_run_leaves_no_folder_behind(tmp_path):
         with outputs.output_folder(out, "quickstart"):
             raise SpecError("seed", -1, "a seed ≥ 0")
     assert not out.exists()
+
+
+def test_ctrl_c_ends_with_one_line_not_brian2s_deletion_warnings(tmp_path):
+    """Objects of a run cut short by Ctrl-C are deleted on the way out; Brian2 warns about
+    each like a traceback. The interrupted command says one line and nothing more."""
+    script = tmp_path / "interrupt.py"
+    script.write_text(
+        "import sys\n"
+        "import brian2 as b2\n"
+        "from snn_antenna.errors import guarded\n"
+        "def run(_):\n"
+        "    group = b2.NeuronGroup(3, 'dv/dt = -v/(10*ms) : 1')   # never in a network\n"
+        "    raise KeyboardInterrupt\n"
+        "code = guarded(run, None, 'snn-antenna')\n"
+        "import gc; gc.collect()               # the abandoned objects go here\n"
+        "sys.exit(code)\n")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert proc.returncode == 130
+    assert proc.stderr.strip() == "snn-antenna: interrupted", proc.stderr
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_a_closed_loop_study_at_once(tmp_path):
+    """Brian2 answers Ctrl-C by ending the current run and returning; the closed loop would go
+    on with the next run. The study must stop, with one line, and no expected warning shown."""
+    proc = subprocess.Popen([*CLI, "run", str(ROOT / "studies" / "exploration.toml"), "--quick",
+                             "--out", str(tmp_path / "o")], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    lines = []
+    for line in proc.stdout:
+        lines.append(line)
+        if line.startswith("[3/5]"):
+            break
+    time.sleep(3)                       # inside the loop's Brian2 runs
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and "[4/5]" not in out
+    assert err.strip().endswith("snn-antenna: interrupted")
+    assert "getting deleted" not in err and "token_post" not in err

@@ -167,11 +167,8 @@ def count_spikes(sweep, p: dict[str, np.ndarray], current: np.ndarray, input_dt_
                  input_index: np.ndarray, count_from_s: float) -> np.ndarray:
     """Spikes per neuron from ``count_from_s`` on: one NeuronGroup, neuron i driven by
     column ``input_index[i]`` of ``current`` (runtime target ``sweep.engine``)."""
-    import brian2 as b2
-
-    # Brian2 answers Ctrl-C by ending the run early and returning: a chunk would be stored
-    # with truncated counts and marked done. Raising KeyboardInterrupt leaves it unmarked.
-    b2.prefs.core.stop_on_keyboard_interrupt = False
+    # a chunk cut short by Ctrl-C must raise, never be stored with truncated counts as done
+    neurons.raise_on_ctrl_c()
     result = neurons.simulate(sweep.preset, current, sweep.dt_ms, k=p["k"], method=sweep.method,
                               input_dt_ms=input_dt_ms, input_index=input_index,
                               target=sweep.engine, force=sweep.force,

@@ -145,6 +145,16 @@ def resting_state(preset: str | Preset = "resonator", b: float | None = None,
     return v, b * v
 
 
+def raise_on_ctrl_c() -> None:
+    """Make Ctrl-C raise ``KeyboardInterrupt`` inside a Brian2 run too. By default Brian2
+    answers it by ending the current ``run`` early and returning, as if it had finished: a
+    study that runs many short runs (the closed loop, a sweep's chunks) would go on with
+    truncated results and write a report from them."""
+    import brian2 as b2
+
+    b2.prefs.core.stop_on_keyboard_interrupt = False
+
+
 def k_for_frequency(freq_hz, hz_per_k: float = DRIVEN_HZ_PER_K):
     """The time-scale factor k whose resonator prefers ``freq_hz``.
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import spec as specs
-from ..logfile import logged
+from ..logfile import CPG_TOKEN_ORDER, logged
 from ..errors import SpecError, check
 from ..figures import draw_rate_map
 from ..networks.assembly import configure
@@ -90,7 +90,8 @@ def build(spec: dict) -> ClosedLoop:
 def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
     parts = build(spec)
     t_start = time.perf_counter()
-    robot, world = parts.run(int(spec.get("seed", 0)), log)
+    with log.expected(CPG_TOKEN_ORDER):
+        robot, world = parts.run(int(spec.get("seed", 0)), log)
     log("[5/5] scoring against the world's contacts and writing the report")
     contacts = [Event("contact", c.t_s, c.hold_s, c.distance_cm, c.material)
                 for c in world.contacts]
