@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from . import bounds
+from .bounds import option
 from .errors import SpecError, guarded
 
 
@@ -25,10 +27,16 @@ def _run(args) -> int:
     study = spec.get("study")
     module = runner(study)
     check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
+    module.build(spec)                  # every field in its bounds, before sizing the work
     out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
     folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)  # and lock it
     try:
         _check_cost(spec, args)
+        if args.check:                  # everything a run would refuse has been said
+            print(f"{args.spec}: the spec and --out {out} are accepted ({study}); "
+                  "nothing was run")
+            outputs.release(folder)
+            return 0
         folder.clear()                  # --force: another study's files, now that all passed
         outputs.claim(folder)
     except BaseException:
@@ -49,23 +57,46 @@ def _run(args) -> int:
 
 
 def _check_cost(spec: dict, args) -> None:
-    """A sweep expected to run beyond the limit is refused without ``--yes``."""
+    """A study (a scene, a bench set, a sweep) expected to run beyond the limit is refused
+    without ``--yes``, naming the key that sets its length."""
+    from . import spec as specs
     from .studies import plan
 
     estimate = plan(spec)
     if estimate is not None:
         from .engine.cost import LONG_SWEEP_S
 
-        print(f"sweep: {estimate.describe()}", file=sys.stderr, flush=True)
+        sweep = hasattr(estimate, "points")
+        print(f"{'sweep: ' if sweep else ''}{estimate.describe()}", file=sys.stderr, flush=True)
         if estimate.seconds > LONG_SWEEP_S and not args.yes:
-            raise SpecError("axes", f"{estimate.points:,} points",
-                            f"a sweep expected to take at most {LONG_SWEEP_S / 3600:g} h "
-                            f"(this one: about {estimate.seconds / 3600:.3g} h); shrink an "
-                            "axis, or pass --yes to run it anyway")
+            key = estimate.key if not sweep else "axes"
+            value = f"{estimate.points:,} points" if sweep else specs.get_field(spec, key)
+            raise SpecError(key, value,
+                            f"a {'sweep' if sweep else 'run'} expected to take at most "
+                            f"{LONG_SWEEP_S / 3600:g} h (this one: about "
+                            f"{estimate.seconds / 3600:.3g} h); "
+                            f"{'shrink an axis' if sweep else 'make it shorter'}, or pass "
+                            "--yes to run it anyway")
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """Bad options are one line too (the usage is one ``-h`` away), exit status 2; the
+    subcommands' parsers are of this class as well."""
+
+    def error(self, message):
+        hint = ""
+        if message.startswith("unrecognized arguments:"):    # a misspelt option: suggest
+            import difflib
+
+            known = [o for a in self._actions for o in a.option_strings]
+            close = {m for given in message.split(":", 1)[1].split()
+                     for m in difflib.get_close_matches(given, known, n=1)}
+            hint = f"; did you mean {', '.join(sorted(close))}?" if close else ""
+        self.exit(2, f"{self.prog}: error: {message}{hint} (see {self.prog} -h)\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="snn-antenna",
         description="Spiking neural networks (Brian2) that read an insect-inspired antenna.")
     from . import __version__
@@ -73,7 +104,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
     run = sub.add_parser("run", help="run a study spec (studies/*.toml) and write its report")
     run.add_argument("spec", help="path of a study spec, e.g. studies/quickstart.toml")
-    run.add_argument("--out", help="output folder (default out/SPEC-NAME)")
+    run.add_argument("--out", type=option(bounds.out_path, text=True),
+                     help="output folder (default out/SPEC-NAME)")
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a spec field, e.g. --set network.n_neurons=48 (repeatable)")
     run.add_argument("--quick", action="store_true",
@@ -85,8 +117,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--force", action="store_true",
                      help="reuse an --out folder that holds another study's outputs or other "
                           "files: what snn-antenna wrote there is replaced, other files are kept")
+    run.add_argument("--check", action="store_true",
+                     help="check the spec, its estimate and --out as a run would, then stop "
+                          "without running or writing anything")
     run.add_argument("--yes", action="store_true",
-                     help="sweeps: run even when the estimate is beyond the limit (1 h)")
+                     help="run even when the estimate is beyond the limit (1 h)")
     run.set_defaults(func=_run)
     try:
         from .bridge.cli import add_subcommands

@@ -11,12 +11,34 @@ import traceback
 from pathlib import Path
 
 
+MAX_SHOWN = 80   # characters of a value a message shows: a 4 MB --set value is not echoed
+
+
+def shown(value, limit: int = MAX_SHOWN) -> str:
+    """``repr(value)`` cut to ``limit`` characters (in the middle, marked with an ellipsis)."""
+    try:
+        text = repr(value)
+    except Exception:                       # a repr that fails is not the user's problem
+        text = f"<{type(value).__name__}>"
+    return _cut(text, limit)
+
+
+def _cut(text: str, limit: int = MAX_SHOWN) -> str:
+    """``text`` at most ``limit`` characters, cut in the middle: a path keeps its file name,
+    a long value its beginning and end."""
+    if len(text) <= limit:
+        return text
+    head = (limit - 1) // 2
+    return text[:head] + "\u2026" + text[len(text) - (limit - 1 - head):]
+
+
 class SpecError(ValueError):
     """A parameter, spec field or input is outside what the toolkit accepts."""
 
     def __init__(self, field: str, value, accepted: str):
         self.field, self.value, self.accepted = field, value, accepted
-        super().__init__(f"{field} = {value!r} is not accepted: {accepted}")
+        super().__init__(f"{_cut(str(field))} = {shown(value)} is not "
+                         f"accepted: {accepted}")
 
     def __reduce__(self):  # errors cross process boundaries (Dask workers) intact
         return type(self), (self.field, self.value, self.accepted)
@@ -114,8 +136,8 @@ def guarded(func, args, prog: str) -> int:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     except OSError as exc:
-        print(f"{prog}: error: {exc.strerror or exc}"
-              + (f": {exc.filename}" if exc.filename else ""), file=sys.stderr)
+        print(f"{prog}: error: {_cut(str(exc.strerror or exc), 200)}"
+              + (f": {_cut(str(exc.filename))}" if exc.filename else ""), file=sys.stderr)
         return 1
     except Exception as exc:                            # a bug: say where, briefly
         if os.environ.get("SNN_ANTENNA_TRACEBACK"):

@@ -20,6 +20,7 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 
+from . import bounds
 from .errors import SpecError, check
 from .signals import validate_samples
 from .sources.antenna import ADC
@@ -66,6 +67,8 @@ class CountsToG(_Causal):
         self.full_scale_g = full_scale_g
 
     def _validate_params_(self):
+        bounds.integer("adc_bits", self.adc_bits, 4, 24)
+        bounds.number("full_scale_g", self.full_scale_g, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
         self.adc_ = ADC(self.adc_bits, self.full_scale_g)
 
     def _step(self, X):
@@ -115,13 +118,10 @@ class LowPass(_Causal):
     def _validate_params_(self):
         from scipy.signal import butter
 
-        check(np.isfinite(self.rate_hz) and self.rate_hz > 0, "rate_hz", self.rate_hz,
-              "a sample rate > 0 Hz")
-        check(np.isfinite(self.cutoff_hz) and 0 < self.cutoff_hz < self.rate_hz / 2,
-              "cutoff_hz", self.cutoff_hz, f"a cut-off in (0, {self.rate_hz / 2:g}) Hz "
-              f"(below Nyquist at rate_hz = {self.rate_hz:g})")
-        check(isinstance(self.order, int) and 1 <= self.order <= 8, "order", self.order,
-              "an integer order in [1, 8]")
+        bounds.rate_hz("rate_hz", self.rate_hz)
+        bounds.number("cutoff_hz", self.cutoff_hz, 0.0, self.rate_hz / 2, lo_open=True,
+                      hi_open=True, unit=f" Hz (below Nyquist at rate_hz = {self.rate_hz:g})")
+        bounds.integer("order", self.order, 1, 8)
         self.sos_ = butter(self.order, self.cutoff_hz, fs=self.rate_hz, output="sos")
 
     def _step(self, X):
@@ -169,10 +169,8 @@ class Centre(_Causal):
         self.tau_s = tau_s
 
     def _validate_params_(self):
-        check(np.isfinite(self.rate_hz) and self.rate_hz > 0, "rate_hz", self.rate_hz,
-              "a sample rate > 0 Hz")
-        check(np.isfinite(self.tau_s) and self.tau_s > 0, "tau_s", self.tau_s,
-              "a time constant > 0 s")
+        bounds.rate_hz("rate_hz", self.rate_hz)
+        bounds.number("tau_s", self.tau_s, 0.0, lo_open=True, unit=" s")
         self.alpha_ = 1.0 - np.exp(-1.0 / (self.tau_s * self.rate_hz))
 
     def _step(self, X):
@@ -200,10 +198,9 @@ class SquareWaveCoder(_Causal):
         self.threshold = threshold
 
     def _validate_params_(self):
-        check(np.isfinite(self.amplitude) and self.amplitude > 0, "amplitude", self.amplitude,
-              "a coder amplitude > 0")
-        check(np.isfinite(self.threshold) and self.threshold >= 0, "threshold", self.threshold,
-              "a threshold >= 0 (a threshold above the signal simply codes silence)")
+        bounds.number("amplitude", self.amplitude, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
+        # a threshold above the signal simply codes silence
+        bounds.number("threshold", self.threshold, 0.0)
 
     def _step(self, X, threshold=None):
         th = self.threshold if threshold is None else threshold
@@ -231,10 +228,23 @@ def make_chain(rate_hz: float, adc_bits: int = 10, full_scale_g: float = 18.0,
     ]
     if highpass_hz is not None:
         steps.append(("highpass", HighPass(rate_hz, highpass_hz, lowpass_order)))
-    return Pipeline(steps + [
-        ("centre", Centre(rate_hz, centre_tau_s)),
-        ("coder", SquareWaveCoder(coder_amplitude, threshold)),
-    ])
+    steps += [("centre", Centre(rate_hz, centre_tau_s)),
+              ("coder", SquareWaveCoder(coder_amplitude, threshold))]
+    for name, stage in steps:   # refused where the values enter, not at the first fit
+        try:
+            stage._validate_params_()
+        except SpecError as exc:  # named as make_chain's caller wrote it
+            raise SpecError(CHAIN_ARGS.get((name, exc.field), exc.field), exc.value,
+                            exc.accepted) from None
+    return Pipeline(steps)
+
+
+# (stage, its parameter) -> make_chain's argument
+CHAIN_ARGS = {("to_g", "adc_bits"): "adc_bits", ("to_g", "full_scale_g"): "full_scale_g",
+              ("lowpass", "cutoff_hz"): "lowpass_hz", ("lowpass", "order"): "lowpass_order",
+              ("highpass", "cutoff_hz"): "highpass_hz", ("highpass", "order"): "lowpass_order",
+              ("centre", "tau_s"): "centre_tau_s", ("coder", "amplitude"): "coder_amplitude",
+              ("coder", "threshold"): "threshold"}
 
 
 def warmup_samples(samples, rate_hz: float, warmup_s: float) -> np.ndarray:
@@ -243,7 +253,9 @@ def warmup_samples(samples, rate_hz: float, warmup_s: float) -> np.ndarray:
     Refuses a warm-up shorter than ten samples or longer than the recording.
     """
     samples = validate_samples(samples, "samples")
-    n = int(round(float(warmup_s) * float(rate_hz))) if np.isfinite(warmup_s) else -1
+    rate_hz = bounds.rate_hz("rate_hz", rate_hz)
+    warmup_s = bounds.number("preprocess.warmup_s", warmup_s, 0.0, lo_open=True, unit=" s")
+    n = int(round(warmup_s * rate_hz)) if warmup_s * rate_hz < 2**62 else -1
     check(10 <= n <= samples.shape[0], "preprocess.warmup_s",
           warmup_s, f"a warm-up of at least {10 / rate_hz:g} s and at most the recording's "
           f"{samples.shape[0] / rate_hz:g} s")

@@ -27,16 +27,18 @@ INCLUDABLE = ("network", "stimulus")
 
 def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -> dict:
     """Read a spec, resolve includes, apply the quick profile and ``--set`` overrides."""
-    path = Path(path)
+    from .bounds import out_path
+
+    path = Path(out_path("spec", path))
     if not path.is_file():
         raise SpecError("spec", str(path), "the path of an existing TOML spec file")
     spec = _read(path)
     for key in INCLUDABLE:
         if isinstance(spec.get(key), str):
-            included = (path.parent / spec[key]).resolve()
+            included = (path.parent / out_path(key, spec[key])).resolve()
             if not included.is_file():
                 raise SpecError(key, spec[key], f"a TOML file path relative to {path.parent}")
-            spec[key] = _read(included)
+            spec[key] = _read(included, key)
     quick_overrides = spec.pop("quick", {})
     if quick:
         for dotted, value in _flatten(quick_overrides):
@@ -50,12 +52,15 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
     return spec
 
 
-def _read(path: Path) -> dict:
+def _read(path: Path, field: str = "spec") -> dict:
     try:
         with open(path, "rb") as f:
             return tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
-        raise SpecError("spec", str(path), f"valid TOML ({exc})") from None
+        raise SpecError(field, str(path), f"valid TOML ({exc})") from None
+    except UnicodeDecodeError:              # tomllib reads bytes but wants UTF-8 text
+        raise SpecError(field, str(path), "a TOML file in UTF-8 text (this one is binary "
+                                           "or in another encoding)") from None
 
 
 def _flatten(table: dict, prefix: str = ""):
@@ -94,6 +99,16 @@ def set_field(spec: dict, dotted: str, value: Any) -> None:
         node[_list_index(node, last, ".".join(parents), dotted)] = value
     else:
         node[last] = value
+
+
+def get_field(spec: dict, dotted: str, default=None):
+    """The value at ``dotted`` (``table.key``), or ``default`` where a table or key is missing."""
+    node = spec
+    for key in dotted.split("."):
+        if not isinstance(node, dict) or key not in node:
+            return default
+        node = node[key]
+    return node
 
 
 def _list_index(items: list, key: str, where: str, dotted: str) -> int:

@@ -15,12 +15,13 @@ def test_version(capsys):
         f"snn-antenna {__version__}"
 
 
-def test_a_misspelt_option_shows_its_commands_usage(capsys):
+def test_a_misspelt_option_is_one_line_of_its_command_with_the_likely_option(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["run", "studies/quickstart.toml", "--quik"])
     err = capsys.readouterr().err
-    assert exit_.value.code == 2
-    assert err.startswith("usage: snn-antenna run") and "--quick" in err and "--quik" in err
+    assert exit_.value.code == 2 and len(err.strip().splitlines()) == 1
+    assert err.startswith("snn-antenna run: error:") and "--quik" in err
+    assert "did you mean --quick?" in err and "snn-antenna run -h" in err
 
 
 def test_every_option_of_every_command_has_help():

@@ -16,6 +16,8 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
+from .. import bounds
+from ..bounds import option
 from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .protocol import WIRE_FORMATS
 from .recorder import COUNT_FIELDS
@@ -33,8 +35,10 @@ def add_subcommands(subparsers) -> None:
                                           "serial port; survives kill -9 with at most the last "
                                           "100 ms missing.")
     _port_args(p)
-    p.add_argument("--out", required=True, help="recording directory (new or empty)")
-    p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
+    p.add_argument("--out", required=True, type=option(bounds.out_path, text=True),
+                   help="recording directory (new or empty)")
+    p.add_argument("--duration", type=option(bounds.positive_seconds), default=None,
+                   help="seconds (default: until Ctrl-C)")
     p.set_defaults(func=cmd_record)
 
     p = subparsers.add_parser("replay", help="replay a recording through the decoder "
@@ -47,6 +51,7 @@ def add_subcommands(subparsers) -> None:
                         "(networks/live.toml: the live setting)")
     _set_arg(p)
     add_view_args(p)
+    _retype(p, "--view-hold", option(bounds.seconds))
     p.set_defaults(func=cmd_replay)
 
     p = subparsers.add_parser("emulate", help="emulate the sensor board (pty or URL), with faults")
@@ -59,16 +64,16 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--stimulus", default=None,
                    help="stimuli/NAME.toml to stream: a scene, or the bench's contact events "
                         "back to back (default: a robot scene with contacts at 19 and 27 cm)")
-    p.add_argument("--frames", type=int, default=None,
+    p.add_argument("--frames", type=option(bounds.positive_integer), default=None,
                    help="frames to send (default: the stimulus's length; a scene loops)")
     p.add_argument("--faults", default="", help="e.g. garbage=3,drop=2,bitflip=2,range=1,"
                                                 "stall=1,disconnect=1,stall_s=0.2,outage_s=0.5")
-    p.add_argument("--seed", type=int, default=0,
+    p.add_argument("--seed", type=option(bounds.seed), default=0,
                    help="seed of the stimulus noise and of where faults fall (default 0)")
     p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
                    help="wire format of the frames (default binary)")
     p.add_argument("--fast", action="store_true", help="as fast as the link takes, not 1 kHz")
-    p.add_argument("--peer-timeout", type=float, default=None,
+    p.add_argument("--peer-timeout", type=option(bounds.positive_seconds), default=None,
                    help="give up if nobody opens the pty within this many seconds")
     p.add_argument("--log", default=None, help="write the injected faults, expected counts and "
                                                 "the stimulus's labelled contacts (JSON) here")
@@ -81,14 +86,16 @@ def add_subcommands(subparsers) -> None:
                    help="networks/NAME.toml; networks/live.toml is the array set for live "
                         "use (rk2 at dt 0.5 ms: 5x fewer steps than resonator_array.toml, "
                         "the same read-out)")
-    p.add_argument("--out", default=None,
+    p.add_argument("--out", default=None, type=option(bounds.out_path, text=True),
                    help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
-    p.add_argument("--duration", type=float, default=None, help="seconds (default: until Ctrl-C)")
+    p.add_argument("--duration", type=option(bounds.positive_seconds), default=None,
+                   help="seconds (default: until Ctrl-C)")
     _set_arg(p)
     add_view_args(p)
     p.add_argument("--json", action="store_true",
                    help="end with the full run report as JSON (for machines) instead of the "
                         "short summary")
+    _retype(p, "--view-hold", option(bounds.seconds))
     p.set_defaults(func=cmd_stream)
 
 
@@ -103,13 +110,20 @@ def _port_args(p) -> None:
                    help="device path (/dev/ttyACM0) or pyserial URL (socket://host:port, ...)")
     p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
                    help="wire format the board sends (default binary)")
-    p.add_argument("--baudrate", type=int, default=DEFAULT_BAUDRATE,
+    p.add_argument("--baudrate", type=option(bounds.baudrate), default=DEFAULT_BAUDRATE,
                    help=f"serial speed in bit/s (default {DEFAULT_BAUDRATE}; ignored by URLs)")
-    p.add_argument("--no-data-timeout", type=float, default=5.0,
+    p.add_argument("--no-data-timeout", type=option(bounds.positive_seconds), default=5.0,
                    help="fail when no valid frame arrives for this many seconds (default 5; a "
                         "board reset by opening the port is silent for 1-3 s)")
-    p.add_argument("--reconnect-timeout", type=float, default=30.0,
+    p.add_argument("--reconnect-timeout", type=option(bounds.positive_seconds), default=30.0,
                    help="how long to retry a port that disappeared (default 30 s)")
+
+
+def _retype(parser, flag: str, parse) -> None:
+    """Give an option another parser defines (``--view-hold``) its bounded type."""
+    for action in parser._actions:
+        if flag in action.option_strings:
+            action.type = parse
 
 
 def _guarded(command):

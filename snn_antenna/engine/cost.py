@@ -103,3 +103,43 @@ def estimate(grid: Grid, sweep, chunk_points: int, workers: int) -> Estimate:
     chunk = min(chunk_points, grid.size) * sweep.bytes_per_point
     return Estimate(grid.size, neuron_steps, workers, seconds, grid.size * per_point, chunk,
                     sweep.engine)
+
+
+# Time steps per second of ONE small Brian2 network (tens of neurons, spike monitor) in one
+# process, where the per-step overhead rather than the neurons sets the pace: quickstart
+# --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
+# with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
+# [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
+# estimate errs long. Standalone is taken as cython (its compile is added separately).
+MEASURED_NETWORK_STEPS_PER_S = {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4}
+
+
+@dataclass
+class JobEstimate:
+    """A study's simulated work (scenes, bench sets, streams) and its expected wall time."""
+    what: str
+    steps: float
+    neuron_steps: float
+    seconds: float
+    engine: str
+    key: str = ""          # the spec key that sets the job's length, named when it is refused
+
+    def describe(self) -> str:
+        return (f"{self.what}: {self.steps:.3g} steps, {self.neuron_steps:.3g} neuron-steps "
+                f"({self.engine}): about {_duration(self.seconds)}")
+
+
+def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str = ""
+                 ) -> JobEstimate:
+    """Wall time of Brian2 runs, each ``(simulated_s, dt_ms, n_neurons, engine)``: the step
+    overhead of a small network plus the neuron-steps of a large one, at the measured rates."""
+    steps = neuron_steps = seconds = 0.0
+    engine = runs[0][3] if runs else "numpy"
+    for simulated_s, dt_ms, n_neurons, eng in runs:
+        eng = eng if eng in MEASURED_NETWORK_STEPS_PER_S else "numpy"
+        n = simulated_s * 1000.0 / dt_ms
+        steps += n
+        neuron_steps += n * n_neurons
+        seconds += (n / MEASURED_NETWORK_STEPS_PER_S[eng]
+                    + n * n_neurons / MEASURED_STEPS_PER_S[eng])
+    return JobEstimate(what, steps, neuron_steps, seconds, engine, key)

@@ -16,6 +16,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 import xarray as xr
 
+from .. import bounds
 from ..errors import PipelineError, SpecError, check, is_integer, is_number
 from ..signals import Recording, validate_samples
 from . import neurons
@@ -73,8 +74,7 @@ class ResonatorArray:
               self.method, f"one of {list(neurons.METHODS)}")
         check(isinstance(self.target, str) and self.target in ("numpy", "cython"), "target",
               self.target, "'numpy' or 'cython'")
-        check(is_number(self.dt_ms) and 0 < self.dt_ms <= 1.0, "dt_ms", self.dt_ms,
-              "a step in (0, 1] ms")
+        bounds.dt_ms("dt_ms", self.dt_ms)
         check(isinstance(self.force, bool), "force", self.force, "true or false")
         k_dt = float(self.k.max()) * self.dt_ms
         if not self.force and k_dt > neurons.MAX_STABLE_K_DT[self.method]:
@@ -132,9 +132,10 @@ class ResonatorArray:
         if not isinstance(coded, Recording):
             raise SpecError("coded", type(coded).__name__,
                             "a signals.Recording of coded samples (rec.with_samples(...))")
-        check(is_number(window_s) and window_s > 0, "window_s", window_s, "a window > 0 s")
-        check(is_number(check_every_ms) and check_every_ms > 0, "check_every_ms",
-              check_every_ms, "an interval > 0 ms between instability checks")
+        # a window holds one input sample at least: a rate map never outgrows the input
+        bounds.number("window_s", window_s, 1.0 / bounds.rate_hz("rate_hz", coded.rate_hz),
+                      unit=" s (one input sample)")
+        bounds.number("check_every_ms", check_every_ms, self.dt_ms, unit=" ms (one step)")
         import brian2 as b2
 
         # Contiguous: Brian2's cython TimedArray refuses a strided view (e.g. a column slice).
@@ -351,6 +352,8 @@ def rate_map(spike_i, spike_t_s, neuron_hz, duration_s: float,
     check(is_number(window_s) and 0 < window_s <= duration_s, "window_s", window_s,
           f"a window in (0, {duration_s:g}] s")
     n_windows = int(np.floor(duration_s / window_s + 1e-9))
+    bounds.n_samples("window_s", n_windows * window_s, 1.0 / window_s,
+                     8 * max(1, len(neuron_hz)))   # the map's windows x neurons must fit
     edges = np.arange(n_windows + 1) * window_s
     # A spike belongs to the window its step starts in, counted as the stream counts it: a
     # spike at exactly 5.3 s is in [5.3, 5.4) although 53 * 0.1 > 5.3 in floating point.

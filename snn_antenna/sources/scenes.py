@@ -33,6 +33,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .. import bounds
 from ..errors import SpecError, check
 from ..signals import Recording
 from . import antenna
@@ -55,11 +56,16 @@ class SpeedProfile:
     points: list = field(default_factory=list)
 
     def validate(self) -> None:
-        check(self.kind in PROFILE_KINDS, "speed.kind", self.kind, f"one of {PROFILE_KINDS}")
+        bounds.choice("speed.kind", self.kind, PROFILE_KINDS)
         if self.kind == "constant":
-            antenna.self_motion_rms_g(self.speed_cm_s)  # refuses negative / non-finite
+            bounds.number("speed.speed_cm_s", self.speed_cm_s, *SPEED_RANGE_CM_S, unit=" cm/s")
             return
-        pts = np.asarray(self.points, dtype=float) if len(self.points) else np.empty((0, 2))
+        pairs = isinstance(self.points, (list, tuple)) and all(
+            isinstance(p, (list, tuple)) and len(p) == 2 and all(
+                bounds._real(v) and abs(v) < 1e300 for v in p) for p in self.points)
+        check(pairs and len(self.points) >= 1, "speed.points", self.points,
+              "a list of [t_s, speed_cm_s] pairs of numbers")
+        pts = np.asarray(self.points, dtype=float)
         check(pts.ndim == 2 and pts.shape[1] == 2 and len(pts) >= 1, "speed.points",
               self.points, "a list of [t_s, speed_cm_s] pairs")
         check(bool(np.all(np.isfinite(pts[:, 0]))) and bool(np.all(np.diff(pts[:, 0]) > 0))
@@ -90,11 +96,11 @@ class Obstacle:
     material: str = "wood"
 
     def validate(self, i: int = 0) -> None:
-        check(np.isfinite(self.x_cm) and np.isfinite(self.y_cm), f"obstacles[{i}]",
-              (self.x_cm, self.y_cm), "finite coordinates in cm")
-        check(np.isfinite(self.radius_cm) and 0 < self.radius_cm < 20, f"obstacles[{i}].radius_cm",
-              self.radius_cm, "a radius in (0, 20) cm")
-        antenna.check_material(self.material)
+        bounds.number(f"obstacles[{i}].x_cm", self.x_cm, -1e9, 1e9, unit=" cm")
+        bounds.number(f"obstacles[{i}].y_cm", self.y_cm, -1e9, 1e9, unit=" cm")
+        bounds.number(f"obstacles[{i}].radius_cm", self.radius_cm, 0.0, 20.0, lo_open=True,
+                      hi_open=True, unit=" cm")
+        bounds.choice(f"obstacles[{i}].material", self.material, sorted(antenna.MATERIALS))
 
 
 def rod_touch(base_xy: np.ndarray, pan_deg, tilt_deg, obstacle: Obstacle,
@@ -184,21 +190,21 @@ class CourseScene(RobotScene):
         return self.speed if self.speed is not None else SpeedProfile("constant", self.speed_cm_s)
 
     def validate(self) -> None:
+        bounds.instance("speed", self.speed, (SpeedProfile, type(None)), "a SpeedProfile")
         self.profile.validate()
         super().validate()
+        bounds.instance("obstacles", self.obstacles, (list, tuple), "a list of Obstacle")
         for i, ob in enumerate(self.obstacles):
+            bounds.instance(f"obstacles[{i}]", ob, Obstacle, "an Obstacle(x_cm, y_cm, ...)")
             ob.validate(i)
         for name in ("start_x_cm", "pan_deg", "pan_amplitude_deg", "tilt_deg",
                      "tilt_amplitude_deg", "tilt_phase_deg"):
-            check(np.isfinite(getattr(self, name)), name, getattr(self, name), "a finite value")
+            bounds.number(name, getattr(self, name), -1e9, 1e9)
         check(abs(self.tilt_deg) + abs(self.tilt_amplitude_deg) < 85, "tilt_amplitude_deg",
               self.tilt_amplitude_deg, "a tilt range within ±85° of the horizon")
-        check(np.isfinite(self.sweep_period_s) and self.sweep_period_s > 0, "sweep_period_s",
-              self.sweep_period_s, "a period > 0 s")
-        check(np.isfinite(self.hold_s) and self.hold_s > 0, "hold_s", self.hold_s,
-              "a contact hold time > 0 s")
-        check(np.isfinite(self.impact_transfer) and 0 < self.impact_transfer <= 1,
-              "impact_transfer", self.impact_transfer, "a share in (0, 1]")
+        bounds.number("sweep_period_s", self.sweep_period_s, 0.0, lo_open=True, unit=" s")
+        bounds.number("hold_s", self.hold_s, 0.0, lo_open=True, unit=" s")
+        bounds.number("impact_transfer", self.impact_transfer, 0.0, 1.0, lo_open=True)
 
     def time(self) -> np.ndarray:
         return np.arange(int(round(self.duration_s * self.rate_hz))) / self.rate_hz
@@ -246,6 +252,7 @@ class CourseScene(RobotScene):
 
     def generate(self, seed: int = 0) -> Recording:
         self.validate()
+        bounds.seed("seed", seed)
         plan = self.plan()
         # The planned contacts become scripted ones: the base class rings the rod for each and
         # stops the robot after the first, exactly as planned.

@@ -11,28 +11,38 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import bounds
 from ..errors import check
 from ..signals import Recording
 from ..truth import Event, GroundTruth
 from . import antenna
 
 
+def _n(duration_s: float, rate_hz: float, bytes_per_sample: int = 16) -> int:
+    """Samples in ``duration_s`` at ``rate_hz``: both bounded, and at least one sample that
+    fits in memory (``bounds.n_samples``)."""
+    rate = bounds.rate_hz("rate_hz", rate_hz)
+    n = bounds.n_samples("duration_s", duration_s, rate, bytes_per_sample)
+    check(n >= 1, "duration_s", duration_s, f"a duration of at least one sample "
+                                            f"({1 / rate:g} s at {rate:g} Hz)")
+    return n
+
+
 def _time(duration_s: float, rate_hz: float) -> np.ndarray:
-    check(np.isfinite(rate_hz) and rate_hz > 0, "rate_hz", rate_hz, "a sample rate > 0 Hz")
-    check(np.isfinite(duration_s) and duration_s > 0, "duration_s", duration_s,
-          "a duration > 0 s")
-    return np.arange(int(round(duration_s * rate_hz))) / rate_hz
+    return np.arange(_n(duration_s, rate_hz)) / rate_hz
 
 
 def _check_freq(freq_hz: float, rate_hz: float, name: str = "freq_hz") -> None:
-    check(np.isfinite(freq_hz) and 0 < freq_hz < rate_hz / 2, name, freq_hz,
-          f"a frequency in (0, {rate_hz / 2:g}) Hz (below Nyquist at {rate_hz:g} Hz)")
+    bounds.number(name, freq_hz, 0.0, rate_hz / 2, lo_open=True, hi_open=True,
+                  unit=f" Hz (below Nyquist at {rate_hz:g} Hz)")
 
 
 def sine(freq_hz: float, duration_s: float, rate_hz: float = 1000.0,
          amplitude: float = 1.0, phase: float = 0.0) -> Recording:
     t = _time(duration_s, rate_hz)
     _check_freq(freq_hz, rate_hz)
+    bounds.amplitude("amplitude", amplitude)
+    bounds.number("phase", phase, -1e6, 1e6)
     return Recording(amplitude * np.sin(2 * np.pi * freq_hz * t + phase), rate_hz, units="a.u.")
 
 
@@ -40,6 +50,7 @@ def square(freq_hz: float, duration_s: float, rate_hz: float = 1000.0,
            amplitude: float = 1.0) -> Recording:
     t = _time(duration_s, rate_hz)
     _check_freq(freq_hz, rate_hz)
+    bounds.amplitude("amplitude", amplitude)
     # Half-period index parity avoids sign(0) = 0 at the sampled zero crossings.
     half = np.floor(2 * freq_hz * t).astype(int)
     return Recording(amplitude * np.where(half % 2 == 0, 1.0, -1.0), rate_hz, units="a.u.")
@@ -52,6 +63,7 @@ def chirp(f0_hz: float, f1_hz: float, duration_s: float, rate_hz: float = 1000.0
     t = _time(duration_s, rate_hz)
     _check_freq(f0_hz, rate_hz, "f0_hz")
     _check_freq(f1_hz, rate_hz, "f1_hz")
+    bounds.amplitude("amplitude", amplitude)
     check(method in ("linear", "logarithmic"), "method", method, "'linear' or 'logarithmic'")
     return Recording(amplitude * scipy_chirp(t, f0_hz, t[-1] if len(t) > 1 else 1.0, f1_hz,
                                              method=method), rate_hz, units="a.u.")
@@ -61,9 +73,10 @@ def pulse_train(rate_per_s: float, duration_s: float, rate_hz: float = 1000.0,
                 amplitude: float = 1.0, width_s: float | None = None) -> Recording:
     t = _time(duration_s, rate_hz)
     _check_freq(rate_per_s, rate_hz, "rate_per_s")
+    bounds.amplitude("amplitude", amplitude)
     width_s = 1.0 / rate_hz if width_s is None else width_s
-    check(0 < width_s < 1.0 / rate_per_s, "width_s", width_s,
-          f"a pulse width in (0, {1.0 / rate_per_s:g}) s")
+    bounds.number("width_s", width_s, 0.0, 1.0 / rate_per_s, lo_open=True, hi_open=True,
+                  unit=" s")
     return Recording(amplitude * ((t * rate_per_s) % 1.0 < width_s * rate_per_s), rate_hz,
                      units="a.u.")
 
@@ -73,7 +86,7 @@ def silence(duration_s: float, rate_hz: float = 1000.0) -> Recording:
 
 
 def dc(level: float, duration_s: float, rate_hz: float = 1000.0) -> Recording:
-    check(np.isfinite(level), "level", level, "a finite level")
+    bounds.amplitude("level", level)
     return Recording(np.full_like(_time(duration_s, rate_hz), level), rate_hz, units="a.u.")
 
 
@@ -81,8 +94,9 @@ def self_motion(speed_cm_s: float, duration_s: float, rate_hz: float = 1000.0,
                 seed: int = 0, terrain: str = "flat") -> Recording:
     """The probe's own oscillation while the robot drives, in g along the main axis."""
     t = _time(duration_s, rate_hz)
-    rng = np.random.default_rng(seed)
-    rms = antenna.self_motion_rms_g(speed_cm_s)
+    rng = np.random.default_rng(bounds.seed("seed", seed))
+    rms = antenna.self_motion_rms_g(bounds.number("speed_cm_s", speed_cm_s))
+    bounds.choice("terrain", terrain, sorted(antenna.TERRAIN_NOISE_G_AT_12))
     return Recording(_motion(np.full(len(t), rms), np.full(len(t), antenna.NATURAL_HZ),
                              np.full(len(t), antenna.NATURAL_TAU_S), speed_cm_s, terrain,
                              rate_hz, rng), rate_hz)
@@ -133,24 +147,35 @@ class RobotScene:
     full_scale_g: float = 18.0
 
     def validate(self) -> None:
-        _time(self.duration_s, self.rate_hz)
+        """Every field typed and bounded, before a sample is made (the scene's memory too)."""
+        _n(self.duration_s, self.rate_hz, bounds.SCENE_BYTES_PER_SAMPLE)
         check(antenna.NATURAL_HZ < 0.45 * self.rate_hz, "rate_hz", self.rate_hz,
               f"a sample rate above {antenna.NATURAL_HZ / 0.45:.0f} Hz (the probe's "
               f"self-oscillation at {antenna.NATURAL_HZ} Hz must be sampled)")
-        antenna.self_motion_rms_g(self.speed_cm_s)
-        check(np.isfinite(self.sensor_noise_g) and self.sensor_noise_g >= 0, "sensor_noise_g",
-              self.sensor_noise_g, "a noise level >= 0 g")
-        check(np.isfinite(self.impact_g) and self.impact_g > 0, "impact_g", self.impact_g,
-              "an impact amplitude > 0 g")
+        speed = bounds.number("speed_cm_s", self.speed_cm_s, 0.0, antenna.SPEED_LIMIT_CM_S,
+                              unit=" cm/s")
+        antenna.self_motion_rms_g(speed)
+        bounds.choice("terrain", self.terrain, sorted(antenna.TERRAIN_NOISE_G_AT_12))
+        if self.stop_after_contact_s is not None:
+            bounds.number("stop_after_contact_s", self.stop_after_contact_s, 0.0, unit=" s")
+        bounds.number("orientation_deg", self.orientation_deg, -360.0, 360.0)
+        bounds.number("sensor_noise_g", self.sensor_noise_g, 0.0, bounds.MAX_AMPLITUDE)
+        bounds.number("impact_g", self.impact_g, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
+        bounds.integer("adc_bits", self.adc_bits, 4, 24)
+        bounds.number("full_scale_g", self.full_scale_g, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
+        bounds.instance("contacts", self.contacts, (list, tuple), "a list of Contact")
         for i, c in enumerate(self.contacts):
-            check(0 <= c.t_s < self.duration_s, f"contacts[{i}].t_s", c.t_s,
-                  f"a time in [0, {self.duration_s}) s")
-            check(np.isfinite(c.hold_s) and c.hold_s > 0, f"contacts[{i}].hold_s", c.hold_s,
-                  "a hold time > 0 s")
-            antenna.check_distance(c.distance_cm)
-            antenna.check_material(c.material)
-            check(c.amplitude_g is None or (np.isfinite(c.amplitude_g) and c.amplitude_g >= 0),
-                  f"contacts[{i}].amplitude_g", c.amplitude_g, "an amplitude >= 0 g (or unset)")
+            bounds.instance(f"contacts[{i}]", c, Contact,
+                            "a stimuli.Contact(t_s, distance_cm, material, hold_s)")
+            bounds.number(f"contacts[{i}].t_s", c.t_s, 0.0, self.duration_s, hi_open=True,
+                          unit=" s")
+            bounds.number(f"contacts[{i}].hold_s", c.hold_s, 0.0, lo_open=True, unit=" s")
+            bounds.number(f"contacts[{i}].distance_cm", c.distance_cm, 0.0,
+                          antenna.ROD_LENGTH_CM, lo_open=True, hi_open=True, unit=" cm")
+            bounds.choice(f"contacts[{i}].material", c.material, sorted(antenna.MATERIALS))
+            if c.amplitude_g is not None:
+                bounds.number(f"contacts[{i}].amplitude_g", c.amplitude_g, 0.0,
+                              bounds.MAX_AMPLITUDE)
             f_low = float(antenna.low_mode_hz(c.distance_cm))
             check(f_low < 0.45 * self.rate_hz, "rate_hz", self.rate_hz,
                   f"a sample rate above {f_low / 0.45:.0f} Hz for the contact at "
@@ -167,7 +192,7 @@ class RobotScene:
 
     def generate(self, seed: int = 0) -> Recording:
         self.validate()
-        rng = np.random.default_rng(seed)
+        rng = np.random.default_rng(bounds.seed("seed", seed))
         n = int(round(self.duration_s * self.rate_hz))
         t = np.arange(n) / self.rate_hz
         speed = self.speed_profile()

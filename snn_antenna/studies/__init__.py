@@ -26,19 +26,8 @@ STUDIES = {
     "baseline_comparison": "snn_antenna.studies.baseline_comparison",
 }
 
-# Where each stage's own parameter comes from in a study spec: (stage, parameter) -> spec key.
-# The preprocessing stages validate their parameters under their own names; a user wrote these.
-PREPROCESS_KEYS = {
-    ("lowpass", "cutoff_hz"): "preprocess.lowpass_hz",
-    ("lowpass", "order"): "preprocess.lowpass_order",
-    ("highpass", "cutoff_hz"): "preprocess.highpass_hz",
-    ("highpass", "order"): "preprocess.lowpass_order",
-    ("centre", "tau_s"): "preprocess.centre_tau_s",
-    ("coder", "amplitude"): "preprocess.coder_amplitude",
-    ("coder", "threshold"): "preprocess.threshold",
-    ("to_g", "adc_bits"): "stimulus.adc_bits",
-    ("to_g", "full_scale_g"): "stimulus.full_scale_g",
-}
+# Where make_chain's arguments come from in a study spec (the rest: ``preprocess.NAME``).
+CHAIN_KEYS = {"adc_bits": "stimulus.adc_bits", "full_scale_g": "stimulus.full_scale_g"}
 
 
 def runner(name: str):
@@ -65,7 +54,7 @@ def check_spec(spec: dict, user_keys=(), rate_hz: float | None = None) -> None:
     if not _number(rate) or rate <= 0:
         raise SpecError("stimulus.rate_hz", rate, "a sample rate > 0 Hz")
     _check_preprocess(spec, stimulus, rate, rate_key)
-    _check_readout(spec, stimulus)
+    _check_readout(spec, stimulus, rate)
     _check_network_rate(spec, rate, rate_key, set(user_keys))
     _check_workers(spec)
 
@@ -85,30 +74,27 @@ def _check_preprocess(spec, stimulus, rate, rate_key) -> None:
     # keys of the table that are not the chain's (e.g. warmup_s, how long the chain is fitted)
     # have rules of their own in the study; an unknown key is named by the study's own check
     chain_keys = {k: v for k, v in table.items() if k in declared_types(make_chain)}
-    chain = make_chain(rate, stimulus.get("adc_bits", 10),
-                       stimulus.get("full_scale_g", 18.0), **chain_keys)
-    for name, stage in chain.steps:
-        try:
-            stage._validate_params_()       # the stage's own rules, not a copy of them
-        except SpecError as exc:
-            key = PREPROCESS_KEYS.get((name, exc.field))
-            if exc.field == "rate_hz":
-                key = rate_key
-            if key is None:
-                raise
-            raise SpecError(key, exc.value,
-                            exc.accepted.replace("rate_hz =", f"{rate_key} =")) from None
+    try:                                    # the stages' own rules, not a copy of them
+        make_chain(rate, stimulus.get("adc_bits", 10), stimulus.get("full_scale_g", 18.0),
+                   **chain_keys)
+    except SpecError as exc:
+        key = rate_key if exc.field == "rate_hz" else CHAIN_KEYS.get(
+            exc.field, f"preprocess.{exc.field}")
+        raise SpecError(key, exc.value,
+                        exc.accepted.replace("rate_hz =", f"{rate_key} =")) from None
 
 
-def _check_readout(spec, stimulus) -> None:
+def _check_readout(spec, stimulus, rate) -> None:
     table = spec.get("readout")
     if not isinstance(table, dict) or "window_s" not in table:
         return
     window = table["window_s"]
     duration = stimulus.get("duration_s")
     longest = f" and at most stimulus.duration_s = {duration:g} s" if _number(duration) else ""
-    check(_number(window) and window > 0 and (not _number(duration) or window <= duration),
-          "readout.window_s", window, f"a window > 0 s{longest}")
+    # one input sample at least: a finer rate map only repeats samples (and may not fit)
+    check(_number(window) and window >= 1 / rate and (not _number(duration) or window <= duration),
+          "readout.window_s", window, f"a window of at least one sample ({1 / rate:g} s at "
+          f"{rate:g} Hz){longest}")
 
 
 def _check_network_rate(spec, rate, rate_key, user_keys) -> None:
@@ -151,13 +137,16 @@ def _check_workers(spec) -> None:
 
 
 def plan(spec: dict):
-    """The estimate of a neuron sweep (``[neuron]`` + ``[axes]``), or None for other studies.
+    """The estimate of a study's work: a neuron sweep (``[neuron]`` + ``[axes]``), sized by
+    its own ``build``, or the scenes, bench sets and sweeps of scenes of the other studies
+    (``costs``), or None where a value of the wrong type leaves nothing to size.
 
-    Built by the study's own ``build`` (which sizes the grid without materialising it); a grid
-    whose results or chunks cannot fit in memory is refused here, before a worker starts.
+    A grid whose results or chunks cannot fit in memory is refused here, before a worker starts.
     """
     if spec.get("study") != "tuning_sweep":
-        return None
+        from .costs import estimate as job
+
+        return job(spec)
     from ..engine.cost import check_memory, estimate
     from ..engine.evaluators import NeuronSweep
 

@@ -1,0 +1,177 @@
+"""Where values enter: one typed, bounded checker per kind of value.
+
+Spec sections, CLI options and public constructors check what they are given with these
+functions, so each kind of value (a duration, a sample rate, a seed, a path) is refused in one
+way, with one message naming the field, the value (cut to ``errors.MAX_SHOWN`` characters) and
+what is accepted. The bounds come from the physics and the machine: a sample rate the sensor
+board could have, a step Brian2 can integrate, an amplitude whose products float64 still holds,
+a recording that fits in memory.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import os
+
+from .errors import SpecError, shown
+
+# Physics and machine bounds, each stated once.
+MAX_RATE_HZ = 1e6            # a MHz ADC is far beyond any antenna board (the paper's: 1 kHz)
+MIN_DT_MS = 1e-4             # 0.1 us: 50x finer than the finest step any study trades
+MAX_AMPLITUDE = 1e6          # drives and levels; squares and sums of it stay far inside float64
+MAX_SEED = 2**63 - 1         # NumPy's SeedSequence takes any integer >= 0; this fits an int64
+SCENE_BYTES_PER_SAMPLE = 256  # a scene's arrays per sample while it is generated (~30 float64)
+NAME_MAX = 255               # bytes in one path component (Linux, macOS)
+PATH_MAX = 4096              # bytes in a whole path (Linux)
+
+
+def _real(value) -> bool:
+    import numpy as np
+
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def number(field: str, value, lo: float | None = None, hi: float | None = None, *,
+           lo_open: bool = False, hi_open: bool = False, unit: str = "") -> float:
+    """A finite real number in [lo, hi] (open ends where asked); returns it as a float."""
+    lo_text = "" if lo is None else f"{'>' if lo_open else '>='} {lo:g}{unit}"
+    hi_text = "" if hi is None else f"{'<' if hi_open else '<='} {hi:g}{unit}"
+    accepted = "a finite number" + (f" {lo_text}" if lo_text else "") + (
+        f"{' and' if lo_text else ''} {hi_text}" if hi_text else "")
+    try:
+        ok = _real(value) and math.isfinite(value)
+    except (OverflowError, TypeError, ValueError):   # an int too large for a float
+        ok = False
+    if not ok:
+        raise SpecError(field, value, accepted)
+    x = float(value)
+    if lo is not None and (x < lo or (lo_open and x == lo)):
+        raise SpecError(field, value, accepted)
+    if hi is not None and (x > hi or (hi_open and x == hi)):
+        raise SpecError(field, value, accepted)
+    return x
+
+
+def integer(field: str, value, lo: int | None = None, hi: int | None = None) -> int:
+    """An integer (not true/false, not 2.0) in [lo, hi]."""
+    import numpy as np
+
+    accepted = "an integer" + (f" >= {lo}" if lo is not None else "") + (
+        f"{' and' if lo is not None else ''} <= {hi}" if hi is not None else "")
+    if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)):
+        raise SpecError(field, value, accepted)
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise SpecError(field, value, accepted)
+    return int(value)
+
+
+def seed(field: str, value) -> int:
+    """A random seed: an integer in [0, 2**63 - 1]."""
+    return integer(field, value, 0, MAX_SEED)
+
+
+def choice(field: str, value, options) -> str:
+    """One of ``options`` (strings)."""
+    if not isinstance(value, str) or value not in options:
+        raise SpecError(field, value, f"one of {', '.join(repr(o) for o in options)}")
+    return value
+
+
+def rate_hz(field: str, value) -> float:
+    """A sample rate in (0, MAX_RATE_HZ] Hz."""
+    return number(field, value, 0.0, MAX_RATE_HZ, lo_open=True, unit=" Hz")
+
+
+def dt_ms(field: str, value, hi: float = 1.0) -> float:
+    """An integration step in [MIN_DT_MS, hi] ms."""
+    return number(field, value, MIN_DT_MS, hi, unit=" ms")
+
+
+def amplitude(field: str, value, lo: float = -MAX_AMPLITUDE) -> float:
+    """An amplitude or level within +-MAX_AMPLITUDE (``lo`` = 0 for magnitudes)."""
+    return number(field, value, lo, MAX_AMPLITUDE)
+
+
+def n_samples(field: str, duration_s, rate: float, bytes_per_sample: int = 16,
+              budget: int | None = None) -> int:
+    """Samples of a recording ``duration_s`` long at ``rate`` Hz, refused when they (at
+    ``bytes_per_sample`` while being made) would not fit in a quarter of the memory available."""
+    duration = number(field, duration_s, 0.0, lo_open=True, unit=" s")
+    if budget is None:
+        from .engine.cost import memory_budget_bytes
+        budget = memory_budget_bytes()
+    most = max(1, budget // bytes_per_sample)
+    n = duration * rate
+    if not n < most:
+        raise SpecError(field, duration_s,
+                        f"a duration > 0 s and at most {most / rate:.4g} s at {rate:g} Hz "
+                        f"({n * bytes_per_sample / 2**30:.3g} GiB needed, "
+                        f"{budget / 2**30:.3g} GiB allowed: a quarter of the memory available)")
+    return int(round(n))
+
+
+def out_path(field: str, value) -> str:
+    """A path the file system can hold: text that encodes as UTF-8 (no lone surrogates from
+    undecodable bytes), components of at most NAME_MAX bytes, at most PATH_MAX bytes in all."""
+    if not isinstance(value, (str, os.PathLike)):
+        raise SpecError(field, value, "a path")
+    text = os.fspath(value)
+    try:
+        encoded = text.encode("utf-8")
+    except UnicodeEncodeError:
+        raise SpecError(field, text, "a path in UTF-8 text (this one holds bytes that "
+                                     "are not UTF-8)") from None
+    if "\x00" in text or not text:
+        raise SpecError(field, text, "a non-empty path without NUL characters")
+    longest = max(len(part.encode("utf-8")) for part in text.split(os.sep))
+    if longest > NAME_MAX or len(encoded) > PATH_MAX:
+        raise SpecError(field, text, f"a path whose names are at most {NAME_MAX} bytes each "
+                                     f"and at most {PATH_MAX} bytes in all")
+    return text
+
+
+def instance(field: str, value, cls, what: str) -> None:
+    """``value`` is a ``cls`` (e.g. a list entry that must be a Contact, not a tuple)."""
+    if not isinstance(value, cls):
+        raise SpecError(field, value, what)
+
+
+# Command-line options: argparse turns an ArgumentTypeError into one line and exit status 2.
+MAX_SECONDS = 365 * 86400.0  # a timeout, a hold or a recording's length: a year at most
+BAUDRATES = (50, 12_000_000)  # what serial ports and USB bridges (FTDI: 12 Mbaud) can run
+
+
+def option(checker, text: bool = False):
+    """An argparse ``type`` from a checker: ``type=option(seconds)``; the option's message is
+    the checker's (field, value, what is accepted), cut as every SpecError is. The option's
+    text is read as a TOML value (``inf``, ``1e9``, ``2``) unless ``text`` (paths)."""
+    import argparse
+
+    def parse(given: str):
+        from .spec import parse_value
+
+        try:
+            return checker("value", given if text else parse_value(given))
+        except SpecError as exc:
+            raise argparse.ArgumentTypeError(f"{shown(given)} is not accepted: "
+                                             f"{exc.accepted}") from None
+    parse.__name__ = checker.__name__
+    return parse
+
+
+def seconds(field: str, value, lo: float = 0.0) -> float:
+    """A time in [lo, MAX_SECONDS] s (a timeout, a hold, a recording's length)."""
+    return number(field, value, lo, MAX_SECONDS, unit=" s")
+
+
+def positive_seconds(field: str, value) -> float:
+    return number(field, value, 0.0, MAX_SECONDS, lo_open=True, unit=" s")
+
+
+def baudrate(field: str, value) -> int:
+    return integer(field, value, *BAUDRATES)
+
+
+
+def positive_integer(field: str, value) -> int:
+    return integer(field, value, 1)

@@ -1,0 +1,138 @@
+"""Issue 30: every input answered in one line, before any work.
+
+Each case a careless user tried (the issue's list) gets one line naming the field, the value and
+what is accepted (SpecError, exit 2), before a scene is generated or Brian2 runs; long jobs
+show their estimate and need --yes; a message shows at most 80 characters of a value.
+"""
+import numpy as np
+import pytest
+
+from snn_antenna import bounds
+from snn_antenna.cli import main
+from snn_antenna.errors import MAX_SHOWN, SpecError
+from snn_antenna.preprocess import fit_warmup, make_chain
+from snn_antenna.sources import stimuli
+from snn_antenna.sources.stimuli import Contact, RobotScene
+
+QUICKSTART = "studies/quickstart.toml"
+
+
+def refused(capsys, argv, field):
+    """Run the CLI; it must exit 2 with one line naming ``field``, before any work."""
+    try:
+        status = main(argv)
+    except SystemExit as exc:           # argparse: an option's type refused it
+        status = exc.code
+    out, err = capsys.readouterr()
+    assert status == 2, err
+    lines = err.strip().splitlines()       # the estimate may come first
+    assert len(lines) <= 2 and sum("error" in line for line in lines) == 1, err
+    assert field in lines[-1] and "internal error" not in err and "Traceback" not in err
+    assert "[1/4]" not in out                        # no scene was generated
+    return lines[-1]
+
+
+@pytest.mark.parametrize("setting, field", [
+    ("stimulus.duration_s=1e308", "stimulus.duration_s"),     # was OverflowError
+    ("network.dt_ms=1e-308", "network.dt_ms"),                # was a Brian2 error
+    ("readout.window_s=1e-9", "readout.window_s"),            # was MemoryError, after the run
+    ("stimulus.rate_hz=1e308", "stimulus.rate_hz"),
+    ("seed=-1", "seed"),
+])
+def test_quickstart_settings_are_refused_before_work(tmp_path, capsys, setting, field):
+    refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / "o"),
+                     "--set", setting], field)
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_include_that_is_a_binary_file_is_named(tmp_path, capsys):
+    (tmp_path / "net.toml").write_bytes(bytes(range(256)) * 8)
+    (tmp_path / "study.toml").write_text('study = "quickstart"\nnetwork = "net.toml"\n')
+    line = refused(capsys, ["run", str(tmp_path / "study.toml"), "--out", str(tmp_path / "o")],
+                   "network")
+    assert "UTF-8" in line
+
+
+@pytest.mark.parametrize("out", ["x" * 300, "ok/" + "y" * 256, "caf\udce9"])
+def test_an_out_the_file_system_cannot_hold_is_refused(tmp_path, capsys, out):
+    refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / out)], "--out")
+
+
+@pytest.mark.parametrize("option, value", [("--view-hold", "inf"), ("--baudrate", "10" * 20),
+                                           ("--duration", "nan"), ("--duration", "1e308"),
+                                           ("--no-data-timeout", "-1")])
+def test_stream_options_are_typed_and_bounded(capsys, option, value):
+    refused(capsys, ["stream", "--port", "loop://", "--network", "networks/live.toml",
+                     option, value], option)
+
+
+def test_a_long_value_is_cut_in_the_message(tmp_path, capsys):
+    huge = "x" * 4_000_000
+    line = refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / "o"),
+                            "--set", f'stimulus.terrain="{huge}"'], "stimulus.terrain")
+    assert len(line) < 400 and "xxx\u2026" in line
+    assert len(str(SpecError("f", huge, "short"))) <= len("f = ") + MAX_SHOWN + 40
+
+
+def test_a_28_hour_scene_shows_its_estimate_and_needs_yes(tmp_path, capsys):
+    line = refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / "o"),
+                            "--set", "stimulus.duration_s=20000"], "stimulus.duration_s")
+    assert "--yes" in line and " h" in line
+    # with --yes the scene that would not fit in memory is still refused, before any work
+    line = refused(capsys, ["run", QUICKSTART, "--quick", "--yes", "--out",
+                            str(tmp_path / "o"), "--set", "stimulus.duration_s=100000"],
+                   "stimulus.duration_s")
+    assert "GiB" in line
+
+
+@pytest.mark.parametrize("spec, setting, field", [
+    ("studies/baseline_comparison.toml", "stimulus.repetitions=2000", "stimulus.repetitions"),
+    ("studies/gating_threshold.toml", "sweep.n_scenes=400", "sweep.n_scenes"),
+    ("studies/exploration.toml", "loop.duration_s=40000", "loop.duration_s"),
+])
+def test_bench_sets_and_sweeps_of_scenes_need_yes_beyond_an_hour(tmp_path, capsys, spec,
+                                                                   setting, field):
+    line = refused(capsys, ["run", spec, "--quick", "--out", str(tmp_path / "o"),
+                            "--set", setting], field)
+    assert "--yes" in line
+
+
+@pytest.mark.parametrize("make, field", [
+    (lambda: stimuli.square(5.0, 1.0, amplitude=1e308), "amplitude"),
+    (lambda: stimuli.square(5.0, 1.0, amplitude="x"), "amplitude"),
+    (lambda: stimuli.sine("x", 1.0), "freq_hz"),
+    (lambda: stimuli.silence(1e9), "duration_s"),          # 7.28 TiB was allocated for
+    (lambda: stimuli.dc(1.0, 1.0, rate_hz=float("inf")), "rate_hz"),
+    (lambda: RobotScene().generate(seed=-1), "seed"),
+    (lambda: RobotScene().generate(seed="a"), "seed"),
+    (lambda: RobotScene(duration_s=1e9).generate(), "duration_s"),
+    (lambda: RobotScene(contacts=None).generate(), "contacts"),
+    (lambda: RobotScene(contacts=[(1.0, 19.0)]).generate(), "contacts[0]"),
+    (lambda: RobotScene(contacts=[Contact("1", 19.0)]).generate(), "contacts[0].t_s"),
+    (lambda: RobotScene(contacts=[Contact(1.0, 19.0, ["wood"])]).generate(),
+     "contacts[0].material"),
+    (lambda: RobotScene(speed_cm_s="fast").generate(), "speed_cm_s"),
+    (lambda: RobotScene(adc_bits=10.5).generate(), "adc_bits"),
+    (lambda: fit_warmup(make_chain(1000.0), np.ones((100, 2)), 0.0, 0.05), "rate_hz"),
+    (lambda: make_chain(1000.0, threshold="x"), "threshold"),
+    (lambda: make_chain(1000.0, highpass_hz=600.0), "highpass_hz"),
+    (lambda: make_chain(1000.0, lowpass_order=2.0), "lowpass_order"),
+])
+def test_public_constructors_refuse_by_name(make, field):
+    with pytest.raises(SpecError) as info:
+        make()
+    assert info.value.field == field
+
+
+def test_bounds_name_what_is_accepted():
+    with pytest.raises(SpecError, match=r"x = 2 is not accepted: an integer >= 3 and <= 5"):
+        bounds.integer("x", 2, 3, 5)
+    with pytest.raises(SpecError, match="finite number > 0"):
+        bounds.number("x", 10**400, 0.0, lo_open=True)        # an int too big for a float
+    assert bounds.number("x", 0.5, 0.0, 1.0) == 0.5
+    assert bounds.seed("s", np.int64(7)) == 7
+    for bad in (True, 2.0, "3", None, [1]):
+        with pytest.raises(SpecError):
+            bounds.integer("x", bad)
+    with pytest.raises(SpecError, match="GiB"):
+        bounds.n_samples("d", 10.0, 1000.0, 8, budget=1000)
