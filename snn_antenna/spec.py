@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable
 
-from .errors import SpecError
+from .errors import SpecError, shown
 
 INCLUDABLE = ("network", "stimulus")
 
@@ -47,7 +47,11 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
         if "=" not in item:
             raise SpecError("--set", item, "key=value, e.g. network.n_neurons=48")
         dotted, text = item.split("=", 1)
-        set_field(spec, dotted.strip(), parse_value(text.strip()))
+        dotted, value = dotted.strip(), parse_value(text.strip())
+        before = get_field(spec, dotted, _MISSING) if dotted else _MISSING
+        if before is not _MISSING:
+            same_kind(dotted, before, value)
+        set_field(spec, dotted, value)
     spec.setdefault("seed", 0)
     return spec
 
@@ -69,6 +73,45 @@ def _flatten(table: dict, prefix: str = ""):
             yield from _flatten(value, f"{prefix}{key}.")
         else:
             yield f"{prefix}{key}", value
+
+
+_MISSING = object()
+
+
+def _kind(value) -> str:
+    if isinstance(value, bool):
+        return "true or false"
+    if isinstance(value, (int, float)):
+        return "a number"
+    if isinstance(value, str):
+        return "a text"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, dict):
+        return "a table"
+    return type(value).__name__
+
+
+def same_kind(dotted: str, before, value) -> None:
+    """A ``--set`` value keeps the kind of value the spec has there: a number stays a number,
+    a list of numbers a list of numbers, a table a table (its known keys checked the same
+    way). The field's own range and rules are its study's checks; this one stops a text or a
+    table from reaching code that reads a number."""
+    accepted = f"{_kind(before)}, as the spec's value there ({shown(before)}) is"
+    if _kind(value) != _kind(before):
+        raise SpecError(dotted, value, accepted)
+    if isinstance(before, list) and before:
+        kinds = {_kind(v) for v in before}
+        if len(kinds) == 1:
+            kind = kinds.pop()
+            for i, item in enumerate(value):
+                if _kind(item) != kind:
+                    raise SpecError(f"{dotted}.{i}", item, f"{kind}, as every entry of the "
+                                                          f"spec's {dotted} is")
+    if isinstance(before, dict):
+        for key, item in value.items():
+            if key in before:
+                same_kind(f"{dotted}.{key}", before[key], item)
 
 
 def parse_value(text: str) -> Any:
