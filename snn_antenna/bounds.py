@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+import tomllib
 
 from .errors import SpecError, shown
 
@@ -50,6 +51,20 @@ def number(field: str, value, lo: float | None = None, hi: float | None = None, 
     if hi is not None and (x > hi or (hi_open and x == hi)):
         raise SpecError(field, value, accepted)
     return x
+
+
+def pair(field: str, value, lo: float = 0.0, strict: bool = False,
+         unit: str = "") -> tuple[float, float]:
+    """``[low, high]``: two finite numbers with ``lo <= low <= high`` (``low < high`` when
+    ``strict``)."""
+    accepted = (f"[low, high]{unit}: two finite numbers with {lo:g} <= low "
+                f"{'<' if strict else '<='} high")
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SpecError(field, value, accepted)
+    low, high = (number(f"{field}.{i}", v) for i, v in enumerate(value))
+    if low < lo or high < low or (strict and high == low):
+        raise SpecError(field, value, accepted)
+    return low, high
 
 
 def integer(field: str, value, lo: int | None = None, hi: int | None = None) -> int:
@@ -98,7 +113,6 @@ def n_samples(field: str, duration_s, rate: float, bytes_per_sample: int = 16,
     ``bytes_per_sample`` while being made) would not fit in a quarter of the memory available."""
     duration = number(field, duration_s, 0.0, lo_open=True, unit=" s")
     if budget is None:
-        from .engine.cost import memory_budget_bytes
         budget = memory_budget_bytes()
     most = max(1, budget // bytes_per_sample)
     n = duration * rate
@@ -148,8 +162,6 @@ def option(checker, text: bool = False):
     import argparse
 
     def parse(given: str):
-        from .spec import parse_value
-
         try:
             return checker("value", given if text else parse_value(given))
         except SpecError as exc:
@@ -172,6 +184,24 @@ def baudrate(field: str, value) -> int:
     return integer(field, value, *BAUDRATES)
 
 
-
 def positive_integer(field: str, value) -> int:
     return integer(field, value, 1)
+
+
+def parse_value(text: str):
+    """A value typed on the command line, read as TOML (``48``, ``[5, 40]``, ``inf``); text
+    that is not TOML stays the text it is."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def memory_budget_bytes() -> int:
+    """A quarter of the memory available now: what a run or a sweep may hold at once."""
+    try:
+        import psutil
+        available = psutil.virtual_memory().available
+    except ImportError:  # psutil comes with distributed; this is a fallback
+        available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    return int(available) // 4

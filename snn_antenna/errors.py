@@ -96,8 +96,12 @@ def is_number(value) -> bool:
 
     import numpy as np
 
-    return (isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
-            and bool(np.isfinite(value)))
+    if not isinstance(value, numbers.Real) or isinstance(value, (bool, np.bool_)):
+        return False
+    try:
+        return bool(np.isfinite(float(value)))
+    except OverflowError:                 # an int beyond any float
+        return False
 
 
 def is_integer(value) -> bool:

@@ -20,6 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable
 
+from .bounds import out_path, parse_value
 from .errors import SpecError, shown
 
 INCLUDABLE = ("network", "stimulus")
@@ -27,8 +28,6 @@ INCLUDABLE = ("network", "stimulus")
 
 def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -> dict:
     """Read a spec, resolve includes, apply the quick profile and ``--set`` overrides."""
-    from .bounds import out_path
-
     path = Path(out_path("spec", path))
     if not path.is_file():
         raise SpecError("spec", str(path), "the path of an existing TOML spec file")
@@ -44,14 +43,7 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
         for dotted, value in _flatten(quick_overrides):
             set_field(spec, dotted, value)
     for item in overrides:
-        if "=" not in item:
-            raise SpecError("--set", item, "key=value, e.g. network.n_neurons=48")
-        dotted, text = item.split("=", 1)
-        dotted, value = dotted.strip(), parse_value(text.strip())
-        before = get_field(spec, dotted, _MISSING) if dotted else _MISSING
-        if before is not _MISSING:
-            same_kind(dotted, before, value)
-        set_field(spec, dotted, value)
+        apply_override(spec, item)
     spec.setdefault("seed", 0)
     return spec
 
@@ -78,17 +70,28 @@ def _flatten(table: dict, prefix: str = ""):
 _MISSING = object()
 
 
+def apply_override(spec: dict, item: str) -> None:
+    """One ``--set key=value``: the value read as TOML (``bounds.parse_value``), of the kind
+    the spec has there (``same_kind``), set in place (``set_field``)."""
+    if "=" not in item:
+        raise SpecError("--set", item, "key=value, e.g. network.n_neurons=48")
+    dotted, text = item.split("=", 1)
+    dotted, value = dotted.strip(), parse_value(text.strip())
+    before = get_field(spec, dotted, _MISSING) if dotted else _MISSING
+    if before is not _MISSING:
+        same_kind(dotted, before, value)
+    set_field(spec, dotted, value)
+
+
 def _kind(value) -> str:
     if isinstance(value, bool):
         return "true or false"
     if isinstance(value, (int, float)):
-        return "a number"
+        return "a finite number (not true/false, not a text)"
     if isinstance(value, str):
         return "a text"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, dict):
-        return "a table"
+    if isinstance(value, (list, dict)):      # an axis is a list of values or a range table
+        return "a list or a table"
     return type(value).__name__
 
 
@@ -100,7 +103,7 @@ def same_kind(dotted: str, before, value) -> None:
     accepted = f"{_kind(before)}, as the spec's value there ({shown(before)}) is"
     if _kind(value) != _kind(before):
         raise SpecError(dotted, value, accepted)
-    if isinstance(before, list) and before:
+    if isinstance(before, list) and before and isinstance(value, list):
         kinds = {_kind(v) for v in before}
         if len(kinds) == 1:
             kind = kinds.pop()
@@ -108,17 +111,10 @@ def same_kind(dotted: str, before, value) -> None:
                 if _kind(item) != kind:
                     raise SpecError(f"{dotted}.{i}", item, f"{kind}, as every entry of the "
                                                           f"spec's {dotted} is")
-    if isinstance(before, dict):
+    if isinstance(before, dict) and isinstance(value, dict):
         for key, item in value.items():
             if key in before:
                 same_kind(f"{dotted}.{key}", before[key], item)
-
-
-def parse_value(text: str) -> Any:
-    try:
-        return tomllib.loads(f"v = {text}")["v"]
-    except tomllib.TOMLDecodeError:
-        return text
 
 
 def set_field(spec: dict, dotted: str, value: Any) -> None:

@@ -64,10 +64,7 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ) -> 
     spec = ({k: raw.get(k, {}) for k in SECTIONS} if isinstance(raw.get("network"), dict)
             else {"network": raw, "preprocess": {}, "readout": {}})
     for item in overrides:
-        if "=" not in item:
-            raise SpecError("--set", item, "key=value, e.g. preprocess.threshold=0.05")
-        dotted, text = item.split("=", 1)
-        specs.set_field(spec, dotted.strip(), specs.parse_value(text.strip()))
+        specs.apply_override(spec, item)
     for key in spec:
         if key not in SECTIONS:
             raise SpecError(key, spec[key], f"a section of an online spec: {', '.join(SECTIONS)}")

@@ -13,17 +13,8 @@ import numpy as np
 
 from ..errors import check
 from ..store import Output
+from ..bounds import memory_budget_bytes
 from .grid import Grid
-
-
-def memory_budget_bytes() -> int:
-    """A quarter of the memory available now: what a sweep may hold at once."""
-    try:
-        import psutil
-        available = psutil.virtual_memory().available
-    except ImportError:  # psutil comes with distributed; this is a fallback
-        available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    return int(available) // 4
 
 
 def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,

@@ -34,7 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SpecError, check
+from .. import bounds
+from ..errors import SpecError, check, is_number
 from ..sources import antenna
 from . import neurons
 from .resonators import SELF_MOTION_BAND_HZ, tuned_above
@@ -59,9 +60,8 @@ class ControlLayer:
     def __post_init__(self):
         for name in ("w_above", "w_band", "w_motor", "tau_syn_ms", "dt_ms"):
             v = getattr(self, name)
-            check(np.isfinite(v) and v > 0, name, v, "a finite value > 0")
-        lo, hi = self.motion_band_hz
-        check(0 <= lo <= hi, "motion_band_hz", self.motion_band_hz, "[low, high] Hz")
+            check(is_number(v) and v > 0, name, v, "a finite value > 0")
+        bounds.pair("motion_band_hz", self.motion_band_hz, unit=" Hz")
 
     def objects(self, resonators, neuron_hz: np.ndarray) -> dict:
         """Contact and motor units wired to a resonator group (``resonators``)."""

@@ -40,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from .. import bounds
 from ..errors import SpecError, check
 from . import neurons
 
@@ -70,9 +71,7 @@ class SpeedGate:
     def __post_init__(self):
         check(isinstance(self.n_speed_neurons, int) and 4 <= self.n_speed_neurons <= 1000,
               "n_speed_neurons", self.n_speed_neurons, "an integer in [4, 1000]")
-        lo, hi = (float(v) for v in self.speed_range_cm_s)
-        check(np.isfinite(lo) and np.isfinite(hi) and 0 <= lo < hi, "speed_range_cm_s",
-              self.speed_range_cm_s, "[low, high] cm/s with 0 <= low < high")
+        bounds.pair("speed_range_cm_s", self.speed_range_cm_s, strict=True, unit=" cm/s")
         for name in ("tuning_width", "peak_current", "max_rate_hz", "tau_syn_ms", "tau_trace_s",
                      "tau_read_s", "eta", "w_max", "present_s", "dt_ms"):
             value = getattr(self, name)
