@@ -119,7 +119,9 @@ class LowPass(_Causal):
         from scipy.signal import butter
 
         bounds.rate_hz("rate_hz", self.rate_hz)
-        bounds.number("cutoff_hz", self.cutoff_hz, 0.0, self.rate_hz / 2, lo_open=True,
+        # a cut-off below a millionth of the rate underflows the filter design (and no
+        # antenna signal lives there)
+        bounds.number("cutoff_hz", self.cutoff_hz, self.rate_hz * 1e-6, self.rate_hz / 2,
                       hi_open=True, unit=f" Hz (below Nyquist at rate_hz = {self.rate_hz:g})")
         bounds.integer("order", self.order, 1, 8)
         self.sos_ = butter(self.order, self.cutoff_hz, fs=self.rate_hz, output="sos")

@@ -68,6 +68,7 @@ def _flatten(table: dict, prefix: str = ""):
 
 
 _MISSING = object()
+RANGE_KEYS = {"start", "stop", "num", "scale"}   # a sweep axis as a range (engine.grid)
 
 
 def apply_override(spec: dict, item: str) -> None:
@@ -90,8 +91,11 @@ def _kind(value) -> str:
         return "a finite number (not true/false, not a text)"
     if isinstance(value, str):
         return "a text"
-    if isinstance(value, (list, dict)):      # an axis is a list of values or a range table
-        return "a list or a table"
+    if isinstance(value, list) or (isinstance(value, dict) and value
+                                   and set(value) <= RANGE_KEYS):
+        return "a list"                 # a range table stands for its list of values
+    if isinstance(value, dict):
+        return "a table"
     return type(value).__name__
 
 

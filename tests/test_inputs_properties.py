@@ -106,6 +106,31 @@ def test_any_value_of_any_field_is_accepted_or_refused_in_one_line(tmp_path, cap
     _check_field(tmp_path, field, text, capsys)
 
 
+# What the property found (each ended in "internal error" before its fix), kept as examples.
+FOUND = [("baseline_comparison.toml", "stimulus.positions_cm", ":"),
+         ("baseline_comparison.toml", "stimulus.positions_cm", "{a = 0}"),
+         ("baseline_comparison.toml", "spiking.bank.bin_edges_s", "''"),
+         ("baseline_comparison.toml", "spiking.designs", "00"),
+         ("baseline_comparison.toml", "spiking.designs", "{a = 0}"),
+         ("exploration.toml", "gate_training.speeds_cm_s", ""),
+         ("exploration.toml", "gate_training.th_star_g", ""),
+         ("exploration.toml", "loop.speed_cm_s", ""),
+         ("exploration.toml", "network.control.motion_band_hz", "[]"),
+         ("exploration.toml", "network.gate.speed_range_cm_s", "[]"),
+         ("gating_threshold.toml", "calibration.speed_cm_s", ""),
+         ("gating_threshold.toml", "gate.train_speeds_cm_s", ""),
+         ("gating_threshold.toml", "sweep.speeds_cm_s", ""),
+         ("gating_threshold.toml", "sweep.thresholds_g", ""),
+         ("gating_threshold.toml", "preprocess.coder_amplitude", "-9223372036854775809"),
+         ("quickstart.toml", "preprocess.warmup_s", ""),
+         ("speed_accuracy.toml", "preprocess.lowpass_hz", "5e-324")]
+
+
+@pytest.mark.parametrize("spec_name, key, text", FOUND)
+def test_what_the_property_found_stays_answered(tmp_path, capsys, spec_name, key, text):
+    _check_field(tmp_path, (spec_name, key), text, capsys)
+
+
 @pytest.mark.slow
 @settings(max_examples=60, deadline=10_000,
           suppress_health_check=[HealthCheck.function_scoped_fixture,
