@@ -123,7 +123,8 @@ FOUND = [("baseline_comparison.toml", "stimulus.positions_cm", ":"),
          ("gating_threshold.toml", "sweep.thresholds_g", ""),
          ("gating_threshold.toml", "preprocess.coder_amplitude", "-9223372036854775809"),
          ("quickstart.toml", "preprocess.warmup_s", ""),
-         ("speed_accuracy.toml", "preprocess.lowpass_hz", "5e-324")]
+         ("speed_accuracy.toml", "preprocess.lowpass_hz", "5e-324"),
+         ("tuning_sweep.toml", "neuron.dt_ms", "1e-308")]
 
 
 @pytest.mark.parametrize("spec_name, key, text", FOUND)

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import bounds
 from ..errors import SpecError, check
 from ..networks import neurons
 from ..store import Output
@@ -73,8 +74,7 @@ class NeuronSweep:
               f"one of {list(neurons.METHODS)}")
         check(self.engine in ("standalone", "cython", "numpy"), "engine", self.engine,
               "'standalone' (compiled C++, re-run per chunk), 'cython' or 'numpy'")
-        check(math.isfinite(self.dt_ms) and 0 < self.dt_ms <= 1, "dt_ms", self.dt_ms,
-              "a step in (0, 1] ms")
+        bounds.dt_ms("dt_ms", self.dt_ms)        # the same bounds as every other step
         check(math.isfinite(self.input_rate_hz) and self.input_rate_hz > 0 and
               1000.0 / self.input_rate_hz >= self.dt_ms * (1 - 1e-9), "input_rate_hz",
               self.input_rate_hz, f"a sample rate > 0 Hz and at most 1/dt ({1 / self.dt_ms:g} kHz)")
