@@ -23,7 +23,8 @@ def test_bench_bands_are_the_baseline_studys():
         assert Band(**table) == band, name
 
 
-@pytest.mark.parametrize("method", ["euler", "rk4"])
+# rk4 in the default suite; euler (the same check, ~17 s more) behind the slow marker
+@pytest.mark.parametrize("method", [pytest.param("euler", marks=pytest.mark.slow), "rk4"])
 def test_accurate_limit_is_accurate_and_the_next_grid_point_is_not(method):
     limit = bands.ACCURATE_K_DT[method]
     beyond = K_DT_GRID[K_DT_GRID > 1.1 * limit][0]

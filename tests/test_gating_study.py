@@ -187,6 +187,8 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
         sweep("sweep.settle_s=0.5")
 
 
+@pytest.mark.slow   # ~25 s: a Dask cluster of its own (test_sweep and test_event_engine keep
+# the default suite's Dask checks)
 def test_codings_scored_on_dask_workers_equal_those_scored_here():
     """Fig. 9 and the evaluation run on the study's Dask workers while this process trains the
     gate: the scores and rate maps must be those of running the same batches here."""
