@@ -80,9 +80,18 @@ def integer(field: str, value, lo: int | None = None, hi: int | None = None) -> 
     return int(value)
 
 
-def seed(field: str, value) -> int:
-    """A random seed: an integer in [0, 2**63 - 1]."""
-    return integer(field, value, 0, MAX_SEED)
+def seed(field: str, value):
+    """A random seed: an integer in [0, 2**63 - 1], or a NumPy ``SeedSequence`` (how a study
+    hands each of its parts its own stream); returned as given."""
+    import numpy as np
+
+    if isinstance(value, np.random.SeedSequence):
+        return value
+    accepted = f"an integer >= 0 and <= {MAX_SEED}, or a numpy SeedSequence"
+    if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)) \
+            or not 0 <= value <= MAX_SEED:
+        raise SpecError(field, value, accepted)
+    return int(value)
 
 
 def choice(field: str, value, options) -> str:
