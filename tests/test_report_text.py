@@ -69,3 +69,16 @@ def test_speed_accuracy_lists_only_the_shipped_limits_its_map_supports(tmp_path)
     _provenance_rows(full, summary)                 # a full map below the shipped value: said
     izh = [c for c in full._calibrated if "izhikevich" in c.quantity][0]
     assert "NOT supported" in izh.how
+
+
+def test_tuning_puts_the_spread_of_peak_per_k_in_words_not_in_the_interval_column(tmp_path):
+    from snn_antenna.report import Report
+    from snn_antenna.studies.tuning_sweep import _provenance_rows
+
+    summary = {"reference_used": {"k": 1.0}, "calibration": {
+        "hz_per_k_centroid": 20.7, "hz_per_k_peak": 23.9, "hz_per_k_peak_range": [22.0, 24.0],
+        "responding_k": 4, "input_hz_step": 1.0}}
+    report = Report(tmp_path, "t", quick=True)
+    _provenance_rows(report, summary)
+    peak = report._predicted[0]
+    assert peak.interval is None and "22 to 24 Hz" in peak.note

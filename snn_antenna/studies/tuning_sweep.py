@@ -146,6 +146,10 @@ def quick_note(summary: dict, neuron: NeuronSweep) -> str:
 PAPER_HZ_PER_K = 7.0 / 0.3425   # the paper's 7 Hz neuron has k = 0.3425 (docs/reference.md)
 
 
+def _range_text(pair) -> str:
+    return f"{fmt(pair[0])} to {fmt(pair[1])} Hz" if pair else "(none)"
+
+
 def _provenance_rows(report: Report, summary: dict) -> None:
     """What the sweep calibrates (the foundation's constant) apart from what it predicts."""
     cal = summary.get("calibration")
@@ -162,10 +166,12 @@ def _provenance_rows(report: Report, summary: dict) -> None:
         "preferred frequency per unit k (tuning-curve peak)", value=cal["hz_per_k_peak"],
         unit="Hz", paper=PAPER_HZ_PER_K,
         source="paper: the 7 Hz neuron has k = 0.3425 (docs/reference.md)",
-        interval=tuple(cal["hz_per_k_peak_range"]) if cal["hz_per_k_peak_range"] else None,
+        # the spread of peak/k over k is a range, not a confidence interval: it goes in the
+        # note, never in the table's "95 % interval" column
         n=cal["responding_k"],
-        note=(f"range of peak/k over the {cal['responding_k']} k values that fired (not a "
-              f"confidence interval); the paper codes with amplitude 0.085 in its scaling, "
+        note=(f"peak/k ranges {_range_text(cal['hz_per_k_peak_range'])} over the "
+              f"{cal['responding_k']} k values that fired; the paper codes with amplitude "
+              f"0.085 in its scaling, "
               f"this sweep at {used}; the grid's frequency step is "
               f"{fmt(cal['input_hz_step'])} Hz")))
     if "fwhm_vs_I" in summary:
