@@ -257,7 +257,9 @@ def test_emulate_log_never_overwrites_without_force(tmp_path, capsys):
     assert main(["emulate", "--pty", "--frames", "10", "--fast", "--peer-timeout", "0.5",
                  "--log", str(log)]) == 2
     err = capsys.readouterr().err
-    assert "--force" in err and str(log) in err and untouched_state(log) == kept
+    # (a long path is cut in the middle: its name stays)
+    assert "--force" in err and f"{log.parent.name[-10:]}/{log.name}" in err
+    assert untouched_state(log) == kept
     link = tmp_path / "link.json"
     link.symlink_to(log)
     assert main(["emulate", "--pty", "--frames", "10", "--fast", "--force",
@@ -349,7 +351,7 @@ def test_a_damaged_store_is_named_in_one_line(tmp_path):
     chunk.write_bytes(b"not a chunk")
     with pytest.raises(DamagedStore, match="damaged") as err:
         store.load()
-    assert str(path) in str(err.value) and "\n" not in str(err.value)
+    assert "results.zarr" in str(err.value) and "\n" not in str(err.value)
     (path / "zarr.json").unlink()
     with pytest.raises(SpecError, match="--fresh"):
         _store(path)
