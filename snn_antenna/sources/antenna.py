@@ -64,6 +64,9 @@ as a damped oscillation with a low and a high mode. What comes from the paper (P
   30 cm/s (1.6 g rms), where the held rod's forced ringing carries the contact instead
   (``tests/test_scenes.py`` checks that range). Scripted contacts (``stimuli.RobotScene``, the
   bench) keep an explicit ``impact_g``.
+- Contact mechanism: the materials paragraph above is the ``current`` candidate, the default;
+  ``contact_models`` holds the others (compliant boundary, Hertz impact spectrum, friction),
+  compared by the model-selection study (``studies/model_selection.toml``).
 - Sensor: ADXL321-like, ±18 g into a 10-bit ADC (35 mg per count), white noise 10 mg; modes
   above 0.45 × the sample rate are removed, as the sensor's anti-aliasing bandwidth would.
 """

@@ -146,6 +146,7 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
                                             "larger_is_better": v[2], "what": v[3]}
                                         for k, v in PREDICTIONS.items()},
                "data": {"events_per_point": parts.bench.n_events,
+                        "repetitions": parts.bench.repetitions,
                         "seeds": list(parts.evaluation.seeds)},
                "timing": {"total_s": time.perf_counter() - t0}}
     from .report import write_report

@@ -9,6 +9,7 @@ from . import CALIBRATION_TARGETS, PREDICTIONS, value
 
 SOURCE = "paper (docs/reference.md)"
 # Shown in % (accuracies) or as they are (mm, ranks, sites).
+FULL_REPETITIONS = 100     # the paper's protocol (stimuli/bench.toml)
 PERCENT = {"material_accuracy_spectrum", "nmf30_accuracy", "two_material_accuracy"}
 
 
@@ -77,6 +78,17 @@ def write_report(report: Report, summary: dict) -> None:
                    "become the default generator." if decision["wins_clearly"] else
                    "No candidate meets every criterion, so none wins clearly and the default "
                    "generator stays as it is; the table shows how close each came."))
+    reps, n_events = summary["data"]["repetitions"], summary["data"]["events_per_point"]
+    if reps < FULL_REPETITIONS:
+        report.text(
+            f"Data size: {reps} contacts per material and site ({n_events} events per grid "
+            f"point), not the paper's {FULL_REPETITIONS}. Every read-out here "
+            "trains on that fraction, so the accuracies and rmse are lower than on the full "
+            "set for every candidate alike (the current model's full-spectrum MLP reads 93.9 % "
+            "of the materials and its distance rmse is 3.3 mm on the full set): the criteria "
+            "are the issue's bounds for the full set, the ranking compares candidates on the "
+            "same data, and the calibrated constant is the one that meets the targets at "
+            "this size.")
     report.heading("Leave one calibration target out")
     report.table([{"candidate": name, "left out": CALIBRATION_TARGETS[t][2],
                    "strength from the other target": d["strength"],
