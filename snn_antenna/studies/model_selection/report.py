@@ -5,7 +5,7 @@ import numpy as np
 
 from ... import stats
 from ...report import Calibrated, Predicted, Report
-from . import CALIBRATION_TARGETS, PREDICTIONS, value
+from .protocol import CALIBRATION_TARGETS, PREDICTIONS, value
 
 SOURCE = "paper (docs/reference.md)"
 # Shown in % (accuracies) or as they are (mm, ranks, sites).
@@ -21,7 +21,7 @@ def _unit(name: str) -> str:
     return "%" if name in PERCENT else ("mm" if name.endswith("_mm") else "")
 
 
-def seed_interval(values, name: str) -> tuple[Predicted | None, str]:
+def seed_interval(values, name: str) -> tuple[tuple | None, str]:
     """(low, high) of the mean over seeds, and the verdict the rules allow at this n."""
     x = np.asarray(values, dtype=float) * _scale(name)
     if x.size < 2:
