@@ -64,6 +64,9 @@ as a damped oscillation with a low and a high mode. What comes from the paper (P
   30 cm/s (1.6 g rms), where the held rod's forced ringing carries the contact instead
   (``tests/test_scenes.py`` checks that range). Scripted contacts (``stimuli.RobotScene``, the
   bench) keep an explicit ``impact_g``.
+- Contact mechanism: the materials paragraph above is the ``current`` candidate, the default;
+  ``contact_models`` holds the others (compliant boundary, Hertz impact spectrum, friction),
+  compared by the model-selection study (``studies/model_selection.toml``).
 - Sensor: ADXL321-like, ±18 g into a 10-bit ADC (35 mg per count), white noise 10 mg; modes
   above 0.45 × the sample rate are removed, as the sensor's anti-aliasing bandwidth would.
 """
@@ -74,6 +77,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SpecError, check
+from .contact_models import DEFAULT as DEFAULT_PHYSICS, ContactPhysics
 
 ROD_LENGTH_CM = 41.3          # total feeler length (paper: 413 mm)
 CALIBRATED_RANGE_CM = (8.0, 37.5)  # where the paper measured the frequency laws
@@ -180,13 +184,15 @@ class Material:
 
     @property
     def contact_duration_s(self) -> float:
-        """Hertz impact duration of the tube on the rod (crossed cylinders, equivalent sphere
-        of radius √(R₁R₂); the rod far heavier than the tube's effective mass):
-        t_c = 2.868 (m² / (R E*² v))^(1/5)."""
+        """Hertz impact duration of the tube (``TUBE_EFFECTIVE_MASS_KG``) on the rod."""
+        return self.impact_duration_s(TUBE_EFFECTIVE_MASS_KG)
+
+    def impact_duration_s(self, mass_kg: float) -> float:
+        """Hertz impact duration of ``mass_kg`` on the rod (crossed cylinders, equivalent
+        sphere of radius √(R₁R₂); the rod far heavier): t_c = 2.868 (m² / (R E*² v))^(1/5)."""
         radius = np.sqrt(TUBE_RADIUS_M * ROD_DIAMETER_M / 2)
         e_star = self.contact_modulus_gpa * 1e9
-        return float(2.868 * (TUBE_EFFECTIVE_MASS_KG ** 2
-                              / (radius * e_star ** 2 * IMPACT_SPEED_M_S)) ** 0.2)
+        return float(2.868 * (mass_kg ** 2 / (radius * e_star ** 2 * IMPACT_SPEED_M_S)) ** 0.2)
 
     def contact_loss(self) -> float:
         """Loss factor the contact adds to the antenna's modes: the rod stores the share
@@ -291,14 +297,16 @@ def decay_times_s(distance_cm, material: str = "wood") -> tuple[np.ndarray, np.n
 
 def contact_ringing(distance_cm: float, material: str, rate_hz: float, n_samples: int,
                     rng: np.random.Generator, amplitude_g: float = 2.0,
-                    scatter: bool = True) -> np.ndarray:
+                    scatter: bool = True, physics: ContactPhysics = DEFAULT_PHYSICS
+                    ) -> np.ndarray:
     """What the tip's accelerometer records after an impact, in g along the main axis: the
     antenna's free end ringing in its low and high mode, plus the struck rod's own first
     bending mode carried through the contact while the antenna rests on it.
 
     With ``scatter``, every contact differs from the next by the calibrated spread of the
     frequencies and the assumed spread of decay times and amplitudes (``*_CV``); modes above
-    the sensor bandwidth (0.45 × ``rate_hz``) are left out rather than aliased.
+    the sensor bandwidth (0.45 × ``rate_hz``) are left out rather than aliased. ``physics``
+    picks the contact mechanism(s) (``contact_models``; the default is the model above).
     """
     m = check_material(material)
     f_low = float(low_mode_hz(distance_cm))
@@ -307,14 +315,17 @@ def contact_ringing(distance_cm: float, material: str, rate_hz: float, n_samples
                         f"a sample rate above {f_low / 0.45:.0f} Hz for a contact at "
                         f"{distance_cm} cm (its low mode rings at {f_low:.1f} Hz)")
     f_high = float(high_mode_hz(distance_cm))
+    shift_low, shift_high = physics.frequency_factors(m, f_low, f_high)
+    f_low, f_high = f_low * shift_low, f_high * shift_high
     f_rod, tau_rod = m.rod_mode_hz(), m.rod_tau_s()
     tau_low, tau_high = (float(x) for x in decay_times_s(distance_cm, material))
     # The impact is a half-sine force pulse of Hertz's duration: it excites each mode by its
     # pulse spectrum at that mode (relative to the low mode, which it always excites fully).
-    excite = pulse_excitation([f_low, f_high, f_rod], m.contact_duration_s)
+    excite = pulse_excitation([f_low, f_high, f_rod],
+                              m.impact_duration_s(physics.effective_mass_kg()))
     a_low = amplitude_g
     ratio = BASE_HIGH_RATIO * excite[1] / excite[0]
-    a_rod = m.rod_ringing() * excite[2] / excite[0]
+    a_rod = m.rod_ringing() * physics.rod_coupling_scale() * excite[2] / excite[0]
     if scatter:
         f_low *= 10 ** rng.normal(0, LOW_SCATTER_DEX)
         f_high *= 10 ** rng.normal(0, HIGH_SCATTER_DEX)
@@ -326,11 +337,12 @@ def contact_ringing(distance_cm: float, material: str, rate_hz: float, n_samples
         a_rod *= np.exp(rng.normal(0, ROD_AMPLITUDE_CV))
     t = np.arange(n_samples) / rate_hz
     # Impact: the rod is deflected and released, so both modes start near a peak.
-    out = a_low * np.exp(-t / tau_low) * np.cos(2 * np.pi * f_low * t + rng.normal(0, 0.2))
+    out = a_low * physics.envelope(t, tau_low, f_low, a_low, material) * np.cos(
+        2 * np.pi * f_low * t + rng.normal(0, 0.2))
     if f_high < 0.45 * rate_hz:
-        out += a_low * ratio * np.exp(-t / tau_high) * np.cos(
-            2 * np.pi * f_high * t + rng.uniform(0, 2 * np.pi))
-    if f_rod < 0.45 * rate_hz:
+        out += a_low * ratio * physics.envelope(t, tau_high, f_high, a_low * ratio, material) \
+            * np.cos(2 * np.pi * f_high * t + rng.uniform(0, 2 * np.pi))
+    if f_rod < 0.45 * rate_hz and a_rod > 0:
         # An impulse starts a mode at rest with its largest velocity: the acceleration
         # starts at zero, as a sine.
         out += a_low * a_rod * np.exp(-t / tau_rod) * np.sin(2 * np.pi * f_rod * t)

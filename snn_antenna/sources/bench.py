@@ -33,7 +33,7 @@ from ..truth import Event, GroundTruth
 from ..files import refuse_symlink
 from ..provenance import code_hash, code_identity
 from ..store import DamagedStore, short_reason, read_dataset, write_dataset
-from . import antenna
+from . import antenna, contact_models
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
 
@@ -52,6 +52,10 @@ class BenchSpec:
     orientation_deg: float = 30.0
     adc_bits: int = 16
     full_scale_g: float = 10.0
+    # The contact mechanism(s) and the factor on their free constant (sources/contact_models.py;
+    # chosen by the model-selection study, studies/model_selection.toml).
+    physics: str = contact_models.DEFAULT_MECHANISM
+    physics_strength: float = 1.0
     seed: int = 0
     n_jobs: int = 1
     cache_dir: str = "out/.cache"
@@ -83,6 +87,11 @@ class BenchSpec:
               "an integer >= 1 (worker processes)")
         check(isinstance(self.seed, int) and self.seed >= 0, "seed", self.seed, "an integer >= 0")
         antenna.ADC(self.adc_bits, self.full_scale_g)
+        self.contact_physics    # names physics or physics_strength when they are bad
+
+    @property
+    def contact_physics(self) -> contact_models.ContactPhysics:
+        return contact_models.ContactPhysics(self.physics, self.physics_strength)
 
     @property
     def n_events(self) -> int:
@@ -116,10 +125,11 @@ def _generate_block(spec: BenchSpec, mi: int, pi: int) -> np.ndarray:
     adc = antenna.ADC(spec.adc_bits, spec.full_scale_g)
     n, n_pre = spec.n_samples, int(round(spec.pre_trigger_s * spec.rate_hz))
     out = np.empty((spec.repetitions, n, 2), dtype=_counts_dtype(spec.adc_bits))
+    physics = spec.contact_physics
     for r in range(spec.repetitions):
         main = np.zeros(n)
         main[n_pre:] = antenna.contact_ringing(d, material, spec.rate_hz, n - n_pre, rng,
-                                               spec.impact_g)
+                                               spec.impact_g, physics=physics)
         xy = antenna.project(main, spec.orientation_deg)
         xy += rng.standard_normal(xy.shape) * spec.sensor_noise_g
         out[r] = adc.to_counts(xy)

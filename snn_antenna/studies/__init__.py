@@ -24,6 +24,7 @@ STUDIES = {
     "tuning_sweep": "snn_antenna.studies.tuning_sweep",
     "speed_accuracy": "snn_antenna.studies.speed_accuracy",
     "baseline_comparison": "snn_antenna.studies.baseline_comparison",
+    "model_selection": "snn_antenna.studies.model_selection",
 }
 
 # Where make_chain's arguments come from in a study spec (the rest: ``preprocess.NAME``).
