@@ -28,7 +28,9 @@ material's signature, each with ONE free constant, scaled by ``ContactPhysics.st
   from textbook ranges (``FRICTION_COEFFICIENT``).
 
 Mechanisms combine with ``+`` (e.g. ``"boundary+hertz"``); a combination's one strength
-scales each of its mechanisms' reference constants.
+scales each of its mechanisms' reference constants, except ``current``'s: in a combination the
+rod's line keeps its reference coupling (calibrated alone), so ``"current+hertz"`` asks what
+Hertz's excitation spectrum adds to the default model with one free constant, not two.
 """
 from __future__ import annotations
 
@@ -77,8 +79,11 @@ class ContactPhysics:
 
     # -- what each mechanism does ------------------------------------------------------------
     def rod_coupling_scale(self) -> float:
-        """Factor on ``ROD_COUPLING``: the rod's line exists only in ``current``."""
-        return self.strength if self.has("current") else 0.0
+        """Factor on ``ROD_COUPLING``: the rod's line exists only with ``current``; in a
+        combination it stays at its reference (the strength is the other mechanism's)."""
+        if not self.has("current"):
+            return 0.0
+        return self.strength if self.mechanism == "current" else 1.0
 
     def effective_mass_kg(self) -> float:
         """The mass the rod stops, which sets Hertz's contact duration (t_c ∝ m^(2/5))."""

@@ -7,8 +7,9 @@ read-outs on the same splits by repetition for several seeds. Two numbers of the
 calibration targets (``CALIBRATION_TARGETS``): the constant is the grid value that meets them
 best. Everything else is predicted and never enters that choice (``PREDICTIONS``).
 Leave-one-target-out: the constant is chosen again from one target alone, and the left-out
-target becomes a prediction. The candidate whose calibrated predictions meet most of the
-issue's criteria (then: falls least short of them) is the one the study chooses.
+target becomes a prediction. Among the candidates that meet their calibration targets (within
+their tolerances), the one whose predictions meet most of the issue's criteria (then: falls
+least short of them) is the one the study chooses; none, when nothing calibrates.
 """
 from __future__ import annotations
 

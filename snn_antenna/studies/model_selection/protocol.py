@@ -54,6 +54,13 @@ def residual(point: dict, targets) -> float:
                      / CALIBRATION_TARGETS[t][1] for t in targets))
 
 
+def meets_calibration(point: dict) -> bool:
+    """Every calibration target within its tolerance: the candidate reproduces what it was
+    fitted to. A candidate that cannot is not the physics, whatever it predicts."""
+    return all(abs(value(point, t) - paper) <= tol
+               for t, (paper, tol, _) in CALIBRATION_TARGETS.items())
+
+
 def choose(physics: str, points: list[dict]) -> dict:
     """The candidate's calibration (all targets) and its leave-one-target-out checks."""
     targets = list(CALIBRATION_TARGETS)
@@ -62,7 +69,7 @@ def choose(physics: str, points: list[dict]) -> dict:
     if not points:
         return {"physics": physics, "strength": None, "grid": unreadable,
                 "unreadable": unreadable, "residual": None, "point": None, "loto": {},
-                "criteria_met": {}, "n_met": 0, "shortfall": None}
+                "calibrated": False, "criteria_met": {}, "n_met": 0, "shortfall": None}
     best = min(points, key=lambda p: residual(p, targets))
     loto = {}
     for left_out in targets:
@@ -77,7 +84,7 @@ def choose(physics: str, points: list[dict]) -> dict:
             "grid": sorted([p["strength"] for p in points] + unreadable),
             "unreadable": unreadable,
             "residual": residual(best, targets), "point": best, "loto": loto,
-            "criteria_met": met, "n_met": sum(met.values()), "shortfall": shortfall(best)}
+            "calibrated": meets_calibration(best), "criteria_met": met, "n_met": sum(met.values()), "shortfall": shortfall(best)}
 
 
 def criteria(point: dict) -> dict:
@@ -99,22 +106,31 @@ def shortfall(point: dict) -> float:
 
 
 def select(candidates: dict) -> dict:
-    """Most criteria met, then least shortfall; a candidate 'wins clearly' only if it meets
-    every criterion and the default does not."""
-    ranked = sorted((c for c in candidates.values() if c["point"] is not None),
+    """Among the candidates that meet their calibration: most criteria met, then least
+    shortfall. A candidate that misses its calibration is not eligible, however well it
+    predicts (a model that gets its fitted numbers wrong has not earned its predictions).
+    A candidate 'wins clearly' only if it meets every criterion and the default does not."""
+    readable = [c for c in candidates.values() if c["point"] is not None]
+    ranked = sorted((c for c in readable if c["calibrated"]),
                     key=lambda c: (-c["n_met"], c["shortfall"]))
+    missed = sorted((c["physics"] for c in readable if not c["calibrated"]))
     if not ranked:
         return {"chosen": None, "strength": None, "wins_clearly": False, "ranking": [],
-                "reason": "no candidate gave a signal the paper's processing could read"}
+                "not_calibrated": missed,
+                "reason": "no candidate meets its calibration targets within their "
+                          "tolerances" if readable else
+                          "no candidate gave a signal the paper's processing could read"}
     chosen = ranked[0]
     default = candidates.get("current")
     clear = chosen["n_met"] == len(PREDICTIONS) and \
         (default is None or default["n_met"] < len(PREDICTIONS))
-    reason = (f"meets {chosen['n_met']} of {len(PREDICTIONS)} predicted criteria, shortfall "
-              f"{chosen['shortfall']:.2f}")
+    reason = (f"meets its calibration and {chosen['n_met']} of {len(PREDICTIONS)} predicted "
+              f"criteria, shortfall {chosen['shortfall']:.2f}")
     if default is not None and chosen is not default:
         reason += (f"; the current model meets {default['n_met']}, shortfall "
                    f"{default['shortfall']:.2f}")
+    if missed:
+        reason += f"; not eligible (calibration missed): {', '.join(missed)}"
     return {"chosen": chosen["physics"], "strength": chosen["strength"],
             "wins_clearly": bool(clear), "ranking": [c["physics"] for c in ranked],
-            "reason": reason}
+            "not_calibrated": missed, "reason": reason}

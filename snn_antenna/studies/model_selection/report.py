@@ -48,7 +48,8 @@ def write_report(report: Report, summary: dict) -> None:
             rows_cal.append(Calibrated(f"{name}: {what}", value(p, target) * _scale(target),
                                        paper * _scale(target), _unit(target), SOURCE, how))
         row = {"candidate": name, "free constant": f"strength {c['strength']:g}",
-               "calibration residual": c["residual"]}
+               "calibration residual": c["residual"],
+               "meets its calibration": "yes" if c["calibrated"] else "no"}
         for quantity, (paper, bound, _, what) in PREDICTIONS.items():
             v = value(p, quantity) * _scale(quantity)
             interval, note = (None, "one data set, pooled over seeds") \
@@ -66,18 +67,30 @@ def write_report(report: Report, summary: dict) -> None:
     report.predicted(*rows_pred)
     report.heading("Model-selection table")
     paper_row = {"candidate": "paper", "free constant": "", "calibration residual": None,
+                 "meets its calibration": "",
                  **{q: v[0] * _scale(q) for q, v in PREDICTIONS.items()},
                  "most confused": "brass ↔ wood", "criteria met": "", "shortfall": None}
     report.table(table + [paper_row], "Each candidate at its calibrated constant; the "
                  "predictions are means over seeds (intervals in 'Predicted' above). Criteria: "
                  "NMF-30 ≥ 80 %, 5-8-2 ≥ 80 %, both rmse within 1.3× the paper's, brass ↔ wood "
                  "among the three most confused pairs.")
-    report.text(f"Chosen: {decision['chosen']} (strength {decision['strength']}): "
-                f"{decision['reason']}. "
-                + ("It meets every criterion where the current model does not: it should "
-                   "become the default generator." if decision["wins_clearly"] else
-                   "No candidate meets every criterion, so none wins clearly and the default "
-                   "generator stays as it is; the table shows how close each came."))
+    report.text("A candidate is eligible only when its calibrated constant reproduces both "
+                "calibration targets within their tolerances (" + "; ".join(
+                    f"{what} {paper * _scale(t):g} ± {tol * _scale(t):g} {_unit(t)}".rstrip()
+                    for t, (paper, tol, what) in CALIBRATION_TARGETS.items()) +
+                "): a mechanism that gets its fitted numbers wrong has not earned its "
+                "predictions.")
+    if decision["chosen"] is None:
+        report.text(f"Chosen: none ({decision['reason']}); the default generator stays as "
+                    "it is.")
+    else:
+        report.text(f"Chosen: {decision['chosen']} (strength {decision['strength']:g}): "
+                    f"{decision['reason']}. "
+                    + ("It meets every criterion where the current model does not: it should "
+                       "become the default generator." if decision["wins_clearly"] else
+                       "No eligible candidate meets every criterion, so none wins clearly "
+                       "and the default generator stays as it is; the table shows how close "
+                       "each came."))
     reps, n_events = summary["data"]["repetitions"], summary["data"]["events_per_point"]
     if reps < FULL_REPETITIONS:
         report.text(
