@@ -222,10 +222,10 @@ def _sweep_row(ds, v, best, th_star) -> dict:
             "out of the array's band": int(at_zero.out_of_band_contacts.sum())}
 
 
-def _draw_map(ax, rates, rec, parts: Parts, title: str):
+def _draw_map(ax, rates, rec, parts: Parts, title: str, **mesh_kwargs):
     """A rate map with the true contacts (cyan: in the array's band, grey: outside it) and
     the detections (green); returns the mesh for its colour bar."""
-    mesh = draw_rate_map(ax, rates)
+    mesh = draw_rate_map(ax, rates, **mesh_kwargs)
     for c in rec.truth.contacts:
         ok = visible(c, parts.readout.detector, parts.array)
         ax.axvline(c.t_s, color="tab:cyan" if ok else "0.6", ls="--", lw=0.8)
@@ -236,17 +236,29 @@ def _draw_map(ax, rates, rec, parts: Parts, title: str):
 
 
 def _fig9(fig9: dict, parts: Parts):
-    fig, axes = figures.pyplot().subplots(len(fig9), 3, figsize=(15, 3.2 * len(fig9)),
-                                          squeeze=False, sharex=True)
+    """Rows: speeds; columns: Th = 0, Th*, 2·Th*. One colour scale for all panels (so a
+    brighter cell is a higher rate anywhere), sized to stay readable in the report's column."""
+    from matplotlib.lines import Line2D
+
+    vmax = max(1.0, *(float(np.nanmax(m.values)) for row in fig9.values() for m in row.maps))
+    fig, axes = figures.pyplot().subplots(len(fig9), 3, figsize=(10, 2.6 * len(fig9) + 0.9),
+                                          squeeze=False, sharex=True, sharey=True,
+                                          layout="constrained")
     for r, (v, row) in enumerate(fig9.items()):
         for c, (lab, th, rates) in enumerate(zip(("Th", "Th*", "2·Th*"), row.thresholds,
                                                  row.maps)):
-            mesh = _draw_map(axes[r, c], rates, row.rec, parts, f"{v:g} cm/s, {lab} = {th:.3g} g")
-            fig.colorbar(mesh, ax=axes[r, c], label="rate (Hz)", pad=0.01)
-        axes[r, 0].set_ylabel("neuron (Hz)")
+            mesh = _draw_map(axes[r, c], rates, row.rec, parts, f"{lab} = {th:.3g} g",
+                             vmin=0.0, vmax=vmax)
+            if c:
+                axes[r, c].set_ylabel("")
+        axes[r, 0].set_ylabel(f"{v:g} cm/s\nneuron (Hz)")
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
-    fig.tight_layout()
+    fig.colorbar(mesh, ax=axes, label="spike rate (Hz)", shrink=0.8)
+    fig.legend(handles=[Line2D([], [], color="tab:cyan", ls="--", label="contact in the band"),
+                        Line2D([], [], color="0.6", ls="--", label="contact outside the band"),
+                        Line2D([], [], color="tab:green", label="detection")],
+               loc="outside lower center", ncols=3, frameon=False)
     return fig
 
 
