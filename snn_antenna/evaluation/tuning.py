@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
+from ..figures import legend_outside
 from ..networks import neurons
 
 # The foundation's constant holds when the fitted centroid slope is within this (relative)
@@ -217,12 +218,17 @@ def heatmaps_figure(rate: xr.DataArray, maps: xr.Dataset, point: ReadPoint,
             ax.plot(neurons.DRIVEN_HZ_PER_K * kk, kk, "c--", lw=1,
                     label=f"in use: {neurons.DRIVEN_HZ_PER_K:g} Hz × k")
             if hz_per_k_peak:
-                ax.plot(hz_per_k_peak * kk, kk, "w:", lw=1.2,
+                ax.plot(hz_per_k_peak * kk, kk, ":", color="limegreen", lw=1.5,
                         label=f"peaks here: {hz_per_k_peak:.3g} Hz × k")
-            ax.legend(fontsize=7, loc="lower right")
+            legend_outside(ax, fontsize=8, loc="lower left", bbox_to_anchor=(0, 1.01),
+                           ncols=2, frameon=False)
         else:                    # a few grid values: one labelled cell per value
             mesh = ax.pcolormesh(np.arange(sub.sizes[xdim] + 1), np.arange(sub.sizes[ydim] + 1),
                                  values, cmap="magma")
+            for (yi, xi) in zip(*np.nonzero(np.ma.getmaskarray(values))):
+                # a blank cell is a measurement too: say what it means
+                ax.text(xi + 0.5, yi + 0.5, "no spike", ha="center", va="center",
+                        fontsize=8, color="0.35")
             _value_ticks(ax.set_xticks, ax.set_xticklabels, sub[xdim].values)
             _value_ticks(ax.set_yticks, ax.set_yticklabels, sub[ydim].values)
         fig.colorbar(mesh, ax=ax, label=label)
