@@ -36,6 +36,7 @@ STORES = {
     "gating_threshold": "sweep.zarr",
     "speed_accuracy": "runs.jsonl",
     "baseline_comparison": "out/.cache",   # relative to the run's working directory
+    "model_selection": "out/.cache",
 }
 RUN_TIMEOUT_S = 900
 

@@ -4,7 +4,7 @@ and every quick report opened in a real browser (headless Chromium at 1,280 px).
 The study runs are shared through the session fixture ``quick_reports`` (tests/conftest.py).
 The default suite runs the two cheapest studies (quickstart: no store; tuning_sweep: a zarr
 store, interrupted then resumed) plus a report built here with every element a study can
-put on a page; the other four studies run under ``-m slow``. The tests check properties
+put on a page; the other five studies run under ``-m slow``. The tests check properties
 (a second run succeeds with the same numbers, the page opens cleanly), never the values:
 the science inside the studies changes.
 """
@@ -48,6 +48,7 @@ STUDIES = [
     pytest.param("exploration", marks=pytest.mark.slow),
     pytest.param("gating_threshold", marks=pytest.mark.slow),
     pytest.param("baseline_comparison", marks=pytest.mark.slow),
+    pytest.param("model_selection", marks=pytest.mark.slow),
 ]
 
 
