@@ -26,7 +26,8 @@
  * With --fast a full pty pauses the whole simulation instead (as fast as the reader takes it).
  *
  * At the end one JSON line on stderr: simulated and wall seconds, their ratio, the fraction of
- * wall time the simulation was busy, samples fed, bytes sent, the UART line load, held time.
+ * wall time the simulation was busy, samples fed, bytes sent, the UART line load, held time, and
+ * why it stopped early (null, "signal" for SIGINT/SIGTERM, or the reader leaving: exit status 3).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -74,6 +75,7 @@ static struct {
     void *ucsra_param;
     uint8_t udre_mask, udre_hidden;
     volatile sig_atomic_t stop;
+    int peer_gone;
 } sim;
 
 static void fail(int code, const char *fmt, const char *what)
@@ -163,8 +165,8 @@ static void flush_out(int wait)
         if (poll(&p, 1, wait ? 100 : 0) < 0 && errno != EINTR)
             fail(EXIT_SIM, "poll: %s", strerror(errno));
         if (p.revents & (POLLHUP | POLLERR))
-            fail(EXIT_PEER_GONE, "%s", "the reader closed the port");
-        if (sim.stop)
+            sim.peer_gone = 1;
+        if (sim.stop || sim.peer_gone)
             break;
         if (!(p.revents & POLLOUT)) {
             if (wait)
@@ -172,8 +174,10 @@ static void flush_out(int wait)
             break;
         }
         ssize_t n = write(sim.fd, sim.out + done, sim.out_len - done);
-        if (n < 0 && errno != EAGAIN && errno != EINTR)
-            fail(errno == EIO ? EXIT_PEER_GONE : EXIT_SIM, "write: %s", strerror(errno));
+        if (n < 0 && errno == EIO)
+            sim.peer_gone = 1;
+        else if (n < 0 && errno != EAGAIN && errno != EINTR)
+            fail(EXIT_SIM, "write: %s", strerror(errno));
         if (n > 0)
             done += (size_t)n;
     }
@@ -309,7 +313,7 @@ int main(int argc, char **argv)
     double t0 = now_s(), slept = 0;
     uint64_t next_tick = TICK_CYCLES;
     int state = cpu_Running;
-    while (!sim.stop && state != cpu_Done && state != cpu_Crashed) {
+    while (!sim.stop && !sim.peer_gone && state != cpu_Done && state != cpu_Crashed) {
         state = avr_run(avr);
         if (avr->cycle < next_tick)
             continue;
@@ -327,12 +331,13 @@ int main(int argc, char **argv)
         }
         struct pollfd p = { .fd = sim.fd, .events = 0 };
         if (poll(&p, 1, 0) > 0 && (p.revents & (POLLHUP | POLLERR)))
-            fail(EXIT_PEER_GONE, "%s", "the reader closed the port");
+            sim.peer_gone = 1;
         if (sim.fed == sim.n_counts && sim.out_len == 0
             && avr->cycle - sim.last_tx_cycle > IDLE_END_MS * TICK_CYCLES)
             break;
     }
-    flush_out(1);
+    if (!sim.peer_gone)
+        flush_out(1);
     if (state == cpu_Crashed)
         fail(EXIT_SIM, "%s", "the firmware crashed in simavr");
     double wall = now_s() - t0, simulated = (double)avr->cycle / F_CPU_HZ;
@@ -342,6 +347,7 @@ int main(int argc, char **argv)
                     "\"line_load\": %.4f, \"held_s\": %.4f, \"stopped\": %s}\n",
             simulated, wall, simulated / wall, (wall - slept) / wall, sim.fed,
             (unsigned long long)sim.bytes_sent, sim.bytes_sent * byte_s / simulated,
-            (double)sim.held_cycles / F_CPU_HZ, sim.stop ? "true" : "false");
-    return EXIT_OK;
+            (double)sim.held_cycles / F_CPU_HZ,
+            sim.peer_gone ? "\"the reader closed the port\"" : sim.stop ? "\"signal\"" : "null");
+    return sim.peer_gone ? EXIT_PEER_GONE : EXIT_OK;
 }
