@@ -322,11 +322,11 @@ int main(int argc, char **argv)
             sim.held_cycles += TICK_CYCLES;
         flush_out(sim.fast && sim.out_len >= OUT_HIGH);
         if (!sim.fast) {                 /* pace: simulated time never runs ahead of the wall */
-            double ahead = (double)avr->cycle / F_CPU_HZ - (now_s() - t0);
+            double before = now_s(), ahead = (double)avr->cycle / F_CPU_HZ - (before - t0);
             if (ahead > 0) {
                 struct timespec ts = { 0, (long)(ahead * 1e9) };
                 nanosleep(&ts, NULL);
-                slept += ahead;
+                slept += now_s() - before;   /* as slept: the kernel's slack is not busy time */
             }
         }
         struct pollfd p = { .fd = sim.fd, .events = 0 };
