@@ -3,9 +3,12 @@
 and the host's recorder, decoder and live pipeline read it as they read the board."""
 import json
 import os
+import select
 import subprocess
 import sys
 import threading
+import time
+import tty
 from pathlib import Path
 
 import numpy as np
@@ -14,9 +17,11 @@ import pytest
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.firmware_loop import build, missing_tools, run_harness, write_counts
 from snn_antenna.bridge.links import PtyLink
+from snn_antenna.bridge.protocol import Decoder
 from snn_antenna.bridge.recorder import Recorder
 from snn_antenna.bridge.source import SerialSource, run_source
 from snn_antenna.bridge.stimulus import stimulus_recording
+from snn_antenna.errors import PipelineError
 
 ROOT = Path(__file__).resolve().parents[1]
 FIRMWARE = ROOT / "firmware" / "antenna_stream"
@@ -130,6 +135,17 @@ def test_a_held_uart_drops_samples_as_a_counted_gap_never_a_time_warp(tmp_path, 
         "a sample carries another instant's counts: a time warp"
 
 
+@needs_simavr
+def test_counts_the_adc_cannot_give_are_refused_by_the_harness(tmp_path, built):
+    (tmp_path / "counts.txt").write_text("1 2\n3 1024\n")
+    link = PtyLink()
+    try:
+        with pytest.raises(PipelineError, match=r"counts line 2: 3 1024; accepted: 0\.\.1023"):
+            run_harness(built, tmp_path / "counts.txt", link)
+    finally:
+        link.close()
+
+
 def test_firmware_option_refuses_what_the_firmware_cannot_do(tmp_path):
     for options, field in ((["--faults", "drop=2"], "faults"), (["--format", "ascii"], "format"),
                            ([], "firmware")):
@@ -164,3 +180,40 @@ def test_stream_finds_the_quickstart_contact_through_the_firmware(tmp_path):
     [truth] = expected.truth.events
     assert abs(contact["onset_s"] - truth.t_s) < 0.5
     assert abs(contact["distance_cm"] - 19.0) <= 1.5, contact
+
+
+@needs_simavr
+@pytest.mark.slow
+def test_a_reader_that_stops_reading_holds_the_paced_uart(tmp_path, built):
+    """At the board's pace, a reader that opens the port and reads nothing for 5 s: once the
+    pty's buffer is full the harness holds the UART (a line that cannot send) instead of
+    buffering without end, and the firmware drops as it would, one counted gap, no warp."""
+    n = 7000
+    counts = np.random.default_rng(3).integers(0, 1024, (n, 2))
+    write_counts(tmp_path / "counts.txt", counts)
+    link = PtyLink()
+    reader = os.open(link.slave_name, os.O_RDWR | os.O_NOCTTY)
+    summary = {}
+    try:
+        tty.setraw(reader)
+        harness = threading.Thread(target=lambda: summary.update(
+            run_harness(built, tmp_path / "counts.txt", link)))
+        harness.start()
+        time.sleep(5)
+        data = bytearray()
+        os.set_blocking(reader, False)
+        while harness.is_alive() or select.select([reader], [], [], 0.2)[0]:
+            try:
+                data += os.read(reader, 1 << 16)
+            except BlockingIOError:
+                time.sleep(0.01)
+        harness.join()
+    finally:
+        os.close(reader)
+        link.close()
+    decoder = Decoder("binary")
+    got = np.array([tuple(s) for s in decoder.feed(bytes(data))])
+    assert summary["held_s"] > 1 and decoder.stats.gaps >= 1
+    assert decoder.stats.frames + decoder.stats.lost_samples == n
+    assert decoder.stats.crc_errors == decoder.stats.framing_errors == 0
+    assert np.array_equal(got[:, 1:], counts[got[:, 0]]), "a time warp"

@@ -72,9 +72,10 @@ def build(firmware_dir, build_dir) -> Built:
     result = subprocess.run(["make", "-C", str(folder), f"BUILD={out}", f"MCU={MCU}", "sim"],
                             capture_output=True, text=True, timeout=300)
     if result.returncode != 0:
-        tail = (result.stderr or result.stdout).strip().splitlines()[-3:]
-        raise PipelineError(f"building the firmware in simavr failed (make sim in {folder}): "
-                            + " | ".join(tail))
+        lines = (result.stderr or result.stdout).strip().splitlines()
+        first_error = next((line for line in lines if "error" in line.lower()), lines[-1])
+        raise PipelineError(f"building the firmware for simavr (make sim in {folder})",
+                            first_error.strip())
     return Built(out / f"antenna_stream-{MCU}.elf", out / HARNESS)
 
 
@@ -120,7 +121,7 @@ def run_harness(built: Built, counts_file, link: PtyLink, *, fast: bool = False,
         proc.stderr.close()
     lines = err.strip().splitlines()
     if proc.returncode not in (0, HARNESS_PEER_GONE) or not lines or not lines[-1].startswith("{"):
-        raise PipelineError(f"the firmware in simavr failed (exit {proc.returncode}): "
+        raise PipelineError("the firmware in simavr", f"exit {proc.returncode}: "
                             + (lines[-1] if lines else "no output"))
     return json.loads(lines[-1])
 

@@ -27,7 +27,7 @@
  *
  * At the end one JSON line on stderr: simulated and wall seconds, their ratio, the fraction of
  * wall time the simulation was busy, samples fed, bytes sent, the UART line load, held time, and
- * why it stopped early (null, "signal" for SIGINT/SIGTERM, or the reader leaving: exit status 3).
+ * why it stopped early (null, "stopped by a signal" (SIGINT, SIGTERM, or its parent gone), or the reader leaving: exit status 3).
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -310,6 +310,7 @@ int main(int argc, char **argv)
     signal(SIGPIPE, SIG_IGN);
     fcntl(sim.fd, F_SETFL, fcntl(sim.fd, F_GETFL) | O_NONBLOCK);
 
+    pid_t parent = getppid();
     double t0 = now_s(), slept = 0;
     uint64_t next_tick = TICK_CYCLES;
     int state = cpu_Running;
@@ -329,6 +330,8 @@ int main(int argc, char **argv)
                 slept += now_s() - before;   /* as slept: the kernel's slack is not busy time */
             }
         }
+        if (getppid() != parent)         /* whoever started us is gone (killed): so are we */
+            sim.stop = 1;
         struct pollfd p = { .fd = sim.fd, .events = 0 };
         if (poll(&p, 1, 0) > 0 && (p.revents & (POLLHUP | POLLERR)))
             sim.peer_gone = 1;
@@ -348,6 +351,6 @@ int main(int argc, char **argv)
             simulated, wall, simulated / wall, (wall - slept) / wall, sim.fed,
             (unsigned long long)sim.bytes_sent, sim.bytes_sent * byte_s / simulated,
             (double)sim.held_cycles / F_CPU_HZ,
-            sim.peer_gone ? "\"the reader closed the port\"" : sim.stop ? "\"signal\"" : "null");
+            sim.peer_gone ? "\"the reader closed the port\"" : sim.stop ? "\"stopped by a signal\"" : "null");
     return sim.peer_gone ? EXIT_PEER_GONE : EXIT_OK;
 }
