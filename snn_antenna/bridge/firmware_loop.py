@@ -103,23 +103,23 @@ def run_harness(built: Built, counts_file, link: PtyLink, *, fast: bool = False,
     for at_ms, for_ms in holds:
         cmd += ["--hold-uart", f"{at_ms:g}:{for_ms:g}"]
     cmd += [str(built.elf), str(counts_file)]
-    proc = subprocess.Popen(cmd, pass_fds=(link.master,), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True)
-    try:
-        while proc.poll() is None:
-            if stop.is_set():
-                proc.terminate()        # the harness stops at once and reports what it did
-            try:
-                proc.wait(0.1)
-            except subprocess.TimeoutExpired:
-                pass
-        err = proc.stderr.read()
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        proc.stderr.close()
-    lines = err.strip().splitlines()
+    with tempfile.TemporaryFile("w+") as err:     # a file: a chatty harness never blocks
+        proc = subprocess.Popen(cmd, pass_fds=(link.master,), stdout=subprocess.DEVNULL,
+                                stderr=err, text=True)
+        try:
+            while proc.poll() is None:
+                if stop.is_set():
+                    proc.terminate()    # the harness stops at once and reports what it did
+                try:
+                    proc.wait(0.1)
+                except subprocess.TimeoutExpired:
+                    pass
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        err.seek(0)
+        lines = err.read().strip().splitlines()
     if proc.returncode not in (0, HARNESS_PEER_GONE) or not lines or not lines[-1].startswith("{"):
         raise PipelineError("the firmware in simavr", f"exit {proc.returncode}: "
                             + (lines[-1] if lines else "no output"))
