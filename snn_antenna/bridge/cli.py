@@ -78,6 +78,10 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--log", default=None, help="write the injected faults, expected counts and "
                                                 "the stimulus's labelled contacts (JSON) here")
     p.add_argument("--force", action="store_true", help="replace an existing --log file")
+    p.add_argument("--firmware", default=None, metavar="DIR",
+                   help="run the board's own firmware instead, in simavr (with --pty): DIR is "
+                        "its folder (firmware/antenna_stream), built with make and fed the "
+                        "stimulus's counts; prints the simulated-to-real-time ratio")
     p.set_defaults(func=cmd_emulate)
 
     p = subparsers.add_parser("stream", help="run the network live on a serial stream")
@@ -301,6 +305,8 @@ def cmd_emulate(args) -> int:
     from .links import PeerGone
     from .stimulus import played_events, stimulus_recording
 
+    if args.firmware:
+        return _emulate_firmware(args)
     # Everything checked before the pty exists or a byte is written.
     plan = FaultPlan.parse(args.faults)
     if args.link and not args.pty:
@@ -343,6 +349,24 @@ def cmd_emulate(args) -> int:
         raise PortError(ended)
     shown = {k: v for k, v in summary.items() if k not in ("faults", "stopped", "events")}
     print(json.dumps({**shown, "events": len(summary["events"])}), flush=True)
+    return 0
+
+
+def _emulate_firmware(args) -> int:
+    """``emulate --pty --firmware DIR``: the firmware in simavr streams the stimulus."""
+    from .firmware_loop import check_args, emulate_firmware
+
+    check_args(args)
+    if args.log:
+        _check_output_file("log", args.log, args.force)
+    summary = emulate_firmware(args, stop_on_signals(), log=lambda path: print(path, flush=True))
+    if args.log:                        # however the run ended
+        from ..files import write_new
+        write_new(args.log, json.dumps(summary, indent=1), force=args.force)
+    if summary["stopped"]:
+        raise PortError(f"emulator stopped: {summary['stopped']}")
+    print(json.dumps({**{k: v for k, v in summary.items() if k not in ("events", "stopped")},
+                      "events": len(summary["events"])}), flush=True)
     return 0
 
 
