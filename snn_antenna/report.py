@@ -96,6 +96,7 @@ class Report:
         self.quick = quick
         self.quick_note = quick_note
         self._parts: list[str] = []
+        self._lead: list[str] = []
         self.figures: list[str] = []
         self._calibrated: list[Calibrated] = []
         self._predicted: list[Predicted] = []
@@ -142,6 +143,11 @@ class Report:
 
     def text(self, paragraph) -> None:
         self._parts.append(f"<p>{html.escape(fmt(paragraph))}</p>")
+
+    def lead(self, paragraph) -> None:
+        """The page's outcome in a sentence or two, shown above the calibrated and predicted
+        tables: what a reader who reads nothing else should take away."""
+        self._lead.append(f"<p class=\"lead\">{html.escape(fmt(paragraph))}</p>")
 
     def heading(self, text: str) -> None:
         self._parts.append(f"<h2>{html.escape(text)}</h2>")
@@ -199,7 +205,7 @@ class Report:
 <title>{title}</title>
 <style>{_CSS}</style></head><body>
 <h1>{html.escape(self.title)}</h1>
-{self._banner()}{self._provenance_sections()}
+{self._banner()}{''.join(self._lead)}{self._provenance_sections()}
 {''.join(self._parts)}
 <h2>Provenance</h2>
 <p>snn-antenna {html.escape(prov['snn_antenna_version'])}, Brian2

@@ -11,6 +11,7 @@ border-radius:4px;padding:.7em 1em;margin:1em 0}
 .quick-banner strong{display:block;font-size:1.15em;color:#7a5200;text-transform:uppercase;
 letter-spacing:.04em} .quick-banner span{display:block;font-weight:600;margin:.2em 0}
 .quick-banner small{display:block;color:#5c4a00}
+.lead{font-size:1.08em;border-left:4px solid #4a7bb7;padding:.3em .8em;background:#f4f8fc}
 .table-scroll{max-width:100%;overflow-x:auto;margin:1em 0}
 table{border-collapse:collapse;font-size:.9em;max-width:100%;overflow-wrap:break-word}
 caption{caption-side:top;text-align:left;color:#555;padding:.3em 0}

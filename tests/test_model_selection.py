@@ -168,6 +168,10 @@ def test_quick_study_keeps_calibrated_apart_from_predicted(tmp_path):
                    "NMF-30 accuracy")
         assert nmf["n"] == 2 and "too small to resolve" in nmf["note"]
         assert set(saved["candidates"][name]["loto"]) == set(ms.CALIBRATION_TARGETS)
+    # the outcome leads the page, above the calibrated and predicted tables
+    page = (out / "report.html").read_text()
+    assert page.index('class="lead"') < page.index("Calibrated to")
+    assert "of 5" in page[page.index('class="lead"'):page.index("Calibrated to")]
     # too few contacts to meet the calibration: the quick run chooses nothing
     assert summary["selection"]["chosen"] in ("current", "boundary", None)
     assert saved["grid"][1]["physics"] == "boundary"

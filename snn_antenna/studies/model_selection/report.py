@@ -33,8 +33,29 @@ def seed_interval(values, name: str) -> tuple[tuple | None, str]:
     return (iv.low, iv.high), note
 
 
+def outcome(summary: dict) -> str:
+    """The study's answer in two sentences: what was chosen, who was eligible, and the
+    closest any candidate came to the predicted criteria."""
+    candidates, decision = summary["candidates"], summary["selection"]
+    chosen = decision["chosen"]
+    head = ("No candidate was chosen: " + decision["reason"] + "." if chosen is None else
+            f"Chosen: {chosen} (strength {decision['strength']:g}), "
+            + ("which meets every predicted criterion." if decision["wins_clearly"] else
+               f"the eligible candidate that falls least short: it {decision['reason']}."))
+    met = [(c["n_met"], name) for name, c in candidates.items() if c["point"] is not None]
+    best = max(met) if met else (0, None)
+    leaders = [n for m, n in met if m == best[0]]
+    missed = [n for n in leaders if not candidates[n]["calibrated"]]
+    tail = (f" The most any candidate met at its calibrated constant is {best[0]} of "
+            f"{len(PREDICTIONS)} ({', '.join(leaders)}"
+            + (f"; {', '.join(missed)} missing {'its' if len(missed) == 1 else 'their'} "
+               "calibration" if missed else "") + ")." if best[1] else "")
+    return head + tail
+
+
 def write_report(report: Report, summary: dict) -> None:
     candidates, decision = summary["candidates"], summary["selection"]
+    report.lead(outcome(summary))
     rows_cal, rows_pred, table = [], [], []
     for name, c in candidates.items():
         p = c["point"]
