@@ -7,9 +7,11 @@ built here. What this module adds on top of the foundation's streaming API:
 
 - calibration: the PCA alignment needs a fit, so the first ``calibration_s`` of samples fit the
   chain, then go through it like every later sample (same numbers as the offline chain);
-- timing: each sample's host arrival time is kept until its window is published, giving the
-  latency from arrival to the rate map, and the time spent waiting for the port is subtracted
-  from the wall time, giving the real-time factor of the computation itself;
+- timing, measured on the host's clocks: each sample's arrival time (when its bytes were read)
+  is kept until its window is published, giving the latency from arrival to the rate map; the
+  real-time factor is stream seconds processed per wall-clock second actually elapsed (below 1
+  means the pipeline fell behind the board); the compute-only factor, with the time spent
+  waiting for the port taken out, says how much headroom there is;
 - online contact episodes: each window goes to the read-out's
   :class:`~snn_antenna.readout.contacts.EpisodeTracker`, the episode logic that
   ``ContactDetector.detect`` runs offline, so live and offline detections are the same.
@@ -188,6 +190,7 @@ class OnlineReport:
     first_window: tuple | None = None
     last_window: tuple | None = None
     caught_up_at: int = 0               # index of the first window after the start-up backlog
+    steady_window: tuple | None = None  # (perf_counter, waiting_s, simulated_s) at that window
     # (simulated_s, process_time) at the first window and every CPU_EVERY_WINDOWS after it:
     # reading the process's CPU clock costs ~0.7 ms here while other threads run.
     cpu_marks: list[tuple[float, float]] = field(default_factory=list)
@@ -195,15 +198,26 @@ class OnlineReport:
 
     @property
     def realtime_factor(self) -> float:
-        """Simulated seconds per second of computation in the steady state: from the first
-        published window (Brian2's build and compile excluded) to the last, time spent waiting
-        for the port excluded."""
+        """Stream seconds processed per wall-clock second that actually elapsed, in the steady
+        state: from the first window published after the start-up backlog was worked off (the
+        first window at all when it never was, or for a file read flat out) to the last. A
+        live port paced at 1 kHz gives 1.0 when the pipeline keeps up, less when it falls
+        behind (whatever held it up: the network, another thread, the machine)."""
+        return self._factor(waiting_excluded=False)
+
+    @property
+    def compute_realtime_factor(self) -> float:
+        """Stream seconds per wall-clock second spent computing: the same interval with the
+        time spent waiting for the port taken out (headroom, not what happened)."""
+        return self._factor(waiting_excluded=True)
+
+    def _factor(self, waiting_excluded: bool) -> float:
         if self.first_window is None:
             return float("nan")
-        (t0, w0, s0), (t1, w1, s1) = self.first_window, self.last_window
+        (t0, w0, s0), (t1, w1, s1) = self.steady_window or self.first_window, self.last_window
         if s1 <= s0:
             return float("nan")
-        return (s1 - s0) / max((t1 - t0) - (w1 - w0), 1e-9)
+        return (s1 - s0) / max((t1 - t0) - (w1 - w0 if waiting_excluded else 0.0), 1e-9)
 
     @property
     def cpu_realtime_factor(self) -> float:
@@ -229,9 +243,11 @@ class OnlineReport:
         latency_ms = None if arrived is None else (now - arrived) * 1e3
         if latency_ms is not None:
             self.latencies_ms.append(latency_ms)
-        if not self.caught_up_at and waiting_s - self.last_window[1] > 0.1 * window_s:
+        if (latency_ms is not None and self.steady_window is None
+                and waiting_s - self.last_window[1] > 0.1 * window_s):
             # The pipeline had to wait for the port: any start-up backlog is gone.
             self.caught_up_at = len(self.latencies_ms)
+            self.steady_window = (time.perf_counter(), waiting_s, end_s)
         return latency_ms
 
     def as_dict(self, parts: OnlineParts, counts: dict) -> dict:
@@ -250,6 +266,7 @@ class OnlineReport:
             "startup_s": (round(self.first_window[0] - self.started, 3) if self.first_window
                           else None),
             "realtime_factor": _rounded(self.realtime_factor),
+            "compute_realtime_factor": _rounded(self.compute_realtime_factor),
             "cpu_realtime_factor": _rounded(self.cpu_realtime_factor),
             # From a sample's arrival on the host to the rate-map window that includes it:
             # all windows, and those after the start-up backlog was worked off (live only).
