@@ -79,6 +79,7 @@ def live_view(args, parts):
         yield view
         ended = True
     finally:
+        view.flush()                # the stream's last samples and contact, shown while held
         if ended and args.view_hold != 0:
             _hold(url, args.view_hold)
         summary = view.stop()
