@@ -53,6 +53,7 @@ def get_json(url: str) -> dict:
 def view_url(proc, timeout_s: float = 120.0) -> str:
     """The URL the command prints on stderr (the rest of stderr keeps draining)."""
     found, lines = threading.Event(), []
+    proc.stderr_lines = lines               # for end(): has the stream ended yet?
 
     def read():
         for line in proc.stderr:
@@ -70,14 +71,21 @@ def view_url(proc, timeout_s: float = 120.0) -> str:
 
 
 def end(proc, timeout_s: float = 30.0) -> str:
-    """Ctrl-C until the command has exited (the first ends the stream, the next the view)."""
-    deadline = time.monotonic() + timeout_s
-    while proc.poll() is None and time.monotonic() < deadline:
+    """Ctrl-C as a user does: once to end the stream (unless it ended), once more to close the
+    view it holds; each time waiting for the command to get there (a Ctrl-C while Python is
+    already shutting down would kill it as a signal, not be handled)."""
+    def wait_until(done) -> None:
+        deadline = time.monotonic() + timeout_s
+        while proc.poll() is None and not done() and time.monotonic() < deadline:
+            time.sleep(0.05)
+
+    lines = getattr(proc, "stderr_lines", [])
+    if proc.poll() is None and not any("stream ended" in line for line in lines):
         proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(1.0)
-        except subprocess.TimeoutExpired:
-            pass
+        wait_until(lambda: any("stream ended" in line for line in lines))
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        wait_until(lambda: False)
     if proc.poll() is None:
         proc.kill()
         pytest.fail("the command did not end on Ctrl-C")
