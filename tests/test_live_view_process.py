@@ -164,14 +164,23 @@ def test_the_view_process_counts_the_frames_it_could_not_take(tmp_path):
 
 class Reloading:
     """A tab reloading the page twice a second: headless Chromium when installed (its own
-    processes, as a user's browser), else plain ``GET /`` (each one opens a Bokeh session
-    that the server later tears down)."""
+    processes, as a user's browser; the page in a frame whose address is set again every
+    ``period_s``, a reload that cuts the previous load short as F5 does), else plain
+    ``GET /`` (each one builds a Bokeh session that the server later tears down)."""
+
+    RELOADER = """<iframe id="view" style="width:1200px;height:900px"></iframe><script>
+      window.loads = 0;
+      setInterval(() => { document.getElementById('view').src = '%s?' + (++window.loads); },
+                  %d);
+    </script>"""
 
     def __init__(self, url: str, period_s: float = 0.5):
         self.loads, self.kind = 0, "chromium" if CHROMIUM else "http"
-        self._stop = threading.Event()
+        self._stop, self._ready = threading.Event(), threading.Event()
         self._thread = threading.Thread(target=self._run, args=(url, period_s), daemon=True)
         self._thread.start()
+        self._ready.wait(120)
+        self.started = time.monotonic()
 
     def _run(self, url, period_s):
         if CHROMIUM:
@@ -181,32 +190,43 @@ class Reloading:
                 browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
                                             args=["--no-sandbox"])
                 page = browser.new_page()
-                while not self._stop.wait(period_s):
-                    try:
-                        page.goto(url, wait_until="domcontentloaded", timeout=10_000)
-                        self.loads += 1
-                    except Exception:       # a load cut short by the next one is still a load
-                        pass
+                page.set_content(self.RELOADER % (url, period_s * 1000))
+                self._ready.set()
+                while not self._stop.wait(0.5):
+                    pass
+                self.loads = page.evaluate("() => window.loads")
                 browser.close()
         else:
-            while not self._stop.wait(period_s):
+            self._ready.set()
+            next_s = time.monotonic()
+            while not self._stop.wait(max(0.0, next_s - time.monotonic())):
+                next_s += period_s
                 with urllib.request.urlopen(url, timeout=10) as reply:
                     reply.read()
                 self.loads += 1
 
     def close(self):
+        if not self._stop.is_set():
+            self.seconds = time.monotonic() - self.started
         self._stop.set()
         self._thread.join(30)
 
 
 @pytest.mark.slow
 def test_a_page_reloaded_twice_a_second_for_30_s_of_stream(tmp_path):
-    counts = RobotScene(duration_s=30.0, contacts=[Contact(8.0, 19.0), Contact(20.0, 27.0)]
+    # 34 s of scene: the page is reloading for at least 30 s of it (Chromium starts while the
+    # first seconds stream).
+    counts = RobotScene(duration_s=34.0, contacts=[Contact(8.0, 19.0), Contact(20.0, 27.0)]
                         ).generate(seed=3).samples
-    link, emulator, thread, proc, err, url = stream_with_view(tmp_path, counts, 34, 0)
+    link, emulator, thread, proc, err, url = stream_with_view(tmp_path, counts, 40, 300)
     reloading = Reloading(url)
     try:
-        proc.wait(240)
+        thread.join(240)                # the board sent the whole scene
+        reloading.close()
+        err.wait_for("stream ended", 60)
+        # The view (low priority) may still be tearing pages down on a busy machine.
+        with urllib.request.urlopen(url + "state.json", timeout=120) as reply:
+            state = json.loads(reply.read())
     finally:
         reloading.close()
         out = end(proc)
@@ -214,9 +234,17 @@ def test_a_page_reloaded_twice_a_second_for_30_s_of_stream(tmp_path):
         link.close()
     assert proc.returncode == 0 and "Traceback" not in err.text, err.text
     report = report_of(out)
-    assert reloading.loads >= 40, (reloading.kind, reloading.loads)
-    assert len(emulator.log.written) == report["counts"]["frames"] == report["samples"] == 30000
+    print(f"{reloading.kind}: {reloading.loads} loads ({state['pages_served']} pages "
+          f"served) in "
+          f"{reloading.seconds:.1f} s; steady latency {report['steady_latency_ms']}, real-time "
+          f"factor {report['realtime_factor']}")
+    # Reloaded twice a second; the view process (low priority on a busy machine) built and
+    # tore down a page for many of them.
+    assert reloading.seconds >= 30 and reloading.loads >= 1.8 * reloading.seconds, \
+        (reloading.kind, reloading.loads, reloading.seconds)
+    assert state["pages_served"] >= 20, state["pages_served"]
+    assert len(emulator.log.written) == report["counts"]["frames"] == report["samples"] == 34000
     assert report["counts"]["lost_samples"] == report["counts"]["late"] == 0
     steady = report["steady_latency_ms"]
-    assert steady["windows"] >= 200 and steady["p95"] <= 100.0, steady
-    assert report["realtime_factor"] >= 0.95
+    assert steady["windows"] >= 200 and steady["p95"] <= 100.0, (steady, reloading.loads)
+    assert report["realtime_factor"] >= 0.95, report["realtime_factor"]

@@ -20,6 +20,7 @@ def build_page(view, doc) -> None:
     from bokeh.models import ColumnDataSource, Div, Range1d
 
     view.sessions += 1
+    view.pages_served += 1
     doc.on_session_destroyed(lambda _ctx: setattr(view, "sessions", view.sessions - 1))
     x_range = Range1d(0, view.history_s, name="time")
     # The same borders on every plot keep their time axes aligned.

@@ -27,6 +27,7 @@ import numpy as np
 from .page import build_page
 
 DRAIN_MS = 50                   # this process empties the hand-off
+VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
 SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
                   "late", "reconnects")
@@ -85,7 +86,8 @@ class ViewHistory:
         self.counts: dict = {}
         self.n_samples = 0
         self.peak_rate_hz = 10.0
-        self.sessions = 0
+        self.sessions = 0                           # pages open now
+        self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen
         self._next_seq = 0
@@ -168,6 +170,7 @@ class ViewHistory:
             # Points kept for the plots (every DISPLAY_EVERY-th sample), ever.
             "plotted": {"xy": self.xy.total, "coded_input": self.coded.total},
             "sessions": self.sessions,
+            "pages_served": self.pages_served,
             "view_pid": os.getpid(),
         }
 
@@ -182,6 +185,8 @@ def serve(config: ViewConfig, inbox, control) -> None:
     # Ctrl-C in a terminal reaches the whole process group; the pipeline decides when the
     # view ends (a KeyboardInterrupt here would only print a traceback).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # When the cores are busy, the pipeline comes first: a page may update late, a sample not.
+    os.nice(VIEW_NICENESS)
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
     from bokeh.server.server import BaseServer
