@@ -78,11 +78,25 @@ def stream_with_view(tmp_path, counts, duration_s, hold_s):
     proc = subprocess.Popen([*CLI, "stream", "--port", link.path, "--network", NETWORK, *TH,
                              "--out", tmp_path / "rec", "--duration", str(duration_s), "--json",
                              "--view", "--view-port", "0", "--view-hold", str(hold_s)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)     # a terminal of its own: see ctrl_c
     err = Stderr(proc)
     proc.stderr_lines = err.lines           # end() reads it
     url = err.wait_for("live view: http", 120).split()[2]
     return link, emulator, thread, proc, err, url
+
+
+def ctrl_c(proc, err) -> str:
+    """Ctrl-C in the command's terminal, once the stream has ended: the signal reaches its
+    whole process group, the view's process too."""
+    err.wait_for("stream ended", 150)
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("the command did not end on Ctrl-C")
+    return proc.stdout.read()
 
 
 def report_of(out: str) -> dict:
@@ -90,8 +104,8 @@ def report_of(out: str) -> dict:
 
 
 def test_a_frozen_view_process_does_not_hold_the_stream_up(tmp_path):
-    counts = RobotScene(duration_s=4.0, contacts=[Contact(2.0, 19.0)]).generate(seed=3).samples
-    link, emulator, thread, proc, err, url = stream_with_view(tmp_path, counts, 7, 300)
+    counts = RobotScene(duration_s=3.0, contacts=[Contact(1.5, 19.0)]).generate(seed=3).samples
+    link, emulator, thread, proc, err, url = stream_with_view(tmp_path, counts, 4.5, 300)
     view_pid = None
     try:
         view_pid = get_json(url + "state.json")["view_pid"]
@@ -102,27 +116,27 @@ def test_a_frozen_view_process_does_not_hold_the_stream_up(tmp_path):
         deadline = time.monotonic() + 30
         while time.monotonic() < deadline:
             state = get_json(url + "state.json")
-            if state["t_s"] == 4.0 and state["windows"] == 40:
+            if state["t_s"] == 3.0 and state["windows"] == 30:
                 break
             time.sleep(0.2)
     finally:
         if view_pid:
             os.kill(view_pid, signal.SIGCONT)
-        out = end(proc)
+        out = ctrl_c(proc, err)
         thread.join(10)
         link.close()
     assert proc.returncode == 0 and "Traceback" not in err.text, err.text
     # The pipeline kept up with the board while its view was frozen: every frame, in time.
     report = report_of(out)
-    assert len(emulator.log.written) == report["counts"]["frames"] == report["samples"] == 4000
+    assert len(emulator.log.written) == report["counts"]["frames"] == report["samples"] == 3000
     assert report["counts"]["lost_samples"] == report["counts"]["late"] == 0
     assert report["realtime_factor"] >= 0.9
     assert len(report["contacts"]) == 1
     # Resumed, the view showed it all: the hand-off held the frozen seconds.
-    assert state["t_s"] == 4.0 and state["counters"]["frames"] == 4000
+    assert state["t_s"] == 3.0 and state["counters"]["frames"] == 3000
     assert state["counters"]["view_frames_dropped"] == 0
-    assert report["view"]["frames_dropped"] == 0 and report["view"]["frames_published"] > 40
-    # Ctrl-C ended the view process with the command: no orphan left behind.
+    assert report["view"]["frames_dropped"] == 0 and report["view"]["frames_published"] > 30
+    # Ctrl-C ended the view process with the command, quietly: no orphan left behind.
     with pytest.raises(ProcessLookupError):
         os.kill(view_pid, 0)
 
@@ -234,17 +248,18 @@ def test_a_page_reloaded_twice_a_second_for_30_s_of_stream(tmp_path):
         link.close()
     assert proc.returncode == 0 and "Traceback" not in err.text, err.text
     report = report_of(out)
-    print(f"{reloading.kind}: {reloading.loads} loads ({state['pages_served']} pages "
-          f"served) in "
-          f"{reloading.seconds:.1f} s; steady latency {report['steady_latency_ms']}, real-time "
-          f"factor {report['realtime_factor']}")
-    # Reloaded twice a second; the view process (low priority on a busy machine) built and
-    # tore down a page for many of them.
+    print(f"{reloading.kind}: {reloading.loads} loads in {reloading.seconds:.1f} s, "
+          f"{state.get('pages_served')} pages served; steady latency "
+          f"{report['steady_latency_ms']}, real-time factor {report['realtime_factor']}")
+    # Reloaded twice a second for 30 s of stream.
     assert reloading.seconds >= 30 and reloading.loads >= 1.8 * reloading.seconds, \
         (reloading.kind, reloading.loads, reloading.seconds)
-    assert state["pages_served"] >= 20, state["pages_served"]
+    # Every frame the board sent, none lost or late, and in time.
     assert len(emulator.log.written) == report["counts"]["frames"] == report["samples"] == 34000
     assert report["counts"]["lost_samples"] == report["counts"]["late"] == 0
     steady = report["steady_latency_ms"]
     assert steady["windows"] >= 200 and steady["p95"] <= 100.0, (steady, reloading.loads)
     assert report["realtime_factor"] >= 0.95, report["realtime_factor"]
+    # The view process (low priority on a busy machine) built and tore down a page for many of
+    # the loads: the pipeline kept its time while the view did the work.
+    assert state["pages_served"] >= 20, state["pages_served"]
