@@ -222,11 +222,15 @@ def _state(url: str) -> dict:
 
 class Reloader:
     """A client loading the page twice a second over HTTP, in its own process (as a browser
-    tab is): it costs the pipeline's process only what serving the page costs."""
+    tab is). Each load builds a Bokeh session in the view's process, torn down later."""
 
+    # Loads due every period (not a period after the last answer): twice a second as long
+    # as the view process answers within half a second, and catching up when it did not.
     SCRIPT = ("import sys, time, urllib.request\n"
+              "due = time.monotonic()\n"
               "while True:\n"
-              "    time.sleep(float(sys.argv[2]))\n"
+              "    due += float(sys.argv[2])\n"
+              "    time.sleep(max(0.0, due - time.monotonic()))\n"
               "    try:\n"
               "        urllib.request.urlopen(sys.argv[1], timeout=5).read()\n"
               "        print('.', end='', flush=True)\n"
