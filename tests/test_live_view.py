@@ -219,11 +219,15 @@ def test_a_recording_with_a_stalled_view_equals_one_without(tmp_path, scene_coun
         [round(c["distance_cm"], 6) for c in plain_report["contacts"]]
 
 
-def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene_counts):
+def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene_counts,
+                                                                  monkeypatch):
     """In-process, a view whose process never runs (nobody empties its hand-off, here of 8
     frames): the pipeline still runs to the end with the same result as without a view; the
     frames it could not hand over are counted, and the view, reading the hand-off at last,
     counts the same number as dropped."""
+    import snn_antenna.bridge.view as view_module
+
+    monkeypatch.setattr(view_module, "FLUSH_S", 0.0)   # a frame per port read: many frames
     rec = record_counts(tmp_path / "rec", scene_counts[:3000])
     parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
     plain = run_online(ReplaySource(rec, chunk_bytes=800).start(), parts,
