@@ -19,6 +19,7 @@ import math
 import os
 import queue
 import signal
+import time
 from dataclasses import dataclass
 from functools import partial
 
@@ -28,6 +29,7 @@ from .page import build_page
 
 DRAIN_MS = 50                   # this process empties the hand-off
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
+LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
 SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
                   "late", "reconnects")
@@ -90,7 +92,7 @@ class ViewHistory:
         self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen
-        self._next_seq = 0
+        self.next_seq = 0                           # the frame number expected next
 
     def drain(self, inbox, wait_s: float = 0.0) -> int:
         """Take every frame waiting in ``inbox`` (waiting up to ``wait_s`` for the first)."""
@@ -104,8 +106,8 @@ class ViewHistory:
             taken += 1
 
     def take(self, frame: dict) -> None:
-        self.dropped += frame["seq"] - self._next_seq       # the frames between never came
-        self._next_seq = frame["seq"] + 1
+        self.dropped += frame["seq"] - self.next_seq       # the frames between never came
+        self.next_seq = frame["seq"] + 1
         self.received += 1
         if frame["counts"]:
             self.counts = frame["counts"]
@@ -232,7 +234,10 @@ def serve(config: ViewConfig, inbox, control) -> None:
             message = control.recv()
         except (EOFError, OSError):             # the pipeline's process is gone
             message = ("stop", history.received + history.dropped)
-        history.drain(inbox)
+        # The last frames may still be on their way (the queue's feeder thread writes them).
+        deadline = time.monotonic() + LAST_FRAMES_S
+        while history.next_seq < message[1] and time.monotonic() < deadline:
+            history.drain(inbox, wait_s=0.05)
         history.ended(message[1])
         try:
             control.send(("stopped", {"received": history.received,
