@@ -157,6 +157,7 @@ class LiveView:
         self._flushed = time.monotonic()
         self.url = self.port = None
         self.process = self._control = None
+        self._counts_sent = self._view_count = None
 
     # ---- gather (the pipeline's thread) ---------------------------------------------------
     def handle(self, batch) -> None:
@@ -190,8 +191,10 @@ class LiveView:
     def flush(self) -> None:
         """Hand what was gathered to the view process as one frame, without waiting."""
         self._flushed = time.monotonic()
-        if not (self._xy or self._in or self._windows or self._events):
+        if not (self._xy or self._in or self._windows or self._events
+                or self._counts is not self._counts_sent):     # e.g. a link lost: counts only
             return
+        self._counts_sent = self._counts
         samples = (np.asarray(list(chain.from_iterable(self._xy)), dtype=float) if self._xy
                    else np.empty((0, 3)))
         coded = np.concatenate([_coded_rows(*piece) for piece in self._in]) if self._in \
@@ -262,7 +265,7 @@ class LiveView:
     def summary(self) -> dict:
         """The view's part of the run's report: frames published, and those the view process
         counted as dropped (None when it did not answer at the end)."""
-        answer = getattr(self, "_view_count", None)
+        answer = self._view_count
         return {"frames_published": self.published,
                 "frames_dropped": None if answer is None else answer["dropped"],
                 "handoff_full": self.handoff_full}
