@@ -6,24 +6,28 @@
 
 1. Throughput: the emulator (its own process) writes a robot scene (contacts at 19 and 27 cm)
    into a pseudo-terminal as fast as the reader takes it; serial source → decoder →
-   preprocessing → Brian2 array → rate map. The real-time factor is simulated seconds per
-   second of computation in the steady state (Brian2's build and the time spent waiting for
-   bytes excluded); per CPU second, it is simulated seconds per CPU second of the pipeline's
-   own process (its threads, not the emulator's), which other jobs on the machine leave
-   alone. The same throughput run on ``--baseline`` (the offline array, dt 0.1 ms;
+   preprocessing → Brian2 array → rate map. The throughput is the compute-only real-time
+   factor: simulated seconds per second of computation in the steady state (Brian2's build
+   and the time spent waiting for bytes excluded); per CPU second, it is simulated seconds per
+   CPU second of the pipeline's own process (its threads, not the emulator's), which other
+   jobs on the machine leave alone. The same throughput run on ``--baseline`` (the offline array, dt 0.1 ms;
    ``--baseline none`` skips it) gives the ratio of the two settings measured in one run, which
    a machine loaded by other jobs leaves more telling than either factor alone.
 2. Latency: the emulator runs as its own process at 1 kHz real time on a pseudo-terminal; the
-   pipeline streams from it. The latency is from a sample's arrival on the host to the
-   publication of the rate-map window that contains it (steady state, after the start-up
-   backlog is worked off); a window also waits for its own samples, up to ``window_s``.
+   pipeline streams from it. The latency is from a sample's arrival on the host (when its
+   bytes were read) to the publication of the rate-map window that contains it (steady state,
+   after the start-up backlog is worked off); a window also waits for its own samples, up to
+   ``window_s``. The real-time factor of a live run is measured on the wall clock: stream
+   seconds processed per second elapsed since the stream began (1.0 = kept up with the board).
 3. ``--view``: the throughput run again, alternately without and with the live browser view
-   (bridge/view.py) and a page open on it (headless Chromium, when installed), ``--repeats``
-   times each on ``--view-seconds`` of input; the real-time factors are printed side by side. Chromium renders in its own
-   processes, on the same cores as the pipeline.
+   (bridge/view.py, its server in a process of its own) and a page open on it (headless
+   Chromium, when installed), ``--repeats`` times each on ``--view-seconds`` of input; the
+   throughputs are printed side by side. Chromium and the view process run on the same cores
+   as the pipeline.
 4. ``--reload``: the live run at 1 kHz with the view, without and then with a client loading
-   ``GET /`` twice a second (a tab reloading); real-time factor, latency (median, p95) and the
-   samples lost or processed late are printed side by side.
+   ``GET /`` twice a second (a tab reloading); the wall-clock real-time factor, the latency
+   (median, p95), the samples lost or processed late and the view's dropped frames are printed
+   side by side.
 """
 from __future__ import annotations
 
@@ -104,7 +108,7 @@ def main(argv=None) -> int:
           f"dt {parts.array.dt_ms} ms, target {parts.array.target}; "
           f"machine: {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}")
     fast = stream_from_emulator(parts, args.seconds, fast=True)
-    print(f"real-time factor: {fast['realtime_factor']:.1f}x "
+    print(f"throughput (compute-only real-time factor): {fast['compute_realtime_factor']:.1f}x "
           f"({fast['simulated_s']:.1f} s of 1 kHz input; Brian2 start-up {fast['startup_s']:.1f} s "
           f"not included); per CPU second of the pipeline's process: "
           f"{fast['cpu_realtime_factor']:.1f}x")
@@ -112,7 +116,8 @@ def main(argv=None) -> int:
         compare_baseline(args, overrides, fast)
     live = stream_from_emulator(parts, args.seconds, fast=False)
     steady = live["steady_latency_ms"]
-    print(f"live at 1 kHz: real-time factor {live['realtime_factor']:.1f}x, "
+    print(f"live at 1 kHz: real-time factor (wall clock) {live['realtime_factor']:.2f}x, "
+          f"compute-only {live['compute_realtime_factor']:.1f}x, "
           f"caught up with the start-up backlog after {live['windows'] - steady['windows']} "
           f"of {live['windows']} windows")
     if steady["windows"]:
@@ -137,9 +142,9 @@ def compare_baseline(args, overrides, fast) -> None:
     warm_up(base_parts)
     base = stream_from_emulator(base_parts, args.seconds, fast=True)
     print(f"  baseline {Path(args.baseline).name} (dt {base_parts.array.dt_ms} ms, "
-          f"{base_parts.array.method}): {base['realtime_factor']:.1f}x "
+          f"{base_parts.array.method}): {base['compute_realtime_factor']:.1f}x "
           f"({base['cpu_realtime_factor']:.1f}x per CPU second); shipped / baseline "
-          f"{fast['realtime_factor'] / base['realtime_factor']:.2f} (load "
+          f"{fast['compute_realtime_factor'] / base['compute_realtime_factor']:.2f} (load "
           f"{os.getloadavg()[0]:.1f})")
 
 
@@ -154,7 +159,7 @@ def compare_view(args, overrides) -> None:
     page = OpenPage(url)
     try:
         deadline = time.monotonic() + 60
-        while page.kind.startswith("headless") and view.sessions < 1 \
+        while page.kind.startswith("headless") and _state(url)["sessions"] < 1 \
                 and time.monotonic() < deadline:
             time.sleep(0.2)
         time.sleep(2.0)                         # the page has loaded BokehJS and connected
@@ -162,15 +167,15 @@ def compare_view(args, overrides) -> None:
         for _ in range(args.repeats):
             without.append(_rtf(plain_parts, args.view_seconds))
             with_view.append(_rtf(view_parts, args.view_seconds, view))
-        state = view.state()
+        sessions = _state(url)["sessions"]
     finally:
         page.close()
-        view.stop()
+        summary = view.stop()
     a, b = statistics.median(without), statistics.median(with_view)
-    print(f"live view ({page.kind}, {state['sessions']} page(s) open, "
-          f"{state['counters']['view_frames_dropped']} view frames dropped):")
+    print(f"live view ({page.kind}, {sessions} page(s) open, "
+          f"{summary['frames_dropped']} of {summary['frames_published']} view frames dropped):")
     for name, median, runs in (("without view", a, without), ("with view", b, with_view)):
-        print(f"  real-time factor {name:13s} {median:6.1f}x   (runs: "
+        print(f"  throughput {name:13s} {median:6.1f}x   (runs: "
               + ", ".join(f"{v:.1f}x" for v in runs) + ")")
     print(f"  with / without: {b / a:.2f} (median of {args.repeats} alternating runs each)")
 
@@ -182,6 +187,7 @@ def compare_reload(args, overrides) -> None:
     rows = []
     for reloading in (False, True):
         parts = build_online(args.network, overrides)
+        warm_up(parts)
         view = LiveView(parts, port=0)
         url = view.start()
         reloader = Reloader(url) if reloading else None
@@ -190,26 +196,41 @@ def compare_reload(args, overrides) -> None:
         finally:
             if reloader:
                 reloader.close()
-            view.stop()
-        rows.append((reloading, report, reloader.loads if reloader else 0))
+            summary = view.stop()
+        rows.append((reloading, report, reloader.loads if reloader else 0, summary))
     print(f"live view at 1 kHz, {args.view_seconds:g} s of input, without / with a page "
-          "loaded twice a second:")
-    for reloading, report, loads in rows:
-        steady = report["steady_latency_ms"]
-        latency = (f"latency median {steady['median']:6.1f} ms, p95 {steady['p95']:6.1f} ms"
-                   if steady["windows"] else "never caught up with real time")
-        print(f"  {'reloading' if reloading else 'no client':10s} ({loads:3d} loads): real-time "
-              f"factor {report['realtime_factor']:5.2f}x, {latency}, lost samples "
-              f"{report.get('counts', {}).get('lost_samples', 'n/a')}")
+          f"loaded twice a second (load {os.getloadavg()[0]:.1f}):")
+    print(f"  {'client':10s} {'loads':>5s}  {'real-time factor':>16s}  {'latency median':>14s}"
+          f"  {'p95':>8s}  {'lost':>4s}  {'late':>4s}  {'view frames dropped':>19s}")
+    for reloading, report, loads, summary in rows:
+        steady, counts = report["steady_latency_ms"], report.get("counts", {})
+        median, p95 = ((f"{steady['median']:.1f} ms", f"{steady['p95']:.1f} ms")
+                       if steady["windows"] else ("never caught up", "–"))
+        print(f"  {'reloading' if reloading else 'no client':10s} {loads:5d}  "
+              f"{report['realtime_factor']:15.3f}x  {median:>14s}  {p95:>8s}  "
+              f"{counts.get('lost_samples', 'n/a'):>4}  {counts.get('late', 'n/a'):>4}  "
+              f"{summary['frames_dropped']!s:>9s} of {summary['frames_published']:<6d}")
+
+
+def _state(url: str) -> dict:
+    import json
+    import urllib.request
+
+    with urllib.request.urlopen(url + "state.json", timeout=30) as reply:
+        return json.loads(reply.read())
 
 
 class Reloader:
     """A client loading the page twice a second over HTTP, in its own process (as a browser
-    tab is): it costs the pipeline's process only what serving the page costs."""
+    tab is). Each load builds a Bokeh session in the view's process, torn down later."""
 
+    # Loads due every period (not a period after the last answer): twice a second as long
+    # as the view process answers within half a second, and catching up when it did not.
     SCRIPT = ("import sys, time, urllib.request\n"
+              "due = time.monotonic()\n"
               "while True:\n"
-              "    time.sleep(float(sys.argv[2]))\n"
+              "    due += float(sys.argv[2])\n"
+              "    time.sleep(max(0.0, due - time.monotonic()))\n"
               "    try:\n"
               "        urllib.request.urlopen(sys.argv[1], timeout=5).read()\n"
               "        print('.', end='', flush=True)\n"
@@ -231,7 +252,7 @@ def _rtf(parts, seconds: float, view=None) -> float:
     then loses its reader mid-run; such a run is said and done again, not counted."""
     for attempt in range(3):
         try:
-            return stream_from_emulator(parts, seconds, True, view)["realtime_factor"]
+            return stream_from_emulator(parts, seconds, True, view)["compute_realtime_factor"]
         except PortError as exc:
             print(f"  (run lost its port, repeated: {exc})")
     raise PortError("the emulator's pty failed three runs in a row")

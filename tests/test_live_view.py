@@ -27,7 +27,8 @@ from snn_antenna.bridge.links import PeerGone, PtyLink
 from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.view import DISPLAY_EVERY, LiveView
+from snn_antenna.bridge.view import LiveView
+from snn_antenna.bridge.view_process import DISPLAY_EVERY, ViewHistory
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -52,6 +53,7 @@ def get_json(url: str) -> dict:
 def view_url(proc, timeout_s: float = 120.0) -> str:
     """The URL the command prints on stderr (the rest of stderr keeps draining)."""
     found, lines = threading.Event(), []
+    proc.stderr_lines = lines               # for end(): has the stream ended yet?
 
     def read():
         for line in proc.stderr:
@@ -69,14 +71,21 @@ def view_url(proc, timeout_s: float = 120.0) -> str:
 
 
 def end(proc, timeout_s: float = 30.0) -> str:
-    """Ctrl-C until the command has exited (the first ends the stream, the next the view)."""
-    deadline = time.monotonic() + timeout_s
-    while proc.poll() is None and time.monotonic() < deadline:
+    """Ctrl-C as a user does: once to end the stream (unless it ended), once more to close the
+    view it holds; each time waiting for the command to get there (a Ctrl-C while Python is
+    already shutting down would kill it as a signal, not be handled)."""
+    def wait_until(done) -> None:
+        deadline = time.monotonic() + timeout_s
+        while proc.poll() is None and not done() and time.monotonic() < deadline:
+            time.sleep(0.05)
+
+    lines = getattr(proc, "stderr_lines", [])
+    if proc.poll() is None and not any("stream ended" in line for line in lines):
         proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(1.0)
-        except subprocess.TimeoutExpired:
-            pass
+        wait_until(lambda: any("stream ended" in line for line in lines))
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        wait_until(lambda: False)
     if proc.poll() is None:
         proc.kill()
         pytest.fail("the command did not end on Ctrl-C")
@@ -95,7 +104,7 @@ def test_state_json_advances_during_replay_and_shows_the_contact(tmp_path, scene
         while time.monotonic() < deadline:
             state = get_json(url + "state.json")
             seen.append(state)
-            if state["contacts"] and state["t_s"] >= 6.0:
+            if state["contacts"] and state["windows"] >= 60:
                 break
             time.sleep(0.25)
         page = urllib.request.urlopen(url, timeout=10).read().decode()
@@ -112,7 +121,9 @@ def test_state_json_advances_during_replay_and_shows_the_contact(tmp_path, scene
     assert last["rate_map"]["t_s"] == pytest.approx(5.9)
     assert last["th_g"] == 0.05
     assert last["counters"]["frames"] == 6000 and last["counters"]["crc_errors"] == 0
-    assert last["counters"]["realtime_factor"] > 1.0
+    # Measured on the wall clock: a replay paced at 1 kHz that keeps up runs at 1.0× (the
+    # compute-only factor, once shown here, read several times that).
+    assert 0.8 <= last["counters"]["realtime_factor"] <= 1.05
     assert last["counters"]["view_frames_dropped"] == 0
     assert last["plotted"] == {"xy": 6000 // DISPLAY_EVERY, "coded_input": 6000 // DISPLAY_EVERY}
     (contact,) = last["contacts"]
@@ -208,26 +219,34 @@ def test_a_recording_with_a_stalled_view_equals_one_without(tmp_path, scene_coun
         [round(c["distance_cm"], 6) for c in plain_report["contacts"]]
 
 
-def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene_counts):
-    """In-process, a view whose server never runs (nobody empties its inbox, here of 8 items):
-    the pipeline still runs to the end with the same result as without a view; the view keeps
-    only the newest frames and counts the others as dropped."""
+def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene_counts,
+                                                                  monkeypatch):
+    """In-process, a view whose process never runs (nobody empties its hand-off, here of 8
+    frames): the pipeline still runs to the end with the same result as without a view; the
+    frames it could not hand over are counted, and the view, reading the hand-off at last,
+    counts the same number as dropped."""
+    import snn_antenna.bridge.view as view_module
+
+    monkeypatch.setattr(view_module, "FLUSH_S", 0.0)   # a frame per port read: many frames
     rec = record_counts(tmp_path / "rec", scene_counts[:3000])
     parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
     plain = run_online(ReplaySource(rec, chunk_bytes=800).start(), parts,
                        no_data_timeout_s=1e9)
     parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
-    view = LiveView(parts, inbox_items=8)       # never started
+    view = LiveView(parts, inbox_frames=8)       # never started
     viewed = run_online(ReplaySource(rec, chunk_bytes=800).start(), parts, handlers=[view],
                         no_data_timeout_s=1e9, view=view)
+    view.flush()
     assert viewed["samples"] == plain["samples"] == 3000
     assert viewed["contacts"] == plain["contacts"] and len(plain["contacts"]) == 1
-    assert len(view._inbox) == 8
-    state = view.state()
-    assert state["counters"]["view_frames_dropped"] > 50
-    # What survived is the newest: the last window, and the end of the signal.
-    assert state["rate_map"]["t_s"] == pytest.approx(2.9)
-    assert view.xy.rows[-1, 0] == pytest.approx((3000 - DISPLAY_EVERY) / 1000)
+    assert view.published > 8 and view.handoff_full == view.published - 8
+    history = ViewHistory(view.config)
+    assert history.drain(view._inbox, wait_s=5) == 8
+    history.ended(view.published)
+    state = history.state()
+    assert state["counters"]["view_frames_dropped"] == view.handoff_full
+    # What the hand-off kept is the oldest: the first samples, in order.
+    assert history.xy.rows[0, 0] == 0.0 and history.xy.total < 3000 // DISPLAY_EVERY
 
 
 # Canvases (inside Bokeh's shadow roots) holding at least three distinct colours: drawn on.

@@ -83,13 +83,14 @@ def test_a_drain_of_runs_too_short_to_plot_loses_nothing():
     after the items had been taken from the inbox: they were lost uncounted."""
     from snn_antenna.bridge.protocol import Sample
     from snn_antenna.bridge.source import Batch
+    from snn_antenna.bridge.view_process import ViewHistory
 
-    view = LiveView(build_online(NETWORK), port=0)        # server not started: drain by hand
-    view.handle(Batch(0.0, samples=[Sample(0, 500, 500)]))
-    view.drain()
-    view.handle(Batch(0.0, samples=[Sample(1, 500, 500), Sample(2, 500, 500)]))
-    view.drain()                                         # indices 1, 2: nothing to plot
-    view.handle(Batch(0.0, samples=[Sample(3, 500, 500), Sample(4, 510, 500)]))
-    view.drain()
-    assert view.drained == 3 and view.dropped == 0
-    assert view.xy.total == 2 and view.xy.rows[-1, 0] == 4 / 1000
+    view = LiveView(build_online(NETWORK), port=0)        # no view process: drain by hand
+    history = ViewHistory(view.config)
+    for batch in ([Sample(0, 500, 500)], [Sample(1, 500, 500), Sample(2, 500, 500)],
+                  [Sample(3, 500, 500), Sample(4, 510, 500)]):
+        view.handle(Batch(0.0, samples=batch))
+        view.flush()                                     # indices 1, 2: nothing to plot
+        history.drain(view._inbox, wait_s=5)
+    assert history.received == 3 and history.dropped == 0
+    assert history.xy.total == 2 and history.xy.rows[-1, 0] == 4 / 1000

@@ -283,6 +283,8 @@ def cmd_replay(args) -> int:
             report = run_online(source, parts, no_data_timeout_s=1e9,
                                 display=LiveDisplay(sys.stdout), handlers=[view] if view else [],
                                 view=view)
+        if view is not None:            # stopped by now: its process counted what it dropped
+            report["view"] = view.summary()
         print(json.dumps(report, indent=1))
         return 0
     source = ReplaySource(args.recording, realtime=args.realtime).start()
@@ -425,6 +427,8 @@ def cmd_stream(args) -> int:
         report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
                             stop=stop, display=LiveDisplay(sys.stdout), view=view)
+    if view is not None:                # stopped by now: its process counted what it dropped
+        report["view"] = view.summary()
     print(json.dumps(report, indent=1) if args.json else stream_summary(report, args.out))
     return 0
 

@@ -7,9 +7,11 @@ built here. What this module adds on top of the foundation's streaming API:
 
 - calibration: the PCA alignment needs a fit, so the first ``calibration_s`` of samples fit the
   chain, then go through it like every later sample (same numbers as the offline chain);
-- timing: each sample's host arrival time is kept until its window is published, giving the
-  latency from arrival to the rate map, and the time spent waiting for the port is subtracted
-  from the wall time, giving the real-time factor of the computation itself;
+- timing, measured on the host's clocks: each sample's arrival time (when its bytes were read)
+  is kept until its window is published, giving the latency from arrival to the rate map; the
+  real-time factor is stream seconds processed per wall-clock second actually elapsed (below 1
+  means the pipeline fell behind the board); the compute-only factor, with the time spent
+  waiting for the port taken out, says how much headroom there is;
 - online contact episodes: each window goes to the read-out's
   :class:`~snn_antenna.readout.contacts.EpisodeTracker`, the episode logic that
   ``ContactDetector.detect`` runs offline, so live and offline detections are the same.
@@ -115,15 +117,22 @@ class CalibratedChain:
 
 
 class ArrivalClock:
-    """Host arrival time of every sample index, kept only until its window is published."""
+    """Host arrival time of every sample index, kept only until its window is published; and
+    when the stream began by the host's clock (``origin``): the earliest of arrival minus
+    stream time over all samples. A port read continuously gives its first sample's arrival;
+    a source read late (a replay paced in real time waits for Brian2's build) is caught by
+    the later samples that arrive on time."""
 
-    def __init__(self):
+    def __init__(self, rate_hz: float = BOARD_RATE_HZ):
         self._chunks: deque[tuple[int, float]] = deque()    # (end index, arrival time)
         self.n = 0
+        self.rate_hz = rate_hz
+        self.origin = float("inf")
 
     def add(self, n_samples: int, arrival_s: float) -> None:
         self.n += n_samples
         self._chunks.append((self.n, arrival_s))
+        self.origin = min(self.origin, arrival_s - (self.n - 1) / self.rate_hz)
 
     def arrival(self, index: int) -> float:
         while self._chunks and self._chunks[0][0] <= index:
@@ -188,6 +197,8 @@ class OnlineReport:
     first_window: tuple | None = None
     last_window: tuple | None = None
     caught_up_at: int = 0               # index of the first window after the start-up backlog
+    origin: float | None = None         # host clock (time.time) when the stream began, live
+    last_published: float = 0.0         # host clock when the latest window was published
     # (simulated_s, process_time) at the first window and every CPU_EVERY_WINDOWS after it:
     # reading the process's CPU clock costs ~0.7 ms here while other threads run.
     cpu_marks: list[tuple[float, float]] = field(default_factory=list)
@@ -195,15 +206,33 @@ class OnlineReport:
 
     @property
     def realtime_factor(self) -> float:
-        """Simulated seconds per second of computation in the steady state: from the first
-        published window (Brian2's build and compile excluded) to the last, time spent waiting
-        for the port excluded."""
+        """Stream seconds processed per wall-clock second actually elapsed. Live (a port, or a
+        replay paced in real time): from the stream's beginning on the host's clock
+        (:attr:`ArrivalClock.origin`) to the publication of the latest window, so about 1.0
+        when the pipeline keeps up with the board and less when it falls behind, whatever held
+        it up (the network, the start-up, another thread, the machine). A file read flat out
+        has no real time to keep: its stream seconds per wall second from the first published
+        window (Brian2's build excluded)."""
+        if self.last_window is None:
+            return float("nan")
+        if self.origin is not None:
+            return self.last_window[2] / max(self.last_published - self.origin, 1e-9)
+        return self._steady_factor(waiting_excluded=False)
+
+    @property
+    def compute_realtime_factor(self) -> float:
+        """Stream seconds per wall-clock second spent computing, from the first published window
+        to the latest with the time spent waiting for the port taken out: the headroom, not
+        what happened."""
+        return self._steady_factor(waiting_excluded=True)
+
+    def _steady_factor(self, waiting_excluded: bool) -> float:
         if self.first_window is None:
             return float("nan")
         (t0, w0, s0), (t1, w1, s1) = self.first_window, self.last_window
         if s1 <= s0:
             return float("nan")
-        return (s1 - s0) / max((t1 - t0) - (w1 - w0), 1e-9)
+        return (s1 - s0) / max((t1 - t0) - (w1 - w0 if waiting_excluded else 0.0), 1e-9)
 
     @property
     def cpu_realtime_factor(self) -> float:
@@ -229,7 +258,9 @@ class OnlineReport:
         latency_ms = None if arrived is None else (now - arrived) * 1e3
         if latency_ms is not None:
             self.latencies_ms.append(latency_ms)
-        if not self.caught_up_at and waiting_s - self.last_window[1] > 0.1 * window_s:
+        self.last_published = now
+        if (latency_ms is not None and not self.caught_up_at
+                and waiting_s - self.last_window[1] > 0.1 * window_s):
             # The pipeline had to wait for the port: any start-up backlog is gone.
             self.caught_up_at = len(self.latencies_ms)
         return latency_ms
@@ -250,6 +281,7 @@ class OnlineReport:
             "startup_s": (round(self.first_window[0] - self.started, 3) if self.first_window
                           else None),
             "realtime_factor": _rounded(self.realtime_factor),
+            "compute_realtime_factor": _rounded(self.compute_realtime_factor),
             "cpu_realtime_factor": _rounded(self.cpu_realtime_factor),
             # From a sample's arrival on the host to the rate-map window that includes it:
             # all windows, and those after the start-up backlog was worked off (live only).
@@ -289,6 +321,8 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
         # before it asks for the next one.
         end_s = t_s + parts.window_s
         arrived = clock.arrival(max(int(round(end_s * BOARD_RATE_HZ)) - 1, 0))
+        if live:
+            report.origin = clock.origin
         latency_ms = report.window_published(end_s, loop.waiting_s, arrived if live else None,
                                              parts.window_s)
         rates = spike_counts / parts.window_s

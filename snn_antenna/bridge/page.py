@@ -1,9 +1,10 @@
-"""The live view's browser page: Bokeh figures fed from a :class:`~snn_antenna.bridge.view.LiveView`'s
-history.
+"""The live view's browser page: Bokeh figures fed from the view process's history
+(:class:`~snn_antenna.bridge.view_process.ViewHistory`).
 
 Each open page is one Bokeh session with its own data sources; a periodic callback (every
-``PAGE_UPDATE_MS``) pulls what is new in the view's history since that page's cursor, so a page
-that falls behind or closes costs the pipeline nothing.
+``PAGE_UPDATE_MS``) pulls what is new in the history since that page's cursor. All of it runs
+in the view's own process, so a page that falls behind, closes or is reloaded costs the
+pipeline nothing.
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ def build_page(view, doc) -> None:
     from bokeh.models import ColumnDataSource, Div, Range1d
 
     view.sessions += 1
+    view.pages_served += 1
     doc.on_session_destroyed(lambda _ctx: setattr(view, "sessions", view.sessions - 1))
     x_range = Range1d(0, view.history_s, name="time")
     # The same borders on every plot keep their time axes aligned.
@@ -182,7 +184,7 @@ def shown_counters(view) -> list[tuple[str, str]]:
             ("frames", counts.get("frames", 0)), ("CRC errors", counts.get("crc_errors", 0)),
             ("gaps", counts.get("gaps", 0)), ("lost samples", counts.get("lost_samples", 0)),
             ("duplicates", counts.get("duplicates", 0)), ("reordered", counts.get("reordered", 0)),
-            ("reconnects", counts.get("reconnects", 0)),
+            ("late", counts.get("late", 0)), ("reconnects", counts.get("reconnects", 0)),
             ("view frames dropped", view.dropped)]
 
 

@@ -1,0 +1,268 @@
+"""The live view's own process: the Bokeh server, its pages and ``/state.json``, fed by the frames
+the pipeline hands over (bridge/view.py's :class:`~snn_antenna.bridge.view.LiveView`).
+
+Why a process of its own: a Bokeh server does real work while holding the GIL (a page that is
+reloaded tears its document down, ``Document.destroy`` → ``gc.collect``; each open page pulls
+and serialises new points ten times a second). In the pipeline's process that work stalled the
+stream itself. Here it can only slow the view: the pipeline never waits for this process, and
+frames the view could not take are counted here (``view_frames_dropped``), never a sample.
+
+Started with the ``spawn`` context, so this module and what it imports are all the process
+holds: no Brian2, no port, no recorder.
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import logging
+import math
+import os
+import queue
+import signal
+import time
+from dataclasses import dataclass
+from functools import partial
+
+import numpy as np
+
+from .page import build_page
+
+DRAIN_MS = 50                   # this process empties the hand-off
+VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
+LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
+DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
+SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
+                  "late", "reconnects")
+
+
+@dataclass
+class ViewConfig:
+    """What the view process needs from the pipeline's parts: plain values and its own fitted
+    copy of the chain's ``to_g`` (counts → g), all picklable."""
+    host: str
+    port: int
+    rate_hz: float
+    history_s: float
+    window_s: float
+    neuron_hz: np.ndarray
+    to_g: object
+    coder_amplitude: float
+    th_g: float
+
+
+class _Ring:
+    """The last ``capacity`` rows of a stream, and how many rows it ever had (a page's cursor)."""
+
+    def __init__(self, columns: int, capacity: int):
+        self.rows = np.empty((0, columns))
+        self.capacity = capacity
+        self.total = 0
+
+    def add(self, rows: np.ndarray) -> None:
+        if len(rows):
+            self.rows = np.concatenate([self.rows, rows])[-self.capacity:]
+            self.total += len(rows)
+
+    def since(self, cursor: int) -> np.ndarray:
+        return self.rows[len(self.rows) - min(self.total - cursor, len(self.rows)):]
+
+
+class ViewHistory:
+    """The view's side: the last ``history_s`` of what the frames carried, read by the pages
+    (bridge/page.py) and ``/state.json``. A frame is a dict made by ``LiveView.flush``; its
+    ``seq`` numbers frames, so a frame the pipeline could not hand over shows as a gap here."""
+
+    def __init__(self, config: ViewConfig):
+        self.config = config
+        self.rate_hz, self.history_s = config.rate_hz, config.history_s
+        self.neuron_hz, self.window_s = np.asarray(config.neuron_hz, float), config.window_s
+        self.coder_amplitude, self.th_g = config.coder_amplitude, config.th_g
+        n = int(self.history_s * self.rate_hz) // DISPLAY_EVERY + 1
+        self.xy = _Ring(3, n)                       # t_s, x_g, y_g
+        self.coded = _Ring(4, n)                    # t_s, signal_g, th_g, coded
+        n_windows = int(math.ceil(self.history_s / self.window_s)) + 1
+        self.windows = _Ring(1 + len(self.neuron_hz), n_windows)     # t_s, rates
+        self.contacts: list[dict] = []
+        self.open_onset_s: float | None = None
+        self.realtime_factor = self.latency_ms = None
+        self.counts: dict = {}
+        self.n_samples = 0
+        self.peak_rate_hz = 10.0
+        self.sessions = 0                           # pages open now
+        self.pages_served = 0                       # pages built, ever (each load makes one)
+        self.received = 0                           # frames taken
+        self.dropped = 0                            # frames the pipeline published, never seen
+        self.next_seq = 0                           # the frame number expected next
+
+    def drain(self, inbox, wait_s: float = 0.0) -> int:
+        """Take every frame waiting in ``inbox`` (waiting up to ``wait_s`` for the first)."""
+        taken = 0
+        while True:
+            try:
+                frame = inbox.get(timeout=wait_s) if wait_s and not taken else inbox.get_nowait()
+            except queue.Empty:
+                return taken
+            self.take(frame)
+            taken += 1
+
+    def take(self, frame: dict) -> None:
+        self.dropped += frame["seq"] - self.next_seq       # the frames between never came
+        self.next_seq = frame["seq"] + 1
+        self.received += 1
+        if frame["counts"]:
+            self.counts = frame["counts"]
+        first, samples = frame["xy"]
+        if len(samples):
+            rows = self._rows(first, samples[:, 1:])
+            if len(rows):           # a piece shorter than DISPLAY_EVERY may have no shown point
+                rows[:, 1:] = self.config.to_g.transform(rows[:, 1:])
+                self.xy.add(rows)
+            self.n_samples = first + len(samples)
+        first, coded = frame["coded"]
+        if len(coded):
+            self.coded.add(self._rows(first, coded))
+            if self.coded.total:
+                self.th_g = float(self.coded.rows[-1, 2])
+        for t_s, rates, rtf, latency_ms in frame["windows"]:
+            self.windows.add(np.r_[t_s, rates][None, :])
+            self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
+            self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
+            self.latency_ms = latency_ms
+        for kind, what in frame["events"]:
+            if kind == "onset":
+                self.open_onset_s = float(what)
+            else:
+                self.contacts.append(what)
+                self.open_onset_s = None
+
+    def ended(self, published: int) -> None:
+        """The pipeline published ``published`` frames in all: those never taken are dropped."""
+        self.dropped = max(self.dropped, published - self.received)
+
+    def _rows(self, first: int, values: np.ndarray) -> np.ndarray:
+        """Rows (t_s, values...) of every DISPLAY_EVERY-th sample by stream index, so that
+        decimation does not depend on how the port chunked the samples."""
+        index = np.arange(first, first + len(values))
+        keep = index % DISPLAY_EVERY == 0
+        return np.column_stack([index[keep] / self.rate_hz, values[keep]])
+
+    @property
+    def t_s(self) -> float:
+        """Stream time: the samples received so far at the sample rate."""
+        return self.n_samples / self.rate_hz
+
+    def state(self) -> dict:
+        """The live state as plain JSON (``/state.json``)."""
+        last = self.windows.rows[-1] if self.windows.total else None
+        return {
+            "t_s": self.t_s,
+            "rate_map": {"t_s": float(last[0]) if last is not None else None,
+                         "window_s": self.window_s,
+                         "neuron_hz": [round(float(f), 3) for f in self.neuron_hz],
+                         "rates_hz": ([float(r) for r in last[1:]] if last is not None
+                                      else None)},
+            "windows": self.windows.total,
+            "contacts": list(self.contacts),
+            "contact_open_since_s": self.open_onset_s,
+            "th_g": self.th_g,
+            "counters": {"realtime_factor": _finite(self.realtime_factor),
+                         "latency_ms": _finite(self.latency_ms),
+                         **{k: self.counts.get(k, 0) for k in SHOWN_COUNTERS},
+                         "view_frames_dropped": self.dropped},
+            # Points kept for the plots (every DISPLAY_EVERY-th sample), ever.
+            "plotted": {"xy": self.xy.total, "coded_input": self.coded.total},
+            "sessions": self.sessions,
+            "pages_served": self.pages_served,
+            "view_pid": os.getpid(),
+        }
+
+
+def _finite(value):
+    return None if value is None or not np.isfinite(value) else round(float(value), 3)
+
+
+def serve(config: ViewConfig, inbox, control) -> None:
+    """The view process's main: bind, tell the pipeline the URL over ``control``, serve until
+    it says ``("stop", frames published)`` (or goes away), then answer with the view's count."""
+    # Ctrl-C in a terminal reaches the whole process group; the pipeline decides when the
+    # view ends (a KeyboardInterrupt here would only print a traceback).
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # When the cores are busy, the pipeline comes first: a page may update late, a sample not.
+    os.nice(VIEW_NICENESS)
+    from bokeh.application import Application
+    from bokeh.application.handlers.function import FunctionHandler
+    from bokeh.server.server import BaseServer
+    from bokeh.server.tornado import BokehTornado
+    from bokeh.server.util import bind_sockets
+    from tornado.httpserver import HTTPServer
+    from tornado.ioloop import IOLoop, PeriodicCallback
+
+    from .hostguard import HostGuard, allowed_hosts
+
+    # A stalled tab's queued messages are the only thing a slow browser costs; "closed the
+    # websocket" is the normal end of one.
+    logging.getLogger("bokeh.server.views.ws").setLevel(logging.ERROR)
+    asyncio.set_event_loop(asyncio.new_event_loop())
+    loop = IOLoop.current()
+    history = ViewHistory(config)
+    try:
+        sockets, port = bind_sockets(config.host, config.port)
+    except OSError as exc:
+        control.send(("failed", ("view-port", config.port,
+                                 f"a free port on {config.host} ({exc.strerror}), or 0 for "
+                                 "any free port")))
+        return
+    allowed = allowed_hosts(config.host, port)
+    app = BokehTornado({"/": Application(FunctionHandler(partial(build_page, history)))},
+                       extra_websocket_origins=sorted(allowed),
+                       extra_patterns=[(r"/state\.json", _state_handler(),
+                                        {"history": history, "inbox": inbox})],
+                       websocket_ping_interval=10, websocket_ping_timeout=10)
+    http = HTTPServer(HostGuard(app, allowed))
+    http.add_sockets(sockets)
+    server = BaseServer(loop, app, http)
+    server.start()
+    bound = sockets[0].getsockname()[0]
+    shown = f"[{bound}]" if ":" in bound else bound
+    control.send(("ready", f"http://{shown}:{port}/", port))
+
+    def tick() -> None:
+        history.drain(inbox)
+        try:
+            if not control.poll():
+                return
+            message = control.recv()
+        except (EOFError, OSError):             # the pipeline's process is gone
+            message = ("stop", history.received + history.dropped)
+        # The last frames may still be on their way (the queue's feeder thread writes them).
+        deadline = time.monotonic() + LAST_FRAMES_S
+        while history.next_seq < message[1] and time.monotonic() < deadline:
+            history.drain(inbox, wait_s=0.05)
+        history.ended(message[1])
+        try:
+            control.send(("stopped", {"received": history.received,
+                                      "dropped": history.dropped}))
+        except OSError:
+            pass
+        server.stop()
+        loop.stop()
+
+    PeriodicCallback(tick, DRAIN_MS).start()
+    loop.start()
+    loop.close(all_fds=True)
+
+
+def _state_handler():
+    from tornado.web import RequestHandler
+
+    class StateHandler(RequestHandler):
+        def initialize(self, history: ViewHistory, inbox) -> None:
+            self.history, self.inbox = history, inbox
+
+        def get(self) -> None:
+            self.history.drain(self.inbox)
+            self.set_header("Content-Type", "application/json")
+            self.set_header("Cache-Control", "no-store")
+            self.write(json.dumps(self.history.state()))
+
+    return StateHandler
