@@ -1,5 +1,6 @@
 """The control layer's material unit: class-I neurons whose rates name the contact's material."""
 import tomllib
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -8,36 +9,38 @@ from scipy import stats
 
 from snn_antenna.errors import SpecError
 from snn_antenna.networks import assembly
-from snn_antenna.readout.spiking import HIGH_BAND, SpikingBank, window_features
+from snn_antenna.networks.control import MaterialUnit
+from snn_antenna.readout.spiking import Band, SpikingBank, window_features
 from snn_antenna.sources import bench
 from snn_antenna.stats import binomial_interval
 
 ROOT = Path(__file__).resolve().parents[1]
-WINDOW_S = 0.15          # one bench contact per read-out window
 RATE_HZ = 2000.0
 MATERIAL_OBJECTS = {"material", "material_listen", "material_read"}
+# The unit's array is the baseline study's rod band: its input chain (band-pass, low
+# threshold) codes the contacts here, and its resonators are the network's.
+with open(ROOT / "studies" / "baseline_comparison.toml", "rb") as f:
+    ROD_BAND = Band(**tomllib.load(f)["spiking"]["bank"]["bands"]["rod"])
 
 
-def network_spec(name):
+def network_spec(name, runtime_target="numpy"):
     with open(ROOT / "networks" / f"{name}.toml", "rb") as f:
         table = tomllib.load(f)
     for part in ("resonators", "gate", "cpg"):
         if part in table:
-            table[part]["target"] = "numpy"
-    if "material" in table:
-        table["material"]["window_s"] = WINDOW_S
+            table[part]["target"] = runtime_target
     return table
 
 
-def coded_contacts(seed, repetitions, positions_cm):
-    """Bench contacts of all eight materials, coded as the high band's chain codes them."""
+def coded_contacts(seed, repetitions, positions_cm, window_s):
+    """Bench contacts of all eight materials, ``window_s`` each, coded by the rod band's chain."""
     spec = bench.BenchSpec(positions_cm=positions_cm, repetitions=repetitions,
-                           duration_s=WINDOW_S, rate_hz=RATE_HZ, seed=seed)
+                           duration_s=window_s, rate_hz=RATE_HZ, seed=seed)
     counts = np.concatenate([bench._generate_block(spec, mi, pi)
                              for mi in range(len(spec.materials))
                              for pi in range(len(spec.positions_cm))])
     materials = np.repeat(spec.materials, len(spec.positions_cm) * repetitions)
-    bank = SpikingBank(bands={"high": HIGH_BAND}, duration_s=WINDOW_S)
+    bank = SpikingBank(bands={"rod": ROD_BAND}, duration_s=window_s)
     return bank.code(counts, RATE_HZ, spec.adc_bits, spec.full_scale_g), materials
 
 
@@ -47,23 +50,25 @@ def material_unit_correct(train_seed: int, test_seed: int,
     unseen contacts of ``test_seed`` at unseen positions (16, 24 cm, ``test_repetitions`` of
     each material: 16 contacts per repetition)
     back to back through the network, and count how often its most active neuron names the
-    contact's class (metal / non-metal)."""
+    contact's class (metal / non-metal). The resonators run compiled (cython): at the rod
+    band's 0.005 ms step numpy's runtime is ~15 times slower."""
     import brian2 as b2
 
-    table = network_spec("bench_material")
-    coded, materials = coded_contacts(train_seed, 6, (12.0, 20.0, 28.0))
+    table = network_spec("bench_material", runtime_target="cython")
+    window_s = table["material"]["window_s"]
+    coded, materials = coded_contacts(train_seed, 6, (12.0, 20.0, 28.0), window_s)
     unit = assembly.configure(table)["material"].fit(
         window_features(table, coded, RATE_HZ), materials)
-    coded, materials = coded_contacts(test_seed, test_repetitions, (16.0, 24.0))
+    coded, materials = coded_contacts(test_seed, test_repetitions, (16.0, 24.0), window_s)
     n_samples, n_events = coded.shape
     asm = assembly.build(table, fitted={"material": unit})
     feed = b2.TimedArray(np.r_[coded.T.ravel(), np.zeros(n_samples)], dt=b2.second / RATE_HZ)
     asm.objects["resonators"].run_regularly("I_ext = coded_input(t)", dt=b2.second / RATE_HZ)
     spikes = b2.SpikeMonitor(asm.objects["material"])
     asm.network.add(spikes)
-    asm.network.run((n_events + 1) * WINDOW_S * b2.second, namespace={"coded_input": feed})
+    asm.network.run((n_events + 1) * window_s * b2.second, namespace={"coded_input": feed})
     # The read-out of contact e drives the unit during window e + 1.
-    event = (np.asarray(spikes.t_[:]) // WINDOW_S).astype(int) - 1
+    event = (np.asarray(spikes.t_[:]) // window_s).astype(int) - 1
     rates = np.zeros((n_events + 1, len(unit.classes)))
     np.add.at(rates, (event, np.asarray(spikes.i[:])), 1)
     rates = rates[:n_events]
@@ -115,3 +120,43 @@ def test_the_material_unit_needs_resonators_and_a_fit():
     with pytest.raises(SpecError, match="unobtainium"):
         assembly.configure({**network_spec("bench_material"),
                             "material": {"classes": {"metal": ["unobtainium"], "b": ["wood"]}}})
+    unit = MaterialUnit().fit(np.random.default_rng(0).random((4, 3 * 24)),
+                              ["brass", "wood", "copper", "pvc"])
+    with pytest.raises(SpecError, match=r"168 \(7 per resonator\)"):   # 3 + 4 time bins
+        assembly.build(network_spec("bench_material"), fitted={"material": unit})
+
+
+def test_the_material_network_reads_the_baseline_studys_rod_band():
+    spec = network_spec("bench_material", runtime_target="cython")["resonators"]
+    band = asdict(ROD_BAND)
+    for key in ("n_neurons", "b", "hz_per_k", "method", "dt_ms"):
+        assert spec[key] == band[key], key
+    assert tuple(spec["band_hz"]) == tuple(band["band_hz"])
+    network_hz = assembly.configure(network_spec("bench_material"))["resonators"].neuron_hz
+    assert np.allclose(network_hz, ROD_BAND.array(0.1, "euler", "numpy").neuron_hz)
+
+
+def test_window_features_known_answer():
+    unit = MaterialUnit(window_s=0.5, bin_edges_s=(0.1, 0.2, 0.3))
+    # resonator 0: three spikes in window 0; resonator 1: one in window 1 (0.15 s into it)
+    # and one after the last window, which counts in the last (0.45 s into it)
+    rows = unit.window_features([0, 0, 0, 1, 1], [0.05, 0.15, 0.35, 0.65, 0.95], 2, n_windows=2)
+    assert rows.shape == (2, unit.n_features(2)) == (2, 14)
+    #         counts   latency      span       time bins r0  time bins r1
+    assert np.allclose(rows[0], [3, 0, 0.05, 0.5, 0.3, 0, 1, 1, 0, 1, 0, 0, 0, 0])
+    assert np.allclose(rows[1], [0, 2, 0.5, 0.15, 0, 0.3, 0, 0, 0, 0, 0, 1, 0, 1])
+    plain = MaterialUnit(window_s=0.5, bin_edges_s=())
+    assert np.allclose(plain.window_features([0, 0, 0], [0.05, 0.15, 0.35], 1),
+                       [[3, 0.05, 0.3]])
+
+
+def test_material_window_settings_are_checked_before_any_run():
+    with pytest.raises(SpecError, match="bin_edges_s"):
+        MaterialUnit(bin_edges_s=(0.2, 0.1))
+    with pytest.raises(SpecError, match="bin_edges_s"):
+        MaterialUnit(window_s=0.5, bin_edges_s=(0.1, 0.6))
+    table = network_spec("bench_material")
+    with pytest.raises(SpecError, match="window_s"):    # 0.15 s of coded input, 0.5 s window
+        window_features(table, np.zeros((300, 2)), RATE_HZ)
+    with pytest.raises(SpecError, match="material"):
+        window_features({**table, "parts": ["resonators"]}, np.zeros((1000, 2)), RATE_HZ)
