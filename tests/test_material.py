@@ -82,7 +82,7 @@ def material_unit_correct(train_seed: int, test_seed: int,
 def test_the_most_active_material_neuron_names_the_material_more_often_than_chance():
     # 160 unseen contacts (10 of each material at each of two unseen positions), trained on
     # 144 at three other positions. Measured on the rod band with time bins (2026-11-25):
-    # 127 of 160 (79.4 %, Wilson 95 % interval 72.5-84.9 %, p = 1.7e-14 against chance; 19
+    # 127 of 160 (79.4 %, Wilson 95 % interval 72.5-84.9 %, p = 1.7e-14 against chance; 16-19
     # min on two shared cores). The unit's old high-band read-out: 83 of 160 on this physics
     # (p = 0.35), 65.5 % before it. Fed the high band again (its chain and array) with the
     # same 0.5 s window and time bins: 95 of 160 (Wilson 51.6-66.7 %), so the rod band is
