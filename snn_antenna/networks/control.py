@@ -14,17 +14,17 @@
   command to the wheels (the closed loop sets the speed command to 0). Once the robot stops
   its self-motion ends and the resonators fall silent (Fig. 10H).
 
-- ``MaterialUnit``: one class-I neuron per material class, fed by the resonators through
-  ``Synapses`` whose weights are a linear read-out of the resonators' rates fit offline
-  (scikit-learn ``LogisticRegression`` on the filtered resonator spike trains of bench
-  contacts). Its mean input is
-  ``bias + gain · logit``, so the most active neuron names the material. The intercept is
-  gated by the resonators' summed activity, so silent resonators leave every neuron at
-  ``bias``, below rheobase (no spikes at rest). The material shows in the high mode (decay,
-  stiffness): feed the unit a high-band array. Measured (``tests/test_material.py``,
-  2026-11-23), metal vs non-metal on unseen bench contacts at unseen positions: 419 of 640
-  correct over 20 train/test seed pairs (65.5 %, Wilson 95 % interval 61.7–69.1 %; one seed
-  of 32 contacts ranged from 15 to 26 correct, too few to tell the unit from chance).
+- ``MaterialUnit``: one class-I neuron per material class, driven each window by a
+  read-out of the resonators' spikes of the window just past, fit offline (scikit-learn
+  ``LogisticRegression`` on the same network's spikes of bench contacts). Its input is
+  ``bias + drive · p(class)``, so the most active neuron names the material; silent
+  resonators leave every neuron at ``bias``, below rheobase (no spikes at rest). On the
+  bench's contact physics (issue 16) the material sits in the struck rods' own bending modes
+  (107–377 Hz, a few % of the impact; a metal rod rings for 0.5–1.2 s, wood and plastics for
+  50–105 ms): feed the unit the rod band (``networks/bench_material.toml``: the baseline
+  study's ``[spiking.bank.bands.rod]``) over whole 0.5 s contacts, and read each resonator's
+  decay through its counts in time bins (``bin_edges_s``). Measured in
+  ``tests/test_material.py`` (see there).
 
 All use ``neurons.equations("class1", ...)``: rate grows with input current above rheobase.
 """
@@ -115,16 +115,20 @@ class MaterialUnit:
 
     ``classes`` maps a class name to its materials (default metal / non-metal; one class per
     material is ``{m: [m] for m in antenna.MATERIALS}``). ``fit(features, materials)`` trains
-    the read-out (scikit-learn: standardised ``LogisticRegression``) on the resonators'
-    ``spiking.SpikeFeatures.matrix()`` over bench contacts, one ``window_s`` each. In the
-    network, every ``window_s`` the read-out takes the resonators' spikes of the window just
-    past (count, first-spike latency, firing span per resonator) and sets each material
-    neuron's input to ``bias + drive · p(class)``: during the next window the most active
-    neuron names the material; without resonator spikes every input stays at ``bias``, below
-    rheobase, and the unit is silent.
+    the read-out (scikit-learn: standardised ``LogisticRegression``) on ``window_features`` of
+    this network's resonators over bench contacts, one ``window_s`` each
+    (``readout.spiking.window_features`` runs them). In the network, every ``window_s`` the
+    read-out takes the resonators' spikes of the window just past through the same
+    ``window_features`` and sets each material neuron's input to ``bias + drive · p(class)``:
+    during the next window the most active neuron names the material; without resonator
+    spikes every input stays at ``bias``, below rheobase, and the unit is silent.
     """
     classes: dict = field(default_factory=lambda: dict(MATERIAL_CLASSES))
     window_s: float = 0.5
+    # Inner edges (s from the window's start) of the time bins whose spike counts trace each
+    # resonator's decay, as the baseline study's bank (``SpikingBank.bin_edges_s``): a struck
+    # metal rod still rings after 0.2 s, a wooden or plastic one has died away.
+    bin_edges_s: tuple = (0.1, 0.2, 0.3)
     drive: float = 20.0
     bias: float = 20.0                    # just below the class-I rheobase (22.6)
     min_spikes: int = 1                   # resonator spikes in a window that make a contact
@@ -144,10 +148,42 @@ class MaterialUnit:
                 seen.add(m)
         for name in ("window_s", "drive", "regularisation_c", "dt_ms"):
             v = getattr(self, name)
-            check(np.isfinite(v) and v > 0, name, v, "a finite value > 0")
-        check(np.isfinite(self.bias), "bias", self.bias, "a finite value")
+            check(is_number(v) and v > 0, name, v, "a finite value > 0")
+        check(is_number(self.bias), "bias", self.bias, "a finite value")
         check(isinstance(self.min_spikes, int) and self.min_spikes >= 1, "min_spikes",
               self.min_spikes, "an integer >= 1")
+        edges = self.bin_edges_s
+        check(isinstance(edges, (list, tuple)) and all(is_number(e) for e in edges)
+              and all(0 < e < self.window_s for e in edges)
+              and all(a < b for a, b in zip(edges, edges[1:])), "bin_edges_s", edges,
+              f"increasing times inside the window (0 < t < window_s = {self.window_s:g} s), "
+              "or [] for no time bins")
+        self.bin_edges_s = tuple(float(e) for e in edges)
+
+    def n_features(self, n_resonators: int) -> int:
+        """Width of a ``window_features`` row for ``n_resonators`` resonators."""
+        n_bins = len(self.bin_edges_s) + 1 if self.bin_edges_s else 0
+        return n_resonators * (3 + n_bins)
+
+    def window_features(self, spike_i, spike_t_s, n_resonators: int,
+                        n_windows: int = 1) -> np.ndarray:
+        """What the read-out sees: one row per window of ``window_s`` (spike times from the
+        first window's start; later spikes count in the last), per resonator its spike count,
+        first-spike latency and firing span (``neurons.spike_summary``, times from its
+        window's start), then its counts in the time bins (``neurons.binned_spike_counts``),
+        resonator by resonator: the baseline study's ``spiking_rod`` input, per window. The
+        one definition for fitting (``readout.spiking.window_features``) and the network."""
+        i = np.asarray(spike_i, dtype=int)
+        t = np.asarray(spike_t_s, dtype=float)
+        window = np.clip((t // self.window_s).astype(int), 0, n_windows - 1)
+        neuron, t_in = window * n_resonators + i, t - window * self.window_s
+        total = n_resonators * n_windows
+        parts = [x.reshape(n_windows, -1)
+                 for x in neurons.spike_summary(neuron, t_in, total, self.window_s)]
+        if self.bin_edges_s:
+            parts.append(neurons.binned_spike_counts(neuron, t_in, total, self.bin_edges_s)
+                         .reshape(n_windows, -1))
+        return np.hstack(parts).astype(float)
 
     @property
     def class_names(self) -> list[str]:
@@ -160,8 +196,8 @@ class MaterialUnit:
         return np.array([lookup[m] for m in materials])
 
     def fit(self, features: np.ndarray, materials) -> "MaterialUnit":
-        """Train the read-out: ``features`` (events, 3 × resonators) as
-        ``SpikeFeatures.matrix()`` of this network's resonators over ``window_s``."""
+        """Train the read-out: ``features``, one ``window_features`` row per contact, of this
+        network's resonators; ``materials`` the contacts' materials (labels: fit only)."""
         from sklearn.linear_model import LogisticRegression
         from sklearn.pipeline import make_pipeline
         from sklearn.preprocessing import StandardScaler
@@ -196,9 +232,10 @@ class MaterialUnit:
 
         self._check_fitted()
         n_res = len(resonators)
-        check(self.readout_.n_features_in_ == 3 * n_res, "network.material",
-              f"{self.readout_.n_features_in_} features", f"3 per resonator ({3 * n_res}): "
-              "fit on SpikeFeatures of this network's array")
+        check(self.readout_.n_features_in_ == self.n_features(n_res), "network.material",
+              f"{self.readout_.n_features_in_} features",
+              f"{self.n_features(n_res)} ({self.n_features(n_res) // n_res} per resonator): "
+              "fit on window_features of this network's array")
         unit = class1_group(len(self.classes), self.bias, CLASS1_TAU_SYN_MS, self.dt_ms,
                             "material", input_terms=" + drive * p", extra="p : 1",
                             namespace={"drive": self.drive})
@@ -215,7 +252,6 @@ class MaterialUnit:
             if end <= 0 or len(i) < self.min_spikes:
                 unit.p = 0.0
                 return
-            counts, latency, span = neurons.spike_summary(i, t_s, n_res, self.window_s)
-            unit.p = self.probabilities(np.r_[counts, latency, span][None])[0]
+            unit.p = self.probabilities(self.window_features(i, t_s, n_res))[0]
 
         return {"material": unit, "material_listen": listen, "material_read": read}

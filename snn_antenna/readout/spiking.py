@@ -41,7 +41,6 @@ from sklearn.pipeline import Pipeline
 
 from ..errors import SpecError, check, is_number
 from ..networks import neurons
-from ..networks.neurons import spike_summary
 from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain
 from ..sources import antenna
@@ -306,32 +305,33 @@ def _distance_from_hz(f: np.ndarray) -> np.ndarray:
 
 
 def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndarray:
-    """Spike features of the network's own resonator array (``network``: a network spec
-    table) for coded events (samples, events) played back to back, one window each:
-    rows as ``SpikeFeatures.matrix()`` (counts, latencies, spans), what ``MaterialUnit``
-    reads in the network. Fitting on these, not on ``spiking.SpikingBank``'s offline runs,
-    keeps training and use on the same Brian2 code path."""
+    """What the network's ``MaterialUnit`` reads (``network``: a network spec table with a
+    ``material`` part), for coded events (samples, events) played back to back through the
+    network's own resonator array, one window each: rows of ``MaterialUnit.window_features``.
+    Fitting on these, not on ``spiking.SpikingBank``'s offline runs, keeps training and use
+    on the same Brian2 code path and the same feature definition."""
     import brian2 as b2
 
-    from ..networks.assembly import build
+    from ..networks.assembly import build, configure
 
+    check("material" in network.get("parts", []), "network.parts", network.get("parts"),
+          "a network with a 'material' part (whose read-out these features feed)")
+    unit = configure(network)["material"]
+    n_samples, n_events = coded.shape
+    window_s = n_samples / rate_hz
+    check(np.isclose(window_s, unit.window_s), "network.material.window_s", unit.window_s,
+          f"the coded events' length ({n_samples} samples at {rate_hz:g} Hz = {window_s:g} s)")
     resonators_only = {"parts": ["resonators"], "inputs": ["antenna"],
                        "resonators": network.get("resonators", {})}
     asm = build(resonators_only)
     group = asm.objects["resonators"]
-    n_samples, n_events = coded.shape
-    window_s = n_samples / rate_hz
     feed = b2.TimedArray(np.ascontiguousarray(coded.T.ravel()), dt=b2.second / rate_hz)
     group.run_regularly("I_ext = coded_input(t)", dt=b2.second / rate_hz)
     monitor = b2.SpikeMonitor(group)
     asm.network.add(monitor)
     asm.network.run(n_events * window_s * b2.second, namespace={"coded_input": feed})
-    i, t = np.asarray(monitor.i[:]), np.asarray(monitor.t_[:])
-    event = np.minimum((t // window_s).astype(int), n_events - 1)
-    n = len(group)
-    counts, latency, span = spike_summary(event * n + i, t - event * window_s, n * n_events,
-                                          window_s)
-    return np.hstack([x.reshape(n_events, n) for x in (counts, latency, span)]).astype(float)
+    return unit.window_features(np.asarray(monitor.i[:]), np.asarray(monitor.t_[:]),
+                                len(group), n_events)
 
 
 def recording_attrs(data: xr.Dataset) -> tuple[float, int, float]:
