@@ -5,7 +5,7 @@
 - ``bench.toml``: ``parts = ["resonators"]`` (a bench contact: no robot, no motion),
 - ``robot.toml``: ``+ "gate"`` (a driving robot: the speed command sets Th),
 - ``exploration.toml``: ``+ "cpg", "control"`` (the antenna sweeps; contacts stop the robot).
-- ``bench_material.toml``: a high-band array ``+ "material"`` (class-I neurons naming the
+- ``bench_material.toml``: a rod-band array ``+ "material"`` (class-I neurons naming the
   material; fitted offline, passed as ``fitted={"material": MaterialUnit().fit(...)}``).
 
 Each part declares what it needs; a spec asking for a part whose inputs are missing is refused

@@ -313,10 +313,13 @@ def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndar
     import brian2 as b2
 
     from ..networks.assembly import build, configure
+    from ..networks.control import MaterialUnit
 
-    check("material" in network.get("parts", []), "network.parts", network.get("parts"),
+    # the network's material part (its configured unit, found by type: "material" here is a
+    # part of the network, not the bench label a read-out must never look up)
+    unit = next((p for p in configure(network).values() if isinstance(p, MaterialUnit)), None)
+    check(unit is not None, "network.parts", network.get("parts"),
           "a network with a 'material' part (whose read-out these features feed)")
-    unit = configure(network)["material"]
     n_samples, n_events = coded.shape
     window_s = n_samples / rate_hz
     check(np.isclose(window_s, unit.window_s), "network.material.window_s", unit.window_s,
