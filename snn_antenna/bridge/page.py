@@ -37,8 +37,7 @@ def build_page(view, doc) -> None:
     rate_map, mapper = _rate_map_figure(sources["map"], common, view.neuron_hz,
                                         view.peak_rate_hz)
     for fig in (antenna, coded):
-        fig.legend.location, fig.legend.orientation = "top_right", "horizontal"
-        fig.legend.background_fill_alpha = 0.7
+        _legend_outside(fig)
     for fig in (antenna, coded, rate_map):
         _mark_contacts(fig, sources["contacts"])
     # A fixed height: new text then never re-lays the page out (ten times a second).
@@ -48,6 +47,16 @@ def build_page(view, doc) -> None:
     update = _updater(view, sources, mapper, counters, x_range)
     update()
     doc.add_periodic_callback(update, PAGE_UPDATE_MS)
+
+
+def _legend_outside(fig) -> None:
+    """The legend in the right margin, beside the data rather than over the latest points
+    (which arrive at the right edge)."""
+    legend = fig.legend[0]
+    legend.location, legend.orientation = "top_left", "vertical"
+    legend.border_line_alpha, legend.margin, legend.padding = 0, 4, 2
+    legend.label_text_font_size, legend.glyph_width = "11px", 16
+    fig.add_layout(legend, "right")
 
 
 def _antenna_figure(source, common):
