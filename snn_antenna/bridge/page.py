@@ -12,11 +12,12 @@ import numpy as np
 
 PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
 CONTACT_COLOUR = "#d62728"
+PANELS_WIDTH = 230
 
 
 def build_page(view, doc) -> None:
     """Lay out one browser page for ``view`` in the Bokeh document ``doc`` and keep it fed."""
-    from bokeh.layouts import column
+    from bokeh.layouts import column, row
     from bokeh.models import ColumnDataSource, Div, Range1d
 
     view.sessions += 1
@@ -37,17 +38,31 @@ def build_page(view, doc) -> None:
     rate_map, mapper = _rate_map_figure(sources["map"], common, view.neuron_hz,
                                         view.peak_rate_hz)
     for fig in (antenna, coded):
-        fig.legend.location, fig.legend.orientation = "top_right", "horizontal"
-        fig.legend.background_fill_alpha = 0.7
+        _legend_outside(fig)
     for fig in (antenna, coded, rate_map):
         _mark_contacts(fig, sources["contacts"])
     # A fixed height: new text then never re-lays the page out (ten times a second).
     counters = Div(text="", sizing_mode="stretch_width", height=80)
-    doc.add_root(column(counters, antenna, coded, rate_map, sizing_mode="stretch_width"))
+    # Beside the plots, what the running network decides: a panel per part it has. One column
+    # for the plots keeps their time axes aligned.
+    panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided")
+    plots = column(antenna, coded, rate_map, sizing_mode="stretch_width")
+    doc.add_root(column(counters, row(plots, panels, sizing_mode="stretch_width"),
+                        sizing_mode="stretch_width"))
     doc.title = "snn-antenna live view"
-    update = _updater(view, sources, mapper, counters, x_range)
+    update = _updater(view, sources, mapper, counters, panels, x_range)
     update()
     doc.add_periodic_callback(update, PAGE_UPDATE_MS)
+
+
+def _legend_outside(fig) -> None:
+    """The legend in the right margin, beside the data rather than over the latest points
+    (which arrive at the right edge)."""
+    legend = fig.legend[0]
+    legend.location, legend.orientation = "top_left", "vertical"
+    legend.border_line_alpha, legend.margin, legend.padding = 0, 4, 2
+    legend.label_text_font_size, legend.glyph_width = "11px", 16
+    fig.add_layout(legend, "right")
 
 
 def _antenna_figure(source, common):
@@ -107,10 +122,10 @@ def _mark_contacts(fig, source) -> None:
                             background_fill_alpha=0.75))
 
 
-def _updater(view, sources: dict, mapper, counters, x_range):
+def _updater(view, sources: dict, mapper, counters, panels, x_range):
     """The page's periodic callback: stream what is new since this page's cursors."""
     cursor = {"xy": 0, "coded": 0, "windows": 0}
-    shown = {"counters": None, "contacts": None}
+    shown = {"counters": None, "contacts": None, "panels": None}
     rollover = view.xy.capacity
 
     def update() -> None:
@@ -137,6 +152,9 @@ def _updater(view, sources: dict, mapper, counters, x_range):
         html = counters_html(view)
         if html != shown["counters"]:
             shown["counters"] = counters.text = html
+        html = panels_html(view)
+        if html != shown["panels"]:
+            shown["panels"] = panels.text = html
         end = max(view.t_s, view.history_s)
         if x_range.end != end:
             x_range.start, x_range.end = end - view.history_s, end
@@ -160,6 +178,48 @@ def contact_marks(view) -> list[tuple[float, str]]:
     if view.open_onset_s is not None:
         marks.append((view.open_onset_s, "contact…"))
     return marks
+
+
+def panels_html(view) -> str:
+    """A box per panel of the running network (``view.panels``: name → title) with the latest
+    window's decided values; a panel whose window has not come yet says so."""
+    boxes = []
+    for name, title in view.panels.items():
+        values = view.decided.get(name)
+        rows = ("".join(f"<tr><td>{field_label(field)}</td><td><b>{shown_value(value)}"
+                        f"</b></td></tr>" for field, value in values.items())
+                if values else "<tr><td>no window yet</td></tr>")
+        boxes.append(f"<div class='panel' data-panel='{name}' style='border:1px solid #ccc;"
+                     f"margin:0 0 6px 6px;padding:3px 6px'><div style='font-weight:bold'>"
+                     f"{title}</div><table style='font-size:12px'>{rows}</table></div>")
+    return f"<div style='font-family:sans-serif;font-size:12px'>{''.join(boxes)}</div>"
+
+
+UNITS = {"g": "g", "s": "s", "cm": "cm", "hz": "Hz", "deg": "°", "cm_s": "cm/s"}
+
+
+def field_label(field: str) -> str:
+    """``last_distance_cm`` → ``last distance (cm)``; ``th_g`` → ``Th (g)``."""
+    words = field.split("_")
+    for n in (2, 1):
+        if len(words) > n and "_".join(words[-n:]) in UNITS:
+            unit = UNITS["_".join(words[-n:])]
+            words = words[:-n]
+            break
+    else:
+        unit = None
+    text = " ".join("Th" if w == "th" else w for w in words)
+    return f"{text} ({unit})" if unit else text
+
+
+def shown_value(value) -> str:
+    if value is None:
+        return "–"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    if isinstance(value, float):
+        return f"{value:.3g}"
+    return str(value)
 
 
 def counters_html(view) -> str:

@@ -29,6 +29,7 @@ from itertools import chain
 import numpy as np
 
 from ..errors import SpecError
+from .live_state import Decisions
 from .protocol import BOARD_RATE_HZ
 from .view_process import ViewConfig, serve
 
@@ -137,9 +138,11 @@ class LiveView:
         coder = parts.chain.named_steps["coder"]
         # Its own fitted copy: the pipeline's is unfitted until calibration.
         to_g = clone(parts.chain.named_steps["to_g"]).fit(np.zeros((1, 2)))
+        self.decisions = Decisions(parts)
         self.config = ViewConfig(host, port, rate_hz, history_s, parts.window_s,
                                  np.asarray(parts.array.neuron_hz, dtype=float), to_g,
-                                 coder.amplitude, float(coder.threshold))
+                                 coder.amplitude, float(coder.threshold),
+                                 self.decisions.parts, self.decisions.panels)
         _tap_coder(coder, self._coded)
         self._context = multiprocessing.get_context("spawn")
         self._inbox = self._context.Queue(inbox_frames)
@@ -175,10 +178,16 @@ class LiveView:
 
     def window(self, t_s: float, rates: np.ndarray, event, realtime_factor: float,
                latency_ms: float | None) -> None:
-        self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms))
-        self.event(event)
+        decided = self.decisions.window(t_s, rates, event)
+        self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms, decided))
+        self._event(event)
 
     def event(self, event) -> None:
+        """The stream's last contact, closed at its end (no window of its own)."""
+        self.decisions.event(event)
+        self._event(event)
+
+    def _event(self, event) -> None:
         if event is not None:
             kind, what = event
             self._events.append((kind, what if kind == "onset" else what.as_dict()))

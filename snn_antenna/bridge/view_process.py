@@ -48,6 +48,8 @@ class ViewConfig:
     to_g: object
     coder_amplitude: float
     th_g: float
+    parts: tuple = ()               # the parts of the running network
+    panels: dict = None             # panel → title: what it decides (bridge/live_state.py)
 
 
 class _Ring:
@@ -86,6 +88,8 @@ class ViewHistory:
         self.open_onset_s: float | None = None
         self.realtime_factor = self.latency_ms = None
         self.counts: dict = {}
+        self.parts, self.panels = tuple(config.parts), dict(config.panels or {})
+        self.decided: dict = {}                     # panel → the latest window's values
         self.n_samples = 0
         self.peak_rate_hz = 10.0
         self.sessions = 0                           # pages open now
@@ -123,7 +127,8 @@ class ViewHistory:
             self.coded.add(self._rows(first, coded))
             if self.coded.total:
                 self.th_g = float(self.coded.rows[-1, 2])
-        for t_s, rates, rtf, latency_ms in frame["windows"]:
+        for t_s, rates, rtf, latency_ms, decided in frame["windows"]:
+            self.decided = decided
             self.windows.add(np.r_[t_s, rates][None, :])
             self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
             self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
@@ -165,6 +170,9 @@ class ViewHistory:
             "contacts": list(self.contacts),
             "contact_open_since_s": self.open_onset_s,
             "th_g": self.th_g,
+            # What the running network decided on the latest window, a panel per part it has.
+            "network": {"parts": list(self.parts), "panels": dict(self.panels),
+                        "decided": self.decided},
             "counters": {"realtime_factor": _finite(self.realtime_factor),
                          "latency_ms": _finite(self.latency_ms),
                          **{k: self.counts.get(k, 0) for k in SHOWN_COUNTERS},
