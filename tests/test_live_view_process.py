@@ -130,7 +130,10 @@ def test_a_frozen_view_process_does_not_hold_the_stream_up(tmp_path):
     report = report_of(out)
     assert len(emulator.log.written) == report["counts"]["frames"] == report["samples"] == 3000
     assert report["counts"]["lost_samples"] == report["counts"]["late"] == 0
-    assert report["realtime_factor"] >= 0.9
+    # A pipeline waiting on its frozen view would stall (factor near 0, or hang); 0.5 leaves room
+    # for a busy machine (two test workers) without letting a stall pass. The slow 30 s reload
+    # test holds the tighter 0.95.
+    assert report["realtime_factor"] >= 0.5, report["realtime_factor"]
     assert len(report["contacts"]) == 1
     # Resumed, the view showed it all: the hand-off held the frozen seconds.
     assert state["t_s"] == 3.0 and state["counters"]["frames"] == 3000
