@@ -134,6 +134,7 @@ def test_one_window_contact_replays(tmp_path, one_window_counts):
 
 
 def serve(link, counts):
+    """The emulator paced at 1 kHz on ``link`` in a thread; returns (emulator, thread)."""
     emulator = Emulator(counts)
 
     def run():
@@ -145,12 +146,12 @@ def serve(link, counts):
 
     thread = threading.Thread(target=run, daemon=True)
     thread.start()
-    return thread
+    return emulator, thread
 
 
 def test_one_window_contact_streams(tmp_path, one_window_counts):
     link = PtyLink(tmp_path / "tty")
-    server = serve(link, one_window_counts)
+    _, server = serve(link, one_window_counts)
     try:
         result = subprocess.run(
             [*CLI, "stream", "--port", link.path, "--network", str(NETWORK), "--out",
@@ -188,7 +189,7 @@ def test_stream_failure_marks_the_recording_incomplete(tmp_path, monkeypatch, ca
     monkeypatch.setattr(EpisodeTracker, "update", broken_update)
     monkeypatch.setattr(bridge_cli, "stop_on_signals", threading.Event)  # pytest owns SIGINT
     link = PtyLink(tmp_path / "tty")
-    server = serve(link, one_window_counts[:2500])
+    _, server = serve(link, one_window_counts[:2500])
     try:
         code = bridge_cli.main(["stream", "--port", link.path, "--network", str(NETWORK),
                                 "--out", str(tmp_path / "rec"), "--duration", "9"])

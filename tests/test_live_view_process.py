@@ -19,8 +19,7 @@ import urllib.request
 
 import pytest
 
-from snn_antenna.bridge.emulator import Emulator
-from snn_antenna.bridge.links import PeerGone, PtyLink
+from snn_antenna.bridge.links import PtyLink
 from snn_antenna.bridge.online import build_online, run_online, warm_up
 from snn_antenna.bridge.protocol import Sample
 from snn_antenna.bridge.recorder import record_counts
@@ -28,6 +27,7 @@ from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.source import Batch
 from snn_antenna.bridge.view import LiveView
 from snn_antenna.sources.stimuli import Contact, RobotScene
+from test_live_total import serve
 from test_live_view import CHROMIUM, CLI, NETWORK, TH, end, get_json
 
 
@@ -56,25 +56,9 @@ class Stderr:
         return "".join(self.lines)
 
 
-def board(link, counts):
-    """The emulator paced at 1 kHz on ``link``; unplugged once the scene is over."""
-    emulator = Emulator(counts)
-
-    def run():
-        try:
-            emulator.run(link, peer_timeout_s=240)
-        except PeerGone:
-            pass
-        link.disconnect()
-
-    thread = threading.Thread(target=run, daemon=True)
-    thread.start()
-    return emulator, thread
-
-
 def stream_with_view(tmp_path, counts, duration_s, hold_s):
     link = PtyLink(tmp_path / "tty")
-    emulator, thread = board(link, counts)
+    emulator, thread = serve(link, counts)
     proc = subprocess.Popen([*CLI, "stream", "--port", link.path, "--network", NETWORK, *TH,
                              "--out", tmp_path / "rec", "--duration", str(duration_s), "--json",
                              "--view", "--view-port", "0", "--view-hold", str(hold_s)],
