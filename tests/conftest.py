@@ -122,6 +122,35 @@ class QuickReports:
         return run
 
 
+def run_main(argv: list[str]) -> int:
+    """``snn_antenna.cli.main(argv)`` in this process, its stderr kept: a test that needs the
+    run to succeed fails with what the run said (the one-line error), not a bare ``1 == 0``."""
+    import contextlib
+    import io
+
+    from snn_antenna.cli import main
+
+    said = io.StringIO()
+    with contextlib.redirect_stderr(said):
+        status = main(argv)
+    sys.stderr.write(said.getvalue())
+    assert status == 0, f"{' '.join(argv[:2])} exited {status}:\n{said.getvalue()[-3000:]}"
+    return status
+
+
+@pytest.fixture(autouse=True)
+def _brian_console_on_an_open_stream():
+    """Brian2's console handler keeps the stream it was made with. Imported during a test that
+    captured stderr (``capsys``), it is left on that test's closed stream, and every later Brian2
+    warning in the worker prints a "Logging error" traceback instead, long enough to bury the
+    message of a real failure. After each test, point it at the current stderr if so."""
+    yield
+    logger = sys.modules.get("brian2.utils.logger")
+    handler = getattr(getattr(logger, "BrianLogger", None), "console_handler", None)
+    if handler is not None and getattr(handler.stream, "closed", False):
+        handler.setStream(sys.stderr)
+
+
 @pytest.fixture(scope="session")
 def quick_reports(tmp_path_factory) -> QuickReports:
     return QuickReports(tmp_path_factory.mktemp("quick_reports"))

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_main
 
 from snn_antenna.cli import main
 from snn_antenna.errors import SpecError
@@ -61,8 +62,8 @@ SEED = ["--set", "seed=17"]
 @pytest.fixture(scope="module")
 def honest_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("exploration") / "exploration"
-    assert main(["run", str(ROOT / "studies" / "exploration.toml"), "--out", str(out),
-                 "--quick", *SEED]) == 0
+    run_main(["run", str(ROOT / "studies" / "exploration.toml"), "--out", str(out), "--quick",
+              *SEED])
     return out, json.loads((out / "summary.json").read_text())
 
 

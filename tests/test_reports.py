@@ -133,17 +133,13 @@ def test_rate_maps_can_carry_their_colour_scale_in_hz():
 
 def test_expected_warnings_stay_out_of_the_terminal_but_in_the_run_log(tmp_path):
     import io
-    import sys
 
     from brian2.utils.logger import BrianLogger, get_logger
 
     brian_log = get_logger("brian2.groups.group")
     lines = []
     terminal_stream = io.StringIO()   # what Brian2's console handler prints to the user
-    handler = BrianLogger.console_handler
-    if getattr(handler.stream, "closed", False):   # left on a test's captured, closed stream
-        handler.stream = sys.__stderr__          # by an earlier test in this worker
-    before = handler.setStream(terminal_stream)
+    before = BrianLogger.console_handler.setStream(terminal_stream)
     try:
         with LogFile(tmp_path, lines.append) as log:
             log("[1/2] mapping")
