@@ -148,7 +148,7 @@ def _brian_console_on_an_open_stream():
     logger = sys.modules.get("brian2.utils.logger")
     handler = getattr(getattr(logger, "BrianLogger", None), "console_handler", None)
     if handler is not None and getattr(handler.stream, "closed", False):
-        handler.setStream(sys.stderr)
+        handler.stream = sys.stderr      # not setStream: it flushes the closed one first
 
 
 @pytest.fixture(scope="session")
