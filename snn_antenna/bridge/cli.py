@@ -270,6 +270,7 @@ def replay_overrides(args) -> list[str]:
 
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
+    from .controls import recorded_events
     from .replay import ReplaySource
 
     if args.view and not args.network:
@@ -278,11 +279,17 @@ def cmd_replay(args) -> int:
         from .online import LiveDisplay, build_online, run_online
 
         parts = build_online(args.network, replay_overrides(args))
+        # The live run's control changes, at the samples they applied at.
+        scheduled = recorded_events(args.recording)
+        if scheduled:
+            print(f"replay: applying the recording's {len(scheduled)} control change(s) "
+                  "(events.jsonl)", file=sys.stderr)
         with live_view(args, parts) as view:        # None without --view
             source = ReplaySource(args.recording, realtime=args.realtime).start()
             report = run_online(source, parts, no_data_timeout_s=1e9,
                                 display=LiveDisplay(sys.stdout), handlers=[view] if view else [],
-                                view=view)
+                                view=view, controls=live_controls(parts, view,
+                                                                  scheduled=scheduled))
         if view is not None:            # stopped by now: its process counted what it dropped
             report["view"] = view.summary()
         print(json.dumps(report, indent=1))
@@ -327,11 +334,22 @@ def cmd_stream(args) -> int:
             args, {"network": str(args.network), "set": args.set}) as (source, recorder, stop):
         report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
-                            stop=stop, display=LiveDisplay(sys.stdout), view=view)
+                            stop=stop, display=LiveDisplay(sys.stdout), view=view,
+                            controls=live_controls(parts, view, journal=recorder.note_event))
     if view is not None:                # stopped by now: its process counted what it dropped
         report["view"] = view.summary()
     print(json.dumps(report, indent=1) if args.json else stream_summary(report, args.out))
     return 0
+
+
+def live_controls(parts, view, **kwargs):
+    """Th and the rate-map window under the page's hands (bridge/controls.py): requests from
+    the view, changes shown on it; ``journal``/``scheduled`` as the command records or replays."""
+    from .controls import Controls
+    from .protocol import BOARD_RATE_HZ
+
+    return Controls(parts, requests=view.requests if view else None,
+                    on_applied=view.applied if view else None, rate_hz=BOARD_RATE_HZ, **kwargs)
 
 
 def stream_summary(report: dict, out) -> str:
