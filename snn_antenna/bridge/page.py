@@ -154,7 +154,8 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         x_range.start, x_range.end = end - view.history_s, end
 
     def update() -> None:
-        html = counters_html(view) + controls_html(view)
+        view.pull()                 # the frames in transit now, not at the next drain tick
+        html = counters_html(view)
         if html != shown["counters"]:
             shown["counters"] = counters.text = html
         if mode["paused"]:
@@ -180,7 +181,7 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         if marks != shown["contacts"]:
             shown["contacts"] = marks
             sources["contacts"].data = {"t": [m[0] for m in marks], "label": [m[1] for m in marks]}
-        html = panels_html(view)
+        html = panels_html(view) + controls_html(view)
         if html != shown["panels"]:
             shown["panels"] = panels.text = html
         end = max(view.t_s, view.history_s)

@@ -98,6 +98,7 @@ class ViewHistory:
         self.controls: list[dict] = []              # changes the pipeline applied
         self.requested: list[dict] = []             # asked from a page, not applied yet
         self.requests = None                        # the queue to the pipeline (serve sets it)
+        self.inbox = None                           # the frames from it (serve sets it)
         self.contacts: list[dict] = []
         self.open_onset_s: float | None = None
         self.realtime_factor = self.latency_ms = None
@@ -122,6 +123,11 @@ class ViewHistory:
                 return taken
             self.take(frame)
             taken += 1
+
+    def pull(self) -> None:
+        """Take the frames waiting in the inbox, if this history has one."""
+        if self.inbox is not None:
+            self.drain(self.inbox)
 
     def take(self, frame: dict) -> None:
         self.dropped += frame["seq"] - self.next_seq       # the frames between never came
@@ -283,7 +289,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     asyncio.set_event_loop(asyncio.new_event_loop())
     loop = IOLoop.current()
     history = ViewHistory(config)
-    history.requests = requests
+    history.requests, history.inbox = requests, inbox
     try:
         sockets, port = bind_sockets(config.host, config.port)
     except OSError as exc:
