@@ -169,3 +169,9 @@ def test_a_paint_report_counts_from_the_arrival_and_trusts_the_page_clock_only_b
     history.painted(2.0, 100.1, now=100.2)          # a window never shown: ignored
     assert np.allclose(history.display_delays_ms, [50.0, 0.0, 200.0])
     assert history.display_latency()["n"] == 3
+
+
+@pytest.mark.parametrize("name", ["robot.toml", "exploration.toml"])
+def test_a_composed_network_is_refused_by_the_live_path_with_the_reason(name):
+    with pytest.raises(SpecError, match=r"network = .*runs only the resonator array.*gate"):
+        build_online(NETWORK.parent / name)

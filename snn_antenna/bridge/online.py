@@ -63,6 +63,11 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ) -> 
                                               "networks/resonator_array.toml")
     raw = specs.load(path)
     raw.pop("seed", None)
+    if "parts" in raw:                  # a composed network (robot.toml, exploration.toml)
+        raise SpecError("network", str(path), f"a resonator-array spec such as "
+                        f"networks/live.toml: the live path runs only the resonator array, "
+                        f"and this spec composes {raw['parts']} (the board streams the antenna "
+                        f"only: no speed command for a gate, CPG or control layer)")
     spec = ({k: raw.get(k, {}) for k in SECTIONS} if isinstance(raw.get("network"), dict)
             else {"network": raw, "preprocess": {}, "readout": {}})
     for item in overrides:
