@@ -174,7 +174,9 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         if cursor["windows"] != view.windows.total:
             cursor["windows"] = view.windows.total
             end = max(view.t_s, view.history_s)
-            sources["map"].data = _rate_image(span(view.windows.rows, end), True)
+            sources["map"].data = image = _rate_image(span(view.windows.rows, end), True)
+            if image["t_last"]:
+                view.sending(image["t_last"][0])
             if mapper.high != view.peak_rate_hz:
                 mapper.high = view.peak_rate_hz
         marks = contact_marks(view)

@@ -95,6 +95,10 @@ class ViewHistory:
         self.base_window_s = self.window_s
         self.arrivals: dict[float, float] = {}      # window start → host arrival (live only)
         self.display_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
+        # Of each delay, the part until a page's update left this process (the rest is the
+        # websocket and the browser drawing): where the time goes.
+        self.sent: dict[float, float] = {}          # window start → first sent to a page
+        self.server_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
         self.controls: list[dict] = []              # changes the pipeline applied
         self.requested: list[dict] = []             # asked from a page, not applied yet
         self.requests = None                        # the queue to the pipeline (serve sets it)
@@ -154,7 +158,9 @@ class ViewHistory:
             if arrived is not None:
                 self.arrivals[round(float(t_s), 6)] = arrived
                 while len(self.arrivals) > self.windows.capacity:
-                    self.arrivals.pop(next(iter(self.arrivals)))
+                    oldest = next(iter(self.arrivals))
+                    del self.arrivals[oldest]
+                    self.sent.pop(oldest, None)
             self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
             self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
             self.latency_ms = latency_ms
@@ -201,13 +207,22 @@ class ViewHistory:
         painted = min(max(float(painted_unix_s), arrived), now) \
             if math.isfinite(painted_unix_s) else now
         self.display_delays_ms.append((painted - arrived) * 1e3)
+        sent = self.sent.get(round(float(t_s), 6))
+        if sent is not None:
+            self.server_delays_ms.append((sent - arrived) * 1e3)
+
+    def sending(self, t_s: float) -> None:
+        """A page's update carries the rate-map column of the window starting at ``t_s``."""
+        self.sent.setdefault(round(float(t_s), 6), time.time())
 
     def display_latency(self) -> dict:
-        delays = np.asarray(self.display_delays_ms)
+        delays, server = np.asarray(self.display_delays_ms), np.asarray(self.server_delays_ms)
         if not len(delays):
-            return {"last": None, "median": None, "p95": None, "n": 0}
+            return {"last": None, "median": None, "p95": None, "n": 0, "sent_p95": None}
         return {"last": round(float(delays[-1]), 2), "median": round(float(np.median(delays)), 2),
-                "p95": round(float(np.percentile(delays, 95)), 2), "n": int(len(delays))}
+                "p95": round(float(np.percentile(delays, 95)), 2), "n": int(len(delays)),
+                # arrival → the page's update leaving this process (the rest: websocket, paint)
+                "sent_p95": round(float(np.percentile(server, 95)), 2) if len(server) else None}
 
     def ended(self, published: int) -> None:
         """The pipeline published ``published`` frames in all: those never taken are dropped."""
