@@ -99,8 +99,13 @@ def two_contacts(tmp_path_factory):
     return record_counts(tmp_path_factory.mktemp("controls") / "rec", counts)
 
 
-def _replay(recording, scheduled=(), chunk_bytes=800, view=None):
-    parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
+def _parts():
+    return build_online(NETWORK, ["preprocess.threshold=0.04"])
+
+
+def _replay(recording, scheduled=(), chunk_bytes=800, view=None, parts=None):
+    """A replay flat out; with ``view``, a LiveView built on ``parts`` (it taps their coder)."""
+    parts = parts or _parts()
     controls = Controls(parts, scheduled=scheduled, rate_hz=1000.0,
                         on_applied=view.applied if view else None)
     return run_online(ReplaySource(recording, chunk_bytes=chunk_bytes).start(), parts,
@@ -125,15 +130,25 @@ def test_a_journaled_th_change_replays_to_the_same_contacts(two_contacts, tmp_pa
     assert after["contacts"] == before["contacts"][:1]
     assert [(e["sample"], e["was"], e["by"]) for e in after["controls"]] == \
         [(2500, 0.04, "replay")]
-    # However the port chunked the bytes, the change lands on the same sample.
-    assert _replay(two_contacts, events, chunk_bytes=333)["contacts"] == after["contacts"]
+    # However the port chunked the bytes, the change lands on the same sample: the coder's
+    # Th (as the view taps it) is the old one up to sample 2499, the new one from 2500.
+    parts = _parts()
+    view = LiveView(parts)
+    assert _replay(two_contacts, events, chunk_bytes=333, view=view, parts=parts)["contacts"] \
+        == after["contacts"]
+    view.flush()
+    history = ViewHistory(view.config)
+    while history.received < view.published:
+        history.take(view._inbox.get(timeout=5))
+    t, th = history.coded.rows[:, 0], history.coded.rows[:, 2]
+    assert set(th[t < 2.5]) == {0.04} and set(th[t >= 2.5]) == {5.0}
 
 
 def test_a_saved_view_reads_back_as_the_rate_map_the_read_out_takes(two_contacts, tmp_path):
     parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
     view = LiveView(parts, save_dir=str(tmp_path / "views"))
     events = [{"sample": 2000, "field": "windows", "value": 2}]
-    _replay(two_contacts, events, view=view)
+    _replay(two_contacts, events, view=view, parts=parts)
     view.flush()
     history = ViewHistory(view.config)
     while history.received < view.published:

@@ -64,6 +64,7 @@ def model(name: str, attr: str) -> str:
     return f"Bokeh.documents[0].get_model_by_name('{name}').{attr}"
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
 def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
     playwright = pytest.importorskip("playwright.sync_api")

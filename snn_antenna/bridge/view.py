@@ -76,7 +76,7 @@ def live_view(args, parts):
     from .hostguard import LOOPBACK   # with tornado, loaded only when a view is asked for
 
     out = getattr(args, "out", None)
-    save_dir = args.view_save or (Path(out) / "views" if out else Path("out") / "views")
+    save_dir = getattr(args, "view_save", None) or (Path(out) / "views" if out else Path("out") / "views")
     view = LiveView(parts, host=args.view_host, port=args.view_port, save_dir=str(save_dir))
     url = view.start()
     if args.view_host not in LOOPBACK:
