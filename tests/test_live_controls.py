@@ -18,7 +18,7 @@ from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.recorder import EVENTS_FILE, Recorder, record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.saved_view import load_view, save_view
-from snn_antenna.bridge.view import LiveView
+from snn_antenna.bridge.view import LiveView, _tap_coder
 from snn_antenna.bridge.view_process import ViewHistory
 from snn_antenna.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
@@ -131,17 +131,15 @@ def test_a_journaled_th_change_replays_to_the_same_contacts(two_contacts, tmp_pa
     assert [(e["sample"], e["was"], e["by"]) for e in after["controls"]] == \
         [(2500, 0.04, "replay")]
     # However the port chunked the bytes, the change lands on the same sample: the coder's
-    # Th (as the view taps it) is the old one up to sample 2499, the new one from 2500.
+    # Th is the old one up to sample 2499, the new one from 2500, sample by sample.
     parts = _parts()
-    view = LiveView(parts)
-    assert _replay(two_contacts, events, chunk_bytes=333, view=view, parts=parts)["contacts"] \
-        == after["contacts"]
-    view.flush()
-    history = ViewHistory(view.config)
-    while history.received < view.published:
-        history.take(view._inbox.get(timeout=5))
-    t, th = history.coded.rows[:, 0], history.coded.rows[:, 2]
-    assert set(th[t < 2.5]) == {0.04} and set(th[t >= 2.5]) == {5.0}
+    th_per_sample = []
+    _tap_coder(parts.chain.named_steps["coder"],
+               lambda X, th, coded: th_per_sample.append(np.broadcast_to(th, (len(coded),))))
+    assert _replay(two_contacts, events, chunk_bytes=333, parts=parts)["contacts"] == \
+        after["contacts"]
+    th = np.concatenate(th_per_sample)
+    assert set(th[:2500]) == {0.04} and set(th[2500:]) == {5.0}
 
 
 def test_a_saved_view_reads_back_as_the_rate_map_the_read_out_takes(two_contacts, tmp_path):
