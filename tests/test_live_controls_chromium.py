@@ -101,9 +101,9 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
             page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=30_000)
             page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
             page.get_by_role("button", name="Apply Th").click()
-            page.get_by_text("asked Th 5 g").wait_for(timeout=5_000)
+            page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
             page.get_by_role("button", name="Pause display").click()
-            page.get_by_text("display paused").wait_for(timeout=5_000)
+            page.get_by_text("display paused").wait_for(timeout=30_000)
             paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
             paused_end = page.evaluate("() => " + model("time", "end"))
             second_half.set()
@@ -113,10 +113,10 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
             still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
             page.evaluate("() => { " + model("scrub", "value = 1.0") + " }")    # 1 s back
             page.wait_for_function(f"() => {model('time', 'end')} <= {paused_end} - 0.99",
-                                   timeout=5_000)
+                                   timeout=30_000)
             page.get_by_role("button", name="Resume display").click()
             page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
-                                   timeout=10_000)
+                                   timeout=30_000)
             time.sleep(0.3)             # the last windows drawn
             shot.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(shot), full_page=True)
