@@ -8,9 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
-import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,7 +19,7 @@ from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarde
 from .protocol import WIRE_FORMATS
 from .recorder import COUNT_FIELDS
 from .emulate_cmd import cmd_emulate
-from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
+from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
 from .view import add_view_args, live_view
 
 EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
@@ -152,14 +150,6 @@ def _guarded(command):
     run.__name__ = command.__name__
     run.__doc__ = command.__doc__
     return run
-
-
-def stop_on_signals() -> threading.Event:
-    """Ctrl-C and SIGTERM end a recording cleanly (data flushed, meta.json complete)."""
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    return stop
 
 
 def open_source(args) -> SerialSource:

@@ -9,12 +9,11 @@ import time
 from pathlib import Path
 
 from ..errors import SpecError
-from .source import PortError
+from .source import PortError, stop_on_signals
 
 
 def cmd_emulate(args) -> int:
     """Emulate the board: stream a stimulus (labelled in ``--log``) to a pty or a port."""
-    from .cli import stop_on_signals     # the commands' one way to end on Ctrl-C/SIGTERM
     from .emulator import Emulator, FaultPlan
     from .links import PeerGone
     from .stimulus import played_events, stimulus_recording
@@ -68,7 +67,6 @@ def cmd_emulate(args) -> int:
 
 def _emulate_firmware(args) -> int:
     """``emulate --pty --firmware DIR``: the firmware in simavr streams the stimulus."""
-    from .cli import stop_on_signals
     from .firmware_loop import check_args, emulate_firmware
 
     check_args(args)
