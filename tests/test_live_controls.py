@@ -6,6 +6,7 @@ finds what the live run found; the view's paint reports and its saved views
 import json
 import math
 import queue
+import time
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from hypothesis import strategies as st
 from snn_antenna.bridge.controls import (MAX_WINDOWS, TH_MAX_G, Change, Controls,
                                          parse_control, recorded_events)
 from snn_antenna.bridge.online import build_online, run_online
+from snn_antenna.bridge.page import build_page
 from snn_antenna.bridge.recorder import EVENTS_FILE, Recorder, record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.saved_view import load_view, save_view
@@ -188,3 +190,36 @@ def test_a_paint_report_counts_from_the_arrival_and_trusts_the_page_clock_only_b
 def test_a_composed_network_is_refused_by_the_live_path_with_the_reason(name):
     with pytest.raises(SpecError, match=r"network = .*runs only the resonator array.*gate"):
         build_online(NETWORK.parent / name)
+
+
+def _frame(seq: int, t_s: float) -> dict:
+    """A view frame of 100 samples and one window starting at ``t_s`` (arrived now)."""
+    first = int(round(t_s * 1000))
+    samples = np.column_stack([np.arange(first, first + 100), np.full((100, 2), 2048)])
+    return {"seq": seq, "counts": {}, "xy": (first, samples.astype(float)),
+            "coded": (first, np.zeros((100, 3))), "events": [],
+            "windows": [(t_s, np.ones(24), 1.0, 1.0, {}, 1.0, 0.1)]}
+
+
+def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does():
+    """Backpressure per page: updates wait (their points gather) while the browser has not
+    painted the column sent last, so a slow browser does not queue up seconds of updates."""
+    from bokeh.document import Document
+    from bokeh.models import CustomJS
+
+    history = ViewHistory(LiveView(_parts()).config)
+    doc = Document()
+    build_page(history, doc)
+    (callback,) = doc.session_callbacks
+    update = callback.callback
+    token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
+    xy = doc.get_model_by_name("xy")
+    history.take(_frame(0, 0.0))
+    update()
+    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t_last"] == [0.0]
+    history.take(_frame(1, 0.1))
+    update()                                        # column 0.0 not painted yet: waits
+    assert len(xy.data["t"]) == 25
+    history.painted(0.0, time.time(), page=token)
+    update()
+    assert len(xy.data["t"]) == 50 and doc.get_model_by_name("map").data["t_last"] == [0.1]

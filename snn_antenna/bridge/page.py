@@ -8,9 +8,16 @@ pipeline nothing.
 """
 from __future__ import annotations
 
+import time
+import uuid
+
 import numpy as np
 
 PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
+# A page that has not painted the last column sent waits (its points gather) rather than
+# queue more updates than its browser draws; one that never reports (a hidden tab does not
+# paint) still gets one this often.
+UNPAINTED_WAIT_S = 1.0
 CONTACT_COLOUR = "#d62728"
 PANELS_WIDTH = 230
 
@@ -50,10 +57,11 @@ def build_page(view, doc) -> None:
     panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided")
     plots = column(antenna, coded, rate_map, sizing_mode="stretch_width")
     # This page's own mode: paused (its plots stop following) and how far back it scrubs.
-    mode = {"paused": False, "frozen_end": None}
+    mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
     update, reload = _updater(view, sources, mapper, counters, panels, x_range, mode)
     bar, status = control_widgets(view, mode, reload, x_range)
-    sources["map"].js_on_change("data", CustomJS(args={"source": sources["map"]},
+    sources["map"].js_on_change("data", CustomJS(args={"source": sources["map"],
+                                                       "page": mode["page"]},
                                                  code=PAINTED_JS))
     doc.add_root(column(counters, bar, status, row(plots, panels, sizing_mode="stretch_width"),
                         sizing_mode="stretch_width"))
@@ -135,12 +143,12 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
     latest, and follow it again)."""
     from .page_controls import controls_html
 
-    cursor = {"xy": 0, "coded": 0, "windows": 0}
+    cursor = {"xy": 0, "coded": 0, "windows": 0, "sent_t": None, "sent_at": 0.0}
     shown = {"counters": None, "contacts": None, "panels": None}
     rollover = view.shown_points
 
     def span(rows, end):
-        return rows[(rows[:, 0] > end - view.history_s) & (rows[:, 0] <= end)]
+        return rows[(rows[:, 0] >= end - view.history_s) & (rows[:, 0] <= end)]
 
     def reload(end_s=None) -> None:
         live = end_s is None
@@ -149,16 +157,24 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         sources["xy"].data = {"t": xy[:, 0], "x": xy[:, 1], "y": xy[:, 2]}
         sources["coded"].data = {"t": coded[:, 0], "signal": coded[:, 1], "th": coded[:, 2],
                                  "neg_th": -coded[:, 2], "coded": coded[:, 3]}
-        sources["map"].data = _rate_image(span(view.windows.rows, end), live)
+        sources["map"].data = image = _rate_image(span(view.windows.rows, end), live)
+        if live and image["t_last"]:
+            cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
         cursor.update(xy=view.xy.total, coded=view.coded.total, windows=view.windows.total)
         x_range.start, x_range.end = end - view.history_s, end
+
+    def behind() -> bool:
+        """The browser has not painted the last column sent to it yet (for a while)."""
+        return (cursor["sent_t"] is not None
+                and view.painted_by.get(mode["page"]) != round(cursor["sent_t"], 6)
+                and time.monotonic() - cursor["sent_at"] < UNPAINTED_WAIT_S)
 
     def update() -> None:
         view.pull()                 # the frames in transit now, not at the next drain tick
         html = counters_html(view)
         if html != shown["counters"]:
             shown["counters"] = counters.text = html
-        if mode["paused"]:
+        if mode["paused"] or behind():
             return
         new_xy = view.xy.since(cursor["xy"])
         cursor["xy"] = view.xy.total
@@ -177,6 +193,7 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
             sources["map"].data = image = _rate_image(span(view.windows.rows, end), True)
             if image["t_last"]:
                 view.sending(image["t_last"][0])
+                cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
             if mapper.high != view.peak_rate_hz:
                 mapper.high = view.peak_rate_hz
         marks = contact_marks(view)

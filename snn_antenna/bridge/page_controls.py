@@ -22,7 +22,8 @@ if (!d.live || !d.live.length || !d.live[0]) { return; }
 const t = d.t_last[0];
 requestAnimationFrame(() => setTimeout(() => {
   fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
-                    body: JSON.stringify({t_s: t, painted_unix_s: Date.now() / 1000})})
+                    body: JSON.stringify({t_s: t, painted_unix_s: Date.now() / 1000,
+                                          page: page})})
     .catch(() => {});
 }, 0));
 """

@@ -99,6 +99,7 @@ class ViewHistory:
         # websocket and the browser drawing): where the time goes.
         self.sent: dict[float, float] = {}          # window start → first sent to a page
         self.server_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
+        self.painted_by: dict[str, float] = {}      # page → the latest column it painted
         self.controls: list[dict] = []              # changes the pipeline applied
         self.requested: list[dict] = []             # asked from a page, not applied yet
         self.requests = None                        # the queue to the pipeline (serve sets it)
@@ -196,10 +197,13 @@ class ViewHistory:
         self.requested.append(asked)
         return asked
 
-    def painted(self, t_s: float, painted_unix_s: float, now: float | None = None) -> None:
+    def painted(self, t_s: float, painted_unix_s: float, now: float | None = None,
+                page: str | None = None) -> None:
         """A page painted the rate-map column of the window starting at ``t_s`` (its clock):
         the delay from the arrival of that window's last sample. The page's clock is
         trusted only between arrival and now (this host's clock)."""
+        if page is not None and len(self.painted_by) < 1000:
+            self.painted_by[page] = round(float(t_s), 6)
         arrived = self.arrivals.get(round(float(t_s), 6))
         if arrived is None:
             return
@@ -392,7 +396,8 @@ def _handlers() -> dict:
         def post(self) -> None:
             try:
                 report = json.loads(self.request.body[:200])
-                self.history.painted(float(report["t_s"]), float(report["painted_unix_s"]))
+                self.history.painted(float(report["t_s"]), float(report["painted_unix_s"]),
+                                     page=str(report.get("page"))[:40])
             except (ValueError, KeyError, TypeError):
                 self.reply(400, {"error": "expected {t_s, painted_unix_s}"})
                 return
