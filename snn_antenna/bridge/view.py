@@ -14,7 +14,10 @@ rate-map window, contact events) and every 50 ms hands one frame to a bounded
 ``multiprocessing`` queue with ``put_nowait``: it never waits. When the view process falls
 behind (or is stopped), the frames it cannot take are dropped and counted by it
 (``view_frames_dropped`` on the page and in the report), never a sample, which the recorder has
-already written. The page itself is ``bridge/page.py``.
+already written. The page itself is ``bridge/page.py``; its controls (pause, scrub, Th, the
+rate-map window, save view) are ``bridge/page_controls.py``. A change of Th or window travels the
+other way through a second bounded queue (``LiveView.requests``), which the pipeline reads
+without waiting (bridge/controls.py).
 """
 from __future__ import annotations
 

@@ -7,6 +7,10 @@ and serialises new points ten times a second). In the pipeline's process that wo
 stream itself. Here it can only slow the view: the pipeline never waits for this process, and
 frames the view could not take are counted here (``view_frames_dropped``), never a sample.
 
+Besides the pages and ``/state.json``, it answers the pages' POSTs: ``/control`` (checked
+here, then queued to the pipeline), ``/painted`` (the display delay) and ``/save``
+(bridge/saved_view.py).
+
 Started with the ``spawn`` context, so this module and what it imports are all the process
 holds: no Brian2, no port, no recorder.
 """
