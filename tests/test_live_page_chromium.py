@@ -84,6 +84,8 @@ class FakePipeline(threading.Thread):
         except queue.Empty:
             return
         self.asked.append(change)
+        if change.field != "th_g":                  # a window change: asked, that is all here
+            return
         was, self.th = self.th, change.value
         self.view.applied({"sample": n, "t_s": n / 1000, "field": change.field,
                            "value": change.value, "shown": {"th_g": change.value},
@@ -112,6 +114,13 @@ def test_the_page_draws_takes_th_pauses_reports_paints_and_saves(tmp_path):
             page.get_by_label("Th (g)").fill("0.2")
             page.get_by_role("button", name="Apply Th").click()
             page.get_by_text("0.04 → 0.2 g").first.wait_for(timeout=30_000)
+            # A bad value is refused on the page, naming the field, the value and the range.
+            page.get_by_label("rate-map window (s)").fill("0.15")
+            page.get_by_role("button", name="Apply window").click()
+            page.get_by_text("window_s = 0.15 is not accepted").wait_for(timeout=30_000)
+            page.get_by_label("rate-map window (s)").fill("0.2")
+            page.get_by_role("button", name="Apply window").click()
+            page.get_by_text("asked window 0.2 s").wait_for(timeout=30_000)
             page.get_by_role("button", name="Pause display").click()
             page.get_by_text("display paused").wait_for(timeout=30_000)
             paused_at = page.evaluate(latest)
@@ -129,7 +138,7 @@ def test_the_page_draws_takes_th_pauses_reports_paints_and_saves(tmp_path):
         pipeline.stop.set()
         pipeline.join(5)
         view.stop()
-    assert [c.value for c in pipeline.asked] == [0.2]
+    assert [(c.field, c.value) for c in pipeline.asked] == [("th_g", 0.2), ("windows", 2.0)]
     assert final["th_g"] == 0.2 and final["controls"]["applied"][0]["by"] == "page"
     assert still == paused_at and t_later > t_paused + 0.3      # paused: the stream went on
     assert shown > paused_at
