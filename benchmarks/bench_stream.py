@@ -3,6 +3,7 @@
     python benchmarks/bench_stream.py [--network networks/live.toml] [--seconds 8]
                                       [--set network.dt_ms=0.25 ...]
                                       [--baseline networks/resonator_array.toml] [--view]
+                                      [--browsers 0,1,3]
 
 1. Throughput: the emulator (its own process) writes a robot scene (contacts at 19 and 27 cm)
    into a pseudo-terminal as fast as the reader takes it; serial source → decoder →
@@ -28,6 +29,12 @@
    ``GET /`` twice a second (a tab reloading); the wall-clock real-time factor, the latency
    (median, p95), the samples lost or processed late and the view's dropped frames are printed
    side by side.
+5. ``--browsers 0,1,3``: for each number of headless Chromium pages open on the live view, a
+   live run at 1 kHz (wall-clock real-time factor, sample-to-rate-map latency, and the display
+   latency: from the arrival of a window's last sample on the host to its rate-map column
+   painted on a page, as the pages report it to ``/painted``, all pages together), then a
+   throughput run (compute-only real-time factor) with the same pages open. "of it sent" is
+   the part until the page's update left the view process (the rest: websocket and drawing).
 """
 from __future__ import annotations
 
@@ -97,6 +104,9 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=3, help="runs each, with --view")
     ap.add_argument("--view-seconds", type=float, default=30.0,
                     help="seconds of input per run, with --view (longer runs, steadier ratio)")
+    ap.add_argument("--browsers", default=None, metavar="N,N,...",
+                    help="live and throughput runs with this many headless Chromium pages "
+                         "open on the view, e.g. 0,1,3")
     ap.add_argument("--reload", action="store_true",
                     help="also compare live runs with the view, without / with a client "
                          "loading the page twice a second")
@@ -133,7 +143,51 @@ def main(argv=None) -> int:
         compare_view(args, overrides)
     if args.reload:
         compare_reload(args, overrides)
+    if args.browsers:
+        compare_browsers(args, overrides, [int(n) for n in args.browsers.split(",")])
     return 0
+
+
+def compare_browsers(args, overrides, counts: list[int]) -> None:
+    """With 0, 1, 3... pages open: the live run's real-time factor and latencies, the display
+    latency the pages report, and the throughput."""
+    from snn_antenna.bridge.view import LiveView
+
+    rows = []
+    for n in counts:
+        parts = build_online(args.network, overrides)
+        warm_up(parts)
+        view = LiveView(parts, port=0)
+        url = view.start()
+        pages = [OpenPage(url) for _ in range(n)]
+        try:
+            deadline = time.monotonic() + 90
+            while _state(url)["sessions"] < n and time.monotonic() < deadline:
+                time.sleep(0.2)
+            time.sleep(2.0)                     # the pages drew once and follow the stream
+            live = stream_from_emulator(parts, args.view_seconds, False, view)
+            state = _state(url)
+            fast = stream_from_emulator(parts, args.seconds, True, view)
+        finally:
+            for page in pages:
+                page.close()
+            summary = view.stop()
+        rows.append((n, state["sessions"], live, state["display_latency_ms"], fast, summary))
+    print(f"live view with browsers open ({args.view_seconds:g} s live at 1 kHz, then "
+          f"{args.seconds:g} s flat out; load {os.getloadavg()[0]:.1f}):")
+    print(f"  {'pages':>5s}  {'rt factor live':>14s}  {'throughput':>10s}  "
+          f"{'rate map p95':>12s}  {'on screen median':>16s}  {'p95':>8s}  {'paints':>6s}  "
+          f"{'of it sent p95':>14s}  {'frames dropped':>14s}")
+    for n, sessions, live, shown, fast, summary in rows:
+        steady = live["steady_latency_ms"]
+        p95 = f"{steady['p95']:.1f} ms" if steady["windows"] else "behind"
+        screen = ((f"{shown['median']:.0f} ms", f"{shown['p95']:.0f} ms") if shown["n"]
+                  else ("–", "–"))
+        sent = "–" if shown.get("sent_p95") is None else f"{shown['sent_p95']:.0f} ms"
+        print(f"  {sessions:>2d}/{n:<2d}  {live['realtime_factor']:13.2f}x  "
+              f"{fast['compute_realtime_factor']:9.1f}x  {p95:>12s}  {screen[0]:>16s}  "
+              f"{screen[1]:>8s}  {shown['n']:>6d}  {sent:>14s}  "
+              f"{summary['frames_dropped']!s:>5s} of {summary['frames_published']:<6d}")
 
 
 def compare_baseline(args, overrides, fast) -> None:

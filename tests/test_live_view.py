@@ -268,6 +268,9 @@ DRAWN_CANVASES = """() => {
 }"""
 
 
+# Slow: the default suite's Chromium test is tests/test_live_page_chromium.py (the page drawn
+# and driven, no Brian2); the end-to-end one is tests/test_live_controls_chromium.py.
+@pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
 def test_chromium_draws_the_live_page_while_the_emulator_streams(tmp_path, scene_counts):
     playwright = pytest.importorskip("playwright.sync_api")

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import signal
 import sys
-import threading
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -21,7 +18,8 @@ from ..bounds import option
 from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .protocol import WIRE_FORMATS
 from .recorder import COUNT_FIELDS
-from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source
+from .emulate_cmd import cmd_emulate
+from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
 from .view import add_view_args, live_view
 
 EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
@@ -82,7 +80,7 @@ def add_subcommands(subparsers) -> None:
                    help="run the board's own firmware instead, in simavr (with --pty): DIR is "
                         "its folder (firmware/antenna_stream), built with make and fed the "
                         "stimulus's counts; prints the simulated-to-real-time ratio")
-    p.set_defaults(func=cmd_emulate)
+    p.set_defaults(func=_guarded(cmd_emulate))
 
     p = subparsers.add_parser("stream", help="run the network live on a serial stream")
     _port_args(p)
@@ -152,14 +150,6 @@ def _guarded(command):
     run.__name__ = command.__name__
     run.__doc__ = command.__doc__
     return run
-
-
-def stop_on_signals() -> threading.Event:
-    """Ctrl-C and SIGTERM end a recording cleanly (data flushed, meta.json complete)."""
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    return stop
 
 
 def open_source(args) -> SerialSource:
@@ -270,6 +260,7 @@ def replay_overrides(args) -> list[str]:
 
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
+    from .controls import recorded_events
     from .replay import ReplaySource
 
     if args.view and not args.network:
@@ -278,11 +269,17 @@ def cmd_replay(args) -> int:
         from .online import LiveDisplay, build_online, run_online
 
         parts = build_online(args.network, replay_overrides(args))
+        # The live run's control changes, at the samples they applied at.
+        scheduled = recorded_events(args.recording)
+        if scheduled:
+            print(f"replay: applying the recording's {len(scheduled)} control change(s) "
+                  "(events.jsonl)", file=sys.stderr)
         with live_view(args, parts) as view:        # None without --view
             source = ReplaySource(args.recording, realtime=args.realtime).start()
             report = run_online(source, parts, no_data_timeout_s=1e9,
                                 display=LiveDisplay(sys.stdout), handlers=[view] if view else [],
-                                view=view)
+                                view=view, controls=live_controls(parts, view,
+                                                                  scheduled=scheduled))
         if view is not None:            # stopped by now: its process counted what it dropped
             report["view"] = view.summary()
         print(json.dumps(report, indent=1))
@@ -300,91 +297,6 @@ def cmd_replay(args) -> int:
     return 0
 
 
-@_guarded
-def cmd_emulate(args) -> int:
-    """Emulate the board: stream a stimulus (labelled in ``--log``) to a pty or a port."""
-    from .emulator import Emulator, FaultPlan
-    from .links import PeerGone
-    from .stimulus import played_events, stimulus_recording
-
-    if args.firmware:
-        return _emulate_firmware(args)
-    # Everything checked before the pty exists or a byte is written.
-    plan = FaultPlan.parse(args.faults)
-    if args.link and not args.pty:
-        raise SpecError("link", args.link, "only with --pty")
-    if args.frames is not None and not args.frames > 0:
-        raise SpecError("frames", args.frames, "a number of frames > 0")
-    if plan.disconnect and not args.link:
-        raise SpecError("faults.disconnect", plan.disconnect,
-                        "0 unless the emulator owns a pty with a stable --link path")
-    if args.log:
-        _check_output_file("log", args.log, args.force)
-    stimulus = stimulus_recording(args.stimulus, args.seed, args.frames)
-    emulator = Emulator(stimulus.samples, rate_hz=stimulus.rate_hz, faults=plan, seed=args.seed,
-                        wire_format=args.format)
-    n_frames = args.frames or len(emulator.counts)
-    emulator.schedule(n_frames)
-    link = _emulator_link(args)
-    print(link.path, flush=True)
-    t0 = time.monotonic()
-    ended = None
-    try:
-        emulator.run(link, n_frames, realtime=not args.fast, stop=stop_on_signals(),
-                     peer_timeout_s=args.peer_timeout)
-    except PeerGone as exc:
-        ended = f"emulator stopped: {exc}"
-    except OSError as exc:             # the device went away under us (pyserial's errors too)
-        ended = f"emulator stopped: the port {args.port or link.path} failed: {exc}"
-    finally:
-        link.close()
-        log = emulator.log
-        summary = {"path": link.path, "seconds": round(time.monotonic() - t0, 3),
-                   "frames_written": len(log.written), "injected": log.injected(),
-                   "expected_counts": log.expected_counts(), "stopped": ended,
-                   "faults": [list(f) for f in log.faults],
-                   "events": played_events(stimulus, log.frames_due)}
-        if args.log:                    # whoever stopped first, the log says what was sent
-            from ..files import write_new
-            write_new(args.log, json.dumps(summary, indent=1), force=args.force)
-    if ended:
-        raise PortError(ended)
-    shown = {k: v for k, v in summary.items() if k not in ("faults", "stopped", "events")}
-    print(json.dumps({**shown, "events": len(summary["events"])}), flush=True)
-    return 0
-
-
-def _emulate_firmware(args) -> int:
-    """``emulate --pty --firmware DIR``: the firmware in simavr streams the stimulus."""
-    from .firmware_loop import check_args, emulate_firmware
-
-    check_args(args)
-    if args.log:
-        _check_output_file("log", args.log, args.force)
-    summary = emulate_firmware(args, stop_on_signals(), log=lambda path: print(path, flush=True))
-    if args.log:                        # however the run ended
-        from ..files import write_new
-        write_new(args.log, json.dumps(summary, indent=1), force=args.force)
-    if summary["stopped"]:
-        raise PortError(f"emulator stopped: {summary['stopped']}")
-    print(json.dumps({**{k: v for k, v in summary.items() if k not in ("events", "stopped")},
-                      "events": len(summary["events"])}), flush=True)
-    return 0
-
-
-def _emulator_link(args):
-    """The pty the emulator creates (``--pty``), or the port or URL it writes to."""
-    from .links import PtyLink, SerialLink
-
-    if args.pty:
-        return PtyLink(args.link)
-    try:
-        return SerialLink(args.port)
-    except Exception as exc:       # pyserial's open errors, as for a reader
-        from .source import describe_open_error
-        raise describe_open_error(args.port, exc) from exc
-
-
 def _check_recording_dir(path) -> None:
     """A recording goes into a new or empty folder: never beside (or into) a user's files."""
     from ..outputs import check_writable
@@ -393,20 +305,6 @@ def _check_recording_dir(path) -> None:
     if path.is_dir() and any(path.iterdir()):
         raise SpecError("out", str(path), "a new or empty directory (an existing recording or "
                                           "other files are never written into)")
-
-
-def _check_output_file(name: str, path, force: bool = False) -> None:
-    """A new file in a writable folder; an existing one only with ``--force``; a symlink
-    never (the toolkit does not write through links)."""
-    from ..files import refuse_symlink
-
-    path = Path(path)
-    refuse_symlink(path, "file")
-    if path.is_dir() or not path.parent.is_dir() or not os.access(path.parent, os.W_OK):
-        raise SpecError(name, str(path), "a file path in a folder you can write to")
-    if path.exists() and not force:
-        raise SpecError(name, str(path), "a path that does not exist yet (this file would be "
-                                         "overwritten): choose another, or pass --force")
 
 
 @_guarded
@@ -426,11 +324,22 @@ def cmd_stream(args) -> int:
             args, {"network": str(args.network), "set": args.set}) as (source, recorder, stop):
         report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
-                            stop=stop, display=LiveDisplay(sys.stdout), view=view)
+                            stop=stop, display=LiveDisplay(sys.stdout), view=view,
+                            controls=live_controls(parts, view, journal=recorder.note_event))
     if view is not None:                # stopped by now: its process counted what it dropped
         report["view"] = view.summary()
     print(json.dumps(report, indent=1) if args.json else stream_summary(report, args.out))
     return 0
+
+
+def live_controls(parts, view, **kwargs):
+    """Th and the rate-map window under the page's hands (bridge/controls.py): requests from
+    the view, changes shown on it; ``journal``/``scheduled`` as the command records or replays."""
+    from .controls import Controls
+    from .protocol import BOARD_RATE_HZ
+
+    return Controls(parts, requests=view.requests if view else None,
+                    on_applied=view.applied if view else None, rate_hz=BOARD_RATE_HZ, **kwargs)
 
 
 def stream_summary(report: dict, out) -> str:

@@ -63,6 +63,11 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ) -> 
                                               "networks/resonator_array.toml")
     raw = specs.load(path)
     raw.pop("seed", None)
+    if "parts" in raw:                  # a composed network (robot.toml, exploration.toml)
+        raise SpecError("network", str(path), f"a resonator-array spec such as "
+                        f"networks/live.toml: the live path runs only the resonator array, "
+                        f"and this spec composes {raw['parts']} (the board streams the antenna "
+                        f"only: no speed command for a gate, CPG or control layer)")
     spec = ({k: raw.get(k, {}) for k in SECTIONS} if isinstance(raw.get("network"), dict)
             else {"network": raw, "preprocess": {}, "readout": {}})
     for item in overrides:
@@ -301,9 +306,11 @@ def _rounded(value: float) -> float | None:
 
 def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | None = None,
                no_data_timeout_s: float = 5.0, stop=None, display: LiveDisplay | None = None,
-               calibration_s: float = 1.0, view=None) -> dict:
+               calibration_s: float = 1.0, view=None, controls=None) -> dict:
     """Stream a started source (serial or replay) through the network; returns the report.
-    ``view`` (bridge/view.py's LiveView) is told each window and contact; it only copies."""
+    ``view`` (bridge/view.py's LiveView) is told each window and contact; it only copies.
+    ``controls`` (bridge/controls.py) changes Th and the rate-map window at window boundaries;
+    the report's ``controls`` lists what it applied."""
     if not 0 < calibration_s <= 60:
         raise SpecError("calibration_s", calibration_s, "seconds in (0, 60]")
     loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
@@ -316,27 +323,43 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     if display:
         display.header(neuron_hz)
 
+    summed = {"t_s": None, "counts": None, "n": 0}      # network windows summed so far
+
     def on_window(t_s: float, spike_counts: np.ndarray) -> None:
         # ResonatorArray.stream publishes a window once its last sample has been integrated,
-        # before it asks for the next one.
-        end_s = t_s + parts.window_s
-        arrived = clock.arrival(max(int(round(end_s * BOARD_RATE_HZ)) - 1, 0))
+        # before it asks for the next one. The published window sums ``controls.windows`` of
+        # the network's (one without controls).
+        if summed["n"] == 0:
+            summed["t_s"], summed["counts"] = t_s, spike_counts.astype(float)
+        else:
+            summed["counts"] = summed["counts"] + spike_counts
+        summed["n"] += 1
+        if controls is not None and summed["n"] < controls.windows:
+            return
+        t_s, window_s = summed["t_s"], summed["n"] * parts.window_s
+        rates, summed["n"] = summed["counts"] / window_s, 0
+        end_s = t_s + window_s
+        end_index = int(round(end_s * BOARD_RATE_HZ))
+        arrived = clock.arrival(max(end_index - 1, 0))
         if live:
             report.origin = clock.origin
         latency_ms = report.window_published(end_s, loop.waiting_s, arrived if live else None,
-                                             parts.window_s)
-        rates = spike_counts / parts.window_s
+                                             window_s)
+        tracker.window_s = window_s
         event = tracker.update(t_s, rates)
+        if controls is not None:
+            controls.window_change(end_index)
         report.last_window = (time.perf_counter(), loop.waiting_s, end_s)
         if view is not None:
-            view.window(t_s, rates, event, report.realtime_factor, latency_ms)
+            view.window(t_s, rates, event, report.realtime_factor, latency_ms,
+                        arrived if live else None, window_s)
         if display:
             show(display, event)
             display.window(t_s, rates, neuron_hz, report.realtime_factor, latency_ms)
 
     t0 = report.started = time.perf_counter()
     chunks = coded_chunks(loop, source, CalibratedChain(
-        parts.chain, int(calibration_s * BOARD_RATE_HZ)), clock)
+        parts.chain, int(calibration_s * BOARD_RATE_HZ)), clock, controls)
     stats = parts.array.stream(chunks, BOARD_RATE_HZ, window_s=parts.window_s,
                                on_window=on_window)
     report.wall_s = time.perf_counter() - t0
@@ -351,25 +374,42 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
         if display.tty:
             print(file=display.out)
     report.contacts = [e.as_dict() for e in tracker.estimates]
-    return report.as_dict(parts, source.counts())
+    result = report.as_dict(parts, source.counts())
+    if controls is not None:
+        result["controls"] = controls.events
+    return result
 
 
-def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: ArrivalClock):
+def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: ArrivalClock,
+                 controls=None):
     """The coded input for the network, chunk by chunk, from the source's batches (noting
-    each sample's arrival on ``clock``)."""
+    each sample's arrival on ``clock``); a Th change is applied at its sample index."""
     waiting: list = []
+    pushed = 0                          # samples through the chain so far
     for batch in loop:
         if batch.samples:
             waiting += batch.samples
             clock.add(len(batch.samples), batch.host_time_s)
+        if controls is not None:
+            controls.poll(pushed, chain.n_calibration)
         # A live port delivers a frame or two per read; the chain costs the same for one
         # sample as for a hundred, so take everything already queued in one go.
         if not waiting or source.pending():
             continue
-        coded = chain.push(np.asarray(waiting, dtype=float)[:, 1:])
+        counts = np.asarray(waiting, dtype=float)[:, 1:]
         waiting = []
-        if coded is not None:
-            yield coded
+        cuts = controls.due(pushed, pushed + len(counts)) if controls else []
+        pieces, start = [], 0
+        for stop, item in [(c[0] - pushed, c) for c in cuts] + [(len(counts), None)]:
+            if stop > start:
+                pieces.append(chain.push(counts[start:stop]))
+            if item is not None:
+                controls.apply_th(item)
+            start = stop
+        pushed += len(counts)
+        pieces = [p for p in pieces if p is not None]
+        if pieces:
+            yield np.concatenate(pieces) if len(pieces) > 1 else pieces[0]
 
 
 def show(display: LiveDisplay, event) -> None:

@@ -8,9 +8,16 @@ pipeline nothing.
 """
 from __future__ import annotations
 
+import time
+import uuid
+
 import numpy as np
 
 PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
+# A page that has not painted the last column sent waits (its points gather) rather than
+# queue more updates than its browser draws; one that never reports (a hidden tab does not
+# paint) still gets one this often.
+UNPAINTED_WAIT_S = 1.0
 CONTACT_COLOUR = "#d62728"
 PANELS_WIDTH = 230
 
@@ -18,7 +25,9 @@ PANELS_WIDTH = 230
 def build_page(view, doc) -> None:
     """Lay out one browser page for ``view`` in the Bokeh document ``doc`` and keep it fed."""
     from bokeh.layouts import column, row
-    from bokeh.models import ColumnDataSource, Div, Range1d
+    from bokeh.models import ColumnDataSource, CustomJS, Div, Range1d
+
+    from .page_controls import PAINTED_JS, control_widgets
 
     view.sessions += 1
     view.pages_served += 1
@@ -31,7 +40,7 @@ def build_page(view, doc) -> None:
     sources = {"xy": ColumnDataSource({"t": [], "x": [], "y": []}, name="xy"),
                "coded": ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [],
                                           "coded": []}),
-               "map": ColumnDataSource({"image": [], "x": [], "y": [], "dw": [], "dh": []}),
+               "map": ColumnDataSource(_rate_image(view.windows.rows[:0], False), name="map"),
                "contacts": ColumnDataSource({"t": [], "label": []}, name="contacts")}
     antenna = _antenna_figure(sources["xy"], common)
     coded = _coded_figure(sources["coded"], common, view.coder_amplitude)
@@ -47,10 +56,16 @@ def build_page(view, doc) -> None:
     # for the plots keeps their time axes aligned.
     panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided")
     plots = column(antenna, coded, rate_map, sizing_mode="stretch_width")
-    doc.add_root(column(counters, row(plots, panels, sizing_mode="stretch_width"),
+    # This page's own mode: paused (its plots stop following) and how far back it scrubs.
+    mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
+    update, reload = _updater(view, sources, mapper, counters, panels, x_range, mode)
+    bar, status = control_widgets(view, mode, reload, x_range)
+    sources["map"].js_on_change("data", CustomJS(args={"source": sources["map"],
+                                                       "page": mode["page"]},
+                                                 code=PAINTED_JS))
+    doc.add_root(column(counters, bar, status, row(plots, panels, sizing_mode="stretch_width"),
                         sizing_mode="stretch_width"))
     doc.title = "snn-antenna live view"
-    update = _updater(view, sources, mapper, counters, panels, x_range)
     update()
     doc.add_periodic_callback(update, PAGE_UPDATE_MS)
 
@@ -122,13 +137,45 @@ def _mark_contacts(fig, source) -> None:
                             background_fill_alpha=0.75))
 
 
-def _updater(view, sources: dict, mapper, counters, panels, x_range):
-    """The page's periodic callback: stream what is new since this page's cursors."""
-    cursor = {"xy": 0, "coded": 0, "windows": 0}
+def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict):
+    """The page's periodic callback (stream what is new since this page's cursors, unless the
+    page is paused) and ``reload(end_s)``: show the kept history up to ``end_s`` (None: the
+    latest, and follow it again)."""
+    from .page_controls import controls_html
+
+    cursor = {"xy": 0, "coded": 0, "windows": 0, "sent_t": None, "sent_at": 0.0}
     shown = {"counters": None, "contacts": None, "panels": None}
-    rollover = view.xy.capacity
+    rollover = view.shown_points
+
+    def span(rows, end):
+        return rows[(rows[:, 0] >= end - view.history_s) & (rows[:, 0] <= end)]
+
+    def reload(end_s=None) -> None:
+        live = end_s is None
+        end = max(view.t_s, view.history_s) if live else end_s
+        xy, coded = span(view.xy.rows, end), span(view.coded.rows, end)
+        sources["xy"].data = {"t": xy[:, 0], "x": xy[:, 1], "y": xy[:, 2]}
+        sources["coded"].data = {"t": coded[:, 0], "signal": coded[:, 1], "th": coded[:, 2],
+                                 "neg_th": -coded[:, 2], "coded": coded[:, 3]}
+        sources["map"].data = image = _rate_image(span(view.windows.rows, end), live)
+        if live and image["t_last"]:
+            cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
+        cursor.update(xy=view.xy.total, coded=view.coded.total, windows=view.windows.total)
+        x_range.start, x_range.end = end - view.history_s, end
+
+    def behind() -> bool:
+        """The browser has not painted the last column sent to it yet (for a while)."""
+        return (cursor["sent_t"] is not None
+                and view.painted_by.get(mode["page"]) != round(cursor["sent_t"], 6)
+                and time.monotonic() - cursor["sent_at"] < UNPAINTED_WAIT_S)
 
     def update() -> None:
+        view.pull()                 # the frames in transit now, not at the next drain tick
+        html = counters_html(view)
+        if html != shown["counters"]:
+            shown["counters"] = counters.text = html
+        if mode["paused"] or behind():
+            return
         new_xy = view.xy.since(cursor["xy"])
         cursor["xy"] = view.xy.total
         if len(new_xy):
@@ -142,34 +189,41 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range):
                                      "coded": new_in[:, 3]}, rollover=rollover)
         if cursor["windows"] != view.windows.total:
             cursor["windows"] = view.windows.total
-            sources["map"].data = _rate_image(view.windows.rows, view.window_s)
+            end = max(view.t_s, view.history_s)
+            sources["map"].data = image = _rate_image(span(view.windows.rows, end), True)
+            if image["t_last"]:
+                view.sending(image["t_last"][0])
+                cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
             if mapper.high != view.peak_rate_hz:
                 mapper.high = view.peak_rate_hz
         marks = contact_marks(view)
         if marks != shown["contacts"]:
             shown["contacts"] = marks
             sources["contacts"].data = {"t": [m[0] for m in marks], "label": [m[1] for m in marks]}
-        html = counters_html(view)
-        if html != shown["counters"]:
-            shown["counters"] = counters.text = html
-        html = panels_html(view)
+        html = panels_html(view) + controls_html(view)
         if html != shown["panels"]:
             shown["panels"] = panels.text = html
         end = max(view.t_s, view.history_s)
         if x_range.end != end:
             x_range.start, x_range.end = end - view.history_s, end
 
-    return update
+    return update, reload
 
 
-def _rate_image(windows: np.ndarray, window_s: float) -> dict:
-    """The rate map's image data from the kept windows (rows: t_s, rates...). The windows of one
-    stream follow each other; a new stream starts again at 0, and only the latest is shown."""
-    restart = np.flatnonzero(np.diff(windows[:, 0]) <= 0)
+def _rate_image(windows: np.ndarray, live: bool) -> dict:
+    """The rate map's image data from kept windows (rows: t_s, width_s, rates...). The image
+    has one column width: the windows since the latest change of window (or of stream: a new
+    stream starts again at 0) are shown. ``t_last`` and ``live`` tell the page's script which
+    column it paints (bridge/page_controls.py)."""
+    if not len(windows):
+        return {"image": [], "x": [], "y": [], "dw": [], "dh": [], "t_last": [], "live": []}
+    t, width = windows[:, 0], windows[:, 1]
+    restart = np.flatnonzero((np.diff(t) <= 0) | (width[1:] != width[:-1]))
     if len(restart):
         windows = windows[restart[-1] + 1:]
-    return {"image": [np.ascontiguousarray(windows[:, 1:].T)], "x": [windows[0, 0]],
-            "y": [-0.5], "dw": [len(windows) * window_s], "dh": [windows.shape[1] - 1]}
+    return {"image": [np.ascontiguousarray(windows[:, 2:].T)], "x": [windows[0, 0]],
+            "y": [-0.5], "dw": [len(windows) * windows[-1, 1]], "dh": [windows.shape[1] - 2],
+            "t_last": [float(windows[-1, 0])], "live": [bool(live)]}
 
 
 def contact_marks(view) -> list[tuple[float, str]]:
@@ -239,8 +293,11 @@ def shown_counters(view) -> list[tuple[str, str]]:
     counts = view.counts
     rtf = "–" if view.realtime_factor is None else f"×{view.realtime_factor:.1f}"
     lat = "–" if view.latency_ms is None else f"{view.latency_ms:.1f} ms"
+    shown = view.display_latency()
+    display = "–" if shown["p95"] is None else f"{shown['last']:.0f} ms (p95 {shown['p95']:.0f})"
     return [("stream time", f"{view.t_s:.1f} s"), ("real-time factor", rtf),
-            ("latency", lat), ("Th", f"{view.th_g:.3g} g"),
+            ("latency", lat), ("on screen after", display), ("Th", f"{view.th_g:.3g} g"),
+            ("window", f"{view.window_s:.3g} s"),
             ("frames", counts.get("frames", 0)), ("CRC errors", counts.get("crc_errors", 0)),
             ("gaps", counts.get("gaps", 0)), ("lost samples", counts.get("lost_samples", 0)),
             ("duplicates", counts.get("duplicates", 0)), ("reordered", counts.get("reordered", 0)),

@@ -6,6 +6,9 @@ A recording is a directory:
 ``samples.bin``  one fixed-size little-endian record per valid sample: ``seq u16, x u16, y u16,
                  pad u16, host_time_s f64`` (16 bytes). Appending whole records means a crash can
                  only tear the last one, which the reader drops.
+``events.jsonl`` the live controls' changes (Th, the rate-map window), a JSON line each with the
+                 sample index it applied at, written and flushed as it happens (bridge/controls.py
+                 reads them back; ``replay`` applies them again).
 ``meta.json``    port, format, link events (opens, losses, reconnects, with their offset in
                  ``raw.bin``) and the counts; rewritten atomically (tmp + ``os.replace``) so it is
                  never half-written. ``complete`` is true only after a clean close.
@@ -34,6 +37,7 @@ from .source import DEFAULT_BAUDRATE, Batch
 SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("pad", "<u2"),
                          ("host_time_s", "<f8")])
 RAW_FILE, SAMPLES_FILE, META_FILE = "raw.bin", "samples.bin", "meta.json"
+EVENTS_FILE = "events.jsonl"            # bridge/controls.py reads it
 FORMAT_VERSION = 1
 COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
                 "duplicates", "reordered", "late", "seq_restarts", "reconnects")
@@ -54,13 +58,14 @@ class Recorder:
             raise SpecError("out", str(self.dir), "a directory path")
         make_folder(self.dir)
         self._lock = lock_folder(self.dir)        # one recorder per folder, held until close
-        for name in (RAW_FILE, SAMPLES_FILE):     # appending to a link would write elsewhere
+        for name in (RAW_FILE, SAMPLES_FILE, EVENTS_FILE):  # a link would write elsewhere
             refuse_symlink(self.dir / name)
         self.flush_interval_s = flush_interval_s
         self.fsync_interval_s = fsync_interval_s
         self.meta_interval_s = meta_interval_s
         self._raw = open_append(self.dir / RAW_FILE, binary=True)
         self._samples = open_append(self.dir / SAMPLES_FILE, binary=True)
+        self._events = None                       # opened by the first control event
         self.raw_bytes = 0
         self.n_samples = 0
         self.counts = {name: 0 for name in COUNT_FIELDS}
@@ -111,12 +116,21 @@ class Recorder:
             self._write_meta()
             self._last_meta = now
 
+    def note_event(self, event: dict) -> None:
+        """A control change applied by the pipeline (bridge/controls.py): one JSON line in
+        ``events.jsonl``, flushed at once (it is rare, and replay needs every one)."""
+        if self._events is None:
+            self._events = open_append(self.dir / EVENTS_FILE)
+        self._events.write(json.dumps(event) + "\n")
+        self._events.flush()
+        self.meta["control_events"] = self.meta.get("control_events", 0) + 1
+
     def close(self, status: str = "ok", message: str = "", complete: bool = True) -> None:
         """Flush and close; ``complete=False`` records that the session ended in a failure
         (``status`` and ``message`` say which), although every byte received is kept."""
         if self._raw.closed:
             return
-        for f in (self._raw, self._samples):
+        for f in (self._raw, self._samples, *([self._events] if self._events else [])):
             f.flush()
             os.fsync(f.fileno())
             f.close()

@@ -15,6 +15,7 @@ from __future__ import annotations
 import collections
 import errno
 import queue
+import signal
 import threading
 import time
 from dataclasses import dataclass, field
@@ -341,3 +342,11 @@ def _silence_message(source: SerialSource, silent_s: float) -> str:
         return (f"{head}: nothing was received; is the board powered and streaming, "
                 "and is this its port?")
     return f"{head}: the board stopped sending"
+
+
+def stop_on_signals() -> threading.Event:
+    """Ctrl-C and SIGTERM end a recording cleanly (data flushed, meta.json complete)."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    return stop

@@ -14,7 +14,10 @@ rate-map window, contact events) and every 50 ms hands one frame to a bounded
 ``multiprocessing`` queue with ``put_nowait``: it never waits. When the view process falls
 behind (or is stopped), the frames it cannot take are dropped and counted by it
 (``view_frames_dropped`` on the page and in the report), never a sample, which the recorder has
-already written. The page itself is ``bridge/page.py``.
+already written. The page itself is ``bridge/page.py``; its controls (pause, scrub, Th, the
+rate-map window, save view) are ``bridge/page_controls.py``. A change of Th or window travels the
+other way through a second bounded queue (``LiveView.requests``), which the pipeline reads
+without waiting (bridge/controls.py).
 """
 from __future__ import annotations
 
@@ -25,6 +28,7 @@ import threading
 import time
 from contextlib import contextmanager
 from itertools import chain
+from pathlib import Path
 
 import numpy as np
 
@@ -33,7 +37,9 @@ from .live_state import Decisions
 from .protocol import BOARD_RATE_HZ
 from .view_process import ViewConfig, serve
 
-HISTORY_S = 10.0                # what the plots keep
+HISTORY_S = 10.0                # what the plots show
+SCRUB_S = 60.0                  # what the view keeps: a paused page scrubs back through it
+REQUESTS = 16                   # control requests from the page not yet taken by the pipeline
 FLUSH_S = 0.05                  # the pipeline hands a frame over at most this often
 INBOX_FRAMES = 200              # 10 s of frames: the view may stall that long and lose nothing
 START_TIMEOUT_S = 60.0          # a spawned interpreter imports Bokeh: seconds on a busy machine
@@ -50,6 +56,9 @@ def add_view_args(parser) -> None:
                              "only; 0.0.0.0 exposes it to the network deliberately)")
     parser.add_argument("--view-port", type=int, default=5006,
                         help="port of the view (default 5006; 0 = any free port)")
+    parser.add_argument("--view-save", default=None, metavar="DIR",
+                        help="where the page's 'save view' button writes (default: the "
+                             "recording's views/ folder for stream, out/views for replay)")
     parser.add_argument("--view-hold", type=float, default=None,
                         help="seconds to keep the view up after the stream ends (default: "
                              "until Ctrl-C; 0 closes it at once)")
@@ -69,7 +78,9 @@ def live_view(args, parts):
     check_view_host(args.view_host)
     from .hostguard import LOOPBACK   # with tornado, loaded only when a view is asked for
 
-    view = LiveView(parts, host=args.view_host, port=args.view_port)
+    out = getattr(args, "out", None)
+    save_dir = getattr(args, "view_save", None) or (Path(out) / "views" if out else Path("out") / "views")
+    view = LiveView(parts, host=args.view_host, port=args.view_port, save_dir=str(save_dir))
     url = view.start()
     if args.view_host not in LOOPBACK:
         print(f"warning: the live view listens on {args.view_host}, beyond this machine: anyone "
@@ -132,7 +143,7 @@ class LiveView:
 
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
                  history_s: float = HISTORY_S, rate_hz: float = BOARD_RATE_HZ,
-                 inbox_frames: int = INBOX_FRAMES):
+                 inbox_frames: int = INBOX_FRAMES, save_dir=None):
         from sklearn.base import clone
 
         coder = parts.chain.named_steps["coder"]
@@ -142,10 +153,15 @@ class LiveView:
         self.config = ViewConfig(host, port, rate_hz, history_s, parts.window_s,
                                  np.asarray(parts.array.neuron_hz, dtype=float), to_g,
                                  coder.amplitude, float(coder.threshold),
-                                 self.decisions.parts, self.decisions.panels)
+                                 self.decisions.parts, self.decisions.panels,
+                                 keep_s=max(SCRUB_S, history_s), save_dir=save_dir)
         _tap_coder(coder, self._coded)
         self._context = multiprocessing.get_context("spawn")
         self._inbox = self._context.Queue(inbox_frames)
+        # The page's control requests, checked in the view process (bridge/controls.py);
+        # the pipeline takes them without waiting.
+        self.requests = self._context.Queue(REQUESTS)
+        self.requests.cancel_join_thread()
         # Its feeder thread must never hold this process up at exit (a stopped view's pipe
         # is full); what it still held is counted dropped by the view.
         self._inbox.cancel_join_thread()
@@ -156,6 +172,7 @@ class LiveView:
         self._in: list = []
         self._windows: list = []
         self._events: list = []
+        self._applied: list = []
         self._n_xy = self._n_in = 0
         self._flushed = time.monotonic()
         self.url = self.port = None
@@ -177,10 +194,19 @@ class LiveView:
         self._in.append((signal, th, coded))
 
     def window(self, t_s: float, rates: np.ndarray, event, realtime_factor: float,
-               latency_ms: float | None) -> None:
+               latency_ms: float | None, arrived: float | None = None,
+               window_s: float | None = None) -> None:
+        """A published window; ``arrived``: host time its last sample arrived (live only),
+        from which the view process measures the delay to its column on a page."""
         decided = self.decisions.window(t_s, rates, event)
-        self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms, decided))
+        self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms, decided, arrived,
+                              window_s or self.config.window_s))
         self._event(event)
+
+    def applied(self, event: dict) -> None:
+        """A control change the pipeline applied (bridge/controls.py): shown on the page."""
+        self._applied.append(event)
+        self._due()
 
     def event(self, event) -> None:
         """The stream's last contact, closed at its end (no window of its own)."""
@@ -200,7 +226,7 @@ class LiveView:
     def flush(self) -> None:
         """Hand what was gathered to the view process as one frame, without waiting."""
         self._flushed = time.monotonic()
-        if not (self._xy or self._in or self._windows or self._events
+        if not (self._xy or self._in or self._windows or self._events or self._applied
                 or self._counts is not self._counts_sent):     # e.g. a link lost: counts only
             return
         self._counts_sent = self._counts
@@ -210,10 +236,10 @@ class LiveView:
             else np.empty((0, 3))
         frame = {"seq": self.published, "counts": self._counts,
                  "xy": (self._n_xy, samples), "coded": (self._n_in, coded),
-                 "windows": self._windows, "events": self._events}
+                 "windows": self._windows, "events": self._events, "controls": self._applied}
         self._n_xy += len(samples)
         self._n_in += len(coded)
-        self._xy, self._in, self._windows, self._events = [], [], [], []
+        self._xy, self._in, self._windows, self._events, self._applied = [], [], [], [], []
         self.published += 1
         try:
             self._inbox.put_nowait(frame)
@@ -225,7 +251,8 @@ class LiveView:
         """Spawn the view process; returns the page's URL (the address bound) once it listens."""
         control, child_end = self._context.Pipe()
         self.process = self._context.Process(target=serve, name="snn-antenna-view", daemon=True,
-                                             args=(self.config, self._inbox, child_end))
+                                             args=(self.config, self._inbox, child_end,
+                                                   self.requests))
         self.process.start()
         child_end.close()
         message = None
@@ -270,6 +297,7 @@ class LiveView:
                 self.process.join()
             self.process = None
         self._inbox.close()
+        self.requests.close()
 
     def summary(self) -> dict:
         """The view's part of the run's report: frames published, and those the view process

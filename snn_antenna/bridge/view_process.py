@@ -7,6 +7,10 @@ and serialises new points ten times a second). In the pipeline's process that wo
 stream itself. Here it can only slow the view: the pipeline never waits for this process, and
 frames the view could not take are counted here (``view_frames_dropped``), never a sample.
 
+Besides the pages and ``/state.json``, it answers the pages' POSTs: ``/control`` (checked
+here, then queued to the pipeline), ``/painted`` (the display delay) and ``/save``
+(bridge/saved_view.py).
+
 Started with the ``spawn`` context, so this module and what it imports are all the process
 holds: no Brian2, no port, no recorder.
 """
@@ -20,16 +24,19 @@ import os
 import queue
 import signal
 import time
+from collections import deque
 from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
 
+from ..errors import SpecError
 from .page import build_page
 
 DRAIN_MS = 50                   # this process empties the hand-off
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
 LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
+DELAYS_KEPT = 2000               # display delays kept for the p95
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
 SHOWN_COUNTERS = ("frames", "crc_errors", "gaps", "lost_samples", "duplicates", "reordered",
                   "late", "reconnects")
@@ -50,6 +57,8 @@ class ViewConfig:
     th_g: float
     parts: tuple = ()               # the parts of the running network
     panels: dict = None             # panel → title: what it decides (bridge/live_state.py)
+    keep_s: float = 60.0            # what the view keeps: a paused page scrubs back through it
+    save_dir: str | None = None     # where "save view" writes (bridge/saved_view.py)
 
 
 class _Ring:
@@ -79,11 +88,26 @@ class ViewHistory:
         self.rate_hz, self.history_s = config.rate_hz, config.history_s
         self.neuron_hz, self.window_s = np.asarray(config.neuron_hz, float), config.window_s
         self.coder_amplitude, self.th_g = config.coder_amplitude, config.th_g
-        n = int(self.history_s * self.rate_hz) // DISPLAY_EVERY + 1
+        self.keep_s = max(config.keep_s, self.history_s)
+        # Points a plot shows at once (its rollover), and the rings: keep_s of them.
+        self.shown_points = int(self.history_s * self.rate_hz) // DISPLAY_EVERY + 1
+        n = int(self.keep_s * self.rate_hz) // DISPLAY_EVERY + 1
         self.xy = _Ring(3, n)                       # t_s, x_g, y_g
         self.coded = _Ring(4, n)                    # t_s, signal_g, th_g, coded
-        n_windows = int(math.ceil(self.history_s / self.window_s)) + 1
-        self.windows = _Ring(1 + len(self.neuron_hz), n_windows)     # t_s, rates
+        n_windows = int(math.ceil(self.keep_s / self.window_s)) + 1
+        self.windows = _Ring(2 + len(self.neuron_hz), n_windows)     # t_s, width_s, rates
+        self.base_window_s = self.window_s
+        self.arrivals: dict[float, float] = {}      # window start → host arrival (live only)
+        self.display_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
+        # Of each delay, the part until a page's update left this process (the rest is the
+        # websocket and the browser drawing): where the time goes.
+        self.sent: dict[float, float] = {}          # window start → first sent to a page
+        self.server_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
+        self.painted_by: dict[str, float] = {}      # page → the latest column it painted
+        self.controls: list[dict] = []              # changes the pipeline applied
+        self.requested: list[dict] = []             # asked from a page, not applied yet
+        self.requests = None                        # the queue to the pipeline (serve sets it)
+        self.inbox = None                           # the frames from it (serve sets it)
         self.contacts: list[dict] = []
         self.open_onset_s: float | None = None
         self.realtime_factor = self.latency_ms = None
@@ -109,6 +133,11 @@ class ViewHistory:
             self.take(frame)
             taken += 1
 
+    def pull(self) -> None:
+        """Take the frames waiting in the inbox, if this history has one."""
+        if self.inbox is not None:
+            self.drain(self.inbox)
+
     def take(self, frame: dict) -> None:
         self.dropped += frame["seq"] - self.next_seq       # the frames between never came
         self.next_seq = frame["seq"] + 1
@@ -127,9 +156,16 @@ class ViewHistory:
             self.coded.add(self._rows(first, coded))
             if self.coded.total:
                 self.th_g = float(self.coded.rows[-1, 2])
-        for t_s, rates, rtf, latency_ms, decided in frame["windows"]:
+        for t_s, rates, rtf, latency_ms, decided, arrived, width_s in frame["windows"]:
             self.decided = decided
-            self.windows.add(np.r_[t_s, rates][None, :])
+            self.window_s = width_s
+            self.windows.add(np.r_[t_s, width_s, rates][None, :])
+            if arrived is not None:
+                self.arrivals[round(float(t_s), 6)] = arrived
+                while len(self.arrivals) > self.windows.capacity:
+                    oldest = next(iter(self.arrivals))
+                    del self.arrivals[oldest]
+                    self.sent.pop(oldest, None)
             self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
             self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
             self.latency_ms = latency_ms
@@ -139,6 +175,62 @@ class ViewHistory:
             else:
                 self.contacts.append(what)
                 self.open_onset_s = None
+        for event in frame.get("controls", ()):
+            self.controls.append(event)
+            for asked in self.requested:
+                if asked["field"] == event["field"] and asked["value"] == event["value"]:
+                    self.requested.remove(asked)
+                    break
+
+    # ---- the page's hands on the controls --------------------------------------------------
+    def request(self, body) -> dict:
+        """A control request from a page or ``POST /control``: checked (SpecError names the
+        field, value and accepted range), then handed to the pipeline without waiting; it
+        applies at the next window boundary."""
+        from .controls import parse_control
+
+        change = parse_control(body, self.base_window_s)
+        if self.requests is None:
+            raise SpecError("control", change.field, "a running pipeline to apply it to")
+        try:
+            self.requests.put_nowait(change)
+        except queue.Full:
+            raise SpecError("control", change.field, "a moment later: the pipeline has not "
+                                                     "taken the requests before it") from None
+        asked = {"field": change.field, "value": change.value, "asked_t_s": self.t_s}
+        self.requested.append(asked)
+        return asked
+
+    def painted(self, t_s: float, painted_unix_s: float, now: float | None = None,
+                page: str | None = None) -> None:
+        """A page painted the rate-map column of the window starting at ``t_s`` (its clock):
+        the delay from the arrival of that window's last sample. The page's clock is
+        trusted only between arrival and now (this host's clock)."""
+        if page is not None and len(self.painted_by) < 1000:
+            self.painted_by[page] = round(float(t_s), 6)
+        arrived = self.arrivals.get(round(float(t_s), 6))
+        if arrived is None:
+            return
+        now = time.time() if now is None else now
+        painted = min(max(float(painted_unix_s), arrived), now) \
+            if math.isfinite(painted_unix_s) else now
+        self.display_delays_ms.append((painted - arrived) * 1e3)
+        sent = self.sent.get(round(float(t_s), 6))
+        if sent is not None:
+            self.server_delays_ms.append((sent - arrived) * 1e3)
+
+    def sending(self, t_s: float) -> None:
+        """A page's update carries the rate-map column of the window starting at ``t_s``."""
+        self.sent.setdefault(round(float(t_s), 6), time.time())
+
+    def display_latency(self) -> dict:
+        delays, server = np.asarray(self.display_delays_ms), np.asarray(self.server_delays_ms)
+        if not len(delays):
+            return {"last": None, "median": None, "p95": None, "n": 0, "sent_p95": None}
+        return {"last": round(float(delays[-1]), 2), "median": round(float(np.median(delays)), 2),
+                "p95": round(float(np.percentile(delays, 95)), 2), "n": int(len(delays)),
+                # arrival → the page's update leaving this process (the rest: websocket, paint)
+                "sent_p95": round(float(np.percentile(server, 95)), 2) if len(server) else None}
 
     def ended(self, published: int) -> None:
         """The pipeline published ``published`` frames in all: those never taken are dropped."""
@@ -159,6 +251,8 @@ class ViewHistory:
     def state(self) -> dict:
         """The live state as plain JSON (``/state.json``)."""
         last = self.windows.rows[-1] if self.windows.total else None
+        if last is not None:
+            last = np.r_[last[0], last[2:]]
         return {
             "t_s": self.t_s,
             "rate_map": {"t_s": float(last[0]) if last is not None else None,
@@ -170,6 +264,11 @@ class ViewHistory:
             "contacts": list(self.contacts),
             "contact_open_since_s": self.open_onset_s,
             "th_g": self.th_g,
+            "window_s": self.window_s,
+            # The page's hands: changes applied (with the sample they applied at), and asked.
+            "controls": {"applied": list(self.controls), "requested": list(self.requested)},
+            # Arrival of a window's last sample → its column painted on a page.
+            "display_latency_ms": self.display_latency(),
             # What the running network decided on the latest window, a panel per part it has.
             "network": {"parts": list(self.parts), "panels": dict(self.panels),
                         "decided": self.decided},
@@ -189,7 +288,7 @@ def _finite(value):
     return None if value is None or not np.isfinite(value) else round(float(value), 3)
 
 
-def serve(config: ViewConfig, inbox, control) -> None:
+def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     """The view process's main: bind, tell the pipeline the URL over ``control``, serve until
     it says ``("stop", frames published)`` (or goes away), then answer with the view's count."""
     # Ctrl-C in a terminal reaches the whole process group; the pipeline decides when the
@@ -213,6 +312,7 @@ def serve(config: ViewConfig, inbox, control) -> None:
     asyncio.set_event_loop(asyncio.new_event_loop())
     loop = IOLoop.current()
     history = ViewHistory(config)
+    history.requests, history.inbox = requests, inbox
     try:
         sockets, port = bind_sockets(config.host, config.port)
     except OSError as exc:
@@ -221,10 +321,13 @@ def serve(config: ViewConfig, inbox, control) -> None:
                                  "any free port")))
         return
     allowed = allowed_hosts(config.host, port)
+    handlers, routed = _handlers(), {"history": history, "inbox": inbox}
     app = BokehTornado({"/": Application(FunctionHandler(partial(build_page, history)))},
                        extra_websocket_origins=sorted(allowed),
-                       extra_patterns=[(r"/state\.json", _state_handler(),
-                                        {"history": history, "inbox": inbox})],
+                       extra_patterns=[(r"/state\.json", handlers["state"], routed),
+                                       (r"/control", handlers["control"], routed),
+                                       (r"/painted", handlers["painted"], routed),
+                                       (r"/save", handlers["save"], routed)],
                        websocket_ping_interval=10, websocket_ping_timeout=10)
     http = HTTPServer(HostGuard(app, allowed))
     http.add_sockets(sockets)
@@ -260,17 +363,64 @@ def serve(config: ViewConfig, inbox, control) -> None:
     loop.close(all_fds=True)
 
 
-def _state_handler():
+def _handlers() -> dict:
+    """``/state.json`` (GET), and the page's POSTs: ``/control`` (a change of Th or the
+    window), ``/painted`` (when a page painted a window's column), ``/save`` (the view's PNG:
+    written with the shown span's data). All behind the HostGuard (bridge/hostguard.py)."""
     from tornado.web import RequestHandler
 
-    class StateHandler(RequestHandler):
+    class Base(RequestHandler):
         def initialize(self, history: ViewHistory, inbox) -> None:
             self.history, self.inbox = history, inbox
 
-        def get(self) -> None:
-            self.history.drain(self.inbox)
+        def reply(self, status: int, body: dict) -> None:
+            self.set_status(status)
             self.set_header("Content-Type", "application/json")
             self.set_header("Cache-Control", "no-store")
-            self.write(json.dumps(self.history.state()))
+            self.write(json.dumps(body))
 
-    return StateHandler
+        def check_xsrf_cookie(self) -> None:    # the HostGuard checked Host and Origin
+            pass
+
+    class State(Base):
+        def get(self) -> None:
+            self.history.drain(self.inbox)
+            self.reply(200, self.history.state())
+
+    class Control(Base):
+        def post(self) -> None:
+            try:
+                asked = self.history.request(self.request.body)
+            except SpecError as exc:
+                self.reply(400, {"error": str(exc), "field": exc.field})
+                return
+            self.reply(202, {"requested": asked})
+
+    class Painted(Base):
+        def post(self) -> None:
+            try:
+                report = json.loads(self.request.body[:200])
+                self.history.painted(float(report["t_s"]), float(report["painted_unix_s"]),
+                                     page=str(report.get("page"))[:40])
+            except (ValueError, KeyError, TypeError):
+                self.reply(400, {"error": "expected {t_s, painted_unix_s}"})
+                return
+            self.set_status(204)
+
+    class Save(Base):
+        def post(self) -> None:
+            from .saved_view import save_view
+
+            try:
+                start = float(self.get_query_argument("start"))
+                end = float(self.get_query_argument("end"))
+                saved = save_view(self.history, start, end, self.request.body)
+            except SpecError as exc:
+                self.reply(400, {"error": str(exc), "field": exc.field})
+                return
+            except ValueError:
+                self.reply(400, {"error": "expected ?start=SECONDS&end=SECONDS"})
+                return
+            self.reply(200, {"saved": saved})
+
+    return {"state": State, "control": Control, "painted": Painted, "save": Save}

@@ -1,0 +1,225 @@
+"""The live controls (bridge/controls.py): the one parser of control requests refuses every bad
+value with a SpecError naming field, value and range; changes are scheduled at window
+boundaries ahead of the coder, journaled in events.jsonl, and a replay that re-applies them
+finds what the live run found; the view's paint reports and its saved views
+(bridge/saved_view.py) read back."""
+import json
+import math
+import queue
+import time
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from snn_antenna.bridge.controls import (MAX_WINDOWS, TH_MAX_G, Change, Controls,
+                                         parse_control, recorded_events)
+from snn_antenna.bridge.online import build_online, run_online
+from snn_antenna.bridge.page import build_page
+from snn_antenna.bridge.recorder import EVENTS_FILE, Recorder, record_counts
+from snn_antenna.bridge.replay import ReplaySource
+from snn_antenna.bridge.saved_view import load_view, save_view
+from snn_antenna.bridge.view import LiveView, _tap_coder
+from snn_antenna.bridge.view_process import ViewHistory
+from snn_antenna.errors import SpecError
+from snn_antenna.sources.stimuli import Contact, RobotScene
+from tests.test_live_view_panels import NETWORK
+
+BASE = 0.05
+JSON_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**20, 10**20),
+                        st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8))
+
+
+@settings(max_examples=150, deadline=None)
+@given(field=st.sampled_from(["th_g", "window_s", "Th", ""]), value=JSON_VALUES)
+def test_a_request_is_accepted_exactly_when_in_range_else_named(field, value):
+    body = json.dumps({field: value}).encode()
+    number = isinstance(value, (int, float)) and not isinstance(value, bool) \
+        and math.isfinite(value)
+    if field == "th_g":
+        ok = number and 0 <= value <= TH_MAX_G
+    elif field == "window_s":
+        k = value / BASE if number else None
+        ok = number and abs(k - round(k)) <= 1e-6 * max(1, k) and 1 <= round(k) <= MAX_WINDOWS
+    else:
+        ok = False
+    if ok:
+        change = parse_control(body, BASE)
+        assert change.value == (float(value) if field == "th_g" else round(value / BASE))
+        return
+    with pytest.raises(SpecError) as caught:
+        parse_control(body, BASE)
+    message = str(caught.value)
+    if field in ("th_g", "window_s"):       # the field, the value and the accepted range
+        assert caught.value.field == field and "not accepted" in message
+        assert (f"[0, {TH_MAX_G:g}]" if field == "th_g" else f"{MAX_WINDOWS * BASE:g} s") \
+            in message
+    else:
+        assert caught.value.field == "control" and "th_g or window_s" in message
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.one_of(st.binary(max_size=2000), st.text(max_size=200),
+                 st.dictionaries(st.text(max_size=5), JSON_VALUES, max_size=3)))
+def test_any_body_gives_a_change_or_a_spec_error(body):
+    try:
+        change = parse_control(body, BASE)
+    except SpecError as exc:
+        assert str(exc).count("\n") == 0            # one line
+        return
+    assert isinstance(change, Change) and change.field in ("th_g", "windows")
+
+
+class _Parts:
+    """What Controls needs from the online parts: the coder and the network's window."""
+    class chain:
+        class coder:
+            threshold = 0.04
+        named_steps = {"coder": coder}
+    window_s = BASE
+
+
+def test_a_request_applies_at_the_next_boundary_ahead_of_the_coder_and_calibration():
+    asked = queue.Queue()
+    controls = Controls(_Parts, requests=asked, rate_hz=1000.0)
+    asked.put(Change("th_g", 0.2))
+    controls.poll(position=500, n_calibration=1000)         # still calibrating: after it
+    asked.put(Change("windows", 3))
+    controls._polled = 0
+    controls.poll(position=1234, n_calibration=1000)
+    assert [(p[0], p[1].value) for p in controls.pending] == [(1000, 0.2), (1250, 3)]
+    # The window change moves the boundaries after it: every 150 samples from 1250.
+    assert controls.next_boundary(1251) == 1400
+    assert controls.due(1000, 1001)[0][1].value == 0.2
+
+
+@pytest.fixture(scope="module")
+def two_contacts(tmp_path_factory):
+    counts = RobotScene(duration_s=4.0, contacts=[Contact(1.5, 19.0), Contact(3.0, 25.0)]
+                        ).generate(seed=3).samples
+    return record_counts(tmp_path_factory.mktemp("controls") / "rec", counts)
+
+
+def _parts():
+    return build_online(NETWORK, ["preprocess.threshold=0.04"])
+
+
+def _replay(recording, scheduled=(), chunk_bytes=800, view=None, parts=None):
+    """A replay flat out; with ``view``, a LiveView built on ``parts`` (it taps their coder)."""
+    parts = parts or _parts()
+    controls = Controls(parts, scheduled=scheduled, rate_hz=1000.0,
+                        on_applied=view.applied if view else None)
+    return run_online(ReplaySource(recording, chunk_bytes=chunk_bytes).start(), parts,
+                      no_data_timeout_s=1e9, controls=controls, view=view,
+                      handlers=[view] if view else [])
+
+
+def test_a_journaled_th_change_replays_to_the_same_contacts(two_contacts, tmp_path):
+    before = _replay(two_contacts)
+    assert len(before["contacts"]) == 2
+    # As the live run journals a change: the recorder's events.jsonl, a torn last line kept
+    # out by the reader.
+    recorder = Recorder(tmp_path / "live", port="test://", wire_format="binary", baudrate=1)
+    recorder.note_event({"sample": 2500, "field": "th_g", "value": 5.0})
+    recorder.close()
+    with open(tmp_path / "live" / EVENTS_FILE, "a") as f:
+        f.write('{"sample": 26')
+    events = recorded_events(tmp_path / "live")
+    assert events == [{"sample": 2500, "field": "th_g", "value": 5.0}]
+    after = _replay(two_contacts, events)
+    # Th above the signal from 2.5 s: the second contact is coded as silence.
+    assert after["contacts"] == before["contacts"][:1]
+    assert [(e["sample"], e["was"], e["by"]) for e in after["controls"]] == \
+        [(2500, 0.04, "replay")]
+    # However the port chunked the bytes, the change lands on the same sample: the coder's
+    # Th is the old one up to sample 2499, the new one from 2500, sample by sample.
+    parts = _parts()
+    th_per_sample = []
+    _tap_coder(parts.chain.named_steps["coder"],
+               lambda X, th, coded: th_per_sample.append(np.broadcast_to(th, (len(coded),))))
+    assert _replay(two_contacts, events, chunk_bytes=333, parts=parts)["contacts"] == \
+        after["contacts"]
+    th = np.concatenate(th_per_sample)
+    assert set(th[:2500]) == {0.04} and set(th[2500:]) == {5.0}
+
+
+def test_a_saved_view_reads_back_as_the_rate_map_the_read_out_takes(two_contacts, tmp_path):
+    parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
+    view = LiveView(parts, save_dir=str(tmp_path / "views"))
+    events = [{"sample": 2000, "field": "windows", "value": 2}]
+    _replay(two_contacts, events, view=view, parts=parts)
+    view.flush()
+    history = ViewHistory(view.config)
+    while history.received < view.published:
+        history.take(view._inbox.get(timeout=5))
+    assert history.controls[0]["shown"] == {"window_s": 2 * parts.window_s}
+    png = b"\x89PNG\r\n\x1a\n" + bytes(100)
+    saved = save_view(history, 0.0, 4.0, png)
+    ds = load_view(saved["data"])
+    with open(saved["png"], "rb") as f:
+        assert f.read() == png
+    # The windows since the change, twice the network's: the second contact (3 s) is there.
+    assert ds.rates.attrs["window_s"] == 2 * parts.window_s
+    assert float(ds.rates.window_s[0]) == pytest.approx(2.0)
+    kept = history.windows.rows[history.windows.rows[:, 0] >= 2.0]
+    assert np.array_equal(ds.rates.values.T, kept[:, 2:])
+    found = parts.detector.detect(ds.rates)         # the first contact's tail, the second
+    assert [round(c.onset_s, 1) for c in found] == [2.0, 3.0]
+    assert json.loads(ds.attrs["controls"])[0]["field"] == "windows"
+    assert len(ds.x_g) > 0 and float(ds.t_s.max()) <= 4.0
+    with pytest.raises(SpecError, match="png"):
+        save_view(history, 0.0, 4.0, b"not a png")
+
+
+def test_a_paint_report_counts_from_the_arrival_and_trusts_the_page_clock_only_between():
+    parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
+    history = ViewHistory(LiveView(parts).config)
+    history.take({"seq": 0, "counts": {}, "xy": (0, np.empty((0, 3))),
+                  "coded": (0, np.empty((0, 3))), "events": [],
+                  "windows": [(1.0, np.zeros(24), 1.0, 1.0, {}, 100.0, BASE)]})
+    history.painted(1.0, 100.05, now=100.2)
+    history.painted(1.0, 99.0, now=100.2)           # a page clock behind: not below arrival
+    history.painted(1.0, 500.0, now=100.2)          # ahead: not after the report came
+    history.painted(2.0, 100.1, now=100.2)          # a window never shown: ignored
+    assert np.allclose(history.display_delays_ms, [50.0, 0.0, 200.0])
+    assert history.display_latency()["n"] == 3
+
+
+@pytest.mark.parametrize("name", ["robot.toml", "exploration.toml"])
+def test_a_composed_network_is_refused_by_the_live_path_with_the_reason(name):
+    with pytest.raises(SpecError, match=r"network = .*runs only the resonator array.*gate"):
+        build_online(NETWORK.parent / name)
+
+
+def _frame(seq: int, t_s: float) -> dict:
+    """A view frame of 100 samples and one window starting at ``t_s`` (arrived now)."""
+    first = int(round(t_s * 1000))
+    samples = np.column_stack([np.arange(first, first + 100), np.full((100, 2), 2048)])
+    return {"seq": seq, "counts": {}, "xy": (first, samples.astype(float)),
+            "coded": (first, np.zeros((100, 3))), "events": [],
+            "windows": [(t_s, np.ones(24), 1.0, 1.0, {}, 1.0, 0.1)]}
+
+
+def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does():
+    """Backpressure per page: updates wait (their points gather) while the browser has not
+    painted the column sent last, so a slow browser does not queue up seconds of updates."""
+    from bokeh.document import Document
+    from bokeh.models import CustomJS
+
+    history = ViewHistory(LiveView(_parts()).config)
+    doc = Document()
+    build_page(history, doc)
+    (callback,) = doc.session_callbacks
+    update = callback.callback
+    token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
+    xy = doc.get_model_by_name("xy")
+    history.take(_frame(0, 0.0))
+    update()
+    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t_last"] == [0.0]
+    history.take(_frame(1, 0.1))
+    update()                                        # column 0.0 not painted yet: waits
+    assert len(xy.data["t"]) == 25
+    history.painted(0.0, time.time(), page=token)
+    update()
+    assert len(xy.data["t"]) == 50 and doc.get_model_by_name("map").data["t_last"] == [0.1]
