@@ -15,8 +15,9 @@ per second (points × steps / wall time):
   timed on a sample of points and EXTRAPOLATED to the grid (said so in the table);
 - ``numba``: a hand-written Euler kernel of the same equations and input (neuron-outer loop,
   one thread), compile time excluded; its spike counts are compared with Brian2's;
-- ``floor64`` / ``floor32``: the best kernel written by hand (``floor_kernel``: blocks of 64
-  neurons kept in L1 for the whole run, lanes innermost, branch-free, fastmath, one thread),
+- ``floor64`` / ``floor32``: the best kernel written by hand (``benchmarks/floor.c``, compiled
+  at benchmark time with the system ``cc -O3 -march=native -ffast-math``: blocks of 64
+  neurons kept in L1 for the whole run, lanes innermost, branch-free, one thread),
   in float64 and float32; spike counts compared with Brian2's; ours / floor printed per size;
 - scaling: the largest grid on a Dask LocalCluster of 1, 2, ... worker processes (the
   workers return their blocks; this process writes the store, as on a cluster without a
@@ -87,64 +88,50 @@ def numba_kernel():
     return euler_counts
 
 
-FLOORS = {"floor64": np.float64, "floor32": np.float32}
-BLOCK = 64  # neurons per block: v, u, parameters and counts of a block stay in L1 all run
+FLOOR_C = Path(__file__).with_name("floor.c")
+FLOOR_FLAGS = ["-O3", "-march=native", "-ffast-math", "-shared", "-fPIC"]
+FLOORS = {"floor64": "floor_counts_f64", "floor32": "floor_counts_f32"}
 
 
-def floor_kernel(dtype):
-    """The honest floor: the same Euler equations and input, written for the machine.
+def floor_kernels(build_dir: Path) -> dict:
+    """The honest floor (``benchmarks/floor.c``): the same Euler equations and input written
+    by hand for the machine (blocks of 64 neurons kept in L1 for the whole run, lanes
+    innermost, branch-free threshold and reset, the input's sign once per input sample),
+    compiled now with the system compiler (``cc -O3 -march=native -ffast-math``) and called
+    through ctypes on one thread, in float64 and float32."""
+    import ctypes
+    import shutil
+    import subprocess
 
-    Blocks of ``BLOCK`` neurons run the whole simulation while their state stays in L1;
-    lanes are the innermost loop; threshold and reset are selects (branch-free), so LLVM
-    vectorises the lane loop (``fastmath``: the same licence as ``-ffast-math``). The
-    input's sign is computed once per input sample, not per step. One thread."""
-    import numba
+    cc = os.environ.get("CC") or shutil.which("cc")
+    if cc is None:
+        raise SystemExit("bench_sweep: no C compiler (cc) for the floor kernels; set CC")
+    library = build_dir / "floor.so"
+    subprocess.run([cc, *FLOOR_FLAGS, str(FLOOR_C), "-o", str(library)], check=True)
+    lib = ctypes.CDLL(str(library))
+    f64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
+    i32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
+    i64, dbl = ctypes.c_int64, ctypes.c_double
+    kernels = {}
+    for name, symbol in FLOORS.items():
+        fn = getattr(lib, symbol)
+        fn.restype = None
+        fn.argtypes = [f64] * 9 + [i64, i64, dbl, i64, dbl, i64, dbl, dbl, dbl, dbl, i32]
 
-    @numba.njit(fastmath=True, cache=True, error_model="numpy")
-    def blocked_counts(k, a, b, c, d, f_in, I_amp, v0, u0, n_steps, dt, per_sample, rate,
-                       settle_step, p2, p1, p0, v_peak):
-        n = k.shape[0]
-        counts = np.zeros(n, np.int32)
-        v = np.empty(BLOCK, dtype); u = np.empty(BLOCK, dtype)
-        kk = np.empty(BLOCK, dtype); ak = np.empty(BLOCK, dtype); bb = np.empty(BLOCK, dtype)
-        cc = np.empty(BLOCK, dtype); dd = np.empty(BLOCK, dtype)
-        drive = np.empty(BLOCK, dtype); cnt = np.empty(BLOCK, np.int32)
-        two_f = np.empty(BLOCK, np.float64); amp = np.empty(BLOCK, dtype)
-        dt_, p2_, p1_, p0_, vp = dtype(dt), dtype(p2), dtype(p1), dtype(p0), dtype(v_peak)
-        n_samples = (n_steps + per_sample - 1) // per_sample
-        for start in range(0, n, BLOCK):
-            m = min(BLOCK, n - start)
-            for j in range(BLOCK):      # pad the last block with copies of its first lane
-                i = start + (j if j < m else 0)
-                v[j] = v0[i]; u[j] = u0[i]; kk[j] = k[i]; ak[j] = a[i] * k[i]
-                bb[j] = b[i]; cc[j] = c[i]; dd[j] = d[i]; two_f[j] = 2.0 * f_in[i]
-                amp[j] = I_amp[i]; cnt[j] = 0
-            for sample in range(n_samples):
-                t_in = sample / rate
-                for j in range(BLOCK):
-                    half = math.floor(two_f[j] * t_in)
-                    drive[j] = amp[j] * dtype(1 - 2 * (int(half) & 1))
-                first = sample * per_sample
-                for step in range(first, min(first + per_sample, n_steps)):
-                    counting = np.int32(step >= settle_step)
-                    for j in range(BLOCK):
-                        vj = v[j]; uj = u[j]
-                        dv = kk[j] * (p2_ * vj * vj + p1_ * vj + p0_ - uj + drive[j])
-                        du = ak[j] * (bb[j] * vj - uj)
-                        vj += dt_ * dv
-                        uj += dt_ * du
-                        fired = vj >= vp
-                        v[j] = cc[j] if fired else vj
-                        u[j] = uj + dd[j] if fired else uj
-                        cnt[j] += np.int32(fired) * counting
-            for j in range(m):
-                counts[start + j] = cnt[j]
-        return counts
+        def kernel(k, a, b, c, d, f_in, I_amp, v0, u0, n_steps, dt, per_sample, rate,
+                   settle_step, p2, p1, p0, v_peak, fn=fn):
+            arrays = [np.ascontiguousarray(x, dtype=np.float64)
+                      for x in (k, a, b, c, d, f_in, I_amp, v0, u0)]
+            counts = np.zeros(len(arrays[0]), np.int32)
+            fn(*arrays, len(counts), n_steps, dt, per_sample, rate, settle_step,
+               p2, p1, p0, v_peak, counts)
+            return counts
 
-    return blocked_counts
+        kernels[name] = kernel
+    return kernels
 
 
-def run_numba(kernel, sweep: NeuronSweep, points):
+def run_kernel(kernel, sweep: NeuronSweep, points):
     p = sweep.parameters(points)
     v0, u0 = sweep.initial_state(p)
     p2, p1, p0 = neurons.PRESETS[sweep.preset].quadratic
@@ -195,10 +182,10 @@ def main(argv=None) -> int:
     print(f"# {os.cpu_count()} CPU cores, load average {os.getloadavg()[0]:.1f}; "
           f"{base.duration_s:g} s per point at dt {base.dt_ms:g} ms = {steps:,} steps")
     kernel = numba_kernel()
-    run_numba(kernel, base, grid_of(40).points())  # compile outside the timings
-    floors = {name: floor_kernel(dtype) for name, dtype in FLOORS.items()}
+    run_kernel(kernel, base, grid_of(40).points())  # compile outside the timings
+    floors = floor_kernels(tmp)
     for floor in floors.values():
-        run_numba(floor, base, grid_of(40).points())
+        run_kernel(floor, base, grid_of(40).points())
 
     chunk = args.chunk_points
     rows = []
@@ -223,14 +210,14 @@ def main(argv=None) -> int:
             row[engine] = work / row[f"{engine}_s"]
             counts[engine] = out.data.spike_count.values.ravel()
         t0 = time.perf_counter()
-        numba_counts = run_numba(kernel, base, points)
+        numba_counts = run_kernel(kernel, base, points)
         row["numba"] = work / (time.perf_counter() - t0)
         diff = np.abs(numba_counts - counts["standalone"])
         row["max_count_diff_numba"] = int(diff.max())
         row["same_count_numba"] = float(np.mean(diff == 0))
         for name, floor in floors.items():
             t0 = time.perf_counter()
-            floor_counts = run_numba(floor, base, points)
+            floor_counts = run_kernel(floor, base, points)
             row[name] = work / (time.perf_counter() - t0)
             diff = np.abs(floor_counts - counts["standalone"])
             row[f"max_count_diff_{name}"] = int(diff.max())
@@ -257,8 +244,9 @@ def main(argv=None) -> int:
     print("  sweep engines run in this process (one core) after a warm-up chunk: the one-off "
           "compiles (standalone, cython) are excluded; store writes are included")
 
-    print("\n## the floor: hand-written blocked kernels (numba, fastmath, blocks of "
-          f"{BLOCK} neurons in L1, lanes innermost, branch-free; one core)")
+    print("\n## the floor: hand-written blocked C kernels (benchmarks/floor.c, cc "
+          f"{' '.join(FLOOR_FLAGS[:3])}; blocks of 64 neurons in L1, lanes innermost, "
+          "branch-free; one core)")
     print(f"{'points':>8} {'floor f64':>10} {'floor f32':>10} {'sa/floor64':>11} "
           f"{'floor64=sa counts':>18} {'max |Δ|':>8} {'floor32=sa counts':>18} {'max |Δ|':>8}")
     for r in rows:
