@@ -50,41 +50,87 @@ def _standalone_dir(key: str) -> tuple[Path, Any]:
 # sample n of the coder's input holds from n/rate to (n+1)/rate: the square wave of
 # stimuli.square. Its sign is written in floating point, h - 2*floor(h/2) for "h is odd"
 # (exact for every whole h below 2**52), where an int cast and an integer modulo would keep
-# the compiler from vectorising the loop over neurons.
+# the compiler from vectorising the loop over neurons. The state updater computes it once per
+# clock tick into I_held, which the equations read (``FusedUpdater``).
 SQUARE_INPUT = ("I_amp * (1 - 2*(floor((2*f_in)*(floor(t*input_rate + 1e-6)/input_rate_value))"
                 " - 2*floor(0.5*floor((2*f_in)*(floor(t*input_rate + 1e-6)/input_rate_value)))))")
-SQUARE_INPUT_VARIABLES = "f_in : 1 (constant)\nI_amp : 1 (constant)\nspike_count : integer"
+# spike_count is a float: an integer would be converted to and from floating point at every
+# step of the vectorised loop. Whole numbers are exact in it up to 2**24 (float32) spikes.
+SQUARE_INPUT_VARIABLES = ("I_held : 1\nf_in : 1 (constant)\nI_amp : 1 (constant)\n"
+                          "spike_count : 1")
 
 # Threshold, reset and count inside the state update, branch-free: the step, the threshold
-# test and the reset are one pass over the group's arrays, and selects (not a branch, not a
-# list of spiking neurons) so the loop over neurons vectorises. Brian2's own threshold and
-# reset are two more passes per step, the first a compaction that cannot vectorise. The
-# result is the same: threshold after the step, reset in the same step, counted from settle.
-FUSED_RESET = (f"_fired = 1.0*int(v >= {neurons.V_PEAK})\n"
-               "v = _fired*c + (1 - _fired)*v\n"
+# test and the reset are one pass over the group's arrays, and selects (``where``: not a
+# branch, not a list of spiking neurons) so the loop over neurons vectorises. Brian2's own
+# threshold and reset are two more passes per step, the first a compaction that cannot
+# vectorise. The result is the same: threshold after the step, reset in the same step (to
+# exactly c), counted from settle.
+FUSED_RESET = (f"_fired = where(v >= {neurons.V_PEAK}, 1.0, 0.0)\n"
+               f"v = where(v >= {neurons.V_PEAK}, c, v)\n"
                "u = u + _fired*d\n"
                "spike_count += _fired*int(t >= settle)")
 
 
-class FusedUpdater:
-    """A Brian2 state updater: ``method``'s step (one of ``neurons.METHODS``), then
-    ``FUSED_RESET``."""
+def _where():
+    """Brian2 function ``where(condition, a, b)``: a select, as numpy's ``where``."""
+    from brian2 import Function
 
-    def __init__(self, method: str):
+    where = Function(np.where, arg_units=[None, None, None], arg_names=["condition", "a", "b"],
+                     return_unit=lambda u_cond, u_a, u_b: u_a,
+                     arg_types=["boolean", "any", "any"], return_type="highest")
+    where.implementations.add_implementation("cpp", """
+        template <typename A, typename B>
+        inline A _where(const bool condition, const A a, const B b) { return condition ? a : (A)b; }
+        """, name="_where")
+    return where
+
+
+class FusedUpdater:
+    """A Brian2 state updater: the input sample of this clock tick (``SQUARE_INPUT`` into
+    ``I_held``), then ``substeps`` steps of ``method`` (one of ``neurons.METHODS``) at
+    ``dt_sub`` (a namespace constant), each followed by ``FUSED_RESET``.
+
+    The group's clock ticks once per ``substeps`` model steps, and each tick advances every
+    neuron through them all while its state sits in registers: the per-step cost of Brian2's
+    scheduler (a clock query, the code object's call) and the reads and writes of the
+    group's arrays are paid once per tick. Substep j is the same code at time
+    ``t + j*dt_sub``, so the numbers are those of ``method`` stepped at ``dt_sub``.
+    """
+
+    def __init__(self, method: str, substeps: int = 1):
         self.method = method
+        self.substeps = substeps
 
     def __repr__(self):  # names the compiled code in a project's structure key
-        return f"FusedUpdater({self.method!r})"
+        return f"FusedUpdater({self.method!r}, {self.substeps})"
 
     def __call__(self, equations, variables=None, method_options=None) -> str:
+        import re
+
         from brian2.stateupdaters.base import StateUpdateMethod
 
-        step = StateUpdateMethod.apply_stateupdater(
+        one = StateUpdateMethod.apply_stateupdater(
             equations, variables, neurons.brian_method(self.method))
-        return f"{step}\n{FUSED_RESET}"
+        one = re.sub(r"\bdt\b", "dt_sub", f"{one}\n{FUSED_RESET}")
+        steps = [f"I_held = {SQUARE_INPUT}"]
+        for j in range(self.substeps):  # temporaries renamed per substep: each assigned once
+            step = re.sub(r"\bt\b", f"(t + {j}*dt_sub)" if j else "t", one)
+            steps.append(re.sub(r"\b(_\w+)", rf"\1_s{j}", step))
+        return "\n".join(steps)
 
     def can_integrate(self, equations, variables, method_options=None):
         return True
+
+
+def substeps(sweep) -> int:
+    """Model steps per clock tick of the compiled group: one input sample's, when a sample
+    lasts a whole number of steps and the run a whole number of samples (the common case:
+    1 kHz input at dt 0.1 ms gives 10); else 1."""
+    per_sample = 1000.0 / sweep.input_rate_hz / sweep.dt_ms
+    steps = sweep.duration_s * 1000.0 / sweep.dt_ms
+    s = round(per_sample)
+    whole = abs(per_sample - s) < 1e-9 * per_sample and abs(steps / s - round(steps / s)) < 1e-6
+    return s if s >= 1 and whole else 1
 
 
 def project(structure: tuple, build) -> dict:
@@ -138,16 +184,21 @@ def _standalone_project(sweep, n: int):
 
     from .devices import float_precision
 
+    steps = substeps(sweep)
     structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dtype,
-                 sweep.dt_ms, sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, n)
+                 sweep.dt_ms, steps, sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, n)
+    if _PROJECT.get("structure") == structure:
+        return _PROJECT
 
     def build():
         group = b2.NeuronGroup(
-            n, neurons.equations(sweep.preset, SQUARE_INPUT, SQUARE_INPUT_VARIABLES),
-            method=FusedUpdater(sweep.method), dt=sweep.dt_ms * b2.ms, name="neurons",
+            n, neurons.equations(sweep.preset, "I_held", SQUARE_INPUT_VARIABLES),
+            method=FusedUpdater(sweep.method, steps), dt=steps * sweep.dt_ms * b2.ms,
+            name="neurons",
             namespace={"input_rate": sweep.input_rate_hz * b2.Hz,
                        "input_rate_value": float(sweep.input_rate_hz),
-                       "settle": sweep.settle_s * b2.second})
+                       "settle": sweep.settle_s * b2.second, "dt_sub": sweep.dt_ms * b2.ms,
+                       "where": _where()})
         b2.Network(group).run(sweep.duration_s * b2.second, namespace={})
         return {"group": group}
 
@@ -199,4 +250,4 @@ def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
             neuron=i, params={k: float(values[k][i]) for k in ("k", "a", "b", "c", "d")},
             dt_ms=sweep.dt_ms, method=sweep.method, t_ms=sweep.duration_s * 1000,
             safe_dt_ms=neurons.max_stable_dt_ms(values["k"][i], sweep.method))
-    return np.asarray(group.spike_count[:], dtype=np.int64)
+    return np.rint(np.asarray(group.spike_count[:])).astype(np.int64)
