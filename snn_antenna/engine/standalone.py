@@ -66,14 +66,16 @@ SQUARE_INPUT_VARIABLES = ("I_held : 1\nf_in : 1 (constant)\nI_amp : 1 (constant)
 # threshold and reset are two more passes per step, the first a compaction that cannot
 # vectorise. The result is the same: threshold after the step, reset in the same step (to
 # exactly c), counted from settle.
-FUSED_RESET = (f"_fired = where(v >= {neurons.V_PEAK}, 1.0, 0.0)\n"
-               f"v = where(v >= {neurons.V_PEAK}, c, v)\n"
-               "u = u + _fired*d\n"
-               "spike_count += _fired*int(t >= settle)")
+FUSED_RESET = (f"u = where(v >= {neurons.V_PEAK}, u + d, u)\n"
+               f"spike_count = where(v >= {neurons.V_PEAK}, spike_count + int(t >= settle), "
+               "spike_count)\n"
+               f"v = where(v >= {neurons.V_PEAK}, c, v)")
 
 
-def _where():
-    """Brian2 function ``where(condition, a, b)``: a select, as numpy's ``where``."""
+def _functions() -> dict:
+    """Brian2 functions of the compiled model: ``where(condition, a, b)``, a select as
+    numpy's ``where``, and ``square(x)``, x*x in x's own type (Brian2 writes ``v**2`` as
+    ``pow(v, 2)``, which C++ computes in double: in a float32 loop, two conversions)."""
     from brian2 import Function
 
     where = Function(np.where, arg_units=[None, None, None], arg_names=["condition", "a", "b"],
@@ -83,7 +85,12 @@ def _where():
         template <typename A, typename B>
         inline A _where(const bool condition, const A a, const B b) { return condition ? a : (A)b; }
         """, name="_where")
-    return where
+    square = Function(np.square, arg_units=[None], arg_names=["x"],
+                      return_unit=lambda u: u ** 2, arg_types=["float"], return_type="highest")
+    square.implementations.add_implementation(
+        "cpp", "template <typename T> inline T _square(const T x) { return x*x; }",
+        name="_square")
+    return {"where": where, "square": square}
 
 
 class FusedUpdater:
@@ -147,7 +154,7 @@ def project(structure: tuple, build) -> dict:
     """
     from brian2.devices.device import get_device, reset_device, set_device
 
-    if _PROJECT.get("structure") == structure:
+    if _PROJECT.get("structure") == structure and _still_built():
         return _PROJECT
     key = hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
     directory, lock = _standalone_dir(key)
@@ -167,8 +174,16 @@ def project(structure: tuple, build) -> dict:
         raise
     finally:
         reset_device()  # runtime code elsewhere in this process keeps working
-    _PROJECT.update(objects, structure=structure, device=device, lock=lock)
+    _PROJECT.update(objects, structure=structure, device=device, lock=lock,
+                    directory=str(directory))
     return _PROJECT
+
+
+def _still_built() -> bool:
+    """Whether the device still holds this process's project: Brian2 has one cpp_standalone
+    device per process, and another user of it (``engine.devices.run_standalone``) builds
+    elsewhere and re-initialises it."""
+    return _PROJECT["device"].project_dir == _PROJECT["directory"]
 
 
 def run_project(project: dict, run_args: dict) -> None:
@@ -188,22 +203,23 @@ def _standalone_project(sweep, n: int):
     steps = substeps(sweep)
     structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dtype,
                  sweep.dt_ms, steps, sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, n)
-    if _PROJECT.get("structure") == structure:
+    if _PROJECT.get("structure") == structure and _still_built():
         return _PROJECT
 
     def build():
         group = b2.NeuronGroup(
-            n, neurons.equations(sweep.preset, "I_held", SQUARE_INPUT_VARIABLES),
+            n, neurons.equations(sweep.preset, "I_held", SQUARE_INPUT_VARIABLES)
+            .replace("v**2", "square(v)"),
             method=FusedUpdater(sweep.method, steps), dt=steps * sweep.dt_ms * b2.ms,
             name="neurons",
             namespace={"input_rate": sweep.input_rate_hz * b2.Hz,
                        "input_rate_value": float(sweep.input_rate_hz),
                        "settle": sweep.settle_s * b2.second, "dt_sub": sweep.dt_ms * b2.ms,
-                       "where": _where()})
+                       **_functions()})
         b2.Network(group).run(sweep.duration_s * b2.second, namespace={})
         return {"group": group}
 
-    with float_precision(sweep.dtype), vectorising_flags():
+    with float_precision(sweep.dtype), vectorising_flags(sweep.dtype):
         return project(structure, build)
 
 
@@ -211,16 +227,22 @@ def _standalone_project(sweep, n: int):
 # then checks each pair for overlap at run time, but by default only up to 10 checks, above
 # which it leaves the loop scalar. Allowing more lets the one fused loop vectorise.
 VECTORISING_FLAGS = ["--param=vect-max-version-for-alias-checks=64"]
+# In float32, Brian2 still writes constants as double literals (0.04, 140.0), and C++ then
+# computes every expression that holds one in double, converting each float to double and
+# back. This flag makes the literals float, so the loop stays float32 (8 lanes, not 4).
+FLOAT32_FLAGS = ["-fsingle-precision-constant"]
 
 
 @contextmanager
-def vectorising_flags():
+def vectorising_flags(dtype: str):
     """Brian2's compiler flags for projects built inside: its defaults (``-O3 -ffast-math
-    -march=native``, ...) plus ``VECTORISING_FLAGS`` (restored afterwards)."""
+    -march=native``, ...) plus ``VECTORISING_FLAGS`` (and ``FLOAT32_FLAGS`` for float32),
+    restored afterwards."""
     from brian2 import prefs
 
     before = list(prefs.codegen.cpp.extra_compile_args_gcc)
-    prefs.codegen.cpp.extra_compile_args_gcc = before + VECTORISING_FLAGS
+    prefs.codegen.cpp.extra_compile_args_gcc = before + VECTORISING_FLAGS + (
+        FLOAT32_FLAGS if dtype == "float32" else [])
     try:
         yield
     finally:
