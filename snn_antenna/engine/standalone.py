@@ -102,7 +102,10 @@ class FusedUpdater:
     neuron through them all while its state sits in registers: the per-step cost of Brian2's
     scheduler (a clock query, the code object's call) and the reads and writes of the
     group's arrays are paid once per tick. Substep j is the same code at time
-    ``t + j*dt_sub``, so the numbers are those of ``method`` stepped at ``dt_sub``.
+    ``t + j*dt_sub``, so the numbers are those of ``method`` stepped at ``dt_sub`` with the
+    input held over each sample, as the coder holds it. (rk4's last stage looks at
+    ``t + dt``: at a sample's last step the runtime engines read the next sample there,
+    this engine the held one; docs/reference.md gives the difference.)
     """
 
     def __init__(self, method: str, substeps: int = 1):
