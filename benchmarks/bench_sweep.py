@@ -1,27 +1,33 @@
-"""Sweep throughput: vectorised Brian2 grids vs a naive per-point loop vs numba kernels.
+"""Sweep throughput: the Brian2 sweep engine against the hand-written floor, runtime engines,
+a naive per-point loop and a numba kernel.
 
     python benchmarks/bench_sweep.py                 # 10^3, 10^4, 10^5 points
     python benchmarks/bench_sweep.py --sizes 1000 --workers 1 2 --duration-s 0.5
-    python benchmarks/bench_sweep.py --sizes 1000000 # a 10^6-point grid's time, and on Dask
+    python benchmarks/bench_sweep.py --sizes 1000000 --runtime-max 0 --naive-sample 1
+                                                     # the 10^6-point grid, and on 2 Dask workers
 
 Every grid point is one resonator driven by the coder's square wave (``NeuronSweep``), for
 ``--duration-s`` at dt 0.1 ms. Measured in one run and printed side by side, in neuron-steps
 per second (points × steps / wall time):
 
-- ``sweep/<engine>``: ``run_sweep`` in this process (store writes included); the standalone
-  engine's one-off compile is timed separately and excluded from its rate (it is cached on
-  disk and paid once per worker process, not per chunk);
+- ``standalone`` / ``standalone32``: ``run_sweep`` with the compiled engine in float64 and
+  float32, in this process (store writes included), after a warm-up chunk (the one-off
+  compile is cached on disk and paid once per worker process, not per chunk);
+- ``floor64`` / ``floor32``: the best kernel written by hand (``benchmarks/floor.c``, compiled
+  at benchmark time with the system ``cc -O3 -march=native -ffast-math``: blocks of 64
+  neurons kept in L1 for the whole run, lanes innermost, branch-free, one thread). The
+  engines and the floors are timed ``--repeat`` times, interleaved, and ours / floor is
+  printed per size and precision as median [min–max] of the per-repetition ratios, with
+  how far their spike counts agree; float32's counts are compared with float64's;
+- ``cython`` / ``numpy``: the runtime engines (grids up to ``--runtime-max`` points);
 - ``naive loop``: one ``neurons.simulate`` call (one Brian2 run, numpy target) per point,
   timed on a sample of points and EXTRAPOLATED to the grid (said so in the table);
-- ``numba``: a hand-written Euler kernel of the same equations and input (neuron-outer loop,
-  one thread), compile time excluded; its spike counts are compared with Brian2's;
-- ``floor64`` / ``floor32``: the best kernel written by hand (``floor_kernel``: blocks of 64
-  neurons kept in L1 for the whole run, lanes innermost, branch-free, fastmath, one thread),
-  in float64 and float32; spike counts compared with Brian2's; ours / floor printed per size;
-- scaling: the largest grid on a Dask LocalCluster of 1, 2, ... worker processes (the
-  workers return their blocks; this process writes the store, as on a cluster without a
-  shared folder). Each row prints the machine's load average (1 min) before and after it:
-  other jobs holding a core lower the 2-worker ratio, and the load says whether they did.
+- ``numba``: a plain Euler kernel (neuron-outer loop, one thread), compile time excluded;
+- scaling: the largest grid on a Dask LocalCluster of 1, 2, ... worker processes, in both
+  precisions (the workers return their blocks; this process writes the store, as on a
+  cluster without a shared folder). Each row prints the machine's load average (1 min)
+  before and after it: other jobs holding a core lower the 2-worker ratio, and the load
+  says whether they did.
 
 Every row also gives the grid's wall time, so ``--sizes 1000000`` answers "how long does a
 10^6-point grid take here".
@@ -87,64 +93,54 @@ def numba_kernel():
     return euler_counts
 
 
-FLOORS = {"floor64": np.float64, "floor32": np.float32}
-BLOCK = 64  # neurons per block: v, u, parameters and counts of a block stay in L1 all run
+FLOOR_C = Path(__file__).with_name("floor.c")
+FLOOR_FLAGS = ["-O3", "-march=native", "-ffast-math"]
+FLOORS = {"floor64": "floor_counts_f64", "floor32": "floor_counts_f32"}
 
 
-def floor_kernel(dtype):
-    """The honest floor: the same Euler equations and input, written for the machine.
+def floor_kernels(build_dir: Path) -> dict:
+    """The honest floor (``benchmarks/floor.c``): the same Euler equations and input written
+    by hand for the machine (blocks of 64 neurons kept in L1 for the whole run, lanes
+    innermost, branch-free threshold and reset, the input's sign once per input sample),
+    compiled now with the system compiler (``cc -O3 -march=native -ffast-math``) and called
+    through ctypes on one thread, in float64 and float32."""
+    import ctypes
+    import shutil
+    import subprocess
 
-    Blocks of ``BLOCK`` neurons run the whole simulation while their state stays in L1;
-    lanes are the innermost loop; threshold and reset are selects (branch-free), so LLVM
-    vectorises the lane loop (``fastmath``: the same licence as ``-ffast-math``). The
-    input's sign is computed once per input sample, not per step. One thread."""
-    import numba
+    cc = os.environ.get("CC") or shutil.which("cc")
+    if cc is None:
+        raise SystemExit("bench_sweep: no C compiler (cc) for the floor kernels; set CC")
+    library = build_dir / "floor.so"
+    # compiled with -ffast-math, linked without: linking with it would add crtfastmath.o, which
+    # sets flush-to-zero for this whole process (numpy and Brian2 included) when it loads
+    subprocess.run([cc, *FLOOR_FLAGS, "-fPIC", "-c", str(FLOOR_C), "-o",
+                    str(build_dir / "floor.o")], check=True)
+    subprocess.run([cc, "-shared", str(build_dir / "floor.o"), "-o", str(library)], check=True)
+    lib = ctypes.CDLL(str(library))
+    f64 = np.ctypeslib.ndpointer(np.float64, flags="C_CONTIGUOUS")
+    i32 = np.ctypeslib.ndpointer(np.int32, flags="C_CONTIGUOUS")
+    i64, dbl = ctypes.c_int64, ctypes.c_double
+    kernels = {}
+    for name, symbol in FLOORS.items():
+        fn = getattr(lib, symbol)
+        fn.restype = None
+        fn.argtypes = [f64] * 9 + [i64, i64, dbl, i64, dbl, i64, dbl, dbl, dbl, dbl, i32]
 
-    @numba.njit(fastmath=True, cache=True, error_model="numpy")
-    def blocked_counts(k, a, b, c, d, f_in, I_amp, v0, u0, n_steps, dt, per_sample, rate,
-                       settle_step, p2, p1, p0, v_peak):
-        n = k.shape[0]
-        counts = np.zeros(n, np.int32)
-        v = np.empty(BLOCK, dtype); u = np.empty(BLOCK, dtype)
-        kk = np.empty(BLOCK, dtype); ak = np.empty(BLOCK, dtype); bb = np.empty(BLOCK, dtype)
-        cc = np.empty(BLOCK, dtype); dd = np.empty(BLOCK, dtype)
-        drive = np.empty(BLOCK, dtype); cnt = np.empty(BLOCK, np.int32)
-        two_f = np.empty(BLOCK, np.float64); amp = np.empty(BLOCK, dtype)
-        dt_, p2_, p1_, p0_, vp = dtype(dt), dtype(p2), dtype(p1), dtype(p0), dtype(v_peak)
-        n_samples = (n_steps + per_sample - 1) // per_sample
-        for start in range(0, n, BLOCK):
-            m = min(BLOCK, n - start)
-            for j in range(BLOCK):      # pad the last block with copies of its first lane
-                i = start + (j if j < m else 0)
-                v[j] = v0[i]; u[j] = u0[i]; kk[j] = k[i]; ak[j] = a[i] * k[i]
-                bb[j] = b[i]; cc[j] = c[i]; dd[j] = d[i]; two_f[j] = 2.0 * f_in[i]
-                amp[j] = I_amp[i]; cnt[j] = 0
-            for sample in range(n_samples):
-                t_in = sample / rate
-                for j in range(BLOCK):
-                    half = math.floor(two_f[j] * t_in)
-                    drive[j] = amp[j] * dtype(1 - 2 * (int(half) & 1))
-                first = sample * per_sample
-                for step in range(first, min(first + per_sample, n_steps)):
-                    counting = np.int32(step >= settle_step)
-                    for j in range(BLOCK):
-                        vj = v[j]; uj = u[j]
-                        dv = kk[j] * (p2_ * vj * vj + p1_ * vj + p0_ - uj + drive[j])
-                        du = ak[j] * (bb[j] * vj - uj)
-                        vj += dt_ * dv
-                        uj += dt_ * du
-                        fired = vj >= vp
-                        v[j] = cc[j] if fired else vj
-                        u[j] = uj + dd[j] if fired else uj
-                        cnt[j] += np.int32(fired) * counting
-            for j in range(m):
-                counts[start + j] = cnt[j]
-        return counts
+        def kernel(k, a, b, c, d, f_in, I_amp, v0, u0, n_steps, dt, per_sample, rate,
+                   settle_step, p2, p1, p0, v_peak, fn=fn):
+            arrays = [np.ascontiguousarray(x, dtype=np.float64)
+                      for x in (k, a, b, c, d, f_in, I_amp, v0, u0)]
+            counts = np.zeros(len(arrays[0]), np.int32)
+            fn(*arrays, len(counts), n_steps, dt, per_sample, rate, settle_step,
+               p2, p1, p0, v_peak, counts)
+            return counts
 
-    return blocked_counts
+        kernels[name] = kernel
+    return kernels
 
 
-def run_numba(kernel, sweep: NeuronSweep, points):
+def run_kernel(kernel, sweep: NeuronSweep, points):
     p = sweep.parameters(points)
     v0, u0 = sweep.initial_state(p)
     p2, p1, p0 = neurons.PRESETS[sweep.preset].quadratic
@@ -178,11 +174,31 @@ def load() -> float:
     return os.getloadavg()[0]
 
 
+def counts_agree(a: np.ndarray, b: np.ndarray) -> str:
+    """How far two engines' spike counts are apart: the share of points with equal counts,
+    and the largest difference."""
+    diff = np.abs(np.asarray(a, np.int64) - np.asarray(b, np.int64))
+    return f"{np.mean(diff == 0) * 100:.1f}% same, max |Δ| {int(diff.max())}"
+
+
+def spread(values) -> str:
+    """Median [min–max] of repeated measurements."""
+    v = np.asarray(values, float)
+    return f"{np.median(v):.2f} [{v.min():.2f}–{v.max():.2f}]"
+
+
+PRECISIONS = {"standalone": ("float64", "floor64"), "standalone32": ("float32", "floor32")}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 10_000, 100_000])
     ap.add_argument("--duration-s", type=float, default=1.0)
-    ap.add_argument("--chunk-points", type=int, default=10_000)
+    ap.add_argument("--chunk-points", type=int, default=100_000,
+                    help="points per chunk (one run of the compiled project; each run has "
+                         "a fixed cost of tens of ms, so large chunks amortise it)")
+    ap.add_argument("--repeat", type=int, default=3,
+                    help="timings of the standalone engines and the floors, interleaved")
     ap.add_argument("--runtime-max", type=int, default=10_000,
                     help="largest grid also run with the cython and numpy runtime engines")
     ap.add_argument("--naive-sample", type=int, default=5)
@@ -192,13 +208,16 @@ def main(argv=None) -> int:
     base = NeuronSweep(duration_s=args.duration_s, settle_s=min(0.25, args.duration_s / 4))
     steps = int(round(base.duration_s * 1000 / base.dt_ms))
     tmp = Path(tempfile.mkdtemp(prefix="bench_sweep_"))
-    print(f"# {os.cpu_count()} CPU cores, load average {os.getloadavg()[0]:.1f}; "
+    print(f"# {os.cpu_count()} CPU cores, load average {load():.1f}; "
           f"{base.duration_s:g} s per point at dt {base.dt_ms:g} ms = {steps:,} steps")
     kernel = numba_kernel()
-    run_numba(kernel, base, grid_of(40).points())  # compile outside the timings
-    floors = {name: floor_kernel(dtype) for name, dtype in FLOORS.items()}
+    run_kernel(kernel, base, grid_of(40).points())  # compile outside the timings
+    floors = floor_kernels(tmp)
     for floor in floors.values():
-        run_numba(floor, base, grid_of(40).points())
+        run_kernel(floor, base, grid_of(40).points())
+    sweeps = {"standalone": base, "standalone32": dataclasses.replace(base, dtype="float32"),
+              "cython": dataclasses.replace(base, engine="cython"),
+              "numpy": dataclasses.replace(base, engine="numpy")}
 
     chunk = args.chunk_points
     rows = []
@@ -207,67 +226,82 @@ def main(argv=None) -> int:
         n = grid.size
         points = grid.points()
         work = n * steps
-        row = {"points": n, "neuron_steps": work}
-        engines = ["standalone"] + (["cython", "numpy"] if n <= args.runtime_max else [])
-        counts = {}
+        row = {"points": n, "neuron_steps": work, "load_before": load()}
+        counts, seconds = {}, {}
         first_block = Grid({d: grid.axes[d][r] for d, r in grid.blocks(chunk)[0].items()})
-        for engine in engines:
-            sweep = dataclasses.replace(base, engine=engine)
+
+        def sweep_seconds(name):
             # warm-up on the first chunk: compiles (standalone, cython) outside the timing
-            run_sweep(first_block, sweep, tmp / f"warm-{engine}-{n}.zarr", NeuronSweep.OUTPUTS,
-                      chunk_points=chunk, progress=False)
+            run_sweep(first_block, sweeps[name], tmp / f"warm-{name}-{n}.zarr",
+                      NeuronSweep.OUTPUTS, chunk_points=chunk, progress=False, fresh=True)
             t0 = time.perf_counter()
-            out = run_sweep(grid, sweep, tmp / f"{engine}-{n}.zarr", NeuronSweep.OUTPUTS,
-                            chunk_points=chunk, progress=False)
-            row[f"{engine}_s"] = time.perf_counter() - t0
-            row[engine] = work / row[f"{engine}_s"]
-            counts[engine] = out.data.spike_count.values.ravel()
+            out = run_sweep(grid, sweeps[name], tmp / f"{name}-{n}.zarr", NeuronSweep.OUTPUTS,
+                            chunk_points=chunk, progress=False, fresh=True)
+            counts[name] = out.data.spike_count.values.ravel()
+            return time.perf_counter() - t0
+
+        def floor_seconds(name):
+            t0 = time.perf_counter()
+            counts[name] = run_kernel(floors[name], base, points)
+            return time.perf_counter() - t0
+
+        for _ in range(args.repeat):   # interleaved: a load change hits both sides of a ratio
+            for name, (_, floor) in PRECISIONS.items():
+                seconds.setdefault(name, []).append(sweep_seconds(name))
+                seconds.setdefault(floor, []).append(floor_seconds(floor))
+        for name, (_, floor) in PRECISIONS.items():
+            row[name] = work / np.median(seconds[name])
+            row[f"{name}_s"] = float(np.median(seconds[name]))
+            row[floor] = work / np.median(seconds[floor])
+            row[f"{name}/{floor}"] = [a / b for a, b in zip(seconds[name], seconds[floor])]
+            row[f"{floor} counts"] = counts_agree(counts[floor], counts[name])
+        row["float32 counts"] = counts_agree(counts["standalone32"], counts["standalone"])
+        if n <= args.runtime_max:
+            for name in ("cython", "numpy"):
+                row[name] = work / sweep_seconds(name)
         t0 = time.perf_counter()
-        numba_counts = run_numba(kernel, base, points)
+        numba_counts = run_kernel(kernel, base, points)
         row["numba"] = work / (time.perf_counter() - t0)
-        diff = np.abs(numba_counts - counts["standalone"])
-        row["max_count_diff_numba"] = int(diff.max())
-        row["same_count_numba"] = float(np.mean(diff == 0))
-        for name, floor in floors.items():
-            t0 = time.perf_counter()
-            floor_counts = run_numba(floor, base, points)
-            row[name] = work / (time.perf_counter() - t0)
-            diff = np.abs(floor_counts - counts["standalone"])
-            row[f"max_count_diff_{name}"] = int(diff.max())
-            row[f"same_count_{name}"] = float(np.mean(diff == 0))
+        row["numba counts"] = counts_agree(numba_counts, counts["standalone"])
         row["naive"] = steps / naive_seconds_per_point(base, points, args.naive_sample)
+        row["load_after"] = load()
         rows.append(row)
-        print(f"  {n:>9,} points: standalone {row['standalone']:.3g}, numba {row['numba']:.3g}, "
-              f"naive {row['naive']:.3g} neuron-steps/s; the grid took "
-              f"{row['standalone_s']:.1f} s on one core (standalone, compile excluded; "
-              f"load average {load():.1f})", flush=True)
+        print(f"  {n:>9,} points: standalone {row['standalone']:.3g} (float64), "
+              f"{row['standalone32']:.3g} (float32) neuron-steps/s; the grid took "
+              f"{row['standalone_s']:.1f} s / {row['standalone32_s']:.1f} s on one core "
+              f"(median of {args.repeat}, compile excluded; load average "
+              f"{row['load_before']:.1f} before, {row['load_after']:.1f} after)", flush=True)
 
     print("\n## throughput (neuron-steps per second) and ratios, measured in this run")
-    print(f"{'points':>8} {'standalone':>11} {'cython':>9} {'numpy':>9} {'numba':>9} "
-          f"{'naive*':>9} {'sa/naive':>9} {'sa/numba':>9} {'numba=sa counts':>16} {'max |Δ|':>8}")
+    print(f"{'points':>9} {'standalone':>11} {'cython':>9} {'numpy':>9} {'numba':>9} "
+          f"{'naive*':>9} {'sa/naive':>9} {'sa/numba':>9}  numba vs standalone counts")
     for r in rows:
         def fmt(key):
             return f"{r[key]:.3g}" if key in r else "-"
-        print(f"{r['points']:>8,} {fmt('standalone'):>11} {fmt('cython'):>9} {fmt('numpy'):>9} "
+        print(f"{r['points']:>9,} {fmt('standalone'):>11} {fmt('cython'):>9} {fmt('numpy'):>9} "
               f"{fmt('numba'):>9} {fmt('naive'):>9} {r['standalone'] / r['naive']:>8.0f}x "
-              f"{r['standalone'] / r['numba']:>8.2f}x {r['same_count_numba'] * 100:>15.1f}% "
-              f"{r['max_count_diff_numba']:>8}")
+              f"{r['standalone'] / r['numba']:>8.2f}x  {r['numba counts']}")
     print(f"* naive: one neurons.simulate (Brian2 numpy) run per point, {args.naive_sample} "
           "points timed and extrapolated to the grid")
     print("  sweep engines run in this process (one core) after a warm-up chunk: the one-off "
           "compiles (standalone, cython) are excluded; store writes are included")
 
-    print("\n## the floor: hand-written blocked kernels (numba, fastmath, blocks of "
-          f"{BLOCK} neurons in L1, lanes innermost, branch-free; one core)")
-    print(f"{'points':>8} {'floor f64':>10} {'floor f32':>10} {'sa/floor64':>11} "
-          f"{'floor64=sa counts':>18} {'max |Δ|':>8} {'floor32=sa counts':>18} {'max |Δ|':>8}")
+    print("\n## the floor: hand-written blocked C kernels (benchmarks/floor.c, cc "
+          f"{' '.join(FLOOR_FLAGS)}; blocks of 64 neurons in L1, lanes innermost, "
+          "branch-free; one core)")
+    print(f"{'points':>9} {'prec.':>7} {'standalone':>11} {'floor':>9} "
+          f"{'ours/floor (time), median [min–max]':>36}  floor vs standalone counts")
     for r in rows:
-        print(f"{r['points']:>8,} {r['floor64']:>10.3g} {r['floor32']:>10.3g} "
-              f"{r['floor64'] / r['standalone']:>10.2f}x "
-              f"{r['same_count_floor64'] * 100:>17.1f}% {r['max_count_diff_floor64']:>8} "
-              f"{r['same_count_floor32'] * 100:>17.1f}% {r['max_count_diff_floor32']:>8}")
-    print("  sa/floor64: how many times slower the standalone engine (float64) is than the "
-          "float64 floor (ours / floor, in time)")
+        for name, (dtype, floor) in PRECISIONS.items():
+            print(f"{r['points']:>9,} {dtype:>7} {r[name]:>11.3g} {r[floor]:>9.3g} "
+                  f"{spread(r[f'{name}/{floor}']):>36}  {r[f'{floor} counts']}")
+    print(f"  {args.repeat} interleaved timings per engine; the ratio is taken within each "
+          "repetition. Counts differ at rounding-sensitive points (fast-math: fused "
+          "multiply-adds and order differ between compilations)")
+    print("\n## float32 against float64 (the standalone engine, same grid)")
+    for r in rows:
+        print(f"{r['points']:>9,} points: {r['float32 counts']}; float32 "
+              f"{r['standalone32'] / r['standalone']:.2f}x the float64 throughput")
 
     if args.workers:
         grid = grid_of(max(args.sizes))
@@ -275,20 +309,22 @@ def main(argv=None) -> int:
         print(f"\n## scaling with Dask worker processes ({grid.size:,} points, standalone; "
               "timed on a second run: cluster start and each worker's compile excluded; "
               f"{os.cpu_count()} cores, load average = runnable processes, 1 min)")
-        first = None
-        for w in args.workers:
-            with dask_client(workers=w) as client:
-                for attempt in ("warm-up", "timed"):
-                    before = load()
-                    t0 = time.perf_counter()
-                    run_sweep(grid, base, tmp / f"dask-{w}.zarr", NeuronSweep.OUTPUTS,
-                              chunk_points=chunk, client=client, progress=False, fresh=True)
-                    seconds = time.perf_counter() - t0
-            rate = work / seconds
-            first = first or rate
-            print(f"  {w} worker(s): {rate:.3g} neuron-steps/s, {rate / first:.2f}x of 1 worker, "
-                  f"{seconds:.1f} s for the grid; load average {before:.1f} before, "
-                  f"{load():.1f} after", flush=True)
+        for name, (dtype, _) in PRECISIONS.items():
+            first = None
+            for w in args.workers:
+                with dask_client(workers=w) as client:
+                    for attempt in ("warm-up", "timed"):
+                        before = load()
+                        t0 = time.perf_counter()
+                        run_sweep(grid, sweeps[name], tmp / f"dask-{name}-{w}.zarr",
+                                  NeuronSweep.OUTPUTS, chunk_points=chunk, client=client,
+                                  progress=False, fresh=True)
+                        seconds = time.perf_counter() - t0
+                rate = work / seconds
+                first = first or rate
+                print(f"  {dtype}, {w} worker(s): {rate:.3g} neuron-steps/s, "
+                      f"{rate / first:.2f}x of 1 worker, {seconds:.1f} s for the grid; load "
+                      f"average {before:.1f} before, {load():.1f} after", flush=True)
     return 0
 
 

@@ -15,9 +15,19 @@ from snn_antenna.studies.speed_accuracy import report as study_report
 SPEC = "studies/speed_accuracy.toml"
 
 
+# The default suite's run: every stage but the bands' 0.001-0.002 ms runs and the compiled
+# sweep engine's precision stage (two compiles), on the bench scene alone, two methods at
+# dt 0.2 and 0.5 ms and one array size in both float types (~40 s before, when it ran the
+# whole quick main sweep on both scenes). The slow run is the whole quick profile: the tuning
+# scene, izhikevich, the bands (+75 s) and float32 on the sweep engine.
+DEFAULT_SUITE = ["bands.bands=[]", "precision.dtypes=[]", "sweep.scenes=['bench']",
+                 "sweep.methods=['euler', 'rk2']", "sweep.dt_ms=[0.2, 0.5]",
+                 "reference.check_scene='bench'", "cost.n_neurons=[24]"]
+
+
 @pytest.mark.parametrize("overrides", [
-    ["bands.bands=[]"],    # the default suite: every stage but the bands' 0.001-0.002 ms runs
-    pytest.param([], marks=pytest.mark.slow),   # the whole quick profile (bands: +75 s)
+    DEFAULT_SUITE,
+    pytest.param([], marks=pytest.mark.slow),
 ])
 def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tmp_path,
                                                                               overrides):
@@ -47,9 +57,22 @@ def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tm
     assert stored["reference_convergence"]["max_shift_ms"] < 1e-3
     assert {r["scene"] for r in stored["recommendations"]} <= set(quick["scenes"])
     assert set(stored["stability_limits"]) == set(quick["methods"])
-    sizes = {r["n_neurons"] for r in rows if r["sweep"] == "cost"}
-    assert sizes == set(spec["cost"]["n_neurons"])
+    cost = [r for r in rows if r["sweep"] == "cost"]
+    assert {r["n_neurons"] for r in cost} == set(spec["cost"]["n_neurons"])
+    assert {r["dtype"] for r in cost} == set(spec["cost"]["dtypes"])   # float32 is an axis
     assert summary["rows"] == rows
+    precision = stored["precision"]
+    if not spec["precision"]["dtypes"]:
+        assert precision is None
+        return
+    by_dtype = {r["dtype"]: r for r in precision["rows"]}
+    assert set(by_dtype) == set(spec["precision"]["dtypes"])
+    assert by_dtype["float64"]["spike_count_error"] == 0      # float64 is the comparison
+    for r in precision["rows"] + [precision["baseline"]]:
+        assert r["ns_per_neuron_step"] > 0 and 0 <= r["same_count_share"] <= 1
+    r32 = by_dtype["float32"]
+    assert r32["within_tolerance"] == (r32["spike_count_error"] <= precision["tolerance"])
+    assert "Sweep engine: float precision" in (tmp_path / "report.html").read_text()
 
 
 @pytest.mark.parametrize("override, field", [

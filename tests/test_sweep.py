@@ -206,15 +206,25 @@ def test_vectorised_runtime_sweep_matches_a_hand_written_euler_loop():
     assert np.abs(brian - ref).max() <= 1
 
 
-def test_standalone_engine_matches_runtime_engine(tmp_path, monkeypatch):
-    # one compile (~10-20 s on a fresh machine; reused from the cache afterwards)
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_standalone_engine_matches_runtime_engine(dtype):
+    # one compile per float type (~10-20 s on a fresh machine; reused from the cache after).
+    # The compiled engine fuses threshold and reset into a state update that advances every
+    # neuron through one input sample's steps per clock tick; the runtime engine is Brian2's
+    # plain NeuronGroup (float64) with its own threshold and reset, one step per tick.
     grid = Grid(SMALL)
     points = grid.points()
-    standalone = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="standalone",
+    standalone = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="standalone", dtype=dtype,
                              group_size=30)(points)["spike_count"]  # 24 points padded to 30 neurons
     runtime = FAST(points)["spike_count"]
     assert np.abs(standalone - runtime).max() <= 1
     assert standalone.sum() > 20
+
+
+def test_a_float_type_outside_brian2s_is_refused():
+    with pytest.raises(SpecError) as info:
+        NeuronSweep(dtype="float16")
+    assert info.value.field == "dtype" and "float32" in str(info.value)
 
 
 # -- parallel execution -----------------------------------------------------------------------

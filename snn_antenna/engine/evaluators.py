@@ -31,6 +31,7 @@ from .. import bounds
 from ..errors import SpecError, check
 from ..networks import neurons
 from ..store import Output
+from .devices import DTYPES, float_precision
 from .grid import Grid
 from .standalone import standalone_counts
 
@@ -46,6 +47,8 @@ class NeuronSweep:
     are counted from ``settle_s`` to ``duration_s`` (the onset transient is left out);
     ``rate_hz`` is that count per second. Parameters not swept take the values given here
     (``None``: the preset's). Neurons start at rest for the first input sample.
+    ``dtype``: Brian2's float type, ``"float64"`` or ``"float32"`` (faster, a few spikes
+    off at some points: the speed/accuracy study measures it, docs/reference.md).
     """
     preset: str = "resonator"
     duration_s: float = 2.0
@@ -61,6 +64,7 @@ class NeuronSweep:
     d: float | None = None
     input_hz: float = 10.0
     I: float = 0.15
+    dtype: str = "float64"
     force: bool = False
     group_size: int | None = None  # standalone: neurons per compiled group (set by for_grid)
 
@@ -74,6 +78,9 @@ class NeuronSweep:
               f"one of {list(neurons.METHODS)}")
         check(self.engine in ("standalone", "cython", "numpy"), "engine", self.engine,
               "'standalone' (compiled C++, re-run per chunk), 'cython' or 'numpy'")
+        check(self.dtype in DTYPES, "dtype", self.dtype,
+              f"one of {list(DTYPES)} (Brian2's float type; float32 trades spike-count "
+              "accuracy for speed, docs/reference.md)")
         bounds.dt_ms("dt_ms", self.dt_ms)        # the same bounds as every other step
         check(math.isfinite(self.input_rate_hz) and self.input_rate_hz > 0 and
               1000.0 / self.input_rate_hz >= self.dt_ms * (1 - 1e-9), "input_rate_hz",
@@ -125,16 +132,17 @@ class NeuronSweep:
         if self.engine == "standalone":
             counts = standalone_counts(self, p)
         else:
-            counts = _runtime_counts(self, p)
+            with float_precision(self.dtype):
+                counts = _runtime_counts(self, p)
         counts = counts[:n]
         return {"spike_count": counts.astype(np.int32),
                 "rate_hz": counts / (self.duration_s - self.settle_s)}
 
     def initial_state(self, p: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Rest for the first input sample (+I), as ``neurons.simulate`` starts."""
-        pairs = np.stack([p["b"], p["I"]], axis=1)
-        unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
-        rest = np.array([neurons.resting_state(self.preset, b, I) for b, I in unique])
+        # each distinct (b, I) solved once; a complex key sorts far faster than rows
+        unique, inverse = np.unique(p["b"] + 1j * p["I"], return_inverse=True)
+        rest = np.array([neurons.resting_state(self.preset, z.real, z.imag) for z in unique])
         return rest[inverse.ravel(), 0], rest[inverse.ravel(), 1]
 
 

@@ -10,7 +10,8 @@ recommendation per scene, and the stability map (method × k·dt × drive).
 
 Stages: workloads → references → main sweep → cost sweep → stability map → bench bands
 (``evaluation.bands``: each band of the bench's spiking read-out before and at a setting inside
-the accurate range, against the reference, with its cost) → report. Settings
+the accurate range, against the reference, with its cost) → the sweep engine's float precision
+(``precision``: float32 against float64 on a tuning grid, with a rounding baseline) → report. Settings
 loop in this process (``engine.devices``): timing needs the machine to itself, and the knobs
 (method, target, dtype) are build settings rather than the numeric axes of a sweep grid.
 Finished runs are kept in ``OUT/runs.jsonl`` (``engine.runlog``): an interrupted run resumes.
@@ -50,10 +51,12 @@ from ...report import Report
 from ...sources.scenes import scene_from_spec
 from ...sources.stimuli import RobotScene
 from ...store import write_dataset
+from . import precision as engine_precision
+from .precision import Precision
 from .report import human_summary, quick_note, write_report
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
-            "stability", "reference", "match", "bands")
+            "stability", "reference", "match", "bands", "precision")
 SCENES = ("tuning", "quickstart", "bench")
 
 
@@ -137,6 +140,7 @@ class Plan:
     reference: ReferenceSettings
     match: Match
     bands: BandStudy
+    precision: Precision
 
 
 def build(spec: dict) -> Plan:
@@ -160,7 +164,7 @@ def build(spec: dict) -> Plan:
     parts = {}
     for name, cls in (("tuning", TuningStimuli), ("sweep", Sweep), ("cost", Cost),
                       ("stability", StabilityGrid), ("reference", ReferenceSettings),
-                      ("match", Match), ("bands", BandStudy)):
+                      ("match", Match), ("bands", BandStudy), ("precision", Precision)):
         with specs.section(name):
             parts[name] = cls(**specs.check_section(spec, name, cls))
     for scene in robot_scenes.values():
@@ -260,37 +264,43 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         t_start = time.perf_counter()
         seed = int(spec.get("seed", 0))
         sweep, stab = plan.sweep, plan.stability
-        log(f"[1/6] scenes ({', '.join(dict.fromkeys(sweep.scenes + [plan.cost.scene]))}, "
+        log(f"[1/7] scenes ({', '.join(dict.fromkeys(sweep.scenes + [plan.cost.scene]))}, "
             f"seed {seed})")
         workloads = prepare_workloads(plan, seed, log)
-        log(f"[2/6] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
+        log(f"[2/7] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
         refs, ref_rows, convergence = solve_references(plan, workloads, log)
         runs = Measurements(workloads, refs, runlog, log)
         main = [(name, Setting(m, dt, sweep.target, sweep.dtype)) for name in sweep.scenes
                 for m in sweep.methods for dt in sorted(sweep.dt_ms)]
-        log(f"[3/6] main sweep: {len(main)} runs ({sweep.target}, {sweep.dtype})")
+        log(f"[3/7] main sweep: {len(main)} runs ({sweep.target}, {sweep.dtype})")
         with log.expected(UNSTABLE_ON_PURPOSE):   # coarse steps are forced past their limits
             rows = runs.sweep("main", main)
         recommendations = tradeoff.recommend(rows, plan.match)
         cost = cost_pairs(plan, recommendations, workloads[plan.cost.scene].n_neurons)
-        log(f"[4/6] cost sweep on {plan.cost.scene}: {len(cost)} runs "
+        log(f"[4/7] cost sweep on {plan.cost.scene}: {len(cost)} runs "
             f"(targets × dtypes × sizes)")
         with log.expected(FLOAT32_CHECK):
             rows += runs.sweep("cost", cost)
-        log(f"[5/6] stability map ({len(sweep.methods)} methods × {stab.n_k_dt} k·dt × "
+        log(f"[5/7] stability map ({len(sweep.methods)} methods × {stab.n_k_dt} k·dt × "
             f"{len(stab.drives)} drives)")
         with log.expected(UNSTABLE_ON_PURPOSE):
             smap = stab.map(sweep.methods, b=plan.net.get("b", ResonatorArray.b))
         write_dataset(smap, out_dir / "stability_map.zarr")
-        log(f"[6/6] bench bands ({', '.join(plan.bands.bands)}) against the reference; report")
+        log(f"[6/7] bench bands ({', '.join(plan.bands.bands)}) against the reference")
         bands = run_band_study(plan.bands, seed, log)
+        # last: the compiled sweep engine holds Brian2's one standalone device from here on
+        log(f"[7/7] sweep engine precision ({', '.join(plan.precision.dtypes) or 'none'}) "
+            "against float64; report")
+        precision = engine_precision.run(plan.precision, plan.match.rate_map_error, log)
         summary = summarise(plan, rows, (ref_rows, convergence), recommendations, smap)
         summary["bands"] = bands
+        summary["precision"] = precision
         summary["total_wall_s"] = time.perf_counter() - t_start
         report = Report(out_dir, "snn-antenna: speed vs accuracy of the resonator array",
                         quick=quick, quick_note=quick_note(plan.sweep, plan.stability))
         report.text(spec.get("description", ""))
         write_report(report, summary, smap)
+        engine_precision.report_section(report, precision)
         report.write(summary, spec, sweep.target)
         log(human_summary(summary, out_dir))
     return summary

@@ -182,6 +182,10 @@ def human_summary(s: dict, out_dir) -> str:
     for m, v in s["stability_limits"].items():
         lines.append(f"{m}: finite to k·dt {v['measured_max_stable_k_dt']:.3g} "
                      f"(shipped limit {v['shipped_max_stable_k_dt']:g})")
+    for r in (s.get("precision") or {}).get("rows", []):
+        lines.append(f"sweep engine, {r['dtype']}: {r['ns_per_neuron_step']:.2f} ns per "
+                     f"neuron-step, spike-count error {r['spike_count_error']:.2e} against "
+                     f"float64")
     lines.append(f"report in {out_dir}/report.html ({s['total_wall_s']:.0f} s)")
     return "\n".join(lines)
 
