@@ -219,6 +219,12 @@ def test_standalone_engine_matches_runtime_engine(dtype):
     runtime = FAST(points)["spike_count"]
     assert np.abs(standalone - runtime).max() <= 1
     assert standalone.sum() > 20
+    # compiled with one make job per core, not Brian2's unbounded "make -j"
+    import os
+
+    from brian2 import prefs
+    assert prefs.devices.cpp_standalone.extra_make_args_unix == [
+        f"-j{len(os.sched_getaffinity(0))}"]
 
 
 def test_a_float_type_outside_brian2s_is_refused():

@@ -126,7 +126,10 @@ def run_standalone(array: ResonatorArray, coded: Recording) -> Run:
     """
     import brian2 as b2
 
+    from .standalone import bounded_make
+
     directory = tempfile.mkdtemp(prefix="snn_standalone_")
+    bounded_make()
     b2.set_device("cpp_standalone", directory=directory, build_on_run=False)
     try:
         group, spikes = _offline_group(array, coded)

@@ -165,6 +165,7 @@ def project(structure: tuple, build) -> dict:
         _PROJECT["device"].reinit()
         _PROJECT["lock"].close()
         _PROJECT.clear()
+    bounded_make()
     set_device("cpp_standalone", build_on_run=False, directory=str(directory),
                with_output=False)
     device = get_device()
@@ -180,6 +181,15 @@ def project(structure: tuple, build) -> dict:
     _PROJECT.update(objects, structure=structure, device=device, lock=lock,
                     directory=str(directory))
     return _PROJECT
+
+
+def bounded_make() -> None:
+    """Compile with as many jobs as this process has cores. Brian2's default, ``make -j``,
+    starts every code object's compiler at once: a bank of 50 bands meant ~80 g++ processes
+    on 2 cores (load average 80, minutes of thrashing, every other job on the machine held up)."""
+    from brian2 import prefs
+
+    prefs.devices.cpp_standalone.extra_make_args_unix = [f"-j{len(os.sched_getaffinity(0))}"]
 
 
 def _still_built() -> bool:
