@@ -16,7 +16,7 @@ import xarray as xr
 from .. import stats
 from .crossval import BaselineResult
 from .signal import PAPER_SIGNAL
-from ..readout.spiking_decoders import TRAINING_FREE, input_of
+from ..readout.spiking_decoders import TRAINING_FREE, TUNED_READOUTS, input_of
 
 LABELS = {
     "linear_low_peak": "linear regression, low peak",
@@ -33,6 +33,11 @@ LABELS = {
     "spiking_mlp_material_high": "spiking MLP, high band",
     "spiking_mlp_material": "spiking MLP, low + high",
     "spiking_mlp_material_rod": "spiking MLP, + rod band, time bins",
+    "spiking_tuned_rate": "tuned bank: rate",
+    "spiking_tuned_timing": "tuned bank: latency + span",
+    "spiking_tuned_bins": "tuned bank: rate in time bins",
+    "spiking_tuned_decay": "tuned bank: rate + decay",
+    "spiking_tuned_all": "tuned bank: rate, latency, span, bins",
 }
 FULL_SPECTRUM = "mlp_spectrum_material"    # the material read-out the others are held to
 
@@ -58,6 +63,7 @@ class Comparison:
     data: dict
     spiking: dict | None = None
     designs: list = field(default_factory=list)
+    tuned: dict | None = None      # the tuned bank: channels, calibration, curve
 
     @property
     def materials(self) -> list[str]:
@@ -102,7 +108,7 @@ class Comparison:
                                   if k.startswith("spiking_")},
             "against_fft": self.against_fft(),
             "cost": self.costs.get("spiking"), **self.spiking,
-            "designs": list(self.designs)}
+            "designs": list(self.designs), "tuned": self.tuned}
 
     def cost_per_event(self) -> dict[str, float]:
         """Feature extraction + decoder, µs per event. The bank runs every band at once;
@@ -113,6 +119,8 @@ class Comparison:
         out = {}
         for k, r in self.results.items():
             kind = "spiking" if k.startswith("spiking_") else "fft"
+            if k in TUNED_READOUTS:      # its own bank, charged whole
+                kind = "spiking_tuned"
             front = self.costs.get(kind, {}).get("features_us_per_event", 0.0)
             if kind == "spiking":
                 front *= neurons.get(input_of(k), total) / total

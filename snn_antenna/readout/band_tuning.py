@@ -18,7 +18,7 @@ largest k·dt stays within the k·dt the rod band was validated at.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -34,8 +34,10 @@ DT_STEPS_MS = (0.1, 0.05, 0.025, 0.02, 0.01, 0.005, 0.0025, 0.002, 0.001, 0.0005
 class Tuning:
     """How a tuned bank is made (``[spiking.tuned]`` of the baseline study).
 
-    ``n_resonators`` in total, ``per_channel`` of them reading each channel (so
-    ``n_resonators / per_channel`` channels); channels inside ``range_hz``; a bin is the
+    ``n_resonators`` in total, at least ``per_channel`` of them reading each channel, in at
+    most ``max_channels`` channels (each channel is its own NeuronGroup: the compiled
+    project's size grows with them; 24 and 48 channels scored alike on 20 repetitions);
+    channels inside ``range_hz``; a bin is the
     material's when its Fisher ratio is in the top ``1 - quantile`` of the range; each
     channel's coder codes above ``threshold_g``. ``template``: the ``Band`` fields every
     channel shares (coder amplitude, b, Hz per unit k, method); ``max_k_dt``: the largest
@@ -44,6 +46,7 @@ class Tuning:
     """
     n_resonators: int = 24
     per_channel: int = 2
+    max_channels: int = 24
     range_hz: tuple = (80.0, 450.0)
     quantile: float = 0.8
     threshold_g: float = 0.003
@@ -56,9 +59,13 @@ class Tuning:
     def __post_init__(self):
         check(isinstance(self.per_channel, int) and self.per_channel >= 1, "per_channel",
               self.per_channel, "an integer >= 1")
+        check(isinstance(self.max_channels, int) and self.max_channels >= 1, "max_channels",
+              self.max_channels, "an integer >= 1")
         check(isinstance(self.n_resonators, int) and self.n_resonators >= self.per_channel
-              and self.n_resonators % self.per_channel == 0, "n_resonators",
-              self.n_resonators, f"a multiple of per_channel ({self.per_channel})")
+              and self.n_resonators % self.per_channel == 0
+              and self.n_resonators % self.n_channels == 0, "n_resonators",
+              self.n_resonators, f"a multiple of per_channel ({self.per_channel}) that "
+                                 f"{self.max_channels} channels share evenly when it fills more")
         lo, hi = (float(x) for x in self.range_hz)
         check(0 < lo < hi, "range_hz", self.range_hz, "[low, high] in Hz, 0 < low < high")
         check(is_number(self.quantile) and 0 <= self.quantile < 1, "quantile",
@@ -70,7 +77,11 @@ class Tuning:
 
     @property
     def n_channels(self) -> int:
-        return self.n_resonators // self.per_channel
+        return max(1, min(self.n_resonators // max(self.per_channel, 1), self.max_channels))
+
+    @property
+    def resonators_per_channel(self) -> int:
+        return self.n_resonators // self.n_channels
 
 
 def log_spectra(counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float
@@ -129,10 +140,10 @@ def tuned_bands(centres, low, high, tuning: Tuning, rate_hz: float) -> dict[str,
     """One ``Band`` per channel, named ``ch00``, ``ch01``… in frequency order."""
     bands = {}
     for j, (c, lo, hi) in enumerate(zip(centres, low, high)):
-        span = (c * (1 - tuning.spread), c * (1 + tuning.spread)) if tuning.per_channel > 1 \
-            else (c, c)
+        per = tuning.resonators_per_channel
+        span = (c * (1 - tuning.spread), c * (1 + tuning.spread)) if per > 1 else (c, c)
         bands[f"ch{j:02d}"] = Band(
-            n_neurons=tuning.per_channel, band_hz=(float(span[0]), float(span[1])),
+            n_neurons=per, band_hz=(float(span[0]), float(span[1])),
             spacing="log", coder_amplitude=tuning.coder_amplitude,
             threshold_g=tuning.threshold_g, lowpass_hz=float(min(hi, 0.45 * rate_hz)),
             highpass_hz=float(lo), hz_per_k=tuning.hz_per_k, method=tuning.method,
@@ -148,6 +159,3 @@ def tune(counts: np.ndarray, labels, rate_hz: float, adc_bits: int, full_scale_g
     return tuned_bands(*place_channels(freq, fisher_ratio(spectra, labels), tuning), tuning,
                        rate_hz)
 
-
-def with_tuning(tuning: Tuning, **changes) -> Tuning:
-    return replace(tuning, **changes)
