@@ -234,6 +234,35 @@ def design_rows(designs: list[dict]) -> list[dict]:
              "µs/event": f"{d['wall_us_per_event']:.0f}"} for d in designs]
 
 
+def tuned_curve_rows(summary: dict) -> list[dict]:
+    """The tuned bank's accuracy vs resonators beside NMF-n (same events and split)."""
+    fft_us = summary["feature_costs"]["fft"]["features_us_per_event"]
+    return [{"resonators": r["n"], "channels": r["channels"],
+             "spiking (%)": f"{100 * r['spiking']:.1f}", "NMF-n (%)": f"{100 * r['nmf']:.1f}",
+             "of FFT-MLP": f"{100 * r['spiking'] / r['fft_mlp']:.0f} %",
+             "µs/event": f"{r['wall_us_per_event']:.0f}",
+             "× FFT cost": f"{r['wall_us_per_event'] / fft_us:.1f}"}
+            for r in summary["spiking"]["tuned"]["curve"]]
+
+
+def tuned_text(summary: dict) -> str:
+    t, curve = summary["spiking"]["tuned"], summary["spiking"]["tuned"]["curve"]
+    c = summary["feature_costs"].get("spiking_tuned") or {}
+    fft_us = summary["feature_costs"]["fft"]["features_us_per_event"]
+    channels = "; ".join(f"{ch['pass_hz'][0]:g}-{ch['pass_hz'][1]:g} Hz ×{ch['resonators']}"
+                         for ch in t["channels"])
+    return (f"Tuned bank: {t['neurons']} resonators in {len(t['channels'])} channels placed "
+            f"from {t['calibration_events']} calibration contacts of seed "
+            f"{t['calibration_seed']} (never evaluated): {channels}. Its cost, measured in "
+            f"this run on {c.get('events_measured')} events: "
+            f"{c.get('features_us_per_event', 0):.0f} µs per event (coding + Brian2 "
+            f"{c.get('target')}), {c.get('features_us_per_event', 0) / fft_us:.1f} × the FFT "
+            f"pipeline's {fft_us:.0f} µs; {c.get('neuron_steps_per_event', 0):.3g} "
+            f"neuron-steps per event at {c.get('ns_per_neuron_step', 0):.1f} ns each. The "
+            f"curve's {curve[0]['fft_mlp'] * 100:.1f} % full-spectrum MLP is on its own "
+            f"events and split, not the table's.")
+
+
 def spiking_cost_text(summary: dict) -> str:
     sp = summary["spiking"]
     c = sp.get("cost") or {}
