@@ -138,3 +138,48 @@ def test_tuned_plan_refuses_bad_settings_naming_the_field():
     from snn_antenna.studies import baseline_comparison as study
     with pytest.raises(SpecError, match="spiking.tuned.tuning.quantile"):
         study.build(spec)
+
+
+# Brian2 at the channels' own steps over 1,024 contacts of 0.5 s, twice: a thorough check.
+@pytest.mark.slow
+def test_tuned_channels_read_materials_better_than_the_hand_set_rod_band():
+    """The same 24 resonators, the same contacts and split: channels placed from calibration
+    contacts of another seed against the hand-set rod band (90-420 Hz, one wide band-pass)."""
+    import warnings
+
+    from threadpoolctl import threadpool_limits
+
+    from snn_antenna.engine.events import run_bank
+    from snn_antenna.evaluation.bands import ROD_BAND
+    from snn_antenna.evaluation.crossval import split_by_repetition
+    from snn_antenna.readout.spiking import SpikingBank
+    from sklearn.neural_network import MLPClassifier
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    spec = bench.BenchSpec(repetitions=8, n_jobs=2)
+    data = bench.generate(spec, log=lambda *_: None)
+    per = len(spec.positions_cm) * spec.repetitions
+    labels = np.repeat(spec.materials, per)
+    repetition = np.tile(np.arange(spec.repetitions), len(spec.materials) * len(spec.positions_cm))
+    calibration = dataclasses.replace(spec, seed=1000, repetitions=3)
+    cal = bench.generate(calibration, log=lambda *_: None)
+    channels = tune(cal["counts"].values[:, :1000], np.repeat(spec.materials, 16 * 3), RATE,
+                    spec.adc_bits, spec.full_scale_g, Tuning(n_resonators=24))
+    edges = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
+    train, test = split_by_repetition(repetition, 0.3, 0)
+    accuracy = {}
+    for name, bands in (("tuned", channels), ("rod", {"rod": ROD_BAND})):
+        bank = SpikingBank(bands=bands, duration_s=0.5, bin_edges_s=edges)
+        f = run_bank(bank, data["counts"].values, RATE, spec.adc_bits, spec.full_scale_g,
+                     progress=False)
+        X = np.hstack([f.counts, f.latency_s, f.span_s,
+                       f.binned_counts.reshape(len(labels), -1)]).astype(float)
+        with threadpool_limits(1), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            clf = make_pipeline(StandardScaler(), MLPClassifier((51,), max_iter=300,
+                                                                random_state=0))
+            clf.fit(X[train], labels[train])
+        accuracy[name] = float(np.mean(clf.predict(X[test]) == labels[test]))
+    assert accuracy["tuned"] >= accuracy["rod"] + 0.10, accuracy
+    assert accuracy["tuned"] >= 0.65, accuracy
