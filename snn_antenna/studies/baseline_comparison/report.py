@@ -184,7 +184,8 @@ def _write_spiking(report: Report, summary: dict) -> None:
                       "Left: 8-material accuracy of the tuned spiking bank (every read-out "
                       "code, MLP 51) against its resonators, and NMF-n with as many filters, "
                       "on the same events and split; dashed: the full-spectrum MLP and 0.9 of "
-                      "it. Right: the tuned bank's cost per event over the FFT pipeline's.")
+                      "it. Below: the bank's neuron-steps per event and the budget of 5 × the "
+                      "FFT pipeline's cost at the ns per neuron-step measured in this run.")
         report.table(tuned_curve_rows(summary), "Accuracy vs resonators (first split, events "
                      "of the first repetitions): the curve above")
         report.text(tuned_text(summary))
