@@ -1,6 +1,7 @@
 """Bench read-out on the sweep engine: the whole bench set, per neuron-step beside the sweeps.
 
     python benchmarks/bench_events.py [--events 12800] [--workers 2] [--runtime-events 400]
+    python benchmarks/bench_events.py --cost-only [--cost-events 400] [--sizes 24 48]
 
 Every event (the real preprocessing chain, 0.5 s at 2 kHz) drives the 24-resonator low band
 at dt 0.1 ms (``engine.events.run_bank``: grid event × neuron, ``batch_events`` events per
@@ -16,6 +17,15 @@ chunk). Measured in one run and printed side by side, each with the machine's lo
   for the ratio; the spike counts of both paths are compared neuron by neuron;
 - ``whole bench set``: all ``--events`` events on a Dask LocalCluster of ``--workers``
   processes (timed on a second run: cluster start and each worker's compile excluded).
+
+- ``spiking vs FFT, cost per event`` (issue 32; ``--cost-only`` runs this part alone): the
+  FFT pipeline's feature extraction (``events.extraction_cost``, the baseline study's
+  ``[events]``) and the baseline study's tuned bank (``[spiking.tuned]``: channels placed
+  from calibration contacts of another seed, each channel at the coarsest step within the
+  rod band's validated k·dt) at each ``--sizes`` number of resonators, on the same events
+  in one run: every contact of a batch in one Brian2 run (``batch_events`` copies of the
+  bank in one NeuronGroup per channel), and, for the smallest size, one run per contact,
+  so the per-run overhead is measured rather than assumed.
 
 Every timed run follows a warm-up (code generation, compiling; cached on disk).
 """
@@ -36,11 +46,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_sweep import grid_of  # noqa: E402  (this folder)
 
 from snn_antenna.engine.evaluators import NeuronSweep  # noqa: E402
-from snn_antenna.engine.events import run_bank  # noqa: E402
+from snn_antenna import spec as specs  # noqa: E402
+from snn_antenna.engine.events import run_bank, run_cost  # noqa: E402
 from snn_antenna.engine.executor import dask_client  # noqa: E402
 from snn_antenna.engine.sweep import run_sweep  # noqa: E402
 from snn_antenna.readout.spiking import LOW_BAND, SpikingBank  # noqa: E402
+from snn_antenna.readout.events import extraction_cost  # noqa: E402
 from snn_antenna.sources import bench  # noqa: E402
+from snn_antenna.studies import baseline_comparison as study  # noqa: E402
+from snn_antenna.studies.baseline_comparison.tuned import calibration_bands  # noqa: E402
+
+STUDY = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
 
 
 def load() -> str:
@@ -68,6 +84,44 @@ def timed(bank, counts, attrs, warm_events: int = 2, **kw):
     return f, time.perf_counter() - t0
 
 
+def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
+                   repeats: int = 3) -> None:
+    """Cost per event of the FFT pipeline and of the tuned spiking bank, measured now, each
+    the best of ``repeats`` runs taken in turn (on a shared machine a single run of either
+    can land in another process's burst: one such run read the FFT 7x its idle cost)."""
+    parts = study.build(specs.load(str(STUDY)))
+    plan = parts.plan.tuned_plan()
+    plan.curve = sorted(set(sizes))
+    bands, _ = calibration_bands(parts.bench, plan, lambda *_: None, False)
+    ids = np.linspace(0, data.sizes["event"] - 1, n_events).astype(int)
+    banks = {n: plan.bank(bands[n], parts.bank) for n in plan.curve}
+    fft, spiking = [], {n: [] for n in plan.curve}
+    for _ in range(repeats):
+        fft.append(extraction_cost(data, parts.processor, ids)["features_us_per_event"])
+        for n, bank in banks.items():
+            spiking[n].append(run_cost(data, bank, n_events))
+    print(f"FFT pipeline (onset, spectrum, peaks, decay fits; {n_events} events): best "
+          f"{min(fft):8.0f} µs per event of {', '.join(f'{x:.0f}' for x in fft)} ({load()})",
+          flush=True)
+    fft = min(fft)
+    for n, bank in banks.items():
+        c = min(spiking[n], key=lambda r: r["features_us_per_event"])
+        print(f"tuned spiking bank, {n:3d} resonators in {len(bank.bands):2d} channels, "
+              f"{bank.batch_events} contacts per Brian2 run: best {c['features_us_per_event']:8.0f} "
+              f"µs per event = {c['features_us_per_event'] / fft:5.1f}x the FFT pipeline "
+              f"({c['neuron_steps_per_event']:.3g} neuron-steps, {c['ns_per_neuron_step']:.1f} "
+              f"ns each; {load()})", flush=True)
+        if n == plan.curve[0]:
+            one = dataclasses.replace(bank, batch_events=1)
+            counts = data["counts"].values[ids[:per_contact_events]]
+            _, seconds = timed(one, counts, (data.attrs["rate_hz"], data.attrs["adc_bits"],
+                                             data.attrs["full_scale_g"]), warm_events=1)
+            per = 1e6 * seconds / len(counts)
+            print(f"  the same bank, one Brian2 run per contact ({len(counts)} contacts): "
+                  f"{per:8.0f} µs per event = {per / c['features_us_per_event']:.2f}x the "
+                  f"batched run ({load()})", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--events", type=int, default=12_800, help="events of the whole set")
@@ -77,7 +131,19 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=400, help="events per chunk (one Brian2 run)")
     ap.add_argument("--duration", type=float, default=0.5, help="seconds per event")
     ap.add_argument("--sweep-points", type=int, default=10_000)
+    ap.add_argument("--cost-only", action="store_true",
+                    help="only the spiking-vs-FFT cost per event")
+    ap.add_argument("--cost-events", type=int, default=400,
+                    help="events timed for the spiking-vs-FFT cost")
+    ap.add_argument("--sizes", type=int, nargs="+", default=[24, 48],
+                    help="resonators of the tuned banks timed beside the FFT pipeline")
     args = ap.parse_args(argv)
+    if args.cost_only:
+        data = bench.generate(bench.BenchSpec(repetitions=max(1, -(-args.cost_events // 128)),
+                                              n_jobs=2), log=lambda *_: None)
+        print(f"# {os.cpu_count()} CPU cores; spiking vs FFT, cost per event")
+        spiking_vs_fft(data, args.cost_events, args.sizes)
+        return 0
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_events_"))
     spec = bench.BenchSpec(repetitions=max(1, -(-args.events // 128)), n_jobs=2)
@@ -123,6 +189,8 @@ def main(argv=None) -> int:
               f"{len(counts) / seconds:,.0f} events/s, {1e9 * seconds / f.neuron_steps:.2f} ns "
               f"per neuron-step of wall time; Brian2 {f.wall_s:.1f} s summed over the workers "
               f"({1e9 * f.wall_s / f.neuron_steps:.2f} ns per neuron-step) ({load()})", flush=True)
+
+    spiking_vs_fft(data, args.cost_events, args.sizes)
 
     print("\n## summary (measured in this run)")
     print(f"  event engine / sweep engine, ns per neuron-step: whole run {ns_whole / ref:.2f}x, "

@@ -23,7 +23,10 @@ TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_c
         "spiking.bank.duration_s=0.3",
         "spiking.design_repetitions=3",
         "spiking.cost_sample_events=6",
-        "spiking.designs=[{name='low_8', band='low', n_neurons=8}]"]
+        "spiking.designs=[{name='low_8', band='low', n_neurons=8}]",
+        "spiking.tuned.curve=[4,8]", "spiking.tuned.tuning.n_resonators=4",
+        "spiking.tuned.curve_repetitions=3", "spiking.tuned.calibration_repetitions=2",
+        "spiking.tuned.duration_s=0.3", "spiking.tuned.bin_edges_s=[0.1,0.2]"]
 
 
 @pytest.fixture(scope="module")
@@ -128,6 +131,11 @@ def test_report_folder_and_summary_keys(tiny_run):
     assert spiking["cost"]["neuron_steps_per_event"] == pytest.approx(
         24 * 0.3 / 1e-4 + 2 * 24 * 0.3 / 5e-6)
     assert [d["design"] for d in spiking["designs"]] == ["low_8"]
+    # the tuned bank: its read-outs scored on every split, its curve at the asked sizes
+    assert {"spiking_tuned_rate", "spiking_tuned_all"} <= set(spiking["material_accuracy"])
+    assert [r["n"] for r in spiking["tuned"]["curve"]] == [4, 8]
+    assert spiking["tuned"]["calibration_seed"] == 1000
+    assert (out / "tuned_curve.png").is_file()
     assert (out / "pareto_cost_accuracy.png").is_file()
     assert [r["n"] for r in stored["material_accuracy"]["nmf_curve"]] == [3, 24, 30]
     assert stored["data"]["n_events"] == 54
@@ -181,5 +189,9 @@ def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
         study.build(specs.load(SPEC, ["stimulus.materials=['wood','granite']"]))
     with pytest.raises(SpecError, match=r"spiking.designs\[0\]"):
         study.build(specs.load(SPEC, ["spiking.designs=[{name='x', band='low', bogus=1}]"]))
+    with pytest.raises(SpecError, match="spiking.tuned.curve"):
+        study.build(specs.load(SPEC, ["spiking.tuned.curve=[24,25]"]))
+    with pytest.raises(SpecError, match="spiking.tuned.tuning.n_resonators"):
+        study.build(specs.load(SPEC, ["spiking.tuned.tuning.n_resonators=7"]))
     assert main(["run", SPEC, "--out", str(tmp_path), "--set", "events.split_hz=5000"]) == 2
     assert "events.split_hz" in capsys.readouterr().err

@@ -16,7 +16,7 @@ import xarray as xr
 from .. import stats
 from .crossval import BaselineResult
 from .signal import PAPER_SIGNAL
-from ..readout.spiking_decoders import TRAINING_FREE, input_of
+from ..readout.spiking_decoders import TRAINING_FREE, TUNED_READOUTS, input_of
 
 LABELS = {
     "linear_low_peak": "linear regression, low peak",
@@ -33,6 +33,11 @@ LABELS = {
     "spiking_mlp_material_high": "spiking MLP, high band",
     "spiking_mlp_material": "spiking MLP, low + high",
     "spiking_mlp_material_rod": "spiking MLP, + rod band, time bins",
+    "spiking_tuned_rate": "tuned bank: rate",
+    "spiking_tuned_timing": "tuned bank: latency + span",
+    "spiking_tuned_bins": "tuned bank: rate in time bins",
+    "spiking_tuned_decay": "tuned bank: rate + decay",
+    "spiking_tuned_all": "tuned bank: rate, latency, span, bins",
 }
 FULL_SPECTRUM = "mlp_spectrum_material"    # the material read-out the others are held to
 
@@ -58,6 +63,7 @@ class Comparison:
     data: dict
     spiking: dict | None = None
     designs: list = field(default_factory=list)
+    tuned: dict | None = None      # the tuned bank: channels, calibration, curve
 
     @property
     def materials(self) -> list[str]:
@@ -102,7 +108,7 @@ class Comparison:
                                   if k.startswith("spiking_")},
             "against_fft": self.against_fft(),
             "cost": self.costs.get("spiking"), **self.spiking,
-            "designs": list(self.designs)}
+            "designs": list(self.designs), "tuned": self.tuned}
 
     def cost_per_event(self) -> dict[str, float]:
         """Feature extraction + decoder, µs per event. The bank runs every band at once;
@@ -113,6 +119,8 @@ class Comparison:
         out = {}
         for k, r in self.results.items():
             kind = "spiking" if k.startswith("spiking_") else "fft"
+            if k in TUNED_READOUTS:      # its own bank, charged whole
+                kind = "spiking_tuned"
             front = self.costs.get(kind, {}).get("features_us_per_event", 0.0)
             if kind == "spiking":
                 front *= neurons.get(input_of(k), total) / total
@@ -224,6 +232,34 @@ def design_rows(designs: list[dict]) -> list[dict]:
              "neurons": d["n_neurons"], "distance (mm)": f"{d['distance_rmse_mm']:.2f}",
              "material (%)": f"{100 * d['material_accuracy']:.1f}",
              "µs/event": f"{d['wall_us_per_event']:.0f}"} for d in designs]
+
+
+def tuned_curve_rows(summary: dict) -> list[dict]:
+    """The tuned bank's accuracy vs resonators beside NMF-n (same events and split)."""
+    return [{"resonators": r["n"], "channels": r["channels"],
+             "spiking (%)": f"{100 * r['spiking']:.1f}", "NMF-n (%)": f"{100 * r['nmf']:.1f}",
+             "of FFT-MLP": f"{100 * r['spiking'] / r['fft_mlp']:.0f} %",
+             "neuron-steps/event": f"{r['neuron_steps_per_event']:.3g}",
+             "wall µs/event (with compiling)": f"{r['wall_us_per_event']:.0f}"}
+            for r in summary["spiking"]["tuned"]["curve"]]
+
+
+def tuned_text(summary: dict) -> str:
+    t, curve = summary["spiking"]["tuned"], summary["spiking"]["tuned"]["curve"]
+    c = summary["feature_costs"].get("spiking_tuned") or {}
+    fft_us = summary["feature_costs"]["fft"]["features_us_per_event"]
+    channels = "; ".join(f"{ch['pass_hz'][0]:g}-{ch['pass_hz'][1]:g} Hz ×{ch['resonators']}"
+                         for ch in t["channels"])
+    return (f"Tuned bank: {t['neurons']} resonators in {len(t['channels'])} channels placed "
+            f"from {t['calibration_events']} calibration contacts of seed "
+            f"{t['calibration_seed']} (never evaluated): {channels}. Its cost, measured in "
+            f"this run on {c.get('events_measured')} events: "
+            f"{c.get('features_us_per_event', 0):.0f} µs per event (coding + Brian2 "
+            f"{c.get('target')}), {c.get('features_us_per_event', 0) / fft_us:.1f} × the FFT "
+            f"pipeline's {fft_us:.0f} µs; {c.get('neuron_steps_per_event', 0):.3g} "
+            f"neuron-steps per event at {c.get('ns_per_neuron_step', 0):.1f} ns each. The "
+            f"curve's {curve[0]['fft_mlp'] * 100:.1f} % full-spectrum MLP is on its own "
+            f"events and split, not the table's.")
 
 
 def spiking_cost_text(summary: dict) -> str:

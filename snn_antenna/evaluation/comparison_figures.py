@@ -193,3 +193,37 @@ def pareto(summary):
     axes[0].set_title("blue: FFT pipelines, red: spiking; numbers: cost table", fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def tuned_curve(summary):
+    """The tuned spiking bank's 8-material accuracy against its number of resonators, beside
+    NMF with as many filters, on the same events and split; the full-spectrum MLP and the
+    issue's bar (0.9 of it) dashed. Below: the bank's neuron-steps per event (what its cost
+    grows with; wall times of the curve's runs include compiling) and the budget of 5 × the
+    FFT pipeline's cost at the ns per neuron-step measured for the tuned bank in this run."""
+    plt = _plt()
+    curve = summary["spiking"]["tuned"]["curve"]
+    n = [r["n"] for r in curve]
+    fig, (ax, cost) = plt.subplots(2, 1, figsize=(7.5, 6.4), sharex=True)
+    ax.plot(n, [100 * r["spiking"] for r in curve], "o-", color="tab:red",
+            label="spiking, tuned channels")
+    ax.plot(n, [100 * r["nmf"] for r in curve], "s-", color="tab:blue", label="NMF-n → MLP")
+    fft = 100 * curve[0]["fft_mlp"]
+    ax.axhline(fft, color="k", ls="--", label="full-spectrum MLP")
+    ax.axhline(0.9 * fft, color="0.5", ls=":", label="0.9 × full spectrum")
+    ax.set_ylabel("8-material accuracy (%)")
+    cost.plot(n, [r["neuron_steps_per_event"] / 1e6 for r in curve], "o-", color="tab:red",
+              label="tuned bank")
+    measured = summary["feature_costs"].get("spiking_tuned") or {}
+    if measured.get("ns_per_neuron_step"):
+        fft_us = summary["feature_costs"]["fft"]["features_us_per_event"]
+        budget = 5 * fft_us * 1e3 / measured["ns_per_neuron_step"] / 1e6
+        cost.axhline(budget, color="0.5", ls=":", label=f"5 × FFT pipeline at "
+                     f"{measured['ns_per_neuron_step']:.0f} ns/step")
+    cost.set_xlabel("resonators (spiking) or NMF filters")
+    cost.set_ylabel("neuron-steps per event (millions)")
+    cost.set_xticks(n)
+    cost.set_ylim(bottom=0)
+    legend_outside(ax)
+    legend_outside(cost)
+    return fig

@@ -21,6 +21,7 @@ import xarray as xr
 from .. import spec as specs
 from ..errors import check
 from . import baselines as bl
+from .band_tuning import Tuning
 from .spiking import Band, CentroidDistance, DominantNeuronDistance, SpikingBank
 
 # The spiking input sets: which bands, and whether the time-binned counts are included.
@@ -43,11 +44,56 @@ SPIKING_MLPS = {
     "spiking_mlp_material_rod": ("spiking_rod", "material",
                                  "MLP 51 on low, high and rod band, with time bins"),
 }
+# Read-outs of the tuned bank (``band_tuning``; bands named ``ch00``…), each an MLP 51 on one
+# code of the same spikes: which part of the spike train carries the material.
+TUNED_PREFIX = "ch"
+TUNED_READOUTS = {
+    "spiking_tuned_rate": (("counts",), "rate: spike counts"),
+    "spiking_tuned_timing": (("latency_s", "span_s"),
+                             "latency code: first-spike latency and firing span"),
+    "spiking_tuned_bins": (("binned_counts",), "rate in time bins (the decay of activity)"),
+    "spiking_tuned_decay": (("counts", "decay"),
+                            "rate + decay: log ratio of successive time bins' counts"),
+    "spiking_tuned_all": (("counts", "latency_s", "span_s", "binned_counts"),
+                          "rate, latency, span and time bins"),
+}
 
 
 def input_of(name: str) -> str:
     """The input set a spiking decoder reads (the training-free ones: the low band)."""
+    if name in TUNED_READOUTS:
+        return name
     return SPIKING_MLPS[name][0] if name in SPIKING_MLPS else "spiking_low"
+
+
+def decay_code(binned: np.ndarray) -> np.ndarray:
+    """Per neuron, log((n_{b+1} + 1) / (n_b + 1)) of successive time bins' spike counts
+    (events, neurons, bins → events, neurons × (bins − 1)): how fast activity dies after the
+    onset, the damping a rate averages away."""
+    logs = np.log1p(np.asarray(binned, dtype=float))
+    return np.diff(logs, axis=2).reshape(len(logs), -1)
+
+
+def tuned_inputs(features: xr.Dataset, spikes: xr.Dataset) -> xr.Dataset:
+    """The event features with one input matrix per tuned read-out (``TUNED_READOUTS``), from
+    the tuned bank's ``spikes`` on the same events."""
+    sp = spikes.sel(event=features["event"].values)
+    n = sp.sizes["event"]
+    parts = {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
+             "span_s": sp["span_s"].values,
+             "binned_counts": sp["binned_counts"].values.reshape(n, -1),
+             "decay": decay_code(sp["binned_counts"].values)}
+    out = features.copy()
+    for name, (codes, _) in TUNED_READOUTS.items():
+        out[name] = (("event", f"{name}_feature"),
+                     np.hstack([parts[c] for c in codes]).astype(np.float32))
+    return out
+
+
+def tuned_baselines(evaluation) -> list[bl.Baseline]:
+    """An MLP 51 per tuned read-out."""
+    return [mlp_baseline(name, "material", name, evaluation, f"MLP 51, tuned bank: {text}")
+            for name, (_, text) in TUNED_READOUTS.items()]
 
 
 def _available(spikes: xr.Dataset) -> dict:
@@ -155,13 +201,14 @@ class SpikingPlan:
     events of the first ``design_repetitions`` repetitions and decoded on the first split;
     ``cost_sample_events`` events are timed for the cost per event. ``workers``: Dask worker
     processes for the bank's runs (0: one per core; 1: this process; ``--scheduler`` attaches
-    to a running cluster instead).
+    to a running cluster instead). ``tuned``: a ``TunedPlan`` table (empty: no tuned bank).
     """
     bank: dict = field(default_factory=dict)
     designs: list = field(default_factory=list)
     design_repetitions: int = 10
     cost_sample_events: int = 400
     workers: int = 1
+    tuned: dict = field(default_factory=dict)
 
     def build(self, rate_hz: float) -> tuple[SpikingBank, list[Design]]:
         """The bank and its designs, checked (for input sampled at ``rate_hz``)."""
@@ -175,3 +222,56 @@ class SpikingPlan:
               "an integer >= 0 (0: one Dask worker per core; 1: this process)")
         bank.check_rate(rate_hz)
         return bank, designs
+
+    def tuned_plan(self) -> "TunedPlan | None":
+        if not self.tuned:
+            return None
+        with specs.section("tuned"):
+            return TunedPlan(**self.tuned)
+
+
+@dataclass
+class TunedPlan:
+    """The tuned bank (``[spiking.tuned]``): ``band_tuning.Tuning`` fields (``tuning``) for
+    the bank every seed is scored on, tuned on ``calibration_repetitions`` repetitions of
+    contacts generated with the study's seed + ``calibration_seed_offset`` (never the
+    evaluated events, so never a test split); ``curve``: the numbers of resonators of the
+    accuracy curve, each tuned the same way and scored on the events of the first
+    ``curve_repetitions`` repetitions (first split) beside NMF with as many filters;
+    ``duration_s`` and ``bin_edges_s``: the window each event is simulated for and its time
+    bins."""
+    tuning: dict = field(default_factory=dict)
+    calibration_repetitions: int = 5
+    calibration_seed_offset: int = 1000
+    curve: list = field(default_factory=lambda: [24, 48, 72, 96, 144])
+    curve_repetitions: int = 20
+    duration_s: float = 0.5
+    bin_edges_s: tuple = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
+
+    def __post_init__(self):
+        with specs.section("tuning"):
+            self.base = Tuning(**specs.check_section({"tuning": self.tuning}, "tuning", Tuning))
+        for name in ("calibration_repetitions", "curve_repetitions"):
+            value = getattr(self, name)
+            check(isinstance(value, int) and not isinstance(value, bool) and value >= 2, name,
+                  value, "an integer >= 2")
+        check(isinstance(self.calibration_seed_offset, int)
+              and self.calibration_seed_offset >= 1, "calibration_seed_offset",
+              self.calibration_seed_offset, "an integer >= 1 (the evaluated events' seed "
+                                            "+ this: other contacts)")
+        check(isinstance(self.curve, list) and all(
+            isinstance(n, int) and n >= 1 for n in self.curve), "curve", self.curve,
+            "a list of numbers of resonators")
+        for n in self.curve:      # each point's own checks, before any work
+            with specs.section("curve"):
+                replace(self.base, n_resonators=n)
+
+    def tunings(self) -> dict[int, Tuning]:
+        """The main bank's tuning and one per curve point, by number of resonators."""
+        return {n: replace(self.base, n_resonators=n)
+                for n in sorted({self.base.n_resonators, *self.curve})}
+
+    def bank(self, bands: dict, like: SpikingBank) -> SpikingBank:
+        """A bank of ``bands`` with ``like``'s target and batching."""
+        return SpikingBank(bands=bands, duration_s=self.duration_s, target=like.target,
+                           batch_events=like.batch_events, bin_edges_s=self.bin_edges_s)

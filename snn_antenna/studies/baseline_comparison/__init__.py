@@ -35,6 +35,7 @@ from ...readout.spiking_decoders import (
 from ...report import Report
 from ...sources import bench
 from .report import write_report
+from .tuned import tuned_stage
 
 SECTIONS = ("stimulus", "events", "evaluation", "spiking")
 # Events timed for the FFT's cost per event when the spec has no [spiking] section.
@@ -64,6 +65,7 @@ def _spiking_part(spec: dict, rate_hz: float) -> tuple:
         return None, None, []
     with specs.section("spiking"):
         plan = SpikingPlan(**specs.check_section(spec, "spiking", SpikingPlan))
+        plan.tuned_plan()      # its checks, before any work
         return (plan, *plan.build(rate_hz))
 
 
@@ -152,9 +154,13 @@ def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fre
                                       run=partial(run_bank, client=client, progress=False),
                                       repetitions=parts.plan.design_repetitions,
                                       evaluation=parts.evaluation)
+        tuned = (tuned_stage(parts, data, cmp, log, fresh, client)
+                 if parts.plan.tuned_plan() else [])
     cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
-    cmp.spiking = {**bank.description(), "neurons": neurons_per_input(spikes)}
-    return spiking_baselines(spikes, parts.evaluation)
+    neurons = neurons_per_input(spikes)
+    neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
+    cmp.spiking = {**bank.description(), "neurons": neurons}
+    return spiking_baselines(spikes, parts.evaluation) + tuned
 
 
 # -- report ---------------------------------------------------------------------------------
