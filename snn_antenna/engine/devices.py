@@ -18,6 +18,7 @@ build settings themselves are what is measured.
 """
 from __future__ import annotations
 
+import os
 import tempfile
 import time
 from contextlib import contextmanager
@@ -118,6 +119,15 @@ def run_array(array: ResonatorArray, coded: Recording, window_s: float) -> Run:
     return timer.run(result.spike_i, result.spike_t_s * 1000.0)
 
 
+def bounded_make() -> None:
+    """Compile with as many jobs as this process has cores. Brian2's default, ``make -j``,
+    starts every code object's compiler at once: a bank of 50 bands meant ~80 g++ processes
+    on 2 cores (load average 80, minutes of thrashing, every other job on the machine held up)."""
+    from brian2 import prefs
+
+    prefs.devices.cpp_standalone.extra_make_args_unix = [f"-j{len(os.sched_getaffinity(0))}"]
+
+
 def run_standalone(array: ResonatorArray, coded: Recording) -> Run:
     """The array in Brian2's cpp_standalone mode: compile, then time the run alone.
 
@@ -125,8 +135,6 @@ def run_standalone(array: ResonatorArray, coded: Recording) -> Run:
     state (NaN is absorbing in this model: a NaN v never reaches threshold to be reset).
     """
     import brian2 as b2
-
-    from .standalone import bounded_make
 
     directory = tempfile.mkdtemp(prefix="snn_standalone_")
     bounded_make()

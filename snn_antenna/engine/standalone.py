@@ -157,6 +157,8 @@ def project(structure: tuple, build) -> dict:
     """
     from brian2.devices.device import get_device, reset_device, set_device
 
+    from .devices import bounded_make
+
     if _PROJECT.get("structure") == structure and _still_built():
         return _PROJECT
     key = hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
@@ -181,15 +183,6 @@ def project(structure: tuple, build) -> dict:
     _PROJECT.update(objects, structure=structure, device=device, lock=lock,
                     directory=str(directory))
     return _PROJECT
-
-
-def bounded_make() -> None:
-    """Compile with as many jobs as this process has cores. Brian2's default, ``make -j``,
-    starts every code object's compiler at once: a bank of 50 bands meant ~80 g++ processes
-    on 2 cores (load average 80, minutes of thrashing, every other job on the machine held up)."""
-    from brian2 import prefs
-
-    prefs.devices.cpp_standalone.extra_make_args_unix = [f"-j{len(os.sched_getaffinity(0))}"]
 
 
 def _still_built() -> bool:
