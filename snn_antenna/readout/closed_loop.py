@@ -155,8 +155,9 @@ def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna, m
         state["k"] = 0
         state["log"].append((t_s, speed, float(pan), float(tilt), th, world.x_cm))
 
+    # no ``t`` argument: Brian2 would build a Quantity for it at every sample
     @b2.network_operation(dt=b2.second / rate_hz, when="start", order=0)
-    def feed(t):
+    def feed():
         i_ext[:] = state["buffer"][state["k"]]
         state["k"] += 1
 
