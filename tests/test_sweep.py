@@ -278,7 +278,9 @@ def whole_sweep(tmp_path_factory):
                      NeuronSweep.OUTPUTS, chunk_points=4, progress=False)
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT], ids=["SIGKILL", "Ctrl-C"])
+@pytest.mark.parametrize("sig", [signal.SIGKILL,
+                                 pytest.param(signal.SIGINT, marks=pytest.mark.slow)],
+                         ids=["SIGKILL", "Ctrl-C"])   # Ctrl-C's resume: the same path, slow
 def test_killed_sweep_resumes_without_recomputing(tmp_path, sig, whole_sweep):
     path = tmp_path / "killed.zarr"
     proc = subprocess.Popen([sys.executable, "-c", KILLED_SWEEP, str(path)],
