@@ -16,7 +16,6 @@ import subprocess
 import sys
 import threading
 import time
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -25,6 +24,7 @@ from snn_antenna.bridge.controls import recorded_events
 from snn_antenna.bridge.emulator import Emulator
 from snn_antenna.bridge.links import PeerGone, PtyLink
 from snn_antenna.sources.stimuli import Contact, RobotScene
+from test_live_view import get_json, view_url
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "live.toml"
@@ -34,29 +34,6 @@ PACE = 2.0                  # the emulator sends at twice the board's rate: 7 s 
 SECOND_CONTACT_S = 5.0
 SPLIT_S = 3.5               # the board holds back the rest of the scene until the page asked
 HIGH_TH_G = 5.0             # above the filtered signal: the coder codes silence
-
-
-def get_json(url: str) -> dict:
-    with urllib.request.urlopen(url, timeout=5) as reply:
-        return json.loads(reply.read())
-
-
-def view_url(proc, lines: list, timeout_s: float = 120.0) -> str:
-    found = threading.Event()
-
-    def read():
-        for line in proc.stderr:
-            lines.append(line)
-            if "live view:" in line:
-                found.set()
-        found.set()
-
-    threading.Thread(target=read, daemon=True).start()
-    found.wait(timeout_s)
-    for line in lines:
-        if match := re.search(r"live view: (http://\S+/)", line):
-            return match.group(1)
-    raise AssertionError("no view URL printed:\n" + "".join(lines))
 
 
 def model(name: str, attr: str) -> str:
@@ -83,10 +60,10 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
                              "--view-port", "0", "--view-hold", "0", "--no-data-timeout", "60",
                              "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    lines: list = []
     shot = Path(os.environ.get("LIVE_VIEW_SCREENSHOT", tmp_path / "live_view.png"))
     try:
-        url = view_url(proc, lines)
+        url = view_url(proc)
+        lines = proc.stderr_lines
         with playwright.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
                                         args=["--no-sandbox"])
