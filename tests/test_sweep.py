@@ -246,6 +246,8 @@ def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
                        chunk_points=6, progress=False)
     with dask_client(workers=2) as own:  # the embedded default: a LocalCluster of processes
         assert len(own.scheduler_info()["workers"]) == 2
+        # its HTTP server on a free port, not Dask's shared default (two clusters would clash)
+        assert own.cluster.scheduler.http_server.port != 8787
         # attach to it as --scheduler tcp://HOST:PORT does for an existing cluster
         with dask_client(scheduler=own.scheduler.address) as client:
             parallel = run_sweep(grid, FAST, tmp_path / "dask.zarr", NeuronSweep.OUTPUTS,

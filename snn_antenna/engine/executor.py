@@ -124,8 +124,11 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
     # Never more processes than the machine has cores and memory for (500 workers on 2
     # cores took ~10 GB in a minute and ran no faster).
     n = min(workers or os.cpu_count() or 1, max_workers())
+    # No dashboard; the scheduler's HTTP server (health routes) on a free port: on its default,
+    # 8787, two clusters at once (two sweeps, parallel tests) warned "already in use".
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=None,
+                           scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
                            silence_logs=logging.ERROR if quiet else logging.WARNING)
     client = Client(cluster)
     try:
