@@ -130,6 +130,7 @@ def test_out_that_cannot_be_written_is_refused(tmp_path, capsys):
     try:
         refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(locked / "o")], "--out",
                 "not writable")
+        assert not os.path.lexists(locked / "o")
     finally:
         locked.chmod(0o700)
 
@@ -299,7 +300,8 @@ def test_emulate_on_a_port_that_vanishes_is_one_line(tmp_path):
 
 
 def test_emulate_on_a_missing_port_names_it(capsys):
-    refused(capsys, ["emulate", "--port", "/dev/pts/99999", "--frames", "10"], "port")
+    err = refused(capsys, ["emulate", "--port", "/dev/pts/99999", "--frames", "10"], "port")
+    assert "/dev/pts/99999" in err and "pyserial URL" in err    # the value, and what would do
 
 
 # -- Brian2's temporary files ------------------------------------------------------------------

@@ -4,6 +4,8 @@ Each case a careless user tried (the issue's list) gets one line naming the fiel
 what is accepted (SpecError, exit 2), before a scene is generated or Brian2 runs; long jobs
 show their estimate and need --yes; a message shows at most 80 characters of a value.
 """
+import os
+
 import numpy as np
 import pytest
 
@@ -56,14 +58,16 @@ def test_an_include_that_is_a_binary_file_is_named(tmp_path, capsys):
 @pytest.mark.parametrize("out", ["x" * 300, "ok/" + "y" * 256, "caf\udce9"])
 def test_an_out_the_file_system_cannot_hold_is_refused(tmp_path, capsys, out):
     refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / out)], "--out")
+    assert not os.path.lexists(tmp_path / out)       # refused before anything was made
 
 
 @pytest.mark.parametrize("option, value", [("--view-hold", "inf"), ("--baudrate", "10" * 20),
                                            ("--duration", "nan"), ("--duration", "1e308"),
                                            ("--no-data-timeout", "-1")])
 def test_stream_options_are_typed_and_bounded(capsys, option, value):
-    refused(capsys, ["stream", "--port", "loop://", "--network", "networks/live.toml",
-                     option, value], option)
+    line = refused(capsys, ["stream", "--port", "loop://", "--network", "networks/live.toml",
+                            option, value], option)
+    assert value in line and "accepted" in line       # the value, and what would be
 
 
 def test_a_long_value_is_cut_in_the_message(tmp_path, capsys):
