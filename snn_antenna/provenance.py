@@ -1,13 +1,19 @@
 """Which code made a result: the package version, a hash of its source, the git commit.
 
-Every cache key and every store fingerprint includes :func:`code_hash`, so a result computed by
-other code is never taken for this code's (a changed neuron constant, a changed preprocessing
-step: the old store is refused on resume, the old cache rebuilt). The hash covers the whole
-package's source, which is the simplest rule that cannot miss a dependency; its price is that
-any edit of the package invalidates every cache.
+Every cache key and every store fingerprint includes :func:`code_hash` of the code that
+computes it, so a result computed by other code is never taken for this code's (a changed
+neuron constant, a changed preprocessing step: the old store is refused on resume, the old
+cache rebuilt). A computation names the module that computes it (``code_hash("snn_antenna.
+sources.bench")``) and the hash covers that module and every package module it imports, at
+any depth, including imports inside functions (:func:`import_closure`): editing the live page
+no longer invalidates 12,800 generated bench contacts, editing the antenna physics still does.
+A module that imports by name at run time (``importlib``) could reach code the closure cannot
+see, so a closure holding one widens to the whole package. Summaries record the whole
+package's hash and the git commit (:func:`code_identity`).
 """
 from __future__ import annotations
 
+import ast
 import datetime as _dt
 import functools
 import hashlib
@@ -19,17 +25,66 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parent
 
 
-@functools.lru_cache(maxsize=1)
-def code_hash() -> str:
-    """SHA-256 (16 hex digits) of the package version and every ``.py`` file of the package,
-    by relative path and content."""
+@functools.lru_cache(maxsize=None)
+def code_hash(*modules: str) -> str:
+    """SHA-256 (16 hex digits) of the package version and of source files by relative path
+    and content: with no argument every ``.py`` file of the package, else the
+    :func:`import_closure` of ``modules`` (dotted names, e.g. ``"snn_antenna.engine.events"``)."""
     from . import __version__
 
     h = hashlib.sha256(__version__.encode())
-    for path in sorted(PACKAGE.rglob("*.py")):
+    files = import_closure(modules) if modules else sorted(PACKAGE.rglob("*.py"))
+    for path in files:
         h.update(str(path.relative_to(PACKAGE)).encode() + b"\0")
         h.update(path.read_bytes() + b"\0")
     return h.hexdigest()[:16]
+
+
+def import_closure(modules) -> list[Path]:
+    """The source files of ``modules`` and of every package module they import, followed to
+    any depth: ``import`` and ``from ... import`` statements anywhere in a module (a function's
+    lazy import too), relative or absolute, and the ``__init__.py`` of every package on the
+    way. Imported names outside the package are left out (their versions are recorded
+    elsewhere). A root outside the package (a user's evaluator) or a module calling
+    ``import_module`` makes it the whole package: its imports cannot be followed."""
+    whole = sorted(PACKAGE.rglob("*.py"))
+    if any(_source_of(name) is None for name in modules):
+        return whole
+    seen: dict[str, Path] = {}
+    todo = list(modules)
+    while todo:
+        name = todo.pop()
+        path = _source_of(name)
+        if path is None or name in seen:
+            continue
+        seen[name] = path
+        parts = name.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts))]     # parent packages
+        here = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_bytes())):
+            if isinstance(node, ast.Call) and "import_module" in ast.unparse(node.func):
+                return whole
+            if isinstance(node, ast.Import):
+                todo += [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = here.split(".")[:len(here.split(".")) - node.level + 1] \
+                    if node.level else []
+                base = ".".join(base + ([node.module] if node.module else []))
+                # ``from pkg import name``: name is a submodule or an attribute of pkg
+                todo += [base] + [f"{base}.{alias.name}" for alias in node.names]
+    return sorted(set(seen.values()))
+
+
+def _source_of(name: str) -> Path | None:
+    """The file of package module ``name``, or None for anything else."""
+    parts = name.split(".")
+    if parts[0] != PACKAGE.name:
+        return None
+    stem = PACKAGE.joinpath(*parts[1:])
+    for path in (stem.with_suffix(".py"), stem / "__init__.py"):
+        if len(parts) > 1 and path.is_file() or path == PACKAGE / "__init__.py":
+            return path
+    return None
 
 
 @functools.lru_cache(maxsize=1)

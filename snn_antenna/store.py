@@ -14,9 +14,9 @@ writes (Dask workers return their blocks to it), so a cluster needs no shared fo
 After a chunk's data are written, its element of the ``chunk_done`` array (zarr chunks of
 one element; zarr's local store writes each file by an atomic rename) is set. A chunk without
 its mark is redone on resume, whatever part of its data had reached the disk; a marked chunk
-is never recomputed. The store's ``fingerprint`` attribute (grid, outputs, chunking and the
-study's resolved settings) must match to resume: a changed spec is refused, ``fresh=True``
-starts over.
+is never recomputed. The store's ``fingerprint`` attribute (grid, outputs, chunking, the
+study's resolved settings and the code that computes them) must match to resume: a changed
+spec or changed code is refused, ``fresh=True`` starts over.
 """
 from __future__ import annotations
 
@@ -122,10 +122,12 @@ class Output:
     long_name: str = ""
 
 
-def fingerprint(coords: dict, outputs: dict, block_shape, settings) -> str:
+def fingerprint(coords: dict, outputs: dict, block_shape, settings,
+                computed_by: str | None = None) -> str:
     """What makes two sweeps the same: the grid, the outputs, the chunking, the settings and
-    the code that computes them (``provenance.code_hash``)."""
-    h = hashlib.sha256(code_hash().encode())
+    the code that computes them: module ``computed_by`` and its imports, or the whole
+    package when it is not named (``provenance.code_hash``)."""
+    h = hashlib.sha256(_code(computed_by).encode())
     for name, values in coords.items():
         h.update(name.encode())
         h.update(np.ascontiguousarray(values, dtype=float).tobytes())
@@ -133,6 +135,10 @@ def fingerprint(coords: dict, outputs: dict, block_shape, settings) -> str:
     h.update(json.dumps(list(map(int, block_shape))).encode())
     h.update(json.dumps(settings, sort_keys=True, default=str).encode())
     return h.hexdigest()[:16]
+
+
+def _code(computed_by: str | None) -> str:
+    return code_hash(computed_by) if computed_by else code_hash()
 
 
 class SweepStore:
@@ -143,24 +149,28 @@ class SweepStore:
 
     # -- set-up (client side) -----------------------------------------------------------------
     def prepare(self, coords: dict, outputs: dict[str, Output], block_shape, n_chunks: int, *,
-                attrs: dict | None = None, settings=None, fresh: bool = False) -> set[int]:
-        """Create the store, or reopen a matching one; return the ids of finished chunks."""
+                attrs: dict | None = None, settings=None, fresh: bool = False,
+                computed_by: str | None = None) -> set[int]:
+        """Create the store, or reopen a matching one; return the ids of finished chunks.
+        ``computed_by``: the module whose code computes the results (see ``fingerprint``)."""
         import dask.array as da
         import xarray as xr
 
         attrs = dict(attrs or {})
-        key = fingerprint(coords, outputs, block_shape, settings)
+        key = fingerprint(coords, outputs, block_shape, settings, computed_by)
         files.refuse_symlink(self.path, "store")
         if fresh and self.path.exists():
             files.remove_entry(self.path)
         if self.path.exists():
             existing = self._read_attrs()
             if existing.get("fingerprint") != key:
-                other_code = existing.get("code_sha256") != code_hash()
+                code = _code(computed_by)
+                other_code = existing.get("computed_by_sha256") != code
                 what = (f"this one was computed by other code (snn-antenna "
-                        f"{existing.get('snn_antenna_version', '?')}, source "
-                        f"{existing.get('code_sha256', 'unrecorded')}; this is "
-                        f"{code_hash()})" if other_code else "this one holds a different sweep")
+                        f"{existing.get('snn_antenna_version', '?')}, "
+                        f"{existing.get('computed_by', 'the package')} "
+                        f"{existing.get('computed_by_sha256', 'unrecorded')}; this is "
+                        f"{code})" if other_code else "this one holds a different sweep")
                 raise SpecError("store", str(self.path),
                                 "a store written by the same sweep (grid, outputs, chunking, "
                                 f"settings and code all unchanged); {what}: pass --fresh to "
@@ -177,6 +187,8 @@ class SweepStore:
         ds = xr.Dataset(data_vars, coords={name: (name, np.asarray(v)) for name, v in
                                            coords.items()},
                         attrs={**{k: _attr(v) for k, v in attrs.items()}, **code_identity(),
+                               "computed_by": computed_by or "the package",
+                               "computed_by_sha256": _code(computed_by),
                                "fingerprint": key,
                                "block_shape": list(map(int, block_shape))})
         write_dataset(ds, self.path, compute=False)  # never a half-created store

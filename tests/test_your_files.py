@@ -272,7 +272,7 @@ def test_a_store_made_by_other_code_is_refused_on_resume(tmp_path, monkeypatch):
     path = tmp_path / "results.zarr"
     _store(path)
     assert _store(path) is not None                          # same code: resumes
-    monkeypatch.setattr(provenance, "code_hash", lambda: "0123456789abcdef")
+    monkeypatch.setattr(provenance, "code_hash", lambda *modules: "0123456789abcdef")
     import snn_antenna.store as store_module
     monkeypatch.setattr(store_module, "code_hash", provenance.code_hash)
     with pytest.raises(SpecError, match="other code") as err:
@@ -294,11 +294,12 @@ def test_a_cache_made_by_other_code_is_rebuilt_and_said(tmp_path, monkeypatch):
         built.append(1)
         return xr.Dataset({"v": ("i", np.arange(3.0))})
     lines = []
-    bench.cached(tmp_path / "c.zarr", build, lines.append)
-    bench.cached(tmp_path / "c.zarr", build, lines.append)
+    by = "snn_antenna.sources.bench"
+    bench.cached(tmp_path / "c.zarr", build, by, lines.append)
+    bench.cached(tmp_path / "c.zarr", build, by, lines.append)
     assert len(built) == 1 and "reusing" in lines[-1]
-    monkeypatch.setattr(bench, "code_hash", lambda: "fedcba9876543210")
-    bench.cached(tmp_path / "c.zarr", build, lines.append)
+    monkeypatch.setattr(bench, "code_hash", lambda *modules: "fedcba9876543210")
+    bench.cached(tmp_path / "c.zarr", build, by, lines.append)
     assert len(built) == 2 and any("other code" in line and "rebuilding" in line
                                    for line in lines)
 
@@ -307,11 +308,12 @@ def test_cache_keys_and_fingerprints_cover_the_package_source(monkeypatch):
     from snn_antenna.sources import bench
     from snn_antenna.store import fingerprint
 
-    key, fp = bench.cache_key({"a": 1}), fingerprint({"k": [1.0]}, {}, (1,), None)
-    monkeypatch.setattr(bench, "code_hash", lambda: "another")
+    key, fp = bench.cache_key({"a": 1}, "snn_antenna.sources.bench"), \
+        fingerprint({"k": [1.0]}, {}, (1,), None)
+    monkeypatch.setattr(bench, "code_hash", lambda *modules: "another")
     import snn_antenna.store as store_module
-    monkeypatch.setattr(store_module, "code_hash", lambda: "another")
-    assert bench.cache_key({"a": 1}) != key
+    monkeypatch.setattr(store_module, "code_hash", lambda *modules: "another")
+    assert bench.cache_key({"a": 1}, "snn_antenna.sources.bench") != key
     assert fingerprint({"k": [1.0]}, {}, (1,), None) != fp
 
 
@@ -330,6 +332,52 @@ def test_the_code_hash_changes_when_a_source_file_changes(tmp_path, monkeypatch)
         assert provenance.code_hash() != before
     finally:
         provenance.code_hash.cache_clear()
+
+
+def _hashes(roots) -> dict:
+    provenance.code_hash.cache_clear()
+    return {root: provenance.code_hash(root) for root in roots}
+
+
+def test_a_cache_key_covers_the_code_its_module_runs_and_nothing_else(tmp_path, monkeypatch):
+    """Editing the live page keeps 12,800 bench contacts; editing the physics, or the neuron
+    model the event engine integrates, makes new ones (each key follows its module's imports,
+    the lazy ones inside functions too)."""
+    import shutil
+
+    copy = tmp_path / "snn_antenna"
+    shutil.copytree(provenance.PACKAGE, copy, ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(provenance, "PACKAGE", copy)
+    roots = ("snn_antenna.sources.bench", "snn_antenna.engine.events")
+
+    def edit(relative: str):
+        path = copy / relative
+        path.write_text(path.read_text() + "\nEDITED = 1\n")
+        return _hashes(roots)
+    try:
+        before = _hashes(roots)
+        assert edit("bridge/page.py") == before                     # not imported by either
+        after_neurons = edit("networks/neurons.py")                 # the event engine's model
+        assert after_neurons["snn_antenna.sources.bench"] == before["snn_antenna.sources.bench"]
+        assert after_neurons["snn_antenna.engine.events"] != before["snn_antenna.engine.events"]
+        after_physics = edit("sources/antenna.py")                  # reached by both
+        assert all(after_physics[r] != after_neurons[r] for r in roots)
+    finally:
+        provenance.code_hash.cache_clear()
+
+
+def test_the_import_closure_follows_lazy_imports_and_widens_when_it_cannot_follow():
+    closure = {str(p.relative_to(provenance.PACKAGE))
+               for p in provenance.import_closure(["snn_antenna.engine.events"])}
+    # cached_features imports sources.bench inside the function; packages' __init__ on the way
+    assert {"engine/events.py", "sources/bench.py", "sources/antenna.py", "networks/neurons.py",
+            "engine/__init__.py", "__init__.py"} <= closure
+    assert not any(name.startswith(("bridge/", "studies/")) for name in closure)
+    whole = set(provenance.PACKAGE.rglob("*.py"))
+    # studies/__init__ imports studies by name (importlib): nothing can be left out
+    assert set(provenance.import_closure(["snn_antenna.studies.quickstart"])) == whole
+    # an evaluator from outside the package: its imports cannot be followed
+    assert set(provenance.import_closure(["my_lab.evaluators"])) == whole
 
 
 # -- corrupt state is named ----------------------------------------------------------------------
@@ -363,11 +411,12 @@ def test_a_nan_chunk_in_a_cache_is_rebuilt(tmp_path):
     from snn_antenna.sources import bench
 
     good = xr.Dataset({"v": ("i", np.arange(4.0))})
-    bench.cached(tmp_path / "c.zarr", lambda: good.copy(), lambda *a: None)
+    by = "snn_antenna.sources.bench"
+    bench.cached(tmp_path / "c.zarr", lambda: good.copy(), by, lambda *a: None)
     import zarr
     zarr.open_array(tmp_path / "c.zarr" / "v", mode="r+")[1] = np.nan
     lines = []
-    ds = bench.cached(tmp_path / "c.zarr", lambda: good.copy(), lines.append)
+    ds = bench.cached(tmp_path / "c.zarr", lambda: good.copy(), by, lines.append)
     assert np.isfinite(ds["v"].values).all()
     assert any("NaN" in line and "rebuilding" in line for line in lines)
 

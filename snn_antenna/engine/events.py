@@ -260,13 +260,14 @@ def run_bank(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: in
 def cached_features(data, bank: SpikingBank, bench_spec, log=print, fresh: bool = False,
                     client=None):
     """Spiking features of every event of a bench data set (``bench_spec`` made it), cached
-    on disk, keyed by the data set, the bank and the package's source (``bench.cache_key``).
+    on disk, keyed by the data set, the bank and this module's code with its imports
+    (``bench.cache_key``).
     The run itself goes through a sweep store beside the cache, so an interrupted one
     resumes."""
     from ..files import remove_entry
     from ..sources import bench
 
-    key = bench.cache_key({"bench": bench_spec.key(), "bank": _bank_fields(bank)})
+    key = bench.cache_key({"bench": bench_spec.key(), "bank": _bank_fields(bank)}, __name__)
     path = Path(bench_spec.cache_dir) / f"spiking-{key}.zarr"
     store = path.with_name(f"spiking-{key}.sweep.zarr")
 
@@ -276,7 +277,7 @@ def cached_features(data, bank: SpikingBank, bench_spec, log=print, fresh: bool 
         log(f"      {data.sizes['event']} events: {f.neuron_steps:.3g} neuron-steps in "
             f"{f.wall_s:.1f} s of simulation")
         return f.to_dataset(data["event"].values, bank.bin_edges_s)
-    out = bench.cached(path, compute, log, fresh)
+    out = bench.cached(path, compute, __name__, log, fresh)
     remove_entry(store)
     return out
 

@@ -93,8 +93,11 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     regions = grid.blocks(chunk_points)
     store = SweepStore(Path(os.path.abspath(store_path)))   # never resolved: a link is refused, not followed
     settings = repr(evaluate) if settings is None else settings
+    # the evaluator's module and its imports compute the results (the whole package when the
+    # evaluator is not the package's own: provenance.import_closure)
+    computed_by = getattr(evaluate, "__module__", None) or type(evaluate).__module__
     done = store.prepare(grid.coords(), outputs, block_shape, len(regions), attrs=attrs,
-                         settings=settings, fresh=fresh)
+                         settings=settings, fresh=fresh, computed_by=computed_by)
     todo = [i for i in range(len(regions)) if i not in done]
     t0 = time.perf_counter()
     bar = tqdm(total=len(regions), initial=len(done), unit="chunk", desc=desc,

@@ -23,14 +23,14 @@ def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool 
                   ) -> tuple[xr.Dataset, xr.Dataset]:
     """The bench data set of ``bench_spec`` (a ``bench.BenchSpec``) and its event features
     with the events' labels joined; both cached on disk, keyed by their specs and the
-    package's source (``bench.cache_key``)."""
+    code that computes them (``bench.cache_key``)."""
     from ..sources import bench
 
     data = bench.load(bench_spec, log, fresh)
-    key = bench.cache_key({"bench": bench_spec.key(), "events": asdict(processor)})
+    key = bench.cache_key({"bench": bench_spec.key(), "events": asdict(processor)}, __name__)
     path = Path(bench_spec.cache_dir) / f"features-{key}.zarr"
     features = bench.cached(path, lambda: process(data, processor, bench_spec.n_jobs, log=log),
-                            log, fresh)
+                            __name__, log, fresh)
     return data, with_labels(features, data)
 
 

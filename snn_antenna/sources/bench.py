@@ -107,14 +107,15 @@ class BenchSpec:
         fields = {k: v for k, v in asdict(self).items() if k not in ("n_jobs", "cache_dir")}
         fields["materials"] = list(fields["materials"])
         fields["positions_cm"] = [float(x) for x in fields["positions_cm"]]
-        return cache_key(fields)
+        return cache_key(fields, __name__)
 
 
-def cache_key(fields: dict) -> str:
-    """Hash of JSON-able ``fields`` and of the code that computes from them (the whole
-    package's source, ``provenance.code_hash``): a cache made by other code is never found."""
+def cache_key(fields: dict, computed_by: str) -> str:
+    """Hash of JSON-able ``fields`` and of the code that computes from them: module
+    ``computed_by`` (the caller passes its ``__name__``) and every package module it imports
+    (``provenance.code_hash``): a cache made by other code is never found."""
     h = hashlib.sha256(json.dumps(fields, sort_keys=True).encode())
-    h.update(code_hash().encode())
+    h.update(code_hash(computed_by).encode())
     return h.hexdigest()[:16]
 
 
@@ -171,21 +172,21 @@ def _spec_dict(spec: BenchSpec) -> dict:
     return d
 
 
-def cached(path: Path, build: Callable[[], xr.Dataset], log=print, fresh: bool = False
-           ) -> xr.Dataset:
+def cached(path: Path, build: Callable[[], xr.Dataset], computed_by: str, log=print,
+           fresh: bool = False) -> xr.Dataset:
     """Open the zarr store at ``path``, or build the data set and store it there first.
 
     A store is written under a temporary name and renamed into place, so an interrupted run
     leaves no half store behind to be mistaken for a finished one.
     Caches are disposable: a store that cannot be read back, holds non-finite numbers, or was
-    made by other code is rebuilt, and the log says so.
+    made by other code (module ``computed_by`` and its imports) is rebuilt, and the log says so.
     """
     path = Path(path)
     refuse_symlink(path, "cache")
     if path.exists() and not fresh:
         try:
             ds = read_dataset(path)     # text comes back as plain numpy str
-            problem = _cache_problem(ds)
+            problem = _cache_problem(ds, computed_by)
         except DamagedStore as exc:
             problem = short_reason(exc.reason)
         if problem is None:
@@ -194,15 +195,16 @@ def cached(path: Path, build: Callable[[], xr.Dataset], log=print, fresh: bool =
         log(f"cache: {path} is unusable ({problem}); rebuilding it")
     ds = build()
     ds.attrs.update({k: v for k, v in code_identity().items() if v is not None})
+    ds.attrs.update({"computed_by": computed_by, "computed_by_sha256": code_hash(computed_by)})
     write_dataset(ds, path.absolute())
     log(f"cache: stored {path}")
     return ds
 
 
-def _cache_problem(ds: xr.Dataset) -> str | None:
-    if ds.attrs.get("code_sha256") != code_hash():
-        return (f"made by other code: source {ds.attrs.get('code_sha256', 'unrecorded')}, "
-                f"this is {code_hash()}")
+def _cache_problem(ds: xr.Dataset, computed_by: str) -> str | None:
+    if ds.attrs.get("computed_by_sha256") != code_hash(computed_by):
+        return (f"made by other code: {computed_by} and its imports were "
+                f"{ds.attrs.get('computed_by_sha256', 'unrecorded')}, now {code_hash(computed_by)}")
     for name, var in ds.data_vars.items():
         if var.dtype.kind in "fc" and not np.isfinite(var.values).all():
             return f"{name} holds NaN or infinite values"
@@ -213,7 +215,7 @@ def load(spec: BenchSpec, log=print, fresh: bool = False) -> xr.Dataset:
     """The data set of ``spec``, from the cache when it was made before."""
     spec.validate()
     path = Path(spec.cache_dir) / f"bench-{spec.key()}.zarr"
-    return cached(path, lambda: generate(spec, log), log, fresh)
+    return cached(path, lambda: generate(spec, log), __name__, log, fresh)
 
 
 def event_recording(ds: xr.Dataset, i: int) -> Recording:
