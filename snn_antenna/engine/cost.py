@@ -35,11 +35,13 @@ def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
 
 
 # Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
-# compile excluded). numpy: measured with the quick tuning sweep (9.4e6 neuron-steps in 4.3 s on
-# a loaded 2-core machine, `snn-antenna run studies/tuning_sweep.toml --quick`); cython and
-# standalone from the ratios benchmarks/bench_sweep.py measured (standalone 6-16x numpy,
-# 2.5-7.5x cython), at their low ends so the estimate errs long.
-MEASURED_STEPS_PER_S = {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 1.3e7}
+# compile excluded), at their low ends so the estimate errs long. numpy: the quick tuning sweep
+# (9.4e6 neuron-steps in 4.3 s on a loaded 2-core machine, `snn-antenna run
+# studies/tuning_sweep.toml --quick`); cython: bench_sweep.py's ratio to numpy; standalone
+# (float64): `python benchmarks/bench_sweep.py --sizes 1000000 --runtime-max 0 --naive-sample 1`
+# measured 9.3e8 idle on one core (1.8e9 in float32) and 3.6e8 on 10^5 points under heavy
+# load; a third of the idle rate covers a shared machine and small grids' per-chunk overhead.
+MEASURED_STEPS_PER_S = {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8}
 STANDALONE_COMPILE_S = 20.0        # one-off per worker process and group size (cached on disk)
 WORKER_MEMORY_BYTES = 500 * 2**20  # one worker process with Brian2 and Dask imported
 LONG_SWEEP_S = 3600.0              # beyond this the CLI asks for --yes
