@@ -50,20 +50,24 @@ def test_compiled_engine_gives_the_runtime_paths_spike_counts(events, standalone
 
 
 def test_an_interrupted_run_resumes_without_redoing_finished_chunks(events, standalone,
-                                                                    tmp_path):
+                                                                    tmp_path, monkeypatch):
     sweep = EventSweep(BANK, np.ascontiguousarray(events[:, :400]), RATE, BITS, FULL_SCALE)
+    # The same evaluator, interrupted in its second chunk: a stand-in evaluator of another
+    # module would be other code computing the first chunk, which a resume rightly refuses.
+    computes = EventSweep.__call__
 
-    class StopsAfterFirstChunk:
-        def __call__(self, points):
-            if points["event"].min() >= BANK.batch_events:
-                raise RuntimeError("interrupted")
-            return sweep(points)
+    def stops_after_first_chunk(self, points):
+        if points["event"].min() >= BANK.batch_events:
+            raise RuntimeError("interrupted")
+        return computes(self, points)
 
     store = tmp_path / "events.zarr"
     kw = dict(chunk_points=BANK.batch_events * BANK.n_neurons, settings=sweep.settings(),
               progress=False)
-    with pytest.raises(RuntimeError, match="interrupted"):
-        run_sweep(sweep.grid(), StopsAfterFirstChunk(), store, sweep.outputs(), **kw)
+    with monkeypatch.context() as patched:
+        patched.setattr(EventSweep, "__call__", stops_after_first_chunk)
+        with pytest.raises(RuntimeError, match="interrupted"):
+            run_sweep(sweep.grid(), sweep, store, sweep.outputs(), **kw)
     outcome = run_sweep(sweep.grid(), sweep, store, sweep.outputs(), **kw)
     assert outcome.chunks_skipped == [0] and outcome.chunks_computed == [1]
     assert np.array_equal(sweep.features(outcome.data).counts, standalone.counts)
