@@ -37,8 +37,6 @@ from ..sources.antenna import SPEED_LIMIT_CM_S
 NOT_LIVE = {"material": "its read-out is fit offline on bench contacts of the struck rods' "
                         "band (networks/bench_material.toml: 90-420 Hz at dt 0.005 ms), which "
                         "the board's 1 kHz stream cannot carry"}
-# Parts that read the speed command.
-SPEED_PARTS = ("gate", "cpg")
 
 
 def check_live_parts(parts) -> None:
@@ -105,7 +103,7 @@ class LiveRobot:
         import brian2 as b2
 
         self.reset()
-        objects = part_objects(self.configured, group)
+        objects = part_objects(self.configured, group, learning=False)     # recall only
         monitors = {}
         for unit in ("contact", "motor"):
             if f"control_{unit}" in objects:
