@@ -115,6 +115,10 @@ class Controls:
                                                               float(event["value"])),
                                  "replay", time.time()))
         self.pending.sort(key=lambda p: p[0])
+        if self.robot is None and any(p[1].field == "speed_cm_s" for p in self.pending):
+            raise SpecError("network", "no part that reads a speed", "a network whose speed "
+                            "gate or CPG reads the speed command (networks/live_robot.toml): "
+                            "the recording's events.jsonl changes the speed")
         self.events: list[dict] = []
         self._polled = 0.0
 

@@ -393,13 +393,12 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     def on_window(t_s: float, spike_counts: np.ndarray) -> None:
         # ResonatorArray.stream publishes a window once its last sample has been integrated,
         # before it asks for the next one. The published window sums ``controls.windows`` of
-        # the network's (one without controls). A composed network's parts are read (and a
-        # speed command due here applied) at each of the network's windows.
+        # the network's (one without controls). A composed network's parts are read at each
+        # of the network's windows, then a speed command due at its end applies.
         if robot is not None:
-            net_end_index = int(round((t_s + parts.window_s) * BOARD_RATE_HZ))
-            if controls is not None:
-                controls.speed_change(net_end_index)
             robot.window(t_s + parts.window_s)
+            if controls is not None:
+                controls.speed_change(int(round((t_s + parts.window_s) * BOARD_RATE_HZ)))
         if summed["n"] == 0:
             summed["t_s"], summed["counts"] = t_s, spike_counts.astype(float)
         else:

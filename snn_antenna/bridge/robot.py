@@ -81,14 +81,16 @@ class LiveRobot:
         self.configured = configured
         self.names = [name for name in configured if name != "resonators"]
         self.speed_range = speed_range(configured)
-        self.commanded = check_speed(speed_cm_s, self.speed_range)
+        self.start_speed = check_speed(speed_cm_s, self.speed_range)
         gate = configured.get("gate")
         # The read-out's settled rate at the first speed (its trace starts there, not at 0).
-        self._settled_rate = (float(gate.encode(gate.predict([self.commanded]))[0])
+        self._settled_rate = (float(gate.encode(gate.predict([self.start_speed]))[0])
                               if gate is not None else None)
         self.reset()
 
     def reset(self) -> None:
+        """A run starts at the first speed command, driving, with the gate's Th."""
+        self.commanded = self.start_speed
         self.objects: dict = {}
         self.stopped_since: float | None = None
         self.th_source = "gate" if "gate" in self.configured else None

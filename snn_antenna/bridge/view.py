@@ -157,7 +157,7 @@ class LiveView:
                                  keep_s=max(SCRUB_S, history_s), save_dir=save_dir,
                                  speed_range_cm_s=parts.robot.speed_range if parts.robot
                                  else None,
-                                 speed_cm_s=parts.robot.commanded if parts.robot else None)
+                                 speed_cm_s=parts.robot.start_speed if parts.robot else None)
         _tap_coder(coder, self._coded)
         self._context = multiprocessing.get_context("spawn")
         self._inbox = self._context.Queue(inbox_frames)
