@@ -183,3 +183,21 @@ def test_a_speed_is_accepted_exactly_within_the_networks_range(value, accepted):
     else:
         with pytest.raises(SpecError):
             _speed("speed", value)
+
+
+def test_stream_refuses_a_bad_speed_before_opening_the_port(capsys, tmp_path):
+    """``--speed`` is checked with the network, before the port (which does not exist here)."""
+    from snn_antenna.bridge.cli import main
+
+    port = str(tmp_path / "no-such-port")
+    assert main(["stream", "--port", port, "--network", str(NETWORK), "--speed", "5",
+                 "--out", str(tmp_path / "a")]) == 2
+    assert "speed = 5.0 is not accepted: none for a network without a speed gate" in \
+        capsys.readouterr().err
+    assert main(["stream", "--port", port, "--network", str(ROBOT), "--out",
+                 str(tmp_path / "b")]) == 2
+    assert "--speed" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as caught:
+        main(["stream", "--port", port, "--network", str(ROBOT), "--speed", "-3"])
+    assert caught.value.code == 2 and ">= 0 cm/s" in capsys.readouterr().err
+    assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
