@@ -81,7 +81,9 @@ class LiveRobot:
         self.configured = configured
         self.names = [name for name in configured if name != "resonators"]
         self.speed_range = speed_range(configured)
-        self.start_speed = check_speed(speed_cm_s, self.speed_range)
+        # Without a part that reads it, there is no speed command (the page offers none).
+        self.start_speed = (check_speed(speed_cm_s, self.speed_range) if self.speed_range
+                            else 0.0)
         gate = configured.get("gate")
         # The read-out's settled rate at the first speed (its trace starts there, not at 0).
         self._settled_rate = (float(gate.encode(gate.predict([self.start_speed]))[0])
