@@ -48,7 +48,7 @@ class OnlineParts:
     detector: ContactDetector
     window_s: float
     spec: dict
-    robot: LiveRobot | None = None      # a composed network's other parts (bridge/robot.py)
+    robot: object = None                # bridge/robot.py's LiveRobot: a composed spec's parts
 
 
 def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
@@ -131,9 +131,9 @@ def _composed(table: dict, training, speed_cm_s) -> tuple[dict, tuple | None]:
     elif training is not None:
         raise SpecError("gate_training", training, "none: the network has no speed gate")
     if speed_cm_s is None and speed_range(configured) is not None:
-        raise SpecError("speed", None, "the robot's speed command in cm/s (--speed): "
-                                       f"{', '.join(n for n in configured if n in ('gate', 'cpg'))} "
-                                       "read it")
+        readers = ", ".join(name for name in configured if name in ("gate", "cpg"))
+        raise SpecError("speed", None, f"the robot's speed command in cm/s (--speed): "
+                                       f"{readers} read it")
     if speed_cm_s is not None:
         check_speed(speed_cm_s, speed_range(configured))
     return configured, examples
