@@ -68,8 +68,8 @@ def check_speed(value, accepted: tuple[float, float] | None, field: str = "speed
     lo, hi = accepted
     number = value if isinstance(value, (int, float)) and not isinstance(value, bool) else None
     if number is None or not math.isfinite(number) or not lo <= number <= hi:
-        raise SpecError(field, value, f"a speed in cm/s within [{lo:g}, {hi:g}] (the running "
-                                      "network's speed gate)")
+        raise SpecError(field, value, f"a speed in cm/s within [{lo:g}, {hi:g}] (what the "
+                                      "running network's gate or CPG takes)")
     return float(number)
 
 
