@@ -275,7 +275,7 @@ def replay_speed(args) -> float | None:
     """The speed command a replay starts at: ``--speed``, else the recording's (meta.json)."""
     from .recorder import META_FILE
 
-    if args.speed is not None:
+    if getattr(args, "speed", None) is not None:
         return args.speed
     meta_path = Path(args.recording) / META_FILE
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
