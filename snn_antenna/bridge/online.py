@@ -70,8 +70,11 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
     training = raw.pop("gate_training", None)
     spec = ({k: raw.get(k, {}) for k in SECTIONS} if isinstance(raw.get("network"), dict)
             else {"network": raw, "preprocess": {}, "readout": {}})
-    for item in overrides:
+    if training is not None:
+        spec["gate_training"] = training
+    for item in overrides:              # e.g. --set gate_training.from_summary=...
         specs.apply_override(spec, item)
+    training = spec.pop("gate_training", None)
     for key in spec:
         if key not in SECTIONS:
             raise SpecError(key, spec[key], f"a section of an online spec: {', '.join(SECTIONS)}")
@@ -120,9 +123,10 @@ def _composed(table: dict, training, speed_cm_s) -> tuple[dict, tuple | None]:
     examples = None
     if "gate" in configured:
         if not isinstance(training, dict):
-            raise SpecError("gate_training", training, "a [gate_training] table (speeds_cm_s "
-                                                       "and th_star_g, or from_summary): what "
-                                                       "the speed gate learns before the stream")
+            raise SpecError("gate_training", training,
+                            "a [gate_training] table (speeds_cm_s and th_star_g, or "
+                            "from_summary: also --set gate_training.from_summary=PATH): what "
+                            "the speed gate learns before the stream")
         with specs.section("gate_training"):
             table = specs.check_section({"gate_training": training}, "gate_training",
                                         GateTraining)
