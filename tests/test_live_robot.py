@@ -150,8 +150,13 @@ def test_a_composed_spec_is_refused_live_only_where_a_part_cannot_run(recording,
         build_online(ROBOT)
     with pytest.raises(SpecError, match=r"speed = 45 .*\[0, 30\]"):
         build_online(ROBOT, speed_cm_s=45)
-    with pytest.raises(SpecError, match=r"gate_training = None .*\[gate_training\] table"):
+    with pytest.raises(SpecError, match=r"gate_training = None .*\[gate_training\] table.*--set"):
         build_online(NETWORK.parent / "robot.toml", speed_cm_s=SPEED)
+    # --set reaches the gate's training examples (here one threshold short: named).
+    with pytest.raises(SpecError, match=r"gate_training.th_star_g = \[0.1\] .*one threshold per"):
+        build_online(NETWORK.parent / "robot.toml", ["gate_training.speeds_cm_s=[0, 30]",
+                                                     "gate_training.th_star_g=[0.1]"],
+                     speed_cm_s=SPEED)
     with pytest.raises(SpecError, match=r"speed = 10.0 .*none for a network without a speed"):
         build_online(NETWORK, speed_cm_s=10.0)
     # A recording whose journal changes the speed, replayed on a network without one.

@@ -16,6 +16,10 @@ built here. What this module adds on top of the foundation's streaming API:
   :class:`~snn_antenna.readout.contacts.EpisodeTracker`, the episode logic that
   ``ContactDetector.detect`` runs offline, so live and offline detections are the same.
 
+- a composed network (``networks/live_robot.toml``): its speed gate, CPG and control layer run
+  in Brian2 in the array's own network (bridge/robot.py), and each of the network's windows is
+  coded with the gate's Th once the network has integrated the window before it.
+
 Gaps in the stream are not filled: the network sees the received samples back to back.
 """
 from __future__ import annotations
