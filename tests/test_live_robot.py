@@ -206,3 +206,27 @@ def test_stream_refuses_a_bad_speed_before_opening_the_port(capsys, tmp_path):
         main(["stream", "--port", port, "--network", str(ROBOT), "--speed", "-3"])
     assert caught.value.code == 2 and ">= 0 cm/s" in capsys.readouterr().err
     assert not (tmp_path / "a").exists() and not (tmp_path / "b").exists()
+
+
+def test_a_trained_gate_is_kept_and_recalls_as_the_one_that_learned(tmp_path, capsys):
+    """The gate's training is cached (bench.cached, keyed on the gate, its examples and the
+    code): the second stream start reuses it, with the same weights and Th range a fit gives;
+    other examples learn anew."""
+    from snn_antenna.bridge.robot import trained_gate
+    from snn_antenna.networks.gate import SpeedGate
+
+    def small(**changes):
+        return SpeedGate(n_speed_neurons=4, epochs=1, present_s=0.2, curve_points=1, **changes)
+
+    examples = ([0.0, 30.0], [0.05, 0.4])
+    fitted = small().fit(*examples)
+    first = trained_gate(small(), *examples, cache_dir=tmp_path)
+    assert "cache: stored" in capsys.readouterr().err
+    again = trained_gate(small(), *examples, cache_dir=tmp_path)
+    assert "cache: reusing" in capsys.readouterr().err
+    for gate in (first, again):
+        assert np.array_equal(gate.weights_, fitted.weights_)
+        assert gate.th_range_ == fitted.th_range_
+    trained_gate(small(), [0.0, 30.0], [0.05, 0.5], cache_dir=tmp_path)
+    assert "cache: stored" in capsys.readouterr().err
+    assert len(list(tmp_path.glob("gate-*.zarr"))) == 2

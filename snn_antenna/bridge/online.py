@@ -105,10 +105,10 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
     detector, window_s = detector_from_spec(spec)
     robot = None
     if composed:
-        from .robot import LiveRobot
+        from .robot import LiveRobot, trained_gate
 
         if examples is not None:
-            configured["gate"] = configured["gate"].fit(*examples)
+            configured["gate"] = trained_gate(configured["gate"], *examples)
         robot = LiveRobot(configured, speed_cm_s)
     return OnlineParts(array, chain, detector, window_s, spec, robot)
 

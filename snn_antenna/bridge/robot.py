@@ -24,7 +24,10 @@ the rate it settles to at the first speed (the motor command precedes the motion
 """
 from __future__ import annotations
 
+import dataclasses
 import math
+import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -32,6 +35,8 @@ from ..errors import SpecError
 from ..networks.assembly import part_objects
 from ..readout.closed_loop import steer
 from ..sources.antenna import SPEED_LIMIT_CM_S
+
+CACHE_DIR = "out/.cache"                # where a trained gate is kept (as the bench sets are)
 
 # Parts the live stream cannot run, and why (named in the refusal).
 NOT_LIVE = {"material": "its read-out is fit offline on bench contacts of the struck rods' "
@@ -71,6 +76,30 @@ def check_speed(value, accepted: tuple[float, float] | None, field: str = "speed
         raise SpecError(field, value, f"a speed in cm/s within [{lo:g}, {hi:g}] (what the "
                                       "running network's gate or CPG takes)")
     return float(number)
+
+
+def trained_gate(gate, speeds_cm_s, th_star_g, cache_dir=CACHE_DIR):
+    """``gate`` fitted on the examples (``SpeedGate.fit``), from the cache when the same gate
+    learned the same examples before with the same code (``bench.cached``): its weights and Th
+    range, all that recall uses. Learning takes ~5 s; every stream and replay starts with it."""
+    import xarray as xr
+
+    from ..sources import bench
+
+    speeds, th = np.asarray(speeds_cm_s, float), np.asarray(th_star_g, float)
+    fields = {"gate": dataclasses.asdict(gate), "speeds_cm_s": speeds.tolist(),
+              "th_star_g": th.tolist()}
+    path = Path(cache_dir) / f"gate-{bench.cache_key(fields, __name__)}.zarr"
+
+    def learn():
+        fitted = dataclasses.replace(gate).fit(speeds, th)
+        return xr.Dataset({"weights": ("speed_neuron", fitted.weights_)},
+                          attrs={"th_lo": fitted.th_range_[0], "th_hi": fitted.th_range_[1]})
+
+    stored = bench.cached(path, learn, __name__, log=lambda text: print(text, file=sys.stderr))
+    gate.weights_ = np.asarray(stored.weights.values, dtype=float)
+    gate.th_range_ = (float(stored.attrs["th_lo"]), float(stored.attrs["th_hi"]))
+    return gate
 
 
 class LiveRobot:
