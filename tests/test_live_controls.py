@@ -54,7 +54,8 @@ def test_a_request_is_accepted_exactly_when_in_range_else_named(field, value, sp
         ok = number and 0 <= value <= TH_MAX_G
     elif field == "window_s":
         k = value / BASE if number else None
-        ok = number and abs(k - round(k)) <= 1e-6 * max(1, k) and 1 <= round(k) <= MAX_WINDOWS
+        ok = number and math.isfinite(k) and abs(k - round(k)) <= 1e-6 * max(1, k) \
+            and 1 <= round(k) <= MAX_WINDOWS
     else:
         ok = False
     if ok:

@@ -87,7 +87,9 @@ def parse_control(body, base_window_s: float,
             raise SpecError("th_g", value, accepted_range("th_g", base_window_s))
         return Change("th_g", float(number))
     windows = None if number is None or not math.isfinite(number) else number / base_window_s
-    if windows is None or abs(windows - round(windows)) > 1e-6 * max(1.0, windows) \
+    # A finite but huge number of seconds overflows to an infinite number of windows.
+    if windows is None or not math.isfinite(windows) \
+            or abs(windows - round(windows)) > 1e-6 * max(1.0, windows) \
             or not 1 <= round(windows) <= MAX_WINDOWS:
         raise SpecError("window_s", value, accepted_range("window_s", base_window_s))
     return Change("windows", float(round(windows)))
