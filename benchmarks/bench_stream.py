@@ -1,7 +1,7 @@
 """Online pipeline benchmark: real-time factor and sample-to-rate-map latency, one run each.
 
     python benchmarks/bench_stream.py [--network networks/live.toml] [--seconds 8]
-                                      [--set network.dt_ms=0.25 ...]
+                                      [--set network.dt_ms=0.25 ...] [--speed 12]
                                       [--baseline networks/resonator_array.toml] [--view]
                                       [--browsers 0,1,3]
 
@@ -98,6 +98,9 @@ def main(argv=None) -> int:
     ap.add_argument("--baseline", default=str(ROOT / "networks" / "resonator_array.toml"),
                     help="a second network, throughput only, for the ratio ('none': skip)")
     ap.add_argument("--seconds", type=float, default=8.0)
+    ap.add_argument("--speed", type=float, default=12.0,
+                    help="the speed command (cm/s) for a network whose gate or CPG reads one "
+                         "(networks/live_robot.toml); ignored by the others")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--view", action="store_true",
                     help="also compare the real-time factor with the live view open")
@@ -112,10 +115,12 @@ def main(argv=None) -> int:
                          "loading the page twice a second")
     args = ap.parse_args(argv)
     overrides = ["preprocess.threshold=0.05", *args.set]
-    parts = build_online(args.network, overrides)
+    parts = online_parts(args.network, overrides, args.speed)
     warm_up(parts)
-    print(f"network {args.network} {' '.join(args.set)}: {parts.array.n_neurons} resonators, "
-          f"dt {parts.array.dt_ms} ms, target {parts.array.target}; "
+    robot = (f" + {', '.join(parts.robot.names)} at {args.speed:g} cm/s" if parts.robot
+             else "")
+    print(f"network {args.network} {' '.join(args.set)}: {parts.array.n_neurons} resonators"
+          f"{robot}, dt {parts.array.dt_ms} ms, target {parts.array.target}; "
           f"machine: {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}")
     fast = stream_from_emulator(parts, args.seconds, fast=True)
     print(f"throughput (compute-only real-time factor): {fast['compute_realtime_factor']:.1f}x "
@@ -148,6 +153,17 @@ def main(argv=None) -> int:
     return 0
 
 
+def online_parts(network, overrides, speed_cm_s: float):
+    """``build_online`` with the speed command where the network reads one (a composed spec
+    with a gate or CPG: bridge/robot.py)."""
+    from snn_antenna import spec as specs
+
+    raw = specs.load(network)
+    table = raw["network"] if isinstance(raw.get("network"), dict) else raw
+    reads_speed = bool({"gate", "cpg"} & set(table.get("parts", ())))
+    return build_online(network, overrides, speed_cm_s=speed_cm_s if reads_speed else None)
+
+
 def compare_browsers(args, overrides, counts: list[int]) -> None:
     """With 0, 1, 3... pages open: the live run's real-time factor and latencies, the display
     latency the pages report, and the throughput."""
@@ -155,7 +171,7 @@ def compare_browsers(args, overrides, counts: list[int]) -> None:
 
     rows = []
     for n in counts:
-        parts = build_online(args.network, overrides)
+        parts = online_parts(args.network, overrides, args.speed)
         warm_up(parts)
         view = LiveView(parts, port=0)
         url = view.start()
@@ -192,7 +208,7 @@ def compare_browsers(args, overrides, counts: list[int]) -> None:
 
 def compare_baseline(args, overrides, fast) -> None:
     """The throughput run on the baseline network, right after the shipped one's."""
-    base_parts = build_online(args.baseline, overrides)
+    base_parts = online_parts(args.baseline, overrides, args.speed)
     warm_up(base_parts)
     base = stream_from_emulator(base_parts, args.seconds, fast=True)
     print(f"  baseline {Path(args.baseline).name} (dt {base_parts.array.dt_ms} ms, "
@@ -206,8 +222,9 @@ def compare_view(args, overrides) -> None:
     """Throughput runs alternating without / with the view and an open page."""
     from snn_antenna.bridge.view import LiveView
 
-    plain_parts = build_online(args.network, overrides)
-    view_parts = build_online(args.network, overrides)  # the view taps its chain's coder
+    plain_parts = online_parts(args.network, overrides, args.speed)
+    # the view taps its chain's coder
+    view_parts = online_parts(args.network, overrides, args.speed)
     view = LiveView(view_parts, port=0)
     url = view.start()
     page = OpenPage(url)
@@ -240,7 +257,7 @@ def compare_reload(args, overrides) -> None:
 
     rows = []
     for reloading in (False, True):
-        parts = build_online(args.network, overrides)
+        parts = online_parts(args.network, overrides, args.speed)
         warm_up(parts)
         view = LiveView(parts, port=0)
         url = view.start()

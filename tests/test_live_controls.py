@@ -31,17 +31,31 @@ JSON_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**20, 10**20),
                         st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=8))
 
 
-@settings(max_examples=150, deadline=None)
-@given(field=st.sampled_from(["th_g", "window_s", "Th", ""]), value=JSON_VALUES)
-def test_a_request_is_accepted_exactly_when_in_range_else_named(field, value):
+@settings(max_examples=250, deadline=None)
+@given(field=st.sampled_from(["th_g", "window_s", "speed_cm_s", "Th", ""]), value=JSON_VALUES,
+       speeds=st.sampled_from([None, (0.0, 30.0), (5.0, 12.5)]))
+def test_a_request_is_accepted_exactly_when_in_range_else_named(field, value, speeds):
+    """``speeds``: the running network's speed range (None: no part reads a speed)."""
     body = json.dumps({field: value}).encode()
     number = isinstance(value, (int, float)) and not isinstance(value, bool) \
         and math.isfinite(value)
+    if field == "speed_cm_s":
+        ok = number and speeds is not None and speeds[0] <= value <= speeds[1]
+        if ok:
+            assert parse_control(body, BASE, speeds) == Change("speed_cm_s", float(value))
+            return
+        with pytest.raises(SpecError) as caught:
+            parse_control(body, BASE, speeds)
+        assert caught.value.field == "speed_cm_s" and "not accepted" in str(caught.value)
+        assert (f"[{speeds[0]:g}, {speeds[1]:g}]" if speeds else "no part that reads the "
+                "speed command") in str(caught.value)
+        return
     if field == "th_g":
         ok = number and 0 <= value <= TH_MAX_G
     elif field == "window_s":
         k = value / BASE if number else None
-        ok = number and abs(k - round(k)) <= 1e-6 * max(1, k) and 1 <= round(k) <= MAX_WINDOWS
+        ok = number and math.isfinite(k) and abs(k - round(k)) <= 1e-6 * max(1, k) \
+            and 1 <= round(k) <= MAX_WINDOWS
     else:
         ok = False
     if ok:
@@ -56,7 +70,7 @@ def test_a_request_is_accepted_exactly_when_in_range_else_named(field, value):
         assert (f"[0, {TH_MAX_G:g}]" if field == "th_g" else f"{MAX_WINDOWS * BASE:g} s") \
             in message
     else:
-        assert caught.value.field == "control" and "th_g or window_s" in message
+        assert caught.value.field == "control" and "th_g, window_s, speed_cm_s" in message
 
 
 @settings(max_examples=200, deadline=None)
@@ -78,6 +92,7 @@ class _Parts:
             threshold = 0.04
         named_steps = {"coder": coder}
     window_s = BASE
+    robot = None                        # no speed gate or CPG
 
 
 def test_a_request_applies_at_the_next_boundary_ahead_of_the_coder_and_calibration():
@@ -184,12 +199,6 @@ def test_a_paint_report_counts_from_the_arrival_and_trusts_the_page_clock_only_b
     history.painted(2.0, 100.1, now=100.2)          # a window never shown: ignored
     assert np.allclose(history.display_delays_ms, [50.0, 0.0, 200.0])
     assert history.display_latency()["n"] == 3
-
-
-@pytest.mark.parametrize("name", ["robot.toml", "exploration.toml"])
-def test_a_composed_network_is_refused_by_the_live_path_with_the_reason(name):
-    with pytest.raises(SpecError, match=r"network = .*runs only the resonator array.*gate"):
-        build_online(NETWORK.parent / name)
 
 
 def _frame(seq: int, t_s: float) -> dict:

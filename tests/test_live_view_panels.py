@@ -64,8 +64,8 @@ def test_each_window_carries_what_was_decided(viewed):
     report, history, decided, _ = viewed
     last = history.state()["network"]["decided"]
     # Th is the one the spec's override set, and says so.
-    assert last["threshold"] == {"th_g": 0.04, "set_by": "preprocess.threshold (fixed: no "
-                                                         "speed gate runs live)"}
+    assert last["threshold"] == {"th_g": 0.04, "set_by": "preprocess.threshold (fixed: the "
+                                                         "network has no speed gate)"}
     assert history.th_g == 0.04
     # The read-out's decision: contact windows only within the contact the pipeline reported,
     # an episode open during it, and its distance once it closed.

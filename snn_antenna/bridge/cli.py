@@ -48,6 +48,8 @@ def add_subcommands(subparsers) -> None:
                    help="networks/NAME.toml: run the online pipeline on the replay "
                         "(networks/live.toml: the live setting)")
     _set_arg(p)
+    _speed_arg(p, "the speed command at the start (default: the recording's, from its "
+                  "meta.json)")
     add_view_args(p)
     _retype(p, "--view-hold", option(bounds.seconds))
     p.set_defaults(func=cmd_replay)
@@ -93,6 +95,8 @@ def add_subcommands(subparsers) -> None:
     p.add_argument("--duration", type=option(bounds.positive_seconds), default=None,
                    help="seconds (default: until Ctrl-C)")
     _set_arg(p)
+    _speed_arg(p, "the robot's speed command at the start, for a network whose speed gate or "
+                  "CPG reads it (networks/live_robot.toml); the page's speed control changes it")
     add_view_args(p)
     p.add_argument("--json", action="store_true",
                    help="end with the full run report as JSON (for machines) instead of the "
@@ -105,6 +109,15 @@ def _set_arg(p) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a field of the network spec, e.g. --set network.dt_ms=0.25, "
                         "--set preprocess.threshold=0.05, --set readout.window_s=0.05")
+
+
+def _speed_arg(p, text: str) -> None:
+    p.add_argument("--speed", type=option(_speed), default=None, metavar="CM_S", help=text)
+
+
+def _speed(field: str, value) -> float:
+    """A speed in cm/s (the running network's gate names its own range: bridge/robot.py)."""
+    return bounds.number(field, value, 0.0, None, unit=" cm/s")
 
 
 def _port_args(p) -> None:
@@ -258,6 +271,21 @@ def replay_overrides(args) -> list[str]:
     return recorded + list(args.set)
 
 
+def replay_speed(args) -> float | None:
+    """The speed command a replay starts at: ``--speed``, else the recording's (meta.json)."""
+    from .recorder import META_FILE
+
+    if getattr(args, "speed", None) is not None:
+        return args.speed
+    meta_path = Path(args.recording) / META_FILE
+    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    speed = meta.get("speed_cm_s")
+    if speed is not None:
+        print(f"replay: starting at the recording's speed command {speed:g} cm/s (meta.json)",
+              file=sys.stderr)
+    return speed
+
+
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
     from .controls import recorded_events
@@ -268,7 +296,8 @@ def cmd_replay(args) -> int:
     if args.network:
         from .online import LiveDisplay, build_online, run_online
 
-        parts = build_online(args.network, replay_overrides(args))
+        parts = build_online(args.network, replay_overrides(args),
+                             speed_cm_s=replay_speed(args))
         # The live run's control changes, at the samples they applied at.
         scheduled = recorded_events(args.recording)
         if scheduled:
@@ -313,7 +342,8 @@ def cmd_stream(args) -> int:
     from .online import LiveDisplay, build_online, run_online, warm_up
 
     _check_duration(args.duration)
-    parts = build_online(args.network, args.set)     # a bad spec fails before the port opens
+    # A bad spec (or speed) fails before the port opens.
+    parts = build_online(args.network, args.set, speed_cm_s=args.speed)
     if args.out is None:
         args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
     _check_recording_dir(args.out)
@@ -321,7 +351,8 @@ def cmd_stream(args) -> int:
           file=sys.stderr, flush=True)
     warm_up(parts)
     with live_view(args, parts) as view, recording_session(
-            args, {"network": str(args.network), "set": args.set}) as (source, recorder, stop):
+            args, {"network": str(args.network), "set": args.set,
+                   "speed_cm_s": args.speed}) as (source, recorder, stop):
         report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
                             stop=stop, display=LiveDisplay(sys.stdout), view=view,

@@ -1,6 +1,7 @@
-"""Hands on the live pipeline: the input threshold Th and the rate-map window, changed from the
-live page (or ``POST /control``), applied at a window boundary, journaled into the recording
-and replayed from it.
+"""Hands on the live pipeline: the input threshold Th, the rate-map window and (on a network
+with a speed gate or CPG: bridge/robot.py) the robot's speed command, changed from the live
+page (or ``POST /control``), applied at a window boundary, journaled into the recording and
+replayed from it.
 
 A request travels: the page (bridge/page.py) or ``/control`` → :func:`parse_control` in the view
 process (the one parser: a bad value is refused there, naming the field, the value and the
@@ -33,9 +34,12 @@ MAX_WINDOWS = 20                        # the longest rate-map window, in the ne
 MAX_REQUEST_BYTES = 1024
 
 
+FIELDS = ("th_g", "window_s", "speed_cm_s")     # what a request may change
+
+
 @dataclass(frozen=True)
 class Change:
-    """One checked request: ``field`` is ``th_g`` or ``windows``."""
+    """One checked request: ``field`` is ``th_g``, ``windows`` or ``speed_cm_s``."""
     field: str
     value: float
 
@@ -47,10 +51,12 @@ def accepted_range(field: str, base_window_s: float) -> str:
             f"{base_window_s:g} s, from {base_window_s:g} to {MAX_WINDOWS * base_window_s:g} s")
 
 
-def parse_control(body, base_window_s: float) -> Change:
+def parse_control(body, base_window_s: float,
+                  speed_range_cm_s: tuple[float, float] | None = None) -> Change:
     """The one parser of control requests: JSON (bytes, text or a dict) with exactly one of
-    ``{"th_g": number}`` or ``{"window_s": number}``. Anything else raises SpecError naming the
-    field, the value and what is accepted."""
+    ``{"th_g": number}``, ``{"window_s": number}`` or ``{"speed_cm_s": number}`` (within
+    ``speed_range_cm_s``, the running network's: None when no part of it reads a speed).
+    Anything else raises SpecError naming the field, the value and what is accepted."""
     if isinstance(body, (bytes, bytearray)):
         if len(body) > MAX_REQUEST_BYTES:
             raise SpecError("control", f"{len(body)} bytes", f"a request of at most "
@@ -66,17 +72,24 @@ def parse_control(body, base_window_s: float) -> Change:
             raise SpecError("control", body[:60], 'JSON such as {"th_g": 0.05} or '
                                                   '{"window_s": 0.1}') from None
     if not isinstance(body, dict) or len(body) != 1:
-        raise SpecError("control", body, 'one field: {"th_g": number} or {"window_s": number}')
+        raise SpecError("control", body, 'one field: {"th_g": number}, {"window_s": number} '
+                                         'or {"speed_cm_s": number}')
     (field, value), = body.items()
-    if field not in ("th_g", "window_s"):
-        raise SpecError("control", field, "th_g or window_s")
+    if field not in FIELDS:
+        raise SpecError("control", field, ", ".join(FIELDS))
+    if field == "speed_cm_s":
+        from .robot import check_speed
+
+        return Change("speed_cm_s", check_speed(value, speed_range_cm_s, "speed_cm_s"))
     number = value if isinstance(value, (int, float)) and not isinstance(value, bool) else None
     if field == "th_g":
         if number is None or not math.isfinite(number) or not 0 <= number <= TH_MAX_G:
             raise SpecError("th_g", value, accepted_range("th_g", base_window_s))
         return Change("th_g", float(number))
     windows = None if number is None or not math.isfinite(number) else number / base_window_s
-    if windows is None or abs(windows - round(windows)) > 1e-6 * max(1.0, windows) \
+    # A finite but huge number of seconds overflows to an infinite number of windows.
+    if windows is None or not math.isfinite(windows) \
+            or abs(windows - round(windows)) > 1e-6 * max(1.0, windows) \
             or not 1 <= round(windows) <= MAX_WINDOWS:
         raise SpecError("window_s", value, accepted_range("window_s", base_window_s))
     return Change("windows", float(round(windows)))
@@ -91,6 +104,7 @@ class Controls:
     def __init__(self, parts, *, requests=None, journal=None, scheduled=(), on_applied=None,
                  rate_hz: float):
         self.coder = parts.chain.named_steps["coder"]
+        self.robot = parts.robot
         self.rate_hz = rate_hz
         self.base_samples = int(round(parts.window_s * rate_hz))
         self.base_window_s = parts.window_s
@@ -103,6 +117,10 @@ class Controls:
                                                               float(event["value"])),
                                  "replay", time.time()))
         self.pending.sort(key=lambda p: p[0])
+        if self.robot is None and any(p[1].field == "speed_cm_s" for p in self.pending):
+            raise SpecError("network", "no part that reads a speed", "a network whose speed "
+                            "gate or CPG reads the speed command (networks/live_robot.toml): "
+                            "the recording's events.jsonl changes the speed")
         self.events: list[dict] = []
         self._polled = 0.0
 
@@ -136,11 +154,24 @@ class Controls:
         return [p for p in self.pending if p[1].field == "th_g" and start <= p[0] < stop]
 
     def apply_th(self, item) -> None:
+        """A Th change, at its sample: on a network with a speed gate, a manual override of
+        the gate's Th from here on (bridge/robot.py)."""
         index, change, by, asked = item
         self.pending.remove(item)
         was = float(self.coder.threshold)
         self.coder.threshold = change.value
+        if self.robot is not None and self.robot.th_source is not None:
+            self.robot.th_source = "manual"
         self._applied(index, change, by, asked, was)
+
+    def speed_change(self, end_index: int) -> None:
+        """A window of the network ended at ``end_index``: apply the speed commands due there
+        (the gate and CPG read the new speed from the next window on)."""
+        for item in [p for p in self.pending if p[1].field == "speed_cm_s" and p[0] <= end_index]:
+            index, change, by, asked = item
+            self.pending.remove(item)
+            was = self.robot.command(change.value)
+            self._applied(end_index, change, by, asked, was)
 
     def window_change(self, end_index: int) -> bool:
         """A published window ended at ``end_index``: apply a window change due there (True
@@ -159,8 +190,8 @@ class Controls:
         return self.windows * self.base_window_s
 
     def _applied(self, index: int, change: Change, by: str, asked: float, was: float) -> None:
-        shown = ("th_g", change.value) if change.field == "th_g" else \
-            ("window_s", change.value * self.base_window_s)
+        shown = (("window_s", change.value * self.base_window_s) if change.field == "windows"
+                 else (change.field, change.value))
         event = {"sample": index, "t_s": round(index / self.rate_hz, 6), "field": change.field,
                  "value": change.value, "shown": {shown[0]: shown[1]}, "was": was, "by": by,
                  "requested_unix_s": round(asked, 6), "applied_unix_s": round(time.time(), 6)}

@@ -1,11 +1,12 @@
 """What the running network decides, window by window, for the live view's panels.
 
 A panel per part the running network contains, and none for a part it does not. The live
-pipeline (bridge/online.py's ``build_online``) runs one part, the resonator array, fed by the
+pipeline (bridge/online.py's ``build_online``) always runs the resonator array, fed by the
 coder whose gate compares the filtered signal with the input threshold Th, and read out by the
-contact episode logic; the speed gate, CPG and control layer of ``networks/robot.toml`` and
-``exploration.toml`` are not run live (the board streams the antenna only, no speed command),
-so they have no panel.
+contact episode logic (panels ``threshold`` and ``readout``). A composed network
+(``networks/live_robot.toml``) also runs its speed gate, CPG and control layer beside it
+(bridge/robot.py), each with its panel; with a speed gate, the gate's panel shows the Th in
+force and where it came from, in place of ``threshold``.
 
 Each window the pipeline publishes (``LiveView.window``) gathers one ``decided`` dict here,
 ``{panel: {field: value}}`` of plain numbers and strings; it travels in the same frame as the
@@ -17,25 +18,28 @@ import numpy as np
 
 from ..readout.contacts import tuned_above
 
-# The parts the live pipeline runs: the coder and contact read-out belong to the resonators'.
-LIVE_PARTS = ("resonators",)
-# panel → (title, the part it belongs to)
-PANELS = {"threshold": ("Gate: input threshold Th", "resonators"),
-          "readout": ("Contact read-out", "resonators")}
+# panel → (title, the part it belongs to, a part whose panel replaces it)
+PANELS = {"threshold": ("Gate: input threshold Th", "resonators", "gate"),
+          "gate": ("Speed gate: Th from the speed command", "gate", None),
+          "cpg": ("CPG: pan-tilt sweep", "cpg", None),
+          "control": ("Control layer: stop signal", "control", None),
+          "readout": ("Contact read-out", "resonators", None)}
 
 
 class Decisions:
-    """Per window: the Th in force and where it came from, and the read-out's decision on the
-    window (a contact window or not, the episode it keeps open, the last contact's distance)."""
+    """Per window: the Th in force and where it came from, the read-out's decision on the
+    window (a contact window or not, the episode it keeps open, the last contact's distance),
+    and what a composed network's other parts decided (bridge/robot.py)."""
 
     def __init__(self, parts):
         self.coder = parts.chain.named_steps["coder"]
         self.detector = parts.detector
         self.neuron_hz = np.asarray(parts.array.neuron_hz, dtype=float)
         self._above = tuned_above(self.neuron_hz, self.detector.motion_band_hz)
-        self.parts = LIVE_PARTS
-        self.panels = {name: title for name, (title, part) in PANELS.items()
-                       if part in self.parts}
+        self.robot = parts.robot
+        self.parts = ("resonators", *(self.robot.names if self.robot else ()))
+        self.panels = {name: title for name, (title, part, unless) in PANELS.items()
+                       if part in self.parts and unless not in self.parts}
         self._open_since: float | None = None
         self._last: dict | None = None
 
@@ -44,9 +48,16 @@ class Decisions:
         self.event(event)
         contact_window = bool(self.detector.is_contact_window(rates, self._above))
         peak = int(np.argmax(rates))
+        decided = dict(self.robot.decided) if self.robot else {}
+        if "gate" in decided:           # the Th that coded this window, and its source
+            decided["gate"] = {**decided["gate"], "th_g": float(self.coder.threshold),
+                               "th_source": self.robot.th_source}
+        else:
+            decided["threshold"] = {"th_g": float(self.coder.threshold),
+                                    "set_by": "preprocess.threshold (fixed: the network has "
+                                              "no speed gate)"}
         return {
-            "threshold": {"th_g": float(self.coder.threshold),
-                          "set_by": "preprocess.threshold (fixed: no speed gate runs live)"},
+            **decided,
             "readout": {"t_s": round(float(t_s), 6), "contact_window": contact_window,
                         "peak_hz": round(float(self.neuron_hz[peak]), 3) if rates[peak] > 0
                         else None,

@@ -16,6 +16,10 @@ built here. What this module adds on top of the foundation's streaming API:
   :class:`~snn_antenna.readout.contacts.EpisodeTracker`, the episode logic that
   ``ContactDetector.detect`` runs offline, so live and offline detections are the same.
 
+- a composed network (``networks/live_robot.toml``): its speed gate, CPG and control layer run
+  in Brian2 in the array's own network (bridge/robot.py), and each of the network's windows is
+  coded with the gate's Th once the network has integrated the window before it.
+
 Gaps in the stream are not filled: the network sees the received samples back to back.
 """
 from __future__ import annotations
@@ -48,14 +52,18 @@ class OnlineParts:
     detector: ContactDetector
     window_s: float
     spec: dict
+    robot: object = None                # bridge/robot.py's LiveRobot: a composed spec's parts
 
 
-def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ) -> OnlineParts:
+def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
+                 speed_cm_s: float | None = None) -> OnlineParts:
     """The parts the ``--network`` file names, checked before any port is opened.
 
     A network file (``networks/*.toml``, the fields of ResonatorArray) or a study-style file
     with ``[network]``, ``[preprocess]`` and ``[readout]`` tables; ``--set`` overrides apply to
-    the study form (``--set preprocess.threshold=0.05``).
+    the study form (``--set preprocess.threshold=0.05``). A composed network (``parts = [...]``,
+    e.g. networks/live_robot.toml) runs its other parts beside the array (bridge/robot.py),
+    starting at the speed command ``speed_cm_s``; its gate learns from ``[gate_training]``.
     """
     path = Path(network_path)
     if not path.is_file():
@@ -63,35 +71,88 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ) -> 
                                               "networks/resonator_array.toml")
     raw = specs.load(path)
     raw.pop("seed", None)
-    if "parts" in raw:                  # a composed network (robot.toml, exploration.toml)
-        raise SpecError("network", str(path), f"a resonator-array spec such as "
-                        f"networks/live.toml: the live path runs only the resonator array, "
-                        f"and this spec composes {raw['parts']} (the board streams the antenna "
-                        f"only: no speed command for a gate, CPG or control layer)")
+    training = raw.pop("gate_training", None)
     spec = ({k: raw.get(k, {}) for k in SECTIONS} if isinstance(raw.get("network"), dict)
             else {"network": raw, "preprocess": {}, "readout": {}})
-    for item in overrides:
+    if training is not None:
+        spec["gate_training"] = training
+    for item in overrides:              # e.g. --set gate_training.from_summary=...
         specs.apply_override(spec, item)
+    training = spec.pop("gate_training", None)
     for key in spec:
         if key not in SECTIONS:
             raise SpecError(key, spec[key], f"a section of an online spec: {', '.join(SECTIONS)}")
     # The rules joining the sections, named by the spec's keys (the rate is the board's).
     check_spec(spec, [item.split("=", 1)[0].strip() for item in overrides], rate_hz=rate_hz)
+    composed = "parts" in spec["network"]
+    if composed:
+        configured, examples = _composed(spec["network"], training, speed_cm_s)
+        array = configured["resonators"]
+    else:
+        for name, value in (("gate_training", training), ("speed", speed_cm_s)):
+            if value is not None:
+                raise SpecError(name, value, "none for a network without a speed gate (a "
+                                             "composed spec such as networks/live_robot.toml "
+                                             "takes one)")
+        with specs.section("network"):
+            array = ResonatorArray(**specs.check_section(spec, "network", ResonatorArray))
     with specs.section("network"):
-        array = ResonatorArray(**specs.check_section(spec, "network", ResonatorArray))
         array.check_rate(rate_hz)
     with specs.section("preprocess"):
         pre = specs.check_section(spec, "preprocess", make_chain,
                                   exclude=["rate_hz", "adc_bits", "full_scale_g"])
         chain = make_chain(rate_hz, BOARD_ADC_BITS, BOARD_FULL_SCALE_G, **pre)
     detector, window_s = detector_from_spec(spec)
-    return OnlineParts(array, chain, detector, window_s, spec)
+    robot = None
+    if composed:
+        from .robot import LiveRobot, trained_gate
+
+        if examples is not None:
+            configured["gate"] = trained_gate(configured["gate"], *examples)
+        robot = LiveRobot(configured, speed_cm_s)
+    return OnlineParts(array, chain, detector, window_s, spec, robot)
+
+
+def _composed(table: dict, training, speed_cm_s) -> tuple[dict, tuple | None]:
+    """A composed network's parts, configured and checked for the live stream (nothing
+    built, the gate not trained yet), and the gate's examples (speeds, Th*) from
+    ``training`` (None without a gate)."""
+    from ..networks.assembly import configure
+    from ..studies.exploration import GateTraining
+    from .robot import check_live_parts, check_speed, speed_range
+
+    check_live_parts(table.get("parts", []))
+    with specs.section("network"):
+        configured = configure(table)
+    examples = None
+    if "gate" in configured:
+        if not isinstance(training, dict):
+            raise SpecError("gate_training", training,
+                            "a [gate_training] table (speeds_cm_s and th_star_g, or "
+                            "from_summary: also --set gate_training.from_summary=PATH): what "
+                            "the speed gate learns before the stream")
+        with specs.section("gate_training"):
+            table = specs.check_section({"gate_training": training}, "gate_training",
+                                        GateTraining)
+            examples = GateTraining(**table).examples()
+            configured["gate"].check_speeds(examples[0], "speeds_cm_s")
+    elif training is not None:
+        raise SpecError("gate_training", training, "none: the network has no speed gate")
+    if speed_cm_s is None and speed_range(configured) is not None:
+        readers = ", ".join(name for name in configured if name in ("gate", "cpg"))
+        raise SpecError("speed", None, f"the robot's speed command in cm/s (--speed): "
+                                       f"{readers} read it")
+    if speed_cm_s is not None:
+        check_speed(speed_cm_s, speed_range(configured))
+    return configured, examples
 
 
 def warm_up(parts: OnlineParts) -> None:
-    """Run the array on 50 ms of silence, so that Brian2 generates and compiles its code (cached
-    on disk afterwards) before a port is opened and samples start to queue up."""
-    parts.array.stream(iter([np.zeros(int(0.05 * BOARD_RATE_HZ))]), BOARD_RATE_HZ, window_s=0.05)
+    """Run the array (and a composed network's other parts) on 50 ms of silence, so that
+    Brian2 generates and compiles its code (cached on disk afterwards) before a port is opened
+    and samples start to queue up."""
+    parts.array.stream(iter([np.zeros(int(0.05 * BOARD_RATE_HZ))]), BOARD_RATE_HZ, window_s=0.05,
+                       companions=parts.robot.build if parts.robot else None)
 
 
 class CalibratedChain:
@@ -110,6 +171,12 @@ class CalibratedChain:
 
     def push(self, counts: np.ndarray) -> np.ndarray | None:
         """ADC counts (n, 2) in, coded samples out (None while calibrating)."""
+        counts = self.take(counts)
+        return None if counts is None else self.code(counts)
+
+    def take(self, counts: np.ndarray) -> np.ndarray | None:
+        """ADC counts (n, 2) in; the counts ready to code out (the held ones first, once the
+        chain is fitted on them), None while calibrating."""
         if not self.fitted:
             self._held.append(counts)
             counts = np.concatenate(self._held)
@@ -118,6 +185,10 @@ class CalibratedChain:
                 return None
             reset(self.chain.fit(counts[:self.n_calibration]))
             self._held, self.fitted = [], True
+        return counts
+
+    def code(self, counts: np.ndarray) -> np.ndarray:
+        """Counts that ``take`` made ready, through the fitted chain (the coder's Th now)."""
         return partial_transform(self.chain, counts)
 
 
@@ -325,10 +396,17 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
 
     summed = {"t_s": None, "counts": None, "n": 0}      # network windows summed so far
 
+    robot = parts.robot
+
     def on_window(t_s: float, spike_counts: np.ndarray) -> None:
         # ResonatorArray.stream publishes a window once its last sample has been integrated,
         # before it asks for the next one. The published window sums ``controls.windows`` of
-        # the network's (one without controls).
+        # the network's (one without controls). A composed network's parts are read at each
+        # of the network's windows, then a speed command due at its end applies.
+        if robot is not None:
+            robot.window(t_s + parts.window_s)
+            if controls is not None:
+                controls.speed_change(int(round((t_s + parts.window_s) * BOARD_RATE_HZ)))
         if summed["n"] == 0:
             summed["t_s"], summed["counts"] = t_s, spike_counts.astype(float)
         else:
@@ -359,9 +437,10 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
 
     t0 = report.started = time.perf_counter()
     chunks = coded_chunks(loop, source, CalibratedChain(
-        parts.chain, int(calibration_s * BOARD_RATE_HZ)), clock, controls)
+        parts.chain, int(calibration_s * BOARD_RATE_HZ)), clock, controls, robot,
+        int(round(parts.window_s * BOARD_RATE_HZ)))
     stats = parts.array.stream(chunks, BOARD_RATE_HZ, window_s=parts.window_s,
-                               on_window=on_window)
+                               on_window=on_window, companions=robot.build if robot else None)
     report.wall_s = time.perf_counter() - t0
     report.waiting_s = loop.waiting_s
     report.samples, report.windows, report.simulated_s = (stats.samples, stats.windows,
@@ -381,11 +460,19 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
 
 
 def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: ArrivalClock,
-                 controls=None):
+                 controls=None, robot=None, window_samples: int = 0):
     """The coded input for the network, chunk by chunk, from the source's batches (noting
-    each sample's arrival on ``clock``); a Th change is applied at its sample index."""
+    each sample's arrival on ``clock``); a Th change is applied at its sample index.
+
+    With a composed network (``robot``), each of the network's windows (``window_samples``)
+    is coded with the gate's Th only once the network has integrated the window before it:
+    the pieces are yielded one window at a time, and the stream asks for the next only after
+    publishing that window (``ResonatorArray.stream``), so the same samples get the same Th
+    however the source chunked them (live or replayed)."""
+    coder = chain.chain.named_steps["coder"]
     waiting: list = []
-    pushed = 0                          # samples through the chain so far
+    pushed = 0                          # samples handed to the chain so far
+    coded = 0                           # of those, coded (the rest are held for calibration)
     for batch in loop:
         if batch.samples:
             waiting += batch.samples
@@ -396,18 +483,33 @@ def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: Arriva
         # sample as for a hundred, so take everything already queued in one go.
         if not waiting or source.pending():
             continue
-        counts = np.asarray(waiting, dtype=float)[:, 1:]
+        counts = chain.take(np.asarray(waiting, dtype=float)[:, 1:])
+        pushed += len(waiting)
         waiting = []
-        cuts = controls.due(pushed, pushed + len(counts)) if controls else []
+        if counts is None:
+            continue
+        cuts: dict[int, list] = {}          # offset → the Th changes due there
+        for item in controls.due(coded, coded + len(counts)) if controls else []:
+            cuts.setdefault(item[0] - coded, []).append(item)
+        if robot is not None:               # and every window boundary
+            for at in range(-coded % window_samples, len(counts), window_samples):
+                cuts.setdefault(at, [])
         pieces, start = [], 0
-        for stop, item in [(c[0] - pushed, c) for c in cuts] + [(len(counts), None)]:
-            if stop > start:
-                pieces.append(chain.push(counts[start:stop]))
-            if item is not None:
-                controls.apply_th(item)
-            start = stop
-        pushed += len(counts)
-        pieces = [p for p in pieces if p is not None]
+        for at in sorted(cuts) + [len(counts)]:
+            if at > start:
+                piece = chain.code(counts[start:at])
+                if robot is None:
+                    pieces.append(piece)
+                else:
+                    yield piece
+            if at < len(counts):
+                if robot is not None and (coded + at) % window_samples == 0 \
+                        and robot.next_th() is not None:
+                    coder.threshold = robot.next_th()
+                for item in cuts[at]:
+                    controls.apply_th(item)
+            start = at
+        coded += len(counts)
         if pieces:
             yield np.concatenate(pieces) if len(pieces) > 1 else pieces[0]
 

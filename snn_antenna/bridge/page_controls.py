@@ -1,5 +1,6 @@
 """The live page's hands on the controls (bridge/page.py lays them out): pause and resume the
-display, scrub back through the kept minute, change Th and the rate-map window, save the view.
+display, scrub back through the kept minute, change Th, the rate-map window and (on a network
+whose gate or CPG reads one) the robot's speed command, save the view.
 
 Pausing is the page's own business (its plots stop following; the pipeline and the other pages
 go on). Th and the window go through the view process's one parser to the pipeline
@@ -74,6 +75,11 @@ def control_widgets(view, mode: dict, reload, x_range):
     window = TextInput(value=f"{view.window_s:g}", title="rate-map window (s)", name="window",
                        width=130)
     apply_window = Button(label="Apply window", name="apply_window", width=110)
+    speed = apply_speed = None
+    if view.config.speed_range_cm_s is not None:
+        speed = TextInput(value=f"{view.config.speed_cm_s:g}", title="speed (cm/s)",
+                          name="speed", width=90)
+        apply_speed = Button(label="Apply speed", name="apply_speed", width=100)
     save = Button(label="Save view", name="save", width=100)
     status = Div(text="", name="status", width=600, height=40)
 
@@ -103,7 +109,8 @@ def control_widgets(view, mode: dict, reload, x_range):
         except SpecError as exc:
             status.text = f"<span style='color:#d62728'>{html.escape(str(exc))}</span>"
             return
-        shown = f"Th {value:g} g" if field == "th_g" else f"window {value:g} s"
+        shown = {"th_g": f"Th {value:g} g", "window_s": f"window {value:g} s",
+                 "speed_cm_s": f"speed {value:g} cm/s"}[field]
         status.text = (f"asked {shown} at {asked['asked_t_s']:.2f} s: it applies at the next "
                        "window boundary")
 
@@ -112,7 +119,11 @@ def control_widgets(view, mode: dict, reload, x_range):
     apply_th.on_click(lambda: ask("th_g", th.value))
     apply_window.on_click(lambda: ask("window_s", window.value))
     save.js_on_click(CustomJS(args={"status": status, "x_range": x_range}, code=SAVE_JS))
-    bar = row(pause, back, th, apply_th, window, apply_window, save,
+    speed_widgets = []
+    if speed is not None:
+        apply_speed.on_click(lambda: ask("speed_cm_s", speed.value))
+        speed_widgets = [speed, apply_speed]
+    bar = row(pause, back, th, apply_th, window, apply_window, *speed_widgets, save,
               sizing_mode="stretch_width")
     return bar, status
 
@@ -123,11 +134,13 @@ def controls_html(view) -> str:
     for event in view.controls[-5:]:
         if event["field"] == "th_g":
             what = f"Th {event['was']:.3g} → <b>{event['value']:.3g} g</b>"
+        elif event["field"] == "speed_cm_s":
+            what = f"speed {event['was']:.3g} → <b>{event['value']:.3g} cm/s</b>"
         else:
             what = f"window {event['was']:.3g} → <b>{event['shown']['window_s']:.3g} s</b>"
         items.append(f"<li>{event['t_s']:.2f} s: {what} ({event['by']})</li>")
     for asked in view.requested:
-        unit = "g" if asked["field"] == "th_g" else "× the network's window"
+        unit = {"th_g": "g", "speed_cm_s": "cm/s"}.get(asked["field"], "× the network's window")
         items.append(f"<li>asked: {asked['field']} {asked['value']:g} {unit} (waiting for a "
                      "window boundary)</li>")
     listing = f"<ul style='margin:2px 0'>{''.join(items)}</ul>" if items else " none yet"

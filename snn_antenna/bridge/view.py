@@ -154,7 +154,10 @@ class LiveView:
                                  np.asarray(parts.array.neuron_hz, dtype=float), to_g,
                                  coder.amplitude, float(coder.threshold),
                                  self.decisions.parts, self.decisions.panels,
-                                 keep_s=max(SCRUB_S, history_s), save_dir=save_dir)
+                                 keep_s=max(SCRUB_S, history_s), save_dir=save_dir,
+                                 speed_range_cm_s=parts.robot.speed_range if parts.robot
+                                 else None,
+                                 speed_cm_s=parts.robot.start_speed if parts.robot else None)
         _tap_coder(coder, self._coded)
         self._context = multiprocessing.get_context("spawn")
         self._inbox = self._context.Queue(inbox_frames)

@@ -59,6 +59,10 @@ class ViewConfig:
     panels: dict = None             # panel → title: what it decides (bridge/live_state.py)
     keep_s: float = 60.0            # what the view keeps: a paused page scrubs back through it
     save_dir: str | None = None     # where "save view" writes (bridge/saved_view.py)
+    # The speeds the running network accepts from the page (None: no part reads a speed), and
+    # the speed command at the start (bridge/robot.py).
+    speed_range_cm_s: tuple | None = None
+    speed_cm_s: float | None = None
 
 
 class _Ring:
@@ -189,7 +193,7 @@ class ViewHistory:
         applies at the next window boundary."""
         from .controls import parse_control
 
-        change = parse_control(body, self.base_window_s)
+        change = parse_control(body, self.base_window_s, self.config.speed_range_cm_s)
         if self.requests is None:
             raise SpecError("control", change.field, "a running pipeline to apply it to")
         try:

@@ -103,16 +103,28 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
         objects["resonators"] = group
         objects["resonator_guard"] = neurons.instability_guard(group, "resonator", array.dt_ms,
                                                                array.method)
+    objects.update(part_objects(configured, objects.get("resonators")))
+    return Assembly(b2.Network(*objects.values()), objects, configured)
+
+
+def part_objects(configured: dict, resonators=None, learning: bool = True) -> dict:
+    """The Brian2 objects of the configured parts other than the array, by name, wired to the
+    array's group ``resonators``: ``build`` here, and the live stream, whose array is built by
+    ``ResonatorArray.stream`` (bridge/online.py). The gate and CPG read the shared
+    ``speed_cm_s`` the caller writes; the CPG also ``hold_input`` (the freeze reflex).
+    ``learning=False``: the gate recalls only (``SpeedGate.objects``: no teacher)."""
+    objects = {}
     if "gate" in configured:
         gate = configured["gate"]
-        objects.update(gate.objects(weights=getattr(gate, "weights_", None)))
+        objects.update(gate.objects(weights=getattr(gate, "weights_", None),
+                                    learning=learning))
     if "cpg" in configured:
         ring, syn = configured["cpg"].objects(
             hold_expr="hold_input", extra="speed_cm_s : 1 (shared)\nhold_input : 1 (shared)")
         objects.update({"cpg": ring, "cpg_ring": syn})
     if "control" in configured:
-        objects.update(configured["control"].objects(objects["resonators"],
+        objects.update(configured["control"].objects(resonators,
                                                      configured["resonators"].neuron_hz))
     if "material" in configured:
-        objects.update(configured["material"].objects(objects["resonators"]))
-    return Assembly(b2.Network(*objects.values()), objects, configured)
+        objects.update(configured["material"].objects(resonators))
+    return objects

@@ -71,11 +71,16 @@ class CPG:
         step_ms = 1000.0 / (self.n_neurons * np.asarray(frequency_hz, float))
         return 1.0 - self.token_drive * (1.0 - np.exp(-step_ms / self.tau_ms))
 
-    def angles(self, traces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(pan, tilt) in degrees from ring traces of shape (..., n_neurons)."""
+    def phase(self, traces: np.ndarray) -> np.ndarray:
+        """The ring's phase φ (radians, in (−π, π]) from traces of shape (..., n_neurons):
+        the angle of their population vector."""
         z = np.asarray(traces, float) @ np.exp(2j * np.pi * np.arange(self.n_neurons)
                                                / self.n_neurons)
-        phi = np.angle(z)
+        return np.angle(z)
+
+    def angles(self, traces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(pan, tilt) in degrees from ring traces of shape (..., n_neurons)."""
+        phi = self.phase(traces)
         pan = self.pan_centre_deg + self.pan_amplitude_deg * np.cos(phi)
         tilt = self.tilt_centre_deg + self.tilt_amplitude_deg * np.cos(
             phi - np.deg2rad(self.phase_offset_deg))

@@ -123,13 +123,14 @@ class SpeedGate:
     def objects(self, n_copies: int = 1, speed_expr: str = "speed_cm_s",
                 extra: str = "speed_cm_s : 1 (shared)", weights=None,
                 namespace: dict | None = None, teacher_expr: str = "0*Hz",
-                learning_expr: str = "0"):
+                learning_expr: str = "0", learning: bool = True):
         """The gate's Brian2 objects: speed population, read-out, plastic synapses, teacher.
 
         ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
         what it refers to: by default a shared variable the closed loop writes). Returned as
         a dict of named objects (``speed_population``, ``readout``, ``plastic``, ``teacher``,
-        ``teaching``); Th is ``decode(readout.r_read)``.
+        ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, without
+        the teacher and its synapses (they act only while the gate learns).
         """
         import brian2 as b2
 
@@ -165,6 +166,9 @@ class SpeedGate:
             namespace=ns, dt=dt, name="plastic")
         plastic.connect(i=np.arange(n_in * n_copies), j=np.repeat(np.arange(n_copies), n_in))
         plastic.w = np.tile(np.zeros(n_in) if weights is None else weights, n_copies)
+        recall = {"speed_population": speed_pop, "readout": readout, "plastic": plastic}
+        if not learning:
+            return recall
         # A pacemaker fires exactly at the teacher rate: the rule sees the target, not the
         # counting noise of a Poisson train.
         teacher = b2.NeuronGroup(n_copies, f"dphase/dt = {teacher_expr} : 1",
@@ -174,8 +178,7 @@ class SpeedGate:
                                on_pre=f"r_teacher_post += {1 / self.tau_trace_s!r}",
                                dt=dt, name="teaching")
         teaching.connect(j="i")
-        return {"speed_population": speed_pop, "readout": readout, "plastic": plastic,
-                "teacher": teacher, "teaching": teaching}
+        return {**recall, "teacher": teacher, "teaching": teaching}
 
     def _readout_group(self, n_copies: int, namespace: dict, dt):
         """The read-out neuron of each copy, with the synaptic current and the rate traces

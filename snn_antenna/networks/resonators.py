@@ -171,7 +171,8 @@ class ResonatorArray:
     def stream(self, chunks: Iterable[np.ndarray], rate_hz: float, window_s: float = 0.1,
                on_window: Callable[[float, np.ndarray], None] | None = None,
                max_duration_s: float = 365 * 86400.0,
-               block_s: float = STREAM_BLOCK_S) -> "StreamStats":
+               block_s: float = STREAM_BLOCK_S,
+               companions: Callable[[object], Iterable] | None = None) -> "StreamStats":
         """Run the array live on coded samples as they arrive.
 
         ``chunks`` yields 1-D arrays of coded samples (any length, blocking until data come;
@@ -183,6 +184,10 @@ class ResonatorArray:
         them into a ring ``TimedArray`` that the group reads at its own steps: the same
         arithmetic as ``run``'s ``drive(t)``, so the same spikes. A block waits for its last
         sample before it is integrated; a window is published as soon as its last block is.
+
+        ``companions(group)``, when given, returns further Brian2 objects that run in the same
+        network as the array (the other parts of a composed live network, wired to the
+        array's group: bridge/online.py); ``on_window`` may read and steer them.
         """
         import brian2 as b2
 
@@ -207,7 +212,7 @@ class ResonatorArray:
         feeder = _BlockFeeder(_Feed(chunks), ring.values, group, samples_per_window, rate_hz,
                               on_window, period, check_state)
         feed = b2.NetworkOperation(feeder, clock=group.clock, when="start", name="feed")
-        net = b2.Network(group, feed)
+        net = b2.Network(group, feed, *(companions(group) if companions else ()))
         feeder.net = net
         t0 = time.perf_counter()
         net.run(max_duration_s * b2.second, namespace={})

@@ -122,6 +122,19 @@ class ClosedLoop:
                            sorted(asm.names())), world
 
 
+def steer(objects: dict, speed_cm_s: float, moving: bool) -> float:
+    """The speed command in force (0 once the motor unit stopped the robot) into the parts
+    that read it, the speed gate and the CPG, and the freeze hold on the CPG once stopped.
+    The closed loop here and the live stream (bridge/online.py) steer with it."""
+    speed = float(speed_cm_s) if moving else 0.0
+    if "cpg" in objects:
+        objects["cpg"].speed_cm_s = speed
+        objects["cpg"].hold_input = 0.0 if moving else FREEZE_HOLD
+    if "speed_population" in objects:
+        objects["speed_population"].speed_cm_s = speed
+    return speed
+
+
 def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna, motor_spikes,
                      state: dict) -> list:
     """The two NetworkOperations: every chunk, move the robot and code the next samples with
@@ -141,11 +154,7 @@ def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna, m
         t_s = float(t / b2.second)
         if state["stopped_at"] is None and motor_spikes.num_spikes > 0:
             state["stopped_at"] = t_s
-        moving = state["stopped_at"] is None
-        speed = float(loop.speed_cm_s) if moving else 0.0
-        obj["cpg"].speed_cm_s = speed
-        obj["speed_population"].speed_cm_s = speed
-        obj["cpg"].hold_input = 0.0 if moving else FREEZE_HOLD
+        speed = steer(obj, loop.speed_cm_s, moving=state["stopped_at"] is None)
         pan, tilt = cpg.angles(x_ring.copy())
         x = world.step(n_chunk, speed, float(pan), float(tilt))
         for step in steps[:-1]:

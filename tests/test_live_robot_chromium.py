@@ -1,0 +1,144 @@
+"""The robot network on the live page, in headless Chromium (skipped only where Chromium is
+missing): ``stream --network networks/live_robot.toml --speed 12`` while the emulator plays two
+contacts. The page shows the speed gate's, the CPG's and the control layer's panels; the first
+contact stops the robot (the control layer's motor unit), and the page then sets Th by hand
+(above the signal) and drives the robot on at 6 cm/s, pauses and resumes. Both changes land
+in the recording's events.jsonl at window boundaries, and a replay of the recording (its
+speed from meta.json, its changes from events.jsonl) finds the live run's contacts: the first
+only, the second coded as silence.
+
+``LIVE_ROBOT_SCREENSHOT=docs/live_robot.png`` writes the docs' screenshot.
+"""
+import json
+import os
+import re
+import signal
+import subprocess
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from snn_antenna.bridge.controls import recorded_events
+from snn_antenna.bridge.links import PtyLink
+from snn_antenna.sources.stimuli import Contact, RobotScene
+from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, SECOND_CONTACT_S, SPLIT_S,
+                                         _serve, _wait, model)
+from test_live_view import get_json, view_url
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOT = ROOT / "networks" / "live_robot.toml"
+SPEED, DRIVE_ON = 12.0, 6.0
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+def test_the_page_reads_the_robot_panels_steers_and_the_replay_reproduces_it(tmp_path):
+    playwright = pytest.importorskip("playwright.sync_api")
+    scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
+                                                 Contact(SECOND_CONTACT_S, 25.0)])
+    counts = scene.generate(seed=3).samples
+    link = PtyLink(tmp_path / "tty")
+    half = int(SPLIT_S * 1000)
+    second_half = threading.Event()
+    board = threading.Thread(target=_serve, args=(counts, half, link, second_half), daemon=True)
+    rec = tmp_path / "rec"
+    proc = subprocess.Popen([*CLI, "stream", "--port", link.path, "--network", ROBOT,
+                             "--speed", str(SPEED), "--out", rec, "--view", "--view-port", "0",
+                             "--view-hold", "0", "--no-data-timeout", "90", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    shot = Path(os.environ.get("LIVE_ROBOT_SCREENSHOT", tmp_path / "live_robot.png"))
+    try:
+        url = view_url(proc)
+        lines = proc.stderr_lines
+        with playwright.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                        args=["--no-sandbox"])
+            page = browser.new_page(viewport={"width": 1400, "height": 980})
+            page.goto(url)
+            page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0 && "
+                                   "Bokeh.documents[0].get_model_by_name('speed')",
+                                   timeout=30_000)
+            board.start()
+            # The panels while driving: the gate's Th from 12 cm/s, the CPG sweeping.
+            panels = page.locator("[data-panel]")
+            page.locator("[data-panel='cpg']").get_by_text("phase (°)").wait_for(
+                timeout=60_000)
+            gate = page.locator("[data-panel='gate']").inner_text()
+            assert "Th source" in gate and "gate" in gate and "speed (cm/s)" in gate
+            # The first contact: decided, and the control layer stops the robot.
+            page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=60_000)
+            page.locator("[data-panel='control']").get_by_text(
+                re.compile(r"stopped since \(s\)\s*\d")).wait_for(timeout=30_000)
+            control = page.locator("[data-panel='control']").inner_text()
+            shown = {name: page.locator(f"[data-panel='{name}']").count()
+                     for name in ("gate", "cpg", "control", "readout", "threshold")}
+            # Th by hand above the signal, and the robot driven on, from the page.
+            page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
+            page.get_by_role("button", name="Apply Th").click()
+            page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
+            page.get_by_label("speed (cm/s)").fill(str(DRIVE_ON))
+            page.get_by_role("button", name="Apply speed").click()
+            page.get_by_text("asked speed 6 cm/s").wait_for(timeout=30_000)
+            page.get_by_role("button", name="Pause display").click()
+            page.get_by_text("display paused").wait_for(timeout=30_000)
+            paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+            second_half.set()
+            board.join(30)
+            _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000, 60)
+            state = get_json(url + "state.json")
+            still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+            page.get_by_role("button", name="Resume display").click()
+            page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
+                                   timeout=30_000)
+            time.sleep(0.5)             # the last windows drawn
+            shot.parent.mkdir(parents=True, exist_ok=True)
+            page.screenshot(path=str(shot), full_page=True)
+            final = get_json(url + "state.json")
+            n_panels = panels.count()
+            browser.close()
+    finally:
+        second_half.set()
+        if board.ident:
+            board.join(30)
+        proc.send_signal(signal.SIGINT)
+        out = proc.stdout.read()
+        proc.wait(60)
+        link.close()
+    assert proc.returncode == 0, "".join(lines)
+    live = json.loads(out[out.index("{"):])
+    # A panel per part of the running network (the gate's holds Th: no fixed-Th panel), and
+    # the control list's.
+    assert shown == {"gate": 1, "cpg": 1, "control": 1, "readout": 1, "threshold": 0}
+    assert n_panels == 5
+    assert "motor unit spikes" in control
+    network = final["network"]
+    assert network["parts"] == ["resonators", "gate", "cpg", "control"]
+    assert network["decided"]["gate"] == {**network["decided"]["gate"], "th_source": "manual",
+                                          "th_g": HIGH_TH_G, "commanded_cm_s": DRIVE_ON}
+    assert network["decided"]["control"]["stopped_since_s"] is None   # driven on
+    assert still == paused_at and state["t_s"] > paused_at
+    # Both changes: asked from the page, applied at window boundaries, journaled, shown.
+    applied = final["controls"]["applied"]
+    assert [(e["field"], e["value"], e["by"]) for e in applied] == \
+        [("th_g", HIGH_TH_G, "page"), ("speed_cm_s", DRIVE_ON, "page")]
+    window = round(live["window_s"] * 1000)
+    assert all(e["sample"] % window == 0 for e in applied)
+    assert applied[1]["was"] == SPEED
+    assert recorded_events(rec) == live["controls"] == applied
+    # Live: the first contact only (the second coded as silence under the page's Th).
+    assert len(live["contacts"]) == 1 and abs(live["contacts"][0]["distance_cm"] - 19) < 3
+    replay = subprocess.run([*CLI, "replay", rec, "--network", ROBOT],
+                            capture_output=True, text=True, timeout=180)
+    assert replay.returncode == 0, replay.stderr
+    replayed = json.loads(replay.stdout[replay.stdout.index("{\n"):])
+    assert replayed["contacts"] == live["contacts"]
+    assert [(e["sample"], e["field"], e["value"]) for e in replayed["controls"]] == \
+        [(e["sample"], e["field"], e["value"]) for e in applied]
+    assert "2 control change" in replay.stderr and "speed command 12 cm/s" in replay.stderr
+    # Without the journal the replay is another run: the second contact is found.
+    (rec / "events.jsonl").rename(tmp_path / "events.jsonl")
+    plain = subprocess.run([*CLI, "replay", rec, "--network", ROBOT],
+                           capture_output=True, text=True, timeout=180)
+    assert len(json.loads(plain.stdout[plain.stdout.index("{\n"):])["contacts"]) > 1
