@@ -46,7 +46,7 @@ from ..readout.spiking import SpikeFeatures, SpikingBank, recording_attrs
 from ..store import Output
 from .grid import Grid
 from .standalone import (SPIKED, FusedUpdater, _functions, fused_reset, project, run_project,
-                         tick_substeps)
+                         tick_substeps, vectorising_flags)
 from .sweep import run_sweep
 
 CHECK_EVERY_MS = 10.0
@@ -177,7 +177,8 @@ class EventSweep:
         size = self.bank.batch_events
         arrays = list(self.bank.arrays().values())
         layout = self._layout()
-        proj = project(self._structure(layout), lambda: self._build(arrays, layout))
+        with vectorising_flags("float64"):
+            proj = project(self._structure(layout), lambda: self._build(arrays, layout))
         per_event = coded.reshape(len(coded), -1, len(arrays))     # (samples, events, bands)
         m = per_event.shape[1]
         per_event = np.concatenate([per_event, np.repeat(per_event[:, :1], size - m, axis=1)],
@@ -239,8 +240,11 @@ class EventSweep:
             substeps = self._substeps(dt_ms)
             drive = b2.TimedArray(np.zeros((self.n_samples, size * len(bands))), dt=input_dt,
                                   name=f"drive_{g}")
-            # per tick: the input sample, and each bin edge's count so far (spikes before
-            # the edge once the tick starting at it has begun)
+            # per tick, by a pass of its own before the fused update: the tick's input
+            # sample, and each bin edge's count so far (the spikes before the edge, once the
+            # tick starting at it has begun). In the update's loop, the TimedArray's bounds
+            # checks (branches) and the edges' tests (a scalar boolean) would keep the
+            # compiler from vectorising it.
             tick = "\n".join([f"I_held = drive_{g}(t, input_index)"] + [
                 f"before_{e} = where(t_in_timesteps*{substeps} <= {step}, spike_count, "
                 f"before_{e})" for e, step in enumerate(self._edge_steps(dt_ms))])
@@ -249,12 +253,13 @@ class EventSweep:
                  *RECORDED, *(f"before_{e} : 1" for e in range(n_edges))])
             group = b2.NeuronGroup(
                 len(columns), neurons.equations("resonator", "held_input(I_held)", variables),
-                method=FusedUpdater(method, substeps, tick, fused_reset(*ON_SPIKE)
+                method=FusedUpdater(method, substeps, "", fused_reset(*ON_SPIKE)
                                     .replace("SUBSTEPS", str(substeps))),
                 dt=substeps * dt_ms * b2.ms, name=f"band_{g}",
                 namespace={f"drive_{g}": drive, "dt_sub": dt_ms * b2.ms, **_functions()})
             group.input_index = columns
             group.a, group.c, group.d = preset.a, preset.c, preset.d
+            group.run_regularly(tick, when="start", name=f"tick_{g}")
             group.run_regularly(GUARD, dt=CHECK_EVERY_MS * b2.ms, name=f"guard_{g}")
             net.add(group)
             objects["groups"].append(group)

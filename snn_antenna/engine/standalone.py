@@ -147,7 +147,7 @@ class FusedUpdater:
         one = StateUpdateMethod.apply_stateupdater(
             equations, variables, neurons.brian_method(self.method))
         one = re.sub(r"\bdt\b", "dt_sub", f"{one}\n{self.step}")
-        steps = [self.tick]
+        steps = [self.tick] if self.tick else []
         for j in range(self.substeps):  # temporaries renamed per substep: each assigned once
             step = re.sub(r"\bt\b", f"(t + {j}*dt_sub)" if j else "t", one)
             step = re.sub(r"\bsubstep\b", str(j), step)
