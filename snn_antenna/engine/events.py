@@ -52,7 +52,7 @@ from .sweep import run_sweep
 CHECK_EVERY_MS = 10.0
 # Model steps per clock tick at most: each substep is its own unrolled copy of the step's
 # code, which Brian2 generates and the compiler optimises statement by statement. (MEASURED)
-MAX_TICK_SUBSTEPS = 10
+MAX_TICK_SUBSTEPS = 2
 GUARD = (f"unstable = unstable or not (abs(v) < {neurons.RUNAWAY_LIMIT!r} and "
          f"abs(u) < {neurons.RUNAWAY_LIMIT!r})")
 
@@ -162,13 +162,14 @@ class EventSweep:
             out.append(n)
         return out
 
-    def _substeps(self, dt_ms: float) -> int:
-        """Model steps per clock tick of a group at ``dt_ms``: a divisor of the input
-        sample's steps (the input is read once per tick) at which every bin edge starts a
-        tick (its count is taken once per tick), at most ``MAX_TICK_SUBSTEPS``."""
-        n_steps = round(self.n_samples * (1000.0 / self.rate_hz) / dt_ms)
-        return tick_substeps(1000.0 / self.rate_hz, dt_ms, self.n_samples * 1000.0 / self.rate_hz,
-                             MAX_TICK_SUBSTEPS, [e for e in self._edge_steps(dt_ms) if e < n_steps])
+    def _substeps(self, dt_ms: float, at_most: int | None = None) -> int:
+        """Model steps at dt ``dt_ms`` between the passes that read the input and take the
+        bin edges' counts (``at_most=None``): a divisor of the input sample's steps at which
+        every bin edge falls on a pass; or, ``at_most`` given, per call of the fused update
+        (a divisor of the former)."""
+        n_steps = round(self.duration_s * 1000.0 / dt_ms)
+        return tick_substeps(1000.0 / self.rate_hz, dt_ms, self.duration_s * 1000.0, at_most,
+                             [e for e in self._edge_steps(dt_ms) if e < n_steps])
 
     def _standalone(self, coded: np.ndarray) -> list[tuple[np.ndarray, ...]]:
         """Every band's (counts, latency, span, binned), each (events, band neurons[, bins]),
@@ -224,7 +225,8 @@ class EventSweep:
         arrays = list(self.bank.arrays().values())
         return ("events", neurons.PRESETS["resonator"].quadratic, self.n_samples,
                 float(self.rate_hz), self.bank.batch_events, self.bank.bin_edges_s,
-                tuple((dt, method, self._substeps(dt), tuple(arrays[j].n_neurons for j in bands))
+                tuple((dt, method, self._substeps(dt), self._substeps(dt, MAX_TICK_SUBSTEPS),
+                       tuple(arrays[j].n_neurons for j in bands))
                       for dt, method, bands in layout))
 
     def _build(self, arrays, layout) -> dict:
@@ -237,7 +239,8 @@ class EventSweep:
         net = b2.Network()
         for g, (dt_ms, method, bands) in enumerate(layout):
             columns = _input_columns(arrays, bands, size)
-            substeps = self._substeps(dt_ms)
+            substeps = self._substeps(dt_ms, MAX_TICK_SUBSTEPS)
+            every = self._substeps(dt_ms)   # steps between input passes
             drive = b2.TimedArray(np.zeros((self.n_samples, size * len(bands))), dt=input_dt,
                                   name=f"drive_{g}")
             # per tick, by a pass of its own before the fused update: the tick's input
@@ -259,7 +262,7 @@ class EventSweep:
                 namespace={f"drive_{g}": drive, "dt_sub": dt_ms * b2.ms, **_functions()})
             group.input_index = columns
             group.a, group.c, group.d = preset.a, preset.c, preset.d
-            group.run_regularly(tick, when="start", name=f"tick_{g}")
+            group.run_regularly(tick, dt=every * dt_ms * b2.ms, when="start", name=f"tick_{g}")
             group.run_regularly(GUARD, dt=CHECK_EVERY_MS * b2.ms, name=f"guard_{g}")
             net.add(group)
             objects["groups"].append(group)
