@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from snn_antenna.engine.events import run_bank
 from snn_antenna.engine.standalone import tick_substeps
 from snn_antenna.readout.band_tuning import Tuning, tuned_bands
-from snn_antenna.readout.spiking import LOW_BAND, Band, SpikingBank
+from snn_antenna.readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
 from snn_antenna.sources import bench
 
 RATE, BITS, FULL_SCALE = 2000.0, 16, 10.0
@@ -23,7 +23,9 @@ ROD = Band(n_neurons=4, band_hz=(90.0, 420.0), coder_amplitude=0.2, threshold_g=
            lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=27.49, method="rk2", dt_ms=0.005)
 CHANNELS = tuned_bands([120.0, 330.0], [110.0, 300.0], [130.0, 360.0],
                        Tuning(n_resonators=4, per_channel=2, max_channels=2), RATE)
-BANK = SpikingBank(bands={"low": LOW_BAND, "rod": ROD, **CHANNELS}, duration_s=0.2,
+# the high band at rk4, whose last stage reads the next input sample at a sample's last step
+HIGH = dataclasses.replace(HIGH_BAND, n_neurons=6)
+BANK = SpikingBank(bands={"low": LOW_BAND, "high": HIGH, "rod": ROD, **CHANNELS}, duration_s=0.2,
                    batch_events=8, target="standalone", bin_edges_s=(0.05, 0.0752, 0.15))
 
 
@@ -46,9 +48,10 @@ def agree(a, b) -> np.ndarray:
             & (a.binned_counts == b.binned_counts).all(axis=2))
 
 
-def test_the_low_band_gives_the_runtime_paths_features_spike_for_spike(both):
-    fused, runtime = (f.select(["low"]) for f in both)
-    assert fused.counts.sum() > 100 and (fused.binned_counts[:, :, 1:] > 0).any()
+@pytest.mark.parametrize("band, spikes", [("low", 100), ("high", 50)])
+def test_low_and_high_band_give_the_runtime_paths_features_spike_for_spike(both, band, spikes):
+    fused, runtime = (f.select([band]) for f in both)
+    assert fused.counts.sum() > spikes and (fused.binned_counts[:, :, 1:] > 0).any()
     assert agree(fused, runtime).all()
 
 

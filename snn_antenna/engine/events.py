@@ -251,18 +251,21 @@ class EventSweep:
             # tick starting at it has begun). In the update's loop, the TimedArray's bounds
             # checks (branches) and the edges' tests (a scalar boolean) would keep the
             # compiler from vectorising it.
-            tick = "\n".join([f"I_held = drive_{g}(t, input_index)"] + [
+            tick = "\n".join([*_next_sample(g, method), f"I_held = drive_{g}(t, input_index)"] + [
                 f"before_{e} = where(t_in_timesteps*{substeps} <= {step}, spike_count, "
                 f"before_{e})" for e, step in enumerate(self._edge_steps(dt_ms))])
             variables = "\n".join(
                 ["I_held : 1", "input_index : integer (constant)", "unstable : boolean",
-                 *RECORDED, *(f"before_{e} : 1" for e in range(n_edges))])
+                 *RECORDED, *(f"before_{e} : 1" for e in range(n_edges)),
+                 *(("I_next : 1", "next_sample_t : second (shared)") if method == "rk4" else ())])
             group = b2.NeuronGroup(
-                len(columns), neurons.equations("resonator", "held_input(I_held)", variables),
+                len(columns), neurons.equations("resonator", HELD_INPUT[method == "rk4"],
+                                                variables),
                 method=FusedUpdater(method, substeps, "", fused_reset(*ON_SPIKE)
                                     .replace("SUBSTEPS", str(substeps))),
                 dt=substeps * dt_ms * b2.ms, name=f"band_{g}",
-                namespace={f"drive_{g}": drive, "dt_sub": dt_ms * b2.ms, **_functions()})
+                namespace={f"drive_{g}": drive, "dt_sub": dt_ms * b2.ms,
+                           "input_rate": self.rate_hz * b2.Hz, **_functions()})
             group.input_index = columns
             group.a, group.c, group.d = preset.a, preset.c, preset.d
             group.run_regularly(tick, dt=every * dt_ms * b2.ms, when="start", name=f"tick_{g}")
@@ -323,6 +326,24 @@ ON_SPIKE = ("_step = 1.0*(t_in_timesteps*SUBSTEPS + substep)",
             f"spike_count = where({SPIKED}, spike_count + 1, spike_count)",
             f"last_step = where({SPIKED}, _step, last_step)",
             "first_step = where(spike_count > 0, first_step, _step + 1)")
+
+
+# The fused group's input: the sample held over the tick, as the coder holds it. rk4's last
+# stage looks at t + dt, where the runtime path's TimedArray gives the next sample at a
+# sample's last step: for rk4 the tick pass also reads that one (I_next) and the stages
+# after the sample's end take it. The select is arithmetic (w is 0 or 1: exact either way):
+# a scalar boolean in the loop would keep it from vectorising.
+HELD_INPUT = ("held_input(I_held)",
+              "held_input(I_held*(1 - int(t > next_sample_t - 0.25*dt_sub)) "
+              "+ I_next*int(t > next_sample_t - 0.25*dt_sub))")
+
+
+def _next_sample(g: int, method: str) -> tuple[str, ...]:
+    """The tick pass's statements reading the next input sample (rk4 only: ``HELD_INPUT``)."""
+    if method != "rk4":
+        return ()
+    return ("next_sample_t = (floor(t*input_rate + 1e-6) + 1)/input_rate",
+            f"I_next = drive_{g}(next_sample_t, input_index)")
 
 
 def _input_columns(arrays, bands, events: int) -> np.ndarray:

@@ -125,7 +125,8 @@ class FusedUpdater:
     ``t_in_timesteps*substeps + substep``), so the numbers are those of ``method`` stepped
     at ``dt_sub`` with the input held over each tick, as the coder holds its samples. (rk4's
     last stage looks at ``t + dt``: at a sample's last step the runtime engines read the
-    next sample there, this engine the held one; docs/reference.md gives the difference.)
+    next sample there; the sweep's input holds the current one, docs/reference.md gives the
+    difference; the event engine's equations read the next one, ``events.HELD_INPUT``.)
     """
 
     def __init__(self, method: str, substeps: int = 1, tick: str = f"I_held = {SQUARE_INPUT}",
