@@ -185,8 +185,9 @@ class EventSweep:
             proj = project(self._structure(layout), lambda: self._build(arrays, layout))
         per_event = coded.reshape(len(coded), -1, len(arrays))     # (samples, events, bands)
         m = per_event.shape[1]
-        per_event = np.concatenate([per_event, np.repeat(per_event[:, :1], size - m, axis=1)],
-                                   axis=1)
+        if m < size:  # a short chunk: padded with copies of its first event
+            per_event = np.concatenate(
+                [per_event, np.repeat(per_event[:, :1], size - m, axis=1)], axis=1)
         run_args = {}
         for g, (_, _, bands) in enumerate(layout):
             group = proj["groups"][g]
