@@ -15,18 +15,20 @@ from snn_antenna.readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
 from snn_antenna.sources import bench
 
 RATE, BITS, FULL_SCALE = 2000.0, 16, 10.0
-# the baseline study's rod band (rk2 at 0.005 ms) and two tuned channels (rk2 at their
-# coarsest steps, 0.01 and 0.005 ms, one group each with the rod band's dt shared); an edge
-# off the input's sample boundaries (0.0752 s = sample 150.4), so the passes that take the
-# edges' counts come more often than once a sample
+# the baseline study's rod band (rk2 at 0.005 ms) and a tuned channel at the same step (one
+# group: each neuron reads its own channel's column); an edge off the input's sample
+# boundaries (0.0752 s = sample 150.4), so the passes that take the edges' counts come more
+# often than once a sample
 ROD = Band(n_neurons=4, band_hz=(90.0, 420.0), coder_amplitude=0.2, threshold_g=0.006,
            lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=27.49, method="rk2", dt_ms=0.005)
-CHANNELS = tuned_bands([120.0, 330.0], [110.0, 300.0], [130.0, 360.0],
-                       Tuning(n_resonators=4, per_channel=2, max_channels=2), RATE)
+CHANNELS = tuned_bands([330.0], [300.0], [360.0],
+                       Tuning(n_resonators=2, per_channel=2, max_channels=1), RATE)
 # the high band at rk4, whose last stage reads the next input sample at a sample's last step
 HIGH = dataclasses.replace(HIGH_BAND, n_neurons=6)
-BANK = SpikingBank(bands={"low": LOW_BAND, "high": HIGH, "rod": ROD, **CHANNELS}, duration_s=0.2,
-                   batch_events=8, target="standalone", bin_edges_s=(0.05, 0.0752, 0.15))
+# (one chunk of 0.15 s: the runtime path's cost is per step; test_event_engine.py pads a chunk)
+BANK = SpikingBank(bands={"low": LOW_BAND, "high": HIGH, "rod": ROD, **CHANNELS},
+                   duration_s=0.15, batch_events=12, target="standalone",
+                   bin_edges_s=(0.05, 0.0752, 0.1))
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +50,7 @@ def agree(a, b) -> np.ndarray:
             & (a.binned_counts == b.binned_counts).all(axis=2))
 
 
-@pytest.mark.parametrize("band, spikes", [("low", 100), ("high", 50)])
+@pytest.mark.parametrize("band, spikes", [("low", 60), ("high", 50)])
 def test_low_and_high_band_give_the_runtime_paths_features_spike_for_spike(both, band, spikes):
     fused, runtime = (f.select([band]) for f in both)
     assert fused.counts.sum() > spikes and (fused.binned_counts[:, :, 1:] > 0).any()
@@ -57,13 +59,13 @@ def test_low_and_high_band_give_the_runtime_paths_features_spike_for_spike(both,
 
 def test_rod_and_tuned_channels_give_the_runtime_paths_features(both):
     """First spikes and the early bins equal everywhere, every feature equal for most
-    neurons. A channel at the coder's low threshold (3-6 mg) fires for whatever side of its
+    neurons (docs/materials.md, "The fused event engine", gives the counts). A channel at the coder's low threshold (3-6 mg) fires for whatever side of its
     threshold the state lands on, so the compilers' different rounding of the same rk2
     expression parts a few neurons' trains after some tens of spikes: the unfused compiled
     engine (before the fused one) differed from the runtime path as much on these events
     (6 counts and 25 spans of 96 neurons; the fused engine 7 and 24)."""
     fused, runtime = (f.select(["rod", *CHANNELS]) for f in both)
-    assert fused.counts.shape == (12, 8) and fused.counts.sum() > 800
+    assert fused.counts.shape == (12, 6) and fused.counts.sum() > 500
     assert (fused.binned_counts.sum(axis=2) == fused.counts).all()
     assert np.array_equal(fused.latency_s, runtime.latency_s)
     assert np.array_equal(fused.binned_counts[:, :, :2], runtime.binned_counts[:, :, :2])
