@@ -18,7 +18,8 @@ RATE, BITS, FULL_SCALE = 2000.0, 16, 10.0
 # the baseline study's rod band (rk2 at 0.005 ms) and a tuned channel at the same step (one
 # group: each neuron reads its own channel's column); an edge off the input's sample
 # boundaries (0.0752 s = sample 150.4), so the passes that take the edges' counts come more
-# often than once a sample
+# often than once a sample, and edges every 2.5 ms after it, so that some spikes fall in the
+# step just before an edge (which bin takes them is the edges' rule)
 ROD = Band(n_neurons=4, band_hz=(90.0, 420.0), coder_amplitude=0.2, threshold_g=0.006,
            lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=27.49, method="rk2", dt_ms=0.005)
 CHANNELS = tuned_bands([330.0], [300.0], [360.0],
@@ -28,7 +29,7 @@ HIGH = dataclasses.replace(HIGH_BAND, n_neurons=6)
 # (one chunk of 0.15 s: the runtime path's cost is per step; test_event_engine.py pads a chunk)
 BANK = SpikingBank(bands={"low": LOW_BAND, "high": HIGH, "rod": ROD, **CHANNELS},
                    duration_s=0.15, batch_events=12, target="standalone",
-                   bin_edges_s=(0.05, 0.0752, 0.1))
+                   bin_edges_s=(0.0752, *np.arange(0.08, 0.15, 0.0025)))
 
 
 @pytest.fixture(scope="module")
