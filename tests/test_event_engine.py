@@ -54,8 +54,6 @@ def test_an_interrupted_run_resumes_without_redoing_finished_chunks(events, stan
     sweep = EventSweep(BANK, np.ascontiguousarray(events[:, :400]), RATE, BITS, FULL_SCALE)
 
     class StopsAfterFirstChunk:
-        __module__ = EventSweep.__module__  # the event engine's code computes the chunks
-
         def __call__(self, points):
             if points["event"].min() >= BANK.batch_events:
                 raise RuntimeError("interrupted")
