@@ -24,8 +24,10 @@ chunk). Measured in one run and printed side by side, each with the machine's lo
   from calibration contacts of another seed, each channel at the coarsest step within the
   rod band's validated k·dt) at each ``--sizes`` number of resonators, on the same events
   in one run: every contact of a batch in one Brian2 run (``batch_events`` copies of the
-  bank in one NeuronGroup per channel), and, for the smallest size, one run per contact,
-  so the per-run overhead is measured rather than assumed.
+  bank, the channels sharing a step in one NeuronGroup), and, for the smallest size, one
+  run per contact, so the per-run overhead is measured rather than assumed. Each is the
+  best of three runs taken in turn (``run_cost``), with its ns per neuron-step of Brian2
+  time (the compiled run with its inputs' and results' files).
 
 Every timed run follows a warm-up (code generation, compiling; cached on disk).
 """

@@ -90,12 +90,12 @@ def test_a_blown_up_neuron_is_named_after_the_compiled_run():
     array = BANK.arrays()["high"]
     n = 3 * array.n_neurons
     fine = SimpleNamespace(v=np.full(n, -60.0), u=np.full(n, -15.0), unstable=np.zeros(n, bool))
-    sweep._check_stable(fine, array, n)
+    sweep._check_stable(fine, [BANK.arrays()["low"], array], [1], n)
     for field, value in (("v", np.nan), ("u", 1e7), ("unstable", True)):
         group = SimpleNamespace(**vars(fine))
         setattr(group, field, getattr(fine, field).copy())
         getattr(group, field)[30] = value
         with pytest.raises(NumericalInstabilityError, match="neuron 30") as info:
-            sweep._check_stable(group, array, n)
+            sweep._check_stable(group, [BANK.arrays()["low"], array], [1], n)
         assert info.value.params["k"] == pytest.approx(array.k[30 - 24])
         assert info.value.dt_ms == 0.05

@@ -7,10 +7,14 @@ The grid is event × neuron (every neuron of every band of a ``SpikingBank``); a
 (``SpikingBank.code``) and runs each band as its own NeuronGroup at the band's dt and method,
 each neuron reading its event's column of the band's 2-D input:
 
-- ``"standalone"`` (``bank.target``): Brian2 cpp_standalone, one project per process holding
-  one group per band, compiled once and re-run per chunk with the chunk's coded inputs, the
-  bands' tuning and the neurons' resting state through ``run_args`` (``engine.standalone``);
-  a short last chunk is padded with copies of its first event instead of recompiling;
+- ``"standalone"`` (``bank.target``): Brian2 cpp_standalone, one project per process,
+  compiled once and re-run per chunk with the chunk's coded inputs, the bands' tuning and the
+  neurons' resting state through ``run_args`` (``engine.standalone``); a short last chunk is
+  padded with copies of its first event instead of recompiling. Bands that share a dt and a
+  method are one group (each neuron reads its own band's column), stepped by the sweep
+  engine's ``FusedUpdater``: the input read once per clock tick, a few model steps per tick,
+  threshold and reset branch-free, and the features accumulated as model variables in the
+  same pass (no SpikeMonitor);
 - ``"cython"`` / ``"numpy"``: the same groups through ``neurons.simulate`` (runtime).
 
 Per point (event, neuron): spike count, first-spike latency, firing span, spikes per time bin
@@ -41,10 +45,17 @@ from ..networks.neurons import binned_spike_counts, spike_summary
 from ..readout.spiking import SpikeFeatures, SpikingBank, recording_attrs
 from ..store import Output
 from .grid import Grid
-from .standalone import project, run_project
+from .standalone import (SPIKED, FusedUpdater, _functions, fused_reset, project, run_project,
+                         tick_substeps, vectorising_flags)
 from .sweep import run_sweep
 
 CHECK_EVERY_MS = 10.0
+# Model steps per call of the fused update at most. Unrolled substeps of one neuron are one
+# long dependency chain, which the core cannot overlap with the next neurons' (a run of the
+# tuned 24-resonator bank over 400 events took 1.3 s of CPU at 1 substep per call, 1.0 s at
+# 2, 1.3 s at 5 and 1.9 s at 10 with the input read inside the update; 2026-11-26, 2 cores,
+# shared); the input and the bin edges' counts are read once per input sample regardless.
+MAX_TICK_SUBSTEPS = 2
 GUARD = (f"unstable = unstable or not (abs(v) < {neurons.RUNAWAY_LIMIT!r} and "
          f"abs(u) < {neurons.RUNAWAY_LIMIT!r})")
 
@@ -105,16 +116,14 @@ class EventSweep:
                                self.full_scale_g)
         n_bands = len(self.bank.bands)
         t0 = time.perf_counter()
-        columns = [np.ascontiguousarray(coded[:, j::n_bands]) for j in range(n_bands)]
         if self.bank.target == "standalone":
-            spikes = self._standalone(columns)
+            parts = self._standalone(coded)
         else:
-            spikes = [self._runtime(array, cols) for array, cols in
-                      zip(self.bank.arrays().values(), columns)]
+            parts = [band_features(*self._runtime(array, np.ascontiguousarray(coded[:, j::n_bands])),
+                                   len(events), array.n_neurons, self.duration_s,
+                                   self.bank.bin_edges_s)
+                     for j, array in enumerate(self.bank.arrays().values())]
         brian2_s = time.perf_counter() - t0
-        parts = [band_features(i, t_ms, len(events), array.n_neurons,
-                               self.n_samples / self.rate_hz, self.bank.bin_edges_s)
-                 for (i, t_ms), array in zip(spikes, self.bank.arrays().values())]
         counts, latency, span, binned = (np.concatenate([p[k] for p in parts], axis=1)
                                          for k in range(4))
         out = {"count": counts.ravel(), "latency_s": latency.ravel(), "span_s": span.ravel(),
@@ -122,6 +131,10 @@ class EventSweep:
         for b in range(binned.shape[2]):
             out[f"bin_{b}"] = binned[:, :, b].ravel()
         return out
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_samples / self.rate_hz
 
     def _runtime(self, array, columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m = columns.shape[1]
@@ -132,80 +145,153 @@ class EventSweep:
             target=self.bank.target, b=np.full(m * array.n_neurons, array.b))
         return res.spike_i, res.spike_t_ms
 
-    def _standalone(self, columns: list[np.ndarray]) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Every band's spikes (neuron, ms) for the chunk's coded ``columns``: one run of the
-        compiled project, padded to ``batch_events`` events."""
+    # -- the compiled path ---------------------------------------------------------------
+    def _layout(self) -> list[tuple[float, str, tuple[int, ...]]]:
+        """The compiled project's groups: (dt_ms, method, the bands it holds), one per step
+        and method. A group's neurons are ordered event, band, the band's neuron."""
+        groups: dict = {}
+        for j, array in enumerate(self.bank.arrays().values()):
+            groups.setdefault((float(array.dt_ms), array.method), []).append(j)
+        return [(dt, method, tuple(bands)) for (dt, method), bands in groups.items()]
+
+    def _edge_steps(self, dt_ms: float) -> list[int]:
+        """Per edge of ``bin_edges_s``: the first model step at dt ``dt_ms`` whose spike
+        falls in the bin after it (``band_features``' rule on the runtime path's times)."""
+        out = []
+        for edge in self.bank.bin_edges_s:
+            n = max(0, int(edge / (dt_ms * 1e-3)) - 2)
+            while spike_time_s(n, dt_ms) < edge:
+                n += 1
+            out.append(n)
+        return out
+
+    def _substeps(self, dt_ms: float, at_most: int | None = None) -> int:
+        """Model steps at dt ``dt_ms`` between the passes that read the input and take the
+        bin edges' counts (``at_most=None``): a divisor of the input sample's steps at which
+        every bin edge falls on a pass; or, ``at_most`` given, per call of the fused update
+        (a divisor of the former)."""
+        n_steps = round(self.duration_s * 1000.0 / dt_ms)
+        return tick_substeps(1000.0 / self.rate_hz, dt_ms, self.duration_s * 1000.0, at_most,
+                             [e for e in self._edge_steps(dt_ms) if e < n_steps])
+
+    def _standalone(self, coded: np.ndarray) -> list[tuple[np.ndarray, ...]]:
+        """Every band's (counts, latency, span, binned), each (events, band neurons[, bins]),
+        for the chunk's ``coded`` inputs (``SpikingBank.code``): one run of the compiled
+        project, padded to ``batch_events`` events."""
         size = self.bank.batch_events
-        m = columns[0].shape[1]
         arrays = list(self.bank.arrays().values())
-        proj = project(self._structure(arrays), lambda: self._build(arrays))
+        layout = self._layout()
+        with vectorising_flags("float64"):
+            proj = project(self._structure(layout), lambda: self._build(arrays, layout))
+        per_event = coded.reshape(len(coded), -1, len(arrays))     # (samples, events, bands)
+        m = per_event.shape[1]
+        if m < size:  # a short chunk: padded with copies of its first event
+            per_event = np.concatenate(
+                [per_event, np.repeat(per_event[:, :1], size - m, axis=1)], axis=1)
         run_args = {}
-        for j, (array, cols) in enumerate(zip(arrays, columns)):
-            cols = np.hstack([cols, np.repeat(cols[:, :1], size - m, axis=1)])
-            group = proj["groups"][j]
-            k = np.tile(array.k, size)
-            b = np.full(k.size, array.b)
+        for g, (_, _, bands) in enumerate(layout):
+            group = proj["groups"][g]
+            cols = np.ascontiguousarray(per_event[:, :, list(bands)].reshape(len(coded), -1))
+            k = np.tile(np.concatenate([arrays[j].k for j in bands]), size)
+            b = np.tile(np.concatenate([np.full(arrays[j].n_neurons, arrays[j].b)
+                                        for j in bands]), size)
             # at rest for each event's first input sample, as neurons.simulate starts
-            levels, which = np.unique(cols[0], return_inverse=True)
-            rest = np.array([neurons.resting_state("resonator", array.b, float(I0))
-                             for I0 in levels])[np.repeat(which.ravel(), array.n_neurons)]
-            run_args.update({proj["drives"][j]: cols, group.k: k, group.b: b,
+            start = np.stack([b, cols[0][_input_columns(arrays, bands, size)]], axis=1)
+            levels, which = np.unique(start, axis=0, return_inverse=True)
+            rest = np.array([neurons.resting_state("resonator", bb, I0)
+                             for bb, I0 in levels])[which.ravel()]
+            run_args.update({proj["drives"][g]: cols, group.k: k, group.b: b,
                              group.v: np.ascontiguousarray(rest[:, 0]),
                              group.u: np.ascontiguousarray(rest[:, 1])})
         run_project(proj, run_args)
-        out = []
-        for j, array in enumerate(arrays):
-            self._check_stable(proj["groups"][j], array, m * array.n_neurons)
-            monitor = proj["monitors"][j]
-            i, t = np.asarray(monitor.i[:], dtype=int), np.asarray(monitor.t_[:])
-            keep = i < m * array.n_neurons
-            # the runtime path's spike times: monitor.t / ms, the same division
-            out.append((i[keep], t[keep] / 0.001))
-        return out
+        parts = {}
+        for g, (dt_ms, _, bands) in enumerate(layout):
+            group = proj["groups"][g]
+            widths = [arrays[j].n_neurons for j in bands]
+            n = m * sum(widths)
 
-    def _structure(self, arrays) -> tuple:
+            def read(name):
+                return np.asarray(getattr(group, name)[:])[:n].reshape(m, sum(widths))
+
+            self._check_stable(group, arrays, bands, n)
+            features = fused_features(
+                read("spike_count"), read("first_step"), read("last_step"),
+                [read(f"before_{e}") for e in range(len(self.bank.bin_edges_s))],
+                self._edge_steps(dt_ms), round(self.duration_s * 1000.0 / dt_ms), dt_ms,
+                self.duration_s)
+            ends = np.cumsum(widths)[:-1]
+            for j, split in zip(bands, zip(*(np.split(f, ends, axis=1) for f in features))):
+                parts[j] = split
+        return [parts[j] for j in range(len(arrays))]
+
+    def _structure(self, layout) -> tuple:
         """What the compiled project depends on; everything else is a run argument."""
+        arrays = list(self.bank.arrays().values())
         return ("events", neurons.PRESETS["resonator"].quadratic, self.n_samples,
-                float(self.rate_hz), self.bank.batch_events,
-                tuple((a.n_neurons, float(a.dt_ms), a.method) for a in arrays))
+                float(self.rate_hz), self.bank.batch_events, self.bank.bin_edges_s,
+                tuple((dt, method, self._substeps(dt), self._substeps(dt, MAX_TICK_SUBSTEPS),
+                       tuple(arrays[j].n_neurons for j in bands))
+                      for dt, method, bands in layout))
 
-    def _build(self, arrays) -> dict:
+    def _build(self, arrays, layout) -> dict:
         import brian2 as b2
 
         size, input_dt = self.bank.batch_events, (1000.0 / self.rate_hz) * b2.ms
         preset = neurons.PRESETS["resonator"]
-        objects = {"groups": [], "drives": [], "monitors": []}
+        n_edges = len(self.bank.bin_edges_s)
+        objects = {"groups": [], "drives": []}
         net = b2.Network()
-        for j, array in enumerate(arrays):
-            n = size * array.n_neurons
-            drive = b2.TimedArray(np.zeros((self.n_samples, size)), dt=input_dt,
-                                  name=f"drive_{j}")
+        for g, (dt_ms, method, bands) in enumerate(layout):
+            columns = _input_columns(arrays, bands, size)
+            substeps = self._substeps(dt_ms, MAX_TICK_SUBSTEPS)
+            every = self._substeps(dt_ms)   # steps between input passes
+            drive = b2.TimedArray(np.zeros((self.n_samples, size * len(bands))), dt=input_dt,
+                                  name=f"drive_{g}")
+            # per tick, by a pass of its own before the fused update: the tick's input
+            # sample, and each bin edge's count so far (the spikes before the edge, once the
+            # tick starting at it has begun). In the update's loop, the TimedArray's bounds
+            # checks (branches) and the edges' tests (a scalar boolean) would keep the
+            # compiler from vectorising it.
+            tick = "\n".join([*_next_sample(g, method), f"I_held = drive_{g}(t, input_index)"] + [
+                f"before_{e} = where(t_in_timesteps*{substeps} <= {step}, spike_count, "
+                f"before_{e})" for e, step in enumerate(self._edge_steps(dt_ms))])
+            variables = "\n".join(
+                ["I_held : 1", "input_index : integer (constant)", "unstable : boolean",
+                 *RECORDED, *(f"before_{e} : 1" for e in range(n_edges)),
+                 *(("I_next : 1", "next_sample_t : second (shared)") if method == "rk4" else ())])
             group = b2.NeuronGroup(
-                n, neurons.equations("resonator", f"drive_{j}(t, input_index)",
-                                     "input_index : integer (constant)\nunstable : boolean"),
-                threshold=neurons.THRESHOLD, reset=neurons.reset(),
-                method=neurons.brian_method(array.method), dt=array.dt_ms * b2.ms,
-                name=f"band_{j}", namespace={f"drive_{j}": drive})
-            group.input_index = np.arange(n) // array.n_neurons
+                len(columns), neurons.equations("resonator", HELD_INPUT[method == "rk4"],
+                                                variables),
+                method=FusedUpdater(method, substeps, "", fused_reset(*ON_SPIKE)
+                                    .replace("SUBSTEPS", str(substeps))),
+                dt=substeps * dt_ms * b2.ms, name=f"band_{g}",
+                namespace={f"drive_{g}": drive, "dt_sub": dt_ms * b2.ms,
+                           "input_rate": self.rate_hz * b2.Hz, **_functions()})
+            group.input_index = columns
             group.a, group.c, group.d = preset.a, preset.c, preset.d
-            group.run_regularly(GUARD, dt=CHECK_EVERY_MS * b2.ms, name=f"guard_{j}")
-            monitor = b2.SpikeMonitor(group, name=f"spikes_{j}")
-            net.add(group, monitor)
-            for key, obj in (("groups", group), ("drives", drive), ("monitors", monitor)):
-                objects[key].append(obj)
+            group.run_regularly(tick, dt=every * dt_ms * b2.ms, when="start", name=f"tick_{g}")
+            group.run_regularly(GUARD, dt=CHECK_EVERY_MS * b2.ms, name=f"guard_{g}")
+            net.add(group)
+            objects["groups"].append(group)
+            objects["drives"].append(drive)
         net.run(self.n_samples * input_dt, namespace={})
         return objects
 
-    def _check_stable(self, group, array, n: int) -> None:
+    def _check_stable(self, group, arrays, bands, n: int) -> None:
+        """``NumericalInstabilityError`` for the first of the group's ``n`` neurons (holding
+        ``bands`` of ``arrays``) whose |v| or |u| left the finite range during the run."""
         v, u = np.asarray(group.v[:])[:n], np.asarray(group.u[:])[:n]
         bad = np.asarray(group.unstable[:])[:n] | ~np.isfinite(v) | ~np.isfinite(u) \
             | (np.abs(v) >= neurons.RUNAWAY_LIMIT) | (np.abs(u) >= neurons.RUNAWAY_LIMIT)
         if bad.any():
             i = int(np.argmax(bad))
-            k = float(array.k[i % array.n_neurons])
+            per_event = [(j, r) for j in bands for r in range(arrays[j].n_neurons)]
+            j, r = per_event[i % len(per_event)]
+            array = arrays[j]
+            k = float(array.k[r])
             raise NumericalInstabilityError(
                 neuron=i, params={"k": k, "b": float(array.b)}, dt_ms=array.dt_ms,
-                method=array.method, t_ms=1000.0 * self.n_samples / self.rate_hz,
+                method=array.method, t_ms=1000.0 * self.duration_s,
                 safe_dt_ms=neurons.max_stable_dt_ms(k, array.method))
 
     def features(self, data) -> SpikeFeatures:
@@ -221,6 +307,66 @@ class EventSweep:
             min(self.n_samples / self.rate_hz, self.bank.duration_s),
             float(data["brian2_s"].values.sum()), steps,
             np.stack([data[f"bin_{b}"].values for b in range(n_bins)], axis=2))
+
+
+def spike_time_s(step, dt_ms: float):
+    """The time (s) of a spike in model step ``step`` at dt ``dt_ms``, in the runtime path's
+    arithmetic (Brian2's clock: step · dt in s; ``SpikeMonitor.t / ms``; / 1000), so that a
+    spike in the same step has the same time on both paths."""
+    return ((np.asarray(step) * (dt_ms * 0.001)) / 0.001) / 1000.0
+
+
+# What the fused group records per neuron, updated in every model step (``fused_reset``'s
+# statements, ``SPIKED`` its threshold test; SUBSTEPS: the group's substeps per tick): the
+# step index, the spike count, the step of the last spike, and the step of the first spike
+# (``first_step`` follows step + 1 until the first spike, then holds). Floats: an integer
+# would be converted to and from floating point in the vectorised loop; whole numbers are
+# exact in them up to 2**53.
+RECORDED = ("spike_count : 1", "first_step : 1", "last_step : 1")
+ON_SPIKE = ("_step = 1.0*(t_in_timesteps*SUBSTEPS + substep)",
+            f"spike_count = where({SPIKED}, spike_count + 1, spike_count)",
+            f"last_step = where({SPIKED}, _step, last_step)",
+            "first_step = where(spike_count > 0, first_step, _step + 1)")
+
+
+# The fused group's input: the sample held over the tick, as the coder holds it. rk4's last
+# stage looks at t + dt, where the runtime path's TimedArray gives the next sample at a
+# sample's last step: for rk4 the tick pass also reads that one (I_next) and the stages
+# after the sample's end take it. The select is arithmetic (w is 0 or 1: exact either way):
+# a scalar boolean in the loop would keep it from vectorising.
+HELD_INPUT = ("held_input(I_held)",
+              "held_input(I_held*(1 - int(t > next_sample_t - 0.25*dt_sub)) "
+              "+ I_next*int(t > next_sample_t - 0.25*dt_sub))")
+
+
+def _next_sample(g: int, method: str) -> tuple[str, ...]:
+    """The tick pass's statements reading the next input sample (rk4 only: ``HELD_INPUT``)."""
+    if method != "rk4":
+        return ()
+    return ("next_sample_t = (floor(t*input_rate + 1e-6) + 1)/input_rate",
+            f"I_next = drive_{g}(next_sample_t, input_index)")
+
+
+def _input_columns(arrays, bands, events: int) -> np.ndarray:
+    """Each neuron's input column in a group holding ``bands`` of ``arrays`` for ``events``
+    events: neuron (event e, band j, its neuron r) reads column e · len(bands) + j."""
+    within = np.repeat(np.arange(len(bands)), [arrays[j].n_neurons for j in bands])
+    return (np.arange(events)[:, None] * len(bands) + within[None, :]).ravel()
+
+
+def fused_features(count, first_step, last_step, before, edge_steps, n_steps: int,
+                   dt_ms: float, duration_s: float) -> tuple[np.ndarray, ...]:
+    """(counts, latency, span, binned) as ``band_features`` gives them, from a fused group's
+    records (``RECORDED``; ``before``: the count before each of ``edge_steps``, taken only
+    for an edge within the run's ``n_steps``)."""
+    count = np.rint(count).astype(np.int64)
+    fired = count > 0
+    first = np.where(fired, spike_time_s(first_step, dt_ms), duration_s)
+    last = np.where(fired, spike_time_s(last_step, dt_ms), duration_s)
+    cumulative = [np.rint(b).astype(np.int64) if step < n_steps else count
+                  for b, step in zip(before, edge_steps)]
+    binned = np.diff(np.stack([np.zeros_like(count), *cumulative, count], axis=-1), axis=-1)
+    return count, first, last - first, binned
 
 
 def band_features(spike_i, spike_t_ms, n_events: int, n_neurons: int, duration_s: float,

@@ -10,6 +10,7 @@ does not depend on the chunk's values), ``EventSweep``'s in ``engine.events``.
 from __future__ import annotations
 
 import hashlib
+import math
 import os
 import warnings
 from contextlib import contextmanager
@@ -60,22 +61,34 @@ SQUARE_INPUT = ("I_amp * (1 - 2*(floor((2*f_in)*(floor(t*input_rate + 1e-6)/inpu
 SQUARE_INPUT_VARIABLES = ("I_held : 1\nf_in : 1 (constant)\nI_amp : 1 (constant)\n"
                           "spike_count : 1")
 
-# Threshold, reset and count inside the state update, branch-free: the step, the threshold
-# test and the reset are one pass over the group's arrays, and selects (``where``: not a
-# branch, not a list of spiking neurons) so the loop over neurons vectorises. Brian2's own
-# threshold and reset are two more passes per step, the first a compaction that cannot
-# vectorise. The result is the same: threshold after the step, reset in the same step (to
-# exactly c), counted from settle.
-FUSED_RESET = (f"u = where(v >= {neurons.V_PEAK}, u + d, u)\n"
-               f"spike_count = where(v >= {neurons.V_PEAK}, spike_count + int(t >= settle), "
-               "spike_count)\n"
-               f"v = where(v >= {neurons.V_PEAK}, c, v)")
+# Threshold and reset inside the state update, branch-free: the step, the threshold test and
+# the reset are one pass over the group's arrays, and selects (``where``: not a branch, not a
+# list of spiking neurons) so the loop over neurons vectorises. Brian2's own threshold and
+# reset are two more passes per step, the first a compaction that cannot vectorise. The
+# result is the same: threshold after the step, reset in the same step (to exactly c).
+SPIKED = f"v >= {neurons.V_PEAK}"   # the threshold test, written out in each select: as a
+# boolean temporary, Brian2 would turn every select that reads it into a branch
+
+
+def fused_reset(*on_spike: str) -> str:
+    """The model's threshold and reset as state-update statements: ``on_spike`` (branch-free
+    statements that test ``SPIKED``: what a run counts or times), then the reset
+    (``neurons.reset``'s, as selects)."""
+    return "\n".join((*on_spike, f"u = where({SPIKED}, u + d, u)", f"v = where({SPIKED}, c, v)"))
+
+
+# The sweep's: spikes counted from settle.
+FUSED_RESET = fused_reset(
+    f"spike_count = where({SPIKED}, spike_count + int(t >= settle), spike_count)")
 
 
 def _functions() -> dict:
     """Brian2 functions of the compiled model: ``where(condition, a, b)``, a select as
-    numpy's ``where``, and ``square(x)``, x*x in x's own type (Brian2 writes ``v**2`` as
-    ``pow(v, 2)``, which C++ computes in double: in a float32 loop, two conversions)."""
+    numpy's ``where``; ``square(x)``, x*x in x's own type (Brian2 writes ``v**2`` as
+    ``pow(v, 2)``, which C++ computes in double: in a float32 loop, two conversions); and
+    ``held_input(x)``, x itself: a held input written as a function call, so Brian2 orders
+    the equations' sums as with a TimedArray's call (the runtime path's input), and the
+    compiled arithmetic rounds as the runtime path's does."""
     from brian2 import Function
 
     where = Function(np.where, arg_units=[None, None, None], arg_names=["condition", "a", "b"],
@@ -90,30 +103,42 @@ def _functions() -> dict:
     square.implementations.add_implementation(
         "cpp", "template <typename T> inline T _square(const T x) { return x*x; }",
         name="_square")
-    return {"where": where, "square": square}
+    held = Function(lambda x: x, arg_units=[None], arg_names=["x"],
+                    return_unit=lambda u: u, arg_types=["any"], return_type="highest")
+    held.implementations.add_implementation(
+        "cpp", "template <typename T> inline T _held_input(const T x) { return x; }",
+        name="_held_input")
+    return {"where": where, "square": square, "held_input": held}
 
 
 class FusedUpdater:
-    """A Brian2 state updater: the input sample of this clock tick (``SQUARE_INPUT`` into
-    ``I_held``), then ``substeps`` steps of ``method`` (one of ``neurons.METHODS``) at
-    ``dt_sub`` (a namespace constant), each followed by ``FUSED_RESET``.
+    """A Brian2 state updater: ``tick`` (statements run once per clock tick, at its start:
+    the input sample into ``I_held``), then ``substeps`` steps of ``method`` (one of
+    ``neurons.METHODS``) at ``dt_sub`` (a namespace constant), each followed by ``step``
+    (``fused_reset(...)``: threshold, what the run records, reset).
 
     The group's clock ticks once per ``substeps`` model steps, and each tick advances every
     neuron through them all while its state sits in registers: the per-step cost of Brian2's
     scheduler (a clock query, the code object's call) and the reads and writes of the
     group's arrays are paid once per tick. Substep j is the same code at time
-    ``t + j*dt_sub``, so the numbers are those of ``method`` stepped at ``dt_sub`` with the
-    input held over each sample, as the coder holds it. (rk4's last stage looks at
-    ``t + dt``: at a sample's last step the runtime engines read the next sample there,
-    this engine the held one; docs/reference.md gives the difference.)
+    ``t + j*dt_sub``, with ``substep`` standing for j (the model step of substep j is
+    ``t_in_timesteps*substeps + substep``), so the numbers are those of ``method`` stepped
+    at ``dt_sub`` with the input held over each tick, as the coder holds its samples. (rk4's
+    last stage looks at ``t + dt``: at a sample's last step the runtime engines read the
+    next sample there; the sweep's input holds the current one, docs/reference.md gives the
+    difference; the event engine's equations read the next one, ``events.HELD_INPUT``.)
     """
 
-    def __init__(self, method: str, substeps: int = 1):
+    def __init__(self, method: str, substeps: int = 1, tick: str = f"I_held = {SQUARE_INPUT}",
+                 step: str = FUSED_RESET):
         self.method = method
         self.substeps = substeps
+        self.tick = tick
+        self.step = step
 
     def __repr__(self):  # names the compiled code in a project's structure key
-        return f"FusedUpdater({self.method!r}, {self.substeps})"
+        code = hashlib.sha1(f"{self.tick}\n{self.step}".encode()).hexdigest()[:8]
+        return f"FusedUpdater({self.method!r}, {self.substeps}, code {code})"
 
     def __call__(self, equations, variables=None, method_options=None) -> str:
         import re
@@ -122,10 +147,11 @@ class FusedUpdater:
 
         one = StateUpdateMethod.apply_stateupdater(
             equations, variables, neurons.brian_method(self.method))
-        one = re.sub(r"\bdt\b", "dt_sub", f"{one}\n{FUSED_RESET}")
-        steps = [f"I_held = {SQUARE_INPUT}"]
+        one = re.sub(r"\bdt\b", "dt_sub", f"{one}\n{self.step}")
+        steps = [self.tick] if self.tick else []
         for j in range(self.substeps):  # temporaries renamed per substep: each assigned once
             step = re.sub(r"\bt\b", f"(t + {j}*dt_sub)" if j else "t", one)
+            step = re.sub(r"\bsubstep\b", str(j), step)
             steps.append(re.sub(r"\b(_\w+)", rf"\1_s{j}", step))
         return "\n".join(steps)
 
@@ -133,15 +159,26 @@ class FusedUpdater:
         return True
 
 
+def tick_substeps(sample_ms: float, dt_ms: float, run_ms: float, at_most: int | None = None,
+                  boundaries=()) -> int:
+    """Model steps per clock tick of a fused group (``FusedUpdater``): the largest number,
+    at most ``at_most``, that divides one input sample's steps, the run's steps and every
+    step index in ``boundaries`` (where a tick must start), so the input holds over each
+    tick; 1 when a sample does not last a whole number of steps."""
+    per_sample, steps = sample_ms / dt_ms, run_ms / dt_ms
+    whole = [round(x) for x in (per_sample, steps)]
+    if any(w < 1 or abs(x - w) > 1e-6 * max(1.0, x) for x, w in zip((per_sample, steps), whole)):
+        return 1
+    common = math.gcd(*whole, *(int(b) for b in boundaries))
+    cap = common if at_most is None else min(common, at_most)
+    return max(s for s in range(1, cap + 1) if common % s == 0)
+
+
 def substeps(sweep) -> int:
-    """Model steps per clock tick of the compiled group: one input sample's, when a sample
-    lasts a whole number of steps and the run a whole number of samples (the common case:
-    1 kHz input at dt 0.1 ms gives 10); else 1."""
-    per_sample = 1000.0 / sweep.input_rate_hz / sweep.dt_ms
-    steps = sweep.duration_s * 1000.0 / sweep.dt_ms
-    s = round(per_sample)
-    whole = abs(per_sample - s) < 1e-9 * per_sample and abs(steps / s - round(steps / s)) < 1e-6
-    return s if s >= 1 and whole else 1
+    """Model steps per clock tick of the sweep's compiled group: one input sample's, when a
+    sample lasts a whole number of steps and the run a whole number of samples (the common
+    case: 1 kHz input at dt 0.1 ms gives 10)."""
+    return tick_substeps(1000.0 / sweep.input_rate_hz, sweep.dt_ms, sweep.duration_s * 1000.0)
 
 
 def project(structure: tuple, build) -> dict:
