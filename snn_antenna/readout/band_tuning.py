@@ -35,8 +35,9 @@ class Tuning:
     """How a tuned bank is made (``[spiking.tuned]`` of the baseline study).
 
     ``n_resonators`` in total, at least ``per_channel`` of them reading each channel, in at
-    most ``max_channels`` channels (each channel is its own NeuronGroup: the compiled
-    project's size grows with them; 24 and 48 channels scored alike on 20 repetitions);
+    most ``max_channels`` channels (the compiled event engine runs the channels that share a
+    step and method as one NeuronGroup, each channel its own coded input; 24 and 48 channels
+    scored alike on 20 repetitions);
     channels inside ``range_hz``; a bin is the
     material's when its Fisher ratio is in the top ``1 - quantile`` of the range; each
     channel's coder codes above ``threshold_g``. ``template``: the ``Band`` fields every
