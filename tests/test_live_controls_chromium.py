@@ -16,6 +16,8 @@ import subprocess
 import sys
 import threading
 import time
+from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -41,63 +43,53 @@ def model(name: str, attr: str) -> str:
     return f"Bokeh.documents[0].get_model_by_name('{name}').{attr}"
 
 
-@pytest.mark.slow
-@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
-def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
+@dataclass
+class LivePage:
+    """A stream with its page open in Chromium (``streamed_page``)."""
+    page: object                # playwright Page
+    url: str
+    rec: Path                   # the recording's folder
+    second_half: threading.Event
+    board: threading.Thread
+    shot: Path                  # where the screenshot goes
+    lines: list                 # the stream's stderr lines
+    out: str = ""               # the stream's stdout (its JSON report), once it ended
+    returncode: int | None = None
+
+
+@contextmanager
+def streamed_page(tmp_path, counts, stream_args, *, screenshot_env: str, viewport: dict,
+                  ready_model: str, no_data_timeout_s: int = 60):
+    """``stream --view`` on a pty fed by the emulator in two halves (the second once the test
+    sets ``second_half``; the board starts when the test starts ``board``), with the page open
+    in headless Chromium once its Bokeh model ``ready_model`` exists. On leaving: the browser
+    closed, the board played out, the stream ended by Ctrl-C, its report in ``out``."""
     playwright = pytest.importorskip("playwright.sync_api")
-    scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
-                                                 Contact(SECOND_CONTACT_S, 25.0)])
-    counts = scene.generate(seed=3).samples
     link = PtyLink(tmp_path / "tty")
     # The board sends the scene in two halves: the second once the page has asked for the
     # change and paused, so that the test does not race the stream.
-    half = int(SPLIT_S * 1000)
     second_half = threading.Event()
-    board = threading.Thread(target=_serve, args=(counts, half, link, second_half), daemon=True)
+    board = threading.Thread(target=_serve, args=(counts, int(SPLIT_S * 1000), link,
+                                                  second_half), daemon=True)
     rec = tmp_path / "rec"
-    proc = subprocess.Popen([*CLI, "stream", "--port", link.path, "--network", NETWORK,
-                             "--set", "preprocess.threshold=0.04", "--out", rec, "--view",
-                             "--view-port", "0", "--view-hold", "0", "--no-data-timeout", "60",
-                             "--json"],
+    proc = subprocess.Popen([*CLI, "stream", "--port", link.path, *stream_args, "--out", rec,
+                             "--view", "--view-port", "0", "--view-hold", "0",
+                             "--no-data-timeout", str(no_data_timeout_s), "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    shot = Path(os.environ.get("LIVE_VIEW_SCREENSHOT", tmp_path / "live_view.png"))
+    shot = Path(os.environ.get(screenshot_env, tmp_path / f"{screenshot_env.lower()}.png"))
+    live = None
     try:
         url = view_url(proc)
-        lines = proc.stderr_lines
         with playwright.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
                                         args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1300, "height": 900})
+            page = browser.new_page(viewport=viewport)
             page.goto(url)
             page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0 && "
-                                   "Bokeh.documents[0].get_model_by_name('th')",
+                                   f"Bokeh.documents[0].get_model_by_name('{ready_model}')",
                                    timeout=30_000)
-            board.start()
-            # After the first contact is decided, Th goes up from the page: the second
-            # contact is then coded as silence.
-            page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=30_000)
-            page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
-            page.get_by_role("button", name="Apply Th").click()
-            page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
-            page.get_by_role("button", name="Pause display").click()
-            page.get_by_text("display paused").wait_for(timeout=30_000)
-            paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
-            paused_end = page.evaluate("() => " + model("time", "end"))
-            second_half.set()
-            board.join(30)
-            _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000)
-            state = get_json(url + "state.json")
-            still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
-            page.evaluate("() => { " + model("scrub", "value = 1.0") + " }")    # 1 s back
-            page.wait_for_function(f"() => {model('time', 'end')} <= {paused_end} - 0.99",
-                                   timeout=30_000)
-            page.get_by_role("button", name="Resume display").click()
-            page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
-                                   timeout=30_000)
-            time.sleep(0.3)             # the last windows drawn
-            shot.parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(shot), full_page=True)
-            final = get_json(url + "state.json")
+            live = LivePage(page, url, rec, second_half, board, shot, proc.stderr_lines)
+            yield live
             browser.close()
     finally:
         second_half.set()
@@ -107,8 +99,55 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
         out = proc.stdout.read()
         proc.wait(60)
         link.close()
-    assert proc.returncode == 0, "".join(lines)
-    live = json.loads(out[out.index("{"):])
+        if live is not None:
+            live.out, live.returncode = out, proc.returncode
+
+
+def screenshot(live: LivePage, settle_s: float) -> None:
+    """The whole page as the README shows it, once the last windows are drawn."""
+    time.sleep(settle_s)
+    live.shot.parent.mkdir(parents=True, exist_ok=True)
+    live.page.screenshot(path=str(live.shot), full_page=True)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
+    scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
+                                                 Contact(SECOND_CONTACT_S, 25.0)])
+    counts = scene.generate(seed=3).samples
+    with streamed_page(tmp_path, counts, ["--network", NETWORK, "--set",
+                                          "preprocess.threshold=0.04"],
+                       screenshot_env="LIVE_VIEW_SCREENSHOT",
+                       viewport={"width": 1300, "height": 900}, ready_model="th") as session:
+        page, url = session.page, session.url
+        session.board.start()
+        # After the first contact is decided, Th goes up from the page: the second
+        # contact is then coded as silence.
+        page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=30_000)
+        page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
+        page.get_by_role("button", name="Apply Th").click()
+        page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
+        page.get_by_role("button", name="Pause display").click()
+        page.get_by_text("display paused").wait_for(timeout=30_000)
+        paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        paused_end = page.evaluate("() => " + model("time", "end"))
+        session.second_half.set()
+        session.board.join(30)
+        _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000)
+        state = get_json(url + "state.json")
+        still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        page.evaluate("() => { " + model("scrub", "value = 1.0") + " }")    # 1 s back
+        page.wait_for_function(f"() => {model('time', 'end')} <= {paused_end} - 0.99",
+                               timeout=30_000)
+        page.get_by_role("button", name="Resume display").click()
+        page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
+                               timeout=30_000)
+        screenshot(session, 0.3)
+        final = get_json(url + "state.json")
+    assert session.returncode == 0, "".join(session.lines)
+    live = json.loads(session.out[session.out.index("{"):])
+    rec = session.rec
     # Pausing froze this page's plots while the stream went on.
     assert still == paused_at and state["t_s"] > paused_at
     # The change: asked from the page, applied at a window boundary, journaled, shown.

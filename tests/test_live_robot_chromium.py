@@ -10,22 +10,17 @@ only, the second coded as silence.
 ``LIVE_ROBOT_SCREENSHOT=docs/live_robot.png`` writes the docs' screenshot.
 """
 import json
-import os
 import re
-import signal
 import subprocess
-import threading
-import time
 from pathlib import Path
 
 import pytest
 
 from snn_antenna.bridge.controls import recorded_events
-from snn_antenna.bridge.links import PtyLink
 from snn_antenna.sources.stimuli import Contact, RobotScene
-from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, SECOND_CONTACT_S, SPLIT_S,
-                                         _serve, _wait, model)
-from test_live_view import get_json, view_url
+from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, SECOND_CONTACT_S, _wait,
+                                         model, screenshot, streamed_page)
+from test_live_view import get_json
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = ROOT / "networks" / "live_robot.toml"
@@ -35,79 +30,51 @@ SPEED, DRIVE_ON = 12.0, 6.0
 @pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
 def test_the_page_reads_the_robot_panels_steers_and_the_replay_reproduces_it(tmp_path):
-    playwright = pytest.importorskip("playwright.sync_api")
     scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
                                                  Contact(SECOND_CONTACT_S, 25.0)])
     counts = scene.generate(seed=3).samples
-    link = PtyLink(tmp_path / "tty")
-    half = int(SPLIT_S * 1000)
-    second_half = threading.Event()
-    board = threading.Thread(target=_serve, args=(counts, half, link, second_half), daemon=True)
-    rec = tmp_path / "rec"
-    proc = subprocess.Popen([*CLI, "stream", "--port", link.path, "--network", ROBOT,
-                             "--speed", str(SPEED), "--out", rec, "--view", "--view-port", "0",
-                             "--view-hold", "0", "--no-data-timeout", "90", "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    shot = Path(os.environ.get("LIVE_ROBOT_SCREENSHOT", tmp_path / "live_robot.png"))
-    try:
-        url = view_url(proc)
-        lines = proc.stderr_lines
-        with playwright.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                        args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1400, "height": 980})
-            page.goto(url)
-            page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0 && "
-                                   "Bokeh.documents[0].get_model_by_name('speed')",
-                                   timeout=30_000)
-            board.start()
-            # The panels while driving: the gate's Th from 12 cm/s, the CPG sweeping.
-            panels = page.locator("[data-panel]")
-            page.locator("[data-panel='cpg']").get_by_text("phase (°)").wait_for(
-                timeout=60_000)
-            gate = page.locator("[data-panel='gate']").inner_text()
-            assert "Th source" in gate and "gate" in gate and "speed (cm/s)" in gate
-            # The first contact: decided, and the control layer stops the robot.
-            page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=60_000)
-            page.locator("[data-panel='control']").get_by_text(
-                re.compile(r"stopped since \(s\)\s*\d")).wait_for(timeout=30_000)
-            control = page.locator("[data-panel='control']").inner_text()
-            shown = {name: page.locator(f"[data-panel='{name}']").count()
-                     for name in ("gate", "cpg", "control", "readout", "threshold")}
-            # Th by hand above the signal, and the robot driven on, from the page.
-            page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
-            page.get_by_role("button", name="Apply Th").click()
-            page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
-            page.get_by_label("speed (cm/s)").fill(str(DRIVE_ON))
-            page.get_by_role("button", name="Apply speed").click()
-            page.get_by_text("asked speed 6 cm/s").wait_for(timeout=30_000)
-            page.get_by_role("button", name="Pause display").click()
-            page.get_by_text("display paused").wait_for(timeout=30_000)
-            paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
-            second_half.set()
-            board.join(30)
-            _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000, 60)
-            state = get_json(url + "state.json")
-            still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
-            page.get_by_role("button", name="Resume display").click()
-            page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
-                                   timeout=30_000)
-            time.sleep(0.5)             # the last windows drawn
-            shot.parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(shot), full_page=True)
-            final = get_json(url + "state.json")
-            n_panels = panels.count()
-            browser.close()
-    finally:
-        second_half.set()
-        if board.ident:
-            board.join(30)
-        proc.send_signal(signal.SIGINT)
-        out = proc.stdout.read()
-        proc.wait(60)
-        link.close()
-    assert proc.returncode == 0, "".join(lines)
-    live = json.loads(out[out.index("{"):])
+    with streamed_page(tmp_path, counts, ["--network", ROBOT, "--speed", str(SPEED)],
+                       screenshot_env="LIVE_ROBOT_SCREENSHOT",
+                       viewport={"width": 1400, "height": 980}, ready_model="speed",
+                       no_data_timeout_s=90) as session:
+        page, url = session.page, session.url
+        session.board.start()
+        # The panels while driving: the gate's Th from 12 cm/s, the CPG sweeping.
+        panels = page.locator("[data-panel]")
+        page.locator("[data-panel='cpg']").get_by_text("phase (°)").wait_for(timeout=60_000)
+        gate = page.locator("[data-panel='gate']").inner_text()
+        assert "Th source" in gate and "gate" in gate and "speed (cm/s)" in gate
+        # The first contact: decided, and the control layer stops the robot.
+        page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=60_000)
+        page.locator("[data-panel='control']").get_by_text(
+            re.compile(r"stopped since \(s\)\s*\d")).wait_for(timeout=30_000)
+        control = page.locator("[data-panel='control']").inner_text()
+        shown = {name: page.locator(f"[data-panel='{name}']").count()
+                 for name in ("gate", "cpg", "control", "readout", "threshold")}
+        # Th by hand above the signal, and the robot driven on, from the page.
+        page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
+        page.get_by_role("button", name="Apply Th").click()
+        page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
+        page.get_by_label("speed (cm/s)").fill(str(DRIVE_ON))
+        page.get_by_role("button", name="Apply speed").click()
+        page.get_by_text("asked speed 6 cm/s").wait_for(timeout=30_000)
+        page.get_by_role("button", name="Pause display").click()
+        page.get_by_text("display paused").wait_for(timeout=30_000)
+        paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        session.second_half.set()
+        session.board.join(30)
+        _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000, 60)
+        state = get_json(url + "state.json")
+        still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        page.get_by_role("button", name="Resume display").click()
+        page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
+                               timeout=30_000)
+        screenshot(session, 0.5)
+        final = get_json(url + "state.json")
+        n_panels = panels.count()
+    assert session.returncode == 0, "".join(session.lines)
+    live = json.loads(session.out[session.out.index("{"):])
+    rec = session.rec
     # A panel per part of the running network (the gate's holds Th: no fixed-Th panel), and
     # the control list's.
     assert shown == {"gate": 1, "cpg": 1, "control": 1, "readout": 1, "threshold": 0}
