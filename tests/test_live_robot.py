@@ -3,8 +3,6 @@ control layer run in Brian2 in the array's stream network; the gate's Th codes e
 window, a speed command (``--speed``, the page's) is applied at a window boundary, journaled
 and replayed; the control layer stops the robot on contact; each part has its panel and a
 part the spec lacks has none. Replays read flat out (a few seconds each)."""
-import copy
-import json
 import math
 
 import numpy as np
@@ -14,16 +12,13 @@ from hypothesis import strategies as st
 
 from snn_antenna.bridge.cli import _speed
 from snn_antenna.bridge.controls import Controls, recorded_events
-from snn_antenna.bridge.online import build_online, run_online
+from snn_antenna.bridge.online import build_online
 from snn_antenna.bridge.page import panels_html
 from snn_antenna.bridge.recorder import Recorder, record_counts
-from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.robot import check_speed
-from snn_antenna.bridge.view import LiveView
-from snn_antenna.bridge.view_process import ViewHistory
 from snn_antenna.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
-from tests.test_live_view_panels import ABSENT, NETWORK
+from tests.test_live_view_panels import ABSENT, NETWORK, replay_into_view
 
 ROBOT = NETWORK.parent / "live_robot.toml"
 SPEED = 12.0
@@ -48,21 +43,8 @@ def recording(tmp_path_factory):
 
 
 def _replay(recording, parts, scheduled=(), chunk_bytes=800, journal=None):
-    """A replay read flat out into a LiveView never started; its frames taken by the view's
-    own history. Returns (report, history, what each window decided)."""
-    parts = copy.deepcopy(parts)
-    view = LiveView(parts)
-    controls = Controls(parts, scheduled=scheduled, rate_hz=1000.0, journal=journal,
-                        on_applied=view.applied)
-    report = run_online(ReplaySource(recording, chunk_bytes=chunk_bytes).start(), parts,
-                        handlers=[view], no_data_timeout_s=1e9, view=view, controls=controls)
-    view.flush()
-    history, decided = ViewHistory(view.config), []
-    while history.received < view.published:
-        frame = view._inbox.get(timeout=5)
-        history.take(frame)
-        decided += [window[4] for window in frame["windows"]]
-    return report, history, decided
+    """(report, history, what each window decided) of a replay into a never-started view."""
+    return replay_into_view(recording, parts, scheduled, chunk_bytes, journal)[:3]
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,7 @@
 """The live view's panels of what the running network decides (bridge/live_state.py): a panel
 per part the live network runs and none for a part it does not, their values carried in the
 pipeline's own frames, shown on the page and in /state.json."""
+import copy
 import json
 import subprocess
 import sys
@@ -10,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from snn_antenna.bridge.controls import Controls
 from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.page import build_page, panels_html
 from snn_antenna.bridge.recorder import record_counts
@@ -32,14 +34,17 @@ def recording(tmp_path_factory):
     return record_counts(tmp_path_factory.mktemp("panels") / "rec", counts)
 
 
-@pytest.fixture(scope="module")
-def viewed(recording):
+def replay_into_view(recording, parts, scheduled=(), chunk_bytes=800, journal=None):
     """A replay read flat out into a LiveView that is never started: every frame it published
-    (a 200-frame hand-off holds them all), taken one by one by the view's own history."""
-    parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
+    (a 200-frame hand-off holds them all), taken one by one by the view's own history; the
+    controls ``scheduled`` applied as the page's would be. Returns (report, history, what
+    each window decided, view)."""
+    parts = copy.deepcopy(parts)
     view = LiveView(parts)
-    report = run_online(ReplaySource(recording, chunk_bytes=800).start(), parts,
-                        handlers=[view], no_data_timeout_s=1e9, view=view)
+    controls = Controls(parts, scheduled=scheduled, rate_hz=1000.0, journal=journal,
+                        on_applied=view.applied)
+    report = run_online(ReplaySource(recording, chunk_bytes=chunk_bytes).start(), parts,
+                        handlers=[view], no_data_timeout_s=1e9, view=view, controls=controls)
     view.flush()
     history, decided = ViewHistory(view.config), []
     while history.received < view.published:
@@ -47,6 +52,11 @@ def viewed(recording):
         history.take(frame)
         decided += [window[4] for window in frame["windows"]]
     return report, history, decided, view
+
+
+@pytest.fixture(scope="module")
+def viewed(recording):
+    return replay_into_view(recording, build_online(NETWORK, ["preprocess.threshold=0.04"]))
 
 
 def test_the_live_network_has_the_panels_of_its_parts_only(viewed):
