@@ -13,7 +13,9 @@ import uuid
 
 import numpy as np
 
-PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second
+PAGE_UPDATE_MS = 40             # each page pulls what is new 25 times a second: a new column
+# waits at most this long (100 ms: display p95 168 ms with one page; 40: 114; 20 redraws so
+# often that three pages on 2 cores got slower, 369 ms; bench_stream.py --browsers 0,1,3)
 # A page that has not painted the last column sent waits (its points gather) rather than
 # queue more updates than its browser draws; one that never reports (a hidden tab does not
 # paint) still gets one this often.
@@ -108,7 +110,7 @@ def _coded_figure(source, common, amplitude: float):
 
 def _rate_map_figure(source, common, neuron_hz: np.ndarray, peak_rate_hz: float):
     """One image (a row per resonator, a column per window) rather than a rectangle per cell:
-    the browser redraws it ten times a second, and it competes for the same cores."""
+    the browser redraws it up to 25 times a second, and it competes for the same cores."""
     from bokeh.models import ColorBar, FixedTicker, LinearColorMapper, Range1d
     from bokeh.palettes import Viridis256
     from bokeh.plotting import figure

@@ -41,6 +41,9 @@ HISTORY_S = 10.0                # what the plots show
 SCRUB_S = 60.0                  # what the view keeps: a paused page scrubs back through it
 REQUESTS = 16                   # control requests from the page not yet taken by the pipeline
 FLUSH_S = 0.05                  # the pipeline hands a frame over at most this often
+# ... except that a new rate-map column goes at once (at most this often): the delay from a
+# window's last sample to its column on screen is what a person watching sees.
+WINDOW_FLUSH_S = 0.01
 INBOX_FRAMES = 200              # 10 s of frames: the view may stall that long and lose nothing
 START_TIMEOUT_S = 60.0          # a spawned interpreter imports Bokeh: seconds on a busy machine
 STOP_TIMEOUT_S = 5.0
@@ -204,7 +207,9 @@ class LiveView:
         decided = self.decisions.window(t_s, rates, event)
         self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms, decided, arrived,
                               window_s or self.config.window_s))
-        self._event(event)
+        self._note(event)
+        if time.monotonic() - self._flushed >= WINDOW_FLUSH_S:
+            self.flush()
 
     def applied(self, event: dict) -> None:
         """A control change the pipeline applied (bridge/controls.py): shown on the page."""
@@ -217,10 +222,13 @@ class LiveView:
         self._event(event)
 
     def _event(self, event) -> None:
+        self._note(event)
+        self._due()
+
+    def _note(self, event) -> None:
         if event is not None:
             kind, what = event
             self._events.append((kind, what if kind == "onset" else what.as_dict()))
-        self._due()
 
     def _due(self) -> None:
         if time.monotonic() - self._flushed >= FLUSH_S:
