@@ -148,3 +148,22 @@ def test_state_json_serves_the_panels_during_a_replay(recording):
     assert network["decided"]["threshold"]["th_g"] == 0.04
     (contact,) = state["contacts"]
     assert network["decided"]["readout"]["last_distance_cm"] == contact["distance_cm"]
+
+
+def test_new_columns_are_pushed_to_the_open_pages_as_they_arrive(recording):
+    """The view process tells each open page when new rate-map columns came in (its update is
+    then scheduled at once, not at the next periodic pull), and only then."""
+    parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
+    view = LiveView(parts)
+    run_online(ReplaySource(recording, chunk_bytes=800).start(), parts, handlers=[view],
+               no_data_timeout_s=1e9, view=view)
+    view.flush()
+    history, pushes = ViewHistory(view.config), []
+    history.column_listeners.add(lambda: pushes.append(history.windows.total))
+    while history.received < view.published:
+        history.drain(view._inbox, wait_s=5)
+    assert pushes and pushes[-1] == history.windows.total == 30
+    assert pushes == sorted(set(pushes))        # once per drain that brought columns
+    seen = len(pushes)
+    history.drain(view._inbox)                  # nothing new: no page is disturbed
+    assert len(pushes) == seen

@@ -13,9 +13,8 @@ import uuid
 
 import numpy as np
 
-PAGE_UPDATE_MS = 40             # each page pulls what is new 25 times a second: a new column
-# waits at most this long (100 ms: display p95 168 ms with one page; 40: 114; 20 redraws so
-# often that three pages on 2 cores got slower, 369 ms; bench_stream.py --browsers 0,1,3)
+PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second; a new rate-map
+# column is pushed to it on arrival (build_page's update_now)
 # A page that has not painted the last column sent waits (its points gather) rather than
 # queue more updates than its browser draws; one that never reports (a hidden tab does not
 # paint) still gets one this often.
@@ -70,6 +69,12 @@ def build_page(view, doc) -> None:
     doc.title = "snn-antenna live view"
     update()
     doc.add_periodic_callback(update, PAGE_UPDATE_MS)
+    # New rate-map columns are pushed as they arrive; the periodic pull carries the rest.
+    def update_now() -> None:
+        doc.add_next_tick_callback(update)
+
+    view.column_listeners.add(update_now)
+    doc.on_session_destroyed(lambda _context: view.column_listeners.discard(update_now))
 
 
 def _legend_outside(fig) -> None:
@@ -110,7 +115,7 @@ def _coded_figure(source, common, amplitude: float):
 
 def _rate_map_figure(source, common, neuron_hz: np.ndarray, peak_rate_hz: float):
     """One image (a row per resonator, a column per window) rather than a rectangle per cell:
-    the browser redraws it up to 25 times a second, and it competes for the same cores."""
+    the browser redraws it ten times a second and on each new column, and it competes for the same cores."""
     from bokeh.models import ColorBar, FixedTicker, LinearColorMapper, Range1d
     from bokeh.palettes import Viridis256
     from bokeh.plotting import figure

@@ -3,7 +3,7 @@ the pipeline hands over (bridge/view.py's :class:`~snn_antenna.bridge.view.LiveV
 
 Why a process of its own: a Bokeh server does real work while holding the GIL (a page that is
 reloaded tears its document down, ``Document.destroy`` → ``gc.collect``; each open page pulls
-and serialises new points 25 times a second). In the pipeline's process that work stalled the
+and serialises new points ten times a second and each new column). In the pipeline's process that work stalled the
 stream itself. Here it can only slow the view: the pipeline never waits for this process, and
 frames the view could not take are counted here (``view_frames_dropped``), never a sample.
 
@@ -33,7 +33,8 @@ import numpy as np
 from ..errors import SpecError
 from .page import build_page
 
-DRAIN_MS = 50                   # this process empties the hand-off
+DRAIN_MS = 10                   # this process empties the hand-off (a new column then goes
+                                # to the pages at once: ViewHistory.column_listeners)
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
 LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
 DELAYS_KEPT = 2000               # display delays kept for the p95
@@ -121,21 +122,29 @@ class ViewHistory:
         self.n_samples = 0
         self.peak_rate_hz = 10.0
         self.sessions = 0                           # pages open now
+        # Each open page's "update me now" (bridge/page.py): called when new rate-map columns
+        # arrive, so a column goes out on arrival instead of at the page's next periodic pull.
+        self.column_listeners: set = set()
         self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen
         self.next_seq = 0                           # the frame number expected next
 
     def drain(self, inbox, wait_s: float = 0.0) -> int:
-        """Take every frame waiting in ``inbox`` (waiting up to ``wait_s`` for the first)."""
-        taken = 0
+        """Take every frame waiting in ``inbox`` (waiting up to ``wait_s`` for the first);
+        tell the open pages when new rate-map columns came with them."""
+        taken, columns = 0, self.windows.total
         while True:
             try:
                 frame = inbox.get(timeout=wait_s) if wait_s and not taken else inbox.get_nowait()
             except queue.Empty:
-                return taken
+                break
             self.take(frame)
             taken += 1
+        if self.windows.total != columns:
+            for update_now in list(self.column_listeners):
+                update_now()
+        return taken
 
     def pull(self) -> None:
         """Take the frames waiting in the inbox, if this history has one."""
