@@ -294,7 +294,8 @@ def cmd_replay(args) -> int:
     if args.view and not args.network:
         raise SpecError("view", True, "--view with --network (the view shows the network)")
     if args.network:
-        from .online import LiveDisplay, build_online, run_online
+        from .online import build_online, run_online
+        from .terminal import LiveDisplay
 
         parts = build_online(args.network, replay_overrides(args),
                              speed_cm_s=replay_speed(args))
@@ -339,7 +340,8 @@ def _check_recording_dir(path) -> None:
 @_guarded
 def cmd_stream(args) -> int:
     """Run the online pipeline on a live port, recording while streaming."""
-    from .online import LiveDisplay, build_online, run_online, warm_up
+    from .online import build_online, run_online, warm_up
+    from .terminal import LiveDisplay
 
     _check_duration(args.duration)
     # A bad spec (or speed) fails before the port opens.

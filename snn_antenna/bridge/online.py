@@ -24,10 +24,9 @@ Gaps in the stream are not filled: the network sees the received samples back to
 """
 from __future__ import annotations
 
-import sys
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -39,10 +38,11 @@ from ..preprocess import make_chain, partial_transform, reset
 from ..readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
 from ..studies import check_spec
 from .protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
+from .online_report import OnlineReport
 from .source import SourceLoop
+from .terminal import LiveDisplay, show
 
 SECTIONS = ("network", "preprocess", "readout")
-CPU_EVERY_WINDOWS = 10
 
 
 @dataclass
@@ -216,165 +216,6 @@ class ArrivalClock:
         return self._chunks[0][1]
 
 
-BARS = " ▁▂▃▄▅▆▇█"
-
-
-def rate_bar(rates_hz: np.ndarray, full_scale_hz: float) -> str:
-    levels = np.clip(np.round(rates_hz / full_scale_hz * (len(BARS) - 1)), 0, len(BARS) - 1)
-    return "".join(BARS[int(v)] for v in levels)
-
-
-class LiveDisplay:
-    """A compact live rate map: one character per neuron. On a terminal the line is redrawn in
-    place every window; elsewhere (logs, pipes) one line per second. Events get their own line."""
-
-    def __init__(self, out=None, full_scale_hz: float | None = None):
-        self.out = out or sys.stdout
-        self.tty = hasattr(self.out, "isatty") and self.out.isatty()
-        self.fixed_scale_hz = full_scale_hz
-        self.full_scale_hz = full_scale_hz or 10.0
-        self._last_plain = -1.0
-
-    def header(self, neuron_hz: np.ndarray) -> None:
-        scale = (f"{self.fixed_scale_hz:g} spikes/s" if self.fixed_scale_hz
-                 else "the highest rate so far")
-        print(f"rate map: {len(neuron_hz)} resonators {neuron_hz[0]:.1f}–{neuron_hz[-1]:.1f} Hz "
-              f"(low → high), full bar = {scale}", file=self.out, flush=True)
-
-    def window(self, t_s: float, rates: np.ndarray, neuron_hz: np.ndarray, rtf: float,
-               latency_ms: float | None) -> None:
-        if not self.fixed_scale_hz:
-            self.full_scale_hz = max(self.full_scale_hz, float(rates.max()))
-        peak = f"{neuron_hz[int(np.argmax(rates))]:5.1f} Hz" if rates.max() > 0 else "  silent"
-        lat = f"  latency {latency_ms:5.1f} ms" if latency_ms is not None else ""
-        line = (f"{t_s:8.1f} s |{rate_bar(rates, self.full_scale_hz)}| peak {peak}  "
-                f"rt x{rtf:5.1f}{lat}")
-        if self.tty:
-            print("\r" + line, end="", file=self.out, flush=True)
-        elif t_s - self._last_plain >= 1.0 - 1e-9:
-            self._last_plain = t_s
-            print(line, file=self.out, flush=True)
-
-    def event(self, text: str) -> None:
-        print(("\r\n" if self.tty else "") + text, file=self.out, flush=True)
-
-
-@dataclass
-class OnlineReport:
-    samples: int = 0
-    windows: int = 0
-    simulated_s: float = 0.0
-    wall_s: float = 0.0
-    waiting_s: float = 0.0
-    started: float = 0.0                # perf_counter when the pipeline started
-    latencies_ms: list[float] = field(default_factory=list)
-    contacts: list[dict] = field(default_factory=list)
-    # (perf_counter, waiting_s, simulated_s) at the first and the latest published window
-    first_window: tuple | None = None
-    last_window: tuple | None = None
-    caught_up_at: int = 0               # index of the first window after the start-up backlog
-    origin: float | None = None         # host clock (time.time) when the stream began, live
-    last_published: float = 0.0         # host clock when the latest window was published
-    # (simulated_s, process_time) at the first window and every CPU_EVERY_WINDOWS after it:
-    # reading the process's CPU clock costs ~0.7 ms here while other threads run.
-    cpu_marks: list[tuple[float, float]] = field(default_factory=list)
-    published: int = 0
-
-    @property
-    def realtime_factor(self) -> float:
-        """Stream seconds processed per wall-clock second actually elapsed. Live (a port, or a
-        replay paced in real time): from the stream's beginning on the host's clock
-        (:attr:`ArrivalClock.origin`) to the publication of the latest window, so about 1.0
-        when the pipeline keeps up with the board and less when it falls behind, whatever held
-        it up (the network, the start-up, another thread, the machine). A file read flat out
-        has no real time to keep: its stream seconds per wall second from the first published
-        window (Brian2's build excluded)."""
-        if self.last_window is None:
-            return float("nan")
-        if self.origin is not None:
-            return self.last_window[2] / max(self.last_published - self.origin, 1e-9)
-        return self._steady_factor(waiting_excluded=False)
-
-    @property
-    def compute_realtime_factor(self) -> float:
-        """Stream seconds per wall-clock second spent computing, from the first published window
-        to the latest with the time spent waiting for the port taken out: the headroom, not
-        what happened."""
-        return self._steady_factor(waiting_excluded=True)
-
-    def _steady_factor(self, waiting_excluded: bool) -> float:
-        if self.first_window is None:
-            return float("nan")
-        (t0, w0, s0), (t1, w1, s1) = self.first_window, self.last_window
-        if s1 <= s0:
-            return float("nan")
-        return (s1 - s0) / max((t1 - t0) - (w1 - w0 if waiting_excluded else 0.0), 1e-9)
-
-    @property
-    def cpu_realtime_factor(self) -> float:
-        """Simulated seconds per CPU second of this process (all its threads) in the steady
-        state: what the pipeline would reach on a core of its own, however loaded the machine
-        is with other work."""
-        if len(self.cpu_marks) < 2:
-            return float("nan")
-        (s0, c0), (s1, c1) = self.cpu_marks[0], self.cpu_marks[-1]
-        return (s1 - s0) / max(c1 - c0, 1e-9)
-
-    def window_published(self, end_s: float, waiting_s: float, arrived: float | None,
-                         window_s: float) -> float | None:
-        """Note a rate-map window ending at ``end_s`` (stream time) as it is published;
-        returns its latency (ms) from the host arrival of its last sample (``arrived``, None
-        when the source is not live)."""
-        now = time.time()
-        if self.first_window is None:           # steady state starts here (Brian2 is built)
-            self.first_window = self.last_window = (time.perf_counter(), waiting_s, end_s)
-        if self.published % CPU_EVERY_WINDOWS == 0:
-            self.cpu_marks.append((end_s, time.process_time()))
-        self.published += 1
-        latency_ms = None if arrived is None else (now - arrived) * 1e3
-        if latency_ms is not None:
-            self.latencies_ms.append(latency_ms)
-        self.last_published = now
-        if (latency_ms is not None and not self.caught_up_at
-                and waiting_s - self.last_window[1] > 0.1 * window_s):
-            # The pipeline had to wait for the port: any start-up backlog is gone.
-            self.caught_up_at = len(self.latencies_ms)
-        return latency_ms
-
-    def as_dict(self, parts: OnlineParts, counts: dict) -> dict:
-        def summary(values):
-            if not len(values):
-                return {"median": None, "p95": None, "max": None, "windows": 0}
-            lat = np.asarray(values)
-            return {"median": round(float(np.median(lat)), 2),
-                    "p95": round(float(np.percentile(lat, 95)), 2),
-                    "max": round(float(lat.max()), 2), "windows": len(values)}
-
-        return {
-            "samples": self.samples, "windows": self.windows,
-            "simulated_s": round(self.simulated_s, 3), "wall_s": round(self.wall_s, 3),
-            "waiting_s": round(self.waiting_s, 3),
-            "startup_s": (round(self.first_window[0] - self.started, 3) if self.first_window
-                          else None),
-            "realtime_factor": _rounded(self.realtime_factor),
-            "compute_realtime_factor": _rounded(self.compute_realtime_factor),
-            "cpu_realtime_factor": _rounded(self.cpu_realtime_factor),
-            # From a sample's arrival on the host to the rate-map window that includes it:
-            # all windows, and those after the start-up backlog was worked off (live only).
-            "latency_ms": summary(self.latencies_ms),
-            "steady_latency_ms": summary(self.latencies_ms[self.caught_up_at:]
-                                         if self.caught_up_at else []),
-            "window_s": parts.window_s,
-            "network": {"n_neurons": parts.array.n_neurons, "dt_ms": parts.array.dt_ms,
-                        "target": parts.array.target, "method": parts.array.method},
-            "contacts": self.contacts, "counts": counts,
-        }
-
-
-def _rounded(value: float) -> float | None:
-    return round(value, 2) if np.isfinite(value) else None
-
-
 def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | None = None,
                no_data_timeout_s: float = 5.0, stop=None, display: LiveDisplay | None = None,
                calibration_s: float = 1.0, view=None, controls=None) -> dict:
@@ -512,14 +353,3 @@ def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: Arriva
         coded += len(counts)
         if pieces:
             yield np.concatenate(pieces) if len(pieces) > 1 else pieces[0]
-
-
-def show(display: LiveDisplay, event) -> None:
-    if event is None:
-        return
-    kind, what = event
-    if kind == "onset":
-        display.event(f"contact onset at {what:.2f} s")
-    else:
-        display.event(f"contact {what.onset_s:.2f}–{what.end_s:.2f} s: ringing "
-                      f"{what.frequency_hz:.1f} Hz → distance {what.distance_cm:.1f} cm")
