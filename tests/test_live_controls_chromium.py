@@ -110,12 +110,26 @@ def screenshot(live: LivePage, settle_s: float) -> None:
     live.page.screenshot(path=str(live.shot), full_page=True)
 
 
+def two_contacts():
+    """The scene both live-page tests stream: a robot driving, contacts at 1.5 s (19 cm) and
+    at SECOND_CONTACT_S (25 cm); 7 s of board counts."""
+    scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
+                                                 Contact(SECOND_CONTACT_S, 25.0)])
+    return scene.generate(seed=3).samples
+
+
+def replay_report(rec, network, timeout_s: float = 180):
+    """``snn-antenna replay REC --network NETWORK``: the finished process and its JSON report."""
+    replay = subprocess.run([*CLI, "replay", rec, "--network", network],
+                            capture_output=True, text=True, timeout=timeout_s)
+    assert replay.returncode == 0, replay.stderr
+    return replay, json.loads(replay.stdout[replay.stdout.index("{\n"):])
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
 def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
-    scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
-                                                 Contact(SECOND_CONTACT_S, 25.0)])
-    counts = scene.generate(seed=3).samples
+    counts = two_contacts()
     with streamed_page(tmp_path, counts, ["--network", NETWORK, "--set",
                                           "preprocess.threshold=0.04"],
                        screenshot_env="LIVE_VIEW_SCREENSHOT",
@@ -159,10 +173,7 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
     assert final["th_g"] == HIGH_TH_G
     # Live: the first contact only; the emulator played both.
     assert len(live["contacts"]) == 1 and abs(live["contacts"][0]["distance_cm"] - 19) < 3
-    replay = subprocess.run([*CLI, "replay", rec, "--network", NETWORK],
-                            capture_output=True, text=True, timeout=120)
-    assert replay.returncode == 0, replay.stderr
-    replayed = json.loads(replay.stdout[replay.stdout.index("{\n"):])
+    replay, replayed = replay_report(rec, NETWORK, timeout_s=120)
     assert replayed["contacts"] == live["contacts"]
     assert "1 control change" in replay.stderr
     # The page reported its paints: the delay from a window's arrival to its column on screen.

@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 from snn_antenna.bridge.controls import recorded_events
-from snn_antenna.sources.stimuli import Contact, RobotScene
-from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, SECOND_CONTACT_S, _wait,
-                                         model, screenshot, streamed_page)
+from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, _wait,
+                                         model, replay_report, screenshot, streamed_page,
+                                         two_contacts)
 from test_live_view import get_json
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,9 +30,7 @@ SPEED, DRIVE_ON = 12.0, 6.0
 @pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
 def test_the_page_reads_the_robot_panels_steers_and_the_replay_reproduces_it(tmp_path):
-    scene = RobotScene(duration_s=7.0, contacts=[Contact(1.5, 19.0),
-                                                 Contact(SECOND_CONTACT_S, 25.0)])
-    counts = scene.generate(seed=3).samples
+    counts = two_contacts()
     with streamed_page(tmp_path, counts, ["--network", ROBOT, "--speed", str(SPEED)],
                        screenshot_env="LIVE_ROBOT_SCREENSHOT",
                        viewport={"width": 1400, "height": 980}, ready_model="speed",
@@ -96,10 +94,7 @@ def test_the_page_reads_the_robot_panels_steers_and_the_replay_reproduces_it(tmp
     assert recorded_events(rec) == live["controls"] == applied
     # Live: the first contact only (the second coded as silence under the page's Th).
     assert len(live["contacts"]) == 1 and abs(live["contacts"][0]["distance_cm"] - 19) < 3
-    replay = subprocess.run([*CLI, "replay", rec, "--network", ROBOT],
-                            capture_output=True, text=True, timeout=180)
-    assert replay.returncode == 0, replay.stderr
-    replayed = json.loads(replay.stdout[replay.stdout.index("{\n"):])
+    replay, replayed = replay_report(rec, ROBOT)
     assert replayed["contacts"] == live["contacts"]
     assert [(e["sample"], e["field"], e["value"]) for e in replayed["controls"]] == \
         [(e["sample"], e["field"], e["value"]) for e in applied]
