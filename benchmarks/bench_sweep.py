@@ -54,15 +54,19 @@ from snn_antenna.engine.sweep import run_sweep
 from snn_antenna.networks import neurons
 
 
-def grid_of(n_points: int) -> Grid:
-    """About n_points: k × I × input_hz with 40 frequencies per tuning curve."""
-    n_f = 40
-    rest = max(1, n_points // n_f)
+def grid_of(n_points: int, sweep_b: bool = False) -> Grid:
+    """About n_points: k × I × input_hz with 40 frequencies per tuning curve (and 5 values
+    of b with ``sweep_b``: a k/b/I tuning grid, where b is one more array per point)."""
+    n_f, n_b = 40, 5 if sweep_b else 1
+    rest = max(1, n_points // (n_f * n_b))
     n_i = 5 if rest >= 25 else 1
     n_k = max(1, rest // n_i)
-    return Grid({"k": {"start": 0.25, "stop": 2.5, "num": n_k, "scale": "log"},
-                 "I": {"start": 0.1, "stop": 0.8, "num": n_i} if n_i > 1 else [0.15],
-                 "input_hz": {"start": 2, "stop": 60, "num": n_f}})
+    axes = {"k": {"start": 0.25, "stop": 2.5, "num": n_k, "scale": "log"},
+            "I": {"start": 0.1, "stop": 0.8, "num": n_i} if n_i > 1 else [0.15],
+            "input_hz": {"start": 2, "stop": 60, "num": n_f}}
+    if sweep_b:
+        axes["b"] = {"start": 0.2, "stop": 0.26, "num": n_b}
+    return Grid(axes)
 
 
 def numba_kernel():
@@ -202,7 +206,10 @@ def main(argv=None) -> int:
     ap.add_argument("--runtime-max", type=int, default=10_000,
                     help="largest grid also run with the cython and numpy runtime engines")
     ap.add_argument("--naive-sample", type=int, default=5)
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--sweep-b", action="store_true",
+                    help="grids over k, b, I and input_hz (b per point), not k, I and input_hz")
+    ap.add_argument("--workers", type=int, nargs="*", default=[1, 2],
+                    help="Dask worker counts of the scaling rows (none: no scaling rows)")
     args = ap.parse_args(argv)
 
     base = NeuronSweep(duration_s=args.duration_s, settle_s=min(0.25, args.duration_s / 4))
@@ -222,7 +229,7 @@ def main(argv=None) -> int:
     chunk = args.chunk_points
     rows = []
     for size in args.sizes:
-        grid = grid_of(size)
+        grid = grid_of(size, args.sweep_b)
         n = grid.size
         points = grid.points()
         work = n * steps
@@ -304,7 +311,7 @@ def main(argv=None) -> int:
               f"{r['standalone32'] / r['standalone']:.2f}x the float64 throughput")
 
     if args.workers:
-        grid = grid_of(max(args.sizes))
+        grid = grid_of(max(args.sizes), args.sweep_b)
         work = grid.size * steps
         print(f"\n## scaling with Dask worker processes ({grid.size:,} points, standalone; "
               "timed on a second run: cluster start and each worker's compile excluded; "

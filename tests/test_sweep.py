@@ -206,25 +206,51 @@ def test_vectorised_runtime_sweep_matches_a_hand_written_euler_loop():
     assert np.abs(brian - ref).max() <= 1
 
 
-@pytest.mark.parametrize("dtype", ["float64", "float32"])
-def test_standalone_engine_matches_runtime_engine(dtype):
-    # one compile per float type (~10-20 s on a fresh machine; reused from the cache after).
+@pytest.mark.parametrize("dtype, axes", [
+    ("float64", {**SMALL, "b": [0.2, 0.26]}),   # every parameter per point (b too)
+    ("float64", SMALL),   # a, b, c, d not swept: one shared value each
+    ("float32", SMALL)], ids=["float64-b swept", "float64", "float32"])
+def test_standalone_engine_matches_runtime_engine(dtype, axes):
+    # one compile per case (~10-20 s on a fresh machine; reused from the cache after).
     # The compiled engine fuses threshold and reset into a state update that advances every
-    # neuron through one input sample's steps per clock tick; the runtime engine is Brian2's
-    # plain NeuronGroup (float64) with its own threshold and reset, one step per tick.
-    grid = Grid(SMALL)
+    # neuron through one input sample's steps per clock tick, four grid points per element
+    # of the group (standalone.LANES); the runtime engine is Brian2's plain NeuronGroup
+    # (float64) with its own threshold and reset, one step per tick.
+    grid = Grid(axes)
     points = grid.points()
-    standalone = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="standalone", dtype=dtype,
-                             group_size=30)(points)["spike_count"]  # 24 points padded to 30 neurons
+    sweep = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="standalone", dtype=dtype)
+    sweep = sweep.for_grid(grid, (grid.size + 6,))   # padded: lanes and elements not full
+    assert sweep.shared == tuple(name for name in ("a", "b", "c", "d") if name not in axes)
+    standalone = sweep(points)["spike_count"]
     runtime = FAST(points)["spike_count"]
     assert np.abs(standalone - runtime).max() <= 1
     assert standalone.sum() > 20
+    if "b" in axes:   # b reaches each point: the two b values give other counts
+        assert not np.array_equal(standalone[points["b"] == 0.2], standalone[points["b"] == 0.26])
     # compiled with one make job per core, not Brian2's unbounded "make -j"
     import os
 
     from brian2 import prefs
     assert prefs.devices.cpp_standalone.extra_make_args_unix == [
         f"-j{len(os.sched_getaffinity(0))}"]
+
+
+def test_lanes_copy_equations_and_statements_with_each_name_suffixed():
+    from snn_antenna.engine.standalone import in_lanes
+
+    text = "dv/dt = k*(v**2 - u + I_held)/ms : 1\nd : 1 (constant)\nv = where(v >= 30, c, v)"
+    lanes = in_lanes(text, {"v", "u", "k", "d", "I_held"}, 2).splitlines()
+    assert lanes == ["dv_0/dt = k_0*(v_0**2 - u_0 + I_held_0)/ms : 1", "d_0 : 1 (constant)",
+                     "v_0 = where(v_0 >= 30, c, v_0)",
+                     "dv_1/dt = k_1*(v_1**2 - u_1 + I_held_1)/ms : 1", "d_1 : 1 (constant)",
+                     "v_1 = where(v_1 >= 30, c, v_1)"]   # c is not a lane's: left alone
+
+
+def test_a_parameter_declared_shared_that_varies_is_refused_before_compiling():
+    points = Grid(SMALL).points()
+    sweep = NeuronSweep(duration_s=0.4, settle_s=0.1, shared=("k",))   # k varies in SMALL
+    with pytest.raises(ValueError, match="k is declared shared"):
+        sweep(points)
 
 
 def test_a_float_type_outside_brian2s_is_refused():

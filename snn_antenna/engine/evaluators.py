@@ -67,6 +67,8 @@ class NeuronSweep:
     dtype: str = "float64"
     force: bool = False
     group_size: int | None = None  # standalone: neurons per compiled group (set by for_grid)
+    shared: tuple[str, ...] = ()   # standalone: parameters the grid does not sweep, one value
+    # for all its points (set by for_grid)
 
     OUTPUTS = {"spike_count": Output("i4", "1", "spikes counted after settle_s"),
                "rate_hz": Output("f8", "Hz", "spike rate after settle_s")}
@@ -113,7 +115,9 @@ class NeuronSweep:
               f"{self.input_rate_hz:g} Hz)")
         check(bool(np.all(values["I"] >= 0)), "axes.I", list(values["I"]),
               "amplitudes >= 0")
-        return dataclasses.replace(self, group_size=int(np.prod(block_shape)))
+        return dataclasses.replace(self, group_size=int(np.prod(block_shape)),
+                                   shared=tuple(name for name in NEURON_AXES
+                                                if name not in grid.dims))
 
     @property
     def bytes_per_point(self) -> int:

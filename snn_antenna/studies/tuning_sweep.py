@@ -58,7 +58,7 @@ def build(spec: dict) -> Plan:
     specs.check_top_level(spec, SECTIONS)
     with specs.section("neuron"):
         neuron = NeuronSweep(**specs.check_section(spec, "neuron", NeuronSweep,
-                                                   exclude=["group_size"]))
+                                                   exclude=["group_size", "shared"]))
     grid = Grid.from_spec(spec.get("axes", {}), NEURON_AXES)
     check("input_hz" in grid.axes and len(grid.axes["input_hz"]) >= 3, "axes.input_hz",
           list(grid.axes.get("input_hz", [])),
