@@ -7,7 +7,9 @@ a naive per-point loop and a numba kernel.
                                                      # the 10^6-point grid, and on 2 Dask workers
 
 Every grid point is one resonator driven by the coder's square wave (``NeuronSweep``), for
-``--duration-s`` at dt 0.1 ms. Measured in one run and printed side by side, in neuron-steps
+``--duration-s`` at dt 0.1 ms. The grids sweep k, I and input_hz (``--sweep-b``: b too, a k/b/I
+tuning grid); the engine keeps what a grid does not sweep as one shared value, the floor reads
+every parameter per point (it keeps its blocks in L1, where that costs nothing). Measured in one run and printed side by side, in neuron-steps
 per second (points × steps / wall time):
 
 - ``standalone`` / ``standalone32``: ``run_sweep`` with the compiled engine in float64 and
