@@ -193,11 +193,12 @@ def test_a_paint_report_counts_from_the_arrival_and_trusts_the_page_clock_only_b
     history.take({"seq": 0, "counts": {}, "xy": (0, np.empty((0, 3))),
                   "coded": (0, np.empty((0, 3))), "events": [],
                   "windows": [(1.0, np.zeros(24), 1.0, 1.0, {}, 100.0, BASE)]})
-    history.painted(1.0, 100.05, now=100.2)
+    history.painted(1.0, 100.05, now=100.2, received_unix_s=100.03)
     history.painted(1.0, 99.0, now=100.2)           # a page clock behind: not below arrival
     history.painted(1.0, 500.0, now=100.2)          # ahead: not after the report came
     history.painted(2.0, 100.1, now=100.2)          # a window never shown: ignored
     assert np.allclose(history.display_delays_ms, [50.0, 0.0, 200.0])
+    assert np.allclose(history.received_delays_ms, [30.0])   # in the page, not drawn yet
     assert history.display_latency()["n"] == 3
 
 
@@ -229,6 +230,36 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     history.take(_frame(1, 0.1))
     update()                                        # column 0.0 not painted yet: waits
     assert len(xy.data["t"]) == 25
+    # The paint report releases the held column at once (the next tick), the column alone.
     history.painted(0.0, time.time(), page=token)
-    update()
-    assert len(xy.data["t"]) == 50 and doc.get_model_by_name("map").data["t_last"] == [0.1]
+    (push,) = (c for c in doc.session_callbacks if c is not callback)
+    push.callback()
+    assert doc.get_model_by_name("map").data["t_last"] == [0.1] and len(xy.data["t"]) == 25
+    history.painted(0.1, time.time(), page=token)   # nothing held back: nothing scheduled
+    assert doc.session_callbacks == [callback]
+    update()                                        # the lines come with the periodic pull
+    assert len(xy.data["t"]) == 50
+
+
+def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monkeypatch):
+    """Samples go in frames every FLUSH_S; a window does not wait for the next one: it goes
+    WINDOW_FLUSH_S after the last frame at the latest (the delay a person sees)."""
+    import types
+
+    from snn_antenna.bridge import view as view_module
+
+    clock = [1000.0]
+    monkeypatch.setattr(view_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
+    live = LiveView(_parts())
+    live.handle(types.SimpleNamespace(counts={"frames": 1}, samples=[(0, 1.0, 2.0)]))
+    clock[0] += view_module.FLUSH_S + 1e-6          # a frame of samples goes
+    live.idle()
+    assert live.published == 1
+    clock[0] += 0.001
+    live.window(0.0, np.ones(24), None, 1.0, 1.0, arrived=1.0)
+    assert live.published == 1                      # 1 ms after a frame: held back...
+    clock[0] += view_module.WINDOW_FLUSH_S + 1e-6
+    live.idle()
+    assert live.published == 2                      # ... WINDOW_FLUSH_S, not FLUSH_S
+    assert live._inbox.get(timeout=5)["seq"] == 0
+    assert len(live._inbox.get(timeout=5)["windows"]) == 1

@@ -59,7 +59,7 @@ def build_page(view, doc) -> None:
     plots = column(antenna, coded, rate_map, sizing_mode="stretch_width")
     # This page's own mode: paused (its plots stop following) and how far back it scrubs.
     mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
-    update, reload = _updater(view, sources, mapper, counters, panels, x_range, mode)
+    update, update_map, reload, waiting = _updater(view, sources, mapper, counters, panels, x_range, mode)
     bar, status = control_widgets(view, mode, reload, x_range)
     sources["map"].js_on_change("data", CustomJS(args={"source": sources["map"],
                                                        "page": mode["page"]},
@@ -69,12 +69,20 @@ def build_page(view, doc) -> None:
     doc.title = "snn-antenna live view"
     update()
     doc.add_periodic_callback(update, PAGE_UPDATE_MS)
-    # New rate-map columns are pushed as they arrive; the periodic pull carries the rest.
-    def update_now() -> None:
-        doc.add_next_tick_callback(update)
 
-    view.column_listeners.add(update_now)
-    doc.on_session_destroyed(lambda _context: view.column_listeners.discard(update_now))
+    # A new rate-map column is pushed as it arrives, alone: a small message, and the browser
+    # redraws the rate map only (the lines, panels and counters come with the periodic pull).
+    def push() -> None:
+        doc.add_next_tick_callback(update_map)
+
+    def painted() -> None:          # columns held back while the browser drew: now
+        if waiting():
+            push()
+
+    view.column_listeners.add(push)
+    view.painted_listeners[mode["page"]] = painted
+    doc.on_session_destroyed(lambda _context: (view.column_listeners.discard(push),
+                                               view.painted_listeners.pop(mode["page"], None)))
 
 
 def _legend_outside(fig) -> None:
@@ -176,12 +184,37 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
                 and view.painted_by.get(mode["page"]) != round(cursor["sent_t"], 6)
                 and time.monotonic() - cursor["sent_at"] < UNPAINTED_WAIT_S)
 
+    def update_map() -> bool:
+        """The rate map's new columns, unless the page is paused or its browser has not
+        drawn the last ones; whether the page follows the stream now."""
+        view.pull()                 # the frames in transit now
+        if mode["paused"] or behind():
+            return False
+        if cursor["windows"] != view.windows.total:
+            cursor["windows"] = view.windows.total
+            end = max(view.t_s, view.history_s)
+            sources["map"].data = image = _rate_image(span(view.windows.rows, end), True)
+            if image["t_last"]:
+                view.sending(image["t_last"][0])
+                cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
+            if mapper.high != view.peak_rate_hz:
+                mapper.high = view.peak_rate_hz
+            if image["t_last"] and image["t_last"][0] + view.window_s > x_range.end:
+                follow()            # the new column in sight, not past the plot's right edge
+        return True
+
+    def follow() -> None:
+        """The plots' time axis up to the window in progress: a column that comes before the
+        next pull is then already in sight, and only the rate map is redrawn for it."""
+        end = max(view.t_s, view.history_s) + view.window_s
+        if x_range.end != end:
+            x_range.start, x_range.end = end - view.history_s, end
+
     def update() -> None:
-        view.pull()                 # the frames in transit now, not at the next drain tick
         html = counters_html(view)
         if html != shown["counters"]:
             shown["counters"] = counters.text = html
-        if mode["paused"] or behind():
+        if not update_map():
             return
         new_xy = view.xy.since(cursor["xy"])
         cursor["xy"] = view.xy.total
@@ -194,15 +227,6 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
             sources["coded"].stream({"t": new_in[:, 0], "signal": new_in[:, 1],
                                      "th": new_in[:, 2], "neg_th": -new_in[:, 2],
                                      "coded": new_in[:, 3]}, rollover=rollover)
-        if cursor["windows"] != view.windows.total:
-            cursor["windows"] = view.windows.total
-            end = max(view.t_s, view.history_s)
-            sources["map"].data = image = _rate_image(span(view.windows.rows, end), True)
-            if image["t_last"]:
-                view.sending(image["t_last"][0])
-                cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
-            if mapper.high != view.peak_rate_hz:
-                mapper.high = view.peak_rate_hz
         marks = contact_marks(view)
         if marks != shown["contacts"]:
             shown["contacts"] = marks
@@ -210,11 +234,9 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         html = panels_html(view) + controls_html(view)
         if html != shown["panels"]:
             shown["panels"] = panels.text = html
-        end = max(view.t_s, view.history_s)
-        if x_range.end != end:
-            x_range.start, x_range.end = end - view.history_s, end
+        follow()
 
-    return update, reload
+    return update, update_map, reload, lambda: cursor["windows"] != view.windows.total
 
 
 def _rate_image(windows: np.ndarray, live: bool) -> dict:

@@ -21,10 +21,11 @@ PAINTED_JS = """
 const d = source.data;
 if (!d.live || !d.live.length || !d.live[0]) { return; }
 const t = d.t_last[0];
+const received = Date.now() / 1000;    // the column reached this page's document
 requestAnimationFrame(() => setTimeout(() => {
   fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
                     body: JSON.stringify({t_s: t, painted_unix_s: Date.now() / 1000,
-                                          page: page})})
+                                          received_unix_s: received, page: page})})
     .catch(() => {});
 }, 0));
 """

@@ -208,8 +208,7 @@ class LiveView:
         self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms, decided, arrived,
                               window_s or self.config.window_s))
         self._note(event)
-        if time.monotonic() - self._flushed >= WINDOW_FLUSH_S:
-            self.flush()
+        self._due()
 
     def applied(self, event: dict) -> None:
         """A control change the pipeline applied (bridge/controls.py): shown on the page."""
@@ -231,7 +230,8 @@ class LiveView:
             self._events.append((kind, what if kind == "onset" else what.as_dict()))
 
     def _due(self) -> None:
-        if time.monotonic() - self._flushed >= FLUSH_S:
+        since = time.monotonic() - self._flushed
+        if since >= FLUSH_S or (self._windows and since >= WINDOW_FLUSH_S):
             self.flush()
 
     def flush(self) -> None:

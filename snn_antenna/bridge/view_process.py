@@ -23,6 +23,7 @@ import math
 import os
 import queue
 import signal
+import threading
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -33,8 +34,9 @@ import numpy as np
 from ..errors import SpecError
 from .page import build_page
 
-DRAIN_MS = 10                   # this process empties the hand-off (a new column then goes
-                                # to the pages at once: ViewHistory.column_listeners)
+DRAIN_MS = 50                   # this process checks the pipeline's stop message (frames
+# need no polling: a thread waits on the hand-off and passes each frame to the server's loop at
+# once, ``_receive``; a new column then goes to the pages: ViewHistory.column_listeners)
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
 LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
 DELAYS_KEPT = 2000               # display delays kept for the p95
@@ -108,6 +110,11 @@ class ViewHistory:
         # websocket and the browser drawing): where the time goes.
         self.sent: dict[float, float] = {}          # window start → first sent to a page
         self.server_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
+        # ... the part until this process took the window from the pipeline's hand-off, and
+        # the part until the page's document had it (the rest: the browser drawing)
+        self.taken_at: dict[float, float] = {}      # window start → taken here
+        self.handoff_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
+        self.received_delays_ms: deque = deque(maxlen=DELAYS_KEPT)
         self.painted_by: dict[str, float] = {}      # page → the latest column it painted
         self.controls: list[dict] = []              # changes the pipeline applied
         self.requested: list[dict] = []             # asked from a page, not applied yet
@@ -125,6 +132,9 @@ class ViewHistory:
         # Each open page's "update me now" (bridge/page.py): called when new rate-map columns
         # arrive, so a column goes out on arrival instead of at the page's next periodic pull.
         self.column_listeners: set = set()
+        # ... and each page's own, called when that page reports it painted: a page held back
+        # until its browser drew the last column (page.py) goes on at once, not at its next pull.
+        self.painted_listeners: dict = {}
         self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen
@@ -175,10 +185,12 @@ class ViewHistory:
             self.windows.add(np.r_[t_s, width_s, rates][None, :])
             if arrived is not None:
                 self.arrivals[round(float(t_s), 6)] = arrived
+                self.taken_at[round(float(t_s), 6)] = time.time()
                 while len(self.arrivals) > self.windows.capacity:
                     oldest = next(iter(self.arrivals))
                     del self.arrivals[oldest]
                     self.sent.pop(oldest, None)
+                    self.taken_at.pop(oldest, None)
             self.peak_rate_hz = max(self.peak_rate_hz, float(rates.max()))
             self.realtime_factor = rtf if rtf is not None and np.isfinite(rtf) else None
             self.latency_ms = latency_ms
@@ -215,35 +227,56 @@ class ViewHistory:
         return asked
 
     def painted(self, t_s: float, painted_unix_s: float, now: float | None = None,
-                page: str | None = None) -> None:
+                page: str | None = None, received_unix_s: float | None = None) -> None:
         """A page painted the rate-map column of the window starting at ``t_s`` (its clock):
-        the delay from the arrival of that window's last sample. The page's clock is
+        the delay from the arrival of that window's last sample (``received_unix_s``: when
+        the column reached the page's document, before drawing). The page's clock is
         trusted only between arrival and now (this host's clock)."""
         if page is not None and len(self.painted_by) < 1000:
             self.painted_by[page] = round(float(t_s), 6)
+            if page in self.painted_listeners:
+                self.painted_listeners[page]()
         arrived = self.arrivals.get(round(float(t_s), 6))
         if arrived is None:
             return
         now = time.time() if now is None else now
-        painted = min(max(float(painted_unix_s), arrived), now) \
-            if math.isfinite(painted_unix_s) else now
+
+        def on_this_clock(page_s) -> float:
+            return min(max(float(page_s), arrived), now) if math.isfinite(page_s) else now
+
+        painted = on_this_clock(painted_unix_s)
         self.display_delays_ms.append((painted - arrived) * 1e3)
+        if received_unix_s is not None:
+            self.received_delays_ms.append((min(on_this_clock(received_unix_s), painted)
+                                            - arrived) * 1e3)
         sent = self.sent.get(round(float(t_s), 6))
         if sent is not None:
             self.server_delays_ms.append((sent - arrived) * 1e3)
+        taken = self.taken_at.get(round(float(t_s), 6))
+        if taken is not None:
+            self.handoff_delays_ms.append((taken - arrived) * 1e3)
 
     def sending(self, t_s: float) -> None:
         """A page's update carries the rate-map column of the window starting at ``t_s``."""
         self.sent.setdefault(round(float(t_s), 6), time.time())
 
     def display_latency(self) -> dict:
-        delays, server = np.asarray(self.display_delays_ms), np.asarray(self.server_delays_ms)
+        delays = np.asarray(self.display_delays_ms)
         if not len(delays):
-            return {"last": None, "median": None, "p95": None, "n": 0, "sent_p95": None}
+            return {"last": None, "median": None, "p95": None, "n": 0, "sent_p95": None,
+                    "taken_p95": None, "received_p95": None}
+
+        def p95(parts) -> float | None:
+            return round(float(np.percentile(parts, 95)), 2) if len(parts) else None
+
         return {"last": round(float(delays[-1]), 2), "median": round(float(np.median(delays)), 2),
-                "p95": round(float(np.percentile(delays, 95)), 2), "n": int(len(delays)),
+                "p95": p95(delays), "n": int(len(delays)),
                 # arrival → the page's update leaving this process (the rest: websocket, paint)
-                "sent_p95": round(float(np.percentile(server, 95)), 2) if len(server) else None}
+                "sent_p95": p95(self.server_delays_ms),
+                # arrival → taken by this process from the pipeline's hand-off
+                "taken_p95": p95(self.handoff_delays_ms),
+                # arrival → in the page's document (the rest: the browser drawing it)
+                "received_p95": p95(self.received_delays_ms)}
 
     def ended(self, published: int) -> None:
         """The pipeline published ``published`` frames in all: those never taken are dropped."""
@@ -325,6 +358,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     asyncio.set_event_loop(asyncio.new_event_loop())
     loop = IOLoop.current()
     history = ViewHistory(config)
+    inbox = _receive(inbox, loop, history)
     history.requests, history.inbox = requests, inbox
     try:
         sockets, port = bind_sockets(config.host, config.port)
@@ -376,6 +410,26 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     loop.close(all_fds=True)
 
 
+def _receive(handoff, loop, history) -> queue.Queue:
+    """A thread that waits on the pipeline's hand-off and passes each frame to the server's
+    loop as it comes (``IOLoop.add_callback`` is the one thread-safe call): polling it every
+    few ms would add up to that much to every column's delay. Returns the queue this process
+    reads the frames from, in the order they came."""
+    frames: queue.Queue = queue.Queue()
+
+    def wait() -> None:
+        while True:
+            try:
+                frame = handoff.get()
+            except (EOFError, OSError, ValueError):     # the pipeline's end of it closed
+                return
+            frames.put(frame)
+            loop.add_callback(history.drain, frames)
+
+    threading.Thread(target=wait, name="view-handoff", daemon=True).start()
+    return frames
+
+
 def _handlers() -> dict:
     """``/state.json`` (GET), and the page's POSTs: ``/control`` (a change of Th or the
     window), ``/painted`` (when a page painted a window's column), ``/save`` (the view's PNG:
@@ -412,9 +466,12 @@ def _handlers() -> dict:
     class Painted(Base):
         def post(self) -> None:
             try:
-                report = json.loads(self.request.body[:200])
+                report = json.loads(self.request.body[:300])
+                received = report.get("received_unix_s")
                 self.history.painted(float(report["t_s"]), float(report["painted_unix_s"]),
-                                     page=str(report.get("page"))[:40])
+                                     page=str(report.get("page"))[:40],
+                                     received_unix_s=None if received is None
+                                     else float(received))
             except (ValueError, KeyError, TypeError):
                 self.reply(400, {"error": "expected {t_s, painted_unix_s}"})
                 return
