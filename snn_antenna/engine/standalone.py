@@ -278,6 +278,41 @@ def run_project(project: dict, run_args: dict) -> None:
 LANES = 4
 
 
+def lane_model(one: str, shared=()) -> tuple[str, set]:
+    """A model's equations ``one`` (written for one point) with ``LANES`` points per element:
+    each name once per lane (``in_lanes``), except ``shared`` (declared in ``one``: one value
+    for every point, kept once as a shared constant) and what ``one`` declares shared. Returns
+    the equations and the names that have lanes."""
+    from brian2 import Equations
+
+    declared = Equations(one)
+    once = {name for name in declared.names if "shared" in declared[name].flags}
+    laned, kept = [], []
+    for line in one.splitlines():
+        name = line.split(":")[0].strip()
+        if name in once:
+            kept.append(line.strip())
+        elif name not in shared:
+            laned.append(line)
+    names = set(declared.names) - once - set(shared)
+    return "\n".join([in_lanes("\n".join(laned), names), *kept,
+                      *(f"{name} : 1 (shared, constant)" for name in sorted(shared))]), names
+
+
+def lane_points(values: np.ndarray, elements: int) -> np.ndarray:
+    """Per-point ``values`` as (LANES, elements): point i in lane i // elements, element
+    i % elements; a short last lane padded with the first point."""
+    values = np.asarray(values)
+    pad = elements * LANES - len(values)
+    return np.r_[values, np.repeat(values[:1], pad)].reshape(LANES, elements)
+
+
+def point_values(group, name: str, n: int) -> np.ndarray:
+    """A laned variable ``name`` of ``group``, point by point (the first ``n``)."""
+    return np.concatenate([np.asarray(getattr(group, f"{name}_{lane}")[:])
+                           for lane in range(LANES)])[:n]
+
+
 def in_lanes(text: str, names, lanes: int = LANES) -> str:
     """``text`` (equations or statements) once per lane, lane after lane, with each of
     ``names`` suffixed by its lane: ``v`` -> ``v_0``, ``dv/dt`` -> ``dv_0/dt``."""
@@ -310,14 +345,11 @@ def _standalone_project(sweep, elements: int):
         return _PROJECT
 
     def build():
-        one = (neurons.equations(sweep.preset, "I_held", SQUARE_INPUT_VARIABLES)
-               .replace("v**2", "square(v)"))
-        one = "\n".join(line for line in one.splitlines()
-                        if line.split(":")[0].strip() not in shared)
-        names = set(b2.Equations(one).names) - set(shared)
+        model, names = lane_model(neurons.equations(sweep.preset, "I_held",
+                                                    SQUARE_INPUT_VARIABLES)
+                                  .replace("v**2", "square(v)"), shared)
         group = b2.NeuronGroup(
-            elements, in_lanes(one, names) + "".join(f"\n{name} : 1 (shared, constant)"
-                                                     for name in shared),
+            elements, model,
             method=FusedUpdater(sweep.method, steps, in_lanes(f"I_held = {SQUARE_INPUT}", names),
                                 in_lanes(FUSED_RESET, names),
                                 held=[f"I_held_{lane}" for lane in range(LANES)]),
@@ -373,17 +405,14 @@ def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
     elements = -(-size // LANES)
     group = _standalone_project(sweep, elements)["group"]
     v0, u0 = sweep.initial_state(p)
-    # point i runs in lane i // elements of element i % elements; a short last chunk
-    # repeats its first point instead of recompiling
-    pad = elements * LANES - n
+    # a short last chunk repeats its first point instead of recompiling (lane_points)
     values = {**{name: p[swept] for name, swept in POINT_PARAMETERS.items()}, "v": v0, "u": u0}
     run_args = {}
     for name, arr in values.items():
         if name in _PROJECT["shared"]:
             run_args[getattr(group, name)] = arr[0]
             continue
-        for lane, column in enumerate(np.r_[arr, np.repeat(arr[:1], pad)]
-                                      .reshape(LANES, elements)):
+        for lane, column in enumerate(lane_points(arr, elements)):
             run_args[getattr(group, f"{name}_{lane}")] = column
     with warnings.catch_warnings():
         # Brian2's after-run check compares float32 arrays with 1e50, which float32 cannot
@@ -391,11 +420,7 @@ def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
         warnings.filterwarnings("ignore", "overflow encountered in cast", RuntimeWarning)
         run_project(_PROJECT, run_args)
 
-    def points(name: str) -> np.ndarray:
-        return np.concatenate([np.asarray(getattr(group, f"{name}_{lane}")[:])
-                               for lane in range(LANES)])[:n]
-
-    v, u = points("v"), points("u")
+    v, u = point_values(group, "v", n), point_values(group, "u", n)
     ok = np.isfinite(v) & np.isfinite(u) & (np.abs(v) < neurons.RUNAWAY_LIMIT) \
         & (np.abs(u) < neurons.RUNAWAY_LIMIT)
     if not ok.all():
@@ -404,4 +429,4 @@ def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
             neuron=i, params={k: float(values[k][i]) for k in ("k", "a", "b", "c", "d")},
             dt_ms=sweep.dt_ms, method=sweep.method, t_ms=sweep.duration_s * 1000,
             safe_dt_ms=neurons.max_stable_dt_ms(values["k"][i], sweep.method))
-    return np.rint(points("spike_count")).astype(np.int64)
+    return np.rint(point_values(group, "spike_count", n)).astype(np.int64)
