@@ -88,11 +88,13 @@ class CPG:
 
     # -- Brian2 -----------------------------------------------------------------------------
     def objects(self, speed_expr: str = "speed_cm_s", hold_expr: str = "0",
-                namespace: dict | None = None, extra: str = "speed_cm_s : 1 (shared)"):
+                namespace: dict | None = None, extra: str = "speed_cm_s : 1 (shared)",
+                clock=None):
         """The ring's NeuronGroup and Synapses (named ``cpg`` and ``cpg_ring``).
 
         ``speed_expr`` is the speed command (e.g. a TimedArray ``speed(t)`` or a shared
         variable written by the closed loop); ``hold_expr`` an inhibitory hold (perturbation).
+        ``clock``: a Brian2 clock of step ``dt_ms`` to share (by default one of the ring's own).
         """
         import brian2 as b2
 
@@ -110,13 +112,15 @@ class CPG:
         token : 1
         {extra}
         """
+        if clock is None:
+            clock = b2.Clock(dt=self.dt_ms * b2.ms, name="cpg_clock*")
         ring = b2.NeuronGroup(self.n_neurons, eqs, threshold="v >= 1",
                               reset="v = 0; token = 0; y += 1", method="euler",
-                              namespace=ns, dt=self.dt_ms * b2.ms, name="cpg")
+                              namespace=ns, clock=clock, name="cpg")
         ring.token = 0
         ring.token[0] = 1
         pass_token = b2.Synapses(ring, ring, on_pre="token_post = int(j == (i + 1) % n_ring)",
-                                 namespace=ns, dt=self.dt_ms * b2.ms, name="cpg_ring")
+                                 namespace=ns, clock=clock, name="cpg_ring")
         pass_token.connect()
         return ring, pass_token
 

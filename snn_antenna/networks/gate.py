@@ -123,14 +123,16 @@ class SpeedGate:
     def objects(self, n_copies: int = 1, speed_expr: str = "speed_cm_s",
                 extra: str = "speed_cm_s : 1 (shared)", weights=None,
                 namespace: dict | None = None, teacher_expr: str = "0*Hz",
-                learning_expr: str = "0", learning: bool = True):
+                learning_expr: str = "0", learning: bool = True, clock=None):
         """The gate's Brian2 objects: speed population, read-out, plastic synapses, teacher.
 
         ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
         what it refers to: by default a shared variable the closed loop writes). Returned as
         a dict of named objects (``speed_population``, ``readout``, ``plastic``, ``teacher``,
         ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, without
-        the teacher and its synapses (they act only while the gate learns).
+        the teacher and its synapses (they act only while the gate learns). ``clock``: a Brian2
+        clock of step ``dt_ms`` to share (by default one of its own for all the gate's objects:
+        Brian2's loop pays for every clock at every step of any).
         """
         import brian2 as b2
 
@@ -140,7 +142,8 @@ class SpeedGate:
               "speed_offset": self.speed_offset, "sigma": self.sigma_cm_s,
               **(namespace or {})}
         class1 = neurons.PRESETS["class1"]
-        dt = self.dt_ms * b2.ms
+        if clock is None:
+            clock = b2.Clock(dt=self.dt_ms * b2.ms, name="gate_clock*")
         speed_pop = b2.NeuronGroup(
             n_in * n_copies,
             neurons.equations(
@@ -149,8 +152,8 @@ class SpeedGate:
                 "/ (2*sigma**2))",
                 f"preferred : 1 (constant)\ncopy : integer (constant)\n{extra}"),
             threshold=neurons.THRESHOLD, reset=neurons.reset(),
-            method="euler", namespace=ns, dt=dt, name="speed_population")
-        readout = self._readout_group(n_copies, ns, dt)
+            method="euler", namespace=ns, clock=clock, name="speed_population")
+        readout = self._readout_group(n_copies, ns, clock)
         for group in (speed_pop, readout):
             group.k = 1.0
             group.a, group.b, group.c, group.d = class1.a, class1.b, class1.c, class1.d
@@ -163,7 +166,7 @@ class SpeedGate:
             speed_pop, readout, model="w : 1",
             on_pre=f"""I_syn_post += w
             w = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - r_out_post), -{self.w_max!r}, {self.w_max!r})""",
-            namespace=ns, dt=dt, name="plastic")
+            namespace=ns, clock=clock, name="plastic")
         plastic.connect(i=np.arange(n_in * n_copies), j=np.repeat(np.arange(n_copies), n_in))
         plastic.w = np.tile(np.zeros(n_in) if weights is None else weights, n_copies)
         recall = {"speed_population": speed_pop, "readout": readout, "plastic": plastic}
@@ -173,14 +176,14 @@ class SpeedGate:
         # counting noise of a Poisson train.
         teacher = b2.NeuronGroup(n_copies, f"dphase/dt = {teacher_expr} : 1",
                                  threshold="phase >= 1", reset="phase -= 1", method="euler",
-                                 namespace=ns, dt=dt, name="teacher")
+                                 namespace=ns, clock=clock, name="teacher")
         teaching = b2.Synapses(teacher, readout,
                                on_pre=f"r_teacher_post += {1 / self.tau_trace_s!r}",
-                               dt=dt, name="teaching")
+                               clock=clock, name="teaching")
         teaching.connect(j="i")
         return {**recall, "teacher": teacher, "teaching": teaching}
 
-    def _readout_group(self, n_copies: int, namespace: dict, dt):
+    def _readout_group(self, n_copies: int, namespace: dict, clock):
         """The read-out neuron of each copy, with the synaptic current and the rate traces
         the learning rule (r_out, r_teacher) and the online Th (r_read) use."""
         import brian2 as b2
@@ -196,7 +199,7 @@ class SpeedGate:
             threshold=neurons.THRESHOLD,
             reset=neurons.reset(f"r_out += {1 / self.tau_trace_s!r}",
                                 f"r_read += {1 / self.tau_read_s!r}"),
-            method="euler", namespace=namespace, dt=dt, name="readout")
+            method="euler", namespace=namespace, clock=clock, name="readout")
 
     def _network(self, speed_cm_s: np.ndarray, teacher_hz: np.ndarray, learning: np.ndarray,
                  step_s: float, weights: np.ndarray, record_read_every_s: float | None = None):
