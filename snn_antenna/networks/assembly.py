@@ -107,12 +107,13 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
     return Assembly(b2.Network(*objects.values()), objects, configured)
 
 
-def part_objects(configured: dict, resonators=None, learning: bool = True) -> dict:
+def part_objects(configured: dict, resonators=None) -> dict:
     """The Brian2 objects of the configured parts other than the array, by name, wired to the
     array's group ``resonators``: ``build`` here, and the live stream, whose array is built by
     ``ResonatorArray.stream`` (bridge/online.py). The gate and CPG read the shared
-    ``speed_cm_s`` the caller writes; the CPG also ``hold_input`` (the freeze reflex).
-    ``learning=False``: the gate recalls only (``SpeedGate.objects``: no teacher).
+    ``speed_cm_s`` the caller writes; the CPG also ``hold_input`` (the freeze reflex). The gate
+    recalls only (``SpeedGate.objects(learning=False)``): it learns in ``SpeedGate.fit``, and
+    its weights (``weights_``, zero unfitted) go into the network.
 
     Parts with the same step share one Brian2 clock (the array's, where theirs is the same):
     Brian2's loop looks at every clock at every step of any, so in runtime mode each further
@@ -122,8 +123,8 @@ def part_objects(configured: dict, resonators=None, learning: bool = True) -> di
     objects = {}
     if "gate" in configured:
         gate = configured["gate"]
-        objects.update(gate.objects(weights=getattr(gate, "weights_", None),
-                                    learning=learning, clock=clock(gate.dt_ms)))
+        objects.update(gate.objects(weights=getattr(gate, "weights_", None), learning=False,
+                                    clock=clock(gate.dt_ms)))
     if "cpg" in configured:
         cpg = configured["cpg"]
         ring, syn = cpg.objects(

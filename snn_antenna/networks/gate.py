@@ -129,10 +129,11 @@ class SpeedGate:
         ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
         what it refers to: by default a shared variable the closed loop writes). Returned as
         a dict of named objects (``speed_population``, ``readout``, ``plastic``, ``teacher``,
-        ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, without
-        the teacher and its synapses (they act only while the gate learns). ``clock``: a Brian2
-        clock of step ``dt_ms`` to share (by default one of its own for all the gate's objects:
-        Brian2's loop pays for every clock at every step of any).
+        ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, reduced
+        to what recall uses (no teacher, no learning traces, synapses that only transmit; the
+        same recall, with fewer Brian2 calls per step). ``clock``: a Brian2 clock of step
+        ``dt_ms`` to share (by default one of its own for all the gate's objects: Brian2's loop
+        pays for every clock at every step of any).
         """
         import brian2 as b2
 
@@ -153,7 +154,7 @@ class SpeedGate:
                 f"preferred : 1 (constant)\ncopy : integer (constant)\n{extra}"),
             threshold=neurons.THRESHOLD, reset=neurons.reset(),
             method="euler", namespace=ns, clock=clock, name="speed_population")
-        readout = self._readout_group(n_copies, ns, clock)
+        readout = self._readout_group(n_copies, ns, clock, learning)
         for group in (speed_pop, readout):
             group.k = 1.0
             group.a, group.b, group.c, group.d = class1.a, class1.b, class1.c, class1.d
@@ -162,11 +163,10 @@ class SpeedGate:
         readout.bias = self.readout_bias
         speed_pop.v, speed_pop.u = neurons.resting_state("class1")
         readout.v, readout.u = neurons.resting_state("class1", current=self.readout_bias)
-        plastic = b2.Synapses(
-            speed_pop, readout, model="w : 1",
-            on_pre=f"""I_syn_post += w
-            w = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - r_out_post), -{self.w_max!r}, {self.w_max!r})""",
-            namespace=ns, clock=clock, name="plastic")
+        learn = (f"\nw = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - "
+                 f"r_out_post), -{self.w_max!r}, {self.w_max!r})") if learning else ""
+        plastic = b2.Synapses(speed_pop, readout, model="w : 1", on_pre="I_syn_post += w" + learn,
+                              namespace=ns, clock=clock, name="plastic")
         plastic.connect(i=np.arange(n_in * n_copies), j=np.repeat(np.arange(n_copies), n_in))
         plastic.w = np.tile(np.zeros(n_in) if weights is None else weights, n_copies)
         recall = {"speed_population": speed_pop, "readout": readout, "plastic": plastic}
@@ -183,21 +183,23 @@ class SpeedGate:
         teaching.connect(j="i")
         return {**recall, "teacher": teacher, "teaching": teaching}
 
-    def _readout_group(self, n_copies: int, namespace: dict, clock):
-        """The read-out neuron of each copy, with the synaptic current and the rate traces
-        the learning rule (r_out, r_teacher) and the online Th (r_read) use."""
+    def _readout_group(self, n_copies: int, namespace: dict, clock, learning: bool):
+        """The read-out neuron of each copy, with the synaptic current, the rate trace the
+        online Th reads (r_read) and, when it learns, those of the learning rule (r_out,
+        r_teacher)."""
         import brian2 as b2
 
+        traces = """
+            dr_out/dt = -r_out / tau_trace : 1
+            dr_teacher/dt = -r_teacher / tau_trace : 1""" if learning else ""
         return b2.NeuronGroup(
             n_copies,
-            neurons.equations("class1", "bias + I_syn", """
-            dI_syn/dt = -I_syn / tau_syn : 1
-            dr_out/dt = -r_out / tau_trace : 1
-            dr_teacher/dt = -r_teacher / tau_trace : 1
+            neurons.equations("class1", "bias + I_syn", f"""
+            dI_syn/dt = -I_syn / tau_syn : 1{traces}
             dr_read/dt = -r_read / tau_read : 1
             bias : 1 (constant)"""),
             threshold=neurons.THRESHOLD,
-            reset=neurons.reset(f"r_out += {1 / self.tau_trace_s!r}",
+            reset=neurons.reset(*([f"r_out += {1 / self.tau_trace_s!r}"] if learning else []),
                                 f"r_read += {1 / self.tau_read_s!r}"),
             method="euler", namespace=namespace, clock=clock, name="readout")
 
@@ -221,8 +223,10 @@ class SpeedGate:
             "teacher_rate": b2.TimedArray(np.asarray(teacher_hz, float) * b2.Hz, dt=step,
                                           name="teacher_rate"),
             "learning": b2.TimedArray(np.asarray(learning, float), dt=step, name="learning")}
+        # Recall alone (predict, thresholds) runs the recall-only gate: the same recall.
         parts = self.objects(n_copies, "speed_command(t, copy)", "", weights, namespace,
-                             teacher_expr="teacher_rate(t)", learning_expr="learning(t)")
+                             teacher_expr="teacher_rate(t)", learning_expr="learning(t)",
+                             learning=bool(np.any(learning)))
         spikes = b2.SpikeMonitor(parts["readout"], name="readout_spikes")
         objects = [*parts.values(), spikes,
                    neurons.instability_guard(parts["speed_population"], "class1", self.dt_ms,
