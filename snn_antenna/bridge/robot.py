@@ -34,6 +34,7 @@ import numpy as np
 from ..errors import SpecError
 from ..networks.assembly import part_objects
 from ..networks.control import CONTROL_UNITS
+from ..networks.gate import read_trace
 from ..readout.closed_loop import steer
 from ..sources.antenna import SPEED_LIMIT_CM_S
 
@@ -143,8 +144,7 @@ class LiveRobot:
         self._counts = (objects["control"].variables["spike_count"].get_value()
                         if "control" in objects else None)
         self._seen = dict.fromkeys(CONTROL_UNITS, 0)
-        self._r_read = (objects["readout"].variables["r_read"].get_value()
-                        if "readout" in objects else None)
+        self._r_read = read_trace(objects) if "readout" in objects else None
         self._ring = objects["cpg"].variables["x"].get_value() if "cpg" in objects else None
         self.speed = steer(objects, self.commanded, moving=True)
         self.recalled_th = self._recall()

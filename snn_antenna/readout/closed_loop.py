@@ -26,6 +26,7 @@ import numpy as np
 from ..errors import check
 from ..networks.assembly import build as build_network
 from ..networks.control import CONTROL_UNITS
+from ..networks.gate import read_trace
 from ..networks.resonators import rate_map
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna
@@ -144,7 +145,7 @@ def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna,
     steps = [step for _, step in parts.chain.steps]
     n_chunk = int(round(loop.chunk_ms * rate_hz / 1000.0))
     i_ext = obj["resonators"].variables["I_ext"].get_value()
-    r_read = obj["readout"].variables["r_read"].get_value()
+    r_read = read_trace(obj)
     x_ring = obj["cpg"].variables["x"].get_value()
     unit_spikes = obj["control"].variables["spike_count"].get_value()   # the units count
     motor = CONTROL_UNITS.index("motor")
