@@ -125,6 +125,32 @@ def test_a_replay_of_the_journal_reproduces_the_run(driven, recording, robot_par
     assert decided_plain != decided
 
 
+def test_the_parts_run_on_one_clock_with_no_monitor(robot_parts):
+    """In Brian2's runtime mode every object is a Python call per step of its clock, and the
+    loop looks at every clock at every step: the robot's parts share one clock of their step
+    (the array's where it is the same: the control layer's synapses step with the resonators
+    whose spikes they carry), keep no monitor (the units count their own spikes), and the
+    gate carries no learning (it learned before the stream)."""
+    import copy
+
+    import brian2 as b2
+
+    parts = copy.deepcopy(robot_parts)
+    b2.start_scope()
+    group = parts.array.build_group("I_ext", "I_ext : 1", {})
+    objects = parts.robot.build(group)
+    every = [*objects, *(inner for obj in objects for inner in obj.contained_objects)]
+    steps = {}
+    for obj in every:
+        steps.setdefault(float(obj.clock.dt / b2.ms), set()).add(obj.clock)
+    assert {dt: len(clocks) for dt, clocks in steps.items()} == {1.0: 1, 0.5: 1}
+    assert steps[0.5] == {group.clock}
+    assert not [obj for obj in every if isinstance(obj, (b2.SpikeMonitor, b2.StateMonitor))]
+    names = {obj.name for obj in objects}
+    assert {"speed_population", "readout", "plastic", "control"} <= names
+    assert not names & {"teacher", "teaching"}
+
+
 def test_a_composed_spec_is_refused_live_only_where_a_part_cannot_run(recording, tmp_path):
     with pytest.raises(SpecError, match=r"network.parts = 'material'.*fit offline"):
         build_online(NETWORK.parent / "bench_material.toml")

@@ -33,6 +33,8 @@ import numpy as np
 
 from ..errors import SpecError
 from ..networks.assembly import part_objects
+from ..networks.control import CONTROL_UNITS
+from ..networks.gate import read_trace
 from ..readout.closed_loop import steer
 from ..sources.antenna import SPEED_LIMIT_CM_S
 
@@ -127,33 +129,26 @@ class LiveRobot:
         self.th_source = "gate" if "gate" in self.configured else None
         self.recalled_th: float | None = None
         self.decided: dict = {}
-        self._seen = {}
+        self._counts, self._seen = None, {}
 
     # ---- in the stream's network -----------------------------------------------------------
     def build(self, group) -> list:
         """The parts' Brian2 objects wired to the array's ``group`` (a fresh run: state reset);
         ``ResonatorArray.stream`` runs them in its network."""
-        import brian2 as b2
-
         self.reset()
-        objects = part_objects(self.configured, group, learning=False)     # recall only
-        monitors = {}
-        for unit in ("contact", "motor"):
-            if f"control_{unit}" in objects:
-                monitors[unit] = b2.SpikeMonitor(objects[f"control_{unit}"], record=False,
-                                                 name=f"live_{unit}_spikes")
+        objects = part_objects(self.configured, group)
         if "readout" in objects:
             objects["readout"].r_read = self._settled_rate
         self.objects = objects
-        self._counts = {unit: mon.variables["count"].get_value()
-                        for unit, mon in monitors.items()}
-        self._seen = {unit: 0 for unit in monitors}
-        self._r_read = (objects["readout"].variables["r_read"].get_value()
-                        if "readout" in objects else None)
+        # The control units count their own spikes (no monitor: one Python call less per step).
+        self._counts = (objects["control"].variables["spike_count"].get_value()
+                        if "control" in objects else None)
+        self._seen = dict.fromkeys(CONTROL_UNITS, 0)
+        self._r_read = read_trace(objects) if "readout" in objects else None
         self._ring = objects["cpg"].variables["x"].get_value() if "cpg" in objects else None
         self.speed = steer(objects, self.commanded, moving=True)
         self.recalled_th = self._recall()
-        return [*objects.values(), *monitors.values()]
+        return list(objects.values())
 
     def _recall(self) -> float | None:
         if self._r_read is None:
@@ -172,9 +167,9 @@ class LiveRobot:
         """A window of the network ended at ``end_s`` (stream time): the stop signal, the
         gate's Th for the next window, the CPG's command, all read from the parts."""
         spikes = {}
-        for unit, count in self._counts.items():
-            total = int(count[0])
-            spikes[unit], self._seen[unit] = total - self._seen[unit], total
+        if self._counts is not None:
+            for unit, total in zip(CONTROL_UNITS, self._counts.tolist()):
+                spikes[unit], self._seen[unit] = total - self._seen[unit], total
         if spikes.get("motor") and self.stopped_since is None:
             self.stopped_since = round(float(end_s), 6)
             self.speed = steer(self.objects, self.commanded, moving=False)

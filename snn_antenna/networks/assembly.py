@@ -107,24 +107,48 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
     return Assembly(b2.Network(*objects.values()), objects, configured)
 
 
-def part_objects(configured: dict, resonators=None, learning: bool = True) -> dict:
+def part_objects(configured: dict, resonators=None) -> dict:
     """The Brian2 objects of the configured parts other than the array, by name, wired to the
     array's group ``resonators``: ``build`` here, and the live stream, whose array is built by
     ``ResonatorArray.stream`` (bridge/online.py). The gate and CPG read the shared
-    ``speed_cm_s`` the caller writes; the CPG also ``hold_input`` (the freeze reflex).
-    ``learning=False``: the gate recalls only (``SpeedGate.objects``: no teacher)."""
+    ``speed_cm_s`` the caller writes; the CPG also ``hold_input`` (the freeze reflex). The gate
+    recalls only (``SpeedGate.objects(learning=False)``): it learns in ``SpeedGate.fit``, and
+    its weights (``weights_``, zero unfitted) go into the network.
+
+    Parts with the same step share one Brian2 clock (the array's, where theirs is the same):
+    Brian2's loop looks at every clock at every step of any, so in runtime mode each further
+    clock costs a Python call per step (the live robot network had ten clocks for two step
+    sizes)."""
+    clock = _clocks(resonators, configured.get("resonators"))
     objects = {}
     if "gate" in configured:
         gate = configured["gate"]
-        objects.update(gate.objects(weights=getattr(gate, "weights_", None),
-                                    learning=learning))
+        objects.update(gate.objects(weights=getattr(gate, "weights_", None), learning=False,
+                                    clock=clock(gate.dt_ms)))
     if "cpg" in configured:
-        ring, syn = configured["cpg"].objects(
-            hold_expr="hold_input", extra="speed_cm_s : 1 (shared)\nhold_input : 1 (shared)")
+        cpg = configured["cpg"]
+        ring, syn = cpg.objects(
+            hold_expr="hold_input", extra="speed_cm_s : 1 (shared)\nhold_input : 1 (shared)",
+            clock=clock(cpg.dt_ms))
         objects.update({"cpg": ring, "cpg_ring": syn})
     if "control" in configured:
-        objects.update(configured["control"].objects(resonators,
-                                                     configured["resonators"].neuron_hz))
+        control = configured["control"]
+        objects.update(control.objects(resonators, configured["resonators"].neuron_hz,
+                                       clock=clock(control.dt_ms)))
     if "material" in configured:
         objects.update(configured["material"].objects(resonators))
     return objects
+
+
+def _clocks(resonators, array):
+    """``clock(dt_ms)``: one Brian2 clock per step size, the array's group's own for its step."""
+    import brian2 as b2
+
+    made = {} if resonators is None else {float(array.dt_ms): resonators.clock}
+
+    def clock(dt_ms: float):
+        if float(dt_ms) not in made:
+            made[float(dt_ms)] = b2.Clock(dt=float(dt_ms) * b2.ms, name="parts_clock*")
+        return made[float(dt_ms)]
+
+    return clock

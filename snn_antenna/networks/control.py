@@ -45,6 +45,8 @@ from .resonators import SELF_MOTION_BAND_HZ, tuned_above
 # window by window as the read-out does, and long enough for the spikes of several resonators
 # to add up.
 CLASS1_TAU_SYN_MS = 20.0
+# The control layer's units, in the order of its group's neurons.
+CONTROL_UNITS = ("contact", "motor")
 
 
 @dataclass
@@ -63,41 +65,49 @@ class ControlLayer:
             check(is_number(v) and v > 0, name, v, "a finite value > 0")
         bounds.pair("motion_band_hz", self.motion_band_hz, unit=" Hz")
 
-    def objects(self, resonators, neuron_hz: np.ndarray) -> dict:
-        """Contact and motor units wired to a resonator group (``resonators``)."""
+    def objects(self, resonators, neuron_hz: np.ndarray, clock=None) -> dict:
+        """Contact and motor units wired to a resonator group (``resonators``). ``clock``: a
+        Brian2 clock of step ``dt_ms`` to share (by default one of the layer's own).
+
+        Both units are one two-neuron group (``control``; ``control_contact`` and
+        ``control_motor`` are its Subgroups, for wiring and monitors): the same model, and
+        Subgroups share their group's Brian2 code, so two units cost one group's calls per
+        step. Each unit counts its spikes (``spike_count``)."""
         import brian2 as b2
 
-        dt = self.dt_ms * b2.ms
-        units = {}
-        for name in ("contact", "motor"):
-            units[name] = class1_group(1, self.bias, self.tau_syn_ms, self.dt_ms,
-                                       f"control_{name}")
+        if clock is None:
+            clock = b2.Clock(dt=self.dt_ms * b2.ms, name="control_clock*")
+        units = class1_group(len(CONTROL_UNITS), self.bias, self.tau_syn_ms, clock, "control")
+        contact, motor = (b2.Subgroup(units, at, at + 1, name=f"control_{unit}")
+                          for at, unit in enumerate(CONTROL_UNITS))
         is_above = tuned_above(neuron_hz, self.motion_band_hz)
         above, band = np.flatnonzero(is_above), np.flatnonzero(~is_above)
-        sense = b2.Synapses(resonators, units["contact"], "w : 1", on_pre="I_syn_post += w",
-                            dt=dt, name="control_sense")
+        sense = b2.Synapses(resonators, contact, "w : 1", on_pre="I_syn_post += w",
+                            clock=clock, name="control_sense")
         sense.connect(i=np.r_[above, band].astype(int), j=0)
         sense.w = np.r_[np.full(len(above), self.w_above), np.full(len(band), -self.w_band)]
-        act = b2.Synapses(units["contact"], units["motor"], on_pre=f"I_syn_post += {self.w_motor!r}",
-                          dt=dt, name="control_act")
+        act = b2.Synapses(contact, motor, on_pre=f"I_syn_post += {self.w_motor!r}",
+                          clock=clock, name="control_act")
         act.connect()
-        return {"control_contact": units["contact"], "control_motor": units["motor"],
+        return {"control": units, "control_contact": contact, "control_motor": motor,
                 "control_sense": sense, "control_act": act}
 
 
-def class1_group(n: int, bias, tau_syn_ms: float, dt_ms: float, name: str, *,
+def class1_group(n: int, bias, tau_syn_ms: float, clock, name: str, *,
                  input_terms: str = "", extra: str = "", namespace: dict | None = None):
     """``n`` class-I neurons driven by ``bias`` + an exponential synaptic current ``I_syn``
-    (+ ``input_terms``, whose variables ``extra`` declares)."""
+    (+ ``input_terms``, whose variables ``extra`` declares), stepping on ``clock``; each counts
+    its spikes in ``spike_count`` (a read-out reads them without a monitor's calls)."""
     import brian2 as b2
 
     eqs = neurons.equations("class1", "bias + I_syn" + input_terms,
-                            "dI_syn/dt = -I_syn / tau_syn : 1\nbias : 1 (constant)\n" + extra)
+                            "dI_syn/dt = -I_syn / tau_syn : 1\nbias : 1 (constant)\n"
+                            "spike_count : integer\n" + extra)
     class1 = neurons.PRESETS["class1"]
-    g = b2.NeuronGroup(n, eqs, threshold=neurons.THRESHOLD, reset=neurons.reset(),
-                       method="euler",
+    g = b2.NeuronGroup(n, eqs, threshold=neurons.THRESHOLD,
+                       reset=neurons.reset("spike_count += 1"), method="euler",
                        namespace={"tau_syn": tau_syn_ms * b2.ms, **(namespace or {})},
-                       dt=dt_ms * b2.ms, name=name)
+                       clock=clock, name=name)
     g.k, g.a, g.b, g.c, g.d = 1.0, class1.a, class1.b, class1.c, class1.d
     g.bias = bias
     g.v, g.u = neurons.resting_state("class1", current=float(np.min(bias)))
@@ -236,8 +246,9 @@ class MaterialUnit:
               f"{self.readout_.n_features_in_} features",
               f"{self.n_features(n_res)} ({self.n_features(n_res) // n_res} per resonator): "
               "fit on window_features of this network's array")
-        unit = class1_group(len(self.classes), self.bias, CLASS1_TAU_SYN_MS, self.dt_ms,
-                            "material", input_terms=" + drive * p", extra="p : 1",
+        clock = b2.Clock(dt=self.dt_ms * b2.ms, name="material_clock*")
+        unit = class1_group(len(self.classes), self.bias, CLASS1_TAU_SYN_MS, clock, "material",
+                            input_terms=" + drive * p", extra="p : 1",
                             namespace={"drive": self.drive})
         listen = b2.SpikeMonitor(resonators, name="material_listen")
         seen = {"n": 0}

@@ -47,6 +47,15 @@ from . import neurons
 CLASS1_RHEOBASE = 22.56  # class1 preset (5v + 140, b = -0.1): the fixed point vanishes above
 
 
+def read_trace(objects: dict) -> np.ndarray:
+    """The read-outs' rate traces (``r_read``, one per copy; Th is ``decode`` of it) of the
+    gate's ``objects``, as a live view of the array Brian2 steps: a caller on the network's
+    clock reads it without a monitor. (The read-outs are a Subgroup, and Brian2 hands out the
+    whole group's array for a Subgroup's variable.)"""
+    readout = objects["readout"]
+    return readout.variables["r_read"].get_value()[readout.start:readout.stop]
+
+
 @dataclass
 class SpeedGate:
     n_speed_neurons: int = 7
@@ -123,14 +132,17 @@ class SpeedGate:
     def objects(self, n_copies: int = 1, speed_expr: str = "speed_cm_s",
                 extra: str = "speed_cm_s : 1 (shared)", weights=None,
                 namespace: dict | None = None, teacher_expr: str = "0*Hz",
-                learning_expr: str = "0", learning: bool = True):
+                learning_expr: str = "0", learning: bool = True, clock=None):
         """The gate's Brian2 objects: speed population, read-out, plastic synapses, teacher.
 
         ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
         what it refers to: by default a shared variable the closed loop writes). Returned as
         a dict of named objects (``speed_population``, ``readout``, ``plastic``, ``teacher``,
-        ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, without
-        the teacher and its synapses (they act only while the gate learns).
+        ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, reduced
+        to what recall uses (no teacher, no learning traces, synapses that only transmit; the
+        same recall, with fewer Brian2 calls per step). ``clock``: a Brian2 clock of step
+        ``dt_ms`` to share (by default one of its own for all the gate's objects: Brian2's loop
+        pays for every clock at every step of any).
         """
         import brian2 as b2
 
@@ -139,64 +151,75 @@ class SpeedGate:
               "tau_read": self.tau_read_s * b2.second, "peak_current": self.peak_current,
               "speed_offset": self.speed_offset, "sigma": self.sigma_cm_s,
               **(namespace or {})}
+        if clock is None:
+            clock = b2.Clock(dt=self.dt_ms * b2.ms, name="gate_clock*")
+        # The speed population and the read-outs are one group of class-I neurons (the same
+        # model: the speed neurons' tuned drive and the read-outs' synaptic current are terms
+        # of one input, each zero where it does not apply), with a Subgroup for each: Brian2
+        # then calls one state updater, thresholder and resetter per step, not two.
+        n_speed = n_in * n_copies
+        units = self._units_group(n_speed + n_copies, speed_expr, extra, ns, clock, learning)
+        speed_pop = b2.Subgroup(units, 0, n_speed, name="speed_population")
+        readout = b2.Subgroup(units, n_speed, n_speed + n_copies, name="readout")
         class1 = neurons.PRESETS["class1"]
-        dt = self.dt_ms * b2.ms
-        speed_pop = b2.NeuronGroup(
-            n_in * n_copies,
-            neurons.equations(
-                "class1",
-                f"speed_offset + peak_current * exp(-(({speed_expr}) - preferred)**2 "
-                "/ (2*sigma**2))",
-                f"preferred : 1 (constant)\ncopy : integer (constant)\n{extra}"),
-            threshold=neurons.THRESHOLD, reset=neurons.reset(),
-            method="euler", namespace=ns, dt=dt, name="speed_population")
-        readout = self._readout_group(n_copies, ns, dt)
-        for group in (speed_pop, readout):
-            group.k = 1.0
-            group.a, group.b, group.c, group.d = class1.a, class1.b, class1.c, class1.d
+        units.k = 1.0
+        units.a, units.b, units.c, units.d = class1.a, class1.b, class1.c, class1.d
+        speed_pop.tuned = 1.0
         speed_pop.preferred = np.tile(self.preferred_cm_s, n_copies)
         speed_pop.copy = np.repeat(np.arange(n_copies), n_in)
+        speed_pop.bias = self.speed_offset
+        readout.copy = np.arange(n_copies)
         readout.bias = self.readout_bias
         speed_pop.v, speed_pop.u = neurons.resting_state("class1")
         readout.v, readout.u = neurons.resting_state("class1", current=self.readout_bias)
-        plastic = b2.Synapses(
-            speed_pop, readout, model="w : 1",
-            on_pre=f"""I_syn_post += w
-            w = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - r_out_post), -{self.w_max!r}, {self.w_max!r})""",
-            namespace=ns, dt=dt, name="plastic")
+        learn = (f"\nw = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - "
+                 f"r_out_post), -{self.w_max!r}, {self.w_max!r})") if learning else ""
+        plastic = b2.Synapses(speed_pop, readout, model="w : 1", on_pre="I_syn_post += w" + learn,
+                              namespace=ns, clock=clock, name="plastic")
         plastic.connect(i=np.arange(n_in * n_copies), j=np.repeat(np.arange(n_copies), n_in))
         plastic.w = np.tile(np.zeros(n_in) if weights is None else weights, n_copies)
-        recall = {"speed_population": speed_pop, "readout": readout, "plastic": plastic}
+        recall = {"gate": units, "speed_population": speed_pop, "readout": readout,
+                  "plastic": plastic}
         if not learning:
             return recall
         # A pacemaker fires exactly at the teacher rate: the rule sees the target, not the
         # counting noise of a Poisson train.
         teacher = b2.NeuronGroup(n_copies, f"dphase/dt = {teacher_expr} : 1",
                                  threshold="phase >= 1", reset="phase -= 1", method="euler",
-                                 namespace=ns, dt=dt, name="teacher")
+                                 namespace=ns, clock=clock, name="teacher")
         teaching = b2.Synapses(teacher, readout,
                                on_pre=f"r_teacher_post += {1 / self.tau_trace_s!r}",
-                               dt=dt, name="teaching")
+                               clock=clock, name="teaching")
         teaching.connect(j="i")
         return {**recall, "teacher": teacher, "teaching": teaching}
 
-    def _readout_group(self, n_copies: int, namespace: dict, dt):
-        """The read-out neuron of each copy, with the synaptic current and the rate traces
-        the learning rule (r_out, r_teacher) and the online Th (r_read) use."""
+    def _units_group(self, n: int, speed_expr: str, extra: str, namespace: dict, clock,
+                     learning: bool):
+        """The gate's class-I neurons: a speed neuron (``tuned`` = 1, ``bias`` = the speed
+        offset) takes the drive tuned to its preferred speed, a read-out (``tuned`` = 0,
+        silent ``bias``) the synaptic current from the speed neurons; every neuron keeps the
+        rate trace the online Th reads (r_read: the read-outs') and, when the gate learns,
+        those of the learning rule (r_out, r_teacher)."""
         import brian2 as b2
 
-        return b2.NeuronGroup(
-            n_copies,
-            neurons.equations("class1", "bias + I_syn", """
-            dI_syn/dt = -I_syn / tau_syn : 1
+        traces = """
             dr_out/dt = -r_out / tau_trace : 1
-            dr_teacher/dt = -r_teacher / tau_trace : 1
+            dr_teacher/dt = -r_teacher / tau_trace : 1""" if learning else ""
+        tuned_drive = (f"peak_current * exp(-(({speed_expr}) - preferred)**2 / (2*sigma**2))")
+        return b2.NeuronGroup(
+            n,
+            neurons.equations("class1", f"bias + I_syn + tuned * {tuned_drive}", f"""
+            dI_syn/dt = -I_syn / tau_syn : 1{traces}
             dr_read/dt = -r_read / tau_read : 1
-            bias : 1 (constant)"""),
+            bias : 1 (constant)
+            tuned : 1 (constant)
+            preferred : 1 (constant)
+            copy : integer (constant)
+            {extra}"""),
             threshold=neurons.THRESHOLD,
-            reset=neurons.reset(f"r_out += {1 / self.tau_trace_s!r}",
+            reset=neurons.reset(*([f"r_out += {1 / self.tau_trace_s!r}"] if learning else []),
                                 f"r_read += {1 / self.tau_read_s!r}"),
-            method="euler", namespace=namespace, dt=dt, name="readout")
+            method="euler", namespace=namespace, clock=clock, name="gate")
 
     def _network(self, speed_cm_s: np.ndarray, teacher_hz: np.ndarray, learning: np.ndarray,
                  step_s: float, weights: np.ndarray, record_read_every_s: float | None = None):
@@ -218,12 +241,13 @@ class SpeedGate:
             "teacher_rate": b2.TimedArray(np.asarray(teacher_hz, float) * b2.Hz, dt=step,
                                           name="teacher_rate"),
             "learning": b2.TimedArray(np.asarray(learning, float), dt=step, name="learning")}
+        # Recall alone (predict, thresholds) runs the recall-only gate: the same recall.
         parts = self.objects(n_copies, "speed_command(t, copy)", "", weights, namespace,
-                             teacher_expr="teacher_rate(t)", learning_expr="learning(t)")
+                             teacher_expr="teacher_rate(t)", learning_expr="learning(t)",
+                             learning=bool(np.any(learning)))
         spikes = b2.SpikeMonitor(parts["readout"], name="readout_spikes")
         objects = [*parts.values(), spikes,
-                   neurons.instability_guard(parts["speed_population"], "class1", self.dt_ms,
-                                             "euler")]
+                   neurons.instability_guard(parts["gate"], "class1", self.dt_ms, "euler")]
         trace = None
         if record_read_every_s is not None:
             trace = b2.StateMonitor(parts["readout"], "r_read", record=True,

@@ -25,6 +25,8 @@ import numpy as np
 
 from ..errors import check
 from ..networks.assembly import build as build_network
+from ..networks.control import CONTROL_UNITS
+from ..networks.gate import read_trace
 from ..networks.resonators import rate_map
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna
@@ -103,11 +105,9 @@ class ClosedLoop:
         log("[3/5] building " + ", ".join(cfg) + " in Brian2 and closing the loop")
         asm = build_network(self.network, fitted={"gate": gate})
         world = OnlineAntenna(replace(self.scene, stop_after_contact_s=None), seed)
-        motor_spikes = b2.SpikeMonitor(asm.objects["control_motor"], name="motor_spikes")
         res_spikes = b2.SpikeMonitor(asm.objects["resonators"], name="resonator_spikes")
         state = {"k": 0, "stopped_at": None, "log": []}
-        asm.network.add(motor_spikes, res_spikes,
-                        *_loop_operations(self, gate, asm.objects, world, motor_spikes, state))
+        asm.network.add(res_spikes, *_loop_operations(self, gate, asm.objects, world, state))
         t0 = time.perf_counter()
         asm.network.run(float(loop.duration_s) * b2.second, namespace={})
         wall = time.perf_counter() - t0
@@ -135,7 +135,7 @@ def steer(objects: dict, speed_cm_s: float, moving: bool) -> float:
     return speed
 
 
-def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna, motor_spikes,
+def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna,
                      state: dict) -> list:
     """The two NetworkOperations: every chunk, move the robot and code the next samples with
     the gate's Th; every sample, feed the next coded value to the resonators."""
@@ -145,14 +145,16 @@ def _loop_operations(parts: ClosedLoop, gate, obj: dict, world: OnlineAntenna, m
     steps = [step for _, step in parts.chain.steps]
     n_chunk = int(round(loop.chunk_ms * rate_hz / 1000.0))
     i_ext = obj["resonators"].variables["I_ext"].get_value()
-    r_read = obj["readout"].variables["r_read"].get_value()
+    r_read = read_trace(obj)
     x_ring = obj["cpg"].variables["x"].get_value()
+    unit_spikes = obj["control"].variables["spike_count"].get_value()   # the units count
+    motor = CONTROL_UNITS.index("motor")
     state["buffer"] = np.zeros(n_chunk)
 
     @b2.network_operation(dt=loop.chunk_ms * b2.ms, when="start", order=-1)
     def close_the_loop(t):
         t_s = float(t / b2.second)
-        if state["stopped_at"] is None and motor_spikes.num_spikes > 0:
+        if state["stopped_at"] is None and unit_spikes[motor] > 0:
             state["stopped_at"] = t_s
         speed = steer(obj, loop.speed_cm_s, moving=state["stopped_at"] is None)
         pan, tilt = cpg.angles(x_ring.copy())
