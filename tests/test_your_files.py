@@ -10,7 +10,6 @@ changed or removed.
 """
 from __future__ import annotations
 
-import json
 import os
 import signal
 import stat
@@ -27,7 +26,7 @@ from hypothesis import strategies as st
 from snn_antenna import outputs, provenance
 from snn_antenna.cli import main
 from snn_antenna.errors import SpecError
-from snn_antenna.files import atomic_write, make_folder, open_append
+from snn_antenna.files import atomic_write, open_append
 from snn_antenna.store import DamagedStore, Output, SweepStore
 
 ROOT = Path(__file__).resolve().parents[1]
