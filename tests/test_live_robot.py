@@ -238,3 +238,27 @@ def test_a_trained_gate_is_kept_and_recalls_as_the_one_that_learned(tmp_path, ca
     trained_gate(small(), [0.0, 30.0], [0.05, 0.5], cache_dir=tmp_path)
     assert "cache: stored" in capsys.readouterr().err
     assert len(list(tmp_path.glob("gate-*.zarr"))) == 2
+
+
+def test_brians_dt_mismatch_warning_is_silenced_for_the_control_layers_sense_pathway_alone(
+        recording, robot_parts):
+    """The control layer's sense pathway steps with the array whose spikes it carries, finer
+    than the units it feeds: Brian2's mismatch warning is this design and is dropped for that
+    pathway; any other pathway's mismatch still warns."""
+    import brian2 as b2
+    from brian2.utils.logger import catch_logs
+
+    def mismatch(logs):
+        return [message for _, _, message in logs if "will run on the clock" in message]
+
+    with catch_logs() as logs:
+        _replay(recording, robot_parts)
+    assert mismatch(logs) == []
+    with catch_logs() as logs:
+        b2.start_scope()
+        fine = b2.NeuronGroup(1, "v : 1", threshold="True", dt=0.5 * b2.ms)
+        coarse = b2.NeuronGroup(1, "v : 1", dt=1 * b2.ms)
+        others = b2.Synapses(fine, coarse, on_pre="v_post += 1", dt=1 * b2.ms)
+        others.connect()
+        b2.Network(fine, coarse, others).run(2 * b2.ms)
+    assert len(mismatch(logs)) == 1

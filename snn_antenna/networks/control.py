@@ -82,6 +82,11 @@ class ControlLayer:
                           for at, unit in enumerate(CONTROL_UNITS))
         is_above = tuned_above(neuron_hz, self.motion_band_hz)
         above, band = np.flatnonzero(is_above), np.flatnonzero(~is_above)
+        # Its pathway steps with the array, whose spikes it carries (Brian2 runs a pathway
+        # on its source's clock) and which runs at a finer dt than the units: Brian2 warns of
+        # the mismatch at every build, which is this design; the pathway has no delay to round.
+        neurons.quiet_known_warning("brian2.synapses.synapses.synapses_dt_mismatch",
+                                    "synaptic pathway 'control_sense_pre'", "using a dt of")
         sense = b2.Synapses(resonators, contact, "w : 1", on_pre="I_syn_post += w",
                             clock=clock, name="control_sense")
         sense.connect(i=np.r_[above, band].astype(int), j=0)

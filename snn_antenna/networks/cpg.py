@@ -24,12 +24,12 @@ centred 10° above the horizon).
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import check
+from . import neurons
 
 
 # A spike of neuron i writes every neuron's token (all-to-all synapses, so each neuron is the
@@ -40,19 +40,6 @@ from ..errors import check
 PASS_TOKEN = "token_post = int(j == (i + 1) % n_ring)"
 ORDER_WARNING = ("abstract code block that may not be well-defined",
                  "token_post = int(j == ((i + 1) % n_ring))")   # as Brian2 prints the code
-
-
-class _OrderWarningFilter(logging.Filter):
-    def filter(self, record: logging.LogRecord) -> bool:
-        message = record.getMessage()
-        return not all(part in message for part in ORDER_WARNING)
-
-
-def _quiet_order_warning() -> None:
-    """Drop Brian2's order warning for PASS_TOKEN only (once per process)."""
-    logger = logging.getLogger("brian2.codegen.generators.base")
-    if not any(isinstance(f, _OrderWarningFilter) for f in logger.filters):
-        logger.addFilter(_OrderWarningFilter())
 
 
 @dataclass
@@ -145,7 +132,7 @@ class CPG:
         ring.token[0] = 1
         pass_token = b2.Synapses(ring, ring, on_pre=PASS_TOKEN, namespace=ns, clock=clock,
                                  name="cpg_ring")
-        _quiet_order_warning()
+        neurons.quiet_known_warning("brian2.codegen.generators.base", *ORDER_WARNING)
         pass_token.connect()
         return ring, pass_token
 

@@ -20,6 +20,7 @@ Presets (parameters from the paper, Patanè et al. 2012, and Izhikevich 2003):
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 
@@ -417,3 +418,23 @@ def binned_spike_counts(spike_i: np.ndarray, spike_t_s: np.ndarray, n_neurons: i
     n_bins = len(inner_edges_s) + 1
     flat = np.bincount(np.asarray(spike_i) * n_bins + bins, minlength=n_neurons * n_bins)
     return flat.reshape(n_neurons, n_bins)
+
+
+class _KnownWarning(logging.Filter):
+    """Drops a Brian2 log record whose message holds every one of ``parts``."""
+
+    def __init__(self, parts: tuple[str, ...]):
+        super().__init__()
+        self.parts = parts
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        message = record.getMessage()
+        return not all(part in message for part in self.parts)
+
+
+def quiet_known_warning(logger: str, *parts: str) -> None:
+    """Drop Brian2's warnings on ``logger`` whose message holds all of ``parts`` (name the
+    statement or object: a warning understood for it, and only for it; once per process)."""
+    target = logging.getLogger(logger)
+    if not any(isinstance(f, _KnownWarning) and f.parts == parts for f in target.filters):
+        target.addFilter(_KnownWarning(parts))
