@@ -21,7 +21,7 @@ from snn_antenna.bridge.recorder import EVENTS_FILE, Recorder, record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.saved_view import load_view, save_view
 from snn_antenna.bridge.view import LiveView, _tap_coder
-from snn_antenna.bridge.view_process import ViewHistory
+from snn_antenna.bridge.view_history import ViewHistory
 from snn_antenna.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
 from tests.test_live_view_panels import NETWORK

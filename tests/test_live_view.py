@@ -28,7 +28,7 @@ from snn_antenna.bridge.online import build_online, run_online
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.view import LiveView
-from snn_antenna.bridge.view_process import DISPLAY_EVERY, ViewHistory
+from snn_antenna.bridge.view_history import DISPLAY_EVERY, ViewHistory
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]

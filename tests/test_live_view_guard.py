@@ -83,7 +83,7 @@ def test_a_drain_of_runs_too_short_to_plot_loses_nothing():
     after the items had been taken from the inbox: they were lost uncounted."""
     from snn_antenna.bridge.protocol import Sample
     from snn_antenna.bridge.source import Batch
-    from snn_antenna.bridge.view_process import ViewHistory
+    from snn_antenna.bridge.view_history import ViewHistory
 
     view = LiveView(build_online(NETWORK), port=0)        # no view process: drain by hand
     history = ViewHistory(view.config)

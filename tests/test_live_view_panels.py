@@ -17,7 +17,7 @@ from snn_antenna.bridge.page import build_page, panels_html
 from snn_antenna.bridge.recorder import record_counts
 from snn_antenna.bridge.replay import ReplaySource
 from snn_antenna.bridge.view import LiveView
-from snn_antenna.bridge.view_process import ViewHistory
+from snn_antenna.bridge.view_history import ViewHistory
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -35,7 +35,8 @@ import numpy as np
 from ..errors import SpecError
 from .live_state import Decisions
 from .protocol import BOARD_RATE_HZ
-from .view_process import ViewConfig, serve
+from .view_history import ViewConfig
+from .view_process import serve
 
 HISTORY_S = 10.0                # what the plots show
 SCRUB_S = 60.0                  # what the view keeps: a paused page scrubs back through it
