@@ -128,6 +128,15 @@ def replay_report(rec, network, timeout_s: float = 180):
 
 @pytest.mark.slow
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+
+def ask(page, label, value, button: str, shown: str) -> None:
+    """Fill ``label`` with ``value`` (none: a button alone), click ``button`` and wait until
+    the page shows ``shown``: one of the page's controls, used as a person would."""
+    if label is not None:
+        page.get_by_label(label).fill(str(value))
+    page.get_by_role("button", name=button).click()
+    page.get_by_text(shown).wait_for(timeout=30_000)
+
 def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
     counts = two_contacts()
     with streamed_page(tmp_path, counts, ["--network", NETWORK, "--set",
@@ -139,11 +148,8 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
         # After the first contact is decided, Th goes up from the page: the second
         # contact is then coded as silence.
         page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=30_000)
-        page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
-        page.get_by_role("button", name="Apply Th").click()
-        page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
-        page.get_by_role("button", name="Pause display").click()
-        page.get_by_text("display paused").wait_for(timeout=30_000)
+        ask(page, "Th (g)", HIGH_TH_G, "Apply Th", "asked Th 5 g")
+        ask(page, None, None, "Pause display", "display paused")
         paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
         paused_end = page.evaluate("() => " + model("time", "end"))
         session.second_half.set()

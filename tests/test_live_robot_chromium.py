@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from snn_antenna.bridge.controls import recorded_events
-from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, _wait,
+from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, _wait, ask,
                                          model, replay_report, screenshot, streamed_page,
                                          two_contacts)
 from test_live_view import get_json
@@ -50,14 +50,9 @@ def test_the_page_reads_the_robot_panels_steers_and_the_replay_reproduces_it(tmp
         shown = {name: page.locator(f"[data-panel='{name}']").count()
                  for name in ("gate", "cpg", "control", "readout", "threshold")}
         # Th by hand above the signal, and the robot driven on, from the page.
-        page.get_by_label("Th (g)").fill(str(HIGH_TH_G))
-        page.get_by_role("button", name="Apply Th").click()
-        page.get_by_text("asked Th 5 g").wait_for(timeout=30_000)
-        page.get_by_label("speed (cm/s)").fill(str(DRIVE_ON))
-        page.get_by_role("button", name="Apply speed").click()
-        page.get_by_text("asked speed 6 cm/s").wait_for(timeout=30_000)
-        page.get_by_role("button", name="Pause display").click()
-        page.get_by_text("display paused").wait_for(timeout=30_000)
+        ask(page, "Th (g)", HIGH_TH_G, "Apply Th", "asked Th 5 g")
+        ask(page, "speed (cm/s)", DRIVE_ON, "Apply speed", "asked speed 6 cm/s")
+        ask(page, None, None, "Pause display", "display paused")
         paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
         session.second_half.set()
         session.board.join(30)

@@ -281,21 +281,14 @@ LANES = 4
 def lane_model(one: str, shared=()) -> tuple[str, set]:
     """A model's equations ``one`` (written for one point) with ``LANES`` points per element:
     each name once per lane (``in_lanes``), except ``shared`` (declared in ``one``: one value
-    for every point, kept once as a shared constant) and what ``one`` declares shared. Returns
-    the equations and the names that have lanes."""
+    for every point, kept once as a shared constant). Returns the equations and the names
+    that have lanes."""
     from brian2 import Equations
 
-    declared = Equations(one)
-    once = {name for name in declared.names if "shared" in declared[name].flags}
-    laned, kept = [], []
-    for line in one.splitlines():
-        name = line.split(":")[0].strip()
-        if name in once:
-            kept.append(line.strip())
-        elif name not in shared:
-            laned.append(line)
-    names = set(declared.names) - once - set(shared)
-    return "\n".join([in_lanes("\n".join(laned), names), *kept,
+    laned = "\n".join(line for line in one.splitlines()
+                      if line.split(":")[0].strip() not in shared)
+    names = set(Equations(one).names) - set(shared)
+    return "\n".join([in_lanes(laned, names),
                       *(f"{name} : 1 (shared, constant)" for name in sorted(shared))]), names
 
 
@@ -317,7 +310,8 @@ def in_lanes(text: str, names, lanes: int = LANES) -> str:
     """``text`` (equations or statements) once per lane, lane after lane, with each of
     ``names`` suffixed by its lane: ``v`` -> ``v_0``, ``dv/dt`` -> ``dv_0/dt``."""
     alternatives = "|".join(sorted(map(re.escape, names), key=len, reverse=True))
-    derivative, name = re.compile(rf"\bd({alternatives})/dt\b"), re.compile(rf"\b({alternatives})\b")
+    derivative = re.compile(rf"\bd({alternatives})/dt\b")
+    name = re.compile(rf"\b({alternatives})\b")
     return "\n".join(name.sub(rf"\1_{j}", derivative.sub(rf"d\1_{j}/dt", text))
                      for j in range(lanes))
 
