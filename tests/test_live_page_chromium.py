@@ -12,7 +12,6 @@ the display pauses (while the stream goes on) and resumes, the page reports its 
 import json
 import queue
 import re
-import shutil
 import threading
 import time
 import urllib.request
@@ -28,10 +27,10 @@ from snn_antenna.bridge.source import Batch
 from snn_antenna.bridge.view import LiveView
 from snn_antenna.readout.contacts import ContactEstimate
 from snn_antenna.sources.stimuli import Contact, RobotScene
+from test_live_controls_chromium import CHROMIUM, model
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "live.toml"
-CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 STEP = 50                       # samples per step of the fake pipeline (its window: 0.1 s)
 SCENE_S = 6.0                   # played again and again
 
@@ -109,7 +108,8 @@ def test_the_page_draws_takes_th_pauses_reports_paints_and_saves(tmp_path):
             page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0",
                                    timeout=30_000)
             pipeline.start()
-            latest = "() => Bokeh.documents[0].get_model_by_name('xy').data.t.at(-1) || 0"
+            last_t = f"({model('xy', 'data.t.at(-1)')} ?? 0)"
+            latest = f"() => {last_t}"
             page.get_by_text(re.compile(r"→ 19\.3 cm")).first.wait_for(timeout=30_000)
             page.get_by_label("Th (g)").fill("0.2")
             page.get_by_role("button", name="Apply Th").click()
@@ -128,7 +128,7 @@ def test_the_page_draws_takes_th_pauses_reports_paints_and_saves(tmp_path):
             time.sleep(0.6)
             still, t_later = page.evaluate(latest), state(url)["t_s"]
             page.get_by_role("button", name="Resume display").click()
-            page.wait_for_function(f"{latest[6:]} > {paused_at}", timeout=30_000)
+            page.wait_for_function(f"() => {last_t} > {paused_at}", timeout=30_000)
             page.get_by_role("button", name="Save view").click()
             page.get_by_text("saved ").wait_for(timeout=30_000)
             shown = page.evaluate(latest)
