@@ -241,6 +241,45 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     assert len(xy.data["t"]) == 50
 
 
+def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkeypatch):
+    """The counters and panels are text a person reads: each change of it costs the browser
+    a layout and a repaint of every plot, so it is refreshed TEXT_UPDATE_S apart; a contact
+    is not held back."""
+    import types
+
+    from bokeh.document import Document
+    from bokeh.models import CustomJS
+
+    from snn_antenna.bridge import page as page_module
+
+    clock = [500.0]
+    monkeypatch.setattr(page_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
+    history = ViewHistory(LiveView(_parts()).config)
+    doc = Document()
+    build_page(history, doc)
+    (callback,) = doc.session_callbacks
+    token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
+    counters = doc.get_model_by_name("counters")
+    history.take(_frame(0, 0.0))
+    clock[0] += page_module.TEXT_UPDATE_S
+    callback.callback()
+    assert "<b>stream time</b> 0.1 s" in counters.text
+    history.painted(0.0, time.time(), page=token)
+    history.take(_frame(1, 0.1))
+    clock[0] += page_module.PAGE_UPDATE_MS / 1000
+    callback.callback()                             # the plots move on, the text waits
+    assert "<b>stream time</b> 0.1 s" in counters.text
+    assert doc.get_model_by_name("xy").data["t"][-1] >= 0.1
+    history.take({**_frame(2, 0.2), "events": [("onset", 0.25)]})
+    clock[0] += page_module.PAGE_UPDATE_MS / 1000
+    callback.callback()                             # a contact's onset: at once
+    assert "<b>stream time</b> 0.3 s" in counters.text
+    history.take(_frame(3, 0.3))
+    clock[0] += page_module.TEXT_UPDATE_S
+    callback.callback()
+    assert "<b>stream time</b> 0.4 s" in counters.text
+
+
 def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monkeypatch):
     """Samples go in frames every FLUSH_S; a window does not wait for the next one: it goes
     WINDOW_FLUSH_S after the last frame at the latest (the delay a person sees)."""
