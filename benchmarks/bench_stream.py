@@ -70,7 +70,7 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
              # A few more frames than measured: an emulator that ends closes the pty, and
              # bytes still unread in it would be lost (the run would wait for them in vain).
              "--frames", str(n_frames + 500), *(["--fast"] if fast else [])],
-            stdout=subprocess.PIPE, text=True)
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             emulator.stdout.readline()              # the pty exists once its path is printed
             source = SerialSource(link).start()
@@ -79,7 +79,10 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
             source.stop()
         finally:
             emulator.kill()
-            emulator.wait()
+            _, said = emulator.communicate()
+        # The run ends by closing the pty under the emulator, which says so: expected here.
+        sys.stderr.writelines(line for line in said.splitlines(keepends=True)
+                              if "the reader closed" not in line)
     return report
 
 
