@@ -55,7 +55,7 @@ def build_page(view, doc) -> None:
         _legend_outside(fig)
     for fig in (antenna, coded, rate_map):
         _mark_contacts(fig, sources["contacts"])
-    # A fixed height: new text then never re-lays the page out (ten times a second).
+    # A fixed height: new text does not move the plots below it.
     counters = Div(text="", sizing_mode="stretch_width", height=80, name="counters")
     # Beside the plots, what the running network decides: a panel per part it has. One column
     # for the plots keeps their time axes aligned.
@@ -164,7 +164,7 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
 
     cursor = {"xy": 0, "coded": 0, "windows": 0, "sent_t": None, "sent_at": 0.0,
               "text_at": 0.0}
-    shown = {"counters": None, "contacts": None, "panels": None}
+    shown = {"counters": None, "contacts": None, "panels": None, "text_marks": None}
     rollover = view.shown_points
 
     def span(rows, end):
@@ -220,9 +220,9 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         apart (each change of it re-lays the page out and repaints its plots), and at once
         when a contact comes or changes."""
         now = time.monotonic()
-        if now - cursor["text_at"] < TEXT_UPDATE_S and marks == shown["contacts"]:
+        if now - cursor["text_at"] < TEXT_UPDATE_S and marks == shown["text_marks"]:
             return
-        cursor["text_at"] = now
+        cursor["text_at"], shown["text_marks"] = now, marks
         html = counters_html(view)
         if html != shown["counters"]:
             shown["counters"] = counters.text = html
@@ -231,9 +231,10 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
             shown["panels"] = panels.text = html
 
     def update() -> None:
+        following = update_map()    # it takes the frames in transit first
         marks = contact_marks(view)
-        text(marks)
-        if not update_map():
+        text(marks)                 # paused or not: the pipeline goes on
+        if not following:
             return
         new_xy = view.xy.since(cursor["xy"])
         cursor["xy"] = view.xy.total
