@@ -17,7 +17,7 @@ import numpy as np
 from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
-from snn_antenna.signals import Recording
+from snn_antenna.core.signals import Recording
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 

@@ -48,7 +48,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench_sweep import grid_of  # noqa: E402  (this folder)
 
 from snn_antenna.engine.evaluators import NeuronSweep  # noqa: E402
-from snn_antenna import spec as specs  # noqa: E402
+from snn_antenna.core import spec as specs  # noqa: E402
 from snn_antenna.engine.events import run_bank, run_cost  # noqa: E402
 from snn_antenna.engine.executor import dask_client  # noqa: E402
 from snn_antenna.engine.sweep import run_sweep  # noqa: E402

@@ -53,8 +53,8 @@ import threading
 import time
 from pathlib import Path
 
-from snn_antenna.bridge.online import build_online, run_online, warm_up
-from snn_antenna.bridge.source import PortError, SerialSource
+from snn_antenna.bridge.online.pipeline import build_online, run_online, warm_up
+from snn_antenna.bridge.wire.source import PortError, SerialSource
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -163,7 +163,7 @@ def main(argv=None) -> int:
 def online_parts(network, overrides, speed_cm_s: float):
     """``build_online`` with the speed command where the network reads one (a composed spec
     with a gate or CPG: bridge/robot.py)."""
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
 
     raw = specs.load(network)
     table = raw["network"] if isinstance(raw.get("network"), dict) else raw
@@ -174,7 +174,7 @@ def online_parts(network, overrides, speed_cm_s: float):
 def compare_browsers(args, overrides, counts: list[int]) -> None:
     """With 0, 1, 3... pages open: the live run's real-time factor and latencies, the display
     latency the pages report, and the throughput."""
-    from snn_antenna.bridge.view import LiveView
+    from snn_antenna.bridge.view.view import LiveView
 
     rows = []
     for n in counts:
@@ -230,7 +230,7 @@ def compare_baseline(args, overrides, fast) -> None:
 
 def compare_view(args, overrides) -> None:
     """Throughput runs alternating without / with the view and an open page."""
-    from snn_antenna.bridge.view import LiveView
+    from snn_antenna.bridge.view.view import LiveView
 
     plain_parts = online_parts(args.network, overrides, args.speed)
     # the view taps its chain's coder
@@ -263,7 +263,7 @@ def compare_view(args, overrides) -> None:
 
 def compare_reload(args, overrides) -> None:
     """Live (1 kHz) runs with the view: nobody reading it, then a client reloading the page."""
-    from snn_antenna.bridge.view import LiveView
+    from snn_antenna.bridge.view.view import LiveView
 
     rows = []
     for reloading in (False, True):

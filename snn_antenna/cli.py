@@ -11,15 +11,16 @@ import argparse
 import sys
 from pathlib import Path
 
-from . import bounds
-from .bounds import option
-from .errors import SpecError, guarded
+from .core import bounds
+from .core.bounds import option
+from .core.errors import SpecError, guarded
 
 
 def _run(args) -> int:
-    from . import outputs
-    from . import spec as specs
-    from .studies import check_spec, runner
+    from .core import outputs
+    from .core import spec as specs
+    from .engine.spec_rules import check_spec
+    from .studies import runner
 
     # Every check before any work: the spec as resolved, the rules joining its sections, the
     # size of a sweep, the output folder. Nothing here imports Brian2 or starts a worker.
@@ -59,7 +60,7 @@ def _run(args) -> int:
 def _check_cost(spec: dict, args) -> None:
     """A study (a scene, a bench set, a sweep) expected to run beyond the limit is refused
     without ``--yes``, naming the key that sets its length."""
-    from . import spec as specs
+    from .core import spec as specs
     from .studies import plan
 
     estimate = plan(spec)

@@ -20,9 +20,9 @@ import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 
-from . import bounds
-from .errors import SpecError, check
-from .signals import validate_samples
+from .core import bounds
+from .core.errors import SpecError, check
+from .core.signals import validate_samples
 from .sources.antenna import ADC
 
 

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from snn_antenna import spec as specs
-from snn_antenna.errors import SpecError
+from snn_antenna.core import spec as specs
+from snn_antenna.core.errors import SpecError
 from snn_antenna.readout.band_tuning import (
     Tuning,
     coarsest_dt_ms,

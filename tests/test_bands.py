@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.evaluation import accuracy, bands
 from snn_antenna.readout.spiking import Band
 

@@ -9,9 +9,9 @@ import json
 import numpy as np
 import pytest
 
-from snn_antenna import spec as specs
+from snn_antenna.core import spec as specs
 from snn_antenna.cli import main
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.readout.spiking_decoders import TRAINING_FREE
 from snn_antenna.studies import baseline_comparison as study
 

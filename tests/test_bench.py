@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.sources import bench
 
 SMALL = dict(materials=("wood", "aluminium"), positions_cm=(10.0, 30.0), repetitions=3,
@@ -76,7 +76,7 @@ def test_the_cache_key_follows_the_antenna_physics(monkeypatch, tmp_path):
     package's source (``provenance.code_hash``)."""
     import shutil
 
-    from snn_antenna import provenance
+    from snn_antenna.core import provenance
     spec = bench.BenchSpec(**SMALL)
     before = spec.key()
     copy = tmp_path / "snn_antenna"

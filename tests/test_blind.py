@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.truth import BENCH_LABELS, Event, GroundTruth
+from snn_antenna.core.truth import BENCH_LABELS, Event, GroundTruth
 
 
 # -- the scrambles --------------------------------------------------------------------------
@@ -133,9 +133,9 @@ def test_the_live_tracker_ignores_the_labels(tmp_path):
     """A scene streamed through the live pipeline (replayed from a recording of its counts):
     the contacts it reports are one list, whatever the scene's labels say; scoring them
     against the true and the lying labels differs."""
-    from snn_antenna.bridge.online import build_online, run_online
-    from snn_antenna.bridge.recorder import record_counts
-    from snn_antenna.bridge.replay import ReplaySource
+    from snn_antenna.bridge.online.pipeline import build_online, run_online
+    from snn_antenna.bridge.wire.recorder import record_counts
+    from snn_antenna.bridge.wire.replay import ReplaySource
     from snn_antenna.evaluation.scoring import score
     from snn_antenna.readout.contacts import ContactEstimate
     from snn_antenna.sources.stimuli import Contact, RobotScene

@@ -11,8 +11,8 @@ import time
 import numpy as np
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator
-from snn_antenna.bridge.links import PeerGone, PtyLink
+from snn_antenna.bridge.emulate.emulator import Emulator
+from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
 
 CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.bridge.protocol import Sample, decode_all, encode_binary
+from snn_antenna.bridge.wire.protocol import Sample, decode_all, encode_binary
 
 FIRMWARE = Path(__file__).resolve().parents[1] / "firmware" / "antenna_stream"
 HOST_CC = shutil.which("cc") or shutil.which("gcc")

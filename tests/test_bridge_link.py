@@ -13,12 +13,12 @@ import pytest
 import serial
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator, FaultPlan
-from snn_antenna.bridge.links import PtyLink, SerialLink
-from snn_antenna.bridge.protocol import encode_binary
-from snn_antenna.bridge.recorder import Recorder
-from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.source import PortError, SerialSource, run_source
+from snn_antenna.bridge.emulate.emulator import Emulator, FaultPlan
+from snn_antenna.bridge.emulate.links import PtyLink, SerialLink
+from snn_antenna.bridge.wire.protocol import encode_binary
+from snn_antenna.bridge.wire.recorder import Recorder
+from snn_antenna.bridge.wire.replay import ReplaySource
+from snn_antenna.bridge.wire.source import PortError, SerialSource, run_source
 
 COUNT_KEYS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
               "duplicates", "reordered", "late", "seq_restarts", "reconnects")
@@ -289,8 +289,8 @@ def test_socket_url_reconnects_when_the_server_comes_back(tmp_path):
 
 
 def test_torn_last_record_is_dropped_and_recordings_are_never_overwritten(tmp_path):
-    from snn_antenna.bridge.source import Batch
-    from snn_antenna.errors import SpecError
+    from snn_antenna.bridge.wire.source import Batch
+    from snn_antenna.core.errors import SpecError
 
     recorder = Recorder(tmp_path / "rec", port="loop://", wire_format="binary", baudrate=250000)
     samples = [(s, s, 1023 - s) for s in range(50)]

@@ -5,7 +5,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from snn_antenna.bridge.protocol import (
+from snn_antenna.bridge.wire.protocol import (
     ENCODED_FRAME_LEN,
     REORDER_WINDOW,
     SEQ_MODULUS,
@@ -22,7 +22,7 @@ from snn_antenna.bridge.protocol import (
     find_gaps,
     frame_payload,
 )
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 
 # A board's stream: sequence numbers only move forward (with gaps, across the 16-bit wrap).
 samples_st = st.builds(

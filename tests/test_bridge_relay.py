@@ -13,8 +13,8 @@ import pytest
 import serial
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator
-from snn_antenna.bridge.links import PeerGone, PtyLink
+from snn_antenna.bridge.emulate.emulator import Emulator
+from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -6,8 +6,9 @@ import json
 import numpy as np
 import pytest
 
-from snn_antenna.bridge import cli, online
-from snn_antenna.bridge.recorder import META_FILE, record_counts
+from snn_antenna.bridge import cli
+from snn_antenna.bridge.online import pipeline as online
+from snn_antenna.bridge.wire.recorder import META_FILE, record_counts
 
 
 class Built(Exception):

@@ -21,8 +21,8 @@ import pytest
 from snn_antenna.engine.evaluators import NeuronSweep
 from snn_antenna.engine.grid import Grid
 from snn_antenna.engine.sweep import run_sweep
-from snn_antenna.errors import NumericalInstabilityError, SpecError
-from snn_antenna.store import Output, SweepStore
+from snn_antenna.core.errors import NumericalInstabilityError, SpecError
+from snn_antenna.core.store import Output, SweepStore
 
 REPO = Path(__file__).resolve().parents[1]
 FAST = NeuronSweep(duration_s=0.4, settle_s=0.1, engine="numpy")
@@ -36,7 +36,7 @@ def _no_store_on_this_machine():
     import xarray as xr
     import zarr
 
-    from snn_antenna import store
+    from snn_antenna.core import store
 
     def refuse(*args, **kwargs):
         raise OSError("this worker has no access to the client's disk")

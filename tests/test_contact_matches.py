@@ -3,8 +3,8 @@ import pytest
 
 from snn_antenna.readout.contacts import ContactEstimate
 from snn_antenna.evaluation.scoring import contact_rows, first_match
-from snn_antenna.truth import Event
-from snn_antenna.stats import poisson_interval
+from snn_antenna.core.truth import Event
+from snn_antenna.report.stats import poisson_interval
 
 
 def test_poisson_interval_known_answers():

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks.cpg import CPG, cycle_periods, phase_lag_deg
 
 

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.bridge.protocol import Decoder
-from snn_antenna.bridge.stimulus import played_events, stimulus_recording
+from snn_antenna.bridge.wire.protocol import Decoder
+from snn_antenna.bridge.emulate.stimulus import played_events, stimulus_recording
 
 ROOT = Path(__file__).resolve().parents[1]
 STIMULI = sorted((ROOT / "stimuli").glob("*.toml"))

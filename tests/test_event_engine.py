@@ -8,7 +8,7 @@ import pytest
 
 from snn_antenna.engine.events import EventSweep, run_bank
 from snn_antenna.engine.sweep import run_sweep
-from snn_antenna.errors import NumericalInstabilityError
+from snn_antenna.core.errors import NumericalInstabilityError
 from snn_antenna.readout.spiking import HIGH_BAND, LOW_BAND, SpikingBank
 from snn_antenna.sources import bench
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.readout import events
 
 RATE = 2000.0

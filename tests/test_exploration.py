@@ -9,7 +9,7 @@ import pytest
 from conftest import run_main
 
 from snn_antenna.cli import main
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks import assembly
 from snn_antenna.sources.scenes import OnlineAntenna
 
@@ -115,7 +115,7 @@ def test_the_closed_loop_never_sees_the_ground_truth(honest_run, tmp_path, monke
 
 
 def test_the_gate_trains_on_a_gating_runs_summary_or_refuses_it_clearly(tmp_path):
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
     from snn_antenna.studies import exploration
 
     summary = tmp_path / "summary.json"

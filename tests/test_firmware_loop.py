@@ -15,13 +15,18 @@ import numpy as np
 import pytest
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.firmware_loop import build, missing_tools, run_harness, write_counts
-from snn_antenna.bridge.links import PtyLink
-from snn_antenna.bridge.protocol import Decoder
-from snn_antenna.bridge.recorder import Recorder
-from snn_antenna.bridge.source import SerialSource, run_source
-from snn_antenna.bridge.stimulus import stimulus_recording
-from snn_antenna.errors import PipelineError
+from snn_antenna.bridge.emulate.firmware_loop import (
+    build,
+    missing_tools,
+    run_harness,
+    write_counts,
+)
+from snn_antenna.bridge.emulate.links import PtyLink
+from snn_antenna.bridge.wire.protocol import Decoder
+from snn_antenna.bridge.wire.recorder import Recorder
+from snn_antenna.bridge.wire.source import SerialSource, run_source
+from snn_antenna.bridge.emulate.stimulus import stimulus_recording
+from snn_antenna.core.errors import PipelineError
 
 ROOT = Path(__file__).resolve().parents[1]
 FIRMWARE = ROOT / "firmware" / "antenna_stream"

@@ -2,14 +2,14 @@
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks.gate import SpeedGate
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.readout.contacts import ContactDetector, ContactEstimate
 from snn_antenna.evaluation.scoring import Score, score
 from snn_antenna.readout.detection import run_codings
-from snn_antenna.truth import Event
+from snn_antenna.core.truth import Event
 from snn_antenna.sources.scenes import CourseScene, Obstacle
 
 # Recalled Th within a factor 1.6 of Th* on speeds never trained: one step of the gating
@@ -118,7 +118,7 @@ def test_scoring_per_contact():
 
 
 def test_study_spec_refuses_bad_speeds_before_any_work():
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
     from snn_antenna.studies import gating_threshold
     root = __import__("pathlib").Path(__file__).resolve().parents[1]
     for bad in ("[-3.0, 12.0]", "[0.0, nan]", "[0.0, 90.0]"):

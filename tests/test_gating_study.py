@@ -17,7 +17,7 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
     never as predictions; the gate's F1 and its paired differences are predictions with
     interval and n, recomputable from the per-seed F1s; and a margin too fine for the pilot's
     spread makes the study run more seeds than the pilot, up to the budget."""
-    from snn_antenna.stats import paired_difference
+    from snn_antenna.report.stats import paired_difference
 
     out = tmp_path / "gating"
     status = main(["run", str(ROOT / "studies" / "gating_threshold.toml"), "--out", str(out),
@@ -55,7 +55,7 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
 
 
 def _quick_parts(*overrides):
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
     from snn_antenna.studies.gating_threshold import build
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=6.0", *overrides], quick=True))
@@ -72,7 +72,7 @@ def test_the_read_out_never_sees_the_ground_truth():
     from snn_antenna.engine.batches import ScoredCodings
     from snn_antenna.evaluation.scoring import score_with
     from test_blind import scrambles
-    from snn_antenna.truth import Event, GroundTruth
+    from snn_antenna.core.truth import Event, GroundTruth
     from snn_antenna.sources.scenes import SpeedProfile
     from snn_antenna.studies.gating_threshold import condition, make_scene
 
@@ -129,7 +129,7 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
 
 
 def test_evaluation_speeds_must_be_held_out_from_the_gate():
-    from snn_antenna.errors import SpecError
+    from snn_antenna.core.errors import SpecError
     with pytest.raises(SpecError, match="evaluation.speeds_cm_s"):
         _quick_parts("gate.train_speeds_cm_s=[0.0, 27.0]", "evaluation.speeds_cm_s=[27.0]")
     with pytest.raises(SpecError, match="calibration.speed_cm_s"):
@@ -149,10 +149,10 @@ def test_bad_speed_in_the_spec_fails_fast_with_one_line(tmp_path, capsys):
 def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_changes(tmp_path):
     """The Th × speed sweep runs on the shared sweep engine: its counts land in a zarr store,
     a second run computes nothing, a changed gate reuses it, a changed sweep is refused."""
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
     from snn_antenna.engine.grid import Grid
     from snn_antenna.engine.sweep import run_sweep
-    from snn_antenna.errors import SpecError
+    from snn_antenna.core.errors import SpecError
     from snn_antenna.evaluation.scoring import SCORE_OUTPUTS
     from snn_antenna.studies.gating_threshold import ThresholdSweep, build, sweep_settings
 
@@ -183,7 +183,7 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
 def test_codings_scored_on_dask_workers_equal_those_scored_here():
     """Fig. 9 and the evaluation run on the study's Dask workers while this process trains the
     gate: the scores and rate maps must be those of running the same batches here."""
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
     from snn_antenna.engine.batches import ScoredCodings
     from snn_antenna.engine.executor import dask_client
     from snn_antenna.studies.gating_threshold import build, coded_at, sweep_scene

@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna import outputs
-from snn_antenna.files import atomic_write
+from snn_antenna.core import outputs
+from snn_antenna.core.files import atomic_write
 from snn_antenna.cli import main
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICKSTART = str(ROOT / "studies" / "quickstart.toml")
@@ -137,7 +137,7 @@ def test_out_that_cannot_be_written_is_refused(tmp_path, capsys):
 
 def fake_outputs(folder: Path, study: str, files=("report.html", "summary.json")) -> None:
     """A finished run of ``study`` into ``folder``, written as the toolkit writes (journaled)."""
-    from snn_antenna.files import atomic_write, make_folder
+    from snn_antenna.core.files import atomic_write, make_folder
 
     with outputs.output_folder(folder, study):
         for name in files:
@@ -313,7 +313,7 @@ def test_a_failed_run_leaves_no_brian2_temp_files(tmp_path):
     temp.mkdir()
     code = ("import sys, numpy as np\n"
             "from snn_antenna.networks import neurons\n"
-            "from snn_antenna.errors import guarded\n"
+            "from snn_antenna.core.errors import guarded\n"
             "def boom(args):\n"
             "    neurons.simulate('resonator', np.full(100, 0.1), record_traces='v')\n"
             "    raise IndexError('injected')\n"
@@ -395,7 +395,7 @@ def test_record_and_stream_refuse_an_out_that_is_not_new_or_empty(tmp_path, caps
 
 def test_resonator_array_run_refuses_bad_arguments_by_name():
     from snn_antenna.networks.resonators import ResonatorArray
-    from snn_antenna.signals import Recording
+    from snn_antenna.core.signals import Recording
 
     coded = Recording(np.zeros(100), 1000.0, units="coded")
     for kwargs, name in [({"coded": np.zeros(100)}, "coded"), ({"window_s": 0}, "window_s"),
@@ -407,9 +407,9 @@ def test_resonator_array_run_refuses_bad_arguments_by_name():
 
 
 def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(tmp_path):
-    from snn_antenna import outputs
+    from snn_antenna.core import outputs
 
-    from snn_antenna.files import make_folder, open_append
+    from snn_antenna.core.files import make_folder, open_append
 
     out = tmp_path / "sweep"
     folder = outputs.prepare(out, "tuning_sweep")
@@ -427,7 +427,7 @@ def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(t
 
 
 def test_a_refused_run_leaves_no_folder_behind(tmp_path):
-    from snn_antenna import outputs
+    from snn_antenna.core import outputs
 
     out = tmp_path / "new"
     with pytest.raises(SpecError):
@@ -443,7 +443,7 @@ def test_ctrl_c_ends_with_one_line_not_brian2s_deletion_warnings(tmp_path):
     script.write_text(
         "import sys\n"
         "import brian2 as b2\n"
-        "from snn_antenna.errors import guarded\n"
+        "from snn_antenna.core.errors import guarded\n"
         "def run(_):\n"
         "    group = b2.NeuronGroup(3, 'dv/dt = -v/(10*ms) : 1')   # never in a network\n"
         "    raise KeyboardInterrupt\n"

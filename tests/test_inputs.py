@@ -9,9 +9,9 @@ import os
 import numpy as np
 import pytest
 
-from snn_antenna import bounds
+from snn_antenna.core import bounds
 from snn_antenna.cli import main
-from snn_antenna.errors import MAX_SHOWN, SpecError
+from snn_antenna.core.errors import MAX_SHOWN, SpecError
 from snn_antenna.preprocess import fit_warmup, make_chain
 from snn_antenna.sources import stimuli
 from snn_antenna.sources.stimuli import Contact, RobotScene

@@ -17,9 +17,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from snn_antenna import spec as specs
+from snn_antenna.core import spec as specs
 from snn_antenna.cli import main
-from snn_antenna.errors import NumericalInstabilityError, SpecError
+from snn_antenna.core.errors import NumericalInstabilityError, SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
 STUDIES = sorted((ROOT / "studies").glob("*.toml"))

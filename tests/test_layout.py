@@ -1,16 +1,17 @@
 """The package's layout shows its data flow, and imports follow it.
 
-sources → preprocess → networks → readout → evaluation → engine → report → studies → bridge →
-cli, over a core (errors, signals, truth, spec, stats, store, files, parallel, figures,
-provenance) every
-stage may use. A module may import from its
-own stage or an earlier one, never from a later one, and no two modules import each other,
+core → report → sources → preprocess → networks → readout → evaluation → engine → studies →
+bridge (wire → emulate → online → view) → cli. ``core`` (errors, bounds, specs, files, output
+folders, provenance, stores, run log, recordings and their ground truth) and ``report`` (the
+page, its style, figures, statistics) are what every stage may use. A module may import from
+its own stage or an earlier one, never from a later one, and no two modules import each other,
 directly or through others (imports inside functions count: a lazy import is still a
-dependency).
+dependency). Nothing in the package lies flat at its root but the stages, ``preprocess`` and
+``cli``.
 
 Read-outs are blind by construction: no module of ``snn_antenna.readout`` imports
-``snn_antenna.truth`` (where a recording's labels live), reads an attribute named ``truth`` or
-names one of the bench's labels (``truth.BENCH_LABELS``) in its code.
+``snn_antenna.core.truth`` (where a recording's labels live), reads an attribute named
+``truth`` or names one of the bench's labels (``truth.BENCH_LABELS``) in its code.
 """
 from __future__ import annotations
 
@@ -21,21 +22,20 @@ PACKAGE = Path(__file__).resolve().parents[1] / "snn_antenna"
 
 # Stages in data-flow order; a module belongs to the first prefix it matches.
 STAGES = [
-    ("core", ["snn_antenna", "snn_antenna.errors", "snn_antenna.signals", "snn_antenna.truth",
-              "snn_antenna.spec",
-              "snn_antenna.stats", "snn_antenna.store", "snn_antenna.files",
-              "snn_antenna.parallel", "snn_antenna.figures", "snn_antenna.provenance",
-              "snn_antenna.bounds"]),
+    ("core", ["snn_antenna", "snn_antenna.core"]),
+    ("report", ["snn_antenna.report"]),
     ("sources", ["snn_antenna.sources"]),
     ("preprocess", ["snn_antenna.preprocess"]),
     ("networks", ["snn_antenna.networks"]),
     ("readout", ["snn_antenna.readout"]),
     ("evaluation", ["snn_antenna.evaluation"]),
     ("engine", ["snn_antenna.engine"]),
-    ("report", ["snn_antenna.report", "snn_antenna.report_style", "snn_antenna.outputs",
-                "snn_antenna.logfile"]),
     ("studies", ["snn_antenna.studies"]),
-    ("bridge", ["snn_antenna.bridge"]),
+    ("bridge.wire", ["snn_antenna.bridge", "snn_antenna.bridge.wire"]),
+    ("bridge.emulate", ["snn_antenna.bridge.emulate"]),
+    ("bridge.online", ["snn_antenna.bridge.online"]),
+    ("bridge.view", ["snn_antenna.bridge.view"]),
+    ("bridge.cli", ["snn_antenna.bridge.cli"]),
     ("cli", ["snn_antenna.cli"]),
 ]
 
@@ -142,11 +142,11 @@ def test_the_checks_catch_what_they_forbid():
 
 # -- read-outs are blind -----------------------------------------------------------------------
 def peeks(path: Path) -> list[str]:
-    """Where a module's code reaches ground truth: an import of ``snn_antenna.truth``, an
+    """Where a module's code reaches ground truth: an import of ``snn_antenna.core.truth``, an
     attribute named ``truth``, a bench label looked up (``ds["material"]``,
     ``ds.sel(repetition=0)``) or read as an attribute (``ds.material``; ``distance_cm`` is
     also a decoded distance's name, so only its look-ups count)."""
-    from snn_antenna.truth import BENCH_LABELS
+    from snn_antenna.core.truth import BENCH_LABELS
 
     attributes = {"truth"} | set(BENCH_LABELS) - {"distance_cm"}
     selectors = {"sel", "isel", "where", "query", "drop_sel", "assign_coords", "groupby"}
@@ -188,7 +188,7 @@ def test_the_blindness_check_catches_a_peek(tmp_path):
     """Each way of peeking is caught (a planted module), and the real read-outs are scanned."""
     assert len(readout_modules()) >= 7
     planted = tmp_path / "peek.py"
-    for code in ("from ..truth import GroundTruth", "import snn_antenna.truth",
+    for code in ("from ..truth import GroundTruth", "import snn_antenna.core.truth",
                  "from .. import truth", "x = recording.truth.contacts", "y = ds['material']",
                  "d = ds['distance_cm'].values", "z = features.repetition",
                  "w = ds.sel(position=3)", "g = ds.groupby('material')"):
@@ -197,3 +197,22 @@ def test_the_blindness_check_catches_a_peek(tmp_path):
     planted.write_text("from .contacts import ContactDetector\nx = rates.sel(neuron_hz=8)\n"
                        "d = estimate.distance_cm\ntask = 'material'\n")
     assert not peeks(planted)
+
+
+def test_the_package_root_holds_only_the_stages():
+    """A module lies in the stage it serves: at the root only the package's own ``__init__``,
+    ``preprocess`` (a stage of one module) and the command line."""
+    flat = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert flat == ["__init__.py", "cli.py", "preprocess.py"], flat
+    bridge = sorted(p.name for p in (PACKAGE / "bridge").glob("*.py"))
+    assert bridge == ["__init__.py", "cli.py"], bridge
+
+
+def test_the_bridge_never_imports_the_studies():
+    """The live path stands beside the studies, not on them: what it shares with them (the
+    gate's training examples, the spec rules) lives below both."""
+    graph = import_graph()
+    found = [f"{src} imports {dst}" for src, targets in graph.items()
+             if src.startswith("snn_antenna.bridge") for dst in targets
+             if dst.startswith("snn_antenna.studies")]
+    assert not found, "\n".join(found)

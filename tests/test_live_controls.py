@@ -13,16 +13,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from snn_antenna.bridge.controls import (MAX_WINDOWS, TH_MAX_G, Change, Controls,
-                                         parse_control, recorded_events)
-from snn_antenna.bridge.online import build_online, run_online
-from snn_antenna.bridge.page import build_page
-from snn_antenna.bridge.recorder import EVENTS_FILE, Recorder, record_counts
-from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.saved_view import load_view, save_view
-from snn_antenna.bridge.view import LiveView, _tap_coder
-from snn_antenna.bridge.view_history import ViewHistory
-from snn_antenna.errors import SpecError
+from snn_antenna.bridge.online.controls import (
+    MAX_WINDOWS,
+    TH_MAX_G,
+    Change,
+    Controls,
+    parse_control,
+    recorded_events,
+)
+from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.bridge.view.page import build_page
+from snn_antenna.bridge.wire.recorder import EVENTS_FILE, Recorder, record_counts
+from snn_antenna.bridge.wire.replay import ReplaySource
+from snn_antenna.bridge.view.saved_view import load_view, save_view
+from snn_antenna.bridge.view.view import LiveView, _tap_coder
+from snn_antenna.bridge.view.history import ViewHistory
+from snn_antenna.core.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
 from tests.test_live_view_panels import NETWORK
 
@@ -250,7 +256,7 @@ def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkey
     from bokeh.document import Document
     from bokeh.models import CustomJS
 
-    from snn_antenna.bridge import page as page_module
+    from snn_antenna.bridge.view import page as page_module
 
     clock = [500.0]
     monkeypatch.setattr(page_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
@@ -285,7 +291,7 @@ def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monk
     WINDOW_FLUSH_S after the last frame at the latest (the delay a person sees)."""
     import types
 
-    from snn_antenna.bridge import view as view_module
+    from snn_antenna.bridge.view import view as view_module
 
     clock = [1000.0]
     monkeypatch.setattr(view_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))

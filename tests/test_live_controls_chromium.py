@@ -22,9 +22,9 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.bridge.controls import recorded_events
-from snn_antenna.bridge.emulator import Emulator
-from snn_antenna.bridge.links import PeerGone, PtyLink
+from snn_antenna.bridge.online.controls import recorded_events
+from snn_antenna.bridge.emulate.emulator import Emulator
+from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
 from snn_antenna.sources.stimuli import Contact, RobotScene
 from test_live_view import get_json, view_url
 

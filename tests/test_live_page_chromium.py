@@ -20,11 +20,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.bridge.online import build_online
-from snn_antenna.bridge.protocol import Sample
-from snn_antenna.bridge.saved_view import load_view
-from snn_antenna.bridge.source import Batch
-from snn_antenna.bridge.view import LiveView
+from snn_antenna.bridge.online.pipeline import build_online
+from snn_antenna.bridge.wire.protocol import Sample
+from snn_antenna.bridge.view.saved_view import load_view
+from snn_antenna.bridge.wire.source import Batch
+from snn_antenna.bridge.view.view import LiveView
 from snn_antenna.readout.contacts import ContactEstimate
 from snn_antenna.sources.stimuli import Contact, RobotScene
 from test_live_controls_chromium import CHROMIUM, model

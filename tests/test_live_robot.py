@@ -11,12 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from snn_antenna.bridge.cli import _speed
-from snn_antenna.bridge.controls import Controls, recorded_events
-from snn_antenna.bridge.online import build_online
-from snn_antenna.bridge.page import panels_html
-from snn_antenna.bridge.recorder import Recorder, record_counts
-from snn_antenna.bridge.robot import check_speed
-from snn_antenna.errors import SpecError
+from snn_antenna.bridge.online.controls import Controls, recorded_events
+from snn_antenna.bridge.online.pipeline import build_online
+from snn_antenna.bridge.view.page import panels_html
+from snn_antenna.bridge.wire.recorder import Recorder, record_counts
+from snn_antenna.bridge.online.robot import check_speed
+from snn_antenna.core.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
 from tests.test_live_view_panels import ABSENT, NETWORK, replay_into_view
 
@@ -220,7 +220,7 @@ def test_a_trained_gate_is_kept_and_recalls_as_the_one_that_learned(tmp_path, ca
     """The gate's training is cached (bench.cached, keyed on the gate, its examples and the
     code): the second stream start reuses it, with the same weights and Th range a fit gives;
     other examples learn anew."""
-    from snn_antenna.bridge.robot import trained_gate
+    from snn_antenna.bridge.online.robot import trained_gate
     from snn_antenna.networks.gate import SpeedGate
 
     def small(**changes):

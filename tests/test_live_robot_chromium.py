@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.bridge.controls import recorded_events
+from snn_antenna.bridge.online.controls import recorded_events
 from test_live_controls_chromium import (CHROMIUM, CLI, HIGH_TH_G, _wait, ask,
                                          model, replay_report, screenshot, streamed_page,
                                          two_contacts)

@@ -20,12 +20,12 @@ from hypothesis import strategies as st
 
 from snn_antenna.bridge import cli as bridge_cli
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator
-from snn_antenna.bridge.links import PeerGone, PtyLink
-from snn_antenna.bridge.online import build_online, run_online
-from snn_antenna.bridge.recorder import record_counts
-from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.errors import PipelineError, SpecError
+from snn_antenna.bridge.emulate.emulator import Emulator
+from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
+from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.bridge.wire.recorder import record_counts
+from snn_antenna.bridge.wire.replay import ReplaySource
+from snn_antenna.core.errors import PipelineError, SpecError
 from snn_antenna.readout.contacts import ContactDetector, EpisodeTracker
 from snn_antenna.sources.stimuli import Contact, RobotScene
 

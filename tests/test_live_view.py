@@ -22,13 +22,13 @@ import numpy as np
 import pytest
 
 from snn_antenna.bridge import load_recording
-from snn_antenna.bridge.emulator import Emulator
-from snn_antenna.bridge.links import PeerGone, PtyLink
-from snn_antenna.bridge.online import build_online, run_online
-from snn_antenna.bridge.recorder import record_counts
-from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.view import LiveView
-from snn_antenna.bridge.view_history import DISPLAY_EVERY, ViewHistory
+from snn_antenna.bridge.emulate.emulator import Emulator
+from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
+from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.bridge.wire.recorder import record_counts
+from snn_antenna.bridge.wire.replay import ReplaySource
+from snn_antenna.bridge.view.view import LiveView
+from snn_antenna.bridge.view.history import DISPLAY_EVERY, ViewHistory
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -225,7 +225,7 @@ def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene
     frames): the pipeline still runs to the end with the same result as without a view; the
     frames it could not hand over are counted, and the view, reading the hand-off at last,
     counts the same number as dropped."""
-    import snn_antenna.bridge.view as view_module
+    import snn_antenna.bridge.view.view as view_module
 
     monkeypatch.setattr(view_module, "FLUSH_S", 0.0)   # a frame per port read: many frames
     rec = record_counts(tmp_path / "rec", scene_counts[:3000])

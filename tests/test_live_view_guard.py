@@ -7,9 +7,9 @@ import socket
 
 import pytest
 
-from snn_antenna.bridge.online import build_online
-from snn_antenna.bridge.view import LiveView, live_view
-from snn_antenna.errors import SpecError
+from snn_antenna.bridge.online.pipeline import build_online
+from snn_antenna.bridge.view.view import LiveView, live_view
+from snn_antenna.core.errors import SpecError
 
 NETWORK = "networks/live.toml"
 
@@ -81,9 +81,9 @@ def test_a_drain_of_runs_too_short_to_plot_loses_nothing():
     """Port reads of one or two samples between two shown points (every 4th sample is plotted)
     used to raise in the server's drain (SpecError from to_g on no rows, a Tornado traceback)
     after the items had been taken from the inbox: they were lost uncounted."""
-    from snn_antenna.bridge.protocol import Sample
-    from snn_antenna.bridge.source import Batch
-    from snn_antenna.bridge.view_history import ViewHistory
+    from snn_antenna.bridge.wire.protocol import Sample
+    from snn_antenna.bridge.wire.source import Batch
+    from snn_antenna.bridge.view.history import ViewHistory
 
     view = LiveView(build_online(NETWORK), port=0)        # no view process: drain by hand
     history = ViewHistory(view.config)

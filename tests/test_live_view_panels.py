@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.bridge.controls import Controls
-from snn_antenna.bridge.online import build_online, run_online
-from snn_antenna.bridge.page import build_page, panels_html
-from snn_antenna.bridge.recorder import record_counts
-from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.view import LiveView
-from snn_antenna.bridge.view_history import ViewHistory
+from snn_antenna.bridge.online.controls import Controls
+from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.bridge.view.page import build_page, panels_html
+from snn_antenna.bridge.wire.recorder import record_counts
+from snn_antenna.bridge.wire.replay import ReplaySource
+from snn_antenna.bridge.view.view import LiveView
+from snn_antenna.bridge.view.history import ViewHistory
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]

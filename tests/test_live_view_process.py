@@ -19,13 +19,13 @@ import urllib.request
 
 import pytest
 
-from snn_antenna.bridge.links import PtyLink
-from snn_antenna.bridge.online import build_online, run_online, warm_up
-from snn_antenna.bridge.protocol import Sample
-from snn_antenna.bridge.recorder import record_counts
-from snn_antenna.bridge.replay import ReplaySource
-from snn_antenna.bridge.source import Batch
-from snn_antenna.bridge.view import LiveView
+from snn_antenna.bridge.emulate.links import PtyLink
+from snn_antenna.bridge.online.pipeline import build_online, run_online, warm_up
+from snn_antenna.bridge.wire.protocol import Sample
+from snn_antenna.bridge.wire.recorder import record_counts
+from snn_antenna.bridge.wire.replay import ReplaySource
+from snn_antenna.bridge.wire.source import Batch
+from snn_antenna.bridge.view.view import LiveView
 from snn_antenna.sources.stimuli import Contact, RobotScene
 from test_live_total import serve
 from test_live_view import CHROMIUM, CLI, NETWORK, TH, end, get_json

@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks import assembly
 from snn_antenna.networks.control import MaterialUnit
 from snn_antenna.readout.spiking import Band, SpikingBank, window_features
 from snn_antenna.sources import bench
-from snn_antenna.stats import binomial_interval
+from snn_antenna.report.stats import binomial_interval
 
 ROOT = Path(__file__).resolve().parents[1]
 RATE_HZ = 2000.0

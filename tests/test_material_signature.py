@@ -10,7 +10,7 @@ from scipy import stats
 
 from snn_antenna.readout.events import EventProcessor, process
 from snn_antenna.sources import bench
-from snn_antenna.truth import bench_labels
+from snn_antenna.core.truth import bench_labels
 
 
 def _tau_low(material: str, positions, repetitions=20) -> np.ndarray:

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from snn_antenna import spec as specs
-from snn_antenna.errors import SpecError
+from snn_antenna.core import spec as specs
+from snn_antenna.core.errors import SpecError
 from snn_antenna.sources import antenna, bench
 from snn_antenna.sources.contact_models import ContactPhysics
 from snn_antenna.studies import model_selection as ms

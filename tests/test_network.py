@@ -5,10 +5,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks.resonators import ResonatorArray, rate_map
 from snn_antenna.readout.contacts import ContactDetector, centroid_hz, dominant_hz
-from snn_antenna.signals import Recording
+from snn_antenna.core.signals import Recording
 from snn_antenna.sources import stimuli
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from snn_antenna.errors import NumericalInstabilityError, SpecError
+from snn_antenna.core.errors import NumericalInstabilityError, SpecError
 from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
 

@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from sklearn.base import clone
 
 from snn_antenna import preprocess as pp
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 SCENE = RobotScene(duration_s=4.0, contacts=[Contact(2.0, 19.0)]).generate(seed=5)

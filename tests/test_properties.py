@@ -8,11 +8,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from snn_antenna.errors import NumericalInstabilityError, SpecError
+from snn_antenna.core.errors import NumericalInstabilityError, SpecError
 from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
-from snn_antenna.signals import Recording
+from snn_antenna.core.signals import Recording
 
 # Each example builds a Brian2 network: few examples by default, many under -m slow.
 FEW = settings(max_examples=8, deadline=None, derandomize=True,

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna import spec as specs
-from snn_antenna.errors import SpecError
+from snn_antenna.core import spec as specs
+from snn_antenna.core.errors import SpecError
 from snn_antenna.preprocess import fit_warmup
-from snn_antenna.truth import Event, GroundTruth
+from snn_antenna.core.truth import Event, GroundTruth
 from snn_antenna.sources import antenna
 from snn_antenna.sources.stimuli import RobotScene
 from snn_antenna.studies import quickstart

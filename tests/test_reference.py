@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks import neurons, reference
 from snn_antenna.networks.control import ControlLayer
 from snn_antenna.networks.resonators import ResonatorArray

@@ -31,7 +31,7 @@ def test_max_accurate_k_dt_ignores_drives_the_finest_step_already_misses():
 
 
 def test_one_spelling_per_material_and_times_in_a_readable_unit():
-    from snn_antenna.report import fmt, label
+    from snn_antenna.report.page import fmt, label
 
     assert label("pom") == "POM" and label("pvc") == "PVC" and fmt({"pvc": 0.9}) == "PVC = 0.9"
     assert fmt(389946.0, "µs/event") == "389.9 ms/event" and fmt(12.5, "µs") == "12.5 µs"
@@ -47,14 +47,14 @@ def test_the_band_advice_is_words_not_code():
 
 
 def test_speed_to_value_mappings_are_written_one_way():
-    from snn_antenna.report import by_speed
+    from snn_antenna.report.page import by_speed
 
     line = by_speed({"27.0": 0.35, "12": 0.0669, "0": 0.03}, lambda t: f"{t:.3g} g")
     assert line == "0 cm/s: 0.03 g · 12 cm/s: 0.0669 g · 27 cm/s: 0.35 g"
 
 
 def test_speed_accuracy_lists_only_the_shipped_limits_its_map_supports(tmp_path):
-    from snn_antenna.report import Report
+    from snn_antenna.report.page import Report
     from snn_antenna.studies.speed_accuracy.report import _provenance_rows
 
     summary = {"stability_limits": {
@@ -72,7 +72,7 @@ def test_speed_accuracy_lists_only_the_shipped_limits_its_map_supports(tmp_path)
 
 
 def test_tuning_puts_the_spread_of_peak_per_k_in_words_not_in_the_interval_column(tmp_path):
-    from snn_antenna.report import Report
+    from snn_antenna.report.page import Report
     from snn_antenna.studies.tuning_sweep import _provenance_rows
 
     summary = {"reference_used": {"k": 1.0}, "calibration": {

@@ -24,22 +24,11 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from snn_antenna import stats
-from snn_antenna.figures import draw_rate_map
-from snn_antenna.files import atomic_write
-from snn_antenna.logfile import (
-    CPG_TOKEN_ORDER,
-    FLOAT32_CHECK,
-    UNSTABLE_ON_PURPOSE,
-    LogFile,
-)
-from snn_antenna.report import (
-    Calibrated,
-    Predicted,
-    Report,
-    fmt,
-    label,
-)
+from snn_antenna.report import stats
+from snn_antenna.report.figures import draw_rate_map
+from snn_antenna.core.files import atomic_write
+from snn_antenna.core.logfile import CPG_TOKEN_ORDER, FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
+from snn_antenna.report.page import Calibrated, Predicted, Report, fmt, label
 
 WIDTH_PX = 1280
 STUDIES = [

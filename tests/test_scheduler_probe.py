@@ -7,7 +7,7 @@ import time
 import pytest
 
 from snn_antenna.engine.executor import SCHEDULER_PROBE_S, dask_client
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 
 
 @pytest.fixture(params=["silent", "banner"])

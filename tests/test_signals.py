@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from snn_antenna.errors import SpecError
-from snn_antenna.signals import Recording
+from snn_antenna.core.errors import SpecError
+from snn_antenna.core.signals import Recording
 from snn_antenna.sources import antenna, stimuli
 
 

@@ -3,9 +3,9 @@ import json
 
 import pytest
 
-from snn_antenna import spec as specs
+from snn_antenna.core import spec as specs
 from snn_antenna.engine.runlog import RUN_IDENTITY, RunLog
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks import neurons
 from snn_antenna.evaluation import tradeoff
 from snn_antenna.studies import runner

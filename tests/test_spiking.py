@@ -14,7 +14,7 @@ from snn_antenna.readout.spiking import (
     DominantNeuronDistance,
     SpikingBank,
 )
-from snn_antenna.signals import Recording
+from snn_antenna.core.signals import Recording
 from snn_antenna.sources import bench
 from snn_antenna.sources.stimuli import square
 
@@ -133,7 +133,7 @@ def test_binned_counts_known_answer():
 
 
 def test_bad_banks_are_refused():
-    from snn_antenna.errors import SpecError
+    from snn_antenna.core.errors import SpecError
     on_the_banks_step = dataclasses.replace(HIGH_BAND, dt_ms=None, method=None)
     with pytest.raises(SpecError, match="bands.high.dt_ms"):
         SpikingBank(bands={"high": on_the_banks_step}, dt_ms=0.5)

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from snn_antenna import stats
-from snn_antenna.errors import SpecError
-from snn_antenna.report import Calibrated, Predicted, Report
+from snn_antenna.report import stats
+from snn_antenna.core.errors import SpecError
+from snn_antenna.report.page import Calibrated, Predicted, Report
 
 
 def test_paired_difference_matches_scipy_paired_t():

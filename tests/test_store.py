@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import xarray as xr
 
-from snn_antenna.store import read_dataset, write_dataset
+from snn_antenna.core.store import read_dataset, write_dataset
 
 
 def _with_text() -> xr.Dataset:

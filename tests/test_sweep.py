@@ -17,9 +17,9 @@ from snn_antenna.engine.cost import check_memory
 from snn_antenna.engine.evaluators import NeuronSweep
 from snn_antenna.engine.grid import Grid, axis_values
 from snn_antenna.engine.sweep import run_sweep
-from snn_antenna.errors import SpecError
+from snn_antenna.core.errors import SpecError
 from snn_antenna.networks import neurons
-from snn_antenna.store import Output, SweepStore
+from snn_antenna.core.store import Output, SweepStore
 
 REPO = Path(__file__).resolve().parents[1]
 SMALL = {"k": [0.5, 1.0], "I": [0.15, 0.5], "input_hz": [6.0, 10.0, 14.0, 18.0, 22.0, 26.0]}
@@ -88,7 +88,7 @@ def test_bad_neuron_grids_are_refused_before_any_work(tmp_path):
 
 
 def test_study_spec_refuses_unknown_axis_before_work(tmp_path):
-    from snn_antenna import spec as specs
+    from snn_antenna.core import spec as specs
     from snn_antenna.studies import tuning_sweep
 
     spec = specs.load(REPO / "studies/tuning_sweep.toml", ["axes.q=[1, 2]"], quick=True)
@@ -145,7 +145,7 @@ def test_datasets_are_written_atomically_with_text_as_zarr_v3_strings(tmp_path, 
     import xarray as xr
     import zarr
 
-    from snn_antenna.store import write_dataset
+    from snn_antenna.core.store import write_dataset
 
     ds = xr.Dataset({"status": (("method", "k_dt"), np.arange(6).reshape(2, 3)),
                      "label": ("method", np.array(["fine", "blown"]))},

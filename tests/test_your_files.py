@@ -23,11 +23,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from snn_antenna import outputs, provenance
+from snn_antenna.core import outputs, provenance
 from snn_antenna.cli import main
-from snn_antenna.errors import SpecError
-from snn_antenna.files import atomic_write, open_append
-from snn_antenna.store import DamagedStore, Output, SweepStore
+from snn_antenna.core.errors import SpecError
+from snn_antenna.core.files import atomic_write, open_append
+from snn_antenna.core.store import DamagedStore, Output, SweepStore
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICKSTART = str(ROOT / "studies" / "quickstart.toml")
@@ -197,7 +197,7 @@ def test_run_sweep_does_not_resolve_its_store_path(tmp_path):
 @pytest.mark.parametrize("name", ["run.log", "runs.jsonl"])
 def test_a_log_that_is_a_symlink_is_refused_and_its_target_untouched(tmp_path, name):
     from snn_antenna.engine.runlog import RunLog
-    from snn_antenna.logfile import LogFile
+    from snn_antenna.core.logfile import LogFile
 
     target = tmp_path / "diary.txt"
     kept = users_file(target, "dear diary\n", 0o600)
@@ -214,7 +214,7 @@ def test_a_log_that_is_a_symlink_is_refused_and_its_target_untouched(tmp_path, n
 
 
 def test_a_recording_file_that_is_a_symlink_is_refused(tmp_path):
-    from snn_antenna.bridge.recorder import Recorder
+    from snn_antenna.bridge.wire.recorder import Recorder
 
     target = tmp_path / "data.bin"
     kept = users_file(target, "bytes", 0o600)
@@ -272,7 +272,7 @@ def test_a_store_made_by_other_code_is_refused_on_resume(tmp_path, monkeypatch):
     _store(path)
     assert _store(path) is not None                          # same code: resumes
     monkeypatch.setattr(provenance, "code_hash", lambda *modules: "0123456789abcdef")
-    import snn_antenna.store as store_module
+    import snn_antenna.core.store as store_module
     monkeypatch.setattr(store_module, "code_hash", provenance.code_hash)
     with pytest.raises(SpecError, match="other code") as err:
         _store(path)
@@ -305,12 +305,12 @@ def test_a_cache_made_by_other_code_is_rebuilt_and_said(tmp_path, monkeypatch):
 
 def test_cache_keys_and_fingerprints_cover_the_package_source(monkeypatch):
     from snn_antenna.sources import bench
-    from snn_antenna.store import fingerprint
+    from snn_antenna.core.store import fingerprint
 
     key, fp = bench.cache_key({"a": 1}, "snn_antenna.sources.bench"), \
         fingerprint({"k": [1.0]}, {}, (1,), None)
     monkeypatch.setattr(bench, "code_hash", lambda *modules: "another")
-    import snn_antenna.store as store_module
+    import snn_antenna.core.store as store_module
     monkeypatch.setattr(store_module, "code_hash", lambda *modules: "another")
     assert bench.cache_key({"a": 1}, "snn_antenna.sources.bench") != key
     assert fingerprint({"k": [1.0]}, {}, (1,), None) != fp
@@ -355,7 +355,7 @@ def test_a_cache_key_covers_the_code_its_module_runs_and_nothing_else(tmp_path, 
         return _hashes(roots)
     try:
         before = _hashes(roots)
-        assert edit("bridge/page.py") == before                     # not imported by either
+        assert edit("bridge/view/page.py") == before                     # not imported by either
         after_neurons = edit("networks/neurons.py")                 # the event engine's model
         assert after_neurons["snn_antenna.sources.bench"] == before["snn_antenna.sources.bench"]
         assert after_neurons["snn_antenna.engine.events"] != before["snn_antenna.engine.events"]
@@ -421,7 +421,7 @@ def test_a_nan_chunk_in_a_cache_is_rebuilt(tmp_path):
 
 
 def test_a_bad_meta_json_is_named(tmp_path):
-    from snn_antenna.bridge.recorder import load_recording, record_counts
+    from snn_antenna.bridge.wire.recorder import load_recording, record_counts
 
     rec = record_counts(tmp_path / "rec", np.zeros((10, 2), dtype=np.int64))
     (rec / "meta.json").write_bytes(b"\xff\xfe{")

@@ -1,4 +1,4 @@
-"""Write test_vectors.json from the Python encoder (snn_antenna.bridge.protocol).
+"""Write test_vectors.json from the Python encoder (snn_antenna.bridge.wire.protocol).
 
     python firmware/antenna_stream/make_vectors.py
 
@@ -9,7 +9,7 @@ import json
 import random
 from pathlib import Path
 
-from snn_antenna.bridge.protocol import encode_binary
+from snn_antenna.bridge.wire.protocol import encode_binary
 
 HERE = Path(__file__).resolve().parent
 
@@ -26,7 +26,7 @@ def vectors() -> list[dict]:
 def render() -> str:
     lines = ",\n".join("  " + json.dumps(v) for v in vectors())
     return ('{"description": "wire frames (COBS(seq x y crc16-xmodem) + 0x00) from '
-            'snn_antenna.bridge.protocol.encode_binary",\n "vectors": [\n' + lines + "\n ]\n}\n")
+            'snn_antenna.bridge.wire.protocol.encode_binary",\n "vectors": [\n' + lines + "\n ]\n}\n")
 
 
 if __name__ == "__main__":

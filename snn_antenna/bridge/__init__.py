@@ -2,6 +2,6 @@
 
 ``load_recording(DIR)`` reads back what ``snn-antenna record`` wrote, also after a crash.
 """
-from .recorder import BridgeRecording, load_recording
+from .wire.recorder import BridgeRecording, load_recording
 
 __all__ = ["BridgeRecording", "load_recording"]

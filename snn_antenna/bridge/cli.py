@@ -13,14 +13,14 @@ import time
 from contextlib import contextmanager
 from pathlib import Path
 
-from .. import bounds
-from ..bounds import option
-from ..errors import NumericalInstabilityError, PipelineError, SpecError, guarded
-from .protocol import WIRE_FORMATS
-from .recorder import COUNT_FIELDS
-from .emulate_cmd import cmd_emulate
-from .source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
-from .view import add_view_args, live_view
+from ..core import bounds
+from ..core.bounds import option
+from ..core.errors import NumericalInstabilityError, PipelineError, SpecError, guarded
+from .wire.protocol import WIRE_FORMATS
+from .wire.recorder import COUNT_FIELDS
+from .emulate.command import cmd_emulate
+from .wire.source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
+from .view.view import add_view_args, live_view
 
 EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
 EXIT_FAILED = 1                         # a stage of the pipeline itself failed
@@ -208,7 +208,7 @@ class Progress:
 def recording_session(args, extra_meta: dict | None = None):
     """Open the port, then the recording; yield (source, recorder, stop). However the session
     ends, the port is released and the recording closed with that ending as its status."""
-    from .recorder import Recorder
+    from .wire.recorder import Recorder
 
     _check_recording_dir(args.out)          # before the port is opened
     stop = stop_on_signals()
@@ -255,7 +255,7 @@ def replay_overrides(args) -> list[str]:
     """The ``--set`` a replay runs with: the ones the recording was streamed with (its
     meta.json), then the explicit ones, which win. Said on stderr, so that a replay that
     reports other contacts than the live run says why."""
-    from .recorder import META_FILE
+    from .wire.recorder import META_FILE
 
     meta_path = Path(args.recording) / META_FILE
     meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
@@ -273,7 +273,7 @@ def replay_overrides(args) -> list[str]:
 
 def replay_speed(args) -> float | None:
     """The speed command a replay starts at: ``--speed``, else the recording's (meta.json)."""
-    from .recorder import META_FILE
+    from .wire.recorder import META_FILE
 
     if getattr(args, "speed", None) is not None:
         return args.speed
@@ -288,14 +288,14 @@ def replay_speed(args) -> float | None:
 
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
-    from .controls import recorded_events
-    from .replay import ReplaySource
+    from .online.controls import recorded_events
+    from .wire.replay import ReplaySource
 
     if args.view and not args.network:
         raise SpecError("view", True, "--view with --network (the view shows the network)")
     if args.network:
-        from .online import build_online, run_online
-        from .terminal import LiveDisplay
+        from .online.pipeline import build_online, run_online
+        from .online.terminal import LiveDisplay
 
         parts = build_online(args.network, replay_overrides(args),
                              speed_cm_s=replay_speed(args))
@@ -329,7 +329,7 @@ def cmd_replay(args) -> int:
 
 def _check_recording_dir(path) -> None:
     """A recording goes into a new or empty folder: never beside (or into) a user's files."""
-    from ..outputs import check_writable
+    from ..core.outputs import check_writable
 
     path = check_writable(path)
     if path.is_dir() and any(path.iterdir()):
@@ -340,8 +340,8 @@ def _check_recording_dir(path) -> None:
 @_guarded
 def cmd_stream(args) -> int:
     """Run the online pipeline on a live port, recording while streaming."""
-    from .online import build_online, run_online, warm_up
-    from .terminal import LiveDisplay
+    from .online.pipeline import build_online, run_online, warm_up
+    from .online.terminal import LiveDisplay
 
     _check_duration(args.duration)
     # A bad spec (or speed) fails before the port opens.
@@ -368,8 +368,8 @@ def cmd_stream(args) -> int:
 def live_controls(parts, view, **kwargs):
     """Th and the rate-map window under the page's hands (bridge/controls.py): requests from
     the view, changes shown on it; ``journal``/``scheduled`` as the command records or replays."""
-    from .controls import Controls
-    from .protocol import BOARD_RATE_HZ
+    from .online.controls import Controls
+    from .wire.protocol import BOARD_RATE_HZ
 
     return Controls(parts, requests=view.requests if view else None,
                     on_applied=view.applied if view else None, rate_hz=BOARD_RATE_HZ, **kwargs)
@@ -377,7 +377,7 @@ def live_controls(parts, view, **kwargs):
 
 def stream_summary(report: dict, out) -> str:
     """What a person wants at the end of a live run, in four lines (--json has the rest)."""
-    from ..report import fmt
+    from ..report.page import fmt
 
     lat = report["latency_ms"]
     contacts = report.get("contacts")

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import check
-from ..store import Output
-from ..bounds import memory_budget_bytes
+from ..core.errors import check
+from ..core.store import Output
+from ..core.bounds import memory_budget_bytes
 from .grid import Grid
 
 

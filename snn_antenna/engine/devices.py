@@ -26,13 +26,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import NumericalInstabilityError, check
+from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
 from ..evaluation import accuracy
 from ..evaluation.accuracy import Match, SpikeTrains
 from ..evaluation.tradeoff import ERRORS, RAISED, check_finite
-from ..signals import Recording
+from ..core.signals import Recording
 from ..sources.stimuli import square
 
 WARM_UP_MS = 5.0   # a few steps run every line of the compiled code; their spikes are unused

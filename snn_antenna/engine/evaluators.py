@@ -27,10 +27,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import bounds
-from ..errors import SpecError, check
+from ..core import bounds
+from ..core.errors import SpecError, check
 from ..networks import neurons
-from ..store import Output
+from ..core.store import Output
 from .devices import DTYPES, float_precision
 from .grid import Grid
 from .standalone import standalone_counts
@@ -229,7 +229,7 @@ class SceneSweep:
     def _scene_and_chain(self, values: dict):
         from ..preprocess import make_chain
         from ..sources.scenes import scene_from_spec
-        from ..spec import set_field
+        from ..core.spec import set_field
 
         spec = {"stimulus": copy.deepcopy(self.stimulus),
                 "preprocess": copy.deepcopy(self.preprocess)}

@@ -39,14 +39,22 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import NumericalInstabilityError, check
+from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons
 from ..readout.spiking import SpikeFeatures, SpikingBank, recording_attrs
-from ..store import Output
+from ..core.store import Output
 from .event_features import band_features, fused_features, spike_time_s
 from .grid import Grid
-from .standalone import (SPIKED, FusedUpdater, _functions, fused_reset, project, run_project,
-                         tick_substeps, vectorising_flags)
+from .standalone import (
+    SPIKED,
+    FusedUpdater,
+    _functions,
+    fused_reset,
+    project,
+    run_project,
+    tick_substeps,
+    vectorising_flags,
+)
 from .sweep import run_sweep
 
 CHECK_EVERY_MS = 10.0
@@ -376,7 +384,7 @@ def cached_features(data, bank: SpikingBank, bench_spec, log=print, fresh: bool 
     (``bench.cache_key``).
     The run itself goes through a sweep store beside the cache, so an interrupted one
     resumes."""
-    from ..files import remove_entry
+    from ..core.files import remove_entry
     from ..sources import bench
 
     key = bench.cache_key({"bench": bench_spec.key(), "bank": _bank_fields(bank)}, __name__)

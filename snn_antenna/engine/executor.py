@@ -12,7 +12,7 @@ import functools
 import os
 from contextlib import contextmanager
 
-from ..errors import SpecError, check
+from ..core.errors import SpecError, check
 from .cost import max_workers
 
 

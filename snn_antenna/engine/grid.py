@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import SpecError, check, is_integer
+from ..core.errors import SpecError, check, is_integer
 
 
 def axis_values(name: str, value) -> np.ndarray:

@@ -12,10 +12,10 @@ import hashlib
 import json
 from pathlib import Path
 
-from ..errors import SpecError
+from ..core.errors import SpecError
 from ..evaluation.tradeoff import describe
-from ..files import atomic_write, open_append, refuse_symlink
-from ..provenance import code_hash
+from ..core.files import atomic_write, open_append, refuse_symlink
+from ..core.provenance import code_hash
 from .devices import Setting, measure
 
 # What names one measured run in the log

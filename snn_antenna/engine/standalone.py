@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import NumericalInstabilityError
-from ..files import atomic_write
+from ..core.errors import NumericalInstabilityError
+from ..core.files import atomic_write
 from ..networks import neurons
 
 # One compiled standalone project per process (Brian2's device is process-global); a worker

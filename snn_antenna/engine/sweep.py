@@ -33,8 +33,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..errors import check
-from ..store import Output, SweepStore
+from ..core.errors import check
+from ..core.store import Output, SweepStore
 from .cost import check_memory
 from .executor import prepare_workers
 from .grid import Grid

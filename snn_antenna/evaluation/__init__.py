@@ -2,7 +2,7 @@
 
 This stage comes after ``snn_antenna.readout`` (it may import it; the read-out may never import
 this): decisions are made blind, then scored here against the labels of their recordings
-(``snn_antenna.truth``) or against the exact reference solutions.
+(``snn_antenna.core.truth``) or against the exact reference solutions.
 
 - ``scoring``: detections against a recording's contacts, per contact (``score``,
   ``score_with``, ``score_run``, ``first_match``, ``contact_rows``, ``SCORE_OUTPUTS``).

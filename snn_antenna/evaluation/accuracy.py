@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from ..errors import check
+from ..core.errors import check
 from ..networks import neurons, reference
 from ..networks.resonators import rate_map
 

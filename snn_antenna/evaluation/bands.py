@@ -27,7 +27,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from ..errors import NumericalInstabilityError, check, is_number
+from ..core.errors import NumericalInstabilityError, check, is_number
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
 from .accuracy import rate_map_error, spike_count_error, spike_time_error_ms

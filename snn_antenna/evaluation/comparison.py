@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from .. import stats
+from ..report import stats
 from .crossval import BaselineResult
 from .signal import PAPER_SIGNAL
 from ..readout.spiking_decoders import TRAINING_FREE, TUNED_READOUTS, input_of

@@ -10,7 +10,7 @@ from .comparison import cost_items, label
 from .confusion import confusion
 from .signal import PAPER_SIGNAL
 from ..readout.spiking_decoders import TRAINING_FREE
-from ..figures import legend_outside
+from ..report.figures import legend_outside
 
 # Half-width (cm) of the horizontal jitter that separates the contacts of one site.
 SITE_JITTER_CM = 0.3

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..stats import binomial_interval
+from ..report.stats import binomial_interval
 
 PLASTICS = ("pom", "pvc", "acrylic_glass")
 # Below this share of the pair's contacts taken for each other, a pair counts as easy.

@@ -30,9 +30,17 @@ import numpy as np
 import xarray as xr
 from sklearn.exceptions import ConvergenceWarning
 
-from ..errors import SpecError, check
-from ..readout.baselines import (NMF_DIMENSIONS, TASKS, Baseline, Mlp, distance_baselines,
-                                 inputs_of, material_baselines, two_material_baseline)
+from ..core.errors import SpecError, check
+from ..readout.baselines import (
+    NMF_DIMENSIONS,
+    TASKS,
+    Baseline,
+    Mlp,
+    distance_baselines,
+    inputs_of,
+    material_baselines,
+    two_material_baseline,
+)
 from ..readout.spiking import SpikingBank, recording_attrs
 from ..readout.spiking_decoders import mlp_baseline
 

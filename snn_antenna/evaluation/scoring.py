@@ -25,13 +25,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import check
+from ..core.errors import check
 from ..networks.resonators import ResonatorArray
 from ..readout.contacts import ContactDetector, ContactEstimate
 from ..readout.detection import BlindReadOut
 from ..sources import antenna
-from ..store import Output
-from ..truth import Event
+from ..core.store import Output
+from ..core.truth import Event
 
 
 @dataclass

@@ -16,7 +16,7 @@ import numpy as np
 import xarray as xr
 
 from ..readout.events import EventProcessor, process
-from ..truth import bench_labels
+from ..core.truth import bench_labels
 
 
 def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool = False

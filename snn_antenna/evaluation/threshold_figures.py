@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .thresholds import GateRecall, f1_at
-from ..figures import legend_outside
+from ..report.figures import legend_outside
 
 
 def pyplot():

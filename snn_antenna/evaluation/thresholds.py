@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
-from ..stats import MIN_N_TO_RESOLVE, mean_interval, paired_difference, seeds_needed
+from ..report.stats import MIN_N_TO_RESOLVE, mean_interval, paired_difference, seeds_needed
 from .scoring import Score
 
 F1_BOUNDS = (0.0, 1.0)
@@ -319,21 +319,3 @@ def earns_its_place(s: dict) -> tuple[bool, str]:
             f"there) and its read-out trace (τ = {s['gate_tau_read_s']:g} s) lags each speed "
             "step, so at best a spiking associative memory matches the table it learns")
     return False, "; ".join(why)
-
-
-def th_star_from_summary(path) -> tuple[np.ndarray, np.ndarray]:
-    """The training speeds and their Th* from a gating study's ``summary.json``: the same
-    examples that study taught its own gate."""
-    import json
-    from pathlib import Path
-
-    from ..errors import SpecError
-
-    accepted = "the summary.json of a studies/gating_threshold.toml run"
-    try:
-        summary = json.loads(Path(path).read_text())
-        th_star = {float(v): float(t) for v, t in summary["th_star"].items()}
-        speeds = np.asarray(summary["train_speeds_cm_s"], dtype=float)
-        return speeds, np.array([th_star[float(v)] for v in speeds])
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        raise SpecError("from_summary", str(path), accepted) from None

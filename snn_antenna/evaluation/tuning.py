@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
-from ..figures import legend_outside
+from ..report.figures import legend_outside
 from ..networks import neurons
 
 # The foundation's constant holds when the fitted centroid slope is within this (relative)

@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from .. import spec as specs
-from ..errors import SpecError, check
+from ..core import spec as specs
+from ..core.errors import SpecError, check
 from .control import ControlLayer, MaterialUnit
 from .cpg import CPG
 from .gate import SpeedGate

@@ -34,8 +34,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import bounds
-from ..errors import SpecError, check, is_number
+from ..core import bounds
+from ..core.errors import SpecError, check, is_number
 from ..sources import antenna
 from . import neurons
 from .resonators import SELF_MOTION_BAND_HZ, tuned_above

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import check
+from ..core.errors import check
 from . import neurons
 
 

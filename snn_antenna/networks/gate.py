@@ -40,8 +40,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .. import bounds
-from ..errors import SpecError, check
+from ..core import bounds
+from ..core.errors import SpecError, check
 from . import neurons
 
 CLASS1_RHEOBASE = 22.56  # class1 preset (5v + 140, b = -0.1): the fixed point vanishes above
@@ -345,3 +345,36 @@ class SpeedGate:
                                       self.weights_, record_read_every_s=1.0 / rate_hz)
         th = self.decode(read[warm:warm + len(v)])
         return th[:, 0] if single else th
+
+
+# -- what the gate learns ------------------------------------------------------------------------
+def th_star_from_summary(path) -> tuple[np.ndarray, np.ndarray]:
+    """The training speeds and their Th* from a gating study's ``summary.json``: the same
+    examples that study taught its own gate."""
+    import json
+    from pathlib import Path
+
+    accepted = "the summary.json of a studies/gating_threshold.toml run"
+    try:
+        summary = json.loads(Path(path).read_text())
+        th_star = {float(v): float(t) for v, t in summary["th_star"].items()}
+        speeds = np.asarray(summary["train_speeds_cm_s"], dtype=float)
+        return speeds, np.array([th_star[float(v)] for v in speeds])
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        raise SpecError("from_summary", str(path), accepted) from None
+
+
+@dataclass
+class GateTraining:
+    """Th*(speed) examples the gate learns: the spec's lists, or a gating run's summary."""
+    speeds_cm_s: list = (0.0, 30.0)
+    th_star_g: list = (0.1, 0.6)
+    from_summary: str | None = None     # replaces the lists above
+
+    def examples(self) -> tuple[np.ndarray, np.ndarray]:
+        if self.from_summary is not None:
+            return th_star_from_summary(self.from_summary)
+        v, th = np.asarray(self.speeds_cm_s, float), np.asarray(self.th_star_g, float)
+        check(v.shape == th.shape and len(v) >= 2, "th_star_g", self.th_star_g,
+              "one threshold per speed, at least two")
+        return v, th

@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import NumericalInstabilityError, SpecError, check, is_integer, is_number
-from ..signals import validate_samples
+from ..core.errors import NumericalInstabilityError, SpecError, check, is_integer, is_number
+from ..core.signals import validate_samples
 
 
 @dataclass(frozen=True)

@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from ..errors import NumericalInstabilityError, SpecError, check
-from ..signals import Recording, validate_samples
+from ..core.errors import NumericalInstabilityError, SpecError, check
+from ..core.signals import Recording, validate_samples
 from . import neurons
 
 DEFAULT_RTOL = 1e-10

@@ -16,9 +16,9 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 import xarray as xr
 
-from .. import bounds
-from ..errors import PipelineError, SpecError, check, is_integer, is_number
-from ..signals import Recording, validate_samples
+from ..core import bounds
+from ..core.errors import PipelineError, SpecError, check, is_integer, is_number
+from ..core.signals import Recording, validate_samples
 from . import neurons
 
 MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice

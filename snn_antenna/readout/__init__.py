@@ -1,7 +1,7 @@
 """What the networks' spikes and the sensor's samples mean: decisions a robot can make now.
 
 Everything here sees only what a robot has at that moment (samples, coded signals, spikes,
-rate maps); none of it reads ground truth (``snn_antenna.truth``): ``tests/test_layout.py``
+rate maps); none of it reads ground truth (``snn_antenna.core.truth``): ``tests/test_layout.py``
 fails when a module here imports it, reads a recording's ``truth`` or names a bench label.
 How good the decisions were is ``snn_antenna.evaluation``'s work, afterwards.
 

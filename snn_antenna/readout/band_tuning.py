@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import check, is_number
+from ..core.errors import check, is_number
 from .spiking import Band, align_events
 
 # The steps a band may take (ms), each dividing the bench's 0.5 ms input interval (the

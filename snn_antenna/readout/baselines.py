@@ -23,7 +23,7 @@ from sklearn.neural_network import MLPClassifier, MLPRegressor
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import FunctionTransformer, StandardScaler
 
-from ..errors import SpecError, check
+from ..core.errors import SpecError, check
 from .events import PARAMETERS
 
 NMF_DIMENSIONS = (3, 5, 9, 15, 30, 45, 60)

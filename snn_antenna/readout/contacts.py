@@ -12,7 +12,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
-from ..errors import SpecError, check, is_integer, is_number
+from ..core.errors import SpecError, check, is_integer, is_number
 from ..networks.resonators import SELF_MOTION_BAND_HZ, tuned_above
 from ..sources import antenna
 
@@ -215,7 +215,7 @@ def detector_from_spec(spec: dict) -> tuple["ContactDetector", float]:
 
     Every study and the live pipeline read the section here, so its keys, defaults and
     errors are the same everywhere (``window_s`` defaults to 0.1 s)."""
-    from .. import spec as specs
+    from ..core import spec as specs
 
     with specs.section("readout"):
         read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))

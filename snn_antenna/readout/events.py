@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from ..errors import check
-from ..signals import validate_samples
+from ..core.errors import check
+from ..core.signals import validate_samples
 
 PARAMETERS = ("F_low", "A_low", "tau_low", "F_high", "A_high", "tau_high")
 SKIP_REASONS = ("no_onset", "clipped", "no_decay_fit")
@@ -255,7 +255,7 @@ def process(ds: xr.Dataset, processor: EventProcessor, n_jobs: int = 1, block: i
             log=print) -> xr.Dataset:
     """Features of every event of a bench data set: ``spectrum`` (event, freq_hz),
     ``params`` (event, parameter) and ``skipped`` (event: '' or the reason)."""
-    from ..parallel import parallel_map
+    from ..core.parallel import parallel_map
 
     check(float(ds.attrs["rate_hz"]) == processor.rate_hz, "processor.rate_hz",
           processor.rate_hz, f"the data set's rate, {ds.attrs['rate_hz']} Hz")

@@ -39,7 +39,7 @@ import xarray as xr
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
-from ..errors import SpecError, check, is_number
+from ..core.errors import SpecError, check, is_number
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain

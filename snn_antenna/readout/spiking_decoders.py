@@ -18,8 +18,8 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import xarray as xr
 
-from .. import spec as specs
-from ..errors import check
+from ..core import spec as specs
+from ..core.errors import check
 from . import baselines as bl
 from .band_tuning import Tuning
 from .spiking import Band, CentroidDistance, DominantNeuronDistance, SpikingBank

@@ -76,7 +76,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SpecError, check
+from ..core.errors import SpecError, check
 from .contact_models import DEFAULT as DEFAULT_PHYSICS, ContactPhysics
 
 ROD_LENGTH_CM = 41.3          # total feeler length (paper: 413 mm)

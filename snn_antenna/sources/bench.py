@@ -26,13 +26,13 @@ from typing import Callable, Sequence
 import numpy as np
 import xarray as xr
 
-from ..errors import SpecError, check
-from ..parallel import parallel_map
-from ..signals import Recording
-from ..truth import Event, GroundTruth
-from ..files import refuse_symlink
-from ..provenance import code_hash, code_identity
-from ..store import DamagedStore, short_reason, read_dataset, write_dataset
+from ..core.errors import SpecError, check
+from ..core.parallel import parallel_map
+from ..core.signals import Recording
+from ..core.truth import Event, GroundTruth
+from ..core.files import refuse_symlink
+from ..core.provenance import code_hash, code_identity
+from ..core.store import DamagedStore, short_reason, read_dataset, write_dataset
 from . import antenna, contact_models
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
@@ -232,7 +232,7 @@ def event_recording(ds: xr.Dataset, i: int) -> Recording:
 
 def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
     """Build a BenchSpec from the ``[stimulus]`` table of a study spec (``kind = "bench"``)."""
-    from ..spec import check_section
+    from ..core.spec import check_section
 
     table = dict(table)
     kind = table.pop("kind", "bench")

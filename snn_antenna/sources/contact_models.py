@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SpecError, check
+from ..core.errors import SpecError, check
 
 MECHANISMS = ("current", "boundary", "hertz", "friction")
 DEFAULT_MECHANISM = "current"

@@ -33,9 +33,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .. import bounds
-from ..errors import SpecError, check
-from ..signals import Recording
+from ..core import bounds
+from ..core.errors import SpecError, check
+from ..core.signals import Recording
 from . import antenna
 from .stimuli import Contact, RobotScene
 
@@ -342,7 +342,7 @@ def scene_from_spec(spec: dict) -> RobotScene:
     """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` (a ``RobotScene``, the
     default) or ``kind = "course"`` (a ``CourseScene``: obstacles, a speed profile). The one
     way every study, sweep and the emulator turn a stimulus table into a scene."""
-    from ..spec import check_section
+    from ..core.spec import check_section
 
     spec = dict(spec)
     kind = spec.pop("kind", "robot")

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import bounds
-from ..errors import check
-from ..signals import Recording
-from ..truth import Event, GroundTruth
+from ..core import bounds
+from ..core.errors import check
+from ..core.signals import Recording
+from ..core.truth import Event, GroundTruth
 from . import antenna
 
 

@@ -4,10 +4,9 @@ Each runner module defines ``run(spec, out_dir, quick=False) -> dict`` that vali
 whole spec before any long work, writes the report folder and returns the summary, and
 ``build(spec)`` that does the validating alone.
 
-Before a runner starts, the command checks what the studies share (:func:`check_spec`): the
-rules that join two sections (a low-pass below the stimulus's Nyquist, a band the sample rate
-can code, a read-out window inside the scene) and the Dask worker count, naming the keys the
-user writes. For a sweep, :func:`plan` sizes the work from the grid's shape alone.
+Before a runner starts, the command checks what the studies share
+(``engine.spec_rules.check_spec``). For a sweep, :func:`plan` sizes the work from the grid's
+shape alone.
 """
 from __future__ import annotations
 
@@ -15,7 +14,7 @@ import importlib
 
 import numpy as np
 
-from ..errors import SpecError, check, is_number
+from ..core.errors import SpecError
 
 STUDIES = {
     "quickstart": "snn_antenna.studies.quickstart",
@@ -27,114 +26,11 @@ STUDIES = {
     "model_selection": "snn_antenna.studies.model_selection",
 }
 
-# Where make_chain's arguments come from in a study spec (the rest: ``preprocess.NAME``).
-CHAIN_KEYS = {"adc_bits": "stimulus.adc_bits", "full_scale_g": "stimulus.full_scale_g"}
-
 
 def runner(name: str):
     if not isinstance(name, str) or name not in STUDIES:
         raise SpecError("study", name, f"one of {sorted(STUDIES)}")
     return importlib.import_module(STUDIES[name])
-
-
-def _number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and \
-        bool(np.isfinite(value))
-
-
-def check_spec(spec: dict, user_keys=(), rate_hz: float | None = None) -> None:
-    """The cross-section rules every study shares, before any work (no Brian2 import).
-
-    ``user_keys`` are the dotted keys the user set (``--set``): when a rule joins two keys,
-    the one the user changed is the one named. ``rate_hz`` is the input sample rate when it
-    is not the stimulus's (the serial bridge's board).
-    """
-    stimulus = spec.get("stimulus") if isinstance(spec.get("stimulus"), dict) else {}
-    rate = rate_hz if rate_hz is not None else stimulus.get("rate_hz", 1000.0)
-    rate_key = "stimulus.rate_hz" if rate_hz is None else "the board's sample rate"
-    if not _number(rate) or rate <= 0:
-        raise SpecError("stimulus.rate_hz", rate, "a sample rate > 0 Hz")
-    _check_preprocess(spec, stimulus, rate, rate_key)
-    _check_readout(spec, stimulus, rate)
-    _check_network_rate(spec, rate, rate_key, set(user_keys))
-    _check_workers(spec)
-
-
-def _check_preprocess(spec, stimulus, rate, rate_key) -> None:
-    table = spec.get("preprocess")
-    if not isinstance(table, dict) or not table:
-        return
-    from ..preprocess import make_chain
-    from ..spec import declared_types
-
-    # The chain's parameters are all numbers (None where optional): text is never one.
-    for key, tp in declared_types(make_chain).items():
-        value = table.get(key)
-        if key in table and not (is_number(value) or (value is None and tp is not float)):
-            raise SpecError(f"preprocess.{key}", value, "a finite number")
-    # keys of the table that are not the chain's (e.g. warmup_s, how long the chain is fitted)
-    # have rules of their own in the study; an unknown key is named by the study's own check
-    chain_keys = {k: v for k, v in table.items() if k in declared_types(make_chain)}
-    try:                                    # the stages' own rules, not a copy of them
-        make_chain(rate, stimulus.get("adc_bits", 10), stimulus.get("full_scale_g", 18.0),
-                   **chain_keys)
-    except SpecError as exc:
-        key = rate_key if exc.field == "rate_hz" else CHAIN_KEYS.get(
-            exc.field, f"preprocess.{exc.field}")
-        raise SpecError(key, exc.value,
-                        exc.accepted.replace("rate_hz =", f"{rate_key} =")) from None
-
-
-def _check_readout(spec, stimulus, rate) -> None:
-    table = spec.get("readout")
-    if not isinstance(table, dict) or "window_s" not in table:
-        return
-    window = table["window_s"]
-    duration = stimulus.get("duration_s")
-    longest = f" and at most stimulus.duration_s = {duration:g} s" if _number(duration) else ""
-    # one input sample at least: a finer rate map only repeats samples (and may not fit)
-    check(_number(window) and window >= 1 / rate and (not _number(duration) or window <= duration),
-          "readout.window_s", window, f"a window of at least one sample ({1 / rate:g} s at "
-          f"{rate:g} Hz){longest}")
-
-
-def _check_network_rate(spec, rate, rate_key, user_keys) -> None:
-    """A band the input rate can code, blamed on the key the user changed."""
-    table = spec.get("network")
-    if not isinstance(table, dict) or "band_hz" not in table:
-        return
-    band = table["band_hz"]
-    if not (isinstance(band, (list, tuple)) and len(band) == 2 and all(map(_number, band))):
-        return                  # the type check names it
-    from ..networks.resonators import MIN_SAMPLES_PER_CYCLE
-
-    top = rate / MIN_SAMPLES_PER_CYCLE
-    if float(band[1]) <= top:
-        return
-    if rate_key == "stimulus.rate_hz" and rate_key in user_keys \
-            and "network.band_hz" not in user_keys:
-        raise SpecError(rate_key, rate,
-                        f"a sample rate of at least {MIN_SAMPLES_PER_CYCLE * band[1]:g} Hz for "
-                        f"network.band_hz up to {band[1]:g} Hz ({MIN_SAMPLES_PER_CYCLE} samples "
-                        "per cycle)")
-    raise SpecError("network.band_hz", band,
-                    f"a band up to at most {top:g} Hz at {rate_key} = {rate:g} Hz "
-                    f"({MIN_SAMPLES_PER_CYCLE} samples per cycle)"
-                    + (", or a higher stimulus.rate_hz" if rate_key == "stimulus.rate_hz"
-                       else ""))
-
-
-def _check_workers(spec) -> None:
-    table = spec.get("sweep")
-    if not isinstance(table, dict) or "workers" not in table:
-        return
-    from ..engine.cost import max_workers
-
-    workers, limit = table["workers"], max_workers()
-    check(isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= limit,
-          "sweep.workers", workers,
-          f"an integer in [0, {limit}] (0: one per core; this machine has cores and memory "
-          f"for {limit} worker processes)")
 
 
 def plan(spec: dict):

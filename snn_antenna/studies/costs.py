@@ -7,8 +7,8 @@ The numbers are the shipped defaults where the spec leaves a key out.
 """
 from __future__ import annotations
 
-from ..errors import is_number
-from ..spec import get_field as _get
+from ..core.errors import is_number
+from ..core.spec import get_field as _get
 
 ENGINES = {"cpp_standalone": "standalone"}
 

@@ -17,40 +17,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import spec as specs
-from ..logfile import CPG_TOKEN_ORDER, logged
-from ..errors import SpecError, check
-from ..figures import draw_rate_map
+from ..core import spec as specs
+from ..core.logfile import CPG_TOKEN_ORDER, logged
+from ..core.errors import SpecError, check
+from ..report.figures import draw_rate_map
 from ..networks.assembly import configure
+from ..networks.gate import GateTraining
 from ..networks.cpg import cycle_periods, phase_lag_deg
 from ..preprocess import make_chain
 from ..readout.closed_loop import ClosedLoop, LoopSettings, RobotRecord
 from ..readout.contacts import detector_from_spec
 from ..evaluation.scoring import score_run
 from ..readout.detection import BlindReadOut
-from ..evaluation.thresholds import th_star_from_summary
-from ..report import Calibrated, Predicted, Report, by_speed
-from ..truth import Event
+from ..report.page import Calibrated, Predicted, Report, by_speed
+from ..core.truth import Event
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
-
-
-@dataclass
-class GateTraining:
-    """Th*(speed) examples the gate learns: the spec's lists, or a gating run's summary."""
-    speeds_cm_s: list = (0.0, 30.0)
-    th_star_g: list = (0.1, 0.6)
-    from_summary: str | None = None     # replaces the lists above
-
-    def examples(self) -> tuple[np.ndarray, np.ndarray]:
-        if self.from_summary is not None:
-            return th_star_from_summary(self.from_summary)
-        v, th = np.asarray(self.speeds_cm_s, float), np.asarray(self.th_star_g, float)
-        check(v.shape == th.shape and len(v) >= 2, "th_star_g", self.th_star_g,
-              "one threshold per speed, at least two")
-        return v, th
 
 
 DISPLAY_MEAN_S = 0.5   # the rate map's running mean in the figure (not the read-out's)

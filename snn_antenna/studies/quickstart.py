@@ -22,10 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
-from .. import spec as specs
-from ..logfile import logged
-from ..errors import check
-from ..figures import draw_rate_map
+from ..core import spec as specs
+from ..core.logfile import logged
+from ..core.errors import check
+from ..report.figures import draw_rate_map
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray
 from ..preprocess import fit_warmup, make_chain
@@ -38,12 +38,12 @@ from ..readout.contacts import (
 )
 from ..evaluation.scoring import contact_rows
 from ..evaluation.scoring import score as score_detections
-from ..report import Calibrated, Predicted, Report
-from ..signals import Recording
+from ..report.page import Calibrated, Predicted, Report
+from ..core.signals import Recording
 from ..sources import antenna
 from ..sources.scenes import scene_from_spec
 from ..sources.stimuli import RobotScene
-from ..stats import poisson_interval
+from ..report.stats import poisson_interval
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout")
 

@@ -19,18 +19,18 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
-from .. import spec as specs
+from ..core import spec as specs
 from ..engine.evaluators import NEURON_AXES, NeuronSweep
 from ..engine.executor import executor
 from ..engine.grid import Grid
 from ..engine.sweep import run_sweep
-from ..errors import check
-from ..logfile import LogFile
+from ..core.errors import check
+from ..core.logfile import LogFile
 from ..networks import neurons
 from ..evaluation import tuning
 from ..evaluation.tuning import ReadPoint
-from ..provenance import provenance
-from ..report import Calibrated, Predicted, Report, fmt
+from ..core.provenance import provenance
+from ..report.page import Calibrated, Predicted, Report, fmt
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
 

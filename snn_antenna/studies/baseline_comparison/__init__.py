@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import spec as specs
-from ...logfile import logged
+from ...core import spec as specs
+from ...core.logfile import logged
 from ...engine.events import cached_features, run_bank, run_cost
 from ...engine.executor import executor
-from ...errors import SpecError
-from ...files import write_json
+from ...core.errors import SpecError
+from ...core.files import write_json
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...readout import events
@@ -32,7 +32,7 @@ from ...readout.spiking_decoders import (
     neurons_per_input,
     spiking_baselines,
 )
-from ...report import Report
+from ...report.page import Report
 from ...sources import bench
 from .report import write_report
 from .tuned import tuned_stage

@@ -20,8 +20,8 @@ from ...evaluation.comparison import (
 )
 from ...evaluation.confusion import confusion, confusion_sentence, error_rates
 from ...readout.spiking_decoders import TRAINING_FREE
-from ... import stats
-from ...report import Calibrated, Predicted, Report
+from ...report import stats
+from ...report.page import Calibrated, Predicted, Report
 
 SOURCE = "paper (docs/reference.md)"
 _pair = "{0[0]:.4f}, {0[1]:.3f}".format  # a law's (slope, intercept)

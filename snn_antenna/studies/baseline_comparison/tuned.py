@@ -20,7 +20,7 @@ from ...readout.band_tuning import tune
 from ...readout.spiking import recording_attrs
 from ...readout.spiking_decoders import TunedPlan, decay_code, tuned_baselines, tuned_inputs
 from ...sources import bench
-from ...truth import bench_labels
+from ...core.truth import bench_labels
 
 
 def calibration_bands(bench_spec, plan: TunedPlan, log, fresh: bool) -> dict:

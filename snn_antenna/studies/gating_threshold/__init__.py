@@ -41,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import spec as specs
-from ...logfile import logged
+from ...core import spec as specs
+from ...core.logfile import logged
 from ...engine.batches import ScoredCodings
 from ...engine.executor import executor
 from ...engine.grid import Grid

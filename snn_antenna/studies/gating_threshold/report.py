@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...figures import draw_rate_map
+from ...report.figures import draw_rate_map
 from ...evaluation import threshold_figures as figures
 from ...evaluation.scoring import visible
 from ...evaluation.thresholds import (
@@ -17,7 +17,7 @@ from ...evaluation.thresholds import (
     table_cell,
 )
 from ...evaluation.thresholds import GateRecall, ThStarFit
-from ...report import Calibrated, Predicted, Report, by_speed
+from ...report.page import Calibrated, Predicted, Report, by_speed
 from .spec import Parts
 
 

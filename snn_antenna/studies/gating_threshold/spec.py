@@ -7,9 +7,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ... import spec as specs
+from ...core import spec as specs
 from ...engine.batches import ScoredCodings
-from ...errors import SpecError, check
+from ...core.errors import SpecError, check
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain

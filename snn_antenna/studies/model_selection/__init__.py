@@ -19,20 +19,26 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import spec as specs
-from ...errors import SpecError, check, is_number
+from ...core import spec as specs
+from ...core.errors import SpecError, check, is_number
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...evaluation.confusion import confusion
-from ...logfile import logged
+from ...core.logfile import logged
 from ...readout import events
-from ...readout.baselines import (distance_baselines, material_baselines,
-                                  two_material_baseline)
-from ...report import Report
+from ...readout.baselines import distance_baselines, material_baselines, two_material_baseline
+from ...report.page import Report
 from ...sources import bench
 from ...sources.contact_models import ContactPhysics
-from .protocol import (CALIBRATION_TARGETS, PAPER_PAIR, PREDICTIONS, SCORES, choose,
-                       confused_pairs, select)
+from .protocol import (
+    CALIBRATION_TARGETS,
+    PAPER_PAIR,
+    PREDICTIONS,
+    SCORES,
+    choose,
+    confused_pairs,
+    select,
+)
 from .report import write_report
 
 SECTIONS = ("stimulus", "events", "evaluation", "selection")

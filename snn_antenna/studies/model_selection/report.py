@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ... import stats
-from ...report import Calibrated, Predicted, Report
+from ...report import stats
+from ...report.page import Calibrated, Predicted, Report
 from .protocol import CALIBRATION_TARGETS, PREDICTIONS, value
 
 SOURCE = "paper (docs/reference.md)"

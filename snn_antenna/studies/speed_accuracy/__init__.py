@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ... import spec as specs
+from ...core import spec as specs
 from ...engine.devices import (
     DTYPES,
     RUNTIME_TARGETS,
@@ -37,8 +37,8 @@ from ...engine.devices import (
     solve_reference,
 )
 from ...engine.runlog import Measurements, RunLog
-from ...errors import check
-from ...logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
+from ...core.errors import check
+from ...core.logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
@@ -47,10 +47,10 @@ from ...evaluation.accuracy import Match, StabilityGrid
 from ...evaluation.bands import BandStudy
 from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
-from ...report import Report
+from ...report.page import Report
 from ...sources.scenes import scene_from_spec
 from ...sources.stimuli import RobotScene
-from ...store import write_dataset
+from ...core.store import write_dataset
 from . import precision as engine_precision
 from .precision import Precision
 from .report import human_summary, quick_note, write_report

@@ -21,7 +21,7 @@ import numpy as np
 from ...engine.devices import DTYPES
 from ...engine.evaluators import NeuronSweep
 from ...engine.grid import Grid
-from ...errors import check
+from ...core.errors import check
 from ...evaluation import accuracy
 
 
@@ -102,7 +102,7 @@ def run(precision: Precision, tolerance: float, log) -> dict:
 
 
 def report_section(report, result: dict | None) -> None:
-    from ...report import fmt
+    from ...report.page import fmt
 
     if result is None:
         return

@@ -6,7 +6,7 @@ from __future__ import annotations
 from ...networks import neurons
 from ...evaluation import accuracy, tradeoff
 from ...evaluation.accuracy import StabilityGrid
-from ...report import Calibrated, Predicted, Report, fmt
+from ...report.page import Calibrated, Predicted, Report, fmt
 
 
 def convergence_text(conv: dict) -> str:

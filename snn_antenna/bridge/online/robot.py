@@ -31,12 +31,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SpecError
-from ..networks.assembly import part_objects
-from ..networks.control import CONTROL_UNITS
-from ..networks.gate import read_trace
-from ..readout.closed_loop import steer
-from ..sources.antenna import SPEED_LIMIT_CM_S
+from ...core.errors import SpecError
+from ...networks.assembly import part_objects
+from ...networks.control import CONTROL_UNITS
+from ...networks.gate import read_trace
+from ...readout.closed_loop import steer
+from ...sources.antenna import SPEED_LIMIT_CM_S
 
 CACHE_DIR = "out/.cache"                # where a trained gate is kept (as the bench sets are)
 
@@ -86,7 +86,7 @@ def trained_gate(gate, speeds_cm_s, th_star_g, cache_dir=CACHE_DIR):
     range, all that recall uses. Learning takes ~5 s; every stream and replay starts with it."""
     import xarray as xr
 
-    from ..sources import bench
+    from ...sources import bench
 
     speeds, th = np.asarray(speeds_cm_s, float), np.asarray(th_star_g, float)
     fields = {"gate": dataclasses.asdict(gate), "speeds_cm_s": speeds.tolist(),

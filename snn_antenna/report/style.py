@@ -1,4 +1,4 @@
-"""The style sheet every report.html carries (snn_antenna/report.py)."""
+"""The style sheet every report.html carries (snn_antenna/report/page.py)."""
 
 # The page never grows wider than its column and no box hides a cell: tables are cut to fit
 # (_table_html), their text wraps, images shrink to fit, long words break.

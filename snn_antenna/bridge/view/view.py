@@ -32,11 +32,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SpecError
-from .live_state import Decisions
-from .protocol import BOARD_RATE_HZ
-from .view_history import ViewConfig
-from .view_process import serve
+from ...core.errors import SpecError
+from ..online.live_state import Decisions
+from ..wire.protocol import BOARD_RATE_HZ
+from .history import ViewConfig
+from .process import serve
 
 HISTORY_S = 10.0                # what the plots show
 SCRUB_S = 60.0                  # what the view keeps: a paused page scrubs back through it
@@ -140,7 +140,7 @@ def _tap_coder(coder, tap) -> None:
 
 
 class LiveView:
-    """Pipeline side of the live view: a :class:`~snn_antenna.bridge.source.SourceLoop` handler
+    """Pipeline side of the live view: a :class:`~snn_antenna.bridge.wire.source.SourceLoop` handler
     (``handle``, ``idle``) and ``run_online``'s ``view`` hook (``window``, ``event``); all of
     them only gather, and every ``FLUSH_S`` one frame goes to the view process without waiting.
     ``start`` spawns that process and returns the URL it is bound to; ``stop`` ends it."""

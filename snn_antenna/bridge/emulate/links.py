@@ -1,6 +1,6 @@
 """The emulator's end of a link: a pseudo-terminal it creates, or any pyserial URL or port.
 
-Both offer what :class:`~snn_antenna.bridge.emulator.Emulator` needs of a link: wait for a
+Both offer what :class:`~snn_antenna.bridge.emulate.emulator.Emulator` needs of a link: wait for a
 reader (``wait_for_peer``), write while the reader is there (``write``), wait until the reader
 has taken every byte written (``drain``), and, for a pty behind a stable symlink only,
 ``disconnect``/``reconnect`` as a USB adapter does when it is pulled and plugged back in.
@@ -18,8 +18,8 @@ import time
 import tty
 from pathlib import Path
 
-from ..errors import SpecError
-from .source import DEFAULT_BAUDRATE
+from ...core.errors import SpecError
+from ..wire.source import DEFAULT_BAUDRATE
 
 
 class PeerGone(RuntimeError):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import html
 
-from ..errors import SpecError
+from ...core.errors import SpecError
 
 # After a change of the image, the next animation frame is the paint; a task queued from it
 # runs once that paint is done. Only columns shown live are reported (not a scrubbed view).

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SpecError
-from ..files import atomic_write, make_folder
+from ...core.errors import SpecError
+from ...core.files import atomic_write, make_folder
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 MAX_PNG_BYTES = 20 << 20

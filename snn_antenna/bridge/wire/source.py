@@ -3,7 +3,7 @@
 transport  :class:`SerialTransport` opens, reads and reopens the port (``serial_for_url``: device
            paths, ``loop://``, ``socket://``, ``rfc2217://``) and turns pyserial's errors into
            messages a user can act on.
-framing    :class:`~snn_antenna.bridge.protocol.Decoder`, a pure function of the bytes.
+framing    :class:`~snn_antenna.bridge.wire.protocol.Decoder`, a pure function of the bytes.
 handling   whoever consumes :class:`Batch` objects from :meth:`SerialSource.get` (the recorder,
            the online pipeline), on their own thread, through a bounded queue.
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import serial
 
-from ..errors import SpecError
+from ...core.errors import SpecError
 from .protocol import Decoder, Sample, check_wire_format
 
 DEFAULT_BAUDRATE = 250000

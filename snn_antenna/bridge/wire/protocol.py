@@ -20,7 +20,7 @@ import struct
 from dataclasses import dataclass
 from typing import NamedTuple
 
-from ..errors import SpecError
+from ...core.errors import SpecError
 
 # The sensor board: an ADXL321 (±18 g) into a 10-bit ADC, sampled at 1 kHz. Every part of the
 # bridge that needs to know what the board sends (the decoder's range check, the emulator, the

@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__ as package_version
-from ..errors import SpecError
-from ..files import make_folder, open_append, refuse_symlink, write_json
-from ..outputs import lock_folder
-from ..signals import Recording
+from ... import __version__ as package_version
+from ...core.errors import SpecError
+from ...core.files import make_folder, open_append, refuse_symlink, write_json
+from ...core.outputs import lock_folder
+from ...core.signals import Recording
 from .protocol import BOARD_RATE_HZ, Gap, find_gaps
 from .source import DEFAULT_BAUDRATE, Batch
 
@@ -44,7 +44,7 @@ COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps"
 
 
 class Recorder:
-    """Writes :class:`~snn_antenna.bridge.source.Batch` objects into a recording directory."""
+    """Writes :class:`~snn_antenna.bridge.wire.source.Batch` objects into a recording directory."""
 
     def __init__(self, out_dir, *, port: str, wire_format: str, baudrate: int,
                  rate_hz: float = BOARD_RATE_HZ, flush_interval_s: float = 0.05,
@@ -177,7 +177,7 @@ class BridgeRecording:
         return self.path / RAW_FILE
 
     def to_recording(self) -> Recording:
-        """The two axes as a :class:`~snn_antenna.signals.Recording` in ADC counts. Gaps are not
+        """The two axes as a :class:`~snn_antenna.core.signals.Recording` in ADC counts. Gaps are not
         filled: their positions travel in ``meta['gaps']`` for any stage that must know."""
         return Recording(samples=np.column_stack([self.x, self.y]).astype(float),
                          rate_hz=float(self.meta["rate_hz"]), units="counts",

@@ -8,8 +8,8 @@ import os
 import time
 from pathlib import Path
 
-from ..errors import SpecError
-from .source import PortError, stop_on_signals
+from ...core.errors import SpecError
+from ..wire.source import PortError, stop_on_signals
 
 
 def cmd_emulate(args) -> int:
@@ -56,7 +56,7 @@ def cmd_emulate(args) -> int:
                    "faults": [list(f) for f in log.faults],
                    "events": played_events(stimulus, log.frames_due)}
         if args.log:                    # whoever stopped first, the log says what was sent
-            from ..files import write_new
+            from ...core.files import write_new
             write_new(args.log, json.dumps(summary, indent=1), force=args.force)
     if ended:
         raise PortError(ended)
@@ -74,7 +74,7 @@ def _emulate_firmware(args) -> int:
         _check_output_file("log", args.log, args.force)
     summary = emulate_firmware(args, stop_on_signals(), log=lambda path: print(path, flush=True))
     if args.log:                        # however the run ended
-        from ..files import write_new
+        from ...core.files import write_new
         write_new(args.log, json.dumps(summary, indent=1), force=args.force)
     if summary["stopped"]:
         raise PortError(f"emulator stopped: {summary['stopped']}")
@@ -92,14 +92,14 @@ def _emulator_link(args):
     try:
         return SerialLink(args.port)
     except Exception as exc:       # pyserial's open errors, as for a reader
-        from .source import describe_open_error
+        from ..wire.source import describe_open_error
         raise describe_open_error(args.port, exc) from exc
 
 
 def _check_output_file(name: str, path, force: bool = False) -> None:
     """A new file in a writable folder; an existing one only with ``--force``; a symlink
     never (the toolkit does not write through links)."""
-    from ..files import refuse_symlink
+    from ...core.files import refuse_symlink
 
     path = Path(path)
     refuse_symlink(path, "file")

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from .files import atomic_write
-from .provenance import provenance
-from .report_style import CSS as _CSS
+from ..core.files import atomic_write
+from ..core.provenance import provenance
+from .style import CSS as _CSS
 
 
 def _jsonable(obj: Any):

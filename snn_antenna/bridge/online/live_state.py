@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..readout.contacts import tuned_above
+from ...readout.contacts import tuned_above
 
 # panel → (title, the part it belongs to, a part whose panel replaces it)
 PANELS = {"threshold": ("Gate: input threshold Th", "resonators", "gate"),

@@ -14,7 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from .errors import check
+from ..core.errors import check
 
 MIN_N_TO_RESOLVE = 5      # fewest seeds or splits a "resolved" verdict may rest on
 BOOTSTRAP_RESAMPLES = 4000

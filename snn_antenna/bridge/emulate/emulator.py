@@ -31,8 +31,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SpecError
-from .protocol import (
+from ...core.errors import SpecError
+from ..wire.protocol import (
     ADC_MAX,
     BOARD_RATE_HZ,
     DELIMITER,

@@ -1,5 +1,5 @@
 """The live view's browser page: Bokeh figures fed from the view process's history
-(:class:`~snn_antenna.bridge.view_history.ViewHistory`).
+(:class:`~snn_antenna.bridge.view.view.history.ViewHistory`).
 
 Each open page is one Bokeh session with its own data sources; a periodic callback (every
 ``PAGE_UPDATE_MS``) pulls what is new in the history since that page's cursor. All of it runs

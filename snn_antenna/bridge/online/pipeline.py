@@ -31,15 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import spec as specs
-from ..errors import SpecError
-from ..networks.resonators import ResonatorArray
-from ..preprocess import make_chain, partial_transform, reset
-from ..readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
-from ..studies import check_spec
-from .protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
-from .online_report import OnlineReport
-from .source import SourceLoop
+from ...core import spec as specs
+from ...core.errors import SpecError
+from ...networks.resonators import ResonatorArray
+from ...preprocess import make_chain, partial_transform, reset
+from ...readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
+from ...engine.spec_rules import check_spec
+from ..wire.protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
+from .report import OnlineReport
+from ..wire.source import SourceLoop
 from .terminal import LiveDisplay, show
 
 SECTIONS = ("network", "preprocess", "readout")
@@ -117,8 +117,8 @@ def _composed(table: dict, training, speed_cm_s) -> tuple[dict, tuple | None]:
     """A composed network's parts, configured and checked for the live stream (nothing
     built, the gate not trained yet), and the gate's examples (speeds, Th*) from
     ``training`` (None without a gate)."""
-    from ..networks.assembly import configure
-    from ..studies.exploration import GateTraining
+    from ...networks.assembly import configure
+    from ...networks.gate import GateTraining
     from .robot import check_live_parts, check_speed, speed_range
 
     check_live_parts(table.get("parts", []))

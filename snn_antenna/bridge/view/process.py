@@ -1,5 +1,5 @@
 """The live view's own process: the Bokeh server, its pages and ``/state.json``, fed by the frames
-the pipeline hands over (bridge/view.py's :class:`~snn_antenna.bridge.view.LiveView`).
+the pipeline hands over (bridge/view.py's :class:`~snn_antenna.bridge.view.view.LiveView`).
 
 Why a process of its own: a Bokeh server does real work while holding the GIL (a page that is
 reloaded tears its document down, ``Document.destroy`` → ``gc.collect``; each open page pulls
@@ -7,7 +7,7 @@ and serialises new points ten times a second and each new column). In the pipeli
 stream itself. Here it can only slow the view: the pipeline never waits for this process, and
 frames the view could not take are counted here (``view_frames_dropped``), never a sample.
 
-What it shows is kept in :class:`~snn_antenna.bridge.view_history.ViewHistory`
+What it shows is kept in :class:`~snn_antenna.bridge.view.view.history.ViewHistory`
 (bridge/view_history.py). Besides the pages and ``/state.json``, it answers the pages' POSTs:
 ``/control`` (checked here, then queued to the pipeline), ``/painted`` (the display delay) and
 ``/save`` (bridge/saved_view.py).
@@ -27,9 +27,9 @@ import threading
 import time
 from functools import partial
 
-from ..errors import SpecError
+from ...core.errors import SpecError
 from .page import build_page
-from .view_history import ViewConfig, ViewHistory
+from .history import ViewConfig, ViewHistory
 
 DRAIN_MS = 50                   # this process checks the pipeline's stop message (frames
 # need no polling: a thread waits on the hand-off and passes each frame to the server's loop at

@@ -25,9 +25,9 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import SpecError
-from .protocol import BOARD_FULL_SCALE_G
-from .recorder import EVENTS_FILE
+from ...core.errors import SpecError
+from ..wire.protocol import BOARD_FULL_SCALE_G
+from ..wire.recorder import EVENTS_FILE
 
 TH_MAX_G = BOARD_FULL_SCALE_G           # the filtered signal never exceeds the ADC's range
 MAX_WINDOWS = 20                        # the longest rate-map window, in the network's windows
