@@ -130,6 +130,7 @@ def build_parser() -> argparse.ArgumentParser:
         pass
     else:
         add_subcommands(sub)
+    from .data.command import add_subcommands as add_data_subcommands; add_data_subcommands(sub)  # noqa: E702
     return parser
 
 

@@ -36,6 +36,9 @@ STAGES = [
     ("bridge.online", ["snn_antenna.bridge.online"]),
     ("bridge.view", ["snn_antenna.bridge.view"]),
     ("bridge.cli", ["snn_antenna.bridge.cli"]),
+    # recordings into data sets: reads `record` folders (bridge.wire) and cuts contacts by the
+    # event processing's onset rule (readout)
+    ("data", ["snn_antenna.data"]),
     ("cli", ["snn_antenna.cli"]),
 ]
 

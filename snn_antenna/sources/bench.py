@@ -212,7 +212,11 @@ def _cache_problem(ds: xr.Dataset, computed_by: str) -> str | None:
 
 
 def load(spec: BenchSpec, log=print, fresh: bool = False) -> xr.Dataset:
-    """The data set of ``spec``, from the cache when it was made before."""
+    """The data set of ``spec``, from the cache when it was made before; for contacts imported
+    from recordings (``recorded.RecordedBench``), the imported data set."""
+    if getattr(spec, "recorded", False):
+        log(f"data: {spec.n_events} recorded contacts from {spec.path}")
+        return spec.dataset
     spec.validate()
     path = Path(spec.cache_dir) / f"bench-{spec.key()}.zarr"
     return cached(path, lambda: generate(spec, log), __name__, log, fresh)
@@ -242,5 +246,23 @@ def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
     return BenchSpec(seed=seed, **table)
 
 
+def source_from_spec(spec: dict):
+    """The bench contacts a study reads: the imported recordings its top-level ``data`` names
+    (``recorded.open_bench``; its ``[stimulus]`` then gives only ``n_jobs`` and ``cache_dir``),
+    or the generator's contacts of its ``[stimulus]`` table."""
+    from . import recorded
+
+    seed, table = int(spec.get("seed", 0)), dict(spec.get("stimulus", {}))
+    if spec.get("data") is None:
+        return spec_from_table(table, seed)
+    if not isinstance(spec["data"], str):
+        raise SpecError("data", spec["data"], "the path of a folder written by "
+                                              "`snn-antenna data import`")
+    defaults = BenchSpec()
+    return recorded.open_bench(spec["data"], seed, n_jobs=table.get("n_jobs", defaults.n_jobs),
+                               cache_dir=table.get("cache_dir", defaults.cache_dir))
+
+
 __all__ = ["BenchSpec", "generate", "load", "cached", "event_recording", "spec_from_table",
+           "source_from_spec",
            "cache_key", "PAPER_POSITIONS_CM"]

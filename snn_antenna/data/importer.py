@@ -1,0 +1,168 @@
+"""``snn-antenna data import``: check everything, then write the data set whole or not at all.
+
+:func:`plan_import` reads every recording and the labels table, finds and matches the contacts
+and builds the data set in memory; any bad input is refused there, with one line naming the
+file, the line and the field, before the output folder is touched. :func:`write_import` then
+writes it into an output folder of the toolkit's (``core.outputs``: a journal of what it
+wrote, one writer at a time, the user's files kept): the store under a staging name renamed
+into place (``core.store.write_dataset``), the exclusions table, and ``import.json`` last, so
+a folder without ``import.json`` is never read as a data set (``sources.recorded``).
+"""
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from ..core.errors import SpecError
+from ..sources import recorded
+from . import inputs, labels as label_table, segment
+from .segment import REASONS, Segmentation
+
+STUDY = "data import"
+
+
+@dataclass
+class ImportPlan:
+    dataset: object                 # xarray.Dataset in the generator's layout
+    exclusions: list[segment.Exclusion]
+    meta: dict                      # import.json
+
+
+def plan_import(recordings_dir, labels_path, options: inputs.Options,
+                seg: Segmentation = Segmentation(), log=print) -> ImportPlan:
+    """Read and check the recordings and labels; find, match and cut the contacts."""
+    _check_settings(seg)
+    entries = inputs.recording_entries(recordings_dir)
+    streams = [inputs.read_stream(p, options) for p in entries]
+    first = streams[0]
+    for s in streams[1:]:
+        for name in ("rate_hz", "adc_bits", "full_scale_g"):
+            if getattr(s, name) != getattr(first, name):
+                raise SpecError(f"{s.name} {name}", getattr(s, name),
+                                f"{getattr(first, name):g}, as {first.name}: one data set "
+                                "holds one sensor's samples at one rate")
+    nyquist_check(first.rate_hz, seg)
+    table = label_table.read_labels(labels_path, {s.name: s.duration_s for s in streams})
+    log(f"data: {len(streams)} recording(s), {len(table)} labelled contacts in "
+        f"{Path(labels_path).name}")
+    contacts, excluded = [], []
+    by_name = {s.name: s for s in streams}
+    for s in streams:
+        mine = [(k, lab) for k, lab in enumerate(table) if lab.recording == s.name]
+        found, left_out = segment.reconcile(s, mine, seg)
+        contacts += [(s, c) for c in found]
+        excluded += left_out
+    counts = {"labels": len(table), "events": len(contacts),
+              "excluded": {r: sum(e.reason == r for e in excluded) for r in REASONS}}
+    log(f"data: {len(contacts)} contacts imported; left out: "
+        + (", ".join(f"{n} {r}" for r, n in counts["excluded"].items() if n) or "none"))
+    if not contacts:
+        raise SpecError("labels", str(labels_path),
+                        "labels of which at least one matches a contact found in its "
+                        f"recording (none did: {counts['excluded']}); check onset_s against "
+                        "the recordings' clocks, or --onset-threshold-g")
+    labels_hash = inputs.sha256_of(Path(labels_path))
+    settings = {**asdict(seg), **asdict(options)}
+    key = _key(streams, labels_hash["sha256"], settings)
+    ds = _dataset(contacts, table, by_name, seg, key)
+    meta = {"kind": recorded.KIND, "format_version": recorded.FORMAT_VERSION, "key": key,
+            "package_version": __version__,
+            "labels": {"file": Path(labels_path).name, **labels_hash},
+            "recordings": [s.describe() for s in streams], "settings": settings,
+            "counts": counts}
+    return ImportPlan(ds, excluded, meta)
+
+
+def _check_settings(seg: Segmentation) -> None:
+    for name in ("onset_threshold_g", "quiet_s", "dead_s", "match_s", "duration_s"):
+        value = getattr(seg, name)
+        if not (np.isfinite(value) and value > 0):
+            raise SpecError(f"--{name.replace('_', '-')}", value, "a number > 0")
+    if not (np.isfinite(seg.pre_trigger_s) and 0 <= seg.pre_trigger_s < 1):
+        raise SpecError("--pre-trigger-s", seg.pre_trigger_s, "a lead-in in [0, 1) s")
+
+
+def nyquist_check(rate_hz: float, seg: Segmentation) -> None:
+    if seg.quiet_s * rate_hz < 1:
+        raise SpecError("--quiet-s", seg.quiet_s, f"at least one sample ({1 / rate_hz:g} s "
+                                                  f"at {rate_hz:g} Hz)")
+
+
+def _key(streams, labels_sha: str, settings: dict) -> str:
+    h = hashlib.sha256(labels_sha.encode())
+    for s in streams:
+        for f in s.files:
+            h.update(f"{s.name}/{f['file']}:{f['sha256']}".encode())
+    h.update(json.dumps(settings, sort_keys=True, default=str).encode())
+    return "recorded-" + h.hexdigest()[:16]
+
+
+def _dataset(contacts, table, by_name, seg: Segmentation, key: str):
+    """The contacts in the generator's layout (``sources.bench.generate``), in time order per
+    recording, with where each came from."""
+    import xarray as xr
+
+    first = next(iter(by_name.values()))
+    contacts = sorted(contacts, key=lambda sc: (sc[0].name, sc[1].onset_frame))
+    reps = label_table.repetitions(table)
+    windows = np.stack([segment.cut(s, c.onset_frame, seg) for s, c in contacts])
+    distances = np.asarray([c.label.distance_cm for _, c in contacts], dtype=float)
+    sites = np.unique(distances)
+    dtype = np.uint16 if first.adc_bits <= 16 else np.int32
+    return xr.Dataset(
+        {"counts": (("event", "sample", "axis"), windows.astype(dtype), {"units": "ADC counts"})},
+        coords={"event": np.arange(len(contacts)),
+                "material": ("event", np.asarray([c.label.material for _, c in contacts],
+                                                 dtype=str)),
+                "distance_cm": ("event", distances, {"units": "cm"}),
+                "position": ("event", np.searchsorted(sites, distances)),
+                "repetition": ("event", np.asarray([reps[c.index] for _, c in contacts])),
+                "axis": ["x", "y"],
+                "recording": ("event", np.asarray([s.name for s, _ in contacts], dtype=str)),
+                "onset_s": ("event", np.asarray([c.onset_frame / s.rate_hz
+                                                 for s, c in contacts]), {"units": "s"}),
+                "label_line": ("event", np.asarray([c.label.line for _, c in contacts]))},
+        attrs={"rate_hz": float(first.rate_hz), "pre_trigger_s": float(seg.pre_trigger_s),
+               "adc_bits": int(first.adc_bits), "full_scale_g": float(first.full_scale_g),
+               "key": key, "source": "recorded",
+               "spec": json.dumps({"segmentation": asdict(seg)})})
+
+
+def exclusions_csv(exclusions: list[segment.Exclusion]) -> str:
+    out = io.StringIO()
+    writer = csv.DictWriter(out, ["recording", "t_s", "label_line", "reason"],
+                            lineterminator="\n")
+    writer.writeheader()
+    for e in exclusions:
+        writer.writerow(e.row())
+    return out.getvalue()
+
+
+def write_import(plan: ImportPlan, out, force: bool = False, log=print) -> Path:
+    """Write the planned data set into ``out`` (an output folder of the toolkit's)."""
+    from ..core import outputs
+    from ..core.files import atomic_write, write_json
+    from ..core.store import write_dataset
+
+    out = Path(out)
+    with outputs.output_folder(out, STUDY, force=force):
+        write_dataset(plan.dataset, out.absolute() / recorded.DATASET)
+        atomic_write(out / recorded.EXCLUSIONS, exclusions_csv(plan.exclusions))
+        write_json(out / recorded.IMPORT_FILE, plan.meta)
+    log(f"data: wrote {out} ({plan.meta['counts']['events']} contacts; "
+        f"{len(plan.exclusions)} left out, listed in {recorded.EXCLUSIONS})")
+    return out
+
+
+def check_out(out, force: bool) -> None:
+    """Refuse an output folder before any reading: the same decision ``write_import`` makes."""
+    from ..core import outputs
+
+    outputs.release(outputs.prepare(out, STUDY, force=force))

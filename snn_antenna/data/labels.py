@@ -1,0 +1,172 @@
+"""The labels table of an import: what happened when, as the lab wrote it down.
+
+A CSV file with a header. For bench contacts (a stationary antenna struck at known places):
+
+``recording``    the recording's name in the recordings folder (a ``record`` folder's or a
+                 file's name); may be left out when there is one recording
+``onset_s``      when the contact happened, in seconds on the recording's clock (its first sample
+                 is at its sequence number over the rate for a ``record`` folder, else at 0)
+``distance_cm``  where along the rod, in cm from its base
+``material``     what was struck (one of ``sources.antenna.MATERIALS``)
+``repetition``   optional: the repetition's number (from 0) at that site; splits are by
+                 repetition, so repeated contacts at a site must be numbered apart; without it,
+                 contacts at a site are numbered in time order
+
+Every refusal names the file, the line and the column; lines are counted as an editor counts
+them (the header is line 1).
+"""
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..core.errors import SpecError
+from ..sources import antenna
+
+REQUIRED = ("onset_s", "distance_cm", "material")
+OPTIONAL = ("recording", "repetition")
+COLUMNS = REQUIRED + OPTIONAL
+
+
+@dataclass(frozen=True)
+class Label:
+    line: int
+    recording: str
+    onset_s: float
+    distance_cm: float
+    material: str
+    repetition: int | None
+
+
+def read_labels(path, recordings: dict[str, float]) -> list[Label]:
+    """The rows of the labels table at ``path``, each checked against ``recordings`` (name →
+    duration in s): a refusal names the file, line and column."""
+    path = Path(path)
+    name = path.name
+    if not path.is_file():
+        raise SpecError("labels", str(path), "an existing CSV file of labels")
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (UnicodeDecodeError, OSError) as exc:
+        raise SpecError("labels", str(path), f"a UTF-8 text CSV file ({type(exc).__name__})") \
+            from None
+    rows = list(csv.reader(io.StringIO(text)))
+    if not rows or not any(cell.strip() for cell in rows[0]):
+        raise SpecError("labels", str(path), f"a CSV whose header names {', '.join(REQUIRED)} "
+                                             f"(and optionally {', '.join(OPTIONAL)}); this one "
+                                             "is empty")
+    header = [h.strip() for h in rows[0]]
+    for column in header:
+        if column not in COLUMNS:
+            raise SpecError(f"{name} line 1", column,
+                            f"a column of the labels table: {', '.join(COLUMNS)}")
+    if len(set(header)) != len(header):
+        raise SpecError(f"{name} line 1", ",".join(header), "each column named once")
+    missing = [c for c in REQUIRED if c not in header]
+    if missing:
+        raise SpecError(f"{name} line 1", ",".join(header),
+                        f"a header naming {', '.join(REQUIRED)}; {', '.join(missing)} missing")
+    if "recording" not in header and len(recordings) != 1:
+        raise SpecError(f"{name} line 1", ",".join(header),
+                        f"a 'recording' column naming which of the {len(recordings)} "
+                        "recordings each row belongs to")
+    labels, seen = [], {}
+    for line, row in enumerate(rows[1:], start=2):
+        if not row or not any(cell.strip() for cell in row):
+            continue
+        if len(row) != len(header):
+            raise SpecError(f"{name} line {line}", ",".join(row),
+                            f"{len(header)} fields ({','.join(header)}): the file is "
+                            "truncated or damaged")
+        cells = {c: v.strip() for c, v in zip(header, row)}
+        label = _label(name, line, cells, recordings)
+        key = (label.recording, label.onset_s)
+        if key in seen:
+            raise SpecError(f"{name} line {line} onset_s", label.onset_s,
+                            f"one label per contact; line {seen[key]} labels the same contact "
+                            f"of {label.recording} (a duplicated row)")
+        seen[key] = line
+        labels.append(label)
+    if not labels:
+        raise SpecError("labels", str(path), "a CSV with at least one labelled contact; this "
+                                             "one has a header only")
+    _check_repetitions(name, labels)
+    return labels
+
+
+def _label(name: str, line: int, cells: dict, recordings: dict[str, float]) -> Label:
+    def field(column):
+        return f"{name} line {line} {column}"
+
+    recording = cells.get("recording") or (next(iter(recordings)) if len(recordings) == 1
+                                           else "")
+    if recording not in recordings:
+        raise SpecError(field("recording"), recording,
+                        f"the name of a recording in the folder: {sorted(recordings)}")
+    numbers = {}
+    for column in ("onset_s", "distance_cm"):
+        try:
+            numbers[column] = float(cells[column])
+        except ValueError:
+            raise SpecError(field(column), cells[column], "a number") from None
+        if not np.isfinite(numbers[column]):
+            raise SpecError(field(column), cells[column], "a finite number")
+    duration = recordings[recording]
+    if not 0 <= numbers["onset_s"] < duration:
+        raise SpecError(field("onset_s"), numbers["onset_s"],
+                        f"a time inside {recording}, which spans [0, {duration:g}) s")
+    try:
+        antenna.check_distance(numbers["distance_cm"])
+    except SpecError as exc:
+        raise SpecError(field("distance_cm"), numbers["distance_cm"], exc.accepted) from None
+    if cells["material"] not in antenna.MATERIALS:
+        raise SpecError(field("material"), cells["material"],
+                        f"a known material: {', '.join(sorted(antenna.MATERIALS))}")
+    repetition = None
+    if cells.get("repetition", "") != "":
+        try:
+            repetition = int(cells["repetition"])
+        except ValueError:
+            raise SpecError(field("repetition"), cells["repetition"],
+                            "an integer >= 0") from None
+        if repetition < 0:
+            raise SpecError(field("repetition"), repetition, "an integer >= 0")
+    return Label(line, recording, numbers["onset_s"], numbers["distance_cm"], cells["material"],
+                 repetition)
+
+
+def _check_repetitions(name: str, labels: list[Label]) -> None:
+    """Either every row numbers its repetition or none does; a (material, distance,
+    repetition) names one contact."""
+    given = [lab.repetition is not None for lab in labels]
+    if any(given) and not all(given):
+        first = labels[given.index(False)]
+        raise SpecError(f"{name} line {first.line} repetition", "",
+                        "a repetition on every row once one row has one")
+    if not any(given):
+        return
+    seen = {}
+    for lab in labels:
+        key = (lab.material, lab.distance_cm, lab.repetition)
+        if key in seen:
+            raise SpecError(f"{name} line {lab.line} repetition", lab.repetition,
+                            f"a repetition not already used at {lab.material}, "
+                            f"{lab.distance_cm:g} cm (line {seen[key]}: a duplicated row)")
+        seen[key] = lab.line
+
+
+def repetitions(labels: list[Label]) -> list[int]:
+    """Each label's repetition: its own, or its number in time order at its site."""
+    if labels and labels[0].repetition is not None:
+        return [lab.repetition for lab in labels]
+    order = sorted(range(len(labels)), key=lambda i: (labels[i].recording, labels[i].onset_s))
+    counter, out = {}, [0] * len(labels)
+    for i in order:
+        site = (labels[i].material, labels[i].distance_cm)
+        out[i] = counter.get(site, 0)
+        counter[site] = out[i] + 1
+    return out

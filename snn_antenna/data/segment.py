@@ -1,0 +1,142 @@
+"""Contacts found in a continuous recording by the paper's onset rule, matched to the labels.
+
+The onset rule is the event processing's (``readout.events``): the two axes in g, aligned to
+their main axis (``main_axis_g``: PCA over the recording, its mean removed, so the sensor's
+resting offset is not a contact), and a contact starts where |x| first exceeds
+``onset_threshold_g``. In a continuous recording two more conditions make one contact one
+onset: |x| stayed below the threshold for ``quiet_s`` just before (a ringing rod dips below it
+between its swings, never for that long while it is loud), and at least ``dead_s`` passed since
+the previous onset (the ringing of one contact is not the next).
+
+Every contact is then cut as the generator cuts its events: ``pre_trigger_s`` before the
+onset to ``duration_s`` after it. Left out, each with its recording, time and label line:
+
+``no_contact``      a label with no onset within ``match_s`` of it
+``unlabelled``      an onset no label claims
+``gap``             the window holds samples the link lost (the recording's sequence numbers)
+``clipped``         the window holds a count at either rail of the ADC
+``beyond_end``      the window runs past either end of the recording
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..readout.events import EventProcessor, main_axis_g
+from .inputs import Stream
+from .labels import Label
+
+REASONS = ("no_contact", "unlabelled", "gap", "clipped", "beyond_end")
+
+
+@dataclass(frozen=True)
+class Segmentation:
+    """How contacts are found and cut (the ``data import`` options)."""
+    onset_threshold_g: float = EventProcessor.onset_threshold_g
+    quiet_s: float = 0.02
+    dead_s: float = 0.5
+    match_s: float = 0.1
+    pre_trigger_s: float = 0.05
+    duration_s: float = 1.0
+
+    def n_samples(self, rate_hz: float) -> int:
+        return int(round((self.pre_trigger_s + self.duration_s) * rate_hz))
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A labelled contact found and cut: the label and its window's first frame."""
+    label: Label
+    index: int              # the label's position in the table
+    onset_frame: int
+
+
+@dataclass(frozen=True)
+class Exclusion:
+    recording: str
+    t_s: float
+    line: int | None        # the label's line, None for an unlabelled onset
+    reason: str
+
+    def row(self) -> dict:
+        return {"recording": self.recording, "t_s": round(self.t_s, 6),
+                "label_line": "" if self.line is None else self.line, "reason": self.reason}
+
+
+def onsets(stream: Stream, seg: Segmentation) -> np.ndarray:
+    """Indexes (into ``stream.counts``) of the contacts' onsets (see the module docstring)."""
+    x = main_axis_g(stream.counts.astype(float), stream.adc_bits, stream.full_scale_g)
+    above = np.abs(x) > seg.onset_threshold_g
+    quiet = max(1, int(round(seg.quiet_s * stream.rate_hz)))
+    # loud_before[i]: any sample above the threshold among the ``quiet`` samples before i
+    total = np.concatenate([[0], np.cumsum(above)])
+    i = np.arange(len(above))
+    loud_before = total[i] - total[np.maximum(i - quiet, 0)] > 0
+    loud_before[:quiet] = True          # a recording starting mid-swing has no quiet before
+    candidates = np.flatnonzero(above & ~loud_before)
+    dead = seg.dead_s * stream.rate_hz
+    chosen, last = [], -np.inf
+    frames = stream.frames
+    for i in candidates:
+        if frames[i] - last >= dead:
+            chosen.append(i)
+            last = frames[i]
+    return np.asarray(chosen, dtype=np.int64)
+
+
+def reconcile(stream: Stream, labels: list[tuple[int, Label]], seg: Segmentation
+              ) -> tuple[list[Contact], list[Exclusion]]:
+    """Match ``labels`` (their table positions and rows, this recording's) to the onsets
+    found in ``stream``; every label and onset ends up either a contact or an exclusion."""
+    found = onsets(stream, seg)
+    rate = stream.rate_hz
+    t_found = stream.frames[found] / rate
+    pairs = sorted((abs(t_found[j] - lab.onset_s), k, j) for k, (_, lab) in enumerate(labels)
+                   for j in np.flatnonzero(np.abs(t_found - lab.onset_s) <= seg.match_s))
+    label_of, onset_of = {}, {}
+    for _, k, j in pairs:
+        if k not in label_of and j not in onset_of:
+            label_of[k], onset_of[j] = j, k
+    contacts, excluded = [], []
+    for k, (index, lab) in enumerate(labels):
+        if k not in label_of:
+            excluded.append(Exclusion(stream.name, lab.onset_s, lab.line, "no_contact"))
+            continue
+        i = found[label_of[k]]
+        reason = window_problem(stream, i, seg)
+        if reason:
+            excluded.append(Exclusion(stream.name, t_found[label_of[k]], lab.line, reason))
+        else:
+            contacts.append(Contact(lab, index, int(stream.frames[i])))
+    excluded += [Exclusion(stream.name, float(t_found[j]), None, "unlabelled")
+                 for j in range(len(found)) if j not in onset_of]
+    return contacts, sorted(excluded, key=lambda e: e.t_s)
+
+
+def window_problem(stream: Stream, i: int, seg: Segmentation) -> str | None:
+    """Why the window of the onset at index ``i`` cannot be a contact event, or None."""
+    start, n = window_bounds(stream, i, seg)
+    frames = stream.frames
+    if start < frames[0] or start + n > frames[-1] + 1:
+        return "beyond_end"
+    lo, hi = np.searchsorted(frames, [start, start + n])
+    if hi - lo != n:
+        return "gap"
+    window = stream.counts[lo:hi]
+    if np.any(window <= 0) or np.any(window >= 2 ** stream.adc_bits - 1):
+        return "clipped"
+    return None
+
+
+def window_bounds(stream: Stream, i: int, seg: Segmentation) -> tuple[int, int]:
+    """(first frame, samples) of the event window around the onset at index ``i``."""
+    pre = int(round(seg.pre_trigger_s * stream.rate_hz))
+    return int(stream.frames[i]) - pre, seg.n_samples(stream.rate_hz)
+
+
+def cut(stream: Stream, onset_frame: int, seg: Segmentation) -> np.ndarray:
+    """The event window (samples, 2) of a contact whose onset is at ``onset_frame``."""
+    start = onset_frame - int(round(seg.pre_trigger_s * stream.rate_hz))
+    lo = int(np.searchsorted(stream.frames, start))
+    return stream.counts[lo:lo + seg.n_samples(stream.rate_hz)]

@@ -1,0 +1,53 @@
+"""Recordings with known contacts for the import tests: the board's counts at rest, with
+decaying two-axis ringing at chosen onsets, written as `record` writes them."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from snn_antenna.bridge.wire.protocol import BOARD_RATE_HZ, Sample, encode_binary
+from snn_antenna.bridge.wire.recorder import Recorder
+from snn_antenna.bridge.wire.source import DEFAULT_BAUDRATE, Batch
+from snn_antenna.sources.antenna import ADC, low_mode_hz
+
+RATE = BOARD_RATE_HZ
+BOARD = ADC(10, 18.0)
+
+
+def ringing_counts(onsets_s, distances_cm, duration_s: float, seed: int = 0,
+                   amplitude_g: float = 2.0, tau_s: float = 0.15) -> np.ndarray:
+    """(samples, 2) board counts: sensor noise, and at each onset the rod's low mode ringing
+    (its frequency from the distance) on both axes."""
+    rng = np.random.default_rng(seed)
+    n = int(round(duration_s * RATE))
+    g = rng.standard_normal((n, 2)) * 0.01
+    t = np.arange(n) / RATE
+    for onset, d in zip(onsets_s, distances_cm):
+        after = t >= onset
+        s = t[after] - onset
+        ring = amplitude_g * np.exp(-s / tau_s) * np.sin(2 * np.pi * float(low_mode_hz(d)) * s
+                                                         + np.pi / 2)
+        g[after, 0] += ring * np.cos(0.5)
+        g[after, 1] += ring * np.sin(0.5)
+    return BOARD.to_counts(g)
+
+
+def write_record(path, counts: np.ndarray, seq=None, complete: bool = True):
+    """A `record` folder holding ``counts`` with sequence numbers ``seq`` (default 0, 1, …;
+    leave numbers out for lost samples)."""
+    seq = np.arange(len(counts)) if seq is None else np.asarray(seq)
+    recorder = Recorder(path, port="test://", wire_format="binary", baudrate=DEFAULT_BAUDRATE)
+    raw = b"".join(encode_binary(int(s) % 65536, int(x), int(y))
+                   for s, (x, y) in zip(seq, counts))
+    samples = [Sample(int(s) % 65536, int(x), int(y)) for s, (x, y) in zip(seq, counts)]
+    recorder.handle(Batch(time.time(), raw, samples, {"frames": len(samples)}))
+    recorder.close(complete=complete)
+    return path
+
+
+def write_labels(path, rows, columns=("recording", "onset_s", "distance_cm", "material",
+                                      "repetition")):
+    lines = [",".join(columns)] + [",".join(str(v) for v in row) for row in rows]
+    path.write_text("\n".join(lines) + "\n")
+    return path
