@@ -76,7 +76,7 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
             "package_version": __version__,
             "labels": {"file": Path(labels_path).name, **labels_hash},
             "recordings": [s.describe() for s in streams], "settings": settings,
-            "counts": counts}
+            "counts": counts, "exclusions": [e.row() for e in excluded]}
     return ImportPlan(ds, excluded, meta)
 
 
