@@ -170,3 +170,18 @@ def repetitions(labels: list[Label]) -> list[int]:
         out[i] = counter.get(site, 0)
         counter[site] = out[i] + 1
     return out
+
+
+def from_emulator_log(log: dict, recording: str) -> str:
+    """The labels table (CSV text) of what ``snn-antenna emulate --log`` says it streamed: each
+    contact's onset on the stream's clock (frame over rate), distance and material. A recording
+    of that stream made from its first frame shares the clock (the firmware numbers its samples
+    from 0)."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(["recording", "onset_s", "distance_cm", "material"])
+    for event in log.get("events", []):
+        if event.get("kind") == "contact":
+            writer.writerow([recording, repr(float(event["t_s"])), repr(float(event["distance_cm"])),
+                             event["material"]])
+    return out.getvalue()

@@ -34,7 +34,9 @@ REASONS = ("no_contact", "unlabelled", "gap", "clipped", "beyond_end")
 class Segmentation:
     """How contacts are found and cut (the ``data import`` options)."""
     onset_threshold_g: float = EventProcessor.onset_threshold_g
-    quiet_s: float = 0.02
+    # a period of the slowest low mode (7 Hz): a decaying ringing dips below the threshold
+    # between its swings for a fraction of a period only
+    quiet_s: float = 0.15
     dead_s: float = 0.5
     match_s: float = 0.1
     pre_trigger_s: float = 0.05
@@ -73,7 +75,6 @@ def onsets(stream: Stream, seg: Segmentation) -> np.ndarray:
     total = np.concatenate([[0], np.cumsum(above)])
     i = np.arange(len(above))
     loud_before = total[i] - total[np.maximum(i - quiet, 0)] > 0
-    loud_before[:quiet] = True          # a recording starting mid-swing has no quiet before
     candidates = np.flatnonzero(above & ~loud_before)
     dead = seg.dead_s * stream.rate_hz
     chosen, last = [], -np.inf

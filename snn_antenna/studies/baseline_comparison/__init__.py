@@ -33,7 +33,7 @@ from ...readout.spiking_decoders import (
     spiking_baselines,
 )
 from ...report.page import Report
-from ...sources import bench
+from ...sources import bench, recorded
 from .report import write_report
 from .tuned import tuned_stage
 
@@ -71,10 +71,13 @@ def _spiking_part(spec: dict, rate_hz: float) -> tuple:
 
 def build(spec: dict) -> StudySpec:
     """Check the whole spec before any long work; return its parts."""
-    specs.check_top_level(spec, SECTIONS)
-    with specs.section("stimulus"):
-        bench_spec = bench.spec_from_table(spec.get("stimulus", {}), int(spec.get("seed", 0)))
-        bench_spec.validate()
+    specs.check_top_level(spec, SECTIONS + ("data",))
+    if spec.get("data") is not None:            # contacts imported from recordings
+        bench_spec = bench.source_from_spec(spec)
+    else:
+        with specs.section("stimulus"):
+            bench_spec = bench.source_from_spec(spec)
+            bench_spec.validate()
     with specs.section("events"):
         table = specs.check_section(spec, "events", events.EventProcessor, exclude=["rate_hz"])
         processor = events.EventProcessor(rate_hz=bench_spec.rate_hz, **table)
@@ -118,7 +121,8 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     """The bench data set, its processed events and their statistics beside the paper's,
     and the FFT's cost per event: (data, a Comparison with no results yet, the seconds
     spent making or loading the data and its features)."""
-    log(f"[1/{stages}] bench data set: {parts.bench.n_events} events at "
+    log(f"[1/{stages}] {'recorded' if getattr(parts.bench, 'recorded', False) else 'bench'} "
+        f"data set: {parts.bench.n_events} events at "
         f"{parts.bench.rate_hz:g} Hz")
     t0 = time.perf_counter()
     data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
@@ -134,7 +138,9 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
     return data, Comparison(feats, signal, {}, skipped, costs, data={
         "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
-        "bench_key": parts.bench.key()}), data_s
+        "bench_key": parts.bench.key(),
+        **({"recorded": recorded.summary_entry(parts.bench)}
+           if getattr(parts.bench, "recorded", False) else {})}), data_s
 
 
 def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh,
