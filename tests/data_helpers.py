@@ -33,11 +33,16 @@ def ringing_counts(onsets_s, distances_cm, duration_s: float, seed: int = 0,
     return BOARD.to_counts(g)
 
 
-def write_record(path, counts: np.ndarray, seq=None, complete: bool = True):
+def write_record(path, counts: np.ndarray, seq=None, complete: bool = True,
+                 speed_cm_s: float | None = None, speed_changes=()):
     """A `record` folder holding ``counts`` with sequence numbers ``seq`` (default 0, 1, …;
-    leave numbers out for lost samples)."""
+    leave numbers out for lost samples), the speed command it started at and its changes
+    ((sample index, cm/s), as the live controls journal them)."""
     seq = np.arange(len(counts)) if seq is None else np.asarray(seq)
-    recorder = Recorder(path, port="test://", wire_format="binary", baudrate=DEFAULT_BAUDRATE)
+    recorder = Recorder(path, port="test://", wire_format="binary", baudrate=DEFAULT_BAUDRATE,
+                        extra_meta={} if speed_cm_s is None else {"speed_cm_s": speed_cm_s})
+    for sample, value in speed_changes:
+        recorder.note_event({"sample": sample, "field": "speed_cm_s", "value": value})
     raw = b"".join(encode_binary(int(s) % 65536, int(x), int(y))
                    for s, (x, y) in zip(seq, counts))
     samples = [Sample(int(s) % 65536, int(x), int(y)) for s, (x, y) in zip(seq, counts)]

@@ -321,3 +321,36 @@ def test_a_study_refuses_a_folder_that_is_not_a_finished_import(imported):
         recorded.open_bench(imported / "ds")
     with pytest.raises(SpecError, match="data"):
         bench.source_from_spec({"data": str(imported / "recs")})
+
+
+# -- drives ---------------------------------------------------------------------------------------
+def test_a_drive_is_kept_whole_with_its_speed_log_lost_samples_and_labelled_contacts(tmp_path):
+    counts = ringing_counts([2.0, 5.0, 8.0], [19.0, 27.0, 12.0], DURATION_S, seed=3)
+    lost = np.arange(int(5.2 * RATE), int(5.2 * RATE) + 4)
+    seq = np.delete(np.arange(len(counts)), lost)
+    write_record(tmp_path / "drives" / "drive1", np.delete(counts, lost, axis=0), seq,
+                 speed_cm_s=12.0, speed_changes=[(int(6 * RATE), 20.0)])
+    write_labels(tmp_path / "drive.csv", [("drive1", 2.0, 19.0, "wood"),
+                                          ("drive1", 5.0, 27.0, ""),
+                                          ("drive1", 8.0, 12.0, "aluminium")],
+                 columns=("recording", "contact_s", "distance_cm", "material"))
+    code, err = run_cli(tmp_path / "drives", tmp_path / "drive.csv", "--out", tmp_path / "ds")
+    assert code == 0, err
+    drives = recorded.open_drives(tmp_path / "ds")
+    rec = drives.recording(0)
+    assert rec.n_samples == len(counts) and rec.rate_hz == RATE
+    kept = np.ones(len(counts), bool)
+    kept[lost] = False
+    assert np.array_equal(rec.samples[kept], counts[kept])
+    assert np.array_equal(rec.samples[lost], np.repeat(counts[lost[0] - 1:lost[0]], 4, axis=0))
+    assert list(np.flatnonzero(rec.meta["lost"])) == list(lost)
+    speed = rec.meta["speed_cm_s"]     # the change applied at the 6000th sample received:
+    change = int(6 * RATE) + len(lost)  # after the 4 lost ones, the board's sample 6004
+    assert speed[0] == 12.0 and speed[change - 1] == 12.0 and speed[change] == 20.0
+    # the 5 s contact's stretch holds the lost samples: left out, listed, never scored
+    assert [(c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts] == \
+        [(2.0, 19.0, "wood"), (8.0, 12.0, "aluminium")]
+    with open(tmp_path / "ds" / "exclusions.csv") as f:
+        assert [(r["reason"], r["label_line"]) for r in csv.DictReader(f)] == [("gap", "3")]
+    with pytest.raises(SpecError, match="imported bench recordings"):
+        recorded.open_bench(tmp_path / "ds")

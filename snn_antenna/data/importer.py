@@ -52,6 +52,8 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
     table = label_table.read_labels(labels_path, {s.name: s.duration_s for s in streams})
     log(f"data: {len(streams)} recording(s), {len(table)} labelled contacts in "
         f"{Path(labels_path).name}")
+    if label_table.is_drive_table(labels_path):
+        return _plan_drives(streams, table, labels_path, options, seg, log)
     contacts, excluded = [], []
     by_name = {s.name: s for s in streams}
     for s in streams:
@@ -73,11 +75,81 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
     key = _key(streams, labels_hash["sha256"], settings)
     ds = _dataset(contacts, table, by_name, seg, key)
     meta = {"kind": recorded.KIND, "format_version": recorded.FORMAT_VERSION, "key": key,
-            "package_version": __version__,
+            "data": "bench", "package_version": __version__,
             "labels": {"file": Path(labels_path).name, **labels_hash},
             "recordings": [s.describe() for s in streams], "settings": settings,
             "counts": counts, "exclusions": [e.row() for e in excluded]}
     return ImportPlan(ds, excluded, meta)
+
+
+def _plan_drives(streams, table, labels_path, options, seg: Segmentation, log) -> ImportPlan:
+    """Drives are kept whole (finding their contacts is the studies' read-out's job): each
+    label is checked against its recording's lost and clipped stretches around it."""
+    by_name = {s.name: s for s in streams}
+    kept, excluded = [], []
+    for k, lab in enumerate(table):
+        s = by_name[lab.recording]
+        reason = segment.stretch_problem(s, lab.onset_s, seg)
+        if reason:
+            excluded.append(segment.Exclusion(s.name, lab.onset_s, lab.line, reason))
+        else:
+            kept.append(lab)
+    counts = {"labels": len(table), "events": len(kept), "drives": len(streams),
+              "excluded": {r: sum(e.reason == r for e in excluded) for r in REASONS}}
+    log(f"data: {len(streams)} drive(s), {len(kept)} contacts kept; left out: "
+        + (", ".join(f"{n} {r}" for r, n in counts["excluded"].items() if n) or "none"))
+    labels_hash = inputs.sha256_of(Path(labels_path))
+    settings = {**asdict(seg), **asdict(options)}
+    key = _key(streams, labels_hash["sha256"], settings)
+    meta = {"kind": recorded.KIND, "format_version": recorded.FORMAT_VERSION, "key": key,
+            "data": "drives", "package_version": __version__,
+            "labels": {"file": Path(labels_path).name, **labels_hash},
+            "recordings": [s.describe() for s in streams], "settings": settings,
+            "counts": counts, "exclusions": [e.row() for e in excluded]}
+    return ImportPlan(_drives_dataset(streams, kept, key), excluded, meta)
+
+
+def _drives_dataset(streams, kept, key: str):
+    """Each drive on its own clock from its first sample (lost samples hold the last value and
+    are marked), its speed command per sample (NaN: not logged), and the labelled contacts."""
+    import xarray as xr
+
+    first = streams[0]
+    lengths = [int(s.frames[-1] - s.frames[0]) + 1 for s in streams]
+    n = max(lengths)
+    mid = 2 ** (first.adc_bits - 1)
+    counts = np.full((len(streams), n, 2), mid, dtype=np.int64)
+    lost = np.ones((len(streams), n), dtype=bool)
+    speed = np.full((len(streams), n), np.nan, dtype=np.float32)
+    for d, s in enumerate(streams):
+        index = s.frames - s.frames[0]
+        lost[d, index] = False
+        held = np.maximum.accumulate(np.where(lost[d, :lengths[d]], 0, np.arange(lengths[d])))
+        timeline = np.zeros((lengths[d], 2), dtype=np.int64)
+        timeline[index] = s.counts
+        counts[d, :lengths[d]] = timeline[held]
+        for frame, value in sorted(s.speed_log):
+            speed[d, max(frame - int(s.frames[0]), 0):lengths[d]] = value
+    order = {s.name: d for d, s in enumerate(streams)}
+    start = {s.name: int(s.frames[0]) / s.rate_hz for s in streams}
+    dtype = np.uint16 if first.adc_bits <= 16 else np.int32
+    return xr.Dataset(
+        {"counts": (("drive", "sample", "axis"), counts.astype(dtype), {"units": "ADC counts"}),
+         "lost": (("drive", "sample"), lost),
+         "speed_cm_s": (("drive", "sample"), speed, {"units": "cm/s"}),
+         "n_samples": ("drive", np.asarray(lengths)),
+         "start_s": ("drive", np.asarray([start[s.name] for s in streams]), {"units": "s"}),
+         "contact_drive": ("contact", np.asarray([order[lab.recording] for lab in kept],
+                                                 dtype=int)),
+         "contact_t_s": ("contact", np.asarray([lab.onset_s - start[lab.recording]
+                                                for lab in kept], dtype=float)),
+         "contact_distance_cm": ("contact", np.asarray([lab.distance_cm for lab in kept],
+                                                       dtype=float)),
+         "contact_material": ("contact", np.asarray([lab.material for lab in kept], dtype=str)),
+         "contact_line": ("contact", np.asarray([lab.line for lab in kept], dtype=int))},
+        coords={"drive": np.asarray([s.name for s in streams], dtype=str), "axis": ["x", "y"]},
+        attrs={"rate_hz": float(first.rate_hz), "adc_bits": int(first.adc_bits),
+               "full_scale_g": float(first.full_scale_g), "key": key, "source": "recorded"})
 
 
 def _check_settings(seg: Segmentation) -> None:
@@ -152,8 +224,9 @@ def write_import(plan: ImportPlan, out, force: bool = False, log=print) -> Path:
     from ..core.store import write_dataset
 
     out = Path(out)
+    store = recorded.DRIVES if plan.meta["data"] == "drives" else recorded.DATASET
     with outputs.output_folder(out, STUDY, force=force):
-        write_dataset(plan.dataset, out.absolute() / recorded.DATASET)
+        write_dataset(plan.dataset, out.absolute() / store)
         atomic_write(out / recorded.EXCLUSIONS, exclusions_csv(plan.exclusions))
         write_json(out / recorded.IMPORT_FILE, plan.meta)
     log(f"data: wrote {out} ({plan.meta['counts']['events']} contacts; "

@@ -66,6 +66,7 @@ class Stream:
     full_scale_g: float
     files: list[dict] = field(default_factory=list)     # {"file", "sha256", "bytes"}
     notes: dict = field(default_factory=dict)           # the recording's own counters
+    speed_log: list[tuple[int, float]] = field(default_factory=list)   # (frame, cm/s) changes
 
     @property
     def duration_s(self) -> float:
@@ -177,7 +178,22 @@ def _read_record(path: Path, options: Options) -> Stream:
     notes = {"gaps": len(rec.gaps), "lost_samples": int(sum(g.length for g in rec.gaps)),
              "complete": rec.complete, "counters": dict(rec.counts)}
     return Stream(path.name, "record", counts, frames, rate, BOARD_ADC_BITS, BOARD_FULL_SCALE_G,
-                  _files(path, names), notes)
+                  _files(path, names), notes, _speed_log(path, rec.meta, frames))
+
+
+def _speed_log(path: Path, meta: dict, frames: np.ndarray) -> list[tuple[int, float]]:
+    """The speed command a drive was recorded at: where it started (``meta.json``) and each
+    change the live controls applied (``events.jsonl``, at the sample it applied from)."""
+    from ..bridge.online.controls import recorded_events
+
+    log = []
+    if isinstance(meta.get("speed_cm_s"), (int, float)):
+        log.append((int(frames[0]) if len(frames) else 0, float(meta["speed_cm_s"])))
+    for event in recorded_events(path):
+        if event["field"] == "speed_cm_s" and len(frames):
+            index = min(max(int(event["sample"]), 0), len(frames) - 1)
+            log.append((int(frames[index]), float(event["value"])))
+    return log
 
 
 def _plain(path: Path, counts: np.ndarray, rate: float, options: Options, kind: str,
@@ -212,7 +228,7 @@ def _read_npy(path: Path, options: Options) -> Stream:
                 stated = float(loaded["rate_hz"]) if "rate_hz" in loaded.files else None
     except SpecError:
         raise
-    except (ValueError, OSError, EOFError, TypeError) as exc:
+    except Exception as exc:            # numpy's parser: value, EOF, zip and pickle errors
         raise SpecError(path.name, f"{type(exc).__name__}: {exc}",
                         "a whole NumPy file: it is truncated or damaged") from None
     counts = _counts_array(path, array, "counts")
@@ -279,7 +295,7 @@ def _read_wav(path: Path, options: Options) -> Stream:
         with warnings.catch_warnings():
             warnings.simplefilter("error")          # a short data chunk is a truncated file
             rate, data = wavfile.read(path)
-    except (ValueError, OSError, EOFError, wavfile.WavFileWarning) as exc:
+    except Exception as exc:            # scipy's parser: struct, value, EOF errors, warnings
         raise SpecError(path.name, f"{type(exc).__name__}: {exc}",
                         "a whole WAV file: it is truncated or damaged") from None
     if data.ndim != 2 or data.shape[1] != 2:

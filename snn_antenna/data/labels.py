@@ -12,6 +12,17 @@ A CSV file with a header. For bench contacts (a stationary antenna struck at kno
                  repetition, so repeated contacts at a site must be numbered apart; without it,
                  contacts at a site are numbered in time order
 
+For drives (a robot driving with its antenna out, touching what it meets), a table whose header
+names ``contact_s`` in place of ``onset_s``:
+
+``recording``    as above
+``contact_s``    when the antenna touched, in seconds on the recording's clock
+``distance_cm``  where along the rod
+``material``     optional: what it touched
+
+The speed command of a drive is the recording's own log (a ``record`` folder keeps the speed it
+started at in ``meta.json`` and every change in ``events.jsonl``).
+
 Every refusal names the file, the line and the column; lines are counted as an editor counts
 them (the header is line 1).
 """
@@ -30,6 +41,18 @@ from ..sources import antenna
 REQUIRED = ("onset_s", "distance_cm", "material")
 OPTIONAL = ("recording", "repetition")
 COLUMNS = REQUIRED + OPTIONAL
+DRIVE_REQUIRED = ("contact_s", "distance_cm")
+DRIVE_OPTIONAL = ("recording", "material")
+DRIVE_COLUMNS = DRIVE_REQUIRED + DRIVE_OPTIONAL
+
+
+def is_drive_table(path) -> bool:
+    """A drives table names ``contact_s`` in its header (a bench table ``onset_s``)."""
+    try:
+        first = Path(path).read_text(encoding="utf-8").splitlines()[:1]
+    except (OSError, UnicodeDecodeError):
+        return False
+    return bool(first) and "contact_s" in [h.strip() for h in first[0].split(",")]
 
 
 @dataclass(frozen=True)
@@ -44,8 +67,12 @@ class Label:
 
 def read_labels(path, recordings: dict[str, float]) -> list[Label]:
     """The rows of the labels table at ``path``, each checked against ``recordings`` (name →
-    duration in s): a refusal names the file, line and column."""
+    duration in s): a refusal names the file, line and column. A drives table's rows carry
+    ``contact_s`` as their ``onset_s`` and no repetition."""
     path = Path(path)
+    drive = is_drive_table(path)
+    required, optional = (DRIVE_REQUIRED, DRIVE_OPTIONAL) if drive else (REQUIRED, OPTIONAL)
+    columns = required + optional
     name = path.name
     if not path.is_file():
         raise SpecError("labels", str(path), "an existing CSV file of labels")
@@ -57,19 +84,22 @@ def read_labels(path, recordings: dict[str, float]) -> list[Label]:
     rows = list(csv.reader(io.StringIO(text)))
     if not rows or not any(cell.strip() for cell in rows[0]):
         raise SpecError("labels", str(path), f"a CSV whose header names {', '.join(REQUIRED)} "
-                                             f"(and optionally {', '.join(OPTIONAL)}); this one "
-                                             "is empty")
+                                             f"(and optionally {', '.join(OPTIONAL)}), or for "
+                                             f"drives {', '.join(DRIVE_REQUIRED)} (and "
+                                             f"optionally {', '.join(DRIVE_OPTIONAL)}); this "
+                                             "one is empty")
     header = [h.strip() for h in rows[0]]
     for column in header:
-        if column not in COLUMNS:
+        if column not in columns:
             raise SpecError(f"{name} line 1", column,
-                            f"a column of the labels table: {', '.join(COLUMNS)}")
+                            f"a column of the {'drives' if drive else 'bench'} labels table: "
+                            f"{', '.join(columns)}")
     if len(set(header)) != len(header):
         raise SpecError(f"{name} line 1", ",".join(header), "each column named once")
-    missing = [c for c in REQUIRED if c not in header]
+    missing = [c for c in required if c not in header]
     if missing:
         raise SpecError(f"{name} line 1", ",".join(header),
-                        f"a header naming {', '.join(REQUIRED)}; {', '.join(missing)} missing")
+                        f"a header naming {', '.join(required)}; {', '.join(missing)} missing")
     if "recording" not in header and len(recordings) != 1:
         raise SpecError(f"{name} line 1", ",".join(header),
                         f"a 'recording' column naming which of the {len(recordings)} "
@@ -83,7 +113,9 @@ def read_labels(path, recordings: dict[str, float]) -> list[Label]:
                             f"{len(header)} fields ({','.join(header)}): the file is "
                             "truncated or damaged")
         cells = {c: v.strip() for c, v in zip(header, row)}
-        label = _label(name, line, cells, recordings)
+        if drive:
+            cells["onset_s"] = cells.pop("contact_s")
+        label = _label(name, line, cells, recordings, drive)
         key = (label.recording, label.onset_s)
         if key in seen:
             raise SpecError(f"{name} line {line} onset_s", label.onset_s,
@@ -98,9 +130,10 @@ def read_labels(path, recordings: dict[str, float]) -> list[Label]:
     return labels
 
 
-def _label(name: str, line: int, cells: dict, recordings: dict[str, float]) -> Label:
+def _label(name: str, line: int, cells: dict, recordings: dict[str, float],
+           drive: bool = False) -> Label:
     def field(column):
-        return f"{name} line {line} {column}"
+        return f"{name} line {line} {'contact_s' if drive and column == 'onset_s' else column}"
 
     recording = cells.get("recording") or (next(iter(recordings)) if len(recordings) == 1
                                            else "")
@@ -123,7 +156,8 @@ def _label(name: str, line: int, cells: dict, recordings: dict[str, float]) -> L
         antenna.check_distance(numbers["distance_cm"])
     except SpecError as exc:
         raise SpecError(field("distance_cm"), numbers["distance_cm"], exc.accepted) from None
-    if cells["material"] not in antenna.MATERIALS:
+    material = cells.get("material", "")
+    if not (drive and material == "") and material not in antenna.MATERIALS:
         raise SpecError(field("material"), cells["material"],
                         f"a known material: {', '.join(sorted(antenna.MATERIALS))}")
     repetition = None
@@ -135,7 +169,7 @@ def _label(name: str, line: int, cells: dict, recordings: dict[str, float]) -> L
                             "an integer >= 0") from None
         if repetition < 0:
             raise SpecError(field("repetition"), repetition, "an integer >= 0")
-    return Label(line, recording, numbers["onset_s"], numbers["distance_cm"], cells["material"],
+    return Label(line, recording, numbers["onset_s"], numbers["distance_cm"], material,
                  repetition)
 
 

@@ -130,6 +130,20 @@ def window_problem(stream: Stream, i: int, seg: Segmentation) -> str | None:
     return None
 
 
+def stretch_problem(stream: Stream, t_s: float, seg: Segmentation) -> str | None:
+    """Why the stretch of a drive around a labelled contact at ``t_s`` (from ``pre_trigger_s``
+    before to ``duration_s`` after, within the recording) cannot be scored, or None."""
+    start = max(int(round((t_s - seg.pre_trigger_s) * stream.rate_hz)), int(stream.frames[0]))
+    stop = min(int(round((t_s + seg.duration_s) * stream.rate_hz)), int(stream.frames[-1]) + 1)
+    lo, hi = np.searchsorted(stream.frames, [start, stop])
+    if hi - lo != stop - start:
+        return "gap"
+    window = stream.counts[lo:hi]
+    if np.any(window <= 0) or np.any(window >= 2 ** stream.adc_bits - 1):
+        return "clipped"
+    return None
+
+
 def window_bounds(stream: Stream, i: int, seg: Segmentation) -> tuple[int, int]:
     """(first frame, samples) of the event window around the onset at index ``i``."""
     pre = int(round(seg.pre_trigger_s * stream.rate_hz))

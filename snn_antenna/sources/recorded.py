@@ -13,6 +13,13 @@
 ``import.json``     the provenance (the sha256 of every raw file and of the labels table, the
                     settings, the counts); written last, so a folder without it is not a data set.
 
+Recordings of drives (a labels table with ``contact_s``) are kept whole in ``drives.zarr``:
+``counts`` (drive, sample, axis) on each drive's clock from its first sample, ``lost`` (samples
+the link lost, holding the last value), ``speed_cm_s`` (the logged speed command; NaN where none
+was logged), ``n_samples`` and ``start_s`` per drive, and the labelled contacts along
+``contact`` (``contact_drive``, ``contact_t_s``, ``contact_distance_cm``, ``contact_material``);
+:func:`open_drives` gives them as ``Recording`` objects whose ``truth`` holds the contacts.
+
 A study whose spec names such a folder at its top level (``data = "DIR"``) reads its contacts in
 place of the generator's: :func:`open_bench` gives an object that stands where a
 ``bench.BenchSpec`` stands (``bench.load`` returns its data set), so splits by repetition, seeds
@@ -28,11 +35,12 @@ import numpy as np
 
 from ..core.errors import SpecError
 
-DATASET, EXCLUSIONS, IMPORT_FILE = "bench.zarr", "exclusions.csv", "import.json"
+DATASET, DRIVES = "bench.zarr", "drives.zarr"
+EXCLUSIONS, IMPORT_FILE = "exclusions.csv", "import.json"
 KIND = "snn-antenna recorded data set"
 FORMAT_VERSION = 1
-ACCEPTED = ("a folder written by `snn-antenna data import` (import.json, bench.zarr, "
-            "exclusions.csv)")
+ACCEPTED = ("a folder written by `snn-antenna data import` (import.json, bench.zarr or "
+            "drives.zarr, exclusions.csv)")
 
 
 @dataclass
@@ -98,18 +106,74 @@ class RecordedBench:
 
 def open_bench(path, seed: int = 0, n_jobs: int = 1,
                cache_dir: str = "out/.cache") -> RecordedBench:
-    """The imported data set at ``path``, checked whole: its ``import.json`` names it, its store
-    reads back, and its content is the one the import recorded (``key``)."""
+    """The imported bench contacts at ``path``, checked whole: its ``import.json`` names it, its
+    store reads back, and its content is the one the import recorded (``key``)."""
+    ds, meta = _open(path, "bench", DATASET)
+    return RecordedBench(Path(path), ds, meta, seed=seed, n_jobs=n_jobs, cache_dir=cache_dir)
+
+
+@dataclass
+class RecordedDrives:
+    """Drives imported from recordings: ``recordings()`` gives each as a labelled Recording."""
+    path: Path
+    dataset: object
+    provenance: dict
+    recorded: bool = field(default=True, init=False)
+
+    @property
+    def rate_hz(self) -> float:
+        return float(self.dataset.attrs["rate_hz"])
+
+    @property
+    def adc_bits(self) -> int:
+        return int(self.dataset.attrs["adc_bits"])
+
+    @property
+    def full_scale_g(self) -> float:
+        return float(self.dataset.attrs["full_scale_g"])
+
+    @property
+    def names(self) -> list[str]:
+        return [str(n) for n in self.dataset["drive"].values]
+
+    def recording(self, drive: int = 0):
+        """Drive ``drive`` as a ``Recording`` of ADC counts, its labelled contacts as truth,
+        its speed command per sample and lost samples in ``meta``."""
+        from ..core.signals import Recording
+        from ..core.truth import Event, GroundTruth
+
+        ds = self.dataset.isel(drive=drive)
+        n = int(ds["n_samples"])
+        mine = np.flatnonzero(self.dataset["contact_drive"].values == drive)
+        contacts = tuple(Event("contact", float(self.dataset["contact_t_s"].values[c]), 0.0,
+                               float(self.dataset["contact_distance_cm"].values[c]),
+                               str(self.dataset["contact_material"].values[c]) or None)
+                         for c in mine)
+        return Recording(np.asarray(ds["counts"].values[:n], dtype=np.int32), self.rate_hz,
+                         GroundTruth(tuple(sorted(contacts, key=lambda e: e.t_s))),
+                         units="counts",
+                         meta={"adc_bits": self.adc_bits, "full_scale_g": self.full_scale_g,
+                               "source": f"{self.path}/{self.names[drive]}",
+                               "speed_cm_s": ds["speed_cm_s"].values[:n],
+                               "lost": ds["lost"].values[:n]})
+
+
+def open_drives(path) -> RecordedDrives:
+    """The imported drives at ``path``, checked as :func:`open_bench` checks bench contacts."""
+    ds, meta = _open(path, "drives", DRIVES)
+    return RecordedDrives(Path(path), ds, meta)
+
+
+def _open(path, kind: str, store: str):
     from ..core.store import DamagedStore, read_dataset
 
     folder = Path(path)
     if not folder.is_dir():
         raise SpecError("data", str(path), ACCEPTED)
     meta_path = folder / IMPORT_FILE
-    if not meta_path.is_file() or not (folder / DATASET).is_dir():
-        raise SpecError("data", str(path), f"{ACCEPTED}; {IMPORT_FILE if not meta_path.is_file() else DATASET} "
-                                           "is missing (an import that did not finish writes "
-                                           "no import.json): import it again")
+    if not meta_path.is_file():
+        raise SpecError("data", str(path), f"{ACCEPTED}; {IMPORT_FILE} is missing (an import "
+                                           "that did not finish writes none): import it again")
     try:
         meta = json.loads(meta_path.read_text())
     except (OSError, ValueError) as exc:
@@ -120,14 +184,19 @@ def open_bench(path, seed: int = 0, n_jobs: int = 1,
     if meta.get("format_version") != FORMAT_VERSION:
         raise SpecError(f"{IMPORT_FILE} format_version", meta.get("format_version"),
                         f"{FORMAT_VERSION} (this version of snn-antenna)")
+    if meta.get("data") != kind:
+        raise SpecError("data", str(path), f"imported {kind} recordings (a labels table with "
+                                           f"{'onset_s' if kind == 'bench' else 'contact_s'}); "
+                                           f"this folder holds {meta.get('data')}")
     try:
-        ds = read_dataset(folder / DATASET)
+        ds = read_dataset(folder / store)
     except DamagedStore as exc:
         raise SpecError("data", str(path), f"{ACCEPTED}; {exc.accepted}") from None
-    if ds.attrs.get("key") != meta.get("key") or ds.sizes.get("event") != meta["counts"]["events"]:
-        raise SpecError("data", str(path), f"{ACCEPTED}; its {DATASET} is not the one its "
+    size = ds.sizes.get("event" if kind == "bench" else "contact", 0)
+    if ds.attrs.get("key") != meta.get("key") or size != meta["counts"]["events"]:
+        raise SpecError("data", str(path), f"{ACCEPTED}; its {store} is not the one its "
                                            f"{IMPORT_FILE} describes: import it again")
-    return RecordedBench(folder, ds, meta, seed=seed, n_jobs=n_jobs, cache_dir=cache_dir)
+    return ds, meta
 
 
 def provenance_rows(bench_source) -> list[tuple[str, str]]:
@@ -136,7 +205,8 @@ def provenance_rows(bench_source) -> list[tuple[str, str]]:
         return []
     meta = bench_source.provenance
     counts = meta["counts"]
-    rows = [("data", str(Path(bench_source.path).resolve())),
+    rows = [("data", f"{meta['data']} recordings imported into "
+                     f"{Path(bench_source.path).resolve()} (data set {meta['key']})"),
             ("labels", f"{meta['labels']['file']} (sha256 {meta['labels']['sha256']})"),
             ("contacts imported", f"{counts['events']} of {counts['labels']} labelled "
                                   f"({_excluded_text(counts['excluded'])})")]
@@ -163,5 +233,6 @@ def summary_entry(bench_source) -> dict | None:
             "recordings": meta["recordings"]}
 
 
-__all__ = ["RecordedBench", "open_bench", "provenance_rows", "summary_entry", "DATASET",
+__all__ = ["RecordedBench", "RecordedDrives", "open_bench", "open_drives", "provenance_rows",
+           "summary_entry", "DATASET", "DRIVES",
            "EXCLUSIONS", "IMPORT_FILE", "KIND", "FORMAT_VERSION"]
