@@ -158,6 +158,64 @@ class RecordedDrives:
                                "lost": ds["lost"].values[:n]})
 
 
+    def scene(self, drive: int = 0) -> "RecordedScene":
+        """Drive ``drive`` where a study reads a generated scene."""
+        return RecordedScene(self, self.recording(drive))
+
+
+@dataclass
+class RecordedScene:
+    """A recorded drive standing where a ``RobotScene`` stands: ``generate`` gives the
+    recording (whatever the seed: it was recorded once)."""
+    source: RecordedDrives
+    drive: object                       # the Recording
+    recorded: bool = field(default=True, init=False)
+
+    @property
+    def path(self) -> Path:
+        return self.source.path
+
+    @property
+    def provenance(self) -> dict:
+        return self.source.provenance
+
+    @property
+    def rate_hz(self) -> float:
+        return self.drive.rate_hz
+
+    @property
+    def adc_bits(self) -> int:
+        return self.source.adc_bits
+
+    @property
+    def full_scale_g(self) -> float:
+        return self.source.full_scale_g
+
+    @property
+    def duration_s(self) -> float:
+        return self.drive.duration_s
+
+    @property
+    def contacts(self):
+        return self.drive.truth.contacts
+
+    @property
+    def speed_cm_s(self) -> float | None:
+        """The speed command most of the drive ran at (None when none was logged)."""
+        speed = self.drive.meta["speed_cm_s"]
+        known = speed[np.isfinite(speed)]
+        if not len(known):
+            return None
+        values, counts = np.unique(known, return_counts=True)
+        return float(values[np.argmax(counts)])
+
+    def validate(self) -> None:
+        """Checked when opened (:func:`open_drives`)."""
+
+    def generate(self, seed: int = 0):
+        return self.drive
+
+
 def open_drives(path) -> RecordedDrives:
     """The imported drives at ``path``, checked as :func:`open_bench` checks bench contacts."""
     ds, meta = _open(path, "drives", DRIVES)
@@ -233,6 +291,6 @@ def summary_entry(bench_source) -> dict | None:
             "recordings": meta["recordings"]}
 
 
-__all__ = ["RecordedBench", "RecordedDrives", "open_bench", "open_drives", "provenance_rows",
+__all__ = ["RecordedBench", "RecordedDrives", "RecordedScene", "open_bench", "open_drives", "provenance_rows",
            "summary_entry", "DATASET", "DRIVES",
            "EXCLUSIONS", "IMPORT_FILE", "KIND", "FORMAT_VERSION"]

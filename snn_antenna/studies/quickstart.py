@@ -40,7 +40,7 @@ from ..evaluation.scoring import contact_rows
 from ..evaluation.scoring import score as score_detections
 from ..report.page import Calibrated, Predicted, Report
 from ..core.signals import Recording
-from ..sources import antenna
+from ..sources import antenna, recorded
 from ..sources.scenes import scene_from_spec
 from ..sources.stimuli import RobotScene
 from ..report.stats import poisson_interval
@@ -72,14 +72,17 @@ class ReadOut:
 
 def build(spec: dict) -> Parts:
     """Check the whole spec and build every part, before any simulation runs."""
-    specs.check_top_level(spec, SECTIONS)
+    specs.check_top_level(spec, SECTIONS + ("data",))
     with specs.section("network"):
         net_table = specs.check_section(spec, "network", ResonatorArray)
         array = ResonatorArray(**net_table)
-    with specs.section("stimulus"):
-        stim = specs.check_section(spec, "stimulus", RobotScene, extra=["kind"])
-        scene = scene_from_spec(stim)
-        scene.validate()
+    if spec.get("data") is not None:    # a recorded drive (its first) in place of the scene
+        scene = recorded.open_drives(spec["data"]).scene(0)
+    else:
+        with specs.section("stimulus"):
+            stim = specs.check_section(spec, "stimulus", RobotScene, extra=["kind"])
+            scene = scene_from_spec(stim)
+            scene.validate()
     with specs.section("preprocess"):
         pre = dict(specs.check_section(spec, "preprocess", make_chain,
                                        exclude=["rate_hz", "adc_bits", "full_scale_g"],
@@ -150,8 +153,12 @@ def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
     scene, array = parts.scene, parts.array
     seed = int(spec.get("seed", 0))
     t_start = time.perf_counter()
-    log(f"[1/4] generating the scene ({scene.duration_s:g} s at {scene.rate_hz:g} Hz, "
-        f"{scene.speed_cm_s:g} cm/s, {len(scene.contacts)} contact(s), seed {seed})")
+    if getattr(scene, "recorded", False):
+        log(f"[1/4] the recorded drive {scene.drive.meta['source']} ({scene.duration_s:g} s at "
+            f"{scene.rate_hz:g} Hz, {len(scene.contacts)} labelled contact(s))")
+    else:
+        log(f"[1/4] generating the scene ({scene.duration_s:g} s at {scene.rate_hz:g} Hz, "
+            f"{scene.speed_cm_s:g} cm/s, {len(scene.contacts)} contact(s), seed {seed})")
     rec = scene.generate(seed)
     log(f"[2/4] reading out from the samples alone: chain fitted on the first "
         f"{parts.warmup_s:g} s, then {array.n_neurons} resonators ({array.band_hz[0]:g}–"
@@ -182,7 +189,13 @@ def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
     report = Report(out_dir, "snn-antenna quickstart: contacts on a driving robot", quick=quick,
                     quick_note="quick profile: a shorter scene with fewer contacts; its "
                                "false-positive rate rests on too few minutes to compare")
-    report.text(_scene_text(parts.scene, spec.get("description", "")))
+    if getattr(parts.scene, "recorded", False):
+        report.text(_recorded_text(parts.scene))
+        report.table([{"what": w, "value": v} for w, v in recorded.provenance_rows(parts.scene)],
+                     "Where the data came from")
+        summary["data"] = recorded.summary_entry(parts.scene)
+    else:
+        report.text(_scene_text(parts.scene, spec.get("description", "")))
     _provenance_rows(report, summary, parts)
     report.table([{"quantity": "true positives", "value": scored["tp"]},
                   {"quantity": "misses", "value": scored["misses"]},
@@ -207,21 +220,33 @@ def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
     return summary
 
 
+def _recorded_text(scene) -> str:
+    touches = "; ".join(f"at {c.t_s:g} s{f' on {c.material}' if c.material else ''} "
+                        f"{c.distance_cm:g} cm along the rod" for c in scene.contacts) or "nothing"
+    speed = scene.speed_cm_s
+    return (f"A recorded drive ({scene.duration_s:g} s{f' at {speed:g} cm/s' if speed else ''}"
+            f"): its labels say the antenna touched {touches}. The read-out sees only the "
+            "recorded samples; the labels score it afterwards.")
+
+
 def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
     sc = s["score"]
     law_19 = float(antenna.low_mode_hz(19.0))
-    report.calibrated(
+    generated = not getattr(parts.scene, "recorded", False)
+    report.calibrated(*[c for c in (
         Calibrated("free probe's self-oscillation while driving (generator)", antenna.NATURAL_HZ,
                    7.8, "Hz", "docs/reference.md, robot experiments (paper: Results, "
-                   "spiking-based processing)", "antenna.NATURAL_HZ set to the paper's peak"),
-        Calibrated("low-mode frequency law (generator and read-out)",
+                   "spiking-based processing)", "antenna.NATURAL_HZ set to the paper's peak")
+        if generated else None,
+        Calibrated(f"low-mode frequency law ({'generator and ' if generated else ''}read-out)",
                    f"log10 F = {antenna.LOW_LAW[0]} d + {antenna.LOW_LAW[1]}",
                    "log10 F = 0.0268 d + 0.69", "", "docs/reference.md, Fig. 2C",
                    "antenna.LOW_LAW; readout inverts the same law"),
         Calibrated("self-motion amplitude at 27 vs 12 cm/s (∝ speed²), made to match the "
                    "optimal threshold's ratio", (27 / 12) ** 2, "> 5", "×",
                    "docs/reference.md, Fig. 9",
-                   "antenna.SELF_MOTION_G_AT_12 (0.25 g, assumed) and the speed² law"),
+                   "antenna.SELF_MOTION_G_AT_12 (0.25 g, assumed) and the speed² law")
+        if generated else None,
         # set to this project's own measured tuning curve; the paper's 7 Hz neuron (k =
         # 0.3425, 20.4 Hz per k) is never its target: tuning_sweep sets it beside a prediction
         Calibrated("hertz per unit k of a resonator", neurons.DRIVEN_HZ_PER_K,
@@ -231,7 +256,7 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
         Calibrated("coder threshold Th at 12 cm/s", parts.chain.named_steps["coder"].threshold,
                    "above sensor noise (0.01 g), below self-motion (0.25 g rms)", "g",
                    "studies/quickstart.toml", "set by hand"),
-    )
+    ) if c is not None])
     interval = tuple(sc["fp_per_min_interval"])
     report.predicted(
         Predicted("false positives per minute while driving (12 cm/s)", sc["fp_per_min"],
@@ -245,19 +270,21 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
         Predicted("array's self-motion centroid", s["motion_dominant_hz"], "Hz", None,
                   "this run, windows outside detections", None, None,
                   "its input was generated at the calibrated 7.8 Hz: this checks the "
-                  "array's tuning, not the paper"),
+                  "array's tuning, not the paper" if generated else
+                  "the recorded antenna's own self-motion, as the array reads it"),
     )
     fig10 = [c for c in sc["contacts"] if c["true_distance_cm"] == 19.0 and c["dominant_hz"]]
     if fig10:   # the paper's Fig. 10 contact
         report.predicted(Predicted(
             "most active neuron on the contact at 19 cm", fig10[0]["dominant_hz"], "Hz", 17.0,
             "docs/reference.md, Fig. 10E", None, None, f"the paper's own law gives "
-            f"{law_19:.1f} Hz at 19 cm, which the generator rings at"))
+            f"{law_19:.1f} Hz at 19 cm{', which the generator rings at' if generated else ''}"))
     report.predicted(
         Predicted("mean |distance error|", sc["mean_abs_distance_error_cm"], "cm", None,
                   "this run", None, sc["tp"],
                   "the read-out inverts the generator's own law: self-consistency of the "
-                  "array's frequency estimate, not a reproduction"),
+                  "array's frequency estimate, not a reproduction" if generated else
+                  "against the labelled distances of the recorded contacts"),
     )
 
 
