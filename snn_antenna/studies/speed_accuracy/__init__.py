@@ -48,6 +48,7 @@ from ...evaluation.bands import BandStudy
 from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
 from ...report.page import Report
+from ...sources import recorded
 from ...sources.scenes import scene_from_spec
 from ...sources.stimuli import RobotScene
 from ...core.store import write_dataset
@@ -145,12 +146,16 @@ class Plan:
 
 def build(spec: dict) -> Plan:
     """Check the whole spec and build every part before any simulation runs."""
-    specs.check_top_level(spec, SECTIONS)
+    specs.check_top_level(spec, SECTIONS + ("data",))
     with specs.section("network"):
         net = dict(specs.check_section(spec, "network", ResonatorArray))
         array = ResonatorArray(**net)
     robot_scenes = {}
+    if spec.get("data") is not None:    # a recorded drive (its first) as the quickstart scene
+        robot_scenes["quickstart"] = recorded.open_drives(spec["data"]).scene(0)
     for name, table_name in (("quickstart", "stimulus"), ("bench", "bench")):
+        if name in robot_scenes:
+            continue
         with specs.section(table_name):
             specs.check_section(spec, table_name, RobotScene, extra=["kind"])
             robot_scenes[name] = scene_from_spec(spec.get(table_name, {}))
@@ -299,6 +304,11 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print
         report = Report(out_dir, "snn-antenna: speed vs accuracy of the resonator array",
                         quick=quick, quick_note=quick_note(plan.sweep, plan.stability))
         report.text(spec.get("description", ""))
+        drive = plan.robot_scenes["quickstart"]
+        if getattr(drive, "recorded", False):
+            summary["data"] = recorded.summary_entry(drive)
+            report.table([{"what": w, "value": v} for w, v in recorded.provenance_rows(drive)],
+                         "The quickstart scene is a recorded drive: where it came from")
         write_report(report, summary, smap)
         engine_precision.report_section(report, precision)
         report.write(summary, spec, sweep.target)
