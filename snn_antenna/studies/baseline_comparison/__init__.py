@@ -85,7 +85,8 @@ def build(spec: dict) -> StudySpec:
         evaluation = cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
     if "two_material" in evaluation.pipelines and \
             not {"wood", "aluminium"} <= set(bench_spec.materials):
-        raise SpecError("stimulus.materials", list(bench_spec.materials),
+        raise SpecError("data" if getattr(bench_spec, "recorded", False) else
+                        "stimulus.materials", list(bench_spec.materials),
                         "a list that holds wood and aluminium for the two-material network")
     return StudySpec(bench_spec, processor, evaluation,
                      *_spiking_part(spec, bench_spec.rate_hz))
