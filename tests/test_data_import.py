@@ -354,3 +354,50 @@ def test_a_drive_is_kept_whole_with_its_speed_log_lost_samples_and_labelled_cont
         assert [(r["reason"], r["label_line"]) for r in csv.DictReader(f)] == [("gap", "3")]
     with pytest.raises(SpecError, match="imported bench recordings"):
         recorded.open_bench(tmp_path / "ds")
+
+
+def write_imu_bag(path, counts: np.ndarray, topic: str = "/antenna/imu") -> None:
+    """A ROS 2 bag with one Imu topic: the counts as accelerations (m/s²), stamped at RATE."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from snn_antenna.data.inputs import STANDARD_GRAVITY
+    from data_helpers import BOARD
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    g = BOARD.to_g(counts) * STANDARD_GRAVITY
+    zeros = np.zeros(9)
+    with Writer(path, version=8) as writer:
+        connection = writer.add_connection(topic, "sensor_msgs/msg/Imu", typestore=store)
+        for i, (x, y) in enumerate(g):
+            ns = int(round(i * 1e9 / RATE))
+            msg = t["sensor_msgs/msg/Imu"](
+                header=t["std_msgs/msg/Header"](stamp=t["builtin_interfaces/msg/Time"](
+                    sec=ns // 10**9, nanosec=ns % 10**9), frame_id="antenna"),
+                orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+                orientation_covariance=zeros,
+                angular_velocity=t["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0),
+                angular_velocity_covariance=zeros,
+                linear_acceleration=t["geometry_msgs/msg/Vector3"](x=float(x), y=float(y),
+                                                                   z=STANDARD_GRAVITY),
+                linear_acceleration_covariance=zeros)
+            writer.write(connection, ns, store.serialize_cdr(msg, "sensor_msgs/msg/Imu"))
+
+
+def test_a_ros2_bags_imu_topic_gives_the_same_contacts(tmp_path, counts):
+    pytest.importorskip("rosbags")
+    write_imu_bag(tmp_path / "bags" / "run1", counts)
+    write_labels(tmp_path / "labels.csv", label_rows())
+    code, err = run_cli(tmp_path / "bags", tmp_path / "labels.csv", "--out", tmp_path / "ds",
+                        "--rate", RATE)
+    assert code == 0, err
+    ds = recorded.open_bench(tmp_path / "ds").dataset
+    assert ds.attrs["rate_hz"] == RATE and ds.attrs["adc_bits"] == 16
+    assert list(ds["onset_s"].values) == ONSETS
+    assert list(ds["material"].values) == MATERIALS
+    meta = json.loads((tmp_path / "ds" / "import.json").read_text())
+    assert meta["recordings"][0]["topic"] == "/antenna/imu"
+    code, err = run_cli(tmp_path / "bags", tmp_path / "labels.csv", "--out", tmp_path / "ds2",
+                        "--topic", "/other")
+    assert code == 2 and "--topic" in err and "/antenna/imu" in err

@@ -282,8 +282,13 @@ def _read_csv(path: Path, options: Options) -> Stream:
             line = int(uneven[0]) + 3 if len(uneven) else 3
             raise SpecError(f"{path.name} line {line} t_s", columns["t_s"][line - 2],
                             f"evenly spaced, increasing times (every {step:g} s)")
-        stated = 1.0 / step
+        stated = _rate_of(step)
     return _plain(path, counts, _rate(path, stated, options, "t_s column"), options, "csv")
+
+
+def _rate_of(step_s: float) -> float:
+    """The rate a sample spacing states, to the six digits a written time carries."""
+    return float(f"{1.0 / step_s:.6g}") if step_s > 0 else float("nan")
 
 
 def _read_wav(path: Path, options: Options) -> Stream:
@@ -313,12 +318,7 @@ def _read_wav(path: Path, options: Options) -> Stream:
 
 
 def _read_rosbag(path: Path, options: Options) -> Stream:
-    try:
-        from rosbags.highlevel import AnyReader
-    except ImportError:
-        raise SpecError(path.name, "a ROS 2 bag", "a recording this installation reads: "
-                                                  "ROS 2 bags need the rosbags package "
-                                                  "(pip install rosbags)") from None
+    from rosbags.highlevel import AnyReader
     imu = "sensor_msgs/msg/Imu"
     stamps, xy = [], []
     try:
@@ -343,8 +343,7 @@ def _read_rosbag(path: Path, options: Options) -> Stream:
     if len(t) < 2:
         raise SpecError(f"{path.name} {wanted}", f"{len(t)} message(s)",
                         "an Imu topic with at least two messages")
-    step = float(np.median(np.diff(t)))
-    stated = 1.0 / step if step > 0 else float("nan")
+    stated = _rate_of(float(np.median(np.diff(t))))
     rate = _rate(path, stated, options, f"{wanted} header stamps")
     frames = np.round((t - t[0]) * rate).astype(np.int64)
     if np.any(np.diff(frames) < 1):
