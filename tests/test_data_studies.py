@@ -101,3 +101,73 @@ def test_quickstart_on_the_recorded_drive_scores_as_on_the_generated_scene(drive
     page = (tmp_path / "recorded" / "report.html").read_text()
     meta = json.loads((data / "import.json").read_text())
     assert meta["recordings"][0]["files"][0]["sha256"][:16] in page
+
+
+# -- the gating threshold study on recorded drives ------------------------------------------------
+def record_scene(path, rec) -> None:
+    """A generated drive written as `record` keeps a drive: its counts, the speed command it
+    started at and every change (as the live controls journal them)."""
+    speed = np.asarray(rec.meta["speed_cm_s"], dtype=float)
+    changes = [(int(i), float(speed[i])) for i in np.flatnonzero(np.diff(speed)) + 1]
+    write_record(path, rec.samples, speed_cm_s=float(speed[0]), speed_changes=changes)
+
+
+@pytest.fixture(scope="module")
+def gating_drives(tmp_path_factory):
+    """A calibration drive in the open and a drive along a course on a speed ramp, generated
+    as the study generates its scenes, recorded and labelled."""
+    from snn_antenna.sources.scenes import SpeedProfile, drive as open_drive, ramp
+    from snn_antenna.studies.gating_threshold.spec import build, make_scene
+
+    tmp = tmp_path_factory.mktemp("gating")
+    spec = specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True)
+    parts = build(spec)
+    calibration = open_drive(parts.scene, SpeedProfile("constant", 15.0), 5.0, []).generate(7)
+    v = parts.sweep.speeds_cm_s
+    course, seed = make_scene(parts, ramp(float(v.min()), float(v.max()), parts.sweep.scene_s),
+                              (9, 0))
+    scored = course.generate(seed)
+    assert scored.truth.contacts
+    record_scene(tmp / "drives" / "calibration", calibration)
+    record_scene(tmp / "drives" / "ramp", scored)
+    write_labels(tmp / "labels.csv", [("ramp", c.t_s, c.distance_cm, c.material)
+                                      for c in scored.truth.contacts],
+                 ("recording", "contact_s", "distance_cm", "material"))
+    return spec, scored, import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data")
+
+
+def test_the_gating_study_takes_recorded_drives_with_their_speed_log(gating_drives, tmp_path):
+    from snn_antenna.studies.gating_threshold.spec import build
+
+    spec, scored, data = gating_drives
+    parts = build({**spec, "data": str(data)})
+    ramp = parts.data.recording(parts.data.names.index("ramp"))
+    assert np.array_equal(ramp.samples, scored.samples)
+    assert np.array_equal(ramp.meta["speed_cm_s"], np.asarray(scored.meta["speed_cm_s"],
+                                                               dtype=np.float32))
+    # a drive without its speed log cannot drive the gate: one line, before any work
+    (tmp_path / "drives").mkdir()
+    write_record(tmp_path / "drives" / "ramp", scored.samples)
+    write_record(tmp_path / "drives" / "calibration", scored.samples[:2000])
+    write_labels(tmp_path / "labels.csv", [("ramp", c.t_s, c.distance_cm, c.material)
+                                           for c in scored.truth.contacts],
+                 ("recording", "contact_s", "distance_cm", "material"))
+    unlogged = import_dir(tmp_path / "drives", tmp_path / "labels.csv", tmp_path / "data")
+    with pytest.raises(SpecError, match="speed command is logged"):
+        build({**spec, "data": str(unlogged)})
+
+
+@pytest.mark.slow
+def test_the_gating_study_scores_the_gate_on_recorded_drives(gating_drives, tmp_path):
+    from snn_antenna.studies import gating_threshold
+
+    spec, scored, data = gating_drives
+    s = gating_threshold.run({**spec, "data": str(data)}, tmp_path / "out", quick=True,
+                             log=lambda *a: None)
+    rows = {r["method"]: r for r in s["recorded"]["rows"]}
+    n = len(scored.truth.contacts)
+    assert all(r["tp"] + r["misses"] == n for r in rows.values())
+    page = (tmp_path / "out" / "report.html").read_text()
+    meta = json.loads((data / "import.json").read_text())
+    assert "The gate on recorded drives" in page
+    assert meta["recordings"][0]["files"][0]["sha256"][:16] in page

@@ -58,6 +58,7 @@ from ...evaluation.thresholds import (
     fixed_method,
 )
 from ...sources.scenes import SpeedProfile, ramp, random_steps
+from .recorded import score_drives
 from .report import Fig9Row, Results, SeedPlan, human_summary, write_report
 from .spec import (
     EVALUATION_SCENES,
@@ -257,10 +258,14 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
             f"{len(fixed_th)} fixed Th, the lookup table and the gate")
         collect_fig9(fig9, fig9_runs, codings)
         seeds = evaluate(evaluation, log)
+        drives = parts.data and score_drives(parts, parts.data, fixed_th, fit.sweep_fixed_th_g,
+                                             recall, codings, log)
     results = Results(outcome, fit, fig9, recall, seeds,
                       compare(evaluation.scores, fixed_th, fit.sweep_fixed_th_g),
                       evaluation.example)
     summary = summarize(parts, results)
+    if drives:
+        summary["recorded"] = drives
     summary["total_wall_s"] = time.perf_counter() - t_start
     write_report(out_dir, spec, parts, results, summary, quick)
     log(human_summary(summary, out_dir))

@@ -19,6 +19,7 @@ from ...evaluation.thresholds import (
 from ...evaluation.thresholds import GateRecall, ThStarFit
 from ...report.page import Calibrated, Predicted, Report, by_speed
 from .spec import Parts
+from .recorded import report_section as recorded_section
 
 
 # -- what the stages return ----------------------------------------------------------------
@@ -210,6 +211,7 @@ def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
                "Left: learning curves, recall error factor exp(mean |log(recalled/Th*)|) on "
                "trained and held-out speeds. Right: Th* from the sweep, the gate's recall and "
                "the lookup table.")
+    recorded_section(rep, s)
     rep.write(s, spec, parts.array.target)
 
 

@@ -17,6 +17,7 @@ from ...readout.contacts import detector_from_spec
 from ...evaluation.scoring import score_columns
 from ...readout.detection import BlindReadOut
 from ...sources import antenna
+from .recorded import open_drives
 from ...sources.scenes import (
     CourseLayout,
     CourseScene,
@@ -136,6 +137,7 @@ class Parts:
     evaluation: EvaluationSettings
     held_out_speeds: np.ndarray
     chain: object = None      # fitted on first use (``calibrated_chain``)
+    data: object = None       # recorded drives the gate is also scored on (``recorded``)
 
 
 def _section(spec: dict, name: str, target, **kw):
@@ -144,7 +146,7 @@ def _section(spec: dict, name: str, target, **kw):
 
 def build(spec: dict) -> Parts:
     """Check the whole spec and build every part before any simulation runs."""
-    specs.check_top_level(spec, SECTIONS)
+    specs.check_top_level(spec, SECTIONS + ("data",))
     with specs.section("network"):
         array = _section(spec, "network", ResonatorArray)
     with specs.section("stimulus"):
@@ -186,7 +188,7 @@ def build(spec: dict) -> Parts:
     readout = BlindReadOut(array, detector, window_s, scene.rate_hz, sweep.settle_s,
                            sweep.target)
     return Parts(int(spec.get("seed", 0)), array, scene, pre, cal, readout, course, sweep,
-                 gate, train, ev, held)
+                 gate, train, ev, held, data=open_drives(spec, scene))
 
 
 def sweep_settings(spec: dict) -> dict:
