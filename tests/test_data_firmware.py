@@ -36,18 +36,21 @@ def bench_table(tmp_path, repetitions: int) -> dict:
             "n_jobs": 1, "cache_dir": str(tmp_path / "cache")}
 
 
-def stream_through_firmware(tmp_path, table: dict) -> tuple[Path, dict]:
-    """`emulate --pty --firmware` plays the bench once; the recorder keeps what arrives."""
-    stimulus = tmp_path / "bench.toml"
-    stimulus.write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in table.items()))
+def stream_through_firmware(tmp_path, table: dict | None = None, stimulus: Path | None = None,
+                            name: str = "bench1", *options) -> tuple[Path, dict]:
+    """`emulate --pty --firmware` plays the bench ``table`` (or the ``stimulus`` file) once;
+    the recorder keeps what arrives."""
+    if table is not None:
+        stimulus = tmp_path / "bench.toml"
+        stimulus.write_text("".join(f"{k} = {json.dumps(v)}\n" for k, v in table.items()))
     emu = subprocess.Popen([*CLI, "emulate", "--pty", "--link", tmp_path / "tty", "--firmware",
                             FIRMWARE, "--stimulus", stimulus, "--log", tmp_path / "emu.json",
-                            "--fast"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            "--fast", *map(str, options)], cwd=tmp_path, stdout=subprocess.PIPE,
                            stderr=subprocess.PIPE, text=True, env=ENV)
     try:
         assert emu.stdout.readline().strip() == str(tmp_path / "tty"), emu.stderr.read()
         source = SerialSource(str(tmp_path / "tty")).start()
-        recorder = Recorder(tmp_path / "recs" / "bench1", port=str(tmp_path / "tty"),
+        recorder = Recorder(tmp_path / "recs" / name, port=str(tmp_path / "tty"),
                             wire_format="binary", baudrate=250000)
         stop = threading.Event()
         thread = threading.Thread(target=run_source, daemon=True, args=(source, [recorder]),
@@ -151,3 +154,27 @@ def test_the_baseline_comparison_on_firmware_recordings_agrees_with_the_generate
     page = (tmp_path / "study_recorded" / "report.html").read_text()
     sha = json.loads((data_dir / "import.json").read_text())["recordings"][0]["files"][0]
     assert sha["sha256"] in page and str(data_dir.resolve()) in page
+
+
+@needs_simavr
+def test_a_drive_through_the_firmware_is_the_quickstarts_scene_sample_for_sample(tmp_path):
+    """The quickstart's scene streamed by the firmware, recorded, labelled from the emulator's
+    log and imported as a drive: the study reads the board's counts and the scene's contacts."""
+    from snn_antenna.core import spec as specs
+    from snn_antenna.studies import quickstart
+
+    spec = specs.load(ROOT / "studies" / "quickstart.toml", [])   # the scene the file holds
+    scene = quickstart.build(spec).scene
+    n = int(scene.duration_s * scene.rate_hz)
+    recordings, log = stream_through_firmware(tmp_path, None,
+                                              ROOT / "stimuli" / "quickstart_scene.toml",
+                                              "drive1", "--frames", n, "--seed", spec["seed"])
+    labels = tmp_path / "labels.csv"
+    labels.write_text(from_emulator_log(log, "drive1", drive=True))
+    assert main(["data", "import", str(recordings), str(labels), "--out",
+                 str(tmp_path / "data")]) == 0
+    parts = quickstart.build({**spec, "data": str(tmp_path / "data")})
+    rec, generated = parts.scene.generate(0), scene.generate(int(spec["seed"]))
+    assert np.array_equal(rec.samples, generated.samples)
+    assert [(c.t_s, c.distance_cm) for c in rec.truth.contacts] == \
+        [(c.t_s, c.distance_cm) for c in generated.truth.contacts]

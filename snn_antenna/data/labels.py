@@ -206,14 +206,15 @@ def repetitions(labels: list[Label]) -> list[int]:
     return out
 
 
-def from_emulator_log(log: dict, recording: str) -> str:
+def from_emulator_log(log: dict, recording: str, drive: bool = False) -> str:
     """The labels table (CSV text) of what ``snn-antenna emulate --log`` says it streamed: each
-    contact's onset on the stream's clock (frame over rate), distance and material. A recording
-    of that stream made from its first frame shares the clock (the firmware numbers its samples
-    from 0)."""
+    contact's onset on the stream's clock (frame over rate), distance and material; a bench
+    table, or a drives table when ``drive``. A recording of that stream made from its first
+    frame shares the clock (the firmware numbers its samples from 0)."""
     out = io.StringIO()
     writer = csv.writer(out, lineterminator="\n")
-    writer.writerow(["recording", "onset_s", "distance_cm", "material"])
+    writer.writerow(["recording", "contact_s" if drive else "onset_s", "distance_cm",
+                     "material"])
     for event in log.get("events", []):
         if event.get("kind") == "contact":
             writer.writerow([recording, repr(float(event["t_s"])), repr(float(event["distance_cm"])),
