@@ -13,7 +13,8 @@ def add_subcommands(subparsers) -> None:
     """Add ``data import`` to an argparse subparsers object."""
     data = subparsers.add_parser("data", help="turn recordings of a real antenna into a "
                                               "labelled data set the studies read")
-    actions = data.add_subparsers(dest="data_command", required=True)
+    actions = data.add_subparsers(dest="data_command", required=True, metavar="ACTION",
+                                  help="import: recordings and their labels into a data set")
     p = actions.add_parser(
         "import", help="check recordings and their labels, then write the data set",
         description="Read every recording (folders written by `snn-antenna record`, CSV, NumPy, "
