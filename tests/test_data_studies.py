@@ -171,3 +171,24 @@ def test_the_gating_study_scores_the_gate_on_recorded_drives(gating_drives, tmp_
     meta = json.loads((data / "import.json").read_text())
     assert "The gate on recorded drives" in page
     assert meta["recordings"][0]["files"][0]["sha256"][:16] in page
+
+
+def test_the_tuned_bank_is_refused_on_recorded_data_in_one_line(tmp_path):
+    """Its channels are placed on generated calibration contacts of another seed, which a
+    recording has not."""
+    onsets = [1.0, 2.5, 4.0]
+    write_record(tmp_path / "recs" / "run1", ringing_counts(onsets, [10, 20, 30], 6.0))
+    write_labels(tmp_path / "labels.csv", [("run1", t, d, "wood", 0)
+                                          for t, d in zip(onsets, [10, 20, 30])])
+    data = import_dir(tmp_path / "recs", tmp_path / "labels.csv", tmp_path / "data")
+    spec = specs.load(ROOT / "studies" / "baseline_comparison.toml", [], quick=True)
+    bands = spec["spiking"]["bank"]["bands"]
+    spec = {**spec, "data": str(data), "events": {**spec["events"], "max_hz": 499.0},
+            "evaluation": {**spec["evaluation"], "pipelines": ["distance", "material"]},
+            "spiking": {**spec["spiking"], "bank": {**spec["spiking"]["bank"],
+                                                    "bands": {"low": bands["low"]}}}}
+    with pytest.raises(SpecError) as refused:
+        baseline_comparison.build(spec)
+    assert refused.value.field == "spiking.tuned"
+    spec["spiking"].pop("tuned")
+    assert baseline_comparison.build(spec).bank is not None

@@ -88,8 +88,12 @@ def build(spec: dict) -> StudySpec:
         raise SpecError("data" if getattr(bench_spec, "recorded", False) else
                         "stimulus.materials", list(bench_spec.materials),
                         "a list that holds wood and aluminium for the two-material network")
-    return StudySpec(bench_spec, processor, evaluation,
-                     *_spiking_part(spec, bench_spec.rate_hz))
+    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
+    if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
+        raise SpecError("spiking.tuned", "a tuned bank", "no [spiking.tuned] table with "
+                        "recorded data: the tuned bank places its channels on calibration "
+                        "contacts the generator makes with another seed")
+    return parts
 
 
 @logged
