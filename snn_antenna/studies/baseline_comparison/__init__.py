@@ -90,8 +90,8 @@ def build(spec: dict) -> StudySpec:
                         "a list that holds wood and aluminium for the two-material network")
     parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
     if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
-        raise SpecError("spiking.tuned", "a tuned bank", "no [spiking.tuned] table with "
-                        "recorded data: the tuned bank places its channels on calibration "
+        raise SpecError("spiking.tuned", "a tuned bank", "none with recorded data (--set "
+                        "spiking.tuned={}): the tuned bank places its channels on calibration "
                         "contacts the generator makes with another seed")
     return parts
 
