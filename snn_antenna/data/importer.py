@@ -48,7 +48,7 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
                 raise SpecError(f"{s.name} {name}", getattr(s, name),
                                 f"{getattr(first, name):g}, as {first.name}: one data set "
                                 "holds one sensor's samples at one rate")
-    nyquist_check(first.rate_hz, seg)
+    _check_quiet(first.rate_hz, seg)
     table = label_table.read_labels(labels_path, {s.name: s.duration_s for s in streams})
     log(f"data: {len(streams)} recording(s), {len(table)} labelled contacts in "
         f"{Path(labels_path).name}")
@@ -161,7 +161,7 @@ def _check_settings(seg: Segmentation) -> None:
         raise SpecError("--pre-trigger-s", seg.pre_trigger_s, "a lead-in in [0, 1) s")
 
 
-def nyquist_check(rate_hz: float, seg: Segmentation) -> None:
+def _check_quiet(rate_hz: float, seg: Segmentation) -> None:
     if seg.quiet_s * rate_hz < 1:
         raise SpecError("--quiet-s", seg.quiet_s, f"at least one sample ({1 / rate_hz:g} s "
                                                   f"at {rate_hz:g} Hz)")
