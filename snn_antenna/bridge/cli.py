@@ -18,7 +18,7 @@ from ..core.bounds import option
 from ..core.errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .wire.protocol import WIRE_FORMATS
 from .wire.recorder import COUNT_FIELDS
-from .emulate.command import cmd_emulate
+from .emulate.command import cmd_emulate, faults_help
 from .wire.source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
 from .view.view import add_view_args, live_view
 
@@ -66,8 +66,10 @@ def add_subcommands(subparsers) -> None:
                         "back to back (default: a robot scene with contacts at 19 and 27 cm)")
     p.add_argument("--frames", type=option(bounds.positive_integer), default=None,
                    help="frames to send (default: the stimulus's length; a scene loops)")
-    p.add_argument("--faults", default="", help="e.g. garbage=3,drop=2,bitflip=2,range=1,"
-                                                "stall=1,disconnect=1,stall_s=0.2,outage_s=0.5")
+    p.add_argument("--faults", default="", help=faults_help())
+    p.add_argument("--no-boot-frame", action="store_true",
+                   help="send no boot frame at start and reset (a board whose restarts the "
+                        "host must infer)")
     p.add_argument("--seed", type=option(bounds.seed), default=0,
                    help="seed of the stimulus noise and of where faults fall (default 0)")
     p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
