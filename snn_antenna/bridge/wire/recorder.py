@@ -146,6 +146,11 @@ class Recorder:
         self._events.flush()
         self.meta["control_events"] = self.meta.get("control_events", 0) + 1
 
+    def note_outcome(self, **outcome) -> None:
+        """What the live run found (``stream``: its contacts), kept in ``meta.json`` under
+        ``live`` so that a replay can show it beside its own."""
+        self.meta["live"] = outcome
+
     def close(self, status: str = "ok", message: str = "", complete: bool = True) -> None:
         """Flush and close; ``complete=False`` records that the session ended in a failure
         (``status`` and ``message`` say which), although every byte received is kept."""
@@ -253,6 +258,8 @@ META_OPTIONAL = {
     "network": (lambda v: v is None or isinstance(v, str), "a network's path, or null"),
     "set": (lambda v: v is None or (isinstance(v, list) and all(isinstance(i, str) for i in v)),
             "a list of KEY=VALUE texts"),
+    "live": (lambda v: isinstance(v, dict) and isinstance(v.get("contacts", []), (list, int)),
+             "a table of the live run's outcome, its contacts a list"),
 }
 
 

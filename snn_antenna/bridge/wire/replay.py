@@ -93,3 +93,28 @@ class ReplaySource:
         sessions = self.decoder.sessions[self._sessions_told:]
         self._sessions_told = len(self.decoder.sessions)
         return Batch(time.time(), raw, samples, self.counts(), sessions=sessions)
+
+
+def live_comparison(meta: dict, network, explicit_set=(), speed_cm_s=None) -> dict:
+    """A replay with a network, against the live run it replays (``meta``, as ``stream`` wrote
+    it): the settings that differ (another network, a ``--set`` that changes a key's recorded
+    value, another speed command), each as ``"KEY: LIVE -> REPLAY"``, and the live run's
+    contacts, to show beside the replay's own."""
+    differ = []
+    recorded_network = meta.get("network")
+    if recorded_network and Path(recorded_network).resolve() != Path(network).resolve():
+        differ.append(f"network: {recorded_network} -> {network}")
+    recorded = dict(_key_value(item) for item in meta.get("set") or [])
+    for item in explicit_set:
+        key, value = _key_value(item)
+        if recorded.get(key) != value:
+            differ.append(f"{key}: {recorded.get(key, 'the network file')} -> {value}")
+    live_speed = meta.get("speed_cm_s")
+    if speed_cm_s is not None and speed_cm_s != live_speed:
+        differ.append(f"speed_cm_s: {live_speed} -> {speed_cm_s:g}")
+    return {"settings_differ": differ, "contacts": (meta.get("live") or {}).get("contacts")}
+
+
+def _key_value(item: str) -> tuple[str, str]:
+    key, _, value = str(item).partition("=")
+    return key.strip(), value.strip()
