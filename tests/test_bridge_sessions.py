@@ -221,3 +221,16 @@ def test_find_gaps_never_spans_a_session():
     assert find_gaps(seq) != []                         # read alone, a gap of 25,536
     assert find_gaps(seq, [(0, None), (40_000, None)]) == []
     assert find_gaps(np.array([5, 6, 3, 4]), [(0, None), (2, 0)])[0].length == 3
+
+
+@pytest.mark.slow
+@settings(max_examples=300, deadline=None)
+@given(board_runs(max_sessions=6, max_len=3000))
+def test_many_more_boards_with_and_without_boot_frames(run):
+    sessions, stalls, chunk = run
+    sessions = normalise(sessions)
+    got, decoder = decode_run(sessions, stalls, chunk, boot_frames=True)
+    check_reconciles(sessions, got, decoder)
+    if unambiguous_without_boot_frames(sessions):
+        got, decoder = decode_run(sessions, stalls, chunk, boot_frames=False)
+        check_reconciles(sessions, got, decoder)

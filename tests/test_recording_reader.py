@@ -216,3 +216,16 @@ def test_replay_of_a_damaged_recording_is_one_line_and_exit_2(template, tmp_path
     lines = done.stderr.strip().splitlines()
     assert done.returncode == 2 and len(lines) == 1, done.stderr
     assert "Traceback" not in done.stderr and str(Path(folder).name) in lines[0]
+
+
+@pytest.mark.slow
+@settings(max_examples=2000, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(field=st.sampled_from(sorted(META_FIELDS)),
+       value=st.one_of(st.sampled_from(ODD_VALUES), st.integers(), st.floats(), st.text(),
+                       st.lists(st.integers(), max_size=3)),
+       remove=st.booleans())
+def test_many_more_meta_fields_removed_or_retyped(template, tmp_path_factory, field, value,
+                                                  remove):
+    test_a_meta_field_removed_or_retyped_is_named.hypothesis.inner_test(
+        template, tmp_path_factory, field, value, remove)
