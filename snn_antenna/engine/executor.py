@@ -181,12 +181,12 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
     The local cluster runs ``workers`` processes (0: one per CPU core) of one thread each:
     Brian2 holds the GIL, so threads would not run chunks in parallel.
     """
+    probe_scheduler(scheduler)          # in seconds, before distributed is even imported
     import logging
 
     from distributed import Client, LocalCluster
 
     if scheduler:
-        probe_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
