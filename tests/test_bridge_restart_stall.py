@@ -40,15 +40,19 @@ def assert_recorded_exactly(rec, log):
     assert rec.complete and len(rec.gaps) == rec.counts["gaps"]
 
 
-@pytest.mark.parametrize("boot_frames", [True, False])
-def test_board_resets_over_a_pty_are_restarts_never_loss_or_duplicates(tmp_path, boot_frames):
-    """Three resets of a board whose count starts at 64,000 (it wraps first), between
+@pytest.mark.parametrize("boot_frames, start_seq", [(True, 64_000), (False, 64_000),
+                                                   (False, 40_000)])
+def test_board_resets_over_a_pty_are_restarts_never_loss_or_duplicates(tmp_path, boot_frames,
+                                                                       start_seq):
+    """Three resets of a board whose count starts at 64,000 (it wraps first) or 40,000 (its
+    first reset is a jump forward, which only the host's clock tells from a gap), between
     duplicates, swaps and drops: three restarts, each session continuous, nothing lost but the
-    drops, a duplicate only where one was sent."""
+    drops, a duplicate only where one was sent; and a replay decides as the live run did."""
     n = 3000
     counts = np.random.default_rng(3).integers(0, 1024, (n, 2))
     plan = FaultPlan(reset=3, dup=6, swap=6, drop=3, reset_s=0.15)
-    emulator = Emulator(counts, faults=plan, seed=21, start_seq=64_000, boot_frames=boot_frames)
+    emulator = Emulator(counts, faults=plan, seed=21, start_seq=start_seq,
+                        boot_frames=boot_frames)
     link = PtyLink(tmp_path / "tty")
     recorder = start_record(link.path, tmp_path / "rec")
     try:
@@ -65,10 +69,19 @@ def test_board_resets_over_a_pty_are_restarts_never_loss_or_duplicates(tmp_path,
     assert_recorded_exactly(rec, log)
     assert rec.counts["seq_restarts"] == 3
     assert rec.counts["duplicates"] == log.injected()["dup"]
-    assert [session[0].seq for session in log.sessions()] == [64_000, 0, 0, 0]
+    assert [session[0].seq for session in log.sessions()] == [start_seq, 0, 0, 0]
     assert rec.counts["lost_samples"] == log.injected()["drop"]
     # Per session, what the board sent: frames + lost = sent.
     assert rec.counts["frames"] + rec.counts["lost_samples"] == log.frames_due == n
+    # The replay begins each session at the same byte, host-time rules included.
+    causes = {s["cause"] for s in rec.meta["sessions"][1:]}
+    if boot_frames:
+        assert causes == {"boot"}
+    else:                               # decided by arrival times, which raw.bin does not hold
+        assert causes & {"silence", "jump"} and "boot" not in causes
+    replay = subprocess.run([*CLI, "replay", tmp_path / "rec"], capture_output=True, text=True,
+                            timeout=120)
+    assert replay.returncode == 0 and '"match": true' in replay.stdout, replay.stdout
 
 
 def test_a_host_stall_longer_than_the_no_data_timeout_loses_nothing(tmp_path):
