@@ -23,7 +23,6 @@ import math
 import queue
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from ...core.errors import SpecError
 from ..wire.protocol import BOARD_FULL_SCALE_G
