@@ -19,6 +19,7 @@ from .core.errors import SpecError, guarded
 def _run(args) -> int:
     from .core import outputs
     from .core import spec as specs
+    from .engine.executor import probe_scheduler
     from .engine.spec_rules import check_spec
     from .studies import runner
 
@@ -30,6 +31,7 @@ def _run(args) -> int:
     check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
     module.build(spec)                  # every field in its bounds, before sizing the work
     out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
+    probe_scheduler(getattr(args, "scheduler", None))    # what is there, before --out exists
     folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)  # and lock it
     try:
         _check_cost(spec, args)

@@ -1,5 +1,6 @@
 """The board's C framing against the Python decoder, and the AVR build when avr-gcc is present."""
 import importlib.util
+import json
 import random
 import shutil
 import subprocess
@@ -7,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.bridge.wire.protocol import Sample, decode_all, encode_binary
+from snn_antenna.bridge.wire.protocol import Decoder, Sample, decode_all, encode_binary
 
 FIRMWARE = Path(__file__).resolve().parents[1] / "firmware" / "antenna_stream"
 HOST_CC = shutil.which("cc") or shutil.which("gcc")
@@ -24,6 +25,20 @@ def make(tmp_path, *targets, **variables):
     args = ["make", "-C", str(FIRMWARE), f"BUILD={tmp_path}",
             *(f"{k}={v}" for k, v in variables.items()), *targets]
     return subprocess.run(args, capture_output=True, text=True, timeout=120)
+
+
+def test_boot_vectors_decode_as_a_new_session_never_a_sample():
+    vectors = json.loads((FIRMWARE / "test_vectors.json").read_text())["boot_vectors"]
+    assert len(vectors) == 6
+    for v in vectors:
+        decoder = Decoder()
+        before = decoder.feed(encode_binary(7, 1, 2))
+        after = decoder.feed(bytes.fromhex(v["frame"]) + encode_binary(v["first_seq"], 3, 4))
+        assert before + after == [(7, 1, 2), (v["first_seq"], 3, 4)]
+        stats = decoder.stats
+        assert (stats.boot_frames, stats.seq_restarts, stats.framing_errors) == (1, 1, 0)
+        assert decoder.sessions[-1].cause == "boot" and decoder.sessions[-1].first_seq == \
+            v["first_seq"]
 
 
 def test_vectors_file_matches_the_python_encoder():
@@ -49,7 +64,7 @@ def frame_test(tmp_path_factory):
 def test_c_encoder_passes_the_shared_vectors(frame_test):
     result = subprocess.run([frame_test, FIRMWARE / "test_vectors.json"], capture_output=True,
                             text=True, timeout=10)
-    assert result.returncode == 0 and "64 vectors checked, 0 failed" in result.stdout
+    assert result.returncode == 0 and "70 vectors checked, 0 failed" in result.stdout
 
 
 @needs_host_toolchain

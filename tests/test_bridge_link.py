@@ -16,12 +16,11 @@ from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulate.emulator import Emulator, FaultPlan
 from snn_antenna.bridge.emulate.links import PtyLink, SerialLink
 from snn_antenna.bridge.wire.protocol import encode_binary
-from snn_antenna.bridge.wire.recorder import Recorder
+from snn_antenna.bridge.wire.recorder import COUNT_FIELDS, Recorder
 from snn_antenna.bridge.wire.replay import ReplaySource
 from snn_antenna.bridge.wire.source import PortError, SerialSource, run_source
 
-COUNT_KEYS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
-              "duplicates", "reordered", "late", "seq_restarts", "reconnects")
+COUNT_KEYS = COUNT_FIELDS
 
 
 def random_counts(n, seed=0):

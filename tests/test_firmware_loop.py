@@ -94,7 +94,7 @@ def test_quickstart_through_the_firmware_is_recorded_count_for_count(tmp_path):
     summary = json.loads(out)
     assert summary["frames_fed"] == frames
     harness = summary["simavr"]
-    assert harness["bytes_sent"] == 1 + 10 * frames                 # 0x00 at start, 10 a frame
+    assert harness["bytes_sent"] == 1 + 12 + 10 * frames    # 0x00, the boot frame, 10 a frame
     assert abs(harness["simulated_s"] - frames / 1000) < 0.02       # the firmware's 1 kHz
     assert 0.39 < harness["line_load"] < 0.41                       # 40 % of 250000 baud
     assert "× real time" in err and "UART line load" in err
@@ -138,6 +138,44 @@ def test_a_held_uart_drops_samples_as_a_counted_gap_never_a_time_warp(tmp_path, 
     assert hold_at_ms <= seq[jump[0]] + 1 < hold_at_ms + hold_ms   # dropped during the hold
     assert np.array_equal(np.column_stack([rec.x, rec.y]), counts[seq]), \
         "a sample carries another instant's counts: a time warp"
+
+
+@needs_simavr
+def test_a_reset_board_is_one_restart_never_a_gap_or_duplicates(tmp_path, built):
+    """The MCU is reset (its RESET pin) at 700 ms of a 1500-sample stream, after its count passed
+    the 1,024 a duplicate check remembers and before it wrapped: the firmware boots again, sends
+    its boot frame and counts from 0. `record` must see two sessions, each continuous, one
+    restart, no gap, no duplicate; only the frame on the line at the reset is cut (one framing
+    error), and the new session's samples carry the counts of their own instants."""
+    n, reset_at_ms = 1500, 700
+    counts = np.random.default_rng(11).integers(0, 1024, (n, 2))
+    write_counts(tmp_path / "counts.txt", counts)
+    link = PtyLink(tmp_path / "tty")
+    try:
+        recording = Recording(link.path, tmp_path / "rec")
+        link.wait_for_peer(30, threading.Event())
+        summary = run_harness(built, tmp_path / "counts.txt", link, fast=True,
+                              resets=(reset_at_ms,))
+        link.drain()
+    finally:
+        link.close()
+    rec = recording.finish()
+    assert summary["samples_fed"] == n
+    counted = rec.counts
+    assert (counted["seq_restarts"], counted["boot_frames"]) == (1, 2)
+    assert counted["gaps"] == counted["lost_samples"] == counted["duplicates"] == 0
+    assert counted["crc_errors"] == 0 and counted["framing_errors"] <= 1
+    assert rec.session_starts[:1] == [0] and len(rec.session_starts) == 2
+    k = rec.session_starts[1]
+    seq = rec.seq.astype(np.int64)
+    assert np.array_equal(seq[:k], np.arange(k))
+    assert np.array_equal(seq[k:], np.arange(len(seq) - k))
+    assert abs(k - reset_at_ms) <= 2
+    got = np.column_stack([rec.x, rec.y])
+    assert np.array_equal(got[:k], counts[:k])
+    first = n - (len(seq) - k)          # the stimulus went on: the new count's first instant
+    assert np.array_equal(got[k:], counts[first:]), "the new session's counts are not its own"
+    assert counted["frames"] + (first - k) == n and first - k <= 2
 
 
 @needs_simavr

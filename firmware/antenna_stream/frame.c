@@ -56,3 +56,13 @@ uint8_t frame_encode(uint16_t seq, uint16_t x, uint16_t y, uint8_t out[FRAME_WIR
     out[n++] = 0x00;
     return n;
 }
+
+uint8_t frame_encode_boot(uint8_t cause, uint16_t first_seq, uint8_t out[BOOT_WIRE_LEN])
+{
+    uint8_t payload[BOOT_PAYLOAD_LEN] = { 'B', 'O', 'O', 'T', PROTOCOL_VERSION, cause };
+    put_u16(payload + 6, first_seq);
+    put_u16(payload + 8, frame_crc16_xmodem(payload, 8));
+    uint8_t n = frame_cobs_encode(payload, BOOT_PAYLOAD_LEN, out);
+    out[n++] = 0x00;
+    return n;
+}

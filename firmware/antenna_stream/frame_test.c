@@ -23,9 +23,21 @@ static int check_vectors(const char *path)
         return 2;
     }
     char line[512], want[64], got[64];
-    unsigned seq, x, y, checked = 0, failed = 0;
-    uint8_t wire[FRAME_WIRE_LEN];
+    unsigned seq, x, y, cause, checked = 0, failed = 0;
+    uint8_t wire[FRAME_WIRE_LEN], boot[BOOT_WIRE_LEN];
     while (fgets(line, sizeof line, f)) {
+        const char *b = strstr(line, "{\"boot_cause\"");
+        if (b && sscanf(b, "{\"boot_cause\": %u, \"first_seq\": %u, \"frame\": \"%63[0-9a-f]\"",
+                        &cause, &seq, want) == 3) {
+            to_hex(boot, frame_encode_boot((uint8_t)cause, (uint16_t)seq, boot), got);
+            checked++;
+            if (strcmp(got, want) != 0) {
+                failed++;
+                printf("FAIL boot cause=%u first_seq=%u: C %s, Python %s\n", cause, seq, got,
+                       want);
+            }
+            continue;
+        }
         const char *v = strstr(line, "{\"seq\"");
         if (!v || sscanf(v, "{\"seq\": %u, \"x\": %u, \"y\": %u, \"frame\": \"%63[0-9a-f]\"",
                          &seq, &x, &y, want) != 4)

@@ -6,7 +6,9 @@
  * baud, 8N1: 10 bytes per frame, 40 % of the line.
  *
  * A sample that finds the queue full is dropped but still consumes its sequence number, so the host
- * sees the loss as a gap instead of a silent time warp.
+ * sees the loss as a gap instead of a silent time warp. At reset the board sends a boot frame
+ * (frame.h) before its first sample, whose sequence number is 0: the host counts a new session,
+ * never a gap or duplicates, however far the old count had gone.
  */
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -98,8 +100,14 @@ ISR(ADC_vect)
 
 int main(void)
 {
+    uint8_t cause = MCUSR; /* power-on, external, brown-out or watchdog reset */
+    MCUSR = 0;
     uart_init();
     uart_put(0x00); /* end whatever partial frame the host saw during our reset */
+    uint8_t boot[BOOT_WIRE_LEN];
+    uint8_t n_boot = frame_encode_boot(cause, 0, boot);
+    for (uint8_t i = 0; i < n_boot; i++)
+        uart_put(boot[i]);
     adc_init();
     timer1_init();
     sei();

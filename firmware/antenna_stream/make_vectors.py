@@ -9,7 +9,7 @@ import json
 import random
 from pathlib import Path
 
-from snn_antenna.bridge.wire.protocol import encode_binary
+from snn_antenna.bridge.wire.protocol import encode_binary, encode_boot
 
 HERE = Path(__file__).resolve().parent
 
@@ -23,10 +23,20 @@ def vectors() -> list[dict]:
             for s, x, y in edge + rand]
 
 
+def boot_vectors() -> list[dict]:
+    edge = [(0, 0), (1, 0), (0x0f, 0), (0, 1), (255, 65535), (2, 0x0100)]
+    return [{"boot_cause": cause, "first_seq": first, "frame": encode_boot("binary", first,
+                                                                         cause).hex()}
+            for cause, first in edge]
+
+
 def render() -> str:
     lines = ",\n".join("  " + json.dumps(v) for v in vectors())
-    return ('{"description": "wire frames (COBS(seq x y crc16-xmodem) + 0x00) from '
-            'snn_antenna.bridge.wire.protocol.encode_binary",\n "vectors": [\n' + lines + "\n ]\n}\n")
+    boots = ",\n".join("  " + json.dumps(v) for v in boot_vectors())
+    return ('{"description": "wire frames (COBS(seq x y crc16-xmodem) + 0x00) and boot frames '
+            '(COBS(BOOT version cause first_seq crc16-xmodem) + 0x00) from '
+            'snn_antenna.bridge.wire.protocol",\n "vectors": [\n' + lines + "\n ],\n"
+            ' "boot_vectors": [\n' + boots + "\n ]\n}\n")
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ from ..core.bounds import option
 from ..core.errors import NumericalInstabilityError, PipelineError, SpecError, guarded
 from .wire.protocol import WIRE_FORMATS
 from .wire.recorder import COUNT_FIELDS
-from .emulate.command import cmd_emulate
+from .emulate.command import cmd_emulate, faults_help
 from .wire.source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
 from .view.view import add_view_args, live_view
 
@@ -66,8 +66,10 @@ def add_subcommands(subparsers) -> None:
                         "back to back (default: a robot scene with contacts at 19 and 27 cm)")
     p.add_argument("--frames", type=option(bounds.positive_integer), default=None,
                    help="frames to send (default: the stimulus's length; a scene loops)")
-    p.add_argument("--faults", default="", help="e.g. garbage=3,drop=2,bitflip=2,range=1,"
-                                                "stall=1,disconnect=1,stall_s=0.2,outage_s=0.5")
+    p.add_argument("--faults", default="", help=faults_help())
+    p.add_argument("--no-boot-frame", action="store_true",
+                   help="send no boot frame at start and reset (a board whose restarts the "
+                        "host must infer)")
     p.add_argument("--seed", type=option(bounds.seed), default=0,
                    help="seed of the stimulus noise and of where faults fall (default 0)")
     p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
@@ -255,10 +257,9 @@ def replay_overrides(args) -> list[str]:
     """The ``--set`` a replay runs with: the ones the recording was streamed with (its
     meta.json), then the explicit ones, which win. Said on stderr, so that a replay that
     reports other contacts than the live run says why."""
-    from .wire.recorder import META_FILE
+    from .wire.recorder import read_meta
 
-    meta_path = Path(args.recording) / META_FILE
-    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
+    meta = read_meta(args.recording)
     recorded = [str(item) for item in meta.get("set") or []]
     network = meta.get("network")
     if network and Path(network).resolve() != Path(args.network).resolve():
@@ -273,13 +274,11 @@ def replay_overrides(args) -> list[str]:
 
 def replay_speed(args) -> float | None:
     """The speed command a replay starts at: ``--speed``, else the recording's (meta.json)."""
-    from .wire.recorder import META_FILE
+    from .wire.recorder import read_meta
 
     if getattr(args, "speed", None) is not None:
         return args.speed
-    meta_path = Path(args.recording) / META_FILE
-    meta = json.loads(meta_path.read_text()) if meta_path.is_file() else {}
-    speed = meta.get("speed_cm_s")
+    speed = read_meta(args.recording).get("speed_cm_s")
     if speed is not None:
         print(f"replay: starting at the recording's speed command {speed:g} cm/s (meta.json)",
               file=sys.stderr)
@@ -296,7 +295,15 @@ def cmd_replay(args) -> int:
     if args.network:
         from .online.pipeline import build_online, run_online
         from .online.terminal import LiveDisplay
+        from .wire.recorder import read_meta
+        from .wire.replay import live_comparison
 
+        live = live_comparison(read_meta(args.recording), args.network, args.set,
+                               getattr(args, "speed", None))
+        if live["settings_differ"]:
+            print(f"replay: its settings differ from the live run's "
+                  f"({'; '.join(live['settings_differ'])}): its contacts are its own, with the "
+                  "live run's beside them (\"live\" in the report)", file=sys.stderr)
         parts = build_online(args.network, replay_overrides(args),
                              speed_cm_s=replay_speed(args))
         # The live run's control changes, at the samples they applied at.
@@ -312,6 +319,7 @@ def cmd_replay(args) -> int:
                                                                   scheduled=scheduled))
         if view is not None:            # stopped by now: its process counted what it dropped
             report["view"] = view.summary()
+        report["live"] = live
         print(json.dumps(report, indent=1))
         return 0
     source = ReplaySource(args.recording, realtime=args.realtime).start()
@@ -359,6 +367,7 @@ def cmd_stream(args) -> int:
                             duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
                             stop=stop, display=LiveDisplay(sys.stdout), view=view,
                             controls=live_controls(parts, view, journal=recorder.note_event))
+        recorder.note_outcome(contacts=report.get("contacts"))
     if view is not None:                # stopped by now: its process counted what it dropped
         report["view"] = view.summary()
     print(json.dumps(report, indent=1) if args.json else stream_summary(report, args.out))

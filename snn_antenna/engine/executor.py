@@ -62,36 +62,116 @@ def __getattr__(name):
 
 
 SCHEDULER_PROBE_S = 8.0
+SCHEDULER_ACCEPTED = "the address of a running Dask scheduler, tcp://HOST:PORT"
+# A Dask message starts with its length as a little-endian u64; the scheduler's first message
+# (the comm handshake) is a few hundred bytes. Anything beyond this is another protocol's bytes.
+DASK_FIRST_MESSAGE_MAX = 1 << 20
 
 
-def _probe_scheduler(address: str, timeout_s: float = SCHEDULER_PROBE_S) -> None:
-    """Ask ``address`` who it is, within ``timeout_s``, before a Client waits on it: a silent
-    port would hold the Client for minutes, and one that speaks first (an SSH or HTTP banner)
-    is read by Dask as a frame length of exabytes."""
+def probe_scheduler(address: str | None, timeout_s: float = SCHEDULER_PROBE_S) -> None:
+    """Refuse, in one line and within ``timeout_s``, a ``--scheduler`` address that is not a
+    running Dask scheduler of this toolkit's ``distributed`` version, naming what is there:
+    nothing listening, a server of another protocol (an SSH or HTTP banner, or a silent port),
+    or Dask of another version. ``None`` (no scheduler given) passes. Callers run it before
+    any output folder is created, and :func:`dask_client` runs it again before attaching."""
+    if address is None:
+        return
+    check(isinstance(address, str) and address.startswith("tcp://"), "--scheduler", address,
+          SCHEDULER_ACCEPTED)
+    host, _, port = address[len("tcp://"):].rpartition(":")
+    host = host.strip("[]")
+    check(bool(host) and port.isdigit() and 0 < int(port) < 65536, "--scheduler", address,
+          SCHEDULER_ACCEPTED)
+    _first_message(address, host, int(port), timeout_s)
+    _check_identity(address, timeout_s)
+
+
+def _refuse(address: str, found: str):
+    return SpecError("--scheduler", address, f"{SCHEDULER_ACCEPTED}; {found}")
+
+
+def _first_message(address: str, host: str, port: int, timeout_s: float) -> None:
+    """A Dask scheduler speaks first: its handshake, a length-prefixed message. Read the
+    length with a plain socket, so that another protocol's bytes are never taken for one."""
+    import socket
+    import struct
+
+    try:
+        conn = socket.create_connection((host, port), timeout=timeout_s)
+    except ConnectionRefusedError:
+        raise _refuse(address, f"nothing is listening on {host}:{port} (connection refused)"
+                      ) from None
+    except socket.gaierror as exc:
+        raise _refuse(address, f"the host {host!r} is not known ({exc.strerror})") from None
+    except (TimeoutError, socket.timeout):
+        raise _refuse(address, f"no answer from {host}:{port} within {timeout_s:g} s (the host "
+                               "is down, or a firewall drops the connection)") from None
+    except OSError as exc:
+        raise _refuse(address, f"{host}:{port} cannot be reached ({exc.strerror or exc})"
+                      ) from None
+    head = b""
+    try:
+        with conn:
+            conn.settimeout(timeout_s)
+            while len(head) < 8:
+                piece = conn.recv(8 - len(head))
+                if not piece:
+                    break
+                head += piece
+    except (TimeoutError, socket.timeout):
+        pass
+    except OSError as exc:
+        raise _refuse(address, f"{host}:{port} dropped the connection ({exc.strerror or exc})"
+                      ) from None
+    if not head:
+        raise _refuse(address, f"a server listens on {host}:{port} but does not speak Dask's "
+                               f"protocol (it sent nothing within {timeout_s:g} s)")
+    if len(head) < 8:
+        raise _refuse(address, f"a server listens on {host}:{port} but does not speak Dask's "
+                               f"protocol (it sent {head!r} and closed)")
+    (length,) = struct.unpack("<Q", head)
+    if not 0 < length <= DASK_FIRST_MESSAGE_MAX:
+        raise _refuse(address, f"a server listens on {host}:{port} but speaks another protocol "
+                               f"than Dask's (it began with {head!r})")
+
+
+def _check_identity(address: str, timeout_s: float) -> None:
+    """Ask the Dask peer who it is and which ``distributed`` it runs."""
     import asyncio
 
+    import distributed
     from distributed.comm import connect
 
-    async def identity():
+    async def ask():
         comm = await connect(address, timeout=timeout_s)
         try:
             await comm.write({"op": "identity", "reply": True})
-            return await comm.read()
+            identity = await comm.read()
+            versions = None
+            if isinstance(identity, dict) and identity.get("type") == "Scheduler":
+                await comm.write({"op": "versions", "reply": True})
+                versions = await comm.read()
+            return identity, versions
         finally:
             comm.abort()
 
-    accepted = "the address of a running Dask scheduler"
     try:
-        reply = asyncio.run(asyncio.wait_for(identity(), timeout_s))
+        identity, versions = asyncio.run(asyncio.wait_for(ask(), timeout_s))
     except (asyncio.TimeoutError, TimeoutError):
-        raise SpecError("--scheduler", address, f"{accepted} (no answer within "
-                        f"{timeout_s:g} s: not a Dask scheduler)") from None
-    except Exception as exc:        # refused, reset, or bytes that are not Dask's protocol
-        raise SpecError("--scheduler", address,
-                        f"{accepted} ({type(exc).__name__}: {str(exc)[:120]})") from None
-    if not (isinstance(reply, dict) and reply.get("type") == "Scheduler"):
-        raise SpecError("--scheduler", address,
-                        f"{accepted} (it answered as {str(reply)[:80]!r})")
+        raise _refuse(address, f"a Dask peer that did not say who it is within {timeout_s:g} s"
+                      ) from None
+    except Exception as exc:        # reset, closed, or a reply that is not Dask's
+        raise _refuse(address, f"it does not answer as Dask does ({type(exc).__name__}: "
+                               f"{str(exc)[:100]})") from None
+    if not (isinstance(identity, dict) and identity.get("type") == "Scheduler"):
+        kind = identity.get("type") if isinstance(identity, dict) else str(identity)[:60]
+        raise _refuse(address, f"a Dask {kind!s}, not a scheduler")
+    packages = versions.get("packages", {}) if isinstance(versions, dict) else {}
+    theirs = packages.get("distributed")
+    if theirs != distributed.__version__:
+        raise _refuse(address, f"a Dask scheduler of distributed {theirs}, while this toolkit "
+                               f"runs {distributed.__version__} (install the same version on "
+                               "both sides)")
 
 
 @contextmanager
@@ -101,14 +181,12 @@ def dask_client(workers: int = 0, scheduler: str | None = None, quiet: bool = Tr
     The local cluster runs ``workers`` processes (0: one per CPU core) of one thread each:
     Brian2 holds the GIL, so threads would not run chunks in parallel.
     """
+    probe_scheduler(scheduler)          # in seconds, before distributed is even imported
     import logging
 
     from distributed import Client, LocalCluster
 
     if scheduler:
-        check(isinstance(scheduler, str) and "://" in scheduler, "--scheduler", scheduler,
-              "a Dask scheduler address such as tcp://HOST:8786")
-        _probe_scheduler(scheduler)
         try:
             client = Client(scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:

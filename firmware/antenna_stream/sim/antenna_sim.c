@@ -25,6 +25,10 @@
  *   - paced: while OUT_HIGH bytes wait because the reader does not take them (a full pty).
  * With --fast a full pty pauses the whole simulation instead (as fast as the reader takes it).
  *
+ * --reset-at AT_MS resets the MCU (simavr's avr_reset: the registers, RAM and peripherals, as the
+ * RESET pin does) at that simulated time: the firmware boots again, sends its boot frame and
+ * counts from 0, while the stimulus goes on (the world does not wait for the board).
+ *
  * At the end one JSON line on stderr: simulated and wall seconds, their ratio, the fraction of
  * wall time the simulation was busy, samples fed, bytes sent, the UART line load, held time, and
  * why it stopped early (null, "stopped by a signal" (SIGINT, SIGTERM, or its parent gone), or the reader leaving: exit status 3).
@@ -70,6 +74,8 @@ static struct {
     uint64_t bytes_sent, held_cycles, last_tx_cycle;
     struct { uint64_t from, to; } holds[MAX_HOLDS];
     int n_holds;
+    uint64_t resets[MAX_HOLDS];          /* cycles at which the MCU is reset, in order */
+    int n_resets, next_reset;
     avr_irq_t *adc_irq;                  /* the ADC's IRQs: ADC0..7, IN_TRIGGER, OUT_TRIGGER */
     avr_io_read_t ucsra_read;            /* the UART's own reader of UCSR0A, wrapped below */
     void *ucsra_param;
@@ -242,7 +248,7 @@ static void on_signal(int sig)
 static void usage(void)
 {
     fprintf(stderr, "usage: antenna_sim [--mcu atmega328p|atmega2560] [--fd N] [--fast] "
-                    "[--hold-uart AT_MS:FOR_MS]... FIRMWARE.elf COUNTS\n");
+                    "[--hold-uart AT_MS:FOR_MS]... [--reset-at AT_MS]... FIRMWARE.elf COUNTS\n");
     exit(EXIT_USAGE);
 }
 
@@ -264,6 +270,14 @@ int main(int argc, char **argv)
                 fail(EXIT_USAGE, "--hold-uart %s; accepted: AT_MS:FOR_MS, e.g. 500:50", argv[i]);
             sim.holds[sim.n_holds].from = (uint64_t)(at_ms * (F_CPU_HZ / 1000));
             sim.holds[sim.n_holds++].to = (uint64_t)((at_ms + for_ms) * (F_CPU_HZ / 1000));
+        } else if (!strcmp(argv[i], "--reset-at") && i + 1 < argc && sim.n_resets < MAX_HOLDS) {
+            double at_ms;
+            uint64_t at;
+            if (sscanf(argv[++i], "%lf", &at_ms) != 1 || at_ms <= 0
+                || (at = (uint64_t)(at_ms * (F_CPU_HZ / 1000)),
+                    sim.n_resets && at <= sim.resets[sim.n_resets - 1]))
+                fail(EXIT_USAGE, "--reset-at %s; accepted: AT_MS > 0, later than the last", argv[i]);
+            sim.resets[sim.n_resets++] = at;
         } else {
             usage();
         }
@@ -319,6 +333,10 @@ int main(int argc, char **argv)
         if (avr->cycle < next_tick)
             continue;
         next_tick += TICK_CYCLES;
+        if (sim.next_reset < sim.n_resets && avr->cycle >= sim.resets[sim.next_reset]) {
+            sim.next_reset++;
+            avr_reset(avr);
+        }
         if (held())                      /* held time, to the tick */
             sim.held_cycles += TICK_CYCLES;
         flush_out(sim.fast && sim.out_len >= OUT_HIGH);

@@ -12,6 +12,15 @@ from ...core.errors import SpecError
 from ..wire.source import PortError, stop_on_signals
 
 
+def faults_help() -> str:
+    """``--faults``' help: every fault's name and what it does."""
+    from .emulator import FAULT_DESCRIPTIONS, FAULT_SECONDS
+
+    kinds = "; ".join(f"{name}: {text}" for name, text in FAULT_DESCRIPTIONS.items())
+    return (f"comma-separated NAME=COUNT, e.g. dup=2,swap=1,reset=1,stall_s=0.5. Faults: {kinds}. "
+            f"Seconds: {', '.join(FAULT_SECONDS)}")
+
+
 def cmd_emulate(args) -> int:
     """Emulate the board: stream a stimulus (labelled in ``--log``) to a pty or a port."""
     from .emulator import Emulator, FaultPlan
@@ -33,7 +42,8 @@ def cmd_emulate(args) -> int:
         _check_output_file("log", args.log, args.force)
     stimulus = stimulus_recording(args.stimulus, args.seed, args.frames)
     emulator = Emulator(stimulus.samples, rate_hz=stimulus.rate_hz, faults=plan, seed=args.seed,
-                        wire_format=args.format)
+                        wire_format=args.format,
+                        boot_frames=not getattr(args, "no_boot_frame", False))
     n_frames = args.frames or len(emulator.counts)
     emulator.schedule(n_frames)
     link = _emulator_link(args)

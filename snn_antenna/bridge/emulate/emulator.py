@@ -17,6 +17,14 @@ dup         a frame is sent twice: one duplicate, nothing lost.
 swap        a frame and the next are sent in swapped order: one reordered frame, nothing lost.
 disconnect  the port vanishes for ``outage_s`` and comes back at the same path; the board keeps
             sampling, so the frames due meanwhile are lost: one gap per outage, one reconnect.
+reset       the board restarts, as when power-cycled or reset by DTR: silent for ``reset_s``
+            while it boots, then (with boot frames, as the shipped firmware) a boot frame, and
+            its count starts again from 0: one restart, nothing lost, no duplicate.
+
+A board that sends no boot frame (``boot_frames=False``, ``emulate --no-boot-frame``) leaves
+the restart to the host's rules (bridge/wire/protocol.py). A host that stalls (suspend, swap, a
+stopped process) is the reader's fault, not the board's: the emulator keeps writing, the port
+buffers what it can and the emulator's writes wait for the rest, so nothing is lost.
 
 Like a board whose host opens the port, the emulator waits for a reader before it streams, and
 before it pulls the port away it waits until the reader has taken every byte already written:
@@ -37,15 +45,34 @@ from ..wire.protocol import (
     BOARD_RATE_HZ,
     DELIMITER,
     ENCODED_FRAME_LEN,
+    REORDER_WINDOW,
     SEQ_MODULUS,
     Sample,
     cobs_encode,
+    encode_boot,
     encoder_for,
     find_gaps,
     frame_payload,
 )
 
-FAULT_KINDS = ("garbage", "drop", "bitflip", "range", "stall", "dup", "swap", "disconnect")
+# What each fault does, in one line (``emulate --help`` shows them; the module's docstring says
+# what the receiver must count for each).
+FAULT_DESCRIPTIONS = {
+    "garbage": "random bytes before a frame (framing errors)",
+    "drop": "a frame not sent (a gap)",
+    "bitflip": "one bit of a frame flipped (a CRC error, a gap)",
+    "range": "a frame with x beyond the ADC (a range error, a gap)",
+    "stall": "the link pauses for stall_s, then the backlog (nothing lost)",
+    "dup": "a frame sent twice (a duplicate)",
+    "swap": "two frames in swapped order (one reordered)",
+    "disconnect": "the port vanishes for outage_s (a gap, a reconnect; needs --link)",
+    "reset": "the board restarts, silent for reset_s, its count from 0 (a restart)",
+}
+FAULT_KINDS = tuple(FAULT_DESCRIPTIONS)
+FAULT_SECONDS = ("stall_s", "outage_s", "reset_s")
+# After a reset the first frames go out clean: a board without boot frames is recognised by its
+# new count, which a fault there would hide.
+CLEAN_AFTER_RESET = REORDER_WINDOW + 2
 
 
 # -- faults ------------------------------------------------------------------------------------
@@ -60,8 +87,10 @@ class FaultPlan:
     dup: int = 0
     swap: int = 0
     disconnect: int = 0
+    reset: int = 0
     stall_s: float = 0.2
     outage_s: float = 0.3
+    reset_s: float = 0.1
 
     @classmethod
     def parse(cls, text: str) -> "FaultPlan":
@@ -86,7 +115,7 @@ class FaultPlan:
             value = getattr(self, kind)
             if not (isinstance(value, int) and value >= 0):
                 raise SpecError(f"faults.{kind}", value, "a count >= 0")
-        for name in ("stall_s", "outage_s"):
+        for name in FAULT_SECONDS:
             value = getattr(self, name)
             if not (0 <= value <= 60):
                 raise SpecError(f"faults.{name}", value, "seconds in [0, 60]")
@@ -105,19 +134,28 @@ class EmulatorLog:
     faults: list[tuple[str, int, int]] = field(default_factory=list)   # (kind, frame, seq)
     framing_errors: int = 0
     frames_due: int = 0
+    session_starts: list[int] = field(default_factory=lambda: [0])   # indices into in_order
+    boot_frames: int = 0
 
     def injected(self) -> dict:
         return {kind: sum(1 for k, *_ in self.faults if k == kind) for kind in FAULT_KINDS}
 
     def expected_counts(self) -> dict:
         """The counts a correct receiver reports for this stream."""
-        gaps = find_gaps([s.seq for s in self.in_order])
+        gaps = find_gaps([s.seq for s in self.in_order],
+                         [(i, None) for i in self.session_starts])
         injected = self.injected()
         return {"frames": len(self.in_order), "crc_errors": injected["bitflip"],
                 "framing_errors": self.framing_errors, "range_errors": injected["range"],
                 "gaps": len(gaps), "lost_samples": sum(g.length for g in gaps),
                 "reconnects": injected["disconnect"], "duplicates": injected["dup"],
-                "reordered": injected["swap"], "late": 0, "seq_restarts": 0}
+                "reordered": injected["swap"], "late": 0, "seq_restarts": injected["reset"],
+                "boot_frames": self.boot_frames}
+
+    def sessions(self) -> list[list[Sample]]:
+        """What the board sent in order, one list per board session."""
+        bounds = self.session_starts + [len(self.in_order)]
+        return [self.in_order[a:b] for a, b in zip(bounds, bounds[1:])]
 
 
 def garbage_burst(rng: np.random.Generator) -> tuple[bytes, int]:
@@ -160,7 +198,7 @@ class Emulator:
 
     def __init__(self, counts, *, rate_hz: float = BOARD_RATE_HZ,
                  faults: FaultPlan | None = None, seed: int = 0, wire_format: str = "binary",
-                 start_seq: int = 0, fault_margin: int = 20):
+                 start_seq: int = 0, fault_margin: int = 20, boot_frames: bool = True):
         counts = np.asarray(counts)
         if counts.ndim != 2 or counts.shape[1] != 2 or counts.shape[0] == 0:
             raise SpecError("counts", f"array of shape {counts.shape}", "shape (n_samples, 2)")
@@ -179,7 +217,9 @@ class Emulator:
         self.encode = encoder_for(wire_format)
         self.wire_format = wire_format
         self.seed, self.start_seq, self.fault_margin = seed, start_seq, fault_margin
+        self.boot_frames = boot_frames
         self.log = EmulatorLog()
+        self._session = (0, start_seq)      # (frame index, seq) where the board's count began
 
     def schedule(self, n_frames: int) -> dict[int, str]:
         """Seeded, distinct frame indices for every planned fault."""
@@ -211,7 +251,9 @@ class Emulator:
         link.wait_for_peer(peer_timeout_s, stop)
         t0 = time.monotonic()
         out = _Outbox(link, self.log, stop)
-        i, resyncing = 0, False
+        if self.boot_frames:
+            self._boot(out, self.start_seq)
+        i, clean_until = 0, 0
         while i < n_frames and not stop.is_set():
             if realtime and time.monotonic() < t0 + i / self.rate_hz:
                 out.flush()
@@ -219,15 +261,17 @@ class Emulator:
                 continue
             # After a reconnect the receiver treats bytes before its first valid frame as boot
             # noise; a fault there would go uncounted, so the first frame goes out clean.
-            kind = None if resyncing else plan.get(i)
-            resyncing = False
+            kind = None if i < clean_until else plan.get(i)
             self.log.frames_due = i + 1
             if kind:
-                self.log.faults.append((kind, i, (self.start_seq + i) % SEQ_MODULUS))
+                self.log.faults.append((kind, i, self._sample(i).seq))
             if kind == "disconnect":
                 i = self._disconnect(link, out, i, t0, realtime, peer_timeout_s)
-                resyncing = True
+                clean_until = i + 1
                 continue
+            if kind == "reset":
+                t0 += self._reset(out, i)
+                clean_until = i + CLEAN_AFTER_RESET
             self._frame(out, i, kind, rng)
             i += 2 if kind == "swap" else 1
             if len(out.data) >= 4096:
@@ -238,8 +282,7 @@ class Emulator:
 
     def _frame(self, out: _Outbox, i: int, kind: str | None, rng: np.random.Generator) -> None:
         """Frame ``i`` into the outbox: as it should be, or with the fault ``kind``."""
-        seq = (self.start_seq + i) % SEQ_MODULUS
-        x, y = (int(v) for v in self.counts[i % len(self.counts)])
+        seq, x, y = self._sample(i)
         if kind == "garbage":
             noise, errors = (garbage_burst if self.wire_format == "binary"
                              else ascii_garbage)(rng)
@@ -272,7 +315,24 @@ class Emulator:
 
     def _sample(self, i: int) -> Sample:
         x, y = (int(v) for v in self.counts[i % len(self.counts)])
-        return Sample((self.start_seq + i) % SEQ_MODULUS, x, y)
+        first_frame, first_seq = self._session
+        return Sample((first_seq + i - first_frame) % SEQ_MODULUS, x, y)
+
+    def _boot(self, out: _Outbox, first_seq: int) -> None:
+        out.data += encode_boot(self.wire_format, first_seq)
+        self.log.boot_frames += 1
+
+    def _reset(self, out: _Outbox, i: int) -> float:
+        """The board restarts before frame ``i``: silent while it boots, then a new count from
+        0. Returns the time it took, which the board did not spend sampling."""
+        started = time.monotonic()
+        out.flush()
+        out.stop.wait(self.faults.reset_s)
+        self._session = (i, 0)
+        self.log.session_starts.append(len(self.log.in_order) + len(out.in_order))
+        if self.boot_frames:
+            self._boot(out, 0)
+        return time.monotonic() - started
 
     def _disconnect(self, link, out: _Outbox, i: int, t0: float, realtime: bool,
                     peer_timeout_s: float | None) -> int:

@@ -91,7 +91,7 @@ def looped(samples: np.ndarray, n_frames: int) -> np.ndarray:
 
 
 def run_harness(built: Built, counts_file, link: PtyLink, *, fast: bool = False,
-                holds: tuple[tuple[float, float], ...] = (),
+                holds: tuple[tuple[float, float], ...] = (), resets: tuple[float, ...] = (),
                 stop: threading.Event | None = None) -> dict:
     """Run the firmware on ``counts_file`` into ``link`` until every sample is sent, ``stop``
     is set or the reader leaves; the harness's summary (simulated and wall seconds, ratio, bytes,
@@ -102,6 +102,8 @@ def run_harness(built: Built, counts_file, link: PtyLink, *, fast: bool = False,
         cmd.append("--fast")
     for at_ms, for_ms in holds:
         cmd += ["--hold-uart", f"{at_ms:g}:{for_ms:g}"]
+    for at_ms in resets:                # the RESET pin: the firmware boots again, counts from 0
+        cmd += ["--reset-at", f"{at_ms:g}"]
     cmd += [str(built.elf), str(counts_file)]
     with tempfile.TemporaryFile("w+") as err:     # a file: a chatty harness never blocks
         proc = subprocess.Popen(cmd, pass_fds=(link.master,), stdout=subprocess.DEVNULL,

@@ -23,7 +23,6 @@ import math
 import queue
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from ...core.errors import SpecError
 from ..wire.protocol import BOARD_FULL_SCALE_G
@@ -113,8 +112,7 @@ class Controls:
         self.origin = 0                         # sample index where the window last changed
         self.pending: list[tuple[int, Change, str, float]] = []    # (index, change, by, asked)
         for event in scheduled:
-            self.pending.append((int(event["sample"]), Change(event["field"],
-                                                              float(event["value"])),
+            self.pending.append((int(event["sample"]), journaled_change(event, self.base_window_s),
                                  "replay", time.time()))
         self.pending.sort(key=lambda p: p[0])
         if self.robot is None and any(p[1].field == "speed_cm_s" for p in self.pending):
@@ -196,24 +194,29 @@ class Controls:
                  "value": change.value, "shown": {shown[0]: shown[1]}, "was": was, "by": by,
                  "requested_unix_s": round(asked, 6), "applied_unix_s": round(time.time(), 6)}
         self.events.append(event)
-        if self.journal is not None:
-            self.journal(event)
+        if self.journal is not None:        # the window in seconds, as the page showed it
+            self.journal({**event, "field": shown[0], "value": shown[1]})
         if self.on_applied is not None:
             self.on_applied(event)
 
 
+def journaled_change(event: dict, base_window_s: float) -> Change:
+    """A journaled change as this run applies it: Th and the window (in seconds) through the one
+    parser, so that a value this network cannot take is refused, never applied as another."""
+    field, value = event["field"], event["value"]
+    if field not in ("th_g", "window_s"):
+        return Change(field, float(value))
+    try:
+        return parse_control({field: value}, base_window_s)
+    except SpecError as exc:
+        raise SpecError(f"{EVENTS_FILE} sample {event['sample']} {exc.field}", exc.value,
+                        exc.accepted) from None
+
+
 def recorded_events(recording_dir) -> list[dict]:
-    """The control events a recording holds (``events.jsonl``; a torn last line, from a killed
-    process, is dropped), in the order they were applied."""
-    path = Path(recording_dir) / EVENTS_FILE
-    if not path.is_file():
-        return []
-    events = []
-    for line in path.read_text().splitlines():
-        try:
-            event = json.loads(line)
-        except ValueError:
-            continue
-        if isinstance(event, dict) and {"sample", "field", "value"} <= event.keys():
-            events.append(event)
-    return events
+    """The control events a recording holds (``events.jsonl``, checked by the recording's
+    reader; a torn last line, from a killed process, is dropped), in the order they were
+    applied."""
+    from ..wire.recorder import read_events
+
+    return read_events(recording_dir)

@@ -2,15 +2,27 @@
 
 binary (default): one frame per sample, payload little-endian ``seq u16, x u16, y u16`` followed by
 ``crc u16`` = CRC-16/XMODEM of those 6 bytes, the 8 bytes COBS-encoded and ended by one ``0x00``.
-ascii (debug): lines ``seq,x,y`` ending in ``\\n`` or ``\\r\\n``.
+At reset the board sends one *boot frame*: ``"BOOT", version u8, reset cause u8, first seq u16``
+and the CRC, COBS-encoded (12 bytes on the wire, never the length of a sample frame).
+ascii (debug): lines ``seq,x,y`` ending in ``\\n`` or ``\\r\\n``; the boot line is
+``boot,VERSION,CAUSE,FIRST_SEQ``.
 
 The :class:`Decoder` is fed whatever chunks the port returns and yields samples; it never fills a
-gap, it counts it. Like an RTP receiver it keeps sequence discipline: a sequence number already
-delivered is a duplicate (dropped, counted); a frame arriving ahead of a hole is held for up to
+gap, it counts it. Like an RTP receiver it keeps sequence discipline within one *board session*
+(the board's count from one reset to the next): a sequence number already delivered is a
+duplicate (dropped, counted); a frame arriving ahead of a hole is held for up to
 ``REORDER_WINDOW`` frames so that a late frame can be put back in order (counted ``reordered``);
-a hole still open after that is a gap, its samples lost, counted once. A frame older than the
-window, or that falls in a hole already counted lost, is dropped (``late``); a step further
-back to numbers never delivered nor missed means the board restarted its counter (``seq_restarts``). Nothing here touches a port, so every property is testable on bytes alone.
+a hole still open after that is a gap, its samples lost, counted once; a frame older than the
+window, or that falls in a hole already counted lost, is dropped (``late``).
+
+A new session (RTP's change of SSRC) is never booked as loss or duplicates. A boot frame starts
+one for certain. For a board that sends none, the host tells a restart from a fault by rules
+(:data:`RESTART_CAUSES`): the count went back to numbers never delivered (``backward``); two
+frames in a row continue a count behind the delivered one (``sequence``, RTP's probation); the
+count went back after the board was silent (``silence``); or it jumped ahead further than the
+board could have sampled in the host time since the session began (``jump``). A restart that lands
+on numbers the old count could have reached in that time is a gap to the host: only a boot frame
+tells it apart. Nothing here touches a port, so every property is testable on bytes alone.
 """
 from __future__ import annotations
 
@@ -45,12 +57,43 @@ REORDER_WINDOW = 8
 # than this (and more than half the 16-bit circle away) means the board restarted its counter.
 DUPLICATE_WINDOW = 1024
 HALF_MODULUS = 32768
+# Board sessions. The boot frame's payload, its magic and the protocol version it announces.
+BOOT = struct.Struct("<4sBBH")          # magic, version, reset cause, first seq
+BOOT_MAGIC = b"BOOT"
+PROTOCOL_VERSION = 1
+ENCODED_BOOT_LEN = BOOT.size + 2 + 1    # + crc, + COBS overhead
+# Host-time rules for boards that send no boot frame. A board resetting is silent for longer than
+# this (an Arduino's bootloader waits 1-2 s; a power cycle longer), a duplicate never is.
+RESTART_SILENCE_S = 0.05
+# How far ahead of the host clock a frame may claim to be before its jump is a restart: the
+# host's read latency, plus the board's clock running fast by up to 1 % (a ceramic resonator is
+# 0.5 %) over the session.
+RESTART_SLACK_S = 0.5
+CLOCK_TOLERANCE = 0.01
+RESTART_CAUSES = ("boot", "backward", "sequence", "silence", "jump")
+HOST_TIME_CAUSES = ("silence", "jump")     # decided by arrival times, which a replay has not
 
 
 class Sample(NamedTuple):
     seq: int
     x: int
     y: int
+
+
+class Boot(NamedTuple):
+    version: int
+    cause: int                  # the board's reset cause (the AVR's MCUSR bits)
+    first_seq: int              # the sequence number of its first sample
+
+
+class Session(NamedTuple):
+    """A board session began with the ``index``-th sample delivered (0-based), ``raw_offset``
+    bytes into the stream, for ``cause`` (``"start"`` or one of :data:`RESTART_CAUSES`);
+    ``first_seq`` is the number its boot frame announced (None without one)."""
+    index: int
+    raw_offset: int
+    cause: str
+    first_seq: int | None = None
 
 
 class Gap(NamedTuple):
@@ -73,7 +116,8 @@ class DecoderStats:
     duplicates: int = 0         # a sequence number already delivered (or held), dropped
     reordered: int = 0          # overtaken by a later frame, within the window: put back in order
     late: int = 0               # arrived after its hole was declared a gap: dropped
-    seq_restarts: int = 0       # the counter jumped far back: the board restarted
+    seq_restarts: int = 0       # a new board session began (a boot frame, or a host rule)
+    boot_frames: int = 0        # boot frames received (the first one starts the first session)
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)      # dataclasses.asdict deep-copies: 10x slower per batch
@@ -152,6 +196,15 @@ def encode_ascii(seq: int, x: int, y: int) -> bytes:
     return f"{seq},{x},{y}\r\n".encode()
 
 
+def encode_boot(wire_format: str = "binary", first_seq: int = 0, cause: int = 0) -> bytes:
+    """The frame a board sends once at reset, before its first sample."""
+    check_wire_format(wire_format)
+    if wire_format == "ascii":
+        return f"boot,{PROTOCOL_VERSION},{cause},{first_seq}\r\n".encode()
+    payload = BOOT.pack(BOOT_MAGIC, PROTOCOL_VERSION, cause, first_seq)
+    return cobs_encode(payload + struct.pack("<H", crc16_xmodem(payload))) + DELIMITER
+
+
 def encoder_for(wire_format: str):
     check_wire_format(wire_format)
     return encode_binary if wire_format == "binary" else encode_ascii
@@ -164,46 +217,77 @@ def check_wire_format(wire_format: str) -> str:
 
 
 class Decoder:
-    """Incremental decoder: ``feed(chunk)`` returns the valid samples completed by that chunk.
+    """Incremental decoder: ``feed(chunk, host_time_s)`` returns the valid samples completed by
+    that chunk.
 
     The result does not depend on where the chunk boundaries fall. After :meth:`resync` (the
     source calls it on every port open) bytes up to the first valid frame are boot noise: a board
     reset by DTR, or a frame cut in half by the open, is discarded and counted in ``noise_bytes``
     rather than as an error. Sequence continuity survives a resync, so samples the board produced
     while the link was down appear as a gap.
+
+    ``host_time_s`` (seconds on a monotonic clock, when the chunk was read) enables the
+    host-time restart rules; without it (decoding a file) only the byte-level rules apply, and
+    ``restarts_at`` (raw offsets of frames that began a session by a host-time rule, as a live
+    decoder recorded them) makes a replay decide as the live run did. ``sessions`` lists every
+    session begun, ``gap_list`` every gap (never across a session's start).
     """
 
-    def __init__(self, wire_format: str = "binary", synced: bool = False):
+    def __init__(self, wire_format: str = "binary", synced: bool = False,
+                 rate_hz: float = BOARD_RATE_HZ, restarts_at: dict[int, str] | None = None):
         self.wire_format = check_wire_format(wire_format)
         self._terminator = DELIMITER if wire_format == "binary" else b"\n"
         self._parse = self._parse_binary if wire_format == "binary" else self._parse_ascii
+        self.rate_hz = float(rate_hz)
         self.stats = DecoderStats()
         self.gap_list: list[Gap] = []
+        self.sessions: list[Session] = []
         self._buffer = bytearray()
         self._segment_len = 0           # true length of the unterminated segment, kept or not
         self._synced = synced
+        self._fed = 0                   # bytes fed so far
+        self._segment_start = 0         # raw offset of the segment being completed
+        self._restarts_at = dict(restarts_at or {})
+        self._now: float | None = None
+        self._last_frame_s: float | None = None     # host time of the last valid frame
+        self._suspect: tuple[Sample, str, int] | None = None    # (frame, counted as, offset)
+        self._new_session("start")
+
+    def _new_session(self, cause: str) -> None:
         self._last_seq: int | None = None     # the last sequence number delivered
         self._held: dict[int, Sample] = {}      # frames ahead of a hole, by sequence number
         self._recent: collections.deque[int] = collections.deque()
         self._recent_set: set[int] = set()
+        self._steps = 0                 # sequence steps since the session's first sample
+        self._session_start_s: float | None = None
+        self._min_offset_s: float | None = None    # min over samples of host time - board time
+        self._suspect = None
+        self._session_cause = cause
+        self._session_first_seq: int | None = None
 
     def resync(self) -> None:
         self.stats.noise_bytes += self._segment_len
         self._buffer.clear()
         self._segment_len = 0
+        self._segment_start = self._fed
         self._synced = False
 
     @property
     def last_seq(self) -> int | None:
         return self._last_seq
 
-    def feed(self, chunk: bytes) -> list[Sample]:
+    def feed(self, chunk: bytes, host_time_s: float | None = None) -> list[Sample]:
         samples: list[Sample] = []
+        self._now = host_time_s
         pieces = bytes(chunk).split(self._terminator)
+        position = self._fed
         for piece in pieces[:-1]:
             self._append(piece)
             self._complete(samples)
+            position += len(piece) + 1
+            self._segment_start = position
         self._append(pieces[-1])
+        self._fed += len(chunk)
         return samples
 
     def _append(self, piece: bytes) -> None:
@@ -224,13 +308,17 @@ class Decoder:
             return                      # idle delimiters / blank lines carry nothing
         verdict = "framing" if overlong else self._parse(segment)
         if not self._synced:
-            if isinstance(verdict, Sample):
+            if isinstance(verdict, (Sample, Boot)):
                 self._synced = True
             else:
                 self.stats.noise_bytes += length + 1
                 return
         if isinstance(verdict, Sample):
             self._accept(verdict, out)
+            if self._now is not None:
+                self._last_frame_s = self._now
+        elif isinstance(verdict, Boot):
+            self._boot(verdict, out)
         elif verdict == "crc":
             self.stats.crc_errors += 1
         elif verdict == "range":
@@ -238,11 +326,64 @@ class Decoder:
         else:
             self.stats.framing_errors += 1
 
+    # -- sessions -------------------------------------------------------------------------------
+    def _boot(self, boot: Boot, out: list[Sample]) -> None:
+        self.stats.boot_frames += 1
+        if self._last_seq is not None or self._held:
+            self._restart("boot", out)
+        else:                           # the first session, or a boot before any sample
+            self._session_cause = "boot"
+        # Its first sample is expected: if that one is lost, it is a gap of this session.
+        self._last_seq = (boot.first_seq - 1) % SEQ_MODULUS
+        self._session_first_seq = boot.first_seq
+        self._steps = -1
+
+    def _restart(self, cause: str, out: list[Sample]) -> None:
+        """The old session ends (its held frames delivered, its holes gaps); a new one begins
+        with the next sample delivered."""
+        self._release(out, everything=True)
+        self.stats.seq_restarts += 1
+        self._new_session(cause)
+
+    def _too_far_ahead(self, ahead: int) -> bool:
+        """A forward jump to a number the board could not have reached by now."""
+        if self._now is None or self._min_offset_s is None:
+            return False
+        board_s = (self._steps + ahead + 1) / self.rate_hz
+        slack = RESTART_SLACK_S + CLOCK_TOLERANCE * (self._now - self._session_start_s)
+        return self._now - board_s < self._min_offset_s - slack
+
+    def _after_silence(self) -> bool:
+        return (self._now is not None and self._last_frame_s is not None
+                and self._now - self._last_frame_s >= RESTART_SILENCE_S)
+
     def _accept(self, sample: Sample, out: list[Sample]) -> None:
+        suspect, self._suspect = self._suspect, None
+        cause = self._restarts_at.pop(self._segment_start, None)
+        if cause is not None:
+            self._restart(cause, out)
         if self._last_seq is None:
             self._deliver(sample, out)
             return
         ahead = (sample.seq - self._last_seq - 1) % SEQ_MODULUS   # 0: the one expected next
+        if (suspect is not None and ahead != 0 and sample.seq not in self._held
+                and sample.seq == (suspect[0].seq + 1) % SEQ_MODULUS):
+            # Two frames in a row continue a count behind ours: the board restarted.
+            setattr(self.stats, suspect[1], getattr(self.stats, suspect[1]) - 1)
+            self._restart("sequence", out)
+            here, self._segment_start = self._segment_start, suspect[2]
+            self._deliver(suspect[0], out)
+            self._segment_start = here
+            self._deliver(sample, out)
+            return
+        if REORDER_WINDOW < ahead < HALF_MODULUS and self._too_far_ahead(ahead):
+            self._restart("jump", out)
+            self._deliver(sample, out)
+            return
+        if ahead >= HALF_MODULUS and self._after_silence():
+            self._restart("silence", out)
+            self._deliver(sample, out)
+            return
         while REORDER_WINDOW < ahead < HALF_MODULUS and self._held:
             # Too far ahead to wait for the oldest hole: it is a gap now.
             self._release(out, give_up=True)
@@ -266,12 +407,13 @@ class Decoder:
                 self._release(out, everything=False, give_up=True)
         elif sample.seq in self._recent_set:
             self.stats.duplicates += 1
+            self._suspect = (sample, "duplicates", self._segment_start)
         elif SEQ_MODULUS - ahead <= REORDER_WINDOW + 1 or (
                 SEQ_MODULUS - ahead <= DUPLICATE_WINDOW and self._in_recent_gap(sample.seq)):
             self.stats.late += 1                # overtaken beyond repair, or counted lost
+            self._suspect = (sample, "late", self._segment_start)
         else:
-            self.stats.seq_restarts += 1        # back to numbers never missed: a new count
-            self._release(out, everything=True)
+            self._restart("backward", out)      # back to numbers never delivered nor missed
             self._deliver(sample, out)
 
     def flush(self) -> list[Sample]:
@@ -308,6 +450,19 @@ class Decoder:
         self.gap_list.append(Gap(self.stats.frames - 1, self._last_seq, missing))
 
     def _deliver(self, sample: Sample, out: list[Sample]) -> None:
+        if self._last_seq is None or self._steps < 0:      # the session's first sample
+            self.sessions.append(Session(self.stats.frames, self._segment_start,
+                                         self._session_cause, self._session_first_seq))
+            self._steps = 0
+            self._session_start_s = self._now
+        else:
+            self._steps += (sample.seq - self._last_seq) % SEQ_MODULUS
+        if self._now is not None:
+            offset = self._now - self._steps / self.rate_hz
+            if self._min_offset_s is None or offset < self._min_offset_s:
+                self._min_offset_s = offset
+            if self._session_start_s is None:
+                self._session_start_s = self._now
         if len(self._recent) == DUPLICATE_WINDOW:
             self._recent_set.discard(self._recent.popleft())
         self._recent.append(sample.seq)
@@ -318,6 +473,8 @@ class Decoder:
 
     @staticmethod
     def _parse_binary(segment: bytes):
+        if len(segment) == ENCODED_BOOT_LEN:
+            return Decoder._parse_boot(segment)
         if len(segment) != ENCODED_FRAME_LEN:
             return "framing"
         try:
@@ -334,8 +491,30 @@ class Decoder:
         return Sample(seq, x, y)
 
     @staticmethod
+    def _parse_boot(segment: bytes):
+        try:
+            raw = cobs_decode(segment)
+        except CobsError:
+            return "framing"
+        if len(raw) != BOOT.size + 2:
+            return "framing"
+        magic, version, cause, first_seq = BOOT.unpack(raw[:BOOT.size])
+        if int.from_bytes(raw[BOOT.size:], "little") != crc16_xmodem(raw[:BOOT.size]):
+            return "crc"
+        if magic != BOOT_MAGIC or version != PROTOCOL_VERSION:
+            return "framing"
+        return Boot(version, cause, first_seq)
+
+    @staticmethod
     def _parse_ascii(segment: bytes):
         fields = segment.rstrip(b"\r").split(b",")
+        if len(fields) == 4 and fields[0] == b"boot":
+            if not all(f.strip().isdigit() for f in fields[1:]):
+                return "framing"
+            version, cause, first_seq = (int(f) for f in fields[1:])
+            if version != PROTOCOL_VERSION or cause > 255 or first_seq >= SEQ_MODULUS:
+                return "framing"
+            return Boot(version, cause, first_seq)
         if len(fields) != 3 or not all(f.strip().isdigit() for f in fields):
             return "framing"
         seq, x, y = (int(f) for f in fields)
@@ -353,14 +532,31 @@ def decode_all(data: bytes, wire_format: str = "binary",
     return decoder.feed(data) + decoder.flush(), decoder
 
 
-def find_gaps(seq) -> list[Gap]:
+def find_gaps(seq, sessions=()) -> list[Gap]:
     """The gaps in a whole sequence-number column, by the same rule the Decoder applies online
-    (a recording read back after a crash recomputes them this way)."""
+    (a recording read back after a crash recomputes them this way). ``sessions``
+    (:class:`Session`, or ``(index, first_seq)`` pairs) are where a board session began: no gap
+    spans one, except the samples before the first one its boot frame announced."""
     import numpy as np
 
     seq = np.asarray(seq, dtype=np.int64)
-    if seq.size < 2:
+    if seq.size == 0:
         return []
-    missing = (np.diff(seq) - 1) % SEQ_MODULUS
-    where = np.flatnonzero(missing)
-    return [Gap(int(i), int(seq[i]), int(missing[i])) for i in where]
+    missing = np.zeros(seq.size, dtype=np.int64)    # missing[i]: lost before sample i
+    missing[1:] = (np.diff(seq) - 1) % SEQ_MODULUS
+    for start in sessions:
+        index, first_seq = (start.index, start.first_seq) if isinstance(start, Session) \
+            else start
+        if 0 <= index < seq.size:
+            missing[index] = 0 if first_seq is None else (seq[index] - first_seq) % SEQ_MODULUS
+    gaps = []
+    for i in np.flatnonzero(missing):
+        after_seq = seq[i - 1] if i and not _starts(sessions, i) else None
+        if after_seq is None:               # a session's first samples were lost
+            after_seq = (seq[i] - missing[i] - 1) % SEQ_MODULUS
+        gaps.append(Gap(int(i) - 1, int(after_seq), int(missing[i])))
+    return gaps
+
+
+def _starts(sessions, index: int) -> bool:
+    return any((s.index if isinstance(s, Session) else s[0]) == index for s in sessions)

@@ -3,8 +3,9 @@
 :class:`ReplaySource` reads ``raw.bin`` (every byte the port delivered) and offers the same
 ``start / get / stop / counts`` interface as :class:`~snn_antenna.bridge.wire.source.SerialSource`, so
 :func:`~snn_antenna.bridge.wire.source.run_source` drives either. Decoding the raw bytes again, with a
-resync wherever the recorder saw the port (re)open, must reproduce the recorded samples and
-counts exactly: replay doubles as a check of a recording.
+resync wherever the recorder saw the port (re)open, and a new board session wherever the live
+decoder began one by the arrival times of the bytes (which a replay has not), must reproduce the
+recorded samples, sessions and counts exactly: replay doubles as a check of a recording.
 """
 from __future__ import annotations
 
@@ -27,7 +28,9 @@ class ReplaySource:
         self.realtime = realtime
         # Real time releases about 10 ms of frames at a time; flat out, big chunks.
         self.chunk_bytes = chunk_bytes or (100 if realtime else 1 << 16)
-        self.decoder = Decoder(meta["wire_format"])
+        self.decoder = Decoder(meta["wire_format"], rate_hz=self.rate_hz,
+                               restarts_at=self.recording.restarts_by_host_time())
+        self._sessions_told = 0
         self.reconnects = 0
         self.bytes_received = 0
         self._raw = b""
@@ -64,14 +67,14 @@ class ReplaySource:
                 return None
             held = self.decoder.flush()
             if held:                    # frames held behind a hole: the file has no more
-                return Batch(time.time(), b"", held, self.counts())
+                return self._batch(b"", held)
             self._ended = True
             self.reconnects = len(self._reconnect_at)
             return Batch(time.time(), counts=self.counts(), event="end")
         if self._pos in self._resync_at:
             held = self.decoder.flush()     # as the live source did when the link went down
             if held:
-                return Batch(time.time(), b"", held, self.counts())
+                return self._batch(b"", held)
             self.decoder.resync()
         self.reconnects = sum(1 for o in self._reconnect_at if o <= self._pos)
         end = min(len(self._raw), self._pos + self.chunk_bytes,
@@ -84,4 +87,34 @@ class ReplaySource:
             stats = self.decoder.stats
             due = self._t0 + (stats.frames + stats.lost_samples) / self.rate_hz
             time.sleep(max(0.0, due - time.monotonic()))
-        return Batch(time.time(), chunk, samples, self.counts())
+        return self._batch(chunk, samples)
+
+    def _batch(self, raw: bytes, samples) -> Batch:
+        sessions = self.decoder.sessions[self._sessions_told:]
+        self._sessions_told = len(self.decoder.sessions)
+        return Batch(time.time(), raw, samples, self.counts(), sessions=sessions)
+
+
+def live_comparison(meta: dict, network, explicit_set=(), speed_cm_s=None) -> dict:
+    """A replay with a network, against the live run it replays (``meta``, as ``stream`` wrote
+    it): the settings that differ (another network, a ``--set`` that changes a key's recorded
+    value, another speed command), each as ``"KEY: LIVE -> REPLAY"``, and the live run's
+    contacts, to show beside the replay's own."""
+    differ = []
+    recorded_network = meta.get("network")
+    if recorded_network and Path(recorded_network).resolve() != Path(network).resolve():
+        differ.append(f"network: {recorded_network} -> {network}")
+    recorded = dict(_key_value(item) for item in meta.get("set") or [])
+    for item in explicit_set:
+        key, value = _key_value(item)
+        if recorded.get(key) != value:
+            differ.append(f"{key}: {recorded.get(key, 'the network file')} -> {value}")
+    live_speed = meta.get("speed_cm_s")
+    if speed_cm_s is not None and speed_cm_s != live_speed:
+        differ.append(f"speed_cm_s: {live_speed} -> {speed_cm_s:g}")
+    return {"settings_differ": differ, "contacts": (meta.get("live") or {}).get("contacts")}
+
+
+def _key_value(item: str) -> tuple[str, str]:
+    key, _, value = str(item).partition("=")
+    return key.strip(), value.strip()

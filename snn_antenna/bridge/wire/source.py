@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import serial
 
 from ...core.errors import SpecError
-from .protocol import Decoder, Sample, check_wire_format
+from .protocol import Decoder, Sample, Session, check_wire_format
 
 DEFAULT_BAUDRATE = 250000
 ACCEPTED_PORTS = ("an existing serial device path (e.g. /dev/ttyACM0) or a pyserial URL "
@@ -41,7 +41,8 @@ class Batch:
     ``event`` marks a change of link state (``"opened"``, ``"lost"``, ``"reconnected"``,
     ``"failed"``, or ``"end"`` of a replayed file) and then ``raw`` and ``samples`` are empty.
     ``counts`` is a snapshot of the decoder's and the transport's counters after this batch, so
-    a consumer writing both data and counts stays consistent.
+    a consumer writing both data and counts stays consistent. ``sessions`` are the board sessions
+    that began in this batch, ``Session.index`` counted in samples delivered since the start.
     """
     host_time_s: float
     raw: bytes = b""
@@ -49,6 +50,7 @@ class Batch:
     counts: dict = field(default_factory=dict)
     event: str | None = None
     message: str = ""
+    sessions: list[Session] = field(default_factory=list)
 
 
 def describe_open_error(url: str, exc: Exception) -> Exception:
@@ -136,6 +138,11 @@ class SerialSource:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.bytes_received = 0
+        self._sessions_told = 0
+        # The board's silence, on the reader's own clock: the reader stamps when a read returned
+        # a valid frame and when its last read ended. A host that stalls stops both clocks, and
+        # its first read after the stall takes what the port buffered meanwhile.
+        self._last_valid_s = self._last_read_end_s = time.monotonic()
 
     # -- consumer side -------------------------------------------------------------------------
     def start(self) -> "SerialSource":
@@ -174,7 +181,17 @@ class SerialSource:
         """Frames the decoder holds behind a hole are delivered once no more bytes can come."""
         held = self.decoder.flush()
         if held:
-            put(Batch(time.time(), b"", held, self.counts()))
+            put(self._batch(time.time(), b"", held))
+
+    def _batch(self, now: float, raw: bytes, samples: list[Sample]) -> Batch:
+        sessions = self.decoder.sessions[self._sessions_told:]
+        self._sessions_told = len(self.decoder.sessions)
+        return Batch(now, raw, samples, self.counts(), sessions=sessions)
+
+    def board_silent_s(self) -> float:
+        """How long the reader has been reading without a valid frame (the board's silence, not
+        the host's: a stalled reader reads nothing and counts nothing)."""
+        return max(0.0, self._last_read_end_s - self._last_valid_s)
 
     def _take_queued(self) -> None:
         while True:
@@ -215,11 +232,15 @@ class SerialSource:
                 if not self._reconnect():
                     return
                 continue
+            ended = time.monotonic()
             if raw:
                 now = time.time()
                 self.bytes_received += len(raw)
-                samples = self.decoder.feed(raw)
-                self._put(Batch(now, raw, samples, self.counts()))
+                samples = self.decoder.feed(raw, ended)
+                if samples:
+                    self._last_valid_s = ended
+                self._put(self._batch(now, raw, samples))
+            self._last_read_end_s = ended
 
     def _reconnect(self) -> bool:
         if not self.transport.reopenable:
@@ -237,6 +258,7 @@ class SerialSource:
             else:
                 self.reconnects += 1
                 self.decoder.resync()
+                self._last_valid_s = self._last_read_end_s = time.monotonic()
                 self._put(Batch(time.time(), counts=self.counts(), event="reconnected"))
                 return True
             remaining = deadline - time.monotonic()
@@ -267,7 +289,9 @@ class SourceLoop:
 
     Raises :class:`PortError` when the port is lost for good, or when no valid frame arrives for
     ``no_data_timeout_s`` while the link is up (a board reset by DTR is silent for 1-3 s, hence
-    the 5 s default). Handlers have seen everything received before the error.
+    the 5 s default). That silence is the board's, as the reader saw it
+    (``source.board_silent_s()``): a host that stalled longer than the timeout first reads what
+    the port buffered. Handlers have seen everything received before the error.
     """
     source: object
     handlers: tuple = ()
@@ -313,9 +337,15 @@ class SourceLoop:
                 elif batch.event == "end":      # a replayed file is exhausted
                     return
                 yield batch
-            if link_up and now - last_valid > self.no_data_timeout_s:
-                raise PortError(_silence_message(self.source, now - last_valid))
+            silent_s = (self.source.board_silent_s() if hasattr(self.source, "board_silent_s")
+                        else now - last_valid)
+            if link_up and silent_s > self.no_data_timeout_s:
+                self._drain()
+                raise PortError(_silence_message(self.source, silent_s))
         # Stopped by the clock or a signal: what the port delivered until now is still kept.
+        self._drain()
+
+    def _drain(self) -> None:
         self.source.stop()
         while (batch := self.source.get(timeout=0)) is not None:
             for handler in self.handlers:
