@@ -218,6 +218,20 @@ def check_page(page: Path, sources: Path) -> list[str]:
             continue
         if not _is_number(value) or fmt(value) != shown:
             problems.append(f"{shown!r} cites {ptr} in {file}, which holds {value!r}")
+    run = None
+    for line in text.splitlines():             # text in the tables: the cited file's own
+        label = re.fullmatch(r"\(run-([\w.-]+)\)=", line)
+        if label:
+            run = label.group(1)
+        if run is None or not line.startswith("| ") or set(line) <= set("|- "):
+            continue
+        source = json.dumps(cache.get(run), ensure_ascii=False)
+        for cell in line.strip("|").split(" | "):
+            for chunk in _LINK.split(cell)[::4]:
+                words = chunk.replace("\\|", "|").strip(" ,:;()[]")
+                if re.search(r"\d", words) and json.dumps(words, ensure_ascii=False)[1:-1] \
+                        not in source:
+                    problems.append(f"{words!r} (run {run}) is not in the file it cites")
     return problems
 
 
