@@ -51,18 +51,41 @@ default_role = "literal"
 
 html_theme = "pydata_sphinx_theme"
 html_title = f"snn-antenna {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["custom.css"]
 templates_path = ["_templates"]
 html_theme_options = {
     "navigation_with_keys": False,
     "show_toc_level": 2,
     "navbar_align": "left",
+    "header_links_before_dropdown": 4,
     "footer_start": ["copyright"],
     "footer_end": ["sphinx-version"],
 }
 html_show_sourcelink = False
+# every guide and reference page sits at the top of the site, so the left column would only
+# say "Section Navigation" over nothing: the page takes the width (the API keeps its tree)
+html_sidebars = {page: [] for page in ["index", "results", "reference", "materials", "live",
+                                       "contributing", "changelog", "guide/*"]}
 
 # Short class names (``Parts``, ``Plan``) are defined by more than one study; a type named in a
 # signature is linked where it is unique and left as text where two studies define it.
 suppress_warnings = ["ref.python"]
 html_last_updated_fmt = None
+
+
+# TO THE LEAD: "Bring your own antenna" (docs/guide/own_antenna.md) is written on another branch.
+# index.md lists it; until the page is merged the entry is left out here, so the build stays
+# clean. Delete this hook once the page is in the tree.
+PENDING_PAGES = ["guide/own_antenna"]
+
+
+def _leave_out_pending(app, docname, source):
+    if docname == "index":
+        for page in PENDING_PAGES:
+            if not (Path(app.srcdir) / f"{page}.md").exists():
+                source[0] = source[0].replace(f"{page}\n", "")
+
+
+def setup(app):
+    app.connect("source-read", _leave_out_pending)
