@@ -4,13 +4,14 @@ Build it offline with warnings as errors (``tests/test_docs.py`` does the same):
 
     python -m sphinx -W --keep-going -b html docs docs/_build/html
 """
+
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))          # the checkout's package, also when not installed
+sys.path.insert(0, str(ROOT))  # the checkout's package, also when not installed
 sys.path.insert(0, str(Path(__file__).parent / "_ext"))
 
 import snn_antenna  # noqa: E402  (after the path is set)
@@ -21,12 +22,12 @@ copyright = "the snn-antenna authors"
 version = release = snn_antenna.__version__
 
 extensions = [
-    "myst_parser",                     # the Markdown pages (docs/*.md, the README's style)
+    "myst_parser",  # the Markdown pages (docs/*.md, the README's style)
     "sphinx.ext.autodoc",
-    "sphinx.ext.autosummary",          # one page per public module, generated at build time
-    "sphinx.ext.napoleon",             # numpy-style docstrings
+    "sphinx.ext.autosummary",  # one page per public module, generated at build time
+    "sphinx.ext.napoleon",  # numpy-style docstrings
     "sphinx.ext.mathjax",
-    "plain_docstrings",                # docs/_ext: docstrings are plain text, not reST
+    "plain_docstrings",  # docs/_ext: docstrings are plain text, not reST
 ]
 
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
@@ -34,9 +35,9 @@ root_doc = "index"
 exclude_patterns = ["_build", "README.md", "results/*.md"]
 
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]
-myst_heading_anchors = 3               # links such as reference.md#your-files resolve
+myst_heading_anchors = 3  # links such as reference.md#your-files resolve
 
-autosummary_generate = True            # api/generated/ is written by the build, never committed
+autosummary_generate = True  # api/generated/ is written by the build, never committed
 autosummary_imported_members = False
 autodoc_default_options = {"members": True, "show-inheritance": True}
 autodoc_member_order = "bysource"
@@ -65,8 +66,19 @@ html_theme_options = {
 html_show_sourcelink = False
 # every guide and reference page sits at the top of the site, so the left column would only
 # say "Section Navigation" over nothing: the page takes the width (the API keeps its tree)
-html_sidebars = {page: [] for page in ["index", "results", "reference", "materials", "live",
-                                       "contributing", "changelog", "guide/*"]}
+html_sidebars = {
+    page: []
+    for page in [
+        "index",
+        "results",
+        "reference",
+        "materials",
+        "live",
+        "contributing",
+        "changelog",
+        "guide/*",
+    ]
+}
 
 # Short class names (``Parts``, ``Plan``) are defined by more than one study; a type named in a
 # signature is linked where it is unique and left as text where two studies define it.

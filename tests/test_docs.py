@@ -1,5 +1,6 @@
 """The documentation site builds offline with warnings as errors, covers every public module in
 its API reference, and the examples of "Bring the pieces into Python" run as printed."""
+
 import re
 import subprocess
 import sys
@@ -20,30 +21,63 @@ def site(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("site")
     # the API pages are generated into docs/api/generated (ignored by git) and rebuilt each time
     done = subprocess.run(
-        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-E", "-b", "html",
-         "-d", str(out / "doctrees"), str(DOCS), str(out / "html")],
-        capture_output=True, text=True, cwd=ROOT)
+        [
+            sys.executable,
+            "-m",
+            "sphinx",
+            "-W",
+            "--keep-going",
+            "-q",
+            "-E",
+            "-b",
+            "html",
+            "-d",
+            str(out / "doctrees"),
+            str(DOCS),
+            str(out / "html"),
+        ],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+    )
     assert done.returncode == 0, f"the site does not build:\n{done.stderr[-4000:]}"
     return out / "html"
 
 
 def test_the_site_builds_with_warnings_as_errors(site):
-    for page in ["index", "guide/quickstart", "guide/tuning_sweep", "guide/gating_threshold",
-                 "guide/baseline_comparison", "guide/speed_accuracy", "guide/bridge",
-                 "guide/exploration", "guide/python", "guide/cluster", "guide/files",
-                 "results", "reference", "materials", "live", "contributing", "changelog"]:
+    for page in [
+        "index",
+        "guide/quickstart",
+        "guide/tuning_sweep",
+        "guide/gating_threshold",
+        "guide/baseline_comparison",
+        "guide/speed_accuracy",
+        "guide/bridge",
+        "guide/exploration",
+        "guide/python",
+        "guide/cluster",
+        "guide/files",
+        "results",
+        "reference",
+        "materials",
+        "live",
+        "contributing",
+        "changelog",
+    ]:
         assert (site / f"{page}.html").is_file(), page
 
 
 def test_the_api_reference_covers_every_public_module(site):
-    modules = {".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
-               for p in PACKAGE.rglob("*.py") if not p.name.startswith("_") or
-               p.name == "__init__.py"}
+    modules = {
+        ".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
+        for p in PACKAGE.rglob("*.py")
+        if not p.name.startswith("_") or p.name == "__init__.py"
+    }
     modules = {m for m in modules if not any(part.startswith("_") for part in m.split("."))}
     pages = {p.stem for p in (site / "api" / "generated").glob("*.html")}
     assert modules - pages == set(), f"modules without an API page: {sorted(modules - pages)}"
     text = (site / "api" / "generated" / "snn_antenna.networks.neurons.html").read_text()
-    assert "k_for_frequency" in text             # members are documented, not just listed
+    assert "k_for_frequency" in text  # members are documented, not just listed
 
 
 def test_every_guide_image_and_page_link_resolves(site):
@@ -55,7 +89,7 @@ def test_every_guide_image_and_page_link_resolves(site):
 
 
 def test_the_python_examples_run_as_printed(monkeypatch):
-    monkeypatch.chdir(ROOT)                      # they read docs/results/ like a user's checkout
+    monkeypatch.chdir(ROOT)  # they read docs/results/ like a user's checkout
     text = (DOCS / "guide" / "python.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
     assert len(blocks) >= 3

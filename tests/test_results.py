@@ -1,5 +1,6 @@
 """The results page is what its command makes from the summaries it cites, and every number on
 it is the number its source holds."""
+
 import json
 import re
 import shlex
@@ -52,12 +53,15 @@ def test_a_changed_source_or_a_changed_number_is_caught(tmp_path):
     key = ptr.rsplit("/", 1)[1]
     parent[int(key) if isinstance(parent, list) else key] = value * 2 + 1
     (store / f"{run}.json").write_text(json.dumps(summary))
-    assert results.check_page(page, store)                  # the source moved
+    assert results.check_page(page, store)  # the source moved
     shutil.copy(SOURCES / f"{run}.json", store / f"{run}.json")
     assert results.check_page(page, store) == []
-    page.write_text(page.read_text().replace(f"[{shown}](#run-{run} \"{ptr}\")",
-                                             f"[{shown}1](#run-{run} \"{ptr}\")", 1))
-    assert results.check_page(page, store)                  # the page moved
+    page.write_text(
+        page.read_text().replace(
+            f'[{shown}](#run-{run} "{ptr}")', f'[{shown}1](#run-{run} "{ptr}")', 1
+        )
+    )
+    assert results.check_page(page, store)  # the page moved
 
 
 def test_json_pointers_escape_what_they_must():

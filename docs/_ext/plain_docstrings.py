@@ -9,6 +9,7 @@ tables; they use no reST directives. Read as reST, an aligned table or an absolu
   aligned table) into a literal block, shown as written;
 - escapes ``|`` and ``*`` outside double back-quotes, so they stay characters.
 """
+
 from __future__ import annotations
 
 import re

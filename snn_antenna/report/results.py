@@ -16,6 +16,7 @@ title is the JSON Pointer (RFC 6901) of the value in the cited file, for example
 from its file and fails on any that differs. A benchmark's output is shown as it was printed,
 and the record keeps the command, the commit, the machine and its load.
 """
+
 from __future__ import annotations
 
 import json
@@ -38,10 +39,21 @@ ROW_LISTS = ("calibrated", "predicted")
 #: further values a study's summary holds that the page shows as tables, per study:
 #: (title, pointer of a mapping whose entries are the table's rows, columns)
 EXTRA_TABLES: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
+    "baseline_comparison": [
+        (
+            "8-material accuracy per read-out (the bench table and the spiking read-outs)",
+            "/material_accuracy",
+            ("mean", "low", "high", "n"),
+        ),
+        ("Distance rmse per read-out (mm)", "/distance_rmse_mm", ("mean", "low", "high", "n")),
+    ],
     "gating_threshold": [
         ("F1 on new scenes, mean over seeds", "/f1", ("mean", "low", "high", "n")),
-        ("Paired differences of F1 by seed", "/differences",
-         ("mean", "low", "high", "n", "p_value", "verdict")),
+        (
+            "Paired differences of F1 by seed",
+            "/differences",
+            ("mean", "low", "high", "n", "p_value", "verdict"),
+        ),
     ],
 }
 
@@ -50,12 +62,13 @@ _LINK = re.compile(r'\[([^\]]*)\]\(#run-([\w.-]+) "([^"]*)"\)')
 
 def fmt(value) -> str:
     """A number as every report shows it (``report.page.fmt``: four significant figures)."""
-    from .page import fmt as page_fmt     # numpy and the page only when a page is made
+    from .page import fmt as page_fmt  # numpy and the page only when a page is made
 
     return page_fmt(value)
 
 
 # -- JSON Pointer ---------------------------------------------------------------------------
+
 
 def pointer(*keys) -> str:
     """The JSON Pointer of ``keys`` (``~`` and ``/`` escaped as RFC 6901 says)."""
@@ -73,6 +86,7 @@ def resolve(document: Any, ptr: str) -> Any:
 
 # -- the page -------------------------------------------------------------------------------
 
+
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
@@ -84,11 +98,11 @@ def _cell(value: Any, run: str, ptr: str) -> str:
     if value is None:
         return "–"
     if isinstance(value, dict):
-        return ", ".join(f"{_text(k)}: {_cell(v, run, ptr + pointer(k))}"
-                         for k, v in value.items())
+        return ", ".join(
+            f"{_text(k)}: {_cell(v, run, ptr + pointer(k))}" for k, v in value.items()
+        )
     if isinstance(value, list):
-        return "[" + ", ".join(_cell(v, run, ptr + pointer(i))
-                               for i, v in enumerate(value)) + "]"
+        return "[" + ", ".join(_cell(v, run, ptr + pointer(i)) for i, v in enumerate(value)) + "]"
     if isinstance(value, bool):
         return "yes" if value else "no"
     return _text(value)
@@ -100,8 +114,12 @@ def _text(value: Any) -> str:
 
 
 def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
-    return ["| " + " | ".join(header) + " |", "|" + " --- |" * len(header),
-            *("| " + " | ".join(row) + " |" for row in rows), ""]
+    return [
+        "| " + " | ".join(header) + " |",
+        "|" + " --- |" * len(header),
+        *("| " + " | ".join(row) + " |" for row in rows),
+        "",
+    ]
 
 
 def _row_list(summary: dict, run: str, key: str) -> list[str]:
@@ -112,16 +130,24 @@ def _row_list(summary: dict, run: str, key: str) -> list[str]:
         value = _cell(row.get("value"), run, here + "/value")
         if row.get("interval"):
             value += " (" + _cell(row["interval"], run, here + "/interval")[1:-1] + ")"
-        rows.append([_text(row.get("quantity", "")), value,
-                     _cell(row.get("n"), run, here + "/n") if row.get("n") is not None else "",
-                     _cell(row.get(compare), run, here + "/" + compare),
-                     _text(row.get("unit") or "")])
+        rows.append(
+            [
+                _text(row.get("quantity", "")),
+                value,
+                _cell(row.get("n"), run, here + "/n") if row.get("n") is not None else "",
+                _cell(row.get(compare), run, here + "/" + compare),
+                _text(row.get("unit") or ""),
+            ]
+        )
     if not rows:
         return []
     title = "Calibrated to" if key == "calibrated" else "Predicted"
     compare = "target" if key == "calibrated" else "paper"
-    return [f"**{title}**", "", *_table(("quantity", "value (interval)", "n", compare, "unit"),
-                                        rows)]
+    return [
+        f"**{title}**",
+        "",
+        *_table(("quantity", "value (interval)", "n", compare, "unit"), rows),
+    ]
 
 
 def _extra_tables(summary: dict, run: str, study: str) -> list[str]:
@@ -131,23 +157,33 @@ def _extra_tables(summary: dict, run: str, study: str) -> list[str]:
             entries = resolve(summary, ptr)
         except (KeyError, IndexError, ValueError):
             continue
-        rows = [[_text(name)] + [_cell(entry.get(c), run, ptr + pointer(name, c))
-                                 for c in columns]
-                for name, entry in entries.items()]
+        rows = [
+            [_text(name)] + [_cell(entry.get(c), run, ptr + pointer(name, c)) for c in columns]
+            for name, entry in entries.items()
+            if isinstance(entry, dict)
+        ]
         lines += [f"**{title}**", "", *_table(("", *columns), rows)]
     return lines
 
 
 def _source(run: str, file: str, prov: dict, extra: str = "") -> list[str]:
     commit = prov.get("git_commit") or "not a git checkout"
-    return [f"(run-{run})=", "",
-            f"- command: `{prov.get('command', '')}`",
-            f"- commit: `{commit}` (snn-antenna {prov.get('snn_antenna_version', '?')}, "
-            f"code hash `{prov.get('code_sha256', '?')}`)",
-            f"- machine: {prov.get('platform', '?')}, Python {prov.get('python', '?')}"
-            + (f", Brian2 {prov['brian2_version']} ({prov.get('brian2_target')})"
-               if prov.get("brian2_version") else "") + extra,
-            f"- made: {prov.get('created', '?')}; source: `{file}`", ""]
+    return [
+        f"(run-{run})=",
+        "",
+        f"- command: `{prov.get('command', '')}`",
+        f"- commit: `{commit}` (snn-antenna {prov.get('snn_antenna_version', '?')}, "
+        f"code hash `{prov.get('code_sha256', '?')}`)",
+        f"- machine: {prov.get('platform', '?')}, Python {prov.get('python', '?')}"
+        + (
+            f", Brian2 {prov['brian2_version']} ({prov.get('brian2_target')})"
+            if prov.get("brian2_version")
+            else ""
+        )
+        + extra,
+        f"- made: {prov.get('created', '?')}; source: `{file}`",
+        "",
+    ]
 
 
 def study_section(summary: dict, run: str, file: str) -> list[str]:
@@ -156,8 +192,11 @@ def study_section(summary: dict, run: str, file: str) -> list[str]:
     study = prov.get("spec", {}).get("study", run)
     lines = [f"## {study.replace('_', ' ').capitalize()}", ""]
     if summary.get("quick"):
-        lines += ["A quick-profile run (`--quick`): its numbers check that the pipeline works; "
-                  "its report says what it is too small for.", ""]
+        lines += [
+            "A quick-profile run (`--quick`): its numbers check that the pipeline works; "
+            "its report says what it is too small for.",
+            "",
+        ]
     lines += _source(run, file, prov)
     for key in ROW_LISTS:
         lines += _row_list(summary, run, key)
@@ -170,20 +209,35 @@ def bench_section(record: dict, run: str, file: str) -> list[str]:
     prov = record["provenance"]
     load = record.get("load_average")
     extra = f"; load average {load[0]:.2f} when it started" if load else ""
-    return [f"### `{record['command']}`", "", *_source(run, file, prov, extra),
-            "```text", record["stdout"].rstrip("\n"), "```", ""]
+    return [
+        f"### `{record['command']}`",
+        "",
+        *_source(run, file, prov, extra),
+        "```text",
+        record["stdout"].rstrip("\n"),
+        "```",
+        "",
+    ]
 
 
 def render(summaries: list[Path], benches: list[Path], command: str) -> str:
     """The whole page from its sources."""
-    lines = ["# Results", "",
-             "Every number on this page comes from a run's `summary.json` or a benchmark's "
-             "recorded output, stored beside this page in `docs/results/`; nothing is typed by "
-             "hand. Each number links to the command, commit and machine that made it. "
-             "Benchmarks ran on a shared machine: read their ratios, measured side by side in "
-             "one run, rather than their times.", "",
-             "Regenerate this page (see `snn_antenna.report.results`):", "",
-             "```bash", command, "```", ""]
+    lines = [
+        "# Results",
+        "",
+        "Every number on this page comes from a run's `summary.json` or a benchmark's "
+        "recorded output, stored beside this page in `docs/results/`; nothing is typed by "
+        "hand. Each number links to the command, commit and machine that made it. "
+        "Benchmarks ran on a shared machine: read their ratios, measured side by side in "
+        "one run, rather than their times.",
+        "",
+        "Regenerate this page (see `snn_antenna.report.results`):",
+        "",
+        "```bash",
+        command,
+        "```",
+        "",
+    ]
     for path in summaries:
         summary = json.loads(path.read_text())
         lines += study_section(summary, path.stem, _shown(path))
@@ -219,7 +273,7 @@ def check_page(page: Path, sources: Path) -> list[str]:
         if not _is_number(value) or fmt(value) != shown:
             problems.append(f"{shown!r} cites {ptr} in {file}, which holds {value!r}")
     run = None
-    for line in text.splitlines():             # text in the tables: the cited file's own
+    for line in text.splitlines():  # text in the tables: the cited file's own
         label = re.fullmatch(r"\(run-([\w.-]+)\)=", line)
         if label:
             run = label.group(1)
@@ -229,19 +283,25 @@ def check_page(page: Path, sources: Path) -> list[str]:
         for cell in line.strip("|").split(" | "):
             for chunk in _LINK.split(cell)[::4]:
                 words = chunk.replace("\\|", "|").strip(" ,:;()[]")
-                if re.search(r"\d", words) and json.dumps(words, ensure_ascii=False)[1:-1] \
-                        not in source:
+                if (
+                    re.search(r"\d", words)
+                    and json.dumps(words, ensure_ascii=False)[1:-1] not in source
+                ):
                     problems.append(f"{words!r} (run {run}) is not in the file it cites")
     return problems
 
 
 # -- the command ----------------------------------------------------------------------------
 
+
 def _summary_of(path: Path) -> Path:
     file = path / "summary.json" if path.is_dir() else path
     if not file.is_file():
-        raise SpecError("results", str(path), "a run's output folder holding summary.json, "
-                        "or a summary.json file")
+        raise SpecError(
+            "results",
+            str(path),
+            "a run's output folder holding summary.json, or a summary.json file",
+        )
     return file
 
 
@@ -256,8 +316,9 @@ def collect(runs: list[Path], store: Path) -> list[Path]:
         if not study:
             raise SpecError("results", str(run), "a study's summary.json (with its provenance)")
         if study in cited:
-            raise SpecError("results", str(run), f"one run per study ({study} is also "
-                            f"{cited[study]})")
+            raise SpecError(
+                "results", str(run), f"one run per study ({study} is also {cited[study]})"
+            )
         target = store / f"{study}.json"
         if file.resolve() != target.resolve():
             atomic_write(target, json.dumps(summary, indent=1, sort_keys=False) + "\n")
@@ -271,9 +332,12 @@ def record_benchmark(out: Path, command: list[str]) -> dict:
     started = time.perf_counter()
     done = subprocess.run(command, capture_output=True, text=True, check=False)
     if done.returncode != 0:
-        raise SpecError("record-bench", " ".join(command),
-                        f"a benchmark that ends well (it exited {done.returncode}: "
-                        f"{done.stderr.strip().splitlines()[-1:] or ''})")
+        raise SpecError(
+            "record-bench",
+            " ".join(command),
+            f"a benchmark that ends well (it exited {done.returncode}: "
+            f"{done.stderr.strip().splitlines()[-1:] or ''})",
+        )
     import datetime as _dt
 
     record = {
@@ -282,8 +346,10 @@ def record_benchmark(out: Path, command: list[str]) -> dict:
         "wall_s": time.perf_counter() - started,
         "load_average": load,
         "provenance": {
-            **code_identity(), "platform": platform.platform(),
-            "python": sys.version.split()[0], "cpus": os.cpu_count(),
+            **code_identity(),
+            "platform": platform.platform(),
+            "python": sys.version.split()[0],
+            "cpus": os.cpu_count(),
             "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
             "command": " ".join(command),
         },
@@ -312,9 +378,14 @@ def make_page(runs: list[Path], benches: list[Path], out: Path) -> Path:
         if bench.resolve() != target.resolve():
             atomic_write(target, bench.read_text())
         stored_benches.append(target)
-    command = " ".join(["snn-antenna results", *map(_shown, cited),
-                        *(f"--bench {_shown(b)}" for b in stored_benches),
-                        f"--out {_shown(out)}"])
+    command = " ".join(
+        [
+            "snn-antenna results",
+            *map(_shown, cited),
+            *(f"--bench {_shown(b)}" for b in stored_benches),
+            f"--out {_shown(out)}",
+        ]
+    )
     text = render(cited, stored_benches, command)
     atomic_write(out, text)
     problems = check_page(out, store)
@@ -331,13 +402,22 @@ def _results(args) -> int:
 
 def add_subcommand(sub) -> None:
     """``snn-antenna results``: registered by the command line (cli.py)."""
-    p = sub.add_parser("results", help="write the results page from runs' summary.json and "
-                                       "recorded benchmarks")
-    p.add_argument("runs", nargs="*", help="output folders of study runs (or summary.json "
-                                           "files), one per study")
-    p.add_argument("--bench", action="append", default=[], metavar="FILE.json",
-                   help="a benchmark's recorded output (python -m snn_antenna.report.results "
-                        "record-bench FILE.json -- COMMAND)")
+    p = sub.add_parser(
+        "results", help="write the results page from runs' summary.json and recorded benchmarks"
+    )
+    p.add_argument(
+        "runs",
+        nargs="*",
+        help="output folders of study runs (or summary.json files), one per study",
+    )
+    p.add_argument(
+        "--bench",
+        action="append",
+        default=[],
+        metavar="FILE.json",
+        help="a benchmark's recorded output (python -m snn_antenna.report.results "
+        "record-bench FILE.json -- COMMAND)",
+    )
     p.add_argument("--out", default="docs/results.md", help="the page (default docs/results.md)")
     p.set_defaults(func=_results)
 
@@ -347,11 +427,13 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) >= 3 and argv[0] == "record-bench" and "--" in argv:
         split = argv.index("--")
-        record = record_benchmark(Path(argv[1]), argv[split + 1:])
+        record = record_benchmark(Path(argv[1]), argv[split + 1 :])
         print(record["stdout"], end="")
         return 0
-    print("usage: python -m snn_antenna.report.results record-bench OUT.json -- COMMAND ...",
-          file=sys.stderr)
+    print(
+        "usage: python -m snn_antenna.report.results record-bench OUT.json -- COMMAND ...",
+        file=sys.stderr,
+    )
     return 2
 
 
