@@ -43,9 +43,9 @@ EXTRA_TABLES: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
         (
             "8-material accuracy per read-out (the bench table and the spiking read-outs)",
             "/material_accuracy",
-            ("mean", "low", "high", "n"),
+            ("mean", "sd", "n_seeds"),
         ),
-        ("Distance rmse per read-out (mm)", "/distance_rmse_mm", ("mean", "low", "high", "n")),
+        ("Distance rmse per read-out (mm)", "/distance_rmse_mm", ("mean", "sd", "n_seeds")),
     ],
     "gating_threshold": [
         ("F1 on new scenes, mean over seeds", "/f1", ("mean", "low", "high", "n")),
