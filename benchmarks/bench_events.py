@@ -18,7 +18,7 @@ chunk). Measured in one run and printed side by side, each with the machine's lo
 - ``whole bench set``: all ``--events`` events on a Dask LocalCluster of ``--workers``
   processes (timed on a second run: cluster start and each worker's compile excluded).
 
-- ``spiking vs FFT, cost per event`` (issue 32; ``--cost-only`` runs this part alone): the
+- ``spiking vs FFT, cost per event`` (``--cost-only`` runs this part alone): the
   FFT pipeline's feature extraction (``events.extraction_cost``, the baseline study's
   ``[events]``) and the baseline study's tuned bank (``[spiking.tuned]``: channels placed
   from calibration contacts of another seed, each channel at the coarsest step within the

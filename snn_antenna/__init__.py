@@ -1,2 +1,2 @@
 """snn-antenna: spiking neural networks (Brian2) that read an insect-inspired bionic antenna."""
-__version__ = "0.1.0"
+__version__ = "0.2.0"

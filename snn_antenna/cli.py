@@ -14,6 +14,7 @@ from pathlib import Path
 from .core import bounds
 from .core.bounds import option
 from .core.errors import SpecError, guarded
+from .report import results as results_page
 
 
 def _run(args) -> int:
@@ -126,6 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--yes", action="store_true",
                      help="run even when the estimate is beyond the limit (1 h)")
     run.set_defaults(func=_run)
+    results_page.add_subcommand(sub)
     try:
         from .bridge.cli import add_subcommands
     except ImportError:

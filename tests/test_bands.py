@@ -55,7 +55,7 @@ def test_accurate_step_is_the_largest_inside_the_range(name, method):
 
 
 def test_before_setting_is_far_outside_the_range_for_the_high_band():
-    _, k_dt = bands.k_dt_range(bands.BENCH_BANDS["high"], bands.BEFORE)
+    _, k_dt = bands.k_dt_range(bands.BENCH_BANDS["high"], bands.SMALL_SIGNAL_EULER)
     assert k_dt > 20 * bands.ACCURATE_K_DT["euler"]
 
 
@@ -65,7 +65,7 @@ def test_high_band_inside_the_range_is_closer_to_the_reference_than_before():
     data = bands.sample_data(["aluminium"], [30.0])
     events = bands.code_events("high", bands.BENCH_BANDS["high"], data, duration_s=0.1)
     ref = bands.reference_spikes(events)
-    before = bands.measure(events, bands.BEFORE, ref, target="numpy")
+    before = bands.measure(events, bands.SMALL_SIGNAL_EULER, ref, target="numpy")
     inside = bands.BandSetting("rk4", bands.accurate_dt_ms(events.band, "rk4"))
     after = bands.measure(events, inside, ref, target="numpy")
     assert after["inside_accurate_range"] and not before["inside_accurate_range"]

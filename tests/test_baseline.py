@@ -35,7 +35,7 @@ def test_nmf_filter_bank_is_a_dot_product_with_non_negative_filters():
 
 
 def test_nmf_filter_outputs_are_the_parts_amplitudes():
-    # Issue 31: the raw dot products of broad, overlapping basis vectors are strongly
+    # The raw dot products of broad, overlapping basis vectors are strongly
     # correlated; unmixed by the basis's Gram matrix they give the parts' amplitudes back
     # (NMF-30 45 % -> 65 % of 8 materials on the full bench set).
     rng = np.random.default_rng(2)
@@ -49,7 +49,7 @@ def test_nmf_filter_outputs_are_the_parts_amplitudes():
 
 
 def test_nmf_filters_read_the_spectrum_s_shape_not_its_loudness():
-    # Issue 31: unscaled, the events' loudness (3x between impacts) took the NMF parts and
+    # Unscaled, the events' loudness (3x between impacts) took the NMF parts and
     # every filter output, and NMF-30 read 19 % of the 8 materials where a peak-scaled one
     # reads 36 % (quick bench set). Classes here differ only in the ratio of two lines.
     rng = np.random.default_rng(1)

@@ -63,7 +63,7 @@ def test_rod_and_tuned_channels_give_the_runtime_paths_features(both):
     neurons (docs/materials.md, "The fused event engine", gives the counts). A channel at the coder's low threshold (3-6 mg) fires for whatever side of its
     threshold the state lands on, so the compilers' different rounding of the same rk2
     expression parts a few neurons' trains after some tens of spikes: the unfused compiled
-    engine (before the fused one) differed from the runtime path as much on these events
+    engine without fusion differs from the runtime path as much on these events
     (6 counts and 25 spans of 96 neurons; the fused engine 7 and 24)."""
     fused, runtime = (f.select(["rod", *CHANNELS]) for f in both)
     assert fused.counts.shape == (12, 6) and fused.counts.sum() > 500

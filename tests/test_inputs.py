@@ -1,6 +1,6 @@
-"""Issue 30: every input answered in one line, before any work.
+"""Every input answered in one line, before any work.
 
-Each case a careless user tried (the issue's list) gets one line naming the field, the value and
+Each case a careless user tries gets one line naming the field, the value and
 what is accepted (SpecError, exit 2), before a scene is generated or Brian2 runs; long jobs
 show their estimate and need --yes; a message shows at most 80 characters of a value.
 """

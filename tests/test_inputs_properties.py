@@ -1,4 +1,4 @@
-"""Issue 30, the property: whatever a careless user types, the answer is a result or one line.
+"""The property: whatever a careless user types, the answer is a result or one line.
 
 For every field of every shipped study spec (its networks and stimuli included, as resolved),
 random values of every type (huge, tiny, negative, NaN, inf, strings, lists, nested tables,

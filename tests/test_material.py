@@ -99,9 +99,9 @@ def test_the_most_active_material_neuron_names_the_material_more_often_than_chan
 
 @pytest.mark.slow
 def test_over_many_seeds_the_material_unit_is_resolved_above_chance():
-    # Measured 419 of 640 (61.7-69.1 %) on the high band before issue 16's physics; not
+    # Measured 419 of 640 (61.7-69.1 %) on the high band with a simpler contact physics; not
     # re-measured since the unit moved onto the rod band (20 seed pairs of 176 contacts of
-    # 0.5 s: about two hours of Brian2 on two shared cores). The threshold is the old one.
+    # 0.5 s: about two hours of Brian2 on two shared cores). The threshold is that measurement's.
     results = [material_unit_correct(2 * seed, 2 * seed + 1) for seed in range(20)]
     correct, n = (sum(r[i] for r in results) for i in (0, 1))
     low, high = binomial_interval(correct, n)

@@ -1,4 +1,4 @@
-"""What carries the material information in the generated bench data (issue 31).
+"""What carries the material information in the generated bench data.
 
 The paper tells wood from aluminium by the low mode's decay time (Fig. 5D: τ_low differs at
 12 of 16 sites). A hand mutation, wood's loss factor set to aluminium's, used to pass the

@@ -1,4 +1,4 @@
-"""The model-selection study (issue 31): each candidate contact mechanism moves the data the
+"""The model-selection study: each candidate contact mechanism moves the data the
 way its physics says, and the study keeps its calibrations apart from its predictions."""
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
-"""Nothing a user owns is lost, and no result is silently stale (issue 28).
+"""Nothing a user owns is lost, and no result is silently stale.
 
-Each case the issue saw on main is reproduced here: adoption of a user's file after a killed
+Each case a hostile probe found is reproduced here: adoption of a user's file after a killed
 run, symlinks followed, two writers in one folder, ``emulate --log`` overwriting, stale caches
 and stores, corrupt state ending in a traceback. Every test that makes a symlink asserts that
 its target's content and mode are untouched. A property-based test drives random sequences of
@@ -510,8 +510,8 @@ def test_no_user_file_is_ever_changed_or_removed_thoroughly(tmp_path_factory, ac
 
 
 @pytest.mark.slow
-def test_the_issues_case_a_killed_quickstart_then_force_keeps_the_users_file(tmp_path):
-    """As the issue saw it: SIGKILL a quickstart run once its folder exists, put a file of
+def test_a_killed_quickstart_then_force_keeps_the_users_file(tmp_path):
+    """As a careless user would: SIGKILL a quickstart run once its folder exists, put a file of
     your own there, run the quickstart there again, then another study with ``--force``."""
     out = tmp_path / "out"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -196,16 +196,3 @@ def remove_entry(target: str | Path) -> None:
         shutil.rmtree(target)
     elif os.path.lexists(target):
         target.unlink()
-
-
-def current_umask() -> int:
-    """The process's umask, read without changing it where the system says (Linux)."""
-    try:
-        for line in Path("/proc/self/status").read_text().splitlines():
-            if line.startswith("Umask:"):
-                return int(line.split()[1], 8)
-    except OSError:
-        pass
-    mask = os.umask(0o022)   # elsewhere: set and restore at once
-    os.umask(mask)
-    return mask

@@ -6,7 +6,7 @@ neuron constant, a changed preprocessing step: the old store is refused on resum
 cache rebuilt). A computation names the module that computes it (``code_hash("snn_antenna.
 sources.bench")``) and the hash covers that module and every package module it imports, at
 any depth, including imports inside functions (:func:`import_closure`): editing the live page
-no longer invalidates 12,800 generated bench contacts, editing the antenna physics still does.
+leaves 12,800 generated bench contacts valid, editing the antenna physics does not.
 A module that imports by name at run time (``importlib``) could reach code the closure cannot
 see, so a closure holding one widens to the whole package. Summaries record the whole
 package's hash and the git commit (:func:`code_identity`).

@@ -78,18 +78,19 @@ class BandSetting:
         return text + (f", {self.duration_s:g} s" if self.duration_s is not None else "")
 
 
-# What every bench band ran at before issue 20: the bank's euler 0.1 ms and the small-signal
+# The bank's own integration, euler at 0.1 ms, with the small-signal
 # Hz per unit k (measured again each run, beside the candidates).
-BEFORE = BandSetting("euler", 0.1, neurons.LINEAR_HZ_PER_K)
+SMALL_SIGNAL_EULER = BandSetting("euler", 0.1, neurons.LINEAR_HZ_PER_K)
 
-# Shipped (readout.spiking.HIGH_BAND, ROD_BAND above; low unchanged): the cheapest settings within
+# Shipped (readout.spiking.HIGH_BAND, ROD_BAND above; low at the bank's): cheapest settings within
 # 5 % of the exact reference's rate map on the study's sample events, with hz_per_k from the driven
 # tuning sweep; benchmarks/bench_bands.py prints their error and cost beside the alternatives.
 CHOSEN = {"high": BandSetting("rk4", 0.005, 23.46),
           "rod": BandSetting("rk2", 0.005, 27.49)}
 
 
-def array_of(band: Band, setting: BandSetting = BEFORE, target: str = "numpy") -> ResonatorArray:
+def array_of(band: Band, setting: BandSetting = SMALL_SIGNAL_EULER,
+             target: str = "numpy") -> ResonatorArray:
     """The band's resonators at ``setting`` (forced: settings beyond the stable limit are
     measured on purpose)."""
     b = setting.tuned(band)
@@ -372,29 +373,30 @@ class BandStudy:
 
 
 def recalibrate(study: BandStudy, band: Band, rate_hz: float, log=print) -> tuple[float, dict]:
-    """The band's tuning at ``BEFORE`` and at the most accurate method's accurate step; the
+    """Tuning at ``SMALL_SIGNAL_EULER`` and at the most accurate method's accurate step; the
     Hz per unit k that puts the latter's peaks on target."""
     freqs = study.freqs_hz(band, rate_hz)
-    before = tuning_summary(driven_tuning(band, BEFORE, rate_hz, freqs,
+    before = tuning_summary(driven_tuning(band, SMALL_SIGNAL_EULER, rate_hz, freqs,
                                           study.tuning_duration_s, study.target))
     fine = BandSetting("rk4", accurate_dt_ms(band, "rk4"))
     rates = driven_tuning(band, fine, rate_hz, freqs, study.tuning_duration_s, study.target)
     hz_per_k = peak_hz_per_k(rates)
     log(f"    tuning: {before['mean_abs_offset_channels']:.2f} channels off at "
-        f"{BEFORE.label()}; peaks at {hz_per_k:.4g} Hz per k at {fine.label()}")
+        f"{SMALL_SIGNAL_EULER.label()}; peaks at {hz_per_k:.4g} Hz per k at {fine.label()}")
     return hz_per_k, {"before": before, "calibration": tuning_summary(rates),
                       "freqs_hz": [float(f) for f in freqs]}
 
 
 def study_band(study: BandStudy, name: str, data, log=print) -> dict:
-    """One band: its error and cost at ``BEFORE``, each method at ``candidate_steps`` (at the
+    """A band's error and cost at ``SMALL_SIGNAL_EULER``, each method at ``candidate_steps`` (the
     recalibrated Hz per unit k), the cheapest of those within the rate-map tolerance, and the
     tuning at the chosen setting."""
     band = BENCH_BANDS[name]
     events = code_events(name, band, data, study.duration_s)
     n = events.n_events * band.n_neurons
     ref = reference_spikes(events)
-    rows = [dict(measure(events, BEFORE, ref, study.target, study.cost_events), role="before")]
+    rows = [dict(measure(events, SMALL_SIGNAL_EULER, ref, study.target, study.cost_events),
+                 role="before")]
     out = {"reference_cpu_s": ref.cpu_s,
            "truncation": [{"window_s": w, "rate_map_error": truncation_error(
                ref, n, events.duration_s, w)} for w in study.windows_s]}

@@ -198,7 +198,7 @@ def pareto(summary):
 def tuned_curve(summary):
     """The tuned spiking bank's 8-material accuracy against its number of resonators, beside
     NMF with as many filters, on the same events and split; the full-spectrum MLP and the
-    issue's bar (0.9 of it) dashed. Below: the bank's neuron-steps per event (what its cost
+    target bar (0.9 of it) dashed. Below: the bank's neuron-steps per event (what its cost
     grows with; wall times of the curve's runs include compiling) and the budget of 5 × the
     FFT pipeline's cost at the ns per neuron-step measured for the tuned bank in this run."""
     plt = _plt()

@@ -10,7 +10,7 @@ Splits are by repetition: the repetitions 0…R−1 are shuffled with the split'
 ``test_fraction`` of them form the test set for every material and position, so a contact is
 never in both sets and every class and position is in both. Several seeds give mean and spread.
 
-Reproducibility (issue 31). Data, splits and MLP initialisation are seeded and the fits run on
+Reproducibility. Data, splits and MLP initialisation are seeded and the fits run on
 one BLAS thread, yet a fit's result still depends on which OpenBLAS kernel the CPU selects:
 its summation order changes the float32 gradients in the last bits, and 300 epochs of
 mini-batch training carry that to the end. Measured on the full bench set (12,799 events),

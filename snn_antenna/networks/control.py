@@ -19,7 +19,7 @@
   ``LogisticRegression`` on the same network's spikes of bench contacts). Its input is
   ``bias + drive · p(class)``, so the most active neuron names the material; silent
   resonators leave every neuron at ``bias``, below rheobase (no spikes at rest). On the
-  bench's contact physics (issue 16) the material sits in the struck rods' own bending modes
+  bench's contact physics the material sits in the struck rods' own bending modes
   (107–377 Hz, a few % of the impact; a metal rod rings for 0.5–1.2 s, wood and plastics for
   50–105 ms): feed the unit the rod band (``networks/bench_material.toml``: the baseline
   study's ``[spiking.bank.bands.rod]``) over whole 0.5 s contacts, and read each resonator's

@@ -1,4 +1,4 @@
-"""Bands tuned from data: resonators spent where the material lives (issue 32).
+"""Bands tuned from data: resonators spent where the material lives.
 
 The hand-set rod band (90-420 Hz, log-spaced, one wide band-pass) spends most of its neurons
 between the struck rods' lines and codes the sign of a wide band in which the strongest

@@ -56,14 +56,14 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
     least-squares amplitudes of the parts (X ≈ H W gives H back), the same information
     conditioned for the MLP. On the full bench set (12,799 events, split by repetition,
     seed 0, 30 parts, 60 epochs) that took NMF-30 from 45 % to 65 % (72 % at 300 epochs;
-    NMF's own per-sample activations 69 %), ``benchmarks/nmf_scaling.py``.
+    NMF's own per-sample activations 69 %).
 
     Each spectrum is first scaled to its own peak (fit and transform alike; it uses that
     event's spectrum only). Unscaled, the peak amplitude varies 3× between events (impact
     strength, distance) and is common to every filter's output, so the basis spent its parts
     on the loudness and the filter outputs on one shared factor: on the quick bench set
     (1,280 events, split by repetition, 30 parts, the 51-hidden MLP) the 8-material accuracy
-    was 19 % unscaled and 36 % scaled at 60 epochs, 22 % and 40 % at 300 (issue 31).
+    reads 19 % unscaled and 36 % scaled at 60 epochs, 22 % and 40 % at 300.
     """
 
     def __init__(self, n_components: int = 9, max_iter: int = 400,

@@ -200,16 +200,6 @@ class EpisodeTracker:
         return "contact", found
 
 
-def band_activity_hz(rates: xr.DataArray, t0_s: float, t1_s: float,
-                     band_hz: tuple[float, float] | None = None) -> float:
-    """Centroid frequency of the activity between t0_s and t1_s (optionally within a band)."""
-    sub = rates.sel(window_s=slice(t0_s, t1_s - 1e-9))
-    if band_hz is not None:
-        inside = (sub.neuron_hz >= band_hz[0]) & (sub.neuron_hz <= band_hz[1])
-        sub = sub.where(inside, 0)
-    return float(centroid_hz(sub, dim=("neuron_hz", "window_s")))
-
-
 def detector_from_spec(spec: dict) -> tuple["ContactDetector", float]:
     """The ``[readout]`` table of a spec → (``ContactDetector``, rate-map window in s).
 

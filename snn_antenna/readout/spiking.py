@@ -83,7 +83,7 @@ class Band:
 
 LOW_BAND = Band()
 # The high band (55-500 Hz: k up to ~20) integrates at its own step: at the bank's euler
-# 0.1 ms (k·dt up to 2 model-ms) its rate map was 4.7 times the exact reference's. rk4 at
+# 0.1 ms (k·dt up to 2 model-ms) its rate map is 4.7 times the exact reference's. rk4 at
 # 0.005 ms is the cheapest setting found within 5 % of the reference on bench events, and
 # its Hz per unit k comes from a driven tuning sweep at an accurate step (the speed/accuracy
 # study's "bands" section, ``evaluation.bands``, measures both). Its input is band-passed

@@ -46,7 +46,6 @@ SPIKING_MLPS = {
 }
 # Read-outs of the tuned bank (``band_tuning``; bands named ``ch00``…), each an MLP 51 on one
 # code of the same spikes: which part of the spike train carries the material.
-TUNED_PREFIX = "ch"
 TUNED_READOUTS = {
     "spiking_tuned_rate": (("counts",), "rate: spike counts"),
     "spiking_tuned_timing": (("latency_s", "span_s"),

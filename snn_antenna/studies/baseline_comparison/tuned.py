@@ -1,4 +1,4 @@
-"""The tuned spiking bank of the baseline comparison (issue 32): channels from calibration
+"""The tuned spiking bank of the baseline comparison: channels from calibration
 contacts, the bank over every event, its read-outs, and accuracy against resonators.
 
 Calibration contacts are generated like the bench set but with another seed (the study's

@@ -1,4 +1,4 @@
-"""Model selection: which contact mechanism, chosen by what it predicts (issue 31).
+"""Model selection: which contact mechanism, chosen by what it predicts.
 
 For every candidate (``[selection] candidates``: a mechanism of ``sources/contact_models.py``
 or a ``+`` combination, with a small grid of its one free constant), the study generates a
@@ -8,7 +8,7 @@ calibration targets (``CALIBRATION_TARGETS``): the constant is the grid value th
 best. Everything else is predicted and never enters that choice (``PREDICTIONS``).
 Leave-one-target-out: the constant is chosen again from one target alone, and the left-out
 target becomes a prediction. Among the candidates that meet their calibration targets (within
-their tolerances), the one whose predictions meet most of the issue's criteria (then: falls
+their tolerances), the one whose predictions meet most of the acceptance criteria (then: falls
 least short of them) is the one the study chooses; none, when nothing calibrates.
 """
 from __future__ import annotations

@@ -13,7 +13,7 @@ CALIBRATION_TARGETS = {
     "wood_aluminium_sites": (12.0, 4.0, "sites where wood and aluminium τ_low differ "
                                         "(t-test, 10 contacts each, of 16)"),
 }
-# name -> (paper's value, the issue's "done when" bound, True if larger is better, what)
+# name -> (paper's value, the bound a candidate must meet, True if larger is better, what)
 PREDICTIONS = {
     "nmf30_accuracy": (0.86, 0.80, True, "8 materials, NMF-30 accuracy"),
     "two_material_accuracy": (0.87, 0.80, True, "5-8-2 network, wood/aluminium accuracy"),
@@ -88,7 +88,7 @@ def choose(physics: str, points: list[dict]) -> dict:
 
 
 def criteria(point: dict) -> dict:
-    """The issue's "done when" bounds, one verdict per predicted quantity."""
+    """The acceptance bounds, one verdict per predicted quantity."""
     out = {}
     for name, (_, bound, larger, _) in PREDICTIONS.items():
         v = value(point, name)

@@ -120,7 +120,7 @@ def write_report(report: Report, summary: dict) -> None:
             "trains on that fraction, so the accuracies and rmse are lower than on the full "
             "set for every candidate alike (the current model's full-spectrum MLP reads 93.9 % "
             "of the materials and its distance rmse is 3.3 mm on the full set): the criteria "
-            "are the issue's bounds for the full set, the ranking compares candidates on the "
+            "are the acceptance bounds for the full set, the ranking compares candidates on the "
             "same data, and the calibrated constant is the one that meets the targets at "
             "this size.")
     report.heading("Leave one calibration target out")
@@ -139,7 +139,7 @@ def write_report(report: Report, summary: dict) -> None:
                        "r² low law": g["r2_low"]})} for g in summary["grid"]])
     report.figure(_figure(candidates), "model_selection",
                   "Each candidate's predictions at its calibrated constant (mean over seeds, "
-                  "bars the seeds' range) against the paper (dashed) and the issue's bound "
+                  "bars the seeds' range) against the paper (dashed) and the acceptance bound "
                   "(dotted).")
 
 

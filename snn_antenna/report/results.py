@@ -1,0 +1,441 @@
+"""The results page: every measured number of the documentation, regenerated from its sources.
+
+    snn-antenna results out/quickstart out/gating ... --bench docs/results/bench_array.json \\
+        --out docs/results.md
+    python -m snn_antenna.report.results record-bench docs/results/bench_array.json -- \\
+        python benchmarks/bench_array.py --seconds 2
+
+The page is built from the ``summary.json`` of the study runs it is given and from the recorded
+output of benchmarks; nothing on it is typed by hand. Each run's summary is copied beside the
+page (``docs/results/STUDY.json``), so the page cites files that stay with it, and the page is
+a pure function of those files: running the command again on them gives the same page.
+
+Every number on the page is a link to its run's source block (command, commit, machine) whose
+title is the JSON Pointer (RFC 6901) of the value in the cited file, for example
+``[0.8519](#run-gating_threshold "/f1/gated/mean")``; :func:`check_page` reads each one back
+from its file and fails on any that differs. A benchmark's output is shown as it was printed,
+and the record keeps the command, the commit, the machine and its load.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from ..core.errors import SpecError
+from ..core.files import atomic_write
+from ..core.provenance import code_identity
+
+#: the study summaries' own lists of what was calibrated and what is predicted
+ROW_LISTS = ("calibrated", "predicted")
+
+#: further values a study's summary holds that the page shows as tables, per study:
+#: (title, pointer of a mapping whose entries are the table's rows, columns)
+EXTRA_TABLES: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
+    "baseline_comparison": [
+        (
+            "8-material accuracy per read-out (the bench table and the spiking read-outs)",
+            "/material_accuracy",
+            ("mean", "sd", "n_seeds"),
+        ),
+        ("Distance rmse per read-out (mm)", "/distance_rmse_mm", ("mean", "sd", "n_seeds")),
+    ],
+    "gating_threshold": [
+        ("F1 on new scenes, mean over seeds", "/f1", ("mean", "low", "high", "n")),
+        (
+            "Paired differences of F1 by seed",
+            "/differences",
+            ("mean", "low", "high", "n", "p_value", "verdict"),
+        ),
+    ],
+}
+
+_LINK = re.compile(r'\[([^\]]*)\]\(#run-([\w.-]+) "([^"]*)"\)')
+
+
+def fmt(value) -> str:
+    """A number as every report shows it (``report.page.fmt``: four significant figures)."""
+    from .page import fmt as page_fmt  # numpy and the page only when a page is made
+
+    return page_fmt(value)
+
+
+# -- JSON Pointer ---------------------------------------------------------------------------
+
+
+def pointer(*keys) -> str:
+    """The JSON Pointer of ``keys`` (``~`` and ``/`` escaped as RFC 6901 says)."""
+    return "".join("/" + str(k).replace("~", "~0").replace("/", "~1") for k in keys)
+
+
+def resolve(document: Any, ptr: str) -> Any:
+    """The value at JSON Pointer ``ptr`` in ``document``."""
+    value = document
+    for token in ptr.split("/")[1:]:
+        token = token.replace("~1", "/").replace("~0", "~")
+        value = value[int(token)] if isinstance(value, list) else value[token]
+    return value
+
+
+# -- the page -------------------------------------------------------------------------------
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _cell(value: Any, run: str, ptr: str) -> str:
+    """A value as the page shows it: each number a link to its source, text as text."""
+    if _is_number(value):
+        return f'[{fmt(value)}](#run-{run} "{ptr}")'
+    if value is None:
+        return "–"
+    if isinstance(value, dict):
+        return ", ".join(
+            f"{_text(k)}: {_cell(v, run, ptr + pointer(k))}" for k, v in value.items()
+        )
+    if isinstance(value, list):
+        return "[" + ", ".join(_cell(v, run, ptr + pointer(i)) for i, v in enumerate(value)) + "]"
+    if isinstance(value, bool):
+        return "yes" if value else "no"
+    return _text(value)
+
+
+def _text(value: Any) -> str:
+    """Text inside a Markdown table cell."""
+    return str(value).replace("|", "\\|").replace("\n", " ")
+
+
+def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
+    return [
+        "| " + " | ".join(header) + " |",
+        "|" + " --- |" * len(header),
+        *("| " + " | ".join(row) + " |" for row in rows),
+        "",
+    ]
+
+
+def _row_list(summary: dict, run: str, key: str) -> list[str]:
+    rows = []
+    for i, row in enumerate(summary.get(key) or []):
+        here = pointer(key, i)
+        compare = "target" if key == "calibrated" else "paper"
+        value = _cell(row.get("value"), run, here + "/value")
+        if row.get("interval"):
+            value += " (" + _cell(row["interval"], run, here + "/interval")[1:-1] + ")"
+        rows.append(
+            [
+                _text(row.get("quantity", "")),
+                value,
+                _cell(row.get("n"), run, here + "/n") if row.get("n") is not None else "",
+                _cell(row.get(compare), run, here + "/" + compare),
+                _text(row.get("unit") or ""),
+            ]
+        )
+    if not rows:
+        return []
+    title = "Calibrated to" if key == "calibrated" else "Predicted"
+    compare = "target" if key == "calibrated" else "paper"
+    return [
+        f"**{title}**",
+        "",
+        *_table(("quantity", "value (interval)", "n", compare, "unit"), rows),
+    ]
+
+
+def _extra_tables(summary: dict, run: str, study: str) -> list[str]:
+    lines = []
+    for title, ptr, columns in EXTRA_TABLES.get(study, []):
+        try:
+            entries = resolve(summary, ptr)
+        except (KeyError, IndexError, ValueError):
+            continue
+        rows = [
+            [_text(name)] + [_cell(entry.get(c), run, ptr + pointer(name, c)) for c in columns]
+            for name, entry in entries.items()
+            if isinstance(entry, dict)
+        ]
+        lines += [f"**{title}**", "", *_table(("", *columns), rows)]
+    return lines
+
+
+def _source(run: str, file: str, prov: dict, extra: str = "") -> list[str]:
+    commit = prov.get("git_commit") or "not a git checkout"
+    return [
+        f"(run-{run})=",
+        "",
+        f"- command: `{prov.get('command', '')}`",
+        f"- commit: `{commit}` (snn-antenna {prov.get('snn_antenna_version', '?')}, "
+        f"code hash `{prov.get('code_sha256', '?')}`)",
+        f"- machine: {prov.get('platform', '?')}, Python {prov.get('python', '?')}"
+        + (
+            f", Brian2 {prov['brian2_version']} ({prov.get('brian2_target')})"
+            if prov.get("brian2_version")
+            else ""
+        )
+        + extra,
+        f"- made: {prov.get('created', '?')}; source: `{file}`",
+        "",
+    ]
+
+
+def study_section(summary: dict, run: str, file: str) -> list[str]:
+    """The page's section of one study run."""
+    prov = summary.get("provenance", {})
+    study = prov.get("spec", {}).get("study", run)
+    lines = [f"## {study.replace('_', ' ').capitalize()}", ""]
+    if summary.get("quick"):
+        lines += [
+            "A quick-profile run (`--quick`): its numbers check that the pipeline works; "
+            "its report says what it is too small for.",
+            "",
+        ]
+    lines += _source(run, file, prov)
+    for key in ROW_LISTS:
+        lines += _row_list(summary, run, key)
+    lines += _extra_tables(summary, run, study)
+    return lines
+
+
+def bench_section(record: dict, run: str, file: str) -> list[str]:
+    """The page's section of one recorded benchmark: its output as printed."""
+    prov = record["provenance"]
+    load = record.get("load_average")
+    extra = f"; load average {load[0]:.2f} when it started" if load else ""
+    return [
+        f"### `{record['command']}`",
+        "",
+        *_source(run, file, prov, extra),
+        "```text",
+        record["stdout"].rstrip("\n"),
+        "```",
+        "",
+    ]
+
+
+def render(summaries: list[Path], benches: list[Path], command: str) -> str:
+    """The whole page from its sources."""
+    lines = [
+        "# Results",
+        "",
+        "Every number on this page comes from a run's `summary.json` or a benchmark's "
+        "recorded output, stored beside this page in `docs/results/`; nothing is typed by "
+        "hand. Each number links to the command, commit and machine that made it. "
+        "Benchmarks ran on a shared machine: read their ratios, measured side by side in "
+        "one run, rather than their times.",
+        "",
+        "Regenerate this page (see `snn_antenna.report.results`):",
+        "",
+        "```bash",
+        command,
+        "```",
+        "",
+    ]
+    for path in summaries:
+        summary = json.loads(path.read_text())
+        lines += study_section(summary, path.stem, _shown(path))
+    if benches:
+        lines += ["## Benchmarks", ""]
+        for path in benches:
+            record = json.loads(path.read_text())
+            lines += bench_section(record, path.stem, _shown(path))
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+def check_page(page: Path, sources: Path) -> list[str]:
+    """Every linked number of ``page`` read back from its file in ``sources``; the mismatches
+    (an empty list when every number is its source's)."""
+    problems = []
+    text = page.read_text()
+    links = _LINK.findall(text)
+    if not links:
+        problems.append(f"{page}: no number links to a source")
+    cache: dict[str, Any] = {}
+    for shown, run, ptr in links:
+        file = sources / f"{run}.json"
+        if run not in cache:
+            cache[run] = json.loads(file.read_text()) if file.is_file() else None
+        if cache[run] is None:
+            problems.append(f"{shown!r} cites {file}, which does not exist")
+            continue
+        try:
+            value = resolve(cache[run], ptr)
+        except (KeyError, IndexError, ValueError, TypeError):
+            problems.append(f"{shown!r} cites {ptr} in {file}, which it does not hold")
+            continue
+        if not _is_number(value) or fmt(value) != shown:
+            problems.append(f"{shown!r} cites {ptr} in {file}, which holds {value!r}")
+    run = None
+    for line in text.splitlines():  # text in the tables: the cited file's own
+        label = re.fullmatch(r"\(run-([\w.-]+)\)=", line)
+        if label:
+            run = label.group(1)
+        if run is None or not line.startswith("| ") or set(line) <= set("|- "):
+            continue
+        source = json.dumps(cache.get(run), ensure_ascii=False)
+        for cell in line.strip("|").split(" | "):
+            for chunk in _LINK.split(cell)[::4]:
+                words = chunk.replace("\\|", "|").strip(" ,:;()[]")
+                if (
+                    re.search(r"\d", words)
+                    and json.dumps(words, ensure_ascii=False)[1:-1] not in source
+                ):
+                    problems.append(f"{words!r} (run {run}) is not in the file it cites")
+    return problems
+
+
+# -- the command ----------------------------------------------------------------------------
+
+
+def _summary_of(path: Path) -> Path:
+    file = path / "summary.json" if path.is_dir() else path
+    if not file.is_file():
+        raise SpecError(
+            "results",
+            str(path),
+            "a run's output folder holding summary.json, or a summary.json file",
+        )
+    return file
+
+
+def collect(runs: list[Path], store: Path) -> list[Path]:
+    """Each run's summary, copied into ``store`` as ``STUDY.json`` (one run per study)."""
+    store.mkdir(parents=True, exist_ok=True)
+    cited: dict[str, Path] = {}
+    for run in runs:
+        file = _summary_of(run)
+        summary = json.loads(file.read_text())
+        study = summary.get("provenance", {}).get("spec", {}).get("study")
+        if not study:
+            raise SpecError("results", str(run), "a study's summary.json (with its provenance)")
+        if study in cited:
+            raise SpecError(
+                "results", str(run), f"one run per study ({study} is also {cited[study]})"
+            )
+        target = store / f"{study}.json"
+        if file.resolve() != target.resolve():
+            atomic_write(target, json.dumps(summary, indent=1, sort_keys=False) + "\n")
+        cited[study] = target
+    return list(cited.values())
+
+
+def record_benchmark(out: Path, command: list[str]) -> dict:
+    """Run a benchmark and keep what it printed with its provenance in ``out`` (JSON)."""
+    load = list(os.getloadavg())
+    started = time.perf_counter()
+    done = subprocess.run(command, capture_output=True, text=True, check=False)
+    if done.returncode != 0:
+        raise SpecError(
+            "record-bench",
+            " ".join(command),
+            f"a benchmark that ends well (it exited {done.returncode}: "
+            f"{done.stderr.strip().splitlines()[-1:] or ''})",
+        )
+    import datetime as _dt
+
+    record = {
+        "command": " ".join(command),
+        "stdout": done.stdout,
+        "wall_s": time.perf_counter() - started,
+        "load_average": load,
+        "provenance": {
+            **code_identity(),
+            "platform": platform.platform(),
+            "python": sys.version.split()[0],
+            "cpus": os.cpu_count(),
+            "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+            "command": " ".join(command),
+        },
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(out, json.dumps(record, indent=1) + "\n")
+    return record
+
+
+def _shown(path: Path) -> str:
+    """``path`` as the page names it: relative to the folder the command runs in (the
+    repository), so the page reads the same on every checkout."""
+    return Path(os.path.relpath(path.resolve())).as_posix()
+
+
+def make_page(runs: list[Path], benches: list[Path], out: Path) -> Path:
+    """Copy the runs' summaries and benchmark records beside ``out`` (into ``results/``),
+    write the page from those copies, and check every number on it against them."""
+    store = out.parent / "results"
+    cited = collect(runs, store)
+    stored_benches = []
+    for bench in benches:
+        if not bench.is_file() or "stdout" not in json.loads(bench.read_text()):
+            raise SpecError("--bench", str(bench), "a record written by record-bench")
+        target = store / bench.name
+        if bench.resolve() != target.resolve():
+            atomic_write(target, bench.read_text())
+        stored_benches.append(target)
+    command = " ".join(
+        [
+            "snn-antenna results",
+            *map(_shown, cited),
+            *(f"--bench {_shown(b)}" for b in stored_benches),
+            f"--out {_shown(out)}",
+        ]
+    )
+    text = render(cited, stored_benches, command)
+    atomic_write(out, text)
+    problems = check_page(out, store)
+    if problems:
+        raise RuntimeError("the results page does not match its sources: " + problems[0])
+    return out
+
+
+def _results(args) -> int:
+    out = make_page([Path(p) for p in args.runs], [Path(p) for p in args.bench], Path(args.out))
+    print(f"{out}: written from {len(args.runs)} run(s) and {len(args.bench)} benchmark(s)")
+    return 0
+
+
+def add_subcommand(sub) -> None:
+    """``snn-antenna results``: registered by the command line (cli.py)."""
+    p = sub.add_parser(
+        "results", help="write the results page from runs' summary.json and recorded benchmarks"
+    )
+    p.add_argument(
+        "runs",
+        nargs="*",
+        help="output folders of study runs (or summary.json files), one per study",
+    )
+    p.add_argument(
+        "--bench",
+        action="append",
+        default=[],
+        metavar="FILE.json",
+        help="a benchmark's recorded output (python -m snn_antenna.report.results "
+        "record-bench FILE.json -- COMMAND)",
+    )
+    p.add_argument("--out", default="docs/results.md", help="the page (default docs/results.md)")
+    p.set_defaults(func=_results)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m snn_antenna.report.results record-bench OUT.json -- COMMAND ...``"""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if len(argv) >= 3 and argv[0] == "record-bench" and "--" in argv:
+        split = argv.index("--")
+        record = record_benchmark(Path(argv[1]), argv[split + 1 :])
+        print(record["stdout"], end="")
+        return 0
+    print(
+        "usage: python -m snn_antenna.report.results record-bench OUT.json -- COMMAND ...",
+        file=sys.stderr,
+    )
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
