@@ -84,20 +84,3 @@ html_sidebars = {
 # signature is linked where it is unique and left as text where two studies define it.
 suppress_warnings = ["ref.python"]
 html_last_updated_fmt = None
-
-
-# TO THE LEAD: "Bring your own antenna" (docs/guide/own_antenna.md) is written on another branch.
-# index.md lists it; until the page is merged the entry is left out here, so the build stays
-# clean. Delete this hook once the page is in the tree.
-PENDING_PAGES = ["guide/own_antenna"]
-
-
-def _leave_out_pending(app, docname, source):
-    if docname == "index":
-        for page in PENDING_PAGES:
-            if not (Path(app.srcdir) / f"{page}.md").exists():
-                source[0] = source[0].replace(f"{page}\n", "")
-
-
-def setup(app):
-    app.connect("source-read", _leave_out_pending)
