@@ -1,0 +1,255 @@
+"""The user's files are theirs, by construction: every entry the toolkit creates is journaled
+with what identifies it (device, inode; for files size and mtime), and removal, replacement
+and append act only on an entry that is still that one; no link is followed at any depth;
+staging names are created exclusively and cleaned only when journaled; appends refuse a file
+with more than one hard link; the emulator removes only the link it created.
+
+Each test places what a user might place (a file under a staging name, a link inside a store,
+a link to a real serial device, an edited or replaced output, a hard link) and asserts that it
+is untouched, and that anything refused is refused in one line naming it.
+"""
+from __future__ import annotations
+
+import os
+import stat
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from snn_antenna.core import outputs
+from snn_antenna.core.errors import SpecError
+from snn_antenna.core.files import atomic_write, make_folder, open_append
+from snn_antenna.core.store import Output, SweepStore, write_dataset
+
+
+def users_file(path: Path, text: str = "mine") -> tuple:
+    path.write_text(text)
+    path.chmod(0o640)
+    return state(path)
+
+
+def state(path: Path) -> tuple:
+    st_ = os.lstat(path)
+    return path.read_bytes(), stat.S_IMODE(st_.st_mode), st_.st_ino
+
+
+def one_line(err) -> str:
+    text = str(err.value)
+    assert "\n" not in text
+    return text
+
+
+def _store(path: Path, **kw) -> SweepStore:
+    store = SweepStore(path)
+    store.prepare({"k": np.arange(4.0)}, {"rate": Output("f8")}, (2,), 2, **kw)
+    return store
+
+
+def _dataset():
+    import xarray as xr
+    return xr.Dataset({"v": ("i", np.arange(3.0))})
+
+
+def finished_run(out: Path, study: str, names=("report.html",), store: str | None = None):
+    with outputs.output_folder(out, study):
+        for name in names:
+            atomic_write(out / name, f"{study} {name}")
+        if store:
+            write_dataset(_dataset(), out / store)
+
+
+# -- staging names ---------------------------------------------------------------------------
+@pytest.mark.parametrize("staged", ["results.zarr.partial", ".results.zarr.partial"])
+def test_force_keeps_a_users_file_that_bears_a_staging_name(tmp_path, staged):
+    out = tmp_path / "out"
+    finished_run(out, "quickstart")
+    mine = users_file(out / staged, "my partial results")
+    try:
+        with outputs.output_folder(out, "tuning_sweep", force=True):
+            write_dataset(_dataset(), out / "results.zarr")
+    except SpecError:
+        pass                                        # a refusal is fine; a deletion is not
+    assert state(out / staged) == mine
+
+
+def test_a_store_is_never_staged_over_a_users_folder_of_that_name(tmp_path):
+    path = tmp_path / "d.zarr"
+    (tmp_path / "d.zarr.partial").mkdir()
+    mine = users_file(tmp_path / "d.zarr.partial" / "thesis.tex")
+    write_dataset(_dataset(), path)
+    assert state(tmp_path / "d.zarr.partial" / "thesis.tex") == mine
+    assert (path / "zarr.json").is_file()
+
+
+def test_the_manifests_temporary_file_never_truncates_a_users_file(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    name = outputs.MANIFEST + ".tmp"
+    mine = users_file(out / name, "my own notes")
+    for force in (False, True):
+        try:
+            finished_run(out, "quickstart", force and ("report.html",) or ())
+        except SpecError:
+            pass
+    assert state(out / name) == mine
+
+
+# -- no link at any depth ----------------------------------------------------------------------
+def _outside(tmp_path: Path) -> Path:
+    theirs = tmp_path / "theirs"
+    theirs.mkdir(exist_ok=True)
+    users_file(theirs / "data.bin", "outside --out")
+    return theirs
+
+
+def test_a_link_inside_a_store_is_refused_on_resume_and_never_written_through(tmp_path):
+    theirs = _outside(tmp_path)
+    before = state(theirs / "data.bin")
+    path = tmp_path / "results.zarr"
+    _store(path)
+    chunk = path / "rate" / "c" / "0"
+    chunk.parent.mkdir(parents=True, exist_ok=True)
+    chunk.unlink(missing_ok=True)
+    chunk.symlink_to(theirs / "data.bin")
+    with pytest.raises(SpecError) as err:
+        _store(path).write_chunk(0, {"k": slice(0, 2)}, {"rate": np.ones(2)})
+    assert "symbolic link" in one_line(err) and str(chunk) in one_line(err)
+    assert state(theirs / "data.bin") == before and chunk.is_symlink()
+
+
+def test_a_linked_folder_inside_a_store_is_refused_on_resume(tmp_path):
+    theirs = _outside(tmp_path)
+    path = tmp_path / "results.zarr"
+    _store(path)
+    (path / "rate" / "c").mkdir(parents=True, exist_ok=True)
+    import shutil
+    shutil.rmtree(path / "rate" / "c")
+    (path / "rate" / "c").symlink_to(theirs, target_is_directory=True)
+    with pytest.raises(SpecError, match="symbolic link"):
+        _store(path).write_chunk(0, {"k": slice(0, 2)}, {"rate": np.ones(2)})
+    assert sorted(os.listdir(theirs)) == ["data.bin"]
+
+
+def test_a_link_inside_a_store_is_kept_when_the_store_would_be_removed(tmp_path):
+    theirs = _outside(tmp_path)
+    out = tmp_path / "out"
+    finished_run(out, "tuning_sweep", (), store="results.zarr")
+    link = out / "results.zarr" / "mine"
+    link.symlink_to(theirs, target_is_directory=True)
+    try:
+        with outputs.output_folder(out, "quickstart", force=True):
+            atomic_write(out / "report.html", "quickstart")
+    except SpecError as exc:
+        assert "mine" in str(exc)
+    assert link.is_symlink() and sorted(os.listdir(theirs)) == ["data.bin"]
+
+
+def test_a_write_below_a_link_inside_the_output_folder_is_refused(tmp_path):
+    theirs = _outside(tmp_path)
+    out = tmp_path / "out"
+    with outputs.output_folder(out, "quickstart"):
+        make_folder(out / "figures")
+        (theirs / "sub").mkdir()
+        (out / "figures" / "maps").symlink_to(theirs, target_is_directory=True)
+        with pytest.raises(SpecError, match="symbolic link"):
+            atomic_write(out / "figures" / "maps" / "sub" / "a.png", "png")
+    assert sorted(os.listdir(theirs)) == ["data.bin", "sub"] and not os.listdir(theirs / "sub")
+
+
+# -- ownership by identity ---------------------------------------------------------------------
+@pytest.mark.parametrize("how", ["replaced", "edited"])
+def test_an_output_the_user_replaced_or_edited_is_theirs(tmp_path, how):
+    out = tmp_path / "out"
+    finished_run(out, "tuning_sweep", ("report.html", "summary.json"))
+    report = out / "report.html"
+    if how == "replaced":
+        report.unlink()
+        mine = users_file(report, "my own report")
+    else:
+        with open(report, "a") as f:
+            f.write("<!-- my notes -->")
+        mine = state(report)
+    # another study with --force removes only what is still the toolkit's
+    with outputs.output_folder(out, "quickstart", force=True):
+        pass
+    assert state(report) == mine and not (out / "summary.json").exists()
+    # a rerun never replaces it either
+    with pytest.raises(SpecError, match="report.html"):
+        with outputs.output_folder(out, "quickstart", force=True):
+            atomic_write(report, "quickstart's report")
+    assert state(report) == mine
+
+
+def test_a_store_the_user_replaced_is_not_removed_by_force(tmp_path):
+    out = tmp_path / "out"
+    finished_run(out, "tuning_sweep", (), store="results.zarr")
+    import shutil
+    shutil.rmtree(out / "results.zarr")
+    (out / "results.zarr").mkdir()
+    mine = users_file(out / "results.zarr" / "zarr.json", "my own store")
+    with outputs.output_folder(out, "quickstart", force=True):
+        pass
+    assert state(out / "results.zarr" / "zarr.json") == mine
+
+
+def test_a_file_the_user_put_inside_a_store_is_not_removed_by_force(tmp_path):
+    out = tmp_path / "out"
+    finished_run(out, "tuning_sweep", (), store="results.zarr")
+    mine = users_file(out / "results.zarr" / "notes.txt")
+    with outputs.output_folder(out, "quickstart", force=True):
+        pass
+    assert state(out / "results.zarr" / "notes.txt") == mine
+
+
+# -- appends ----------------------------------------------------------------------------------
+def test_an_append_refuses_a_file_with_another_hard_link(tmp_path):
+    log = tmp_path / "run.log"
+    log.write_text("first line\n")
+    os.link(log, tmp_path / "my_copy.log")
+    with pytest.raises(SpecError) as err:
+        with open_append(log) as f:
+            f.write("more\n")
+    assert "hard link" in one_line(err)
+    assert (tmp_path / "my_copy.log").read_text() == "first line\n"
+
+
+def test_an_append_to_a_journaled_log_the_user_replaced_is_refused(tmp_path):
+    out = tmp_path / "out"
+    with outputs.output_folder(out, "quickstart"):
+        with open_append(out / "run.log") as f:
+            f.write("line\n")
+    (out / "run.log").unlink()
+    mine = users_file(out / "run.log", "my log\n")
+    with pytest.raises(SpecError, match="run.log"):
+        with outputs.output_folder(out, "quickstart", force=True):
+            with open_append(out / "run.log") as f:
+                f.write("line\n")
+    assert state(out / "run.log") == mine
+
+
+# -- the emulator's link -----------------------------------------------------------------------
+def test_emulate_link_refuses_a_users_link_to_a_serial_device(tmp_path):
+    from snn_antenna.bridge.emulate.links import PtyLink
+
+    link = tmp_path / "ttyANT"
+    link.symlink_to("/dev/ttyUSB0")
+    with pytest.raises(SpecError) as err:
+        PtyLink(link).close()
+    assert "left as it is" in one_line(err)
+    assert link.is_symlink() and os.readlink(link) == "/dev/ttyUSB0"
+
+
+def test_the_emulator_removes_only_the_link_it_created(tmp_path):
+    from snn_antenna.bridge.emulate.links import PtyLink
+
+    link = tmp_path / "ttyANT"
+    pty = PtyLink(link)
+    assert os.readlink(link) == pty.slave_name
+    link.unlink()                               # the user takes the path for a device of theirs
+    link.symlink_to("/dev/ttyS0")
+    pty.close()
+    assert link.is_symlink() and os.readlink(link) == "/dev/ttyS0"
+    pty2 = PtyLink(tmp_path / "ttyB")
+    pty2.close()
+    assert not os.path.lexists(tmp_path / "ttyB")   # its own link is removed
