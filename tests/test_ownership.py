@@ -253,3 +253,217 @@ def test_the_emulator_removes_only_the_link_it_created(tmp_path):
     pty2 = PtyLink(tmp_path / "ttyB")
     pty2.close()
     assert not os.path.lexists(tmp_path / "ttyB")   # its own link is removed
+
+
+def test_a_staging_name_already_taken_is_passed_over(tmp_path, monkeypatch):
+    import itertools
+
+    from snn_antenna.core import files
+
+    monkeypatch.setattr(files, "_counter", itertools.count())
+    taken = [tmp_path / f".report.html.{os.getpid()}-{n}.tmp" for n in range(2)] + \
+        [tmp_path / f".{outputs.MANIFEST}.{os.getpid()}-2.tmp"]
+    mine = [users_file(path) for path in taken]
+    with outputs.output_folder(tmp_path, "quickstart", force=True):
+        atomic_write(tmp_path / "report.html", "report")
+    assert [state(path) for path in taken] == mine
+    assert (tmp_path / "report.html").read_text() == "report"
+
+
+# -- the property: a user acting anywhere, the toolkit running anyhow ---------------------------
+from hypothesis import HealthCheck, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+from hypothesis.stateful import (RuleBasedStateMachine, initialize, invariant,  # noqa: E402
+                                 precondition, rule)
+
+WRITES = ["run.log", "report.html", "summary.json", "results.zarr", "cache.zarr",
+          "figures/a.png"]
+USER_NAMES = ["notes.txt", "report.html", "run.log", "results.zarr", "cache.zarr",
+              "results.zarr.partial", "cache.zarr.partial", f".results.zarr.{os.getpid()}-0.partial",
+              f".report.html.{os.getpid()}-1.tmp", outputs.MANIFEST + ".tmp",
+              f".{outputs.MANIFEST}.{os.getpid()}-3.tmp", "figures", "figures/a.png"]
+INSIDE = ["results.zarr/notes.txt", "results.zarr/rate/c", "results.zarr/rate/c/0", "results.zarr/chunk_done/c/1",
+          "cache.zarr/v/c/0", "cache.zarr/zarr.json", "figures/mine.png"]
+
+
+STATS = {"runs": 0, "writes": 0, "refusals": 0}
+
+
+class UserAndToolkit(RuleBasedStateMachine):
+    """A user places files, links and hard links anywhere in and around an output folder
+    (under the toolkit's names, staging names, inside its stores), edits or replaces the
+    toolkit's outputs; the toolkit runs, is killed, resumes, is forced. Invariant: nothing
+    the user made changes or disappears, and nothing outside the folder is written."""
+
+    @initialize()
+    def make_folders(self):
+        import tempfile
+        self.base = Path(tempfile.mkdtemp(prefix="own-"))
+        self.out, self.outside = self.base / "out", self.base / "outside"
+        self.outside.mkdir()
+        (self.outside / "dir").mkdir()
+        users_file(self.outside / "shared.txt", "the user's data")
+        users_file(self.outside / "dir" / "inner.txt", "more of it")
+        self.users: dict[Path, object] = {}
+
+    def teardown(self):
+        import shutil
+        if hasattr(self, "base"):
+            shutil.rmtree(self.base, ignore_errors=True)
+
+    # -- the user ---------------------------------------------------------------------------
+    def _free(self, rel: str) -> Path | None:
+        path = self.out / rel
+        parent = path.parent
+        if os.path.lexists(path) or parent.is_symlink() or (parent != self.out
+                                                            and not parent.is_dir()):
+            return None
+        if any(path == p or p in path.parents for p in self.users):
+            return None                 # inside something of the user's: theirs already
+        if parent == self.out:
+            self.out.mkdir(exist_ok=True)
+        return path if parent.is_dir() else None
+
+    @rule(rel=st.sampled_from(USER_NAMES + INSIDE), text=st.sampled_from(["a", "bb"]))
+    def place_file(self, rel, text):
+        path = self._free(rel)
+        if path is not None:
+            users_file(path, text)
+            self.users[path] = state(path)
+
+    @rule(rel=st.sampled_from(USER_NAMES + INSIDE), to_dir=st.booleans())
+    def place_link(self, rel, to_dir):
+        path = self._free(rel)
+        if path is not None:
+            path.symlink_to(self.outside / ("dir" if to_dir else "shared.txt"))
+            self.users[path] = ("link", os.readlink(path))
+
+    @rule(rel=st.sampled_from(USER_NAMES + INSIDE))
+    def place_hard_link(self, rel):
+        path = self._free(rel)
+        if path is not None:
+            os.link(self.outside / "shared.txt", path)
+            self.users[path] = ("hard", (self.outside / "shared.txt").stat().st_ino)
+
+    @rule(pick=st.integers(0, 99), how=st.sampled_from(["edit", "replace", "link out",
+                                                       "add inside"]))
+    def touch_an_output(self, pick, how):
+        """The user edits, replaces, hard-links out or adds to something the toolkit wrote."""
+        if not self.out.is_dir():
+            return
+        outputs_ = sorted(p for p in self.out.iterdir() if p not in self.users
+                          and p.name != outputs.MANIFEST and not p.is_symlink())
+        if not outputs_:
+            return
+        path = outputs_[pick % len(outputs_)]
+        if path.is_dir():
+            inner = sorted(p for p in path.rglob("*") if p.is_file() and not p.is_symlink()
+                           and not any(u == p or u in p.parents for u in self.users))
+            if how == "add inside" or not inner:
+                if not (path / "mine.txt").exists():
+                    self.users[path / "mine.txt"] = users_file(path / "mine.txt") and \
+                        state(path / "mine.txt")
+                return
+            path = inner[pick % len(inner)]
+        if how == "link out":               # the user keeps a hard link to an output
+            copy = self.outside / f"kept-{len(self.users)}"
+            os.link(path, copy)
+            self.users[copy] = state(copy)
+            return
+        if how == "edit" and path.stat().st_nlink > 1:
+            return                          # it would edit the user's kept link too
+        if how in ("replace", "add inside"):
+            path.unlink()
+            path.write_text("the user's version")
+        else:
+            with open(path, "a") as f:
+                f.write("the user's line")
+        self.users[path] = state(path)
+
+    # -- the toolkit ------------------------------------------------------------------------
+    @rule(study=st.sampled_from(["quickstart", "tuning_sweep"]),
+          writes=st.lists(st.sampled_from(WRITES), min_size=1, max_size=3),
+          force=st.booleans(), fresh=st.booleans(),
+          killed=st.one_of(st.none(), st.integers(0, 2)))
+    def run(self, study, writes, force, fresh, killed):
+        self._run(study, writes, force, fresh, killed)
+
+    @rule(study=st.sampled_from(["quickstart", "tuning_sweep"]),
+          writes=st.lists(st.sampled_from(WRITES), min_size=1, max_size=3))
+    def run_forced(self, study, writes):
+        """What a user does after a refusal: run again with --force."""
+        self._run(study, writes, True, False, None)
+
+    def _run(self, study, writes, force, fresh, killed):
+        STATS["runs"] += 1
+        try:
+            folder = outputs.prepare(self.out, study, force=force, fresh=fresh)
+            try:
+                folder.clear()
+                outputs.claim(folder)
+            except BaseException:
+                outputs.release(folder)
+                raise
+            try:
+                for i, name in enumerate(writes):
+                    if i == killed:
+                        break
+                    self._write(name, fresh)
+            finally:
+                if killed is None:
+                    outputs.record(folder)
+                else:
+                    outputs.release(folder)         # killed: the journal says "running"
+        except SpecError:
+            STATS["refusals"] += 1
+
+    def _write(self, name: str, fresh: bool) -> None:
+        STATS["writes"] += 1
+        path = self.out / name
+        if name == "results.zarr":
+            store = SweepStore(path)
+            store.prepare({"k": np.arange(4.0)}, {"rate": Output("f8")}, (2,), 2, fresh=fresh)
+            store.write_chunk(0, {"k": slice(0, 2)}, {"rate": np.ones(2)})
+        elif name == "cache.zarr":
+            write_dataset(_dataset(), path)
+        elif name.endswith(".log"):
+            with open_append(path) as f:
+                f.write("a line\n")
+        else:
+            atomic_write(path, name)
+
+    # -- what must hold -----------------------------------------------------------------------
+    @invariant()
+    def the_users_entries_are_untouched(self):
+        if not hasattr(self, "base"):
+            return
+        for path, was in self.users.items():
+            assert os.path.lexists(path), f"{path} disappeared"
+            if isinstance(was, tuple) and was[0] == "link":
+                assert path.is_symlink() and os.readlink(path) == was[1], path
+            elif isinstance(was, tuple) and was[0] == "hard":
+                assert os.lstat(path).st_ino == was[1], path
+            else:
+                assert state(path) == was, path
+        assert sorted(os.listdir(self.base)) in (["outside"], ["out", "outside"])
+        assert (self.outside / "shared.txt").read_text() == "the user's data"
+        assert (self.outside / "dir" / "inner.txt").read_text() == "more of it"
+        kept = {p.name for p in self.users if p.parent == self.outside}
+        assert set(os.listdir(self.outside)) == {"shared.txt", "dir"} | kept
+        assert os.listdir(self.outside / "dir") == ["inner.txt"]
+
+
+UserAndToolkit.TestCase.settings = settings(
+    max_examples=20, stateful_step_count=15, deadline=None,
+    suppress_health_check=[HealthCheck.too_slow])
+test_a_user_and_the_toolkit = UserAndToolkit.TestCase
+
+
+class UserAndToolkitThoroughly(UserAndToolkit):
+    pass
+
+
+UserAndToolkitThoroughly.TestCase.settings = settings(
+    max_examples=300, stateful_step_count=40, deadline=None,
+    suppress_health_check=[HealthCheck.too_slow])
+test_a_user_and_the_toolkit_thoroughly = pytest.mark.slow(UserAndToolkitThoroughly.TestCase)

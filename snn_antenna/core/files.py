@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import io
 import itertools
 import json
 import os
@@ -52,11 +53,12 @@ def identity(st: os.stat_result) -> dict | None:
     return None if kind is None else {"kind": kind, "dev": st.st_dev, "ino": st.st_ino}
 
 
-def settled_identity(path: str | Path) -> dict | None:
+def settled_identity(path: str | Path, st: os.stat_result | None = None) -> dict | None:
     """``identity`` of ``path`` with its content's fingerprint: a file's size and modification
-    time, a folder's ``tree_digest``; ``None`` when it is missing, a link or a special file."""
+    time (from ``st`` when given), a folder's ``tree_digest``; ``None`` when it is missing, a
+    link or a special file."""
     try:
-        st = os.lstat(path)
+        st = st if st is not None else os.lstat(path)
     except FileNotFoundError:
         return None
     ident = identity(st)
@@ -65,6 +67,12 @@ def settled_identity(path: str | Path) -> dict | None:
     if ident["kind"] == "file":
         return {**ident, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
     return {**ident, "tree": tree_digest(path)}
+
+
+def is_settled(ident: dict | None) -> bool:
+    """Whether ``ident`` holds the content's fingerprint (the entry was finished), not only
+    device and inode (it was being written when its run was killed)."""
+    return bool(ident) and ("size" in ident or "tree" in ident)
 
 
 def tree_digest(folder: str | Path) -> str:
@@ -78,11 +86,12 @@ def tree_digest(folder: str | Path) -> str:
     return h.hexdigest()[:24]
 
 
-def matches(path: str | Path, ident: dict | None) -> bool:
-    """Whether ``path`` is still the entry ``ident`` identifies (never through a link): same
-    kind, device and inode, and, when ``ident`` holds them, the same size and modification
-    time (a file) or the same tree (a folder)."""
-    if not ident:
+def matches(path: str | Path, ident: dict | None, writing: bool = False) -> bool:
+    """Whether ``path`` is still the finished entry ``ident`` identifies (never through a
+    link): same kind, device and inode, and the same size and modification time (a file) or
+    the same tree (a folder). An entry that was still being written (``ident`` without its
+    fingerprint) matches on device and inode only when ``writing`` (to resume it)."""
+    if not ident or not (writing or is_settled(ident)):
         return False
     try:
         st = os.lstat(path)
@@ -99,9 +108,9 @@ def matches(path: str | Path, ident: dict | None) -> bool:
 
 
 def same_object(path: str | Path, ident: dict | None) -> bool:
-    """``matches`` on device, inode and kind only (what a run that is writing the entry
-    knows of it)."""
-    return bool(ident) and matches(path, {k: ident[k] for k in ("kind", "dev", "ino")})
+    """``matches`` on device, inode and kind only."""
+    return bool(ident) and matches(path, {k: ident[k] for k in ("kind", "dev", "ino")},
+                                   writing=True)
 
 
 # -- walking without following ---------------------------------------------------------------------
@@ -158,6 +167,25 @@ def staging_name(path: str | Path, suffix: str = "tmp") -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}-{next(_counter)}.{suffix}")
 
 
+def make_staging(path: str | Path, suffix: str, create: Callable[[Path], object]):
+    """``(name, create(name))`` for a fresh staging name beside ``path``: declared first,
+    then made by ``create``, which must fail on an existing entry (``O_EXCL``, ``mkdir``); a
+    name already taken (by anyone) is passed over, never opened."""
+    for _ in range(1000):
+        name = staging_name(path, suffix)
+        if os.path.lexists(name):
+            continue
+        declare(name)
+        try:
+            made = create(name)
+        except FileExistsError:
+            continue
+        note(name)
+        return name, made
+    raise SpecError("file", str(path), "a folder where snn-antenna can stage a file; every "
+                                       "staging name it tried is taken")
+
+
 def is_staging(name: str, of: str | None = None) -> bool:
     """Whether ``name`` is a staging name (of the entry ``of``, when given)."""
     return bool(_STAGING.match(name)) and (of is None or name.startswith(f".{of}."))
@@ -168,10 +196,12 @@ class Journal:
     """The top-level entries of ``folder`` the toolkit owns, by identity.
 
     ``owned`` holds earlier runs' entries (checked by ``matches`` when the folder was
-    prepared); ``names`` this run's: ``None`` once declared, then the entry's identity. Each
-    change is persisted (``on_change(entries)``, atomically and synchronously) before the
-    name is created, and again once it exists. ``itself`` (the journal's own file) and its
-    staging names are not journaled.
+    prepared); ``names`` this run's: ``None`` once declared, then the entry's identity
+    (``settled`` once finished). Each change is persisted (``on_change(entries)``, atomically
+    and synchronously) before the name is created, and again once it exists. ``itself`` (the
+    journal's own file) and its staging names are not journaled. An entry a killed run was
+    still writing may be resumed (written, appended) but is never removed: nothing proves
+    what was added to it since.
     """
 
     def __init__(self, folder: str | Path, on_change: Callable[[dict], None],
@@ -179,6 +209,7 @@ class Journal:
         self.folder = Path(os.path.abspath(folder))
         self.owned: dict[str, dict] = dict(owned or {})
         self.names: dict[str, dict | None] = {}
+        self.resumed: set[str] = set()             # left unfinished by a killed run
         self.on_change = on_change
         self.itself = itself
 
@@ -205,13 +236,16 @@ class Journal:
         entry = self.folder / name
         if name in self.names:
             ident = self.names[name]
-            if os.path.lexists(entry) and not same_object(entry, ident):
-                raise self._not_ours(name, "it was replaced while snn-antenna was writing")
+            if os.path.lexists(entry) and not matches(entry, ident, writing=True):
+                raise self._not_ours(name, "it was replaced or edited while snn-antenna was "
+                                           "writing")
             return
         if name in self.owned:
-            if not matches(entry, self.owned[name]) and os.path.lexists(entry):
-                raise self._not_ours(name, "it changed since snn-antenna wrote it")
             ident = self.owned[name]
+            if not matches(entry, ident, writing=True) and os.path.lexists(entry):
+                raise self._not_ours(name, "it changed since snn-antenna wrote it")
+            if not is_settled(ident):
+                self.resumed.add(name)
             self.names[name] = {k: ident[k] for k in ("kind", "dev", "ino")} \
                 if os.path.lexists(entry) else None      # being written: settled at the end
         elif os.path.lexists(entry):
@@ -220,24 +254,30 @@ class Journal:
             self.names[name] = None
         self.on_change(self.entries())
 
-    def note(self, path: Path, st: os.stat_result | None = None) -> None:
+    def note(self, path: Path, st: os.stat_result | None = None,
+             settled: bool = False) -> None:
         top = self._top(path)
         if top is None or len(top[1]) != 1:
             return
-        ident = identity(st if st is not None else os.lstat(path))
+        ident = settled_identity(path, st) if settled else \
+            identity(st if st is not None else os.lstat(path))
         if self.names.get(top[0]) != ident:
             self.names[top[0]] = ident
             self.on_change(self.entries())
 
-    def owns(self, path: Path) -> bool:
-        """Whether the top-level entry holding ``path`` is still the toolkit's."""
+    def owns(self, path: Path, removing: bool = False) -> bool:
+        """Whether the top-level entry holding ``path`` is still the toolkit's (to write or
+        append; to remove, when ``removing``: never an entry a killed run left unfinished,
+        unless a staging name)."""
         top = self._top(path)
         if top is None:
             return True
-        entry = self.folder / top[0]
-        if top[0] in self.names:
-            return same_object(entry, self.names[top[0]])
-        return matches(entry, self.owned.get(top[0]))
+        name, entry = top[0], self.folder / top[0]
+        if removing and name in self.resumed and not is_staging(name):
+            return False
+        if name in self.names:
+            return matches(entry, self.names[name], writing=True)
+        return matches(entry, self.owned.get(name), writing=is_staging(name) or not removing)
 
     def forget(self, name: str) -> None:
         self.owned.pop(name, None)
@@ -248,7 +288,7 @@ class Journal:
         """The run has ended: each entry it wrote gets its content's fingerprint, and one no
         longer there (or no longer the one it made) is dropped."""
         for name, ident in list(self.names.items()):
-            if same_object(self.folder / name, ident):
+            if matches(self.folder / name, ident, writing=True):
                 self.names[name] = settled_identity(self.folder / name)
             else:
                 del self.names[name]
@@ -285,16 +325,17 @@ def declare(path: str | Path) -> None:
             journal.declare(Path(path))
 
 
-def note(path: str | Path, st: os.stat_result | None = None) -> None:
-    """Record what identifies ``path`` (just created by the caller) in its run's journal."""
+def note(path: str | Path, st: os.stat_result | None = None, settled: bool = False) -> None:
+    """Record what identifies ``path`` (just created by the caller) in its run's journal;
+    ``settled``: it is finished, with its content's fingerprint."""
     with _journal_lock:
         for journal in _journals:
-            journal.note(Path(path), st)
+            journal.note(Path(path), st, settled)
 
 
-def _owned(path: Path) -> bool:
+def _owned(path: Path, removing: bool = False) -> bool:
     with _journal_lock:
-        return all(journal.owns(path) for journal in _journals)
+        return all(journal.owns(path, removing) for journal in _journals)
 
 
 # -- no symlinks ---------------------------------------------------------------------------------
@@ -360,7 +401,25 @@ def open_append(path: str | Path, binary: bool = False):
         os.close(fd)
         raise SpecError("file", str(path), problem)
     note(path, st)
-    return os.fdopen(fd, "ab" if binary else "a", **({} if binary else {"encoding": "utf-8"}))
+    raw = _Appending(fd, path)
+    buffered = io.BufferedWriter(raw)
+    return buffered if binary else io.TextIOWrapper(buffered, encoding="utf-8",
+                                                    line_buffering=False)
+
+
+class _Appending(io.FileIO):
+    """An append-only file that tells its journal what it is once closed (finished)."""
+
+    def __init__(self, fd: int, path: Path):
+        super().__init__(fd, "a", closefd=True)
+        self._path = path
+
+    def close(self) -> None:
+        if not self.closed:
+            try:
+                note(self._path, os.fstat(self.fileno()), settled=True)
+            finally:
+                super().close()
 
 
 def write_new(path: str | Path, data: bytes | str, force: bool = False,
@@ -389,11 +448,9 @@ def atomic_write(path: str | Path, data: bytes | str) -> None:
     make_folder(path.parent)
     refuse_symlink(path)
     declare(path)
-    tmp = staging_name(path)
-    declare(tmp)
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL | NOFOLLOW | CLOEXEC, 0o666)
+    tmp, fd = make_staging(path, "tmp", lambda name: os.open(
+        name, os.O_WRONLY | os.O_CREAT | os.O_EXCL | NOFOLLOW | CLOEXEC, 0o666))
     made = os.fstat(fd)
-    note(tmp, made)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data if isinstance(data, bytes) else data.encode("utf-8"))
@@ -402,7 +459,7 @@ def atomic_write(path: str | Path, data: bytes | str) -> None:
             st = os.fstat(f.fileno())
         refuse_symlink(path)
         os.replace(tmp, path)
-        note(path, st)
+        note(path, st, settled=True)
     except BaseException:
         if same_object(tmp, identity(made)):          # only the file it made
             os.unlink(tmp)
@@ -424,11 +481,13 @@ def remove_entry(target: str | Path, ident: dict | None = None) -> None:
     refuse_symlink(target, "entry")
     if not os.path.lexists(target):
         return
-    if not _owned(target) or (ident is not None and not matches(target, ident)):
+    if not _owned(target, removing=True) or (
+            ident is not None and not matches(target, ident, writing=is_staging(target.name))):
         raise SpecError("entry", str(target),
-                        "an entry snn-antenna wrote, to be removed; this one changed since "
-                        "(replaced or edited), so it is the user's and is kept: move it, or "
-                        "choose another --out")
+                        "an entry snn-antenna wrote and finished, to be removed; this one "
+                        "changed since (replaced or edited), or a run that was killed left it "
+                        "unfinished, so it may hold what is not snn-antenna's and is kept: "
+                        "move it away, or choose another --out")
     if target.is_dir():
         check_tree(target, "folder")
         _remove_tree(target)

@@ -134,7 +134,7 @@ def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
     known = {name: (manifest.get("identity") or {}).get(name) for name in manifest["files"]
              if isinstance(name, str)} if manifest else {}
     listed = {name: ident for name, ident in known.items()
-              if name in entries and files.matches(path / name, ident)}
+              if name in entries and files.matches(path / name, ident, writing=True)}
     foreign = [e for e in entries if e not in listed]
     changed = [e for e in foreign if e in known]
     other_study = owner is not None and owner != study
@@ -157,8 +157,9 @@ def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
                                 f"{MANIFEST}, or changed since); --fresh never removes anything "
                                 "else")
     replace = {}
-    if other_study and force:
-        replace, listed = listed, {}
+    if other_study and force:       # what a killed run left unfinished is never removed
+        replace = {n: i for n, i in listed.items() if files.is_settled(i)}
+        listed = {}
     for entry in replace:                   # before anything is removed
         if (path / entry).is_dir():
             files.check_tree(path / entry, "folder")
@@ -207,7 +208,7 @@ def claim(folder: OutputFolder) -> None:
         folder.lock_fd = lock_folder(folder.path)
     folder.started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     folder.listed = {name: ident for name, ident in folder.listed.items()
-                     if files.matches(folder.path / name, ident)}
+                     if files.matches(folder.path / name, ident, writing=True)}
     journal = files.Journal(folder.path,
                             lambda entries: _write_manifest(folder, entries, "running"),
                             owned=folder.listed, itself=MANIFEST)

@@ -58,10 +58,7 @@ def write_dataset(ds, path: str | Path, **to_zarr) -> None:
     files.refuse_symlink(path, "store")
     files.make_folder(path.parent)
     files.declare(path)                             # the user's entry of that name is refused
-    tmp = files.staging_name(path, "partial")
-    files.declare(tmp)
-    os.mkdir(tmp)                                   # exclusively: never a name already there
-    files.note(tmp)
+    tmp, _ = files.make_staging(path, "partial", os.mkdir)   # never a name already there
     try:
         ds.to_zarr(tmp, mode="w-", zarr_format=3, consolidated=False, **to_zarr)
         files.remove_entry(path)
@@ -70,7 +67,7 @@ def write_dataset(ds, path: str | Path, **to_zarr) -> None:
         if os.path.isdir(tmp) and not os.path.islink(tmp):
             files.remove_entry(tmp)
         raise
-    files.note(path)
+    files.note(path, settled=True)
 
 
 def read_dataset(path: str | Path):
