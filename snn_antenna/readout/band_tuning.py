@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import calibration
+from ..core import bounds
 from ..core.errors import check, is_number
 from .spiking import Band, align_events
 
@@ -76,6 +77,10 @@ class Tuning:
               "model ms per step > 0")
         check(is_number(self.spread) and 0 <= self.spread < 0.5, "spread", self.spread,
               "a fraction in [0, 0.5)")
+        bounds.amplitude("threshold_g", self.threshold_g, lo=0.0)
+        bounds.number("coder_amplitude", self.coder_amplitude, 0.0, bounds.MAX_AMPLITUDE,
+                      lo_open=True)
+        bounds.number("hz_per_k", self.hz_per_k, 0.0, bounds.MAX_RATE_HZ, lo_open=True)
 
     @property
     def n_channels(self) -> int:
