@@ -202,6 +202,24 @@ def test_a_file_the_user_put_inside_a_store_is_not_removed_by_force(tmp_path):
     assert state(out / "results.zarr" / "notes.txt") == mine
 
 
+def test_a_killed_sweep_resumes_and_no_other_study_removes_it(tmp_path):
+    out = tmp_path / "out"
+    folder = outputs.prepare(out, "tuning_sweep")
+    outputs.claim(folder)
+    _store(out / "results.zarr").write_chunk(0, {"k": slice(0, 2)}, {"rate": np.ones(2)})
+    outputs.release(folder)                     # killed: its journal says "running"
+    with outputs.output_folder(out, "tuning_sweep"):
+        assert _store(out / "results.zarr").done_chunks() == {0}       # resumed
+    folder = outputs.prepare(out, "tuning_sweep")
+    outputs.claim(folder)
+    _store(out / "results.zarr").write_chunk(1, {"k": slice(2, 4)}, {"rate": np.ones(2)})
+    outputs.release(folder)                     # killed again, mid-sweep
+    mine = users_file(out / "results.zarr" / "mine.txt")
+    with outputs.output_folder(out, "quickstart", force=True):
+        pass                                    # what a killed run left is never removed
+    assert state(out / "results.zarr" / "mine.txt") == mine
+
+
 # -- appends ----------------------------------------------------------------------------------
 def test_an_append_refuses_a_file_with_another_hard_link(tmp_path):
     log = tmp_path / "run.log"
@@ -424,6 +442,7 @@ class UserAndToolkit(RuleBasedStateMachine):
             store = SweepStore(path)
             store.prepare({"k": np.arange(4.0)}, {"rate": Output("f8")}, (2,), 2, fresh=fresh)
             store.write_chunk(0, {"k": slice(0, 2)}, {"rate": np.ones(2)})
+            store.write_chunk(1, {"k": slice(2, 4)}, {"rate": np.ones(2)})
         elif name == "cache.zarr":
             write_dataset(_dataset(), path)
         elif name.endswith(".log"):

@@ -203,6 +203,7 @@ class SweepStore:
                                "fingerprint": key,
                                "block_shape": list(map(int, block_shape))})
         write_dataset(ds, self.path, compute=False)  # never a half-created store
+        files.note(self.path)           # being written chunk by chunk: finished at the run's end
         return set()
 
     def _read_attrs(self) -> dict:
