@@ -16,7 +16,6 @@ import re
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 

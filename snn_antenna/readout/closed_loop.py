@@ -24,7 +24,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..core import bounds
-from ..core.errors import check
 from ..networks.assembly import build as build_network
 from ..networks.control import CONTROL_UNITS
 from ..networks.gate import read_trace
