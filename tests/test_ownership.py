@@ -216,7 +216,8 @@ def test_a_killed_sweep_resumes_and_no_other_study_removes_it(tmp_path):
     outputs.release(folder)                     # killed again, mid-sweep
     mine = users_file(out / "results.zarr" / "mine.txt")
     with outputs.output_folder(out, "quickstart", force=True):
-        pass                                    # what a killed run left is never removed
+        with pytest.raises(SpecError, match="killed left it unfinished"):
+            _store(out / "results.zarr")        # what a killed run left is never removed
     assert state(out / "results.zarr" / "mine.txt") == mine
 
 

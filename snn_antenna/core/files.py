@@ -205,11 +205,12 @@ class Journal:
     """
 
     def __init__(self, folder: str | Path, on_change: Callable[[dict], None],
-                 owned: dict | None = None, itself: str = ""):
+                 owned: dict | None = None, itself: str = "", unfinished=()):
         self.folder = Path(os.path.abspath(folder))
         self.owned: dict[str, dict] = dict(owned or {})
         self.names: dict[str, dict | None] = {}
         self.resumed: set[str] = set()             # left unfinished by a killed run
+        self.unfinished = set(unfinished)          # the same, of another study: kept
         self.on_change = on_change
         self.itself = itself
 
@@ -249,7 +250,9 @@ class Journal:
             self.names[name] = {k: ident[k] for k in ("kind", "dev", "ino")} \
                 if os.path.lexists(entry) else None      # being written: settled at the end
         elif os.path.lexists(entry):
-            raise self._not_ours(name, "that name is a file of yours there")
+            raise self._not_ours(name, "a run that was killed left it unfinished, so it may "
+                                       "hold what is not snn-antenna's" if name in self.unfinished
+                                 else "that name is a file of yours there")
         else:
             self.names[name] = None
         self.on_change(self.entries())

@@ -52,6 +52,7 @@ class OutputFolder:
     study: str
     listed: dict = field(default_factory=dict)      # the toolkit's earlier entries: identity
     replace: dict = field(default_factory=dict)     # another study's entries, for --force
+    unfinished: set = field(default_factory=set)    # what its killed run left: kept
     created: bool = False                           # the run made the folder
     lock_fd: int | None = None                      # the folder's flock, held for the run
     journal: files.Journal | None = None
@@ -156,14 +157,15 @@ def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
                                 "a store snn-antenna created (this one is not in the folder's "
                                 f"{MANIFEST}, or changed since); --fresh never removes anything "
                                 "else")
-    replace = {}
+    replace, unfinished = {}, set()
     if other_study and force:       # what a killed run left unfinished is never removed
         replace = {n: i for n, i in listed.items() if files.is_settled(i)}
+        unfinished = set(listed) - set(replace)
         listed = {}
     for entry in replace:                   # before anything is removed
         if (path / entry).is_dir():
             files.check_tree(path / entry, "folder")
-    return OutputFolder(path, study, listed, replace)
+    return OutputFolder(path, study, listed, replace, unfinished)
 
 
 # -- one writer per folder ----------------------------------------------------------------------
@@ -211,7 +213,8 @@ def claim(folder: OutputFolder) -> None:
                      if files.matches(folder.path / name, ident, writing=True)}
     journal = files.Journal(folder.path,
                             lambda entries: _write_manifest(folder, entries, "running"),
-                            owned=folder.listed, itself=MANIFEST)
+                            owned=folder.listed, itself=MANIFEST,
+                            unfinished=folder.unfinished)
     folder.journal = journal
     _write_manifest(folder, journal.entries(), "running")
     files.open_journal(journal)
