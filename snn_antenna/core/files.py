@@ -1,67 +1,311 @@
-"""How the toolkit touches the disk: the one place that writes, appends and removes.
+"""How the toolkit touches the disk: the one place that writes, appends, removes and locks.
 
-Three promises, kept here so that every writer keeps them the same way:
+Four promises, kept here so that every writer keeps them the same way:
 
-- **Whole or not at all.** ``atomic_write`` writes beside the target and renames into place: a
-  reader never sees half a report, summary or recording header, and an interruption leaves the
-  previous version in place.
-- **No symlink is followed.** Where the toolkit expects its own file or folder and finds a
-  symlink, it refuses with one line (``refuse_symlink``); appends open with ``O_NOFOLLOW``;
-  removal (``remove_entry``) never descends through a link. A link the user made points at the
-  user's data, which the toolkit did not write.
-- **Write-ahead ownership.** While a run holds a :class:`Journal` on its output folder, every
-  name the toolkit creates at the top of that folder is recorded in the journal *before* it is
-  created (``declare``), so a run killed at any instant leaves exactly the names it created, and
-  nothing else in the folder is ever taken as the toolkit's (``outputs`` keeps the journal).
+- **Whole or not at all.** ``atomic_write`` writes a staging file beside the target and
+  renames it into place: a reader never sees half a report, summary, manifest or recording
+  header, and an interruption leaves the previous version in place.
+- **No link is followed, at any depth.** Where the toolkit expects its own file or folder and
+  finds a symlink, it refuses with one line (``refuse_symlink``); inside an output folder every
+  folder between it and the written file is checked too; appends open with ``O_NOFOLLOW``; a
+  folder is walked without following anything (``check_tree``) before it is resumed or
+  removed, and any link, device, pipe or hard-linked file inside it is refused by name. A link
+  the user made points at the user's data, which the toolkit did not write.
+- **Ownership by identity, written ahead.** While a run holds a :class:`Journal` on its output
+  folder, every name the toolkit creates at the top of that folder is recorded *before* it is
+  created (``declare``) and, once it exists, with what identifies it (``note``: device and
+  inode; at the run's end, for a file its size and modification time, for a folder a digest of
+  every entry below it). Removal, replacement and append act only on an entry that is still
+  that one (``matches``), never on the journal's word alone: an entry the user replaced or
+  edited is the user's. An entry a killed run was still writing carries its device and inode
+  only, and is matched on those.
+- **Staging names are never the user's.** A staging name (``staging_name``: hidden, with the
+  process id and a counter) is declared first and created exclusively (``O_EXCL``, ``mkdir``),
+  so a file already bearing it is refused, never truncated or removed; a staging entry left by
+  a killed run is cleaned only when its journal proves it was the toolkit's.
+
+Appends refuse a file with more than one hard link: writing it would change the other name.
 """
 from __future__ import annotations
 
+import fcntl
+import hashlib
+import io
 import itertools
 import json
 import os
-import shutil
+import re
 import stat
 import threading
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 from .errors import SpecError
+
+NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
+CLOEXEC = getattr(os, "O_CLOEXEC", 0)
+
+
+# -- what identifies an entry ------------------------------------------------------------------
+def identity(st: os.stat_result) -> dict | None:
+    """Device, inode and kind of a regular file or folder (``None`` for anything else)."""
+    kind = "dir" if stat.S_ISDIR(st.st_mode) else "file" if stat.S_ISREG(st.st_mode) else None
+    return None if kind is None else {"kind": kind, "dev": st.st_dev, "ino": st.st_ino}
+
+
+def settled_identity(path: str | Path, st: os.stat_result | None = None) -> dict | None:
+    """``identity`` of ``path`` with its content's fingerprint: a file's size and modification
+    time (from ``st`` when given), a folder's ``tree_digest``; ``None`` when it is missing, a
+    link or a special file."""
+    try:
+        st = st if st is not None else os.lstat(path)
+    except FileNotFoundError:
+        return None
+    ident = identity(st)
+    if ident is None:
+        return None
+    if ident["kind"] == "file":
+        return {**ident, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+    return {**ident, "tree": tree_digest(path)}
+
+
+def is_settled(ident: dict | None) -> bool:
+    """Whether ``ident`` holds the content's fingerprint (the entry was finished), not only
+    device and inode (it was being written when its run was killed)."""
+    return bool(ident) and ("size" in ident or "tree" in ident)
+
+
+def tree_digest(folder: str | Path) -> str:
+    """A digest of every entry below ``folder`` (its relative name, kind, inode, size and
+    modification time), read without following anything: any file added, removed, replaced
+    or written below it changes the digest."""
+    h = hashlib.sha256()
+    for rel, st in sorted(walk(folder), key=lambda item: item[0]):
+        h.update(json.dumps([rel, stat.S_IFMT(st.st_mode), st.st_ino, st.st_size,
+                             st.st_mtime_ns if not stat.S_ISDIR(st.st_mode) else 0]).encode())
+    return h.hexdigest()[:24]
+
+
+def matches(path: str | Path, ident: dict | None, writing: bool = False) -> bool:
+    """Whether ``path`` is still the finished entry ``ident`` identifies (never through a
+    link): same kind, device and inode, and the same size and modification time (a file) or
+    the same tree (a folder). An entry that was still being written (``ident`` without its
+    fingerprint) matches on device and inode only when ``writing`` (to resume it)."""
+    if not ident or not (writing or is_settled(ident)):
+        return False
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return False
+    now = identity(st)
+    if now is None or any(now[k] != ident.get(k) for k in ("kind", "dev", "ino")):
+        return False
+    if "size" in ident:
+        return (st.st_size, st.st_mtime_ns) == (ident["size"], ident.get("mtime_ns"))
+    if "tree" in ident:
+        return tree_digest(path) == ident["tree"]
+    return True
+
+
+def same_object(path: str | Path, ident: dict | None) -> bool:
+    """``matches`` on device, inode and kind only."""
+    return bool(ident) and matches(path, {k: ident[k] for k in ("kind", "dev", "ino")},
+                                   writing=True)
+
+
+# -- walking without following ---------------------------------------------------------------------
+def walk(folder: str | Path) -> Iterator[tuple[str, os.stat_result]]:
+    """``(relative name, lstat)`` of every entry below ``folder``; never enters a link."""
+    folder = Path(folder)
+    stack = [""]
+    while stack:
+        rel = stack.pop()
+        try:
+            with os.scandir(folder / rel if rel else folder) as it:
+                entries = list(it)
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        for entry in entries:
+            name = f"{rel}/{entry.name}" if rel else entry.name
+            st = entry.stat(follow_symlinks=False)
+            yield name, st
+            if stat.S_ISDIR(st.st_mode):
+                stack.append(name)
+
+
+def check_tree(folder: str | Path, what: str = "store") -> Path:
+    """``folder`` (the toolkit's) walked without following anything, before it is resumed
+    or removed: a link, a device or pipe, or a file with another hard link anywhere inside
+    it is refused in one line naming it (writing there would reach what is not the toolkit's;
+    removing it would take what the user placed)."""
+    folder = refuse_symlink(folder, what)
+    for rel, st in walk(folder):
+        path = folder / rel
+        if stat.S_ISLNK(st.st_mode):
+            problem = f"{path} is a symbolic link (to {os.readlink(path)})"
+        elif not (stat.S_ISDIR(st.st_mode) or stat.S_ISREG(st.st_mode)):
+            problem = f"{path} is a device, pipe or socket"
+        elif stat.S_ISREG(st.st_mode) and st.st_nlink > 1:
+            problem = f"{path} is a file with another hard link ({st.st_nlink} names)"
+        else:
+            continue
+        raise SpecError(what, str(folder),
+                        f"a {what} holding only what snn-antenna wrote; {problem}, which "
+                        "snn-antenna never writes through or removes: move it out, or choose "
+                        "another --out")
+    return folder
+
+
+# -- staging names -------------------------------------------------------------------------------
+_counter = itertools.count()
+_STAGING = re.compile(r"^\..+\.\d+-\d+\.(tmp|partial)$")
+
+
+def staging_name(path: str | Path, suffix: str = "tmp") -> Path:
+    """A fresh hidden name beside ``path`` to build it under (``.NAME.PID-N.SUFFIX``)."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{os.getpid()}-{next(_counter)}.{suffix}")
+
+
+def make_staging(path: str | Path, suffix: str, create: Callable[[Path], object]):
+    """``(name, create(name))`` for a fresh staging name beside ``path``: declared first,
+    then made by ``create``, which must fail on an existing entry (``O_EXCL``, ``mkdir``); a
+    name already taken (by anyone) is passed over, never opened."""
+    for _ in range(1000):
+        name = staging_name(path, suffix)
+        if os.path.lexists(name):
+            continue
+        declare(name)
+        try:
+            made = create(name)
+        except FileExistsError:
+            continue
+        note(name)
+        return name, made
+    raise SpecError("file", str(path), "a folder where snn-antenna can stage a file; every "
+                                       "staging name it tried is taken")
+
+
+def is_staging(name: str, of: str | None = None) -> bool:
+    """Whether ``name`` is a staging name (of the entry ``of``, when given)."""
+    return bool(_STAGING.match(name)) and (of is None or name.startswith(f".{of}."))
 
 
 # -- write-ahead journals -----------------------------------------------------------------------
 class Journal:
-    """The top-level names one run creates in ``folder``; ``on_new(names)`` persists the
-    set (atomically, synchronously) each time it grows, before the name is created. A name
-    that already exists and is not ``owned`` (the toolkit's from before) is the user's: it is
-    refused, never overwritten (``--force`` keeps the user's files, so a study may meet one
-    that bears a name it writes)."""
+    """The top-level entries of ``folder`` the toolkit owns, by identity.
 
-    def __init__(self, folder: str | Path, on_new: Callable[[set], None], owned=()):
+    ``owned`` holds earlier runs' entries (checked by ``matches`` when the folder was
+    prepared); ``names`` this run's: ``None`` once declared, then the entry's identity
+    (``settled`` once finished). Each change is persisted (``on_change(entries)``, atomically
+    and synchronously) before the name is created, and again once it exists. ``itself`` (the
+    journal's own file) and its staging names are not journaled. An entry a killed run was
+    still writing may be resumed (written, appended) but is never removed: nothing proves
+    what was added to it since.
+    """
+
+    def __init__(self, folder: str | Path, on_change: Callable[[dict], None],
+                 owned: dict | None = None, itself: str = "", unfinished=()):
         self.folder = Path(os.path.abspath(folder))
-        self.names: set[str] = set()
-        self.owned = set(owned)
-        self.on_new = on_new
+        self.owned: dict[str, dict] = dict(owned or {})
+        self.names: dict[str, dict | None] = {}
+        self.resumed: set[str] = set()             # left unfinished by a killed run
+        self.unfinished = set(unfinished)          # the same, of another study: kept
+        self.on_change = on_change
+        self.itself = itself
 
-    def declare(self, path: Path) -> None:
+    def entries(self) -> dict:
+        return {**self.owned, **self.names}
+
+    def _top(self, path: Path) -> tuple[str, tuple[str, ...]] | None:
         try:
             rel = Path(os.path.abspath(path)).relative_to(self.folder)
         except ValueError:
+            return None
+        if not rel.parts or rel.parts[0] == self.itself or is_staging(rel.parts[0],
+                                                                         self.itself):
+            return None
+        return rel.parts[0], rel.parts
+
+    def declare(self, path: Path) -> None:
+        top = self._top(path)
+        if top is None:
             return
-        if not rel.parts:
+        name, parts = top
+        for depth in range(1, len(parts)):          # no link between the folder and the file
+            refuse_symlink(self.folder.joinpath(*parts[:depth]), "folder")
+        entry = self.folder / name
+        if name in self.names:
+            ident = self.names[name]
+            if os.path.lexists(entry) and not matches(entry, ident, writing=True):
+                raise self._not_ours(name, "it was replaced or edited while snn-antenna was "
+                                           "writing")
             return
-        name = rel.parts[0]
-        if name not in self.names:
-            if name not in self.owned and os.path.lexists(self.folder / name):
-                raise SpecError("--out", str(self.folder),
-                                f"a folder where snn-antenna may write {name}; that name is "
-                                "a file of yours there, which it never overwrites: move it, "
-                                "or choose another --out")
-            self.names.add(name)
-            self.on_new(set(self.names))
+        if name in self.owned:
+            ident = self.owned[name]
+            if not matches(entry, ident, writing=True) and os.path.lexists(entry):
+                raise self._not_ours(name, "it changed since snn-antenna wrote it")
+            if not is_settled(ident):
+                self.resumed.add(name)
+            self.names[name] = {k: ident[k] for k in ("kind", "dev", "ino")} \
+                if os.path.lexists(entry) else None      # being written: settled at the end
+        elif os.path.lexists(entry):
+            raise self._not_ours(name, "a run that was killed left it unfinished, so it may "
+                                       "hold what is not snn-antenna's" if name in self.unfinished
+                                 else "that name is a file of yours there")
+        else:
+            self.names[name] = None
+        self.on_change(self.entries())
+
+    def note(self, path: Path, st: os.stat_result | None = None,
+             settled: bool = False) -> None:
+        top = self._top(path)
+        if top is None or len(top[1]) != 1:
+            return
+        ident = settled_identity(path, st) if settled else \
+            identity(st if st is not None else os.lstat(path))
+        if self.names.get(top[0]) != ident:
+            self.names[top[0]] = ident
+            self.on_change(self.entries())
+
+    def owns(self, path: Path, removing: bool = False) -> bool:
+        """Whether the top-level entry holding ``path`` is still the toolkit's (to write or
+        append; to remove, when ``removing``: never an entry a killed run left unfinished,
+        unless a staging name)."""
+        top = self._top(path)
+        if top is None:
+            return True
+        name, entry = top[0], self.folder / top[0]
+        if removing and name in self.resumed and not is_staging(name):
+            return False
+        if name in self.names:
+            return matches(entry, self.names[name], writing=True)
+        return matches(entry, self.owned.get(name), writing=is_staging(name) or not removing)
+
+    def forget(self, name: str) -> None:
+        self.owned.pop(name, None)
+        self.names.pop(name, None)
+        self.on_change(self.entries())
+
+    def settle(self) -> None:
+        """The run has ended: each entry it wrote gets its content's fingerprint, and one no
+        longer there (or no longer the one it made) is dropped."""
+        for name, ident in list(self.names.items()):
+            if matches(self.folder / name, ident, writing=True):
+                self.names[name] = settled_identity(self.folder / name)
+            else:
+                del self.names[name]
+        self.owned = {n: i for n, i in self.owned.items() if os.path.lexists(self.folder / n)}
+
+    def _not_ours(self, name: str, why: str) -> SpecError:
+        return SpecError("--out", str(self.folder),
+                         f"a folder where snn-antenna may write {name}; {why}, and it is "
+                         "never overwritten, appended to or removed: move it, or choose "
+                         "another --out")
 
 
 _journals: list[Journal] = []
-_journal_lock = threading.Lock()
+_journal_lock = threading.RLock()
 
 
 def open_journal(journal: Journal) -> None:
@@ -77,10 +321,24 @@ def close_journal(journal: Journal) -> None:
 
 def declare(path: str | Path) -> None:
     """Record ``path`` (its name at the top of an output folder a run is writing) in that
-    run's journal before the caller creates it. Outside any journaled folder: nothing."""
+    run's journal before the caller creates, replaces or appends to it; refused when that
+    entry is not the toolkit's (see :class:`Journal`). Outside any journaled folder: nothing."""
     with _journal_lock:
         for journal in _journals:
             journal.declare(Path(path))
+
+
+def note(path: str | Path, st: os.stat_result | None = None, settled: bool = False) -> None:
+    """Record what identifies ``path`` (just created by the caller) in its run's journal;
+    ``settled``: it is finished, with its content's fingerprint."""
+    with _journal_lock:
+        for journal in _journals:
+            journal.note(Path(path), st, settled)
+
+
+def _owned(path: Path, removing: bool = False) -> bool:
+    with _journal_lock:
+        return all(journal.owns(path, removing) for journal in _journals)
 
 
 # -- no symlinks ---------------------------------------------------------------------------------
@@ -112,19 +370,22 @@ def make_folder(path: str | Path) -> Path:
             os.mkdir(folder)
         except FileExistsError:
             pass
+        else:
+            note(folder)
     refuse_symlink(path, "folder")
     return path
 
 
 def open_append(path: str | Path, binary: bool = False):
-    """``path`` opened to append, never through a symlink. A file the call creates gets the
-    mode any new file would get; an existing file's mode is left as its owner set it."""
+    """``path`` opened to append, never through a symlink, never to a file with another hard
+    link, and (in an output folder) only to the toolkit's own file. A file the call creates
+    gets the mode any new file would get; an existing file's mode is left as its owner set it."""
     path = Path(path)
     make_folder(path.parent)
     refuse_symlink(path)
     declare(path)
-    flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) \
-        | getattr(os, "O_CLOEXEC", 0)
+    existed = os.path.lexists(path)
+    flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | NOFOLLOW | CLOEXEC
     try:
         fd = os.open(path, flags, 0o666)      # the umask applies, as to any new file
     except OSError as exc:
@@ -132,10 +393,36 @@ def open_append(path: str | Path, binary: bool = False):
             refuse_symlink(path)
         raise SpecError("file", str(path), f"a file snn-antenna can append to ({exc.strerror})"
                         ) from None
-    if not stat.S_ISREG(os.fstat(fd).st_mode):
+    st = os.fstat(fd)
+    problem = ("a regular file (this is a device, pipe or folder)" if not stat.S_ISREG(st.st_mode)
+               else f"a file with one name; this one has another hard link ({st.st_nlink} "
+                    "names), which an append would change too: copy it instead of linking it"
+               if st.st_nlink > 1 else None)
+    if problem is None and existed and not _owned(path):
+        problem = "the toolkit's own file; it was replaced while snn-antenna was writing"
+    if problem is not None:
         os.close(fd)
-        raise SpecError("file", str(path), "a regular file (this is a device, pipe or folder)")
-    return os.fdopen(fd, "ab" if binary else "a", **({} if binary else {"encoding": "utf-8"}))
+        raise SpecError("file", str(path), problem)
+    note(path, st)
+    raw = _Appending(fd, path)
+    buffered = io.BufferedWriter(raw)
+    return buffered if binary else io.TextIOWrapper(buffered, encoding="utf-8",
+                                                    line_buffering=False)
+
+
+class _Appending(io.FileIO):
+    """An append-only file that tells its journal what it is once closed (finished)."""
+
+    def __init__(self, fd: int, path: Path):
+        super().__init__(fd, "a", closefd=True)
+        self._path = path
+
+    def close(self) -> None:
+        if not self.closed:
+            try:
+                note(self._path, os.fstat(self.fileno()), settled=True)
+            finally:
+                super().close()
 
 
 def write_new(path: str | Path, data: bytes | str, force: bool = False,
@@ -151,32 +438,33 @@ def write_new(path: str | Path, data: bytes | str, force: bool = False,
 
 
 # -- whole or not at all -------------------------------------------------------------------------
-_tmp_counter = itertools.count()
-
-
 def atomic_write(path: str | Path, data: bytes | str) -> None:
-    """Write to a temporary file beside ``path`` and rename it into place.
+    """Write to a staging file beside ``path`` and rename it into place.
 
-    The temporary name is declared (and made with ``O_EXCL``) before it exists, so a run killed
-    mid-write leaves only a name its journal holds. The file gets the mode any new file would
-    get (0644 under the usual umask 022). A symlink at ``path`` is refused, not replaced.
+    The staging name is declared before it exists and made with ``O_EXCL``, so a run killed
+    mid-write leaves only a name its journal holds (with its identity), and a file of the
+    user's that bears such a name is never opened. The file gets the mode any new file would
+    get (0644 under the usual umask 022). A symlink at ``path`` is refused, not replaced, and
+    so is (in an output folder) an entry that is no longer the toolkit's.
     """
     path = Path(path)
     make_folder(path.parent)
     refuse_symlink(path)
     declare(path)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}-{next(_tmp_counter)}.tmp")
-    declare(tmp)
-    flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
-    fd = os.open(tmp, flags, 0o666)
+    tmp, fd = make_staging(path, "tmp", lambda name: os.open(
+        name, os.O_WRONLY | os.O_CREAT | os.O_EXCL | NOFOLLOW | CLOEXEC, 0o666))
+    made = os.fstat(fd)
     try:
         with os.fdopen(fd, "wb") as f:
             f.write(data if isinstance(data, bytes) else data.encode("utf-8"))
             f.flush()
             os.fsync(f.fileno())
+            st = os.fstat(f.fileno())
+        refuse_symlink(path)
         os.replace(tmp, path)
+        note(path, st, settled=True)
     except BaseException:
-        if os.path.lexists(tmp):
+        if same_object(tmp, identity(made)):          # only the file it made
             os.unlink(tmp)
         raise
 
@@ -186,13 +474,54 @@ def write_json(path: str | Path, data, indent: int = 1) -> None:
     atomic_write(path, json.dumps(data, indent=indent))
 
 
-def remove_entry(target: str | Path) -> None:
-    """Remove a file or folder the toolkit created: a folder's tree is removed without
-    following any link inside it; a symlink where the toolkit's entry was is refused (the
-    user put it there)."""
+def remove_entry(target: str | Path, ident: dict | None = None) -> None:
+    """Remove a file or folder the toolkit created, and only that: a symlink where it was is
+    refused (the user put it there); in an output folder, an entry that is no longer the one
+    its journal identifies is refused; with ``ident``, so is anything that does not
+    ``match`` it. A folder is walked first (``check_tree``) and removed without following
+    anything."""
     target = Path(target)
     refuse_symlink(target, "entry")
+    if not os.path.lexists(target):
+        return
+    if not _owned(target, removing=True) or (
+            ident is not None and not matches(target, ident, writing=is_staging(target.name))):
+        raise SpecError("entry", str(target),
+                        "an entry snn-antenna wrote and finished, to be removed; this one "
+                        "changed since (replaced or edited), or a run that was killed left it "
+                        "unfinished, so it may hold what is not snn-antenna's and is kept: "
+                        "move it away, or choose another --out")
     if target.is_dir():
-        shutil.rmtree(target)
-    elif os.path.lexists(target):
+        check_tree(target, "folder")
+        _remove_tree(target)
+    else:
         target.unlink()
+
+
+def _remove_tree(folder: Path) -> None:
+    """Remove ``folder`` and everything below it (``check_tree`` has passed), deepest first,
+    each entry by name relative to its parent's descriptor: nothing is followed."""
+    for rel, st in sorted(walk(folder), key=lambda item: -item[0].count("/")):
+        path = folder / rel
+        if stat.S_ISDIR(st.st_mode):
+            os.rmdir(path)
+        else:
+            os.unlink(path)
+    os.rmdir(folder)
+
+
+# -- one writer per folder ----------------------------------------------------------------------
+def lock_folder(path: str | Path, follow: bool = False) -> int | None:
+    """An exclusive ``flock`` on the folder ``path`` itself (no lock file to leave behind):
+    its descriptor, held until closed, or ``None`` when another process holds it. The kernel
+    releases the lock of a process that dies. A symlink at ``path`` is refused unless
+    ``follow`` (the output folder a user names may itself be a link)."""
+    path = Path(path) if follow else refuse_symlink(path, "folder")
+    fd = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | CLOEXEC
+                 | (0 if follow else NOFOLLOW))
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    return fd

@@ -2,9 +2,11 @@
 
 A run never destroys what the user owns. Ownership is kept by a write-ahead journal, never
 guessed: the folder's manifest, :data:`MANIFEST`, is written before anything else, and every
-name the run creates at the top of the folder is added to it *before* it is created (the
-toolkit's writers call ``files.declare``). A run killed at any instant leaves exactly the names
-it created listed; nothing else in the folder is ever taken as the toolkit's.
+name the run creates at the top of the folder is added to it *before* it is created, then with
+what identifies it (the toolkit's writers call ``files.declare`` and ``files.note``; see
+:mod:`snn_antenna.core.files`). A run killed at any instant leaves exactly the names it created
+listed; nothing else in the folder, and no listed entry that has since been replaced or edited,
+is ever taken as the toolkit's.
 
 Before a study starts, :func:`prepare` decides the folder:
 
@@ -14,19 +16,21 @@ Before a study starts, :func:`prepare` decides the folder:
 - a new or empty folder is used as it is;
 - a folder of this same study (its manifest says so) is reused: re-running a study into its own
   folder updates its report and resumes its stores (also after a killed run: its journal lists
-  what it made);
-- a folder holding another study's outputs, or files snn-antenna did not write, is refused,
-  unless ``force``: then the entries the manifest lists are removed (:meth:`OutputFolder.clear`,
-  once every other check has passed) and the user's files are kept. No symlink is followed: a
-  link where a listed entry was is refused, not removed through.
+  what it made); staging files a killed run left are removed;
+- a folder holding another study's outputs, or files snn-antenna did not write (or wrote and
+  the user has replaced or edited since), is refused, unless ``force``: then the entries the
+  manifest lists that are still the toolkit's are removed (:meth:`OutputFolder.clear`, once
+  every other check has passed) and the user's files are kept. No link is followed at any
+  depth: a folder holding a link, a device or a hard-linked file is refused, not removed.
 
 :func:`claim` takes the folder's lock (``fcntl.flock`` on the folder itself, held for the run)
-and opens the journal; :func:`record` closes it, however the run ended.
+and opens the journal; :func:`record` closes it, however the run ended; :func:`release` gives
+up a prepared folder without running. :func:`output_folder` does all four in order: the one way
+a run claims a folder (the CLI, the bridge's recorder and the tests).
 """
 from __future__ import annotations
 
 import datetime as _dt
-import fcntl
 import json
 import os
 import socket
@@ -39,7 +43,6 @@ from . import files
 from .errors import SpecError
 
 MANIFEST = ".snn-antenna-manifest.json"
-_MANIFEST_TMP = MANIFEST + ".tmp"
 KIND = "snn-antenna output folder"
 
 
@@ -47,8 +50,9 @@ KIND = "snn-antenna output folder"
 class OutputFolder:
     path: Path
     study: str
-    listed: set = field(default_factory=set)        # entries the toolkit wrote before
-    replace: set = field(default_factory=set)       # another study's entries, for --force
+    listed: dict = field(default_factory=dict)      # the toolkit's earlier entries: identity
+    replace: dict = field(default_factory=dict)     # another study's entries, for --force
+    unfinished: set = field(default_factory=set)    # what its killed run left: kept
     created: bool = False                           # the run made the folder
     lock_fd: int | None = None                      # the folder's flock, held for the run
     journal: files.Journal | None = None
@@ -57,9 +61,9 @@ class OutputFolder:
     def clear(self) -> None:
         """Remove the other study's entries (``--force``): only what the manifest lists.
         Called once every check has passed, so a refused run removes nothing."""
-        for entry in sorted(self.replace):
-            files.remove_entry(self.path / entry)
-        self.replace = set()
+        for entry, ident in sorted(self.replace.items()):
+            files.remove_entry(self.path / entry, ident)
+        self.replace = {}
 
 
 def check_writable(path) -> Path:
@@ -95,7 +99,8 @@ def read_manifest(path) -> dict | None:
                         "choose another --out (snn-antenna cannot tell which files there are "
                         "its own)") from None
     if not isinstance(data, dict) or data.get("kind") != KIND \
-            or not isinstance(data.get("files"), list):
+            or not isinstance(data.get("files"), list) \
+            or not isinstance(data.get("identity", {}), dict):
         raise SpecError("--out", str(path),
                         f"a folder whose {MANIFEST} is one snn-antenna wrote; this one is "
                         "not: choose another --out")
@@ -105,7 +110,8 @@ def read_manifest(path) -> dict | None:
 def _entries(path: Path) -> list[str]:
     if not path.is_dir():
         return []
-    return sorted(e for e in os.listdir(path) if e not in (MANIFEST, _MANIFEST_TMP))
+    return sorted(e for e in os.listdir(path)
+                  if e != MANIFEST and not files.is_staging(e, MANIFEST))
 
 
 def prepare(path, study: str, force: bool = False, fresh: bool = False) -> OutputFolder:
@@ -126,12 +132,17 @@ def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
     entries = _entries(path)
     manifest = read_manifest(path)
     owner = manifest.get("study") if manifest else None
-    listed = set(manifest["files"]) & set(entries) if manifest else set()
+    known = {name: (manifest.get("identity") or {}).get(name) for name in manifest["files"]
+             if isinstance(name, str)} if manifest else {}
+    listed = {name: ident for name, ident in known.items()
+              if name in entries and files.matches(path / name, ident, writing=True)}
     foreign = [e for e in entries if e not in listed]
+    changed = [e for e in foreign if e in known]
     other_study = owner is not None and owner != study
     if (other_study or foreign) and not force:
         held = (f"the outputs of the {owner!r} study" if other_study
-                else "files snn-antenna did not write")
+                else "files snn-antenna did not write" + (" or that changed since it wrote "
+                                                          "them" if changed else ""))
         shown = ", ".join(foreign[:4]) + (", …" if len(foreign) > 4 else "")
         raise SpecError("--out", str(path),
                         f"a new or empty folder, or this study's own earlier output; it holds "
@@ -144,25 +155,26 @@ def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
             if entry.endswith(".zarr"):
                 raise SpecError("--fresh", str(path / entry),
                                 "a store snn-antenna created (this one is not in the folder's "
-                                f"{MANIFEST}); --fresh never removes anything else")
-    replace = set()
-    if other_study and force:
-        replace, listed = listed, set()
-    for entry in replace:
-        files.refuse_symlink(path / entry, "entry")      # before anything is removed
-    return OutputFolder(path, study, listed, replace)
+                                f"{MANIFEST}, or changed since); --fresh never removes anything "
+                                "else")
+    replace, unfinished = {}, set()
+    if other_study and force:       # what a killed run left unfinished is never removed
+        replace = {n: i for n, i in listed.items() if files.is_settled(i)}
+        unfinished = set(listed) - set(replace)
+        listed = {}
+    for entry in replace:                   # before anything is removed
+        if (path / entry).is_dir():
+            files.check_tree(path / entry, "folder")
+    return OutputFolder(path, study, listed, replace, unfinished)
 
 
 # -- one writer per folder ----------------------------------------------------------------------
 def lock_folder(path: Path) -> int:
-    """An exclusive ``flock`` on the folder itself (no lock file to leave behind); refused at
-    once, naming the holder, when another run holds it. The kernel releases the lock of a
-    process that dies, so a killed run's folder is simply taken."""
-    fd = os.open(path, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | os.O_CLOEXEC)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
+    """An exclusive lock on the output folder (``files.lock_folder``), refused at once,
+    naming the holder, when another run holds it. A killed run's lock is released by the
+    kernel, so its folder is simply taken."""
+    fd = files.lock_folder(path, follow=True)   # --out may itself be a link the user made
+    if fd is None:
         try:
             holder = json.loads((path / MANIFEST).read_text())
             who = (f"run by PID {holder.get('pid')} on {holder.get('host')} since "
@@ -182,61 +194,65 @@ def _unlock(fd: int | None) -> None:
 
 def release(folder: OutputFolder) -> None:
     """Give up a prepared folder without running (a refusal after ``prepare``)."""
+    if folder.journal is not None:
+        files.close_journal(folder.journal)
     _unlock(folder.lock_fd)
     folder.lock_fd = None
 
 
 def claim(folder: OutputFolder) -> None:
-    """Create and lock the folder, write its manifest before anything else, and open the
-    write-ahead journal that lists every name the run creates before it is created."""
+    """Create and lock the folder, write its manifest before anything else, open the
+    write-ahead journal that lists every name the run creates before it is created, and
+    remove the staging files a killed run of the toolkit's left (its journal proves them)."""
     folder.created = not folder.path.exists()
     folder.path.mkdir(parents=True, exist_ok=True)
     if folder.lock_fd is None:
         folder.lock_fd = lock_folder(folder.path)
     folder.started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    folder.listed &= set(_entries(folder.path))
-    folder.journal = files.Journal(
-        folder.path, lambda names: _write_manifest(folder, folder.listed | names, "running"),
-        owned=folder.listed)
-    _write_manifest(folder, folder.listed, "running")
-    files.open_journal(folder.journal)
+    folder.listed = {name: ident for name, ident in folder.listed.items()
+                     if files.matches(folder.path / name, ident, writing=True)}
+    journal = files.Journal(folder.path,
+                            lambda entries: _write_manifest(folder, entries, "running"),
+                            owned=folder.listed, itself=MANIFEST,
+                            unfinished=folder.unfinished)
+    folder.journal = journal
+    _write_manifest(folder, journal.entries(), "running")
+    files.open_journal(journal)
+    for name, ident in sorted(folder.listed.items()):
+        if files.is_staging(name):
+            files.remove_entry(folder.path / name, ident)
+            journal.forget(name)
 
 
 def record(folder: OutputFolder) -> None:
-    """Close the journal and write the manifest: every entry this run created and the
-    toolkit's earlier entries that are still there; release the lock. Atomic (a reader sees
-    the old or the new manifest)."""
+    """Close the journal and write the manifest: every entry this run created, with what
+    identifies it now that it is written, and the toolkit's earlier entries that are still
+    there; release the lock. Atomic (a reader sees the old or the new manifest)."""
     try:
-        if folder.journal is not None:
-            files.close_journal(folder.journal)
+        journal = folder.journal
+        if journal is not None:
+            files.close_journal(journal)
         path = folder.path
-        if not path.is_dir():
+        if not path.is_dir() or journal is None:
             return                          # the run failed before writing anything
-        made = folder.journal.names if folder.journal else set()
-        written = (folder.listed | made) & set(_entries(path))
-        if not made & written and folder.created:
+        journal.settle()
+        if not journal.names and folder.created:
             # refused or failed before writing anything: leave no trace of a folder it made
             (path / MANIFEST).unlink(missing_ok=True)
             if not any(path.iterdir()):
                 path.rmdir()
             return
-        _write_manifest(folder, written, "ended")
+        _write_manifest(folder, journal.entries(), "ended")
     finally:
         release(folder)
 
 
-def _write_manifest(folder: OutputFolder, names: set, status: str) -> None:
-    data = {"kind": KIND, "study": folder.study, "files": sorted(names), "status": status,
+def _write_manifest(folder: OutputFolder, entries: dict, status: str) -> None:
+    data = {"kind": KIND, "study": folder.study, "files": sorted(entries),
+            "identity": {name: entries[name] for name in sorted(entries)}, "status": status,
             "pid": os.getpid(), "host": socket.gethostname(),
             "started": folder.started, "updated_unix_s": time.time()}
-    tmp = folder.path / _MANIFEST_TMP
-    files.refuse_symlink(folder.path / MANIFEST, "manifest")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o666)
-    with os.fdopen(fd, "w", encoding="utf-8") as f:
-        f.write(json.dumps(data, indent=1))
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, folder.path / MANIFEST)
+    files.atomic_write(folder.path / MANIFEST, json.dumps(data, indent=1))
 
 
 @contextmanager

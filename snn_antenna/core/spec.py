@@ -20,6 +20,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable
 
+from . import calibration
 from .bounds import out_path, parse_value
 from .errors import SpecError, shown
 
@@ -27,7 +28,8 @@ INCLUDABLE = ("network", "stimulus")
 
 
 def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -> dict:
-    """Read a spec, resolve includes, apply the quick profile and ``--set`` overrides."""
+    """Read a spec, resolve includes, apply the quick profile, put the calibrated constants
+    it names in place (``core.calibration``) and apply ``--set`` overrides."""
     path = Path(out_path("spec", path))
     if not path.is_file():
         raise SpecError("spec", str(path), "the path of an existing TOML spec file")
@@ -42,7 +44,8 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
     if quick:
         for dotted, value in _flatten(quick_overrides):
             set_field(spec, dotted, value)
-    for item in overrides:
+    spec = calibration.resolve(spec)        # "calibrated:NAME": the table's value, which
+    for item in overrides:                  # --set may override with a number
         apply_override(spec, item)
     spec.setdefault("seed", 0)
     return spec

@@ -14,7 +14,9 @@ writes (Dask workers return their blocks to it), so a cluster needs no shared fo
 After a chunk's data are written, its element of the ``chunk_done`` array (zarr chunks of
 one element; zarr's local store writes each file by an atomic rename) is set. A chunk without
 its mark is redone on resume, whatever part of its data had reached the disk; a marked chunk
-is never recomputed. The store's ``fingerprint`` attribute (grid, outputs, chunking, the
+is never recomputed. Before a store is resumed it is walked without following anything, and
+a link, device or hard-linked file anywhere inside it is refused by name
+(``files.check_tree``): zarr writes by path, and would write through it. The store's ``fingerprint`` attribute (grid, outputs, chunking, the
 study's resolved settings and the code that computes them) must match to resume: a changed
 spec or changed code is refused, ``fresh=True`` starts over.
 """
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,8 +41,10 @@ DONE = "chunk_done"
 def write_dataset(ds, path: str | Path, **to_zarr) -> None:
     """Write ``ds`` as the zarr store ``path``: atomically, and in data types Zarr v3 specifies.
 
-    The store is written under a temporary name beside ``path`` and renamed into place, so an
-    interrupted write never leaves a half store to be taken for a finished one. Text (method
+    The store is written under a staging name beside ``path`` (``files.staging_name``, made
+    exclusively and journaled first) and renamed into place, so an interrupted write never
+    leaves a half store to be taken for a finished one, and never touches an entry of the
+    user's that bears a staging-like name. Text (method
     or material names) is stored as variable-length UTF-8, Zarr v3's ``string`` type: numpy's
     fixed-width unicode has no Zarr v3 specification, and other readers may refuse it.
     Metadata are not consolidated (no part of Zarr v3 either). ``to_zarr`` is passed on
@@ -50,15 +55,19 @@ def write_dataset(ds, path: str | Path, **to_zarr) -> None:
             if var.dtype.kind == "U"}
     ds = ds.assign_coords({k: v for k, v in text.items() if k in ds.coords}).assign(
         {k: v for k, v in text.items() if k not in ds.coords})
-    tmp = path.with_name(path.name + ".partial")
     files.refuse_symlink(path, "store")
-    files.remove_entry(tmp)                         # a write interrupted before; never a link
     files.make_folder(path.parent)
-    files.declare(tmp)
-    files.declare(path)
-    ds.to_zarr(tmp, mode="w", zarr_format=3, consolidated=False, **to_zarr)
-    files.remove_entry(path)
-    tmp.rename(path)
+    files.declare(path)                             # the user's entry of that name is refused
+    tmp, _ = files.make_staging(path, "partial", os.mkdir)   # never a name already there
+    try:
+        ds.to_zarr(tmp, mode="w-", zarr_format=3, consolidated=False, **to_zarr)
+        files.remove_entry(path)
+        os.rename(tmp, path)
+    except BaseException:
+        if os.path.isdir(tmp) and not os.path.islink(tmp):
+            files.remove_entry(tmp)
+        raise
+    files.note(path, settled=True)
 
 
 def read_dataset(path: str | Path):
@@ -159,9 +168,11 @@ class SweepStore:
         attrs = dict(attrs or {})
         key = fingerprint(coords, outputs, block_shape, settings, computed_by)
         files.refuse_symlink(self.path, "store")
+        files.declare(self.path)                    # resumed or made: this run writes it
         if fresh and self.path.exists():
             files.remove_entry(self.path)
         if self.path.exists():
+            files.check_tree(self.path)             # nothing inside is written through
             existing = self._read_attrs()
             if existing.get("fingerprint") != key:
                 code = _code(computed_by)
@@ -192,6 +203,7 @@ class SweepStore:
                                "fingerprint": key,
                                "block_shape": list(map(int, block_shape))})
         write_dataset(ds, self.path, compute=False)  # never a half-created store
+        files.note(self.path)           # being written chunk by chunk: finished at the run's end
         return set()
 
     def _read_attrs(self) -> dict:

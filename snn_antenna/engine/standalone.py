@@ -16,12 +16,11 @@ import re
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from ..core.errors import NumericalInstabilityError
-from ..core.files import atomic_write
+from ..core.files import atomic_write, lock_folder, make_folder
 from ..networks import neurons
 
 # One compiled standalone project per process (Brian2's device is process-global); a worker
@@ -29,25 +28,16 @@ from ..networks import neurons
 _PROJECT: dict = {}
 
 
-def _standalone_dir(key: str) -> tuple[Path, Any]:
-    """A project directory this process holds alone (a lock per slot), kept across runs so
-    an unchanged model is not recompiled next time."""
-    import fcntl
-
+def _standalone_dir(key: str) -> tuple[Path, int]:
+    """A project directory this process holds alone (the folder's own lock, per slot), kept
+    across runs so an unchanged model is not recompiled next time."""
     base = Path(os.environ.get("SNN_ANTENNA_CACHE", Path.home() / ".cache" / "snn_antenna"))
-    base = base / "brian2_standalone"
-    base.mkdir(parents=True, exist_ok=True)
+    base = make_folder(base / "brian2_standalone")
     for slot in range(1024):
-        # never truncated, never through a link (a lock file holds nothing, only its flock)
-        lock = os.fdopen(os.open(base / f"{key}-{slot}.lock",
-                                 os.O_WRONLY | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC,
-                                 0o666), "w")
-        try:
-            fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            lock.close()
-            continue
-        return base / f"{key}-{slot}", lock
+        directory = make_folder(base / f"{key}-{slot}")
+        lock = lock_folder(directory)
+        if lock is not None:
+            return directory, lock
     raise RuntimeError(f"no free Brian2 standalone directory under {base}")
 
 
@@ -227,7 +217,7 @@ def project(structure: tuple, build) -> dict:
     directory, lock = _standalone_dir(key)
     if _PROJECT:
         _PROJECT["device"].reinit()
-        _PROJECT["lock"].close()
+        os.close(_PROJECT["lock"])
         _PROJECT.clear()
     bounded_make()
     set_device("cpp_standalone", build_on_run=False, directory=str(directory),
@@ -243,7 +233,7 @@ def project(structure: tuple, build) -> dict:
                      additional_source_files=[ALIGNED_ARRAYS])
     except BaseException:
         device.reinit()
-        lock.close()
+        os.close(lock)
         raise
     finally:
         reset_device()  # runtime code elsewhere in this process keeps working

@@ -27,6 +27,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
+from ..core import calibration
 from ..core.errors import NumericalInstabilityError, check, is_number
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
@@ -44,7 +45,8 @@ DT_STEPS_MS = (0.1, 0.05, 0.025, 0.02, 0.01, 0.005, 0.0025, 0.002, 0.001, 0.0005
 
 # The rod band of studies/baseline_comparison.toml (tests/test_bands.py keeps the two equal).
 ROD_BAND = Band(n_neurons=24, band_hz=(90.0, 420.0), coder_amplitude=0.2, threshold_g=0.006,
-                lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=27.49, dt_ms=0.005, method="rk2")
+                lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=calibration.value("rod_hz_per_k"),
+                dt_ms=0.005, method="rk2")
 BENCH_BANDS = {"low": LOW_BAND, "high": HIGH_BAND, "rod": ROD_BAND}
 
 
@@ -85,8 +87,8 @@ SMALL_SIGNAL_EULER = BandSetting("euler", 0.1, neurons.LINEAR_HZ_PER_K)
 # Shipped (readout.spiking.HIGH_BAND, ROD_BAND above; low at the bank's): cheapest settings within
 # 5 % of the exact reference's rate map on the study's sample events, with hz_per_k from the driven
 # tuning sweep; benchmarks/bench_bands.py prints their error and cost beside the alternatives.
-CHOSEN = {"high": BandSetting("rk4", 0.005, 23.46),
-          "rod": BandSetting("rk2", 0.005, 27.49)}
+CHOSEN = {"high": BandSetting("rk4", 0.005, calibration.value("high_band_hz_per_k")),
+          "rod": BandSetting("rk2", 0.005, calibration.value("rod_hz_per_k"))}
 
 
 def array_of(band: Band, setting: BandSetting = SMALL_SIGNAL_EULER,

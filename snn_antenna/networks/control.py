@@ -64,6 +64,7 @@ class ControlLayer:
             v = getattr(self, name)
             check(is_number(v) and v > 0, name, v, "a finite value > 0")
         bounds.pair("motion_band_hz", self.motion_band_hz, unit=" Hz")
+        bounds.amplitude("bias", self.bias)
 
     def objects(self, resonators, neuron_hz: np.ndarray, clock=None) -> dict:
         """Contact and motor units wired to a resonator group (``resonators``). ``clock``: a
@@ -164,7 +165,7 @@ class MaterialUnit:
         for name in ("window_s", "drive", "regularisation_c", "dt_ms"):
             v = getattr(self, name)
             check(is_number(v) and v > 0, name, v, "a finite value > 0")
-        check(is_number(self.bias), "bias", self.bias, "a finite value")
+        bounds.amplitude("bias", self.bias)
         check(isinstance(self.min_spikes, int) and self.min_spikes >= 1, "min_spikes",
               self.min_spikes, "an integer >= 1")
         edges = self.bin_edges_s

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import check
 from . import neurons
 
@@ -69,7 +70,7 @@ class CPG:
         for name in ("pan_centre_deg", "pan_amplitude_deg", "tilt_centre_deg",
                      "tilt_amplitude_deg", "phase_offset_deg"):
             v = getattr(self, name)
-            check(np.isfinite(v), name, v, "a finite angle in degrees")
+            bounds.number(name, v, -360.0, 360.0, unit=" deg")
         check(self.drive_for(self.frequency_hz(0.0)) >= 0.0, "period_s", self.period_s,
               "a period the ring can reach with token_drive (lower token_drive, or raise "
               "tau_ms, for slower cycles)")

@@ -93,6 +93,8 @@ class SpeedGate:
         check(isinstance(self.curve_points, int) and self.curve_points >= 1, "curve_points",
               self.curve_points, "an integer >= 1")
         check(self.target in ("numpy", "cython"), "target", self.target, "'numpy' or 'cython'")
+        bounds.amplitude("readout_bias", self.readout_bias)
+        bounds.seed("seed", self.seed)
 
     # -- codes ------------------------------------------------------------------------------
     @property

@@ -67,7 +67,7 @@ class ResonatorArray:
         lo, hi = (float(x) for x in self.band_hz)
         check(isinstance(self.spacing, str) and self.spacing in ("log", "linear"), "spacing",
               self.spacing, "'log' or 'linear'")
-        check(is_number(self.b), "b", self.b, "a finite number")
+        bounds.amplitude("b", self.b)
         check(is_number(self.hz_per_k) and self.hz_per_k > 0, "hz_per_k", self.hz_per_k,
               "Hz per unit k > 0")
         check(isinstance(self.method, str) and self.method in neurons.METHODS, "method",

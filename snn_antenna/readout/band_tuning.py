@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import calibration
+from ..core import bounds
 from ..core.errors import check, is_number
 from .spiking import Band, align_events
 
@@ -43,7 +45,7 @@ class Tuning:
     channel's coder codes above ``threshold_g``. ``template``: the ``Band`` fields every
     channel shares (coder amplitude, b, Hz per unit k, method); ``max_k_dt``: the largest
     k·dt (model ms per step) a channel's step may reach (the rod band's validated setting:
-    rk2 at 0.005 ms up to 420 Hz at 27.49 Hz per unit k, within 4 % of the exact reference).
+    rk2 at 0.005 ms up to 420 Hz, within 4 % of the exact reference; ``core.calibration``).
     """
     n_resonators: int = 24
     per_channel: int = 2
@@ -52,9 +54,9 @@ class Tuning:
     quantile: float = 0.8
     threshold_g: float = 0.003
     coder_amplitude: float = 0.2
-    hz_per_k: float = 27.49
+    hz_per_k: float = calibration.value("rod_hz_per_k")
     method: str = "rk2"
-    max_k_dt: float = 0.0764
+    max_k_dt: float = calibration.value("rod_max_k_dt")
     spread: float = 0.03      # the channel's resonators span centre × (1 ± spread)
 
     def __post_init__(self):
@@ -75,6 +77,10 @@ class Tuning:
               "model ms per step > 0")
         check(is_number(self.spread) and 0 <= self.spread < 0.5, "spread", self.spread,
               "a fraction in [0, 0.5)")
+        bounds.amplitude("threshold_g", self.threshold_g, lo=0.0)
+        bounds.number("coder_amplitude", self.coder_amplitude, 0.0, bounds.MAX_AMPLITUDE,
+                      lo_open=True)
+        bounds.number("hz_per_k", self.hz_per_k, 0.0, bounds.MAX_RATE_HZ, lo_open=True)
 
     @property
     def n_channels(self) -> int:

@@ -23,6 +23,7 @@ from sklearn.neural_network import MLPClassifier, MLPRegressor
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import FunctionTransformer, StandardScaler
 
+from ..core import bounds
 from ..core.errors import SpecError, check
 from .events import PARAMETERS
 
@@ -75,6 +76,12 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
 
     def fit(self, X, y=None):
         X = np.asarray(X, dtype=float)
+        check(X.ndim == 2 and len(X) >= 1, "X", f"shape {X.shape}",
+              "amplitude spectra, one row per event")
+        bounds.integer("max_iter", self.max_iter, 1, 1_000_000)
+        bounds.integer("max_fit_samples", self.max_fit_samples, 1, 10**9)
+        if self.random_state is not None:
+            bounds.seed("random_state", self.random_state)
         check(isinstance(self.n_components, int) and 1 <= self.n_components <= X.shape[1],
               "n_components", self.n_components, f"an integer in [1, {X.shape[1]}]")
         check(np.all(np.isfinite(X)) and X.min() >= 0, "X", "negative or non-finite values",
@@ -118,6 +125,12 @@ class Mlp:
     learning_rate_init: float = 1e-3
     alpha: float = 1e-4
     early_stopping: bool = False
+
+    def __post_init__(self):
+        bounds.integer("max_iter", self.max_iter, 1, 1_000_000)
+        bounds.integer("batch_size", self.batch_size, 1, 1_000_000)
+        bounds.number("learning_rate_init", self.learning_rate_init, 0.0, 10.0, lo_open=True)
+        bounds.number("alpha", self.alpha, 0.0, 1e6)
 
     def regressor(self, hidden, seed) -> MLPRegressor:
         return MLPRegressor(hidden_layer_sizes=tuple(hidden), random_state=seed, **self.__dict__)

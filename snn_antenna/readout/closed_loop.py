@@ -23,7 +23,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..core.errors import check
+from ..core import bounds
 from ..networks.assembly import build as build_network
 from ..networks.control import CONTROL_UNITS
 from ..networks.gate import read_trace
@@ -47,8 +47,9 @@ class LoopSettings:
 
     def __post_init__(self):
         antenna.self_motion_rms_g(self.speed_cm_s)
-        check(self.duration_s > 0 and self.chunk_ms >= 1 and self.calibration_s > 0,
-              "loop", vars(self), "duration_s > 0, chunk_ms >= 1, calibration_s > 0")
+        bounds.positive_seconds("duration_s", self.duration_s)
+        bounds.number("chunk_ms", self.chunk_ms, 1.0, 1e6, unit=" ms")
+        bounds.positive_seconds("calibration_s", self.calibration_s)
 
 
 @dataclass

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..core.errors import check
 from ..core.signals import validate_samples
 
@@ -86,6 +87,9 @@ class EventProcessor:
             check(0 < value < 1, name, value, "a fraction in (0, 1)")
         check(np.isfinite(self.edge_sigmas) and 0 <= self.edge_sigmas <= 5, "edge_sigmas",
               self.edge_sigmas, "a number of smoothing widths in [0, 5]")
+        bounds.number("extreme_min_interval_ms", self.extreme_min_interval_ms, 0.0, 1e6,
+                      unit=" ms")
+        bounds.number("extreme_min_fraction", self.extreme_min_fraction, 0.0, 1.0)
 
     @property
     def fft_points(self) -> int:

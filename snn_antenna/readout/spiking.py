@@ -39,6 +39,7 @@ import xarray as xr
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
+from ..core import calibration
 from ..core.errors import SpecError, check, is_number
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray
@@ -89,7 +90,7 @@ LOW_BAND = Band()
 # study's "bands" section, ``evaluation.bands``, measures both). Its input is band-passed
 # (50-900 Hz): the square-wave coder codes only the sign, so with the low mode still in the
 # signal the high mode would show only near the low mode's zero crossings.
-HIGH_BAND_HZ_PER_K = 23.46
+HIGH_BAND_HZ_PER_K = calibration.value("high_band_hz_per_k")
 HIGH_BAND = Band(n_neurons=24, band_hz=(55.0, 500.0), lowpass_hz=900.0, highpass_hz=50.0,
                  threshold_g=0.02, hz_per_k=HIGH_BAND_HZ_PER_K, dt_ms=0.005, method="rk4")
 

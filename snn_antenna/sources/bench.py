@@ -26,6 +26,7 @@ from typing import Callable, Sequence
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..core.errors import SpecError, check
 from ..core.parallel import parallel_map
 from ..core.signals import Recording
@@ -60,7 +61,17 @@ class BenchSpec:
     n_jobs: int = 1
     cache_dir: str = "out/.cache"
 
+    def __post_init__(self):
+        self.validate()
+
     def validate(self) -> None:
+        for name in ("rate_hz", "pre_trigger_s", "duration_s", "impact_g", "sensor_noise_g",
+                     "orientation_deg", "physics_strength"):
+            bounds.number(name, getattr(self, name), -bounds.MAX_AMPLITUDE,
+                          bounds.MAX_AMPLITUDE)
+        bounds.integer("repetitions", self.repetitions, 1, 100_000)
+        bounds.integer("n_jobs", self.n_jobs, 1, 4096)
+        bounds.seed("seed", self.seed)
         check(len(self.materials) >= 1 and len(set(self.materials)) == len(self.materials),
               "materials", list(self.materials), "a non-empty list of distinct material names")
         for m in self.materials:

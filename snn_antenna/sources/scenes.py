@@ -55,6 +55,9 @@ class SpeedProfile:
     speed_cm_s: float = 12.0
     points: list = field(default_factory=list)
 
+    def __post_init__(self):
+        self.validate()
+
     def validate(self) -> None:
         bounds.choice("speed.kind", self.kind, PROFILE_KINDS)
         if self.kind == "constant":
@@ -94,6 +97,9 @@ class Obstacle:
     y_cm: float
     radius_cm: float = 0.6
     material: str = "wood"
+
+    def __post_init__(self):
+        self.validate()
 
     def validate(self, i: int = 0) -> None:
         bounds.number(f"obstacles[{i}].x_cm", self.x_cm, -1e9, 1e9, unit=" cm")
@@ -294,6 +300,12 @@ class CourseLayout:
     materials: tuple = ("wood",)
     first_reach_cm: tuple = (12.0, 28.0)
     first_angle_deg: tuple = (20.0, 60.0)
+
+    def __post_init__(self):
+        bounds.number("spacing_cm", self.spacing_cm, 0.0, 1e9, lo_open=True, unit=" cm")
+        bounds.pair("lateral_cm", self.lateral_cm, lo=-1e9, unit=" cm")
+        bounds.pair("first_reach_cm", self.first_reach_cm, unit=" cm")
+        bounds.pair("first_angle_deg", self.first_angle_deg, lo=-360.0, unit=" deg")
 
     def posts(self, rng: np.random.Generator, length_cm: float) -> list[Obstacle]:
         return random_course(rng, length_cm, self.spacing_cm, tuple(self.lateral_cm),

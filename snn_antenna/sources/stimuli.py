@@ -123,6 +123,15 @@ class Contact:
     hold_s: float = 1.0
     amplitude_g: float | None = None   # the impact's ringing; None: the scene's ``impact_g``
 
+    def __post_init__(self):
+        """Bounded alone; the scene checks it against its duration and sample rate."""
+        bounds.number("t_s", self.t_s, 0.0, bounds.MAX_SECONDS, unit=" s")
+        bounds.number("hold_s", self.hold_s, 0.0, bounds.MAX_SECONDS, lo_open=True, unit=" s")
+        bounds.number("distance_cm", self.distance_cm, 0.0, antenna.ROD_LENGTH_CM,
+                      lo_open=True, hi_open=True, unit=" cm")
+        if self.amplitude_g is not None:
+            bounds.number("amplitude_g", self.amplitude_g, 0.0, bounds.MAX_AMPLITUDE)
+
 
 @dataclass
 class RobotScene:
@@ -145,6 +154,9 @@ class RobotScene:
     sensor_noise_g: float = 0.01
     adc_bits: int = 10
     full_scale_g: float = 18.0
+
+    def __post_init__(self):
+        self.validate()
 
     def validate(self) -> None:
         """Every field typed and bounded, before a sample is made (the scene's memory too)."""

@@ -31,13 +31,16 @@ class PtyLink:
 
     With ``link`` the path is a symlink that is removed on disconnect and recreated, pointing at
     a fresh pty, on reconnect: the same path disappears and returns, as a USB adapter's
-    ``/dev/serial/by-id`` name does.
+    ``/dev/serial/by-id`` name does. The link is created exclusively (a path that exists is
+    refused, whatever it points at) and removed only while it is still the one this link made
+    (same inode, same target): a link the user put there meanwhile is theirs.
     """
 
     def __init__(self, link: str | os.PathLike | None = None):
         self.link = Path(link) if link is not None else None
         self.master: int | None = None
         self.slave_name = ""
+        self._made: tuple[int, int, str] | None = None  # (dev, ino, target) of our link
         # Held while unread_bytes() has the slave open itself: that fd clears POLLHUP on the
         # master exactly as a reader's would, so peer_open() must not look meanwhile. Without
         # this, a probe from another thread (a test watching the queue) passed for the reader:
@@ -61,10 +64,15 @@ class PtyLink:
         os.close(slave)
         os.set_blocking(self.master, False)
         if self.link is not None:
-            tmp = self.link.with_name(self.link.name + ".new")
-            tmp.unlink(missing_ok=True)
-            os.symlink(self.slave_name, tmp)
-            os.replace(tmp, self.link)
+            try:
+                os.symlink(self.slave_name, self.link)   # fails on any entry already there
+            except FileExistsError:
+                os.close(self.master)
+                self.master = None
+                check_link_path(self.link)
+                raise
+            st = os.lstat(self.link)
+            self._made = (st.st_dev, st.st_ino, self.slave_name)
 
     def peer_open(self) -> bool:
         """Whether a reader holds the slave open (the link's own probe does not count)."""
@@ -131,11 +139,20 @@ class PtyLink:
             time.sleep(0.005)
 
     def disconnect(self) -> None:
-        if self.link is not None and is_own_link(self.link):   # never a path the user took
+        if self.link is not None and self._is_ours():          # never a path the user took
             self.link.unlink()
+            self._made = None
         if self.master is not None:
             os.close(self.master)
             self.master = None
+
+    def _is_ours(self) -> bool:
+        """Whether :attr:`link` is still the link this object made (by identity)."""
+        try:
+            st = os.lstat(self.link)
+            return self._made == (st.st_dev, st.st_ino, os.readlink(self.link))
+        except OSError:
+            return False
 
     def reconnect(self) -> None:
         self._open()
@@ -148,31 +165,20 @@ class PtyLink:
         return self.link is not None
 
 
-def is_own_link(path: Path) -> bool:
-    """A symlink to a pseudo-terminal: what PtyLink makes (perhaps left by a killed emulator)."""
-    return path.is_symlink() and os.readlink(path).startswith(("/dev/pts/", "/dev/tty"))
-
-
 def check_link_path(link: Path) -> None:
-    """Refuse a --link path that holds anything but an emulator's own link: the emulator
-    replaces that path and removes it on exit, so it must never be a file or folder of the
-    user's."""
+    """Refuse a --link path that holds anything at all: the emulator creates the link there and
+    removes it on exit, so it must never be a file, folder or link of the user's (a link left
+    by an emulator that was killed is not provably its own either: remove it)."""
     link = Path(link)
-    if link.is_symlink() and not is_own_link(link):
-        raise SpecError("link", str(link), f"a new path or an emulator's own link to a pty; "
-                                           f"this is a symlink to {os.readlink(link)}, left as "
-                                           "it is")
-    if link.exists() and not link.is_symlink():
-        what = "folder" if link.is_dir() else "file"
-        raise SpecError("link", str(link), f"a new path or an emulator's own link to a pty; "
-                                           f"this is an existing {what}, left as it is")
+    if os.path.lexists(link):
+        what = (f"a symlink to {os.readlink(link)}" if link.is_symlink()
+                else "an existing folder" if link.is_dir() else "an existing file")
+        raise SpecError("link", str(link), f"a new path, where the emulator makes its own "
+                                           f"link to a pty; this is {what}, left as it is "
+                                           "(remove it, or choose another --link)")
     if not link.parent.is_dir() or not os.access(link.parent, os.W_OK | os.X_OK):
         raise SpecError("link", str(link), f"a path in a folder you can write to "
                                            f"({link.parent} is not one)")
-    tmp = link.with_name(link.name + ".new")
-    if (tmp.exists() or tmp.is_symlink()) and not is_own_link(tmp):
-        raise SpecError("link", str(link), f"a path whose {tmp.name} is free (the emulator "
-                                           "creates the link there first)")
 
 
 class SerialLink:

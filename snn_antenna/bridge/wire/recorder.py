@@ -36,8 +36,8 @@ import numpy as np
 
 from ... import __version__ as package_version
 from ...core.errors import SpecError
-from ...core.files import make_folder, open_append, refuse_symlink, write_json
-from ...core.outputs import lock_folder
+from ...core import outputs
+from ...core.files import open_append, refuse_symlink, write_json
 from ...core.signals import Recording
 from .protocol import (
     BOARD_RATE_HZ,
@@ -73,10 +73,10 @@ class Recorder:
                             "a new or empty directory (an existing recording is never overwritten)")
         if self.dir.exists() and not self.dir.is_dir():
             raise SpecError("out", str(self.dir), "a directory path")
-        make_folder(self.dir)
-        self._lock = lock_folder(self.dir)        # one recorder per folder, held until close
         for name in (RAW_FILE, SAMPLES_FILE, EVENTS_FILE):  # a link would write elsewhere
             refuse_symlink(self.dir / name)
+        self._folder = outputs.prepare(self.dir, "recording")  # one recorder per folder,
+        outputs.claim(self._folder)                            # journaled until close
         self.flush_interval_s = flush_interval_s
         self.fsync_interval_s = fsync_interval_s
         self.meta_interval_s = meta_interval_s
@@ -163,7 +163,7 @@ class Recorder:
         self.meta.update(status=status, message=message, complete=complete,
                          stopped_unix_s=time.time())
         self._write_meta()
-        os.close(self._lock)
+        outputs.record(self._folder)
 
     def _write_meta(self) -> None:
         self.meta["counts"] = dict(self.counts)
