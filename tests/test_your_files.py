@@ -424,10 +424,10 @@ def test_a_bad_meta_json_is_named(tmp_path):
 
     rec = record_counts(tmp_path / "rec", np.zeros((10, 2), dtype=np.int64))
     (rec / "meta.json").write_bytes(b"\xff\xfe{")
-    with pytest.raises(SpecError, match="meta.json is damaged"):
+    with pytest.raises(SpecError, match=r"meta\.json.*JSON text written by .snn-antenna record."):
         load_recording(rec)
     (rec / "meta.json").write_text("[1, 2]")
-    with pytest.raises(SpecError, match="meta.json is damaged"):
+    with pytest.raises(SpecError, match=r"meta\.json"):
         load_recording(rec)
 
 
