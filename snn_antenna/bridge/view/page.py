@@ -72,12 +72,20 @@ def build_page(view, doc) -> None:
                         sizing_mode="stretch_width"))
     doc.title = "snn-antenna live view"
     update()
-    doc.add_periodic_callback(update, PAGE_UPDATE_MS)
+
+    # A page nobody holds (reloaded, closed, or not connected yet) costs nothing until its
+    # session is discarded or a browser connects: it then catches up from its cursors.
+    def pull() -> None:
+        if connected(doc):
+            update()
+
+    doc.add_periodic_callback(pull, PAGE_UPDATE_MS)
 
     # A new rate-map column is pushed as it arrives, alone: a small message, and the browser
     # redraws the rate map only (the lines, panels and counters come with the periodic pull).
     def push() -> None:
-        doc.add_next_tick_callback(update_map)
+        if connected(doc):
+            doc.add_next_tick_callback(update_map)
 
     def painted() -> None:          # columns held back while the browser drew: now
         if waiting():
@@ -87,6 +95,12 @@ def build_page(view, doc) -> None:
     view.painted_listeners[mode["page"]] = painted
     doc.on_session_destroyed(lambda _context: (view.column_listeners.discard(push),
                                                view.painted_listeners.pop(mode["page"], None)))
+
+
+def connected(doc) -> bool:
+    """Whether a browser holds the page's session now (a document outside a server: yes)."""
+    session = doc.session_context.session if doc.session_context is not None else None
+    return session is None or session.connection_count > 0
 
 
 def _legend_outside(fig) -> None:

@@ -290,7 +290,8 @@ class LiveView:
         if self._control is not None:
             answer = None
             try:
-                self._control.send(("stop", self.published))
+                self._control.send(("stop", self.published,
+                                    self.published - self.handoff_full))
                 if self._control.poll(STOP_TIMEOUT_S):
                     answer = self._control.recv()[1]
             except (EOFError, OSError):
