@@ -232,7 +232,7 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     xy = doc.get_model_by_name("xy")
     history.take(_frame(0, 0.0))
     update()
-    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t_last"] == [0.0]
+    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t"] == [0.0]
     history.take(_frame(1, 0.1))
     update()                                        # column 0.0 not painted yet: waits
     assert len(xy.data["t"]) == 25
@@ -240,7 +240,7 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     history.painted(0.0, time.time(), page=token)
     (push,) = (c for c in doc.session_callbacks if c is not callback)
     push.callback()
-    assert doc.get_model_by_name("map").data["t_last"] == [0.1] and len(xy.data["t"]) == 25
+    assert doc.get_model_by_name("map").data["t"] == [0.1] and len(xy.data["t"]) == 25
     history.painted(0.1, time.time(), page=token)   # nothing held back: nothing scheduled
     assert doc.session_callbacks == [callback]
     update()                                        # the lines come with the periodic pull
