@@ -21,6 +21,7 @@ from snn_antenna.bridge.online.controls import (
     parse_control,
     recorded_events,
 )
+from snn_antenna.bridge.online.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online, run_online
 from snn_antenna.bridge.view.page import build_page
 from snn_antenna.bridge.wire.recorder import EVENTS_FILE, Recorder, record_counts
@@ -301,7 +302,7 @@ def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monk
     live.idle()
     assert live.published == 1
     clock[0] += 0.001
-    live.window(0.0, np.ones(24), None, 1.0, 1.0, arrived=1.0)
+    live.window(Window(0.1, 100, 0.0, Published(0.0, 0.1, np.ones(24), None, 1.0, 1.0, 1.0)))
     assert live.published == 1                      # 1 ms after a frame: held back...
     clock[0] += view_module.WINDOW_FLUSH_S + 1e-6
     live.idle()

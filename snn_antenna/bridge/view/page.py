@@ -69,7 +69,8 @@ def build_page(view, doc) -> None:
     doc.add_root(column(counters, bar, status, row(plots, panels, sizing_mode="stretch_width"),
                         sizing_mode="stretch_width"))
     doc.title = "snn-antenna live view"
-    reload(None)
+    reload(None)                    # the kept span, then its text
+    update()
 
     # A page nobody holds (reloaded, closed, or not connected yet) costs nothing until its
     # session is discarded or a browser connects: it then catches up from its cursors.
