@@ -1,4 +1,4 @@
-"""The live view never touches the pipeline's time (issue 29): its server runs in a process of
+"""The live view never touches the pipeline's time: its server runs in a process of
 its own, fed through a bounded hand-off the pipeline never waits on.
 
 - A view process frozen (SIGSTOP) for the whole stream: the stream still keeps up with the
