@@ -67,9 +67,12 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
         link = os.path.join(tmp, "tty")
         emulator = subprocess.Popen(
             [sys.executable, "-m", "snn_antenna.bridge.cli", "emulate", "--pty", "--link", link,
-             # A few more frames than measured: an emulator that ends closes the pty, and
-             # bytes still unread in it would be lost (the run would wait for them in vain).
-             "--frames", str(n_frames + 500), *(["--fast"] if fast else [])],
+             # More frames than measured: an emulator that ends closes the pty, and bytes
+             # still unread in it would be lost (the run would wait for them in vain). Flat
+             # out, it ends as soon as the reader has taken all but the pty's buffer (tens of
+             # kB): 20,000 frames more than fill it.
+             "--frames", str(n_frames + (20_000 if fast else 500)),
+             *(["--fast"] if fast else [])],
             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         try:
             emulator.stdout.readline()              # the pty exists once its path is printed

@@ -21,6 +21,7 @@ from snn_antenna.bridge.online.controls import (
     parse_control,
     recorded_events,
 )
+from snn_antenna.bridge.online.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online, run_online
 from snn_antenna.bridge.view.page import build_page
 from snn_antenna.bridge.wire.recorder import EVENTS_FILE, Recorder, record_counts
@@ -232,7 +233,7 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     xy = doc.get_model_by_name("xy")
     history.take(_frame(0, 0.0))
     update()
-    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t_last"] == [0.0]
+    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t"] == [0.0]
     history.take(_frame(1, 0.1))
     update()                                        # column 0.0 not painted yet: waits
     assert len(xy.data["t"]) == 25
@@ -240,7 +241,7 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     history.painted(0.0, time.time(), page=token)
     (push,) = (c for c in doc.session_callbacks if c is not callback)
     push.callback()
-    assert doc.get_model_by_name("map").data["t_last"] == [0.1] and len(xy.data["t"]) == 25
+    assert doc.get_model_by_name("map").data["t"] == [0.1] and len(xy.data["t"]) == 25
     history.painted(0.1, time.time(), page=token)   # nothing held back: nothing scheduled
     assert doc.session_callbacks == [callback]
     update()                                        # the lines come with the periodic pull
@@ -301,7 +302,7 @@ def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monk
     live.idle()
     assert live.published == 1
     clock[0] += 0.001
-    live.window(0.0, np.ones(24), None, 1.0, 1.0, arrived=1.0)
+    live.window(Window(0.1, 100, 0.0, Published(0.0, 0.1, np.ones(24), None, 1.0, 1.0, 1.0)))
     assert live.published == 1                      # 1 ms after a frame: held back...
     clock[0] += view_module.WINDOW_FLUSH_S + 1e-6
     live.idle()

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from snn_antenna.bridge.online.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online
 from snn_antenna.bridge.wire.protocol import Sample
 from snn_antenna.bridge.view.saved_view import load_view
@@ -73,7 +74,8 @@ class FakePipeline(threading.Thread):
                 event = {1.0: ("onset", t_s), 1.5: ("contact", ContactEstimate(
                     t_s - 0.5, t_s, 16.0, 19.3))}.get(at)
                 rates = rng.uniform(0, 20, len(self.parts.array.neuron_hz))
-                self.view.window(t_s, rates, event, 1.0, 1.0, now, self.parts.window_s)
+                self.view.window(Window(t_s + self.parts.window_s, n, 0.0, Published(
+                    t_s, self.parts.window_s, rates, event, now, 1.0, 1.0)))
             time.sleep(max(0.0, t0 + n / 1000 - time.monotonic()))
         self.view.flush()
 

@@ -162,6 +162,20 @@ class Controls:
             self.robot.th_source = "manual"
         self._applied(index, change, by, asked, was)
 
+    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
+    def stream_started(self, parts) -> None:
+        pass
+
+    def window(self, window) -> None:
+        """At the end of each of the network's windows the speed commands due; at the end of a
+        published one, a window change due."""
+        self.speed_change(window.end_index)
+        if window.published is not None:
+            self.window_change(window.end_index)
+
+    def stream_ended(self, final_event) -> None:
+        pass
+
     def speed_change(self, end_index: int) -> None:
         """A window of the network ended at ``end_index``: apply the speed commands due there
         (the gate and CPG read the new speed from the next window on)."""

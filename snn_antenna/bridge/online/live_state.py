@@ -42,8 +42,22 @@ class Decisions:
                        if part in self.parts and unless not in self.parts}
         self._open_since: float | None = None
         self._last: dict | None = None
+        self.latest: dict = {}              # what was decided on the latest window
 
-    def window(self, t_s: float, rates: np.ndarray, event) -> dict:
+    # ---- a WindowHandler (bridge/online/handler.py), held by the view ------------------------
+    def stream_started(self, parts) -> None:
+        pass
+
+    def window(self, window) -> None:
+        """What was decided on a published window: ``latest``."""
+        if window.published is not None:
+            published = window.published
+            self.latest = self.decided(published.t_s, published.rates, published.event)
+
+    def stream_ended(self, final_event) -> None:
+        self.event(final_event)
+
+    def decided(self, t_s: float, rates: np.ndarray, event) -> dict:
         """What was decided on the window starting at ``t_s`` (``event``: the tracker's)."""
         self.event(event)
         contact_window = bool(self.detector.is_contact_window(rates, self._above))

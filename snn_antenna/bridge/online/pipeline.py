@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +40,8 @@ from ...engine.spec_rules import check_spec
 from ..wire.protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
 from .report import OnlineReport
 from ..wire.source import SourceLoop
-from .terminal import LiveDisplay, show
+from .handler import Published, Window
+from .terminal import LiveDisplay
 
 SECTIONS = ("network", "preprocess", "readout")
 
@@ -220,61 +221,56 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
                no_data_timeout_s: float = 5.0, stop=None, display: LiveDisplay | None = None,
                calibration_s: float = 1.0, view=None, controls=None) -> dict:
     """Stream a started source (serial or replay) through the network; returns the report.
-    ``view`` (bridge/view.py's LiveView) is told each window and contact; it only copies.
-    ``controls`` (bridge/controls.py) changes Th and the rate-map window at window boundaries;
-    the report's ``controls`` lists what it applied."""
+    ``handlers`` see the source's batches (bridge/wire/source.py's SourceLoop: the recorder,
+    the view). The run report, a composed network's parts, ``controls`` (bridge/online/
+    controls.py: Th, the rate-map window, the speed at window boundaries), ``view``
+    (bridge/view/view.py's LiveView: it only copies) and ``display`` (the terminal's lines)
+    are WindowHandlers (bridge/online/handler.py), in that order; the
+    report's ``controls`` lists what the controls applied."""
     if not 0 < calibration_s <= 60:
         raise SpecError("calibration_s", calibration_s, "seconds in (0, 60]")
     loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
     clock, report = ArrivalClock(), OnlineReport()
-    neuron_hz = parts.array.neuron_hz
-    tracker = EpisodeTracker(parts.detector, neuron_hz, parts.window_s)
+    robot = parts.robot
+    # The report first: the real-time factor the others see counts the window.
+    followers = [h for h in (robot, controls, view, display) if h is not None]
+    for handler in (report, *followers):
+        handler.stream_started(parts)
+    tracker = EpisodeTracker(parts.detector, parts.array.neuron_hz, parts.window_s)
     # A replay read flat out delivers seconds of samples at once: arrival-to-rate-map latency
     # only means something for a live port (or a replay paced in real time).
     live = getattr(source, "realtime", True)
-    if display:
-        display.header(neuron_hz)
-
     summed = {"t_s": None, "counts": None, "n": 0}      # network windows summed so far
 
-    robot = parts.robot
-
     def on_window(t_s: float, spike_counts: np.ndarray) -> None:
-        # ResonatorArray.stream publishes a window once its last sample has been integrated,
+        # ResonatorArray.stream hands over a window once its last sample has been integrated,
         # before it asks for the next one. The published window sums ``controls.windows`` of
-        # the network's (one without controls). A composed network's parts are read at each
-        # of the network's windows, then a speed command due at its end applies.
-        if robot is not None:
-            robot.window(t_s + parts.window_s)
-            if controls is not None:
-                controls.speed_change(int(round((t_s + parts.window_s) * BOARD_RATE_HZ)))
+        # the network's (one without controls).
+        end_s = t_s + parts.window_s
+        end_index = int(round(end_s * BOARD_RATE_HZ))
         if summed["n"] == 0:
             summed["t_s"], summed["counts"] = t_s, spike_counts.astype(float)
         else:
             summed["counts"] = summed["counts"] + spike_counts
         summed["n"] += 1
-        if controls is not None and summed["n"] < controls.windows:
-            return
-        t_s, window_s = summed["t_s"], summed["n"] * parts.window_s
-        rates, summed["n"] = summed["counts"] / window_s, 0
-        end_s = t_s + window_s
-        end_index = int(round(end_s * BOARD_RATE_HZ))
-        arrived = clock.arrival(max(end_index - 1, 0))
-        if live:
-            report.origin = clock.origin
-        latency_ms = report.window_published(end_s, loop.waiting_s, arrived if live else None,
-                                             window_s)
-        tracker.window_s = window_s
-        event = tracker.update(t_s, rates)
-        if controls is not None:
-            controls.window_change(end_index)
-        report.last_window = (time.perf_counter(), loop.waiting_s, end_s)
-        if view is not None:
-            view.window(t_s, rates, event, report.realtime_factor, latency_ms,
-                        arrived if live else None, window_s)
-        if display:
-            show(display, event)
-            display.window(t_s, rates, neuron_hz, report.realtime_factor, latency_ms)
+        published = None
+        if controls is None or summed["n"] >= controls.windows:
+            start_s, window_s = summed["t_s"], summed["n"] * parts.window_s
+            rates, summed["n"] = summed["counts"] / window_s, 0
+            arrived = clock.arrival(max(end_index - 1, 0)) if live else None
+            if live:
+                report.origin = clock.origin
+            tracker.window_s = window_s
+            published = Published(start_s, window_s, rates, tracker.update(start_s, rates),
+                                  arrived, None if arrived is None
+                                  else (time.time() - arrived) * 1e3, float("nan"))
+        window = Window(end_s, end_index, loop.waiting_s, published)
+        report.window(window)
+        if published is not None:
+            window = replace(window, published=replace(
+                published, realtime_factor=report.realtime_factor))
+        for handler in followers:
+            handler.window(window)
 
     t0 = report.started = time.perf_counter()
     chunks = coded_chunks(loop, source, CalibratedChain(
@@ -287,12 +283,8 @@ def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | N
     report.samples, report.windows, report.simulated_s = (stats.samples, stats.windows,
                                                           stats.simulated_s)
     final = tracker.close()
-    if view is not None:
-        view.event(final)
-    if display:
-        show(display, final)
-        if display.tty:
-            print(file=display.out)
+    for handler in (report, *followers):
+        handler.stream_ended(final)
     report.contacts = [e.as_dict() for e in tracker.estimates]
     result = report.as_dict(parts, source.counts())
     if controls is not None:

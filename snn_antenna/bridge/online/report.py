@@ -72,26 +72,34 @@ class OnlineReport:
         (s0, c0), (s1, c1) = self.cpu_marks[0], self.cpu_marks[-1]
         return (s1 - s0) / max(c1 - c0, 1e-9)
 
-    def window_published(self, end_s: float, waiting_s: float, arrived: float | None,
-                         window_s: float) -> float | None:
-        """Note a rate-map window ending at ``end_s`` (stream time) as it is published;
-        returns its latency (ms) from the host arrival of its last sample (``arrived``, None
-        when the source is not live)."""
-        now = time.time()
+    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
+    def stream_started(self, parts) -> None:
+        pass
+
+    def window(self, window) -> None:
+        """Note a published rate-map window (stream time, its latency, the time spent waiting
+        for the port so far, the process's CPU time every CPU_EVERY_WINDOWS)."""
+        published = window.published
+        if published is None:
+            return
         if self.first_window is None:           # steady state starts here (Brian2 is built)
-            self.first_window = self.last_window = (time.perf_counter(), waiting_s, end_s)
+            self.first_window = self.last_window = (time.perf_counter(), window.waiting_s,
+                                                    window.end_s)
         if self.published % CPU_EVERY_WINDOWS == 0:
-            self.cpu_marks.append((end_s, time.process_time()))
+            self.cpu_marks.append((window.end_s, time.process_time()))
         self.published += 1
-        latency_ms = None if arrived is None else (now - arrived) * 1e3
+        latency_ms = published.latency_ms
         if latency_ms is not None:
             self.latencies_ms.append(latency_ms)
-        self.last_published = now
+        self.last_published = time.time()
         if (latency_ms is not None and not self.caught_up_at
-                and waiting_s - self.last_window[1] > 0.1 * window_s):
+                and window.waiting_s - self.last_window[1] > 0.1 * published.window_s):
             # The pipeline had to wait for the port: any start-up backlog is gone.
             self.caught_up_at = len(self.latencies_ms)
-        return latency_ms
+        self.last_window = (time.perf_counter(), window.waiting_s, window.end_s)
+
+    def stream_ended(self, final_event) -> None:
+        pass
 
     def as_dict(self, parts, counts: dict) -> dict:
         def summary(values):

@@ -163,9 +163,14 @@ class LiveRobot:
         self.speed = steer(self.objects, self.commanded, moving=True)
         return was
 
-    def window(self, end_s: float) -> None:
-        """A window of the network ended at ``end_s`` (stream time): the stop signal, the
-        gate's Th for the next window, the CPG's command, all read from the parts."""
+    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
+    def stream_started(self, parts) -> None:
+        pass
+
+    def window(self, window) -> None:
+        """A window of the network ended: the stop signal, the gate's Th for the next window,
+        the CPG's command, all read from the parts."""
+        end_s = window.end_s
         spikes = {}
         if self._counts is not None:
             for unit, total in zip(CONTROL_UNITS, self._counts.tolist()):
@@ -190,6 +195,9 @@ class LiveRobot:
                                   "motor_unit_spikes": spikes.get("motor", 0),
                                   "stopped_since_s": self.stopped_since}
         self.decided = decided
+
+    def stream_ended(self, final_event) -> None:
+        pass
 
     def next_th(self) -> float | None:
         """The Th the coder uses for the next window: the gate's, unless the page overrode it."""

@@ -1,5 +1,6 @@
 """The live pipeline's terminal output: a compact rate map per window (one character per
-neuron) and a line per contact event (bridge/online.py's ``run_online`` writes them)."""
+neuron) and a line per contact event (a WindowHandler of bridge/online/pipeline.py's
+``run_online``)."""
 from __future__ import annotations
 
 import sys
@@ -24,26 +25,41 @@ class LiveDisplay:
         self.fixed_scale_hz = full_scale_hz
         self.full_scale_hz = full_scale_hz or 10.0
         self._last_plain = -1.0
+        self.neuron_hz = None
 
-    def header(self, neuron_hz: np.ndarray) -> None:
+    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
+    def stream_started(self, parts) -> None:
+        self.neuron_hz = parts.array.neuron_hz
         scale = (f"{self.fixed_scale_hz:g} spikes/s" if self.fixed_scale_hz
                  else "the highest rate so far")
-        print(f"rate map: {len(neuron_hz)} resonators {neuron_hz[0]:.1f}–{neuron_hz[-1]:.1f} Hz "
-              f"(low → high), full bar = {scale}", file=self.out, flush=True)
+        print(f"rate map: {len(self.neuron_hz)} resonators {self.neuron_hz[0]:.1f}–"
+              f"{self.neuron_hz[-1]:.1f} Hz (low → high), full bar = {scale}", file=self.out,
+              flush=True)
 
-    def window(self, t_s: float, rates: np.ndarray, neuron_hz: np.ndarray, rtf: float,
-               latency_ms: float | None) -> None:
+    def window(self, window) -> None:
+        published = window.published
+        if published is None:
+            return
+        show(self, published.event)
+        rates, neuron_hz = published.rates, self.neuron_hz
         if not self.fixed_scale_hz:
             self.full_scale_hz = max(self.full_scale_hz, float(rates.max()))
         peak = f"{neuron_hz[int(np.argmax(rates))]:5.1f} Hz" if rates.max() > 0 else "  silent"
-        lat = f"  latency {latency_ms:5.1f} ms" if latency_ms is not None else ""
+        lat = (f"  latency {published.latency_ms:5.1f} ms" if published.latency_ms is not None
+               else "")
+        t_s = published.t_s
         line = (f"{t_s:8.1f} s |{rate_bar(rates, self.full_scale_hz)}| peak {peak}  "
-                f"rt x{rtf:5.1f}{lat}")
+                f"rt x{published.realtime_factor:5.1f}{lat}")
         if self.tty:
             print("\r" + line, end="", file=self.out, flush=True)
         elif t_s - self._last_plain >= 1.0 - 1e-9:
             self._last_plain = t_s
             print(line, file=self.out, flush=True)
+
+    def stream_ended(self, final_event) -> None:
+        show(self, final_event)
+        if self.tty:
+            print(file=self.out)
 
     def event(self, text: str) -> None:
         print(("\r\n" if self.tty else "") + text, file=self.out, flush=True)

@@ -1,4 +1,5 @@
-"""The live view's browser page: Bokeh figures fed from the view process's history
+"""The live view's browser page: Bokeh figures (the antenna's axes, the coded input) and the
+rate map's own canvas (bridge/view/rate_map.py), fed from the view process's history
 (:class:`~snn_antenna.bridge.view.view.history.ViewHistory`).
 
 Each open page is one Bokeh session with its own data sources; a periodic callback (every
@@ -30,9 +31,10 @@ PANELS_WIDTH = 230
 def build_page(view, doc) -> None:
     """Lay out one browser page for ``view`` in the Bokeh document ``doc`` and keep it fed."""
     from bokeh.layouts import column, row
-    from bokeh.models import ColumnDataSource, CustomJS, Div, Range1d
+    from bokeh.models import ColumnDataSource, Div, Range1d
 
-    from .page_controls import PAINTED_JS, control_widgets
+    from .page_controls import control_widgets
+    from .rate_map import rate_map
 
     view.sessions += 1
     view.pages_served += 1
@@ -45,39 +47,44 @@ def build_page(view, doc) -> None:
     sources = {"xy": ColumnDataSource({"t": [], "x": [], "y": []}, name="xy"),
                "coded": ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [],
                                           "coded": []}),
-               "map": ColumnDataSource(_rate_image(view.windows.rows[:0], False), name="map"),
                "contacts": ColumnDataSource({"t": [], "label": []}, name="contacts")}
+    # This page's own mode: paused (its plots stop following) and how far back it scrubs.
+    mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
     antenna = _antenna_figure(sources["xy"], common)
     coded = _coded_figure(sources["coded"], common, view.coder_amplitude)
-    rate_map, mapper = _rate_map_figure(sources["map"], common, view.neuron_hz,
-                                        view.peak_rate_hz)
+    rate_map_div, sources["map"] = rate_map(doc, view, x_range, sources["contacts"],
+                                            mode["page"], CONTACT_COLOUR, coded)
     for fig in (antenna, coded):
         _legend_outside(fig)
-    for fig in (antenna, coded, rate_map):
         _mark_contacts(fig, sources["contacts"])
     # A fixed height: new text does not move the plots below it.
     counters = Div(text="", sizing_mode="stretch_width", height=80, name="counters")
     # Beside the plots, what the running network decides: a panel per part it has. One column
     # for the plots keeps their time axes aligned.
     panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided")
-    plots = column(antenna, coded, rate_map, sizing_mode="stretch_width")
-    # This page's own mode: paused (its plots stop following) and how far back it scrubs.
-    mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
-    update, update_map, reload, waiting = _updater(view, sources, mapper, counters, panels, x_range, mode)
+    plots = column(antenna, coded, rate_map_div, sizing_mode="stretch_width")
+    update, update_map, reload, waiting = _updater(view, sources, counters, panels, x_range,
+                                                   mode)
     bar, status = control_widgets(view, mode, reload, x_range)
-    sources["map"].js_on_change("data", CustomJS(args={"source": sources["map"],
-                                                       "page": mode["page"]},
-                                                 code=PAINTED_JS))
     doc.add_root(column(counters, bar, status, row(plots, panels, sizing_mode="stretch_width"),
                         sizing_mode="stretch_width"))
     doc.title = "snn-antenna live view"
+    reload(None)                    # the kept span, then its text
     update()
-    doc.add_periodic_callback(update, PAGE_UPDATE_MS)
+
+    # A page nobody holds (reloaded, closed, or not connected yet) costs nothing until its
+    # session is discarded or a browser connects: it then catches up from its cursors.
+    def pull() -> None:
+        if connected(doc):
+            update()
+
+    doc.add_periodic_callback(pull, PAGE_UPDATE_MS)
 
     # A new rate-map column is pushed as it arrives, alone: a small message, and the browser
     # redraws the rate map only (the lines, panels and counters come with the periodic pull).
     def push() -> None:
-        doc.add_next_tick_callback(update_map)
+        if connected(doc):
+            doc.add_next_tick_callback(update_map)
 
     def painted() -> None:          # columns held back while the browser drew: now
         if waiting():
@@ -87,6 +94,12 @@ def build_page(view, doc) -> None:
     view.painted_listeners[mode["page"]] = painted
     doc.on_session_destroyed(lambda _context: (view.column_listeners.discard(push),
                                                view.painted_listeners.pop(mode["page"], None)))
+
+
+def connected(doc) -> bool:
+    """Whether a browser holds the page's session now (a document outside a server: yes)."""
+    session = doc.session_context.session if doc.session_context is not None else None
+    return session is None or session.connection_count > 0
 
 
 def _legend_outside(fig) -> None:
@@ -125,26 +138,6 @@ def _coded_figure(source, common, amplitude: float):
     return fig
 
 
-def _rate_map_figure(source, common, neuron_hz: np.ndarray, peak_rate_hz: float):
-    """One image (a row per resonator, a column per window) rather than a rectangle per cell:
-    the browser redraws it ten times a second and on each new column, and it competes for the same cores."""
-    from bokeh.models import ColorBar, FixedTicker, LinearColorMapper, Range1d
-    from bokeh.palettes import Viridis256
-    from bokeh.plotting import figure
-
-    n = len(neuron_hz)
-    mapper = LinearColorMapper(palette=Viridis256, low=0, high=peak_rate_hz)
-    fig = figure(title="Rate map: resonators (tuning frequency) × time",
-                 y_axis_label="resonator tuning (Hz)", x_axis_label="stream time (s)",
-                 y_range=Range1d(-0.5, n - 0.5), **{**common, "height": 260})
-    fig.image(image="image", x="x", y="y", dw="dw", dh="dh", source=source, color_mapper=mapper)
-    ticks = list(range(0, n, max(1, n // 8)))
-    fig.yaxis.ticker = FixedTicker(ticks=ticks)
-    fig.yaxis.major_label_overrides = {i: f"{neuron_hz[i]:.1f}" for i in ticks}
-    fig.add_layout(ColorBar(color_mapper=mapper, title="rate (spikes/s)", width=12), "right")
-    return fig, mapper
-
-
 def _mark_contacts(fig, source) -> None:
     """A vertical line and a label at every contact's onset."""
     from bokeh.models import LabelSet
@@ -156,11 +149,12 @@ def _mark_contacts(fig, source) -> None:
                             background_fill_alpha=0.75))
 
 
-def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict):
+def _updater(view, sources: dict, counters, panels, x_range, mode: dict):
     """The page's periodic callback (stream what is new since this page's cursors, unless the
     page is paused) and ``reload(end_s)``: show the kept history up to ``end_s`` (None: the
     latest, and follow it again)."""
     from .page_controls import controls_html
+    from .rate_map import map_rows
 
     cursor = {"xy": 0, "coded": 0, "windows": 0, "sent_t": None, "sent_at": 0.0,
               "text_at": 0.0}
@@ -177,9 +171,10 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         sources["xy"].data = {"t": xy[:, 0], "x": xy[:, 1], "y": xy[:, 2]}
         sources["coded"].data = {"t": coded[:, 0], "signal": coded[:, 1], "th": coded[:, 2],
                                  "neg_th": -coded[:, 2], "coded": coded[:, 3]}
-        sources["map"].data = image = _rate_image(span(view.windows.rows, end), live)
-        if live and image["t_last"]:
-            cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
+        shown = span(view.windows.rows, end)
+        sources["map"].data = map_rows(shown, live, view.peak_rate_hz, reset=True)
+        if live and len(shown):
+            cursor["sent_t"], cursor["sent_at"] = float(shown[-1, 0]), time.monotonic()
         cursor.update(xy=view.xy.total, coded=view.coded.total, windows=view.windows.total)
         x_range.start, x_range.end = end - view.history_s, end
 
@@ -196,15 +191,13 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         if mode["paused"] or behind():
             return False
         if cursor["windows"] != view.windows.total:
+            new = view.windows.since(cursor["windows"])
             cursor["windows"] = view.windows.total
-            end = max(view.t_s, view.history_s)
-            sources["map"].data = image = _rate_image(span(view.windows.rows, end), True)
-            if image["t_last"]:
-                view.sending(image["t_last"][0])
-                cursor["sent_t"], cursor["sent_at"] = image["t_last"][0], time.monotonic()
-            if mapper.high != view.peak_rate_hz:
-                mapper.high = view.peak_rate_hz
-            if image["t_last"] and image["t_last"][0] + view.window_s > x_range.end:
+            sources["map"].data = map_rows(new, True, view.peak_rate_hz)
+            last = float(new[-1, 0])
+            view.sending(last)
+            cursor["sent_t"], cursor["sent_at"] = last, time.monotonic()
+            if last + view.window_s > x_range.end:
                 follow()            # the new column in sight, not past the plot's right edge
         return True
 
@@ -253,22 +246,6 @@ def _updater(view, sources: dict, mapper, counters, panels, x_range, mode: dict)
         follow()
 
     return update, update_map, reload, lambda: cursor["windows"] != view.windows.total
-
-
-def _rate_image(windows: np.ndarray, live: bool) -> dict:
-    """The rate map's image data from kept windows (rows: t_s, width_s, rates...). The image
-    has one column width: the windows since the latest change of window (or of stream: a new
-    stream starts again at 0) are shown. ``t_last`` and ``live`` tell the page's script which
-    column it paints (bridge/page_controls.py)."""
-    if not len(windows):
-        return {"image": [], "x": [], "y": [], "dw": [], "dh": [], "t_last": [], "live": []}
-    t, width = windows[:, 0], windows[:, 1]
-    restart = np.flatnonzero((np.diff(t) <= 0) | (width[1:] != width[:-1]))
-    if len(restart):
-        windows = windows[restart[-1] + 1:]
-    return {"image": [np.ascontiguousarray(windows[:, 2:].T)], "x": [windows[0, 0]],
-            "y": [-0.5], "dw": [len(windows) * windows[-1, 1]], "dh": [windows.shape[1] - 2],
-            "t_last": [float(windows[-1, 0])], "live": [bool(live)]}
 
 
 def contact_marks(view) -> list[tuple[float, str]]:

@@ -5,30 +5,14 @@ whose gate or CPG reads one) the robot's speed command, save the view.
 Pausing is the page's own business (its plots stop following; the pipeline and the other pages
 go on). Th and the window go through the view process's one parser to the pipeline
 (bridge/controls.py), which applies them at a window boundary and journals them; the page
-shows what was asked and what was applied. Two small scripts run in the browser: one reports
-when the page painted a new rate-map column (``/painted``: the display delay), the other draws
-the page's canvases into one PNG and posts it to ``/save``.
+shows what was asked and what was applied. A small script draws the page's canvases (the
+rate map's among them, bridge/view/rate_map.py) into one PNG and posts it to ``/save``.
 """
 from __future__ import annotations
 
 import html
 
 from ...core.errors import SpecError
-
-# After a change of the image, the next animation frame is the paint; a task queued from it
-# runs once that paint is done. Only columns shown live are reported (not a scrubbed view).
-PAINTED_JS = """
-const d = source.data;
-if (!d.live || !d.live.length || !d.live[0]) { return; }
-const t = d.t_last[0];
-const received = Date.now() / 1000;    // the column reached this page's document
-requestAnimationFrame(() => setTimeout(() => {
-  fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
-                    body: JSON.stringify({t_s: t, painted_unix_s: Date.now() / 1000,
-                                          received_unix_s: received, page: page})})
-    .catch(() => {});
-}, 0));
-"""
 
 # Bokeh draws each plot on canvases inside shadow roots: walk them, draw each where it sits.
 SAVE_JS = """

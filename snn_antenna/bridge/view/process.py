@@ -23,24 +23,28 @@ import logging
 import os
 import queue
 import signal
+import sys
 import threading
-import time
 from functools import partial
 
 from ...core.errors import SpecError
 from .page import build_page
 from .history import ViewConfig, ViewHistory
 
-DRAIN_MS = 50                   # this process checks the pipeline's stop message (frames
-# need no polling: a thread waits on the hand-off and passes each frame to the server's loop at
-# once, ``_receive``; a new column then goes to the pages: ViewHistory.column_listeners)
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
 LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
+# A page's session outlives its page by this much (Bokeh's default: 15 s, checked every 17 s):
+# a storm of reloads leaves a session per load until then (page.py keeps one nobody holds
+# idle). Long enough for a busy machine's browser to load BokehJS and connect to the session
+# its page was built with.
+SESSION_LINGER_MS = 10_000
+SESSION_CHECK_MS = 2_000
 
 
 def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     """The view process's main: bind, tell the pipeline the URL over ``control``, serve until
-    it says ``("stop", frames published)`` (or goes away), then answer with the view's count."""
+    it says ``("stop", frames published, frames handed over)`` (or goes away), then answer
+    with the view's count."""
     # Ctrl-C in a terminal reaches the whole process group; the pipeline decides when the
     # view ends (a KeyboardInterrupt here would only print a traceback).
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -52,7 +56,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     from bokeh.server.tornado import BokehTornado
     from bokeh.server.util import bind_sockets
     from tornado.httpserver import HTTPServer
-    from tornado.ioloop import IOLoop, PeriodicCallback
+    from tornado.ioloop import IOLoop
 
     from .hostguard import HostGuard, allowed_hosts
 
@@ -62,7 +66,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     asyncio.set_event_loop(asyncio.new_event_loop())
     loop = IOLoop.current()
     history = ViewHistory(config)
-    inbox = _receive(inbox, loop, history)
+    inbox, arrived = _receive(inbox, loop, history)
     history.requests, history.inbox = requests, inbox
     try:
         sockets, port = bind_sockets(config.host, config.port)
@@ -79,47 +83,47 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
                                        (r"/control", handlers["control"], routed),
                                        (r"/painted", handlers["painted"], routed),
                                        (r"/save", handlers["save"], routed)],
-                       websocket_ping_interval=10, websocket_ping_timeout=10)
+                       websocket_ping_interval=10, websocket_ping_timeout=10,
+                       unused_session_lifetime_milliseconds=SESSION_LINGER_MS,
+                       check_unused_sessions_milliseconds=SESSION_CHECK_MS)
     http = HTTPServer(HostGuard(app, allowed))
     http.add_sockets(sockets)
-    server = BaseServer(loop, app, http)
-    server.start()
+    BaseServer(loop, app, http).start()
     bound = sockets[0].getsockname()[0]
     shown = f"[{bound}]" if ":" in bound else bound
     control.send(("ready", f"http://{shown}:{port}/", port))
 
-    def tick() -> None:
-        history.drain(inbox)
-        try:
-            if not control.poll():
-                return
-            message = control.recv()
-        except (EOFError, OSError):             # the pipeline's process is gone
-            message = ("stop", history.received + history.dropped)
-        # The last frames may still be on their way (the queue's feeder thread writes them).
-        deadline = time.monotonic() + LAST_FRAMES_S
-        while history.next_seq < message[1] and time.monotonic() < deadline:
-            history.drain(inbox, wait_s=0.05)
-        history.ended(message[1])
-        try:
-            control.send(("stopped", {"received": history.received,
-                                      "dropped": history.dropped}))
-        except OSError:
-            pass
-        server.stop()
-        loop.stop()
-
-    PeriodicCallback(tick, DRAIN_MS).start()
+    threading.Thread(target=_answer_stop, args=(control, arrived), name="view-stop",
+                     daemon=True).start()
     loop.start()
-    loop.close(all_fds=True)
 
 
-def _receive(handoff, loop, history) -> queue.Queue:
+class _Arrived:
+    """The frames that came through the pipeline's hand-off (counted by the thread that takes
+    them, whatever the server's loop is busy with), and a condition to wait for more."""
+
+    def __init__(self):
+        self.count = 0
+        self.changed = threading.Condition()
+
+    def add(self) -> None:
+        with self.changed:
+            self.count += 1
+            self.changed.notify_all()
+
+    def wait_for(self, count: int, timeout_s: float) -> int:
+        with self.changed:
+            self.changed.wait_for(lambda: self.count >= count, timeout_s)
+            return self.count
+
+
+def _receive(handoff, loop, history) -> tuple[queue.Queue, _Arrived]:
     """A thread that waits on the pipeline's hand-off and passes each frame to the server's
     loop as it comes (``IOLoop.add_callback`` is the one thread-safe call): polling it every
     few ms would add up to that much to every column's delay. Returns the queue this process
-    reads the frames from, in the order they came."""
+    reads the frames from, in the order they came, and their count."""
     frames: queue.Queue = queue.Queue()
+    arrived = _Arrived()
 
     def wait() -> None:
         while True:
@@ -128,10 +132,34 @@ def _receive(handoff, loop, history) -> queue.Queue:
             except (EOFError, OSError, ValueError):     # the pipeline's end of it closed
                 return
             frames.put(frame)
+            arrived.add()
             loop.add_callback(history.drain, frames)
 
     threading.Thread(target=wait, name="view-handoff", daemon=True).start()
-    return frames
+    return frames, arrived
+
+
+def _answer_stop(control, arrived: _Arrived) -> None:
+    """Wait for the pipeline's ``("stop", published, handed over)`` (or its going away),
+    answer with the frames this process received and dropped, and end the process. All of it
+    off the server's loop: however busy the loop is (a storm of reloaded pages leaves it
+    sessions to tear down), the answer does not wait on it. Nothing is left to do after the
+    answer (a saved view is written whole when asked), so the process exits at once: an
+    interpreter's teardown with Bokeh and scikit-learn loaded takes 1-2 s on a busy machine."""
+    try:
+        _, published, handed = control.recv()
+    except (EOFError, OSError):                 # the pipeline's process is gone
+        os._exit(0)
+    # The last frames may still be on their way (the queue's feeder thread writes them);
+    # those the hand-off refused never come.
+    received = arrived.wait_for(handed, LAST_FRAMES_S)
+    try:
+        control.send(("stopped", {"received": received, "dropped": published - received}))
+    except OSError:
+        pass
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(0)
 
 
 def _handlers() -> dict:

@@ -141,8 +141,9 @@ def _tap_coder(coder, tap) -> None:
 
 class LiveView:
     """Pipeline side of the live view: a :class:`~snn_antenna.bridge.wire.source.SourceLoop` handler
-    (``handle``, ``idle``) and ``run_online``'s ``view`` hook (``window``, ``event``); all of
-    them only gather, and every ``FLUSH_S`` one frame goes to the view process without waiting.
+    (``handle``, ``idle``) and a :class:`~snn_antenna.bridge.online.handler.WindowHandler`
+    (``run_online``'s ``view``); all of them only gather, and every ``FLUSH_S`` (a new
+    rate-map column: ``WINDOW_FLUSH_S``) one frame goes to the view process without waiting.
     ``start`` spawns that process and returns the URL it is bound to; ``stop`` ends it."""
 
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
@@ -200,29 +201,33 @@ class LiveView:
     def _coded(self, signal, th, coded) -> None:
         self._in.append((signal, th, coded))
 
-    def window(self, t_s: float, rates: np.ndarray, event, realtime_factor: float,
-               latency_ms: float | None, arrived: float | None = None,
-               window_s: float | None = None) -> None:
-        """A published window; ``arrived``: host time its last sample arrived (live only),
-        from which the view process measures the delay to its column on a page."""
-        decided = self.decisions.window(t_s, rates, event)
-        self._windows.append((t_s, rates.copy(), realtime_factor, latency_ms, decided, arrived,
-                              window_s or self.config.window_s))
-        self._note(event)
+    # ---- a WindowHandler (bridge/online/handler.py) ---------------------------------------
+    def stream_started(self, parts) -> None:
+        self.decisions.stream_started(parts)
+
+    def window(self, window) -> None:
+        """A published window goes to the pages with what the network decided on it; its
+        ``arrived`` (host time of its last sample, live only) is where the view process
+        measures the delay to its column on a page from."""
+        self.decisions.window(window)
+        published = window.published
+        if published is None:
+            return
+        self._windows.append((published.t_s, published.rates.copy(), published.realtime_factor,
+                              published.latency_ms, self.decisions.latest, published.arrived,
+                              published.window_s))
+        self._note(published.event)
+        self._due()
+
+    def stream_ended(self, final_event) -> None:
+        """The stream's last contact, closed at its end (no window of its own)."""
+        self.decisions.stream_ended(final_event)
+        self._note(final_event)
         self._due()
 
     def applied(self, event: dict) -> None:
         """A control change the pipeline applied (bridge/controls.py): shown on the page."""
         self._applied.append(event)
-        self._due()
-
-    def event(self, event) -> None:
-        """The stream's last contact, closed at its end (no window of its own)."""
-        self.decisions.event(event)
-        self._event(event)
-
-    def _event(self, event) -> None:
-        self._note(event)
         self._due()
 
     def _note(self, event) -> None:
@@ -290,7 +295,8 @@ class LiveView:
         if self._control is not None:
             answer = None
             try:
-                self._control.send(("stop", self.published))
+                self._control.send(("stop", self.published,
+                                    self.published - self.handoff_full))
                 if self._control.poll(STOP_TIMEOUT_S):
                     answer = self._control.recv()[1]
             except (EOFError, OSError):

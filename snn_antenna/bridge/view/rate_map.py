@@ -1,0 +1,178 @@
+"""The live page's rate map: a canvas of its own, drawn by a small script in the page, fed over
+the page's Bokeh websocket.
+
+Why not a Bokeh plot: each paint of a Bokeh plot costs its page's main thread ~10 ms (axes,
+tick labels, CSS look-ups), and with three pages on two cores the browsers' drawing is what
+delays a column. Here the view process sends each page only the new columns (a data source no
+glyph draws: a small message), and the page's script keeps the columns it shows and paints
+them with ``fillRect`` (one rectangle per resonator and window, ~1 ms for the 10 s shown). The
+plot follows the page's shared time axis (``x_range``: paused, scrubbed, panned), marks the
+contacts' onsets, and reports each live column it painted to ``/painted`` (the display delay,
+bridge/view/history.py).
+
+The source's columns, one row per window: ``t`` (start, s), ``w`` (width, s), ``rates``
+(spikes/s per resonator, float32), ``high`` (the colour scale's top, spikes/s), ``live``
+(shown live: only those are reported painted) and ``reset`` (the page starts its map again
+from these rows: a reload, a scrub). No rows at all is a reset to an empty map.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+HEIGHT = 260
+TITLE = "Rate map: resonators (tuning frequency) × time"
+
+# The plot's frame inside the canvas, in CSS pixels, until the plot above it is laid out (its
+# frame's left and right are then the map's, so that the time axes line up).
+FRAME = {"left": 70, "right": 110, "top": 26, "bottom": 40}
+
+# Shared by the three triggers (``on``): "data" (new rows from the view process), "ready"
+# (the document as the page loaded it), "view" (the time axis or the contacts changed).
+RATE_MAP_JS = """
+const st = div._rate_map || (div._rate_map = {t: [], w: [], r: [], high: 10, live: true,
+                                               canvas: null});
+const d = source.data;
+if (on !== 'view') {
+  const n_new = d.t.length;
+  const clear = () => { st.t = []; st.w = []; st.r = []; };
+  if (n_new === 0 || d.reset[0]) { clear(); }
+  for (let i = 0; i < n_new; i++) {
+    if (st.t.length && d.t[i] <= st.t[st.t.length - 1]) { clear(); }   // a new stream
+    st.t.push(d.t[i]); st.w.push(d.w[i]); st.r.push(d.rates[i]);
+  }
+  if (n_new) { st.high = d.high[n_new - 1]; st.live = d.live[n_new - 1]; }
+  const oldest = st.t.length ? st.t[st.t.length - 1] - 2 * history_s : 0;
+  let k = 0;
+  while (k < st.t.length && st.t[k] + st.w[k] < oldest) { k++; }
+  if (k) { st.t.splice(0, k); st.w.splice(0, k); st.r.splice(0, k); }
+}
+const received = Date.now() / 1000;     // the columns reached this page's document
+
+function find(root) {                   // Bokeh renders a Div's text in a shadow root
+  for (const el of root.querySelectorAll('*')) {
+    if (el.tagName === 'CANVAS' && el.dataset.rateMap === page) { return el; }
+    if (el.shadowRoot) { const found = find(el.shadowRoot); if (found) { return found; } }
+  }
+  return null;
+}
+if (!st.canvas || !st.canvas.isConnected) { st.canvas = find(document); }
+const canvas = st.canvas;
+const host = canvas && canvas.getRootNode().host;     // the Div, stretched to the column
+if (host && host.clientWidth > 0) {
+  const dpr = window.devicePixelRatio || 1;
+  const W = host.clientWidth, H = canvas.clientHeight;
+  if (canvas.style.width !== W + 'px') { canvas.style.width = W + 'px'; }
+  if (canvas.width !== Math.round(W * dpr) || canvas.height !== Math.round(H * dpr)) {
+    canvas.width = Math.round(W * dpr); canvas.height = Math.round(H * dpr);
+  }
+  const ctx = canvas.getContext('2d');
+  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+  ctx.fillStyle = 'white'; ctx.fillRect(0, 0, W, H);
+  // The time axis where the plot above has its own (its frame, once laid out).
+  const above = window.Bokeh && Bokeh.index && Bokeh.index.find_one(align);
+  const bbox = above && above.frame && above.frame.bbox;
+  const shift = bbox ? above.el.getBoundingClientRect().left
+                       - canvas.getBoundingClientRect().left : 0;
+  const x0 = bbox ? bbox.left + shift : frame.left;
+  const x1 = bbox ? bbox.right + shift : W - frame.right;
+  const y0 = frame.top, y1 = H - frame.bottom;
+  const start = x_range.start, end = x_range.end, sx = (x1 - x0) / (end - start);
+  const rowH = (y1 - y0) / n, top = palette.length - 1, high = st.high > 0 ? st.high : 1;
+  for (let j = 0; j < st.t.length; j++) {
+    const t = st.t[j], w = st.w[j];
+    if (t + w < start || t > end) { continue; }
+    const a = Math.max(x0, Math.floor(x0 + (t - start) * sx));
+    const b = Math.min(x1, Math.ceil(x0 + (t + w - start) * sx));
+    const r = st.r[j];
+    for (let i = 0; i < n; i++) {
+      ctx.fillStyle = palette[Math.max(0, Math.min(top, Math.round(r[i] / high * top)))];
+      ctx.fillRect(a, y1 - (i + 1) * rowH, b - a, rowH + 0.5);
+    }
+  }
+  ctx.strokeStyle = '#e5e5e5'; ctx.lineWidth = 1;
+  ctx.strokeRect(x0 + 0.5, y0 + 0.5, x1 - x0 - 1, y1 - y0 - 1);
+  ctx.strokeStyle = contact_colour; ctx.lineWidth = 2;
+  for (const onset of contacts.data.t) {
+    if (onset < start || onset > end) { continue; }
+    const x = x0 + (onset - start) * sx;
+    ctx.beginPath(); ctx.moveTo(x, y0); ctx.lineTo(x, y1); ctx.stroke();
+  }
+  ctx.fillStyle = '#444'; ctx.font = '11px sans-serif';
+  ctx.textAlign = 'right'; ctx.textBaseline = 'middle';
+  for (const [i, label] of ticks) { ctx.fillText(label, x0 - 5, y1 - (i + 0.5) * rowH); }
+  ctx.textAlign = 'center'; ctx.textBaseline = 'top';
+  const step = [0.5, 1, 2, 5, 10, 20, 60].find(s => s * sx >= 50) || 60;
+  for (let s = Math.ceil(start / step) * step; s <= end; s += step) {
+    const x = x0 + (s - start) * sx;
+    ctx.fillText(String(+s.toFixed(2)), x, y1 + 4);
+    ctx.fillRect(x, y1, 1, 3);
+  }
+  ctx.fillText('stream time (s)', (x0 + x1) / 2, y1 + 20);
+  ctx.save(); ctx.translate(12, (y0 + y1) / 2); ctx.rotate(-Math.PI / 2);
+  ctx.fillText('resonator tuning (Hz)', 0, 0); ctx.restore();
+  ctx.font = 'bold 13px sans-serif'; ctx.textAlign = 'left';
+  ctx.fillText(title, x0, 6);
+  const bx = x1 + 14, bw = 12;          // the colour bar: 0 at the bottom, high at the top
+  for (let p = 0; p <= top; p++) {
+    ctx.fillStyle = palette[p];
+    const y = y1 - (p + 1) * (y1 - y0) / (top + 1);
+    ctx.fillRect(bx, y, bw, (y1 - y0) / (top + 1) + 0.5);
+  }
+  ctx.fillStyle = '#444'; ctx.font = '11px sans-serif';
+  ctx.textAlign = 'left'; ctx.textBaseline = 'middle';
+  ctx.fillText(String(+high.toFixed(1)), bx + bw + 4, y0 + 4);
+  ctx.fillText('0', bx + bw + 4, y1 - 4);
+  ctx.save(); ctx.translate(bx + bw + 40, (y0 + y1) / 2); ctx.rotate(-Math.PI / 2);
+  ctx.textAlign = 'center'; ctx.fillText('rate (spikes/s)', 0, 0); ctx.restore();
+}
+// A live column reported once painted: the next animation frame is the paint, and a task
+// queued from it runs once that paint is done.
+if (on === 'data' && d.t.length && d.live[d.t.length - 1]) {
+  const t = d.t[d.t.length - 1];
+  requestAnimationFrame(() => setTimeout(() => {
+    fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
+                      body: JSON.stringify({t_s: t, painted_unix_s: Date.now() / 1000,
+                                            received_unix_s: received, page: page})})
+      .catch(() => {});
+  }, 0));
+}
+"""
+
+
+def rate_map(doc, view, x_range, contacts, page: str, colour: str, align):
+    """The rate map of one page (the Bokeh document ``doc``): its Div (holding the canvas)
+    and its data source, named ``map`` (rows as :func:`map_rows` makes them). ``contacts``:
+    the page's contact marks (a source with ``t``); ``page``: the page's token for
+    ``/painted``; ``align``: the plot above, whose frame the map's time axis lines up with."""
+    from bokeh.events import DocumentReady
+    from bokeh.models import ColumnDataSource, CustomJS, Div
+    from bokeh.palettes import Viridis256
+
+    n = len(view.neuron_hz)
+    source = ColumnDataSource(map_rows(np.empty((0, 2 + n)), True, view.peak_rate_hz),
+                              name="map")
+    div = Div(text=f"<canvas data-rate-map='{page}' style='display:block;width:100%;"
+                   f"height:{HEIGHT}px'></canvas>", sizing_mode="stretch_width", height=HEIGHT,
+              name="rate_map")
+    ticks = [[i, f"{view.neuron_hz[i]:.1f}"] for i in range(0, n, max(1, n // 8))]
+    args = dict(source=source, x_range=x_range, contacts=contacts, div=div, n=n, page=page,
+                palette=list(Viridis256), ticks=ticks, history_s=view.history_s, frame=FRAME,
+                title=TITLE, contact_colour=colour, align=align)
+
+    def draw(on: str) -> CustomJS:
+        return CustomJS(args={**args, "on": on}, code=RATE_MAP_JS)
+
+    source.js_on_change("data", draw("data"))
+    x_range.js_on_change("end", draw("view"))       # the page's code moves both ends
+    x_range.js_on_change("start", draw("view"))     # ... a pan or zoom may move one
+    contacts.js_on_change("data", draw("view"))
+    doc.js_on_event(DocumentReady, draw("ready"))   # the rows the page loaded with
+    return div, source
+
+
+def map_rows(windows: np.ndarray, live: bool, high: float, reset: bool = False) -> dict:
+    """The map source's data for kept windows (rows: t_s, width_s, rates...)."""
+    n = len(windows)
+    return {"t": windows[:, 0].tolist(), "w": windows[:, 1].tolist(),
+            "rates": [np.ascontiguousarray(row[2:], dtype=np.float32) for row in windows],
+            "high": [float(high)] * n, "live": [bool(live)] * n, "reset": [bool(reset)] * n}
