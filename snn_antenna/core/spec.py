@@ -20,7 +20,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterable
 
-from .bounds import out_path, parse_value
+from .bounds import beyond_limits, nested, out_path, parse_value
+from .bounds import seed as checked_seed
 from .errors import SpecError, shown
 
 INCLUDABLE = ("network", "stimulus")
@@ -51,12 +52,17 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
 def _read(path: Path, field: str = "spec") -> dict:
     try:
         with open(path, "rb") as f:
-            return tomllib.load(f)
+            table = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(field, str(path), f"valid TOML ({exc})") from None
     except UnicodeDecodeError:              # tomllib reads bytes but wants UTF-8 text
         raise SpecError(field, str(path), "a TOML file in UTF-8 text (this one is binary "
                                            "or in another encoding)") from None
+    except (ValueError, RecursionError, MemoryError) as exc:   # TOML Python cannot hold
+        raise SpecError(field, str(path), f"a TOML file with {beyond_limits(exc)}") from None
+    for key, value in table.items():
+        nested(key, value)
+    return table
 
 
 def _flatten(table: dict, prefix: str = ""):
@@ -77,7 +83,8 @@ def apply_override(spec: dict, item: str) -> None:
     if "=" not in item:
         raise SpecError("--set", item, "key=value, e.g. network.n_neurons=48")
     dotted, text = item.split("=", 1)
-    dotted, value = dotted.strip(), parse_value(text.strip())
+    dotted = dotted.strip()
+    value = parse_value(text.strip(), dotted or "--set")
     before = get_field(spec, dotted, _MISSING) if dotted else _MISSING
     if before is not _MISSING:
         same_kind(dotted, before, value)
@@ -260,9 +267,7 @@ def check_top_level(spec: dict, sections: Iterable[str]) -> None:
         if key not in allowed:
             raise SpecError(key, spec[key],
                             f"a known top-level key of this study: {', '.join(sorted(allowed))}")
-    seed = spec.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise SpecError("seed", seed, "an integer >= 0")
+    checked_seed("seed", spec.get("seed", 0))
 
 
 @contextmanager

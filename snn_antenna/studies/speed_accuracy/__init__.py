@@ -38,6 +38,7 @@ from ...engine.devices import (
 )
 from ...engine.runlog import Measurements, RunLog
 from ...core.errors import check
+from ...engine.cost import engine_of, stages_estimate
 from ...core.logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
@@ -53,10 +54,12 @@ from ...sources.stimuli import RobotScene
 from ...core.store import write_dataset
 from . import precision as engine_precision
 from .precision import Precision
+from ..contract import COMMON, Options, Plan, data_folder
 from .report import human_summary, quick_note, write_report
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
-            "stability", "reference", "match", "bands", "precision")
+            "stability", "reference", "match", "bands", "precision", "data")
+OPTIONS = (*COMMON, "fresh", "data")
 SCENES = ("tuning", "quickstart", "bench")
 
 
@@ -126,7 +129,7 @@ class ReferenceSettings:
 
 
 @dataclasses.dataclass
-class Plan:
+class Parts:
     """Every part of the study, built and checked from the spec before any simulation."""
     net: dict
     robot_scenes: dict
@@ -143,9 +146,10 @@ class Plan:
     precision: Precision
 
 
-def build(spec: dict) -> Plan:
+def plan(spec: dict) -> Plan:
     """Check the whole spec and build every part before any simulation runs."""
     specs.check_top_level(spec, SECTIONS)
+    data_folder(spec)
     with specs.section("network"):
         net = dict(specs.check_section(spec, "network", ResonatorArray))
         array = ResonatorArray(**net)
@@ -169,11 +173,30 @@ def build(spec: dict) -> Plan:
             parts[name] = cls(**specs.check_section(spec, name, cls))
     for scene in robot_scenes.values():
         array.check_rate(scene.rate_hz)
-    return Plan(net, robot_scenes, pre, detector, window_s, **parts)
+    return Plan("speed_accuracy", spec,
+                Parts(net, robot_scenes, pre, detector, window_s, **parts), estimate)
+
+
+def estimate(parts: Parts):
+    """The main sweep (every scene at every method and dt) and the cost sweep (its settings
+    at every target, float type and array size)."""
+    array = ResonatorArray(**dict(parts.net, force=True))
+    seconds = {"tuning": parts.tuning.duration_s,
+               **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
+    size = {"tuning": array.n_neurons * parts.tuning.n_freqs}
+    sweep, cost = parts.sweep, parts.cost
+    main = [(seconds[s], float(dt), size.get(s, array.n_neurons), engine_of(sweep.target))
+            for s in sweep.scenes for dt in sweep.dt_ms] * len(sweep.methods)
+    # the recommendation is the fastest setting that matches: sized as the spec's settings
+    settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
+    costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
+             for t in cost.targets for n in cost.n_neurons] * len(cost.dtypes)
+    return stages_estimate("the method x dt sweep and the cost sweep", [
+        ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs)])
 
 
 # -- stages ---------------------------------------------------------------------------------
-def prepare_workloads(plan: Plan, seed: int, log) -> dict:
+def prepare_workloads(plan: Parts, seed: int, log) -> dict:
     """The tuning workload, and each robot scene generated and coded as the quickstart does."""
     workloads = {}
     for name in dict.fromkeys(plan.sweep.scenes + [plan.cost.scene]):
@@ -192,7 +215,7 @@ def prepare_workloads(plan: Plan, seed: int, log) -> dict:
     return workloads
 
 
-def solve_references(plan: Plan, workloads: dict, log) -> tuple[dict, list, dict]:
+def solve_references(plan: Parts, workloads: dict, log) -> tuple[dict, list, dict]:
     """Each workload's reference and read-out, and how far one moves at a tighter tolerance."""
     tol = plan.reference
     refs = {name: solve_reference(w, tol.rtol, tol.atol) for name, w in workloads.items()}
@@ -211,7 +234,7 @@ def solve_references(plan: Plan, workloads: dict, log) -> tuple[dict, list, dict
     return refs, rows, convergence
 
 
-def cost_pairs(plan: Plan, recommendations: list[dict], own_size: int) -> list:
+def cost_pairs(plan: Parts, recommendations: list[dict], own_size: int) -> list:
     """The cost sweep's settings: the spec's (plus the quickstart recommendation) × targets ×
     dtypes × sizes; the workload's own size is scored against its reference."""
     cost = plan.cost
@@ -225,7 +248,7 @@ def cost_pairs(plan: Plan, recommendations: list[dict], own_size: int) -> list:
             for n in cost.n_neurons]
 
 
-def summarise(plan: Plan, rows: list[dict], refs: tuple[list, dict], recommendations: list,
+def summarise(plan: Parts, rows: list[dict], refs: tuple[list, dict], recommendations: list,
               smap) -> dict:
     ref_rows, convergence = refs
     ref_cost = {r["scene"]: r[tradeoff.COST] for r in ref_rows}
@@ -256,13 +279,13 @@ def summarise(plan: Plan, rows: list[dict], refs: tuple[list, dict], recommendat
     }
 
 
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print) -> dict:
-    plan = build(spec)
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, quick, seed = plan.spec, options.quick, plan.seed
+    plan = plan.parts
     out_dir = Path(out_dir)
-    runlog = RunLog(out_dir / "runs.jsonl", spec, fresh)   # a damaged log is said before work
+    runlog = RunLog(out_dir / "runs.jsonl", spec, options.fresh)   # a damaged log: said first
     with LogFile(out_dir, log) as log:
         t_start = time.perf_counter()
-        seed = int(spec.get("seed", 0))
         sweep, stab = plan.sweep, plan.stability
         log(f"[1/7] scenes ({', '.join(dict.fromkeys(sweep.scenes + [plan.cost.scene]))}, "
             f"seed {seed})")
