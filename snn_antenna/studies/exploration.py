@@ -82,7 +82,8 @@ def estimate(parts: ClosedLoop):
     resonators = cfg["resonators"]
     neurons = sum(int(getattr(part, "n_neurons", 0) or 0) for part in cfg.values())
     return stages_estimate("the closed loop", [
-        ("network.gate.epochs", gate.epochs, gate_training_runs(gate, len(speeds), len(speeds))),
+        ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
+         gate_training_runs(gate, len(speeds), len(speeds))),
         ("loop.duration_s", loop.duration_s,
          [(float(loop.duration_s), resonators.dt_ms, max(neurons, resonators.n_neurons),
            engine_of(resonators.target))])])

@@ -213,7 +213,7 @@ def estimate(parts: Parts):
                            "its seed budget)", [
         ("sweep.n_scenes", sw.n_scenes, codings(n_v * sw.n_scenes * n_th)),
         ("sweep.n_scenes", sw.n_scenes, codings(len(LOW_HIGH_CM_S) * sw.n_scenes * 3)),
-        ("gate.epochs", parts.gate.epochs,
+        ("gate", {"epochs": parts.gate.epochs, "present_s": parts.gate.present_s},
          gate_training_runs(parts.gate, len(parts.train_speeds), n_v)),
         ("evaluation.max_seeds", ev.max_seeds, codings(scenes * (n_th + 3)) + recall)])
 
