@@ -75,18 +75,17 @@ def plan(spec: dict) -> Plan:
 
 
 def estimate(parts: ClosedLoop):
-    """The gate's training, then the closed loop: every part of the network, stepped together
-    for ``loop.duration_s``."""
+    """The gate's training, then the closed loop for ``loop.duration_s``: every part of the
+    network steps at the resonators' dt, each with its own groups (so its own per-step cost)."""
     gate, loop, cfg = parts.configured["gate"], parts.loop, parts.configured
     speeds = parts.gate_training[0]
     resonators = cfg["resonators"]
-    neurons = sum(int(getattr(part, "n_neurons", 0) or 0) for part in cfg.values())
-    return stages_estimate("the closed loop", [
+    loop_run = (float(loop.duration_s), resonators.dt_ms, resonators.n_neurons,
+                engine_of(resonators.target))
+    return stages_estimate("the gate's training and the closed loop", [
         ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
          gate_training_runs(gate, len(speeds), len(speeds))),
-        ("loop.duration_s", loop.duration_s,
-         [(float(loop.duration_s), resonators.dt_ms, max(neurons, resonators.n_neurons),
-           engine_of(resonators.target))])])
+        ("loop.duration_s", loop.duration_s, [loop_run] * len(cfg))])
 
 
 @logged
