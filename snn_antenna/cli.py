@@ -17,6 +17,7 @@ from .core import bounds, outputs
 from .core.bounds import option
 from .core.errors import SpecError, guarded
 from .studies import runner
+from .studies.contract import scheduler_address
 
 
 def _run(args) -> int:
@@ -170,6 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--fresh", action="store_true",
                      help="studies that keep results or caches: discard them and start over")
     run.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                     type=option(scheduler_address, text=True),
                      help="studies with Dask workers: run on an existing Dask cluster instead "
                           "of a local one")
     run.add_argument("--data", metavar="PATH", type=option(bounds.out_path, text=True),

@@ -22,7 +22,7 @@ from typing import Any, Iterable
 
 from .bounds import beyond_limits, nested, out_path, parse_value
 from .bounds import seed as checked_seed
-from .errors import SpecError, shown
+from .errors import NumericalInstabilityError, SpecError, shown
 
 INCLUDABLE = ("network", "stimulus")
 
@@ -272,7 +272,8 @@ def check_top_level(spec: dict, sections: Iterable[str]) -> None:
 
 @contextmanager
 def section(name: str):
-    """Prefix the field of any SpecError raised inside with the spec section's name."""
+    """Prefix the field of any SpecError raised inside with the spec section's name; any other
+    error a value of the section caused while its parts were built names the section."""
     try:
         yield
     except SpecError as exc:
@@ -281,6 +282,14 @@ def section(name: str):
         raise SpecError(f"{name}.{exc.field}", exc.value, exc.accepted) from None
     except TypeError as exc:  # a wrong type that slipped past key checks
         raise SpecError(name, "a value of the wrong type", str(exc)) from None
+    except NumericalInstabilityError:
+        raise
+    except (ValueError, ArithmeticError, IndexError, KeyError) as exc:
+        # a value that slipped past the section's checks: building the parts needs nothing
+        # but the spec, so what failed there is the spec's (and the message says what)
+        raise SpecError(name, "one of its values",
+                        f"values its parts can be built from ({type(exc).__name__}: "
+                        f"{str(exc)[:200]})") from None
 
 
 def resolved(spec: dict) -> dict:

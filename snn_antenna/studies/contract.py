@@ -51,6 +51,29 @@ def flag(name: str) -> str:
     return "--" + name.replace("_", "-")
 
 
+# Dask's address schemes (``distributed.comm``): what --scheduler may name
+SCHEDULER_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+
+
+def scheduler_address(field: str, value: str) -> str:
+    """A Dask scheduler's address, ``[SCHEME://]HOST:PORT`` (checked by its form: connecting
+    is the run's first step)."""
+    from urllib.parse import urlsplit
+
+    accepted = (f"an address such as tcp://HOST:8786 (schemes: "
+                f"{', '.join(SCHEDULER_SCHEMES)})")
+    try:
+        parts = urlsplit(value if "://" in value else f"tcp://{value}")   # Dask's default
+        port = parts.port
+    except ValueError:
+        raise SpecError(field, value, accepted) from None
+    if parts.scheme not in SCHEDULER_SCHEMES or not parts.hostname or parts.path.strip("/") \
+            or any(c.isspace() for c in value) \
+            or (parts.scheme != "inproc" and port is None):
+        raise SpecError(field, value, accepted)
+    return value
+
+
 def refused_options(study: str, accepted, options: Options) -> str | None:
     """The message refusing the first option ``study`` does not take, or None."""
     for name in options.given():
