@@ -45,7 +45,7 @@ from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
 from ...evaluation import accuracy, tradeoff
 from ...evaluation.accuracy import Match, StabilityGrid
-from ...evaluation.bands import BandStudy
+from ...evaluation.bands import BENCH_BANDS, BandStudy
 from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
 from ...report.page import Report
@@ -178,8 +178,10 @@ def plan(spec: dict) -> Plan:
 
 
 def estimate(parts: Parts):
-    """The main sweep (every scene at every method and dt) and the cost sweep (its settings
-    at every target, float type and array size)."""
+    """The main sweep (every scene at every method and dt), the cost sweep (its settings at
+    every target, float type and array size), the stability map, the bench bands (their
+    sample events at every method and step, and the tuning that recalibrates them) and the
+    sweep engine's precision grid (per float type)."""
     array = ResonatorArray(**dict(parts.net, force=True))
     seconds = {"tuning": parts.tuning.duration_s,
                **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
@@ -191,8 +193,29 @@ def estimate(parts: Parts):
     settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
     costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
              for t in cost.targets for n in cost.n_neurons] * len(cost.dtypes)
-    return stages_estimate("the method x dt sweep and the cost sweep", [
-        ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs)])
+    stab = parts.stability          # every neuron runs model_ms at the finest k·dt
+    stability = [(stab.model_ms / stab.k_dt_min / 1000.0, 1.0, stab.n_k_dt * len(stab.drives),
+                  "numpy")] * len(sweep.methods)
+    bands = parts.bands
+    events = len(bands.materials) * len(bands.positions_cm) * bands.repetitions
+    band_runs = []
+    for name in bands.bands:
+        band = BENCH_BANDS[name]
+        dt = band.dt_ms or min(sweep.dt_ms)
+        band_runs += [(bands.duration_s, dt, band.n_neurons * events, engine_of(bands.target))
+                      ] * (len(bands.methods) * (bands.coarser_steps + 2))
+        if name in bands.calibrate:
+            band_runs.append((bands.tuning_duration_s, dt, band.n_neurons * bands.n_freqs,
+                              engine_of(bands.target)))
+    precision = parts.precision
+    points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
+    return stages_estimate("the method x dt sweep, the cost sweep, the stability map, the "
+                           "bench bands and the precision grid", [
+        ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs),
+        ("stability.model_ms", stab.model_ms, stability),
+        ("bands.repetitions", bands.repetitions, band_runs),
+        ("precision.n_k", precision.n_k,
+         [(precision.duration_s, 0.1, points, "standalone")] * len(precision.dtypes))])
 
 
 # -- stages ---------------------------------------------------------------------------------
