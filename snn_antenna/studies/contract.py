@@ -2,7 +2,8 @@
 
 A study module declares
 
-- ``SECTIONS``: the top-level tables its spec may hold;
+- ``SECTIONS``: the top-level keys its spec may hold besides ``study``, ``seed`` and
+  ``description``: its tables, and ``data`` for a study that reads recorded data sets;
 - ``OPTIONS``: the command-line options it takes (names of :class:`Options` fields); an option
   it does not take is refused before any work, naming the study and the ones it takes;
 - ``plan(spec) -> Plan``: the whole spec checked and every part built that needs no
