@@ -10,6 +10,7 @@ study on the plan that phase built.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -53,8 +54,7 @@ def first_phase(args):
     from .engine.spec_rules import check_spec
     from .studies.contract import Options, refused_options
 
-    options = Options(quick=args.quick, check=args.check, yes=args.yes, force=args.force,
-                      fresh=args.fresh, scheduler=args.scheduler, data=args.data)
+    options = Options(**{f.name: getattr(args, f.name) for f in dataclasses.fields(Options)})
     spec = specs.load(args.spec, args.set, quick=args.quick)
     study = spec.get("study")
     module = runner(study)
