@@ -353,3 +353,14 @@ def test_check_and_run_give_the_same_answer_for_any_command(tmp_path, capsys, mo
 def test_check_and_run_give_the_same_answer_thoroughly(tmp_path, capsys, monkeypatch, data):
     study, argv = data.draw(commands(tmp_path))
     _check_then_run(tmp_path, capsys, monkeypatch, study, argv)
+
+
+# What the tree property found (each an internal error before its fix), kept as examples.
+FOUND_TREES = [("speed_accuracy", "bands.materials", 3),
+               ("speed_accuracy", "stability.k_dt_min", 0),
+               ("baseline_comparison", "spiking.tuned.tuning.range_hz", [])]
+
+
+@pytest.mark.parametrize("study, key, value", FOUND_TREES)
+def test_what_the_tree_property_found_stays_answered(tmp_path, capsys, study, key, value):
+    _check_tree(tmp_path, capsys, (study, _put(QUICK_SPECS[study], key, value), key, None))
