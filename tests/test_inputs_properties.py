@@ -358,7 +358,8 @@ def test_check_and_run_give_the_same_answer_thoroughly(tmp_path, capsys, monkeyp
 # What the tree property found (each an internal error before its fix), kept as examples.
 FOUND_TREES = [("speed_accuracy", "bands.materials", 3),
                ("speed_accuracy", "stability.k_dt_min", 0),
-               ("baseline_comparison", "spiking.tuned.tuning.range_hz", [])]
+               ("baseline_comparison", "spiking.tuned.tuning.range_hz", []),
+               ("tuning_sweep", "axes.k", [1, 10**400])]
 
 
 @pytest.mark.parametrize("study, key, value", FOUND_TREES)

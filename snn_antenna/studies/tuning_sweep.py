@@ -65,7 +65,8 @@ def plan(spec: dict) -> Plan:
     with specs.section("neuron"):
         neuron = NeuronSweep(**specs.check_section(spec, "neuron", NeuronSweep,
                                                    exclude=["group_size", "shared"]))
-    grid = Grid.from_spec(spec.get("axes", {}), NEURON_AXES)
+    with specs.section("axes"):
+        grid = Grid.from_spec(spec.get("axes", {}), NEURON_AXES)
     check("input_hz" in grid.axes and len(grid.axes["input_hz"]) >= 3, "axes.input_hz",
           list(grid.axes.get("input_hz", [])),
           "an axis of at least 3 input frequencies (the tuning curve)")
