@@ -13,7 +13,6 @@ Summary: ``cpg_period_s`` (measured while driving, and the spec's value at that 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
