@@ -359,7 +359,9 @@ def test_check_and_run_give_the_same_answer_thoroughly(tmp_path, capsys, monkeyp
 FOUND_TREES = [("speed_accuracy", "bands.materials", 3),
                ("speed_accuracy", "stability.k_dt_min", 0),
                ("baseline_comparison", "spiking.tuned.tuning.range_hz", []),
-               ("tuning_sweep", "axes.k", [1, 10**400])]
+               ("tuning_sweep", "axes.k", [1, 10**400]),
+               ("exploration", "loop.duration_s", 10**400),
+               ("gating_threshold", "sweep.scene_s", 10**400)]
 
 
 @pytest.mark.parametrize("study, key, value", FOUND_TREES)

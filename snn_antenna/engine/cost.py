@@ -8,6 +8,7 @@ arithmetic is here, once; what each study runs is its plan's (``studies.contract
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -144,7 +145,10 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
     engine = runs[0][3] if runs else "numpy"
     for simulated_s, dt_ms, n_neurons, eng in runs:
         eng = eng if eng in MEASURED_NETWORK_STEPS_PER_S else "numpy"
-        n = simulated_s * 1000.0 / dt_ms
+        try:
+            n = float(simulated_s) * 1000.0 / float(dt_ms)
+        except OverflowError:           # a length beyond any float: beyond any limit too
+            n = math.inf
         steps += n
         neuron_steps += n * n_neurons
         seconds += (n / MEASURED_NETWORK_STEPS_PER_S[eng]

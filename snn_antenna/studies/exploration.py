@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from ..core import bounds
 from ..core import spec as specs
 from ..core.logfile import CPG_TOKEN_ORDER, logged
 from ..core.errors import SpecError, check
@@ -66,6 +67,9 @@ def plan(spec: dict) -> Plan:
         configured["gate"].check_speeds(examples[0], "speeds_cm_s")
     with specs.section("loop"):
         loop = LoopSettings(**specs.check_section(spec, "loop", LoopSettings))
+        for name in ("duration_s", "calibration_s"):
+            bounds.positive_seconds(name, getattr(loop, name))
+        bounds.number("chunk_ms", loop.chunk_ms, 1.0, bounds.MAX_SECONDS * 1000, unit=" ms")
         configured["gate"].check_speeds([loop.speed_cm_s], "speed_cm_s")
     readout = BlindReadOut(configured["resonators"], detector, window_s, scene.rate_hz,
                            settle_s=0.0)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...engine.batches import ScoredCodings
 from ...core.errors import SpecError, check
@@ -165,6 +166,7 @@ def make_parts(spec: dict) -> Parts:
         course = _section(spec, "course", CourseLayout)
     with specs.section("sweep"):
         sweep = _section(spec, "sweep", SweepSettings)
+        bounds.positive_seconds("scene_s", sweep.scene_s)
         v = sweep.speeds_cm_s
         drive(scene, ramp(v.min(), v.max(), 1.0), 1.0, []).validate()
     with specs.section("gate"):
