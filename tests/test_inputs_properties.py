@@ -361,7 +361,8 @@ FOUND_TREES = [("speed_accuracy", "bands.materials", 3),
                ("baseline_comparison", "spiking.tuned.tuning.range_hz", []),
                ("tuning_sweep", "axes.k", [1, 10**400]),
                ("exploration", "loop.duration_s", 10**400),
-               ("gating_threshold", "sweep.scene_s", 10**400)]
+               ("gating_threshold", "sweep.scene_s", 10**400),
+               ("speed_accuracy", "tuning.n_freqs", 10**400)]
 
 
 @pytest.mark.parametrize("study, key, value", FOUND_TREES)

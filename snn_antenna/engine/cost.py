@@ -147,12 +147,13 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
         eng = eng if eng in MEASURED_NETWORK_STEPS_PER_S else "numpy"
         try:
             n = float(simulated_s) * 1000.0 / float(dt_ms)
-        except OverflowError:           # a length beyond any float: beyond any limit too
-            n = math.inf
+            size = float(n_neurons)
+        except OverflowError:           # a size beyond any float: beyond any limit too
+            n = size = math.inf
         steps += n
-        neuron_steps += n * n_neurons
+        neuron_steps += n * size
         seconds += (n / MEASURED_NETWORK_STEPS_PER_S[eng]
-                    + n * n_neurons / MEASURED_STEPS_PER_S[eng])
+                    + n * size / MEASURED_STEPS_PER_S[eng])
     return JobEstimate(what, steps, neuron_steps, seconds, engine, key)
 
 

@@ -173,6 +173,8 @@ def plan(spec: dict) -> Plan:
                       ("match", Match), ("bands", BandStudy), ("precision", Precision)):
         with specs.section(name):
             parts[name] = cls(**specs.check_section(spec, name, cls))
+    with specs.section("tuning"):        # one neuron per array neuron and frequency
+        bounds.integer("n_freqs", parts["tuning"].n_freqs, 2, 10_000)
     with specs.section("stability"):
         _check_stability(parts["stability"])
     with specs.section("bands"):
