@@ -91,7 +91,7 @@ def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
     """Cost per event of the FFT pipeline and of the tuned spiking bank, measured now, each
     the best of ``repeats`` runs taken in turn (on a shared machine a single run of either
     can land in another process's burst: one such run read the FFT 7x its idle cost)."""
-    parts = study.build(specs.load(str(STUDY)))
+    parts = study.plan(specs.load(str(STUDY))).parts
     plan = parts.plan.tuned_plan()
     plan.curve = sorted(set(sizes))
     bands, _ = calibration_bands(parts.bench, plan, lambda *_: None, False)

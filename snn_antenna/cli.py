@@ -3,84 +3,142 @@
     snn-antenna run studies/quickstart.toml [--out DIR] [--set key=value ...] [--quick]
 
 Every subcommand takes ``--out DIR``. Errors a user can cause print one clear line and exit
-with status 2; they never show a traceback from deep inside Brian2 or numpy.
+with status 2; they never show a traceback from deep inside Brian2 or numpy. ``run`` checks
+everything in one first phase (``first_phase``; ``--check`` stops after it), then runs the
+study on the plan that phase built.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
-from .core import bounds
+from .core import bounds, outputs
 from .core.bounds import option
 from .core.errors import SpecError, guarded
 from .report import results as results_page
+from .studies import runner
+from .studies.contract import scheduler_address
 
 
 def _run(args) -> int:
-    from .core import outputs
-    from .core import spec as specs
-    from .engine.executor import probe_scheduler
-    from .engine.spec_rules import check_spec
-    from .studies import runner
-
-    # Every check before any work: the spec as resolved, the rules joining its sections, the
-    # size of a sweep, the output folder. Nothing here imports Brian2 or starts a worker.
-    spec = specs.load(args.spec, args.set, quick=args.quick)
-    study = spec.get("study")
-    module = runner(study)
-    check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
-    module.build(spec)                  # every field in its bounds, before sizing the work
-    out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
-    probe_scheduler(getattr(args, "scheduler", None))    # what is there, before --out exists
-    folder = outputs.prepare(out, study, force=args.force, fresh=args.fresh)  # and lock it
+    plan, folder, options = first_phase(args)
+    if options.check:                   # everything a run would refuse has been said
+        print(f"{args.spec}: the spec and --out {folder.path} are accepted ({plan.study}); "
+              "nothing was run")
+        outputs.release(folder)
+        return 0
     try:
-        _check_cost(spec, args)
-        if args.check:                  # everything a run would refuse has been said
-            print(f"{args.spec}: the spec and --out {out} are accepted ({study}); "
-                  "nothing was run")
-            outputs.release(folder)
-            return 0
         folder.clear()                  # --force: another study's files, now that all passed
         outputs.claim(folder)
     except BaseException:
         outputs.release(folder)
         raise
-    extra = {}
-    if getattr(args, "fresh", False):
-        extra["fresh"] = True
-    if getattr(args, "scheduler", None):
-        extra["scheduler"] = args.scheduler
     from .networks.neurons import raise_on_ctrl_c
     raise_on_ctrl_c()                   # Ctrl-C stops the study, never just one Brian2 run
     try:
-        module.run(spec, out, quick=args.quick, **extra)
+        runner(plan.study).run(plan, folder.path, options)
     finally:
         outputs.record(folder)          # what this run wrote, however it ended; unlock
     return 0
 
 
-def _check_cost(spec: dict, args) -> None:
-    """A study (a scene, a bench set, a sweep) expected to run beyond the limit is refused
-    without ``--yes``, naming the key that sets its length."""
+def first_phase(args):
+    """Every check a run makes before its work, in one path (``--check`` stops after it):
+    the options against what the study takes, the spec as resolved (its seeds included),
+    the rules joining its sections, every part the study builds without simulating, the
+    output folder and the names the run will write there, the caches, and the cost. Nothing
+    here imports Brian2 or starts a worker. Returns the plan the run goes on with, the
+    prepared (locked) output folder and the options."""
     from .core import spec as specs
-    from .studies import plan
+    from .engine.spec_rules import check_spec
+    from .studies.contract import Options, refused_options
 
-    estimate = plan(spec)
-    if estimate is not None:
-        from .engine.cost import LONG_SWEEP_S
+    options = Options(**{f.name: getattr(args, f.name) for f in dataclasses.fields(Options)})
+    spec = specs.load(args.spec, args.set, quick=args.quick)
+    study = spec.get("study")
+    module = runner(study)
+    refusal = refused_options(study, module.OPTIONS, options)
+    if refusal:
+        args.parser.error(refusal)
+    if options.data is not None:
+        spec["data"] = options.data
+    check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
+    plan = module.plan(spec)            # every field in its bounds, every part built
+    out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
+    check_out(out)
+    from .engine.executor import probe_scheduler
 
-        sweep = hasattr(estimate, "points")
-        print(f"{'sweep: ' if sweep else ''}{estimate.describe()}", file=sys.stderr, flush=True)
-        if estimate.seconds > LONG_SWEEP_S and not args.yes:
-            key = estimate.key if not sweep else "axes"
-            value = f"{estimate.points:,} points" if sweep else specs.get_field(spec, key)
-            raise SpecError(key, value,
-                            f"a {'sweep' if sweep else 'run'} expected to take at most "
-                            f"{LONG_SWEEP_S / 3600:g} h (this one: about "
-                            f"{estimate.seconds / 3600:.3g} h); "
-                            f"{'shrink an axis' if sweep else 'make it shorter'}, or pass "
-                            "--yes to run it anyway")
+    probe_scheduler(options.scheduler)  # what listens there, before --out is touched
+    folder = outputs.prepare(out, study, force=options.force, fresh=options.fresh)  # locked
+    try:
+        check_names(folder)
+        check_cost(plan, options)
+    except BaseException:
+        outputs.release(folder)
+        raise
+    return plan, folder, options
+
+
+# Names a study writes at the top of its output folder (its report, summary, log, figures,
+# stores and run logs): one the user owns there is refused before the run, not by the run.
+WRITTEN_NAMES = ("report.html", "summary.json", "run.log", "runs.jsonl", "predictions.json")
+WRITTEN_SUFFIXES = (".png", ".zarr")
+ROOM_IN_OUT = 160       # bytes below --out the deepest file a run writes needs (stores' chunks)
+
+
+def check_out(out: Path) -> None:
+    """An --out the file system can hold with what a run writes below it, reached by no
+    link that leads nowhere."""
+    import os
+
+    absolute = os.path.abspath(out)
+    if len(absolute.encode("utf-8", "surrogateescape")) + ROOM_IN_OUT > bounds.PATH_MAX:
+        raise SpecError("--out", str(out), f"a path short enough for the files a run writes "
+                                           f"in it (at most {bounds.PATH_MAX - ROOM_IN_OUT} "
+                                           "bytes as an absolute path)")
+    path = Path(absolute)
+    for place in (path, *path.parents):
+        if os.path.islink(place) and not place.exists():
+            raise SpecError("--out", str(out), f"a folder path; {place} is a symbolic link "
+                                               "to nothing")
+
+
+def check_names(folder) -> None:
+    """No file of the user's where the run will write one of its own."""
+    import os
+
+    if not folder.path.is_dir():
+        return
+    ours = folder.listed | folder.replace
+    for name in sorted(os.listdir(folder.path)):
+        if name not in ours and (name in WRITTEN_NAMES or name.endswith(WRITTEN_SUFFIXES)):
+            raise SpecError("--out", str(folder.path),
+                            f"a folder where snn-antenna may write {name}; that name is a file "
+                            "of yours there, which it never overwrites: move it, or choose "
+                            "another --out")
+
+
+def check_cost(plan, options) -> None:
+    """A study expected to run beyond the limit is refused without ``--yes``, naming the key
+    that sets its length. The estimate is the plan's own."""
+    from .engine.cost import LONG_SWEEP_S
+
+    estimate = plan.estimate()
+    if estimate is None:
+        return
+    sweep = hasattr(estimate, "points")
+    print(f"{'sweep: ' if sweep else ''}{estimate.describe()}", file=sys.stderr, flush=True)
+    if estimate.seconds > LONG_SWEEP_S and not options.yes:
+        key = "axes" if sweep else estimate.key
+        value = f"{estimate.points:,} points" if sweep else estimate.value
+        raise SpecError(key, value,
+                        f"a {'sweep' if sweep else 'run'} expected to take at most "
+                        f"{LONG_SWEEP_S / 3600:g} h (this one: about "
+                        f"{estimate.seconds / 3600:.3g} h); "
+                        f"{'shrink an axis' if sweep else 'make it shorter'}, or pass "
+                        "--yes to run it anyway")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -115,9 +173,14 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quick", action="store_true",
                      help="apply the spec's [quick] profile: a small run for tests and first looks")
     run.add_argument("--fresh", action="store_true",
-                     help="sweeps: discard stored results and start over")
+                     help="studies that keep results or caches: discard them and start over")
     run.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                     help="sweeps: run on an existing Dask cluster instead of a local one")
+                     type=option(scheduler_address, text=True),
+                     help="studies with Dask workers: run on an existing Dask cluster instead "
+                          "of a local one")
+    run.add_argument("--data", metavar="PATH", type=option(bounds.out_path, text=True),
+                     help="studies that read recorded data sets: the folder they are in (sets "
+                          "the spec's data)")
     run.add_argument("--force", action="store_true",
                      help="reuse an --out folder that holds another study's outputs or other "
                           "files: what snn-antenna wrote there is replaced, other files are kept")
@@ -126,15 +189,13 @@ def build_parser() -> argparse.ArgumentParser:
                           "without running or writing anything")
     run.add_argument("--yes", action="store_true",
                      help="run even when the estimate is beyond the limit (1 h)")
-    run.set_defaults(func=_run)
+    run.set_defaults(func=_run, parser=run)
     results_page.add_subcommand(sub)
-    try:
-        from .bridge.cli import add_subcommands
-    except ImportError:
-        pass
-    else:
-        add_subcommands(sub)
-    from .data.command import add_subcommands as add_data_subcommands; add_data_subcommands(sub)  # noqa: E702
+    from .bridge.cli import add_subcommands
+    from .data.command import add_subcommands as add_data_subcommands
+
+    add_subcommands(sub)
+    add_data_subcommands(sub)
     return parser
 
 

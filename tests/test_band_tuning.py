@@ -137,7 +137,7 @@ def test_tuned_plan_refuses_bad_settings_naming_the_field():
                       ["spiking.tuned.tuning.quantile=1.5"])
     from snn_antenna.studies import baseline_comparison as study
     with pytest.raises(SpecError, match="spiking.tuned.tuning.quantile"):
-        study.build(spec)
+        study.plan(spec)
 
 
 # Brian2 at the channels' own steps over 1,024 contacts of 0.5 s, twice: a thorough check.

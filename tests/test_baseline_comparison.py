@@ -14,6 +14,7 @@ from snn_antenna.cli import main
 from snn_antenna.core.errors import SpecError
 from snn_antenna.readout.spiking_decoders import TRAINING_FREE
 from snn_antenna.studies import baseline_comparison as study
+from snn_antenna.studies.contract import Options
 
 SPEC = "studies/baseline_comparison.toml"
 TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
@@ -36,7 +37,7 @@ def fft_run(tmp_path_factory):
     spec = specs.load(SPEC, [o for o in TINY if not o.startswith("spiking.")]
                       + [f"stimulus.cache_dir={out / 'cache'}"])
     del spec["spiking"]
-    summary = study.run(spec, out / "report", log=lambda *_: None)
+    summary = study.run(study.plan(spec), out / "report", log=lambda *_: None)
     return out / "report", summary
 
 
@@ -56,7 +57,7 @@ def bench_cache(tmp_path_factory):
 def tiny_run(tmp_path_factory, bench_cache):
     out = tmp_path_factory.mktemp("baseline")
     spec = specs.load(SPEC, TINY + [f"stimulus.cache_dir={bench_cache}"])
-    summary = study.run(spec, out / "report", log=lambda *_: None)
+    summary = study.run(study.plan(spec), out / "report", log=lambda *_: None)
     return out / "report", summary
 
 
@@ -66,7 +67,8 @@ def tiny_quick_run(tmp_path_factory, bench_cache):
     out = tmp_path_factory.mktemp("baseline_quick")
     keep = [o for o in TINY if not o.startswith(("evaluation.nmf_dims", "spiking.designs"))]
     spec = specs.load(SPEC, keep + [f"stimulus.cache_dir={bench_cache}"], quick=True)
-    summary = study.run(spec, out / "report", quick=True, log=lambda *_: None)
+    summary = study.run(study.plan(spec), out / "report", Options(quick=True),
+                        log=lambda *_: None)
     return out / "report", summary
 
 
@@ -182,16 +184,16 @@ def test_no_test_repetition_was_trained_on(any_run):
 
 def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
     with pytest.raises(SpecError, match="evaluation.bogus"):
-        study.build(specs.load(SPEC, ["evaluation.bogus=1"]))
+        study.plan(specs.load(SPEC, ["evaluation.bogus=1"]))
     with pytest.raises(SpecError, match="spiking.bank.bin_edges_s"):
-        study.build(specs.load(SPEC, ["spiking.bank.bin_edges_s=[0.3,0.1]"]))
+        study.plan(specs.load(SPEC, ["spiking.bank.bin_edges_s=[0.3,0.1]"]))
     with pytest.raises(SpecError, match="stimulus.material"):
-        study.build(specs.load(SPEC, ["stimulus.materials=['wood','granite']"]))
+        study.plan(specs.load(SPEC, ["stimulus.materials=['wood','granite']"]))
     with pytest.raises(SpecError, match=r"spiking.designs\[0\]"):
-        study.build(specs.load(SPEC, ["spiking.designs=[{name='x', band='low', bogus=1}]"]))
+        study.plan(specs.load(SPEC, ["spiking.designs=[{name='x', band='low', bogus=1}]"]))
     with pytest.raises(SpecError, match="spiking.tuned.curve"):
-        study.build(specs.load(SPEC, ["spiking.tuned.curve=[24,25]"]))
+        study.plan(specs.load(SPEC, ["spiking.tuned.curve=[24,25]"]))
     with pytest.raises(SpecError, match="spiking.tuned.tuning.n_resonators"):
-        study.build(specs.load(SPEC, ["spiking.tuned.tuning.n_resonators=7"]))
+        study.plan(specs.load(SPEC, ["spiking.tuned.tuning.n_resonators=7"]))
     assert main(["run", SPEC, "--out", str(tmp_path), "--set", "events.split_hz=5000"]) == 2
     assert "events.split_hz" in capsys.readouterr().err

@@ -122,9 +122,9 @@ def test_the_gate_trains_on_a_gating_runs_summary_or_refuses_it_clearly(tmp_path
     summary.write_text(json.dumps({"th_star": {"0": 0.03, "12": 0.13, "15": 0.2, "30": 0.56},
                                    "train_speeds_cm_s": [0.0, 12.0, 30.0]}))
     path = ROOT / "studies" / "exploration.toml"
-    parts = exploration.build(specs.load(path, [f'gate_training.from_summary="{summary}"']))
+    parts = exploration.plan(specs.load(path, [f'gate_training.from_summary="{summary}"'])).parts
     speeds, th = parts.gate_training
     assert speeds.tolist() == [0.0, 12.0, 30.0] and th.tolist() == [0.03, 0.13, 0.56]
     for bad in (tmp_path / "missing.json", ROOT / "pyproject.toml"):
         with pytest.raises(SpecError, match="from_summary"):
-            exploration.build(specs.load(path, [f'gate_training.from_summary="{bad}"']))
+            exploration.plan(specs.load(path, [f'gate_training.from_summary="{bad}"']))

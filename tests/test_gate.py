@@ -125,11 +125,11 @@ def test_study_spec_refuses_bad_speeds_before_any_work():
         spec = specs.load(root / "studies" / "gating_threshold.toml",
                           [f"sweep.speeds_cm_s={bad}"], quick=True)
         with pytest.raises(SpecError, match="speed"):
-            gating_threshold.build(spec)
+            gating_threshold.plan(spec)
     spec = specs.load(root / "studies" / "gating_threshold.toml",
                       ["gate.train_speeds_cm_s=[0.0, 13.0]"], quick=True)
     with pytest.raises(SpecError, match="train_speeds_cm_s"):
-        gating_threshold.build(spec)
+        gating_threshold.plan(spec)
 
 
 def test_th_star_is_the_monotone_fit_of_each_speeds_best_threshold():

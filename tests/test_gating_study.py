@@ -56,10 +56,10 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
 
 def _quick_parts(*overrides):
     from snn_antenna.core import spec as specs
-    from snn_antenna.studies.gating_threshold import build
+    from snn_antenna.studies.gating_threshold import make_parts
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=6.0", *overrides], quick=True))
-    return spec, build(spec)
+    return spec, make_parts(spec)
 
 
 def test_the_read_out_never_sees_the_ground_truth():
@@ -154,13 +154,13 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     from snn_antenna.engine.sweep import run_sweep
     from snn_antenna.core.errors import SpecError
     from snn_antenna.evaluation.scoring import SCORE_OUTPUTS
-    from snn_antenna.studies.gating_threshold import ThresholdSweep, build, sweep_settings
+    from snn_antenna.studies.gating_threshold import ThresholdSweep, make_parts, sweep_settings
 
     def sweep(*overrides):
         spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
                           ["sweep.scene_s=5.0", "sweep.speeds_cm_s=[0.0, 27.0]", *overrides],
                           quick=True)
-        build(spec)
+        make_parts(spec)
         # scene 4: a course whose shaking at 27 cm/s makes false positives at Th = 0
         grid = Grid({"speed_cm_s": [27.0], "scene": [4.0], "threshold_g": [0.0, 0.3, 100.0]})
         return run_sweep(grid, ThresholdSweep(spec), tmp_path / "sweep.zarr", SCORE_OUTPUTS,
@@ -186,12 +186,12 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     from snn_antenna.core import spec as specs
     from snn_antenna.engine.batches import ScoredCodings
     from snn_antenna.engine.executor import dask_client
-    from snn_antenna.studies.gating_threshold import build, coded_at, sweep_scene
+    from snn_antenna.studies.gating_threshold import coded_at, make_parts, sweep_scene
 
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=3.0", "sweep.codings_per_run=2"],
                                      quick=True))
-    parts = build(spec)
+    parts = make_parts(spec)
     # one scene (the driving one: a false positive at Th = 0), three codings in two batches
     rec, x, coder = sweep_scene(parts, 27.0, 1)
     items = [(rec, c) for c in coded_at(coder, x, [0.0, 0.3, 100.0])]

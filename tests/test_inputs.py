@@ -140,3 +140,128 @@ def test_bounds_name_what_is_accepted():
             bounds.integer("x", bad)
     with pytest.raises(SpecError, match="GiB"):
         bounds.n_samples("d", 10.0, 1000.0, 8, budget=1000)
+
+
+# -- the first phase: what --check accepts, the run accepts; what it refuses, the run refuses --
+def first_phase_refuses(capsys, monkeypatch, argv, *names):
+    """``argv`` refused in one line naming ``names`` by ``--check``, and by the run with the
+    same line, before the study's run starts (it is replaced by one that fails the test)."""
+    from snn_antenna.studies import runner
+
+    def must_not_run(plan, out_dir, options, log=print):
+        raise AssertionError("the study ran")
+
+    for name in ("quickstart", "gating_threshold", "exploration", "baseline_comparison",
+                 "speed_accuracy", "model_selection", "tuning_sweep"):
+        monkeypatch.setattr(runner(name), "run", must_not_run)
+    lines = []
+    for extra in (["--check"], []):
+        status = main([*argv, *extra])
+        err = capsys.readouterr().err
+        assert status == 2, err
+        last = err.strip().splitlines()[-1]
+        assert "internal error" not in err and "Traceback" not in err
+        for name in names:
+            assert name in last, last
+        lines.append(last)
+    assert lines[0] == lines[1]
+    return lines[0]
+
+
+@pytest.mark.parametrize("spec, setting, field", [
+    ("gating_threshold", "seed=4294967296", "seed"),            # the gate's Brian2 seed
+    ("baseline_comparison", "evaluation.seeds=[0, 4294967296]", "evaluation.seeds.1"),
+    ("quickstart", "seed=18446744073709551616", "seed"),
+])
+def test_seeds_beyond_numpys_range_are_refused_at_check(tmp_path, capsys, monkeypatch, spec,
+                                                         setting, field):
+    first_phase_refuses(capsys, monkeypatch, ["run", f"studies/{spec}.toml", "--quick", "--out",
+                                              str(tmp_path / "o"), "--set", setting], field)
+
+
+def test_a_report_of_the_users_in_out_is_refused_at_check_even_with_force(tmp_path, capsys,
+                                                                            monkeypatch):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "report.html").write_text("my report")
+    first_phase_refuses(capsys, monkeypatch, ["run", QUICKSTART, "--quick", "--force", "--out",
+                                              str(out)], "--out", "report.html")
+    assert (out / "report.html").read_text() == "my report"
+
+
+def test_a_cache_folder_that_is_a_file_is_refused_at_check(tmp_path, capsys, monkeypatch):
+    cache = tmp_path / "cache"
+    cache.write_text("mine")
+    first_phase_refuses(capsys, monkeypatch, [
+        "run", "studies/baseline_comparison.toml", "--quick", "--out", str(tmp_path / "o"),
+        "--set", f'stimulus.cache_dir="{cache}"'], "stimulus.cache_dir", "file")
+    assert cache.read_text() == "mine"
+
+
+def test_an_out_that_is_a_dangling_link_is_refused_at_check(tmp_path, capsys, monkeypatch):
+    link = tmp_path / "o"
+    link.symlink_to(tmp_path / "nowhere")
+    first_phase_refuses(capsys, monkeypatch, ["run", QUICKSTART, "--quick", "--out", str(link)],
+                        "--out", "link")
+    assert link.is_symlink() and not (tmp_path / "nowhere").exists()
+
+
+def test_an_out_too_long_for_what_the_run_writes_is_refused_at_check(tmp_path, capsys,
+                                                                     monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    out = "/".join(["d" * 200] * 20)[:4000]          # fits PATH_MAX alone, not its files
+    first_phase_refuses(capsys, monkeypatch, ["run", str(bounds_root() / QUICKSTART), "--quick",
+                                              "--out", out], "--out", "short enough")
+    assert not (tmp_path / ("d" * 200)).exists()
+
+
+def bounds_root():
+    from pathlib import Path
+
+    return Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("spec, settings, field", [
+    ("gating_threshold", ["gate.present_s=3000"], "gate"),
+    ("exploration", ["network.gate.present_s=600"], "network.gate"),
+    ("exploration", ["network.gate.epochs=10000"], "network.gate"),
+    ("speed_accuracy", ["cost.n_neurons=[24, 100000]", 'cost.settings=[["euler", 0.01]]'],
+     "cost.n_neurons"),
+    ("model_selection", ["stimulus.repetitions=2000"], "stimulus.repetitions"),
+])
+def test_every_knob_that_makes_a_run_long_needs_yes(tmp_path, capsys, monkeypatch, spec,
+                                                   settings, field):
+    """The gate's training (its epochs and presentation time), the cost sweep's array sizes,
+    the model selection's bench sets: each was outside the estimate, or had none."""
+    argv = ["run", f"studies/{spec}.toml", "--quick", "--out", str(tmp_path / "o")]
+    for setting in settings:
+        argv += ["--set", setting]
+    line = first_phase_refuses(capsys, monkeypatch, argv, field, "--yes")
+    assert line.startswith(f"snn-antenna: error: {field} = ")
+
+
+def test_every_study_prints_its_estimate(tmp_path, capsys):
+    from snn_antenna.studies import STUDIES
+
+    for study in sorted(STUDIES):
+        assert main(["run", f"studies/{study}.toml", "--quick", "--check", "--out",
+                     str(tmp_path / study)]) == 0
+        assert "about " in capsys.readouterr().err, study
+
+
+@pytest.mark.parametrize("text, accepted, in_file", [
+    ("9" * 5000, "digits", "spec"),                       # the reader's ValueError
+    ("[" * 3000 + "]" * 3000, "nested", "spec"),          # the reader's RecursionError
+    ("[" * 40 + "1" + "]" * 40, "nested", "network.b"),   # read, and refused by its key
+    ("{a = " * 50 + "1" + "}" * 50, "nested", "network.b"),
+])
+def test_values_past_pythons_limits_are_one_line(tmp_path, capsys, text, accepted, in_file):
+    """In a spec file and in --set: a RecursionError or ValueError inside the reader before."""
+    spec = tmp_path / "spec.toml"
+    spec.write_text(f'study = "quickstart"\nseed = 0\n[network]\nb = {text}\n')
+    line = refused(capsys, ["run", str(spec), "--check", "--out", str(tmp_path / "o")],
+                   in_file)
+    assert accepted in line and len(line) < 400
+    line = refused(capsys, ["run", QUICKSTART, "--quick", "--check", "--out",
+                            str(tmp_path / "o"), "--set", f"network.b={text}"], "network.b")
+    assert accepted in line and len(line) < 400

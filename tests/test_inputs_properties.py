@@ -192,3 +192,181 @@ def test_public_constructors_answer_any_argument_by_name(data):
 @given(st.data())
 def test_public_constructors_answer_any_argument_thoroughly(data):
     assert _answered_clearly(_call(data.draw(_calls())))
+
+
+# -- whole spec trees, flags x studies, and --check against the run ------------------------------
+# Run in the default suite with the Hypothesis profile's count ("suite": a hundred each, the same
+# every run; HYPOTHESIS_PROFILE=slow: ten thousand); the slow-marked copies always take ten
+# thousand.
+from snn_antenna.studies import STUDIES, runner  # noqa: E402
+
+QUICK_SPECS = {name: specs.load(ROOT / "studies" / f"{name}.toml", [], quick=True)
+               for name in sorted(STUDIES)}
+
+
+RAW = "\0"   # marks a value written as raw TOML text (deep nesting, long numbers)
+raw_texts = st.one_of(
+    st.integers(1, 6000).map(lambda n: "9" * n),                          # long numbers
+    st.integers(1, 4000).map(lambda d: "[" * d + "1" + "]" * d),          # deep lists
+    st.integers(1, 400).map(lambda d: "{a = " * d + "1" + "}" * d),       # deep tables
+    st.integers(0, 3000).map(lambda w: "[" + ", ".join(["0.5"] * w) + "]"),   # wide lists
+    st.sampled_from(["1e400", "-1e400", "0x7fffffffffffffffff", "inf", "nan", "1979-05-27",
+                     "[1, 'a', [2]]", "{}", "[]"]))
+
+
+def _put(spec: dict, dotted: str, value) -> dict:
+    """A copy of ``spec`` with the leaf ``dotted`` replaced (tables along the way copied)."""
+    out = dict(spec)
+    node, *rest = dotted.split(".")
+    if rest and isinstance(out.get(node), dict):
+        out[node] = _put(out[node], ".".join(rest), value)
+    else:
+        out[node] = value
+    return out
+
+
+@st.composite
+def spec_trees(draw):
+    """A shipped study's quick spec with one field (or a new key) replaced by any tree."""
+    study = draw(st.sampled_from(sorted(STUDIES)))
+    spec = QUICK_SPECS[study]
+    keys = [k for k in _leaves(spec) if k != "study"] + ["bogus", "network.bogus"]
+    key = draw(st.sampled_from(keys))
+    if draw(st.booleans()):
+        text = draw(raw_texts)
+        top, *rest = key.split(".")
+        if rest:     # a raw value deep in a table: write its table's other keys around it
+            return study, spec, key, text
+        return study, _put(spec, key, RAW + text), key, None
+    return study, _put(spec, key, draw(values)), key, None
+
+
+def _write_tree(path: Path, spec: dict, key: str, raw: str | None) -> None:
+    lines = []
+    for top, value in spec.items():
+        if raw is not None and key.split(".")[0] == top:
+            continue
+        lines.append(f"{top} = {value[1:]}" if isinstance(value, str) and value.startswith(RAW)
+                     else f"{top} = {toml_value(value)}")
+    if raw is not None:
+        top, *rest = key.split(".")
+        table = spec.get(top) if isinstance(spec.get(top), dict) else {}
+        lines.append(f"[{top}]")
+        inner = ".".join(rest)
+        lines += [f"{k} = {toml_value(v)}" for k, v in table.items() if k != inner]
+        lines.append(f"{inner} = {raw}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def _one_line_or_accepted(status: int, err: str, what: str) -> None:
+    assert status in (0, 2, 3), f"{what}: {err[-2000:]}"
+    assert "internal error" not in err and "Traceback" not in err, f"{what}: {err[-2000:]}"
+    if status == 2:
+        errors = [line for line in err.strip().splitlines() if "error" in line]
+        assert len(errors) == 1 and errors[0] == err.strip().splitlines()[-1], err[-2000:]
+        assert len(errors[0]) < 1000, errors[0][:300]
+
+
+def _check_tree(tmp_path, capsys, tree) -> None:
+    study, spec, key, raw = tree
+    path = tmp_path / "tree.toml"
+    _write_tree(path, spec, key, raw)
+    try:
+        status = main(["run", str(path), "--check", "--out", str(tmp_path / "out")])
+    except SystemExit as exc:
+        status = exc.code
+    _one_line_or_accepted(status, capsys.readouterr().err, f"{study} {key}")
+
+
+@given(tree=spec_trees())
+def test_any_spec_tree_is_checked_or_refused_in_one_line(tmp_path, capsys, tree):
+    _check_tree(tmp_path, capsys, tree)
+
+
+@pytest.mark.slow
+@settings(settings.get_profile("slow"))
+@given(tree=spec_trees())
+def test_any_spec_tree_thoroughly(tmp_path, capsys, tree):
+    _check_tree(tmp_path, capsys, tree)
+
+
+@st.composite
+def commands(draw, tmp_path: Path):
+    """``snn-antenna run`` of a shipped study with any flags (some with odd values) and maybe
+    a ``--set`` of any value to any field."""
+    study = draw(st.sampled_from(sorted(STUDIES)))
+    argv = ["run", str(ROOT / "studies" / f"{study}.toml")]
+    folder, afile = tmp_path / "recordings", tmp_path / "afile"
+    flags = {
+        "--quick": [[]], "--yes": [[]], "--force": [[]], "--fresh": [[]],
+        "--scheduler": [["tcp://127.0.0.1:8786"], [""], ["garbage"], ["tcp://h:99999"]],
+        "--data": [[str(folder)], [str(afile)], [str(tmp_path / "missing")], [""]],
+        "--out": [[str(tmp_path / "out")], [str(afile)], [str(tmp_path / ("x" * 300))],
+                  [str(tmp_path / "mine")], [str(tmp_path / "dangling")]],
+    }
+    takes = {f"--{o}" for o in runner(study).OPTIONS} | {"--out"}
+    for name in sorted(flags):
+        # --out always; a flag the study takes half the time, one it does not now and then
+        if name == "--out" or draw(st.integers(0, 1 if name in takes else 7)) == 0:
+            argv += [name, *draw(st.sampled_from(flags[name]))]
+    if draw(st.booleans()):
+        key = draw(st.sampled_from([k for s, k in FIELDS if s == f"{study}.toml"]))
+        argv += ["--set", f"{key}={draw(settings_text)}"]
+    return study, argv
+
+
+def _check_then_run(tmp_path, capsys, monkeypatch, study, argv) -> None:
+    """--check's answer, then the run's with the study's work replaced by a record of its
+    being reached: both accept, or both refuse with the same line."""
+    (tmp_path / "recordings").mkdir(exist_ok=True)
+    (tmp_path / "afile").write_text("mine")
+    (tmp_path / "mine").mkdir(exist_ok=True)           # a folder of the user's, with a report
+    (tmp_path / "mine" / "report.html").write_text("mine")
+    if not (tmp_path / "dangling").is_symlink():
+        (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    reached = []
+    monkeypatch.setattr(runner(study), "run",
+                        lambda plan, out_dir, options, log=print: reached.append(plan) or {})
+    answers = []
+    for extra in (["--check"], []):
+        try:
+            status = main([*argv, *extra])
+        except SystemExit as exc:
+            status = exc.code
+        err = capsys.readouterr().err
+        _one_line_or_accepted(status, err, " ".join(argv)[-300:])
+        answers.append((status, err.strip().splitlines()[-1] if status else ""))
+    assert answers[0] == answers[1], answers
+    assert bool(reached) == (answers[1][0] == 0)
+    assert (tmp_path / "afile").read_text() == "mine"
+    assert (tmp_path / "mine" / "report.html").read_text() == "mine"
+
+
+@given(data=st.data())
+def test_check_and_run_give_the_same_answer_for_any_command(tmp_path, capsys, monkeypatch,
+                                                            data):
+    study, argv = data.draw(commands(tmp_path))
+    _check_then_run(tmp_path, capsys, monkeypatch, study, argv)
+
+
+@pytest.mark.slow
+@settings(settings.get_profile("slow"))
+@given(data=st.data())
+def test_check_and_run_give_the_same_answer_thoroughly(tmp_path, capsys, monkeypatch, data):
+    study, argv = data.draw(commands(tmp_path))
+    _check_then_run(tmp_path, capsys, monkeypatch, study, argv)
+
+
+# What the tree property found (each an internal error before its fix), kept as examples.
+FOUND_TREES = [("speed_accuracy", "bands.materials", 3),
+               ("speed_accuracy", "stability.k_dt_min", 0),
+               ("baseline_comparison", "spiking.tuned.tuning.range_hz", []),
+               ("tuning_sweep", "axes.k", [1, 10**400]),
+               ("exploration", "loop.duration_s", 10**400),
+               ("gating_threshold", "sweep.scene_s", 10**400),
+               ("speed_accuracy", "tuning.n_freqs", 10**400)]
+
+
+@pytest.mark.parametrize("study, key, value", FOUND_TREES)
+def test_what_the_tree_property_found_stays_answered(tmp_path, capsys, study, key, value):
+    _check_tree(tmp_path, capsys, (study, _put(QUICK_SPECS[study], key, value), key, None))

@@ -12,6 +12,7 @@ from snn_antenna.core.errors import SpecError
 from snn_antenna.sources import antenna, bench
 from snn_antenna.sources.contact_models import ContactPhysics
 from snn_antenna.studies import model_selection as ms
+from snn_antenna.studies.contract import Options
 
 RATE = 2000.0
 SPEC = "studies/model_selection.toml"
@@ -152,7 +153,8 @@ def _trimmed_quick(tmp_path):
 
 def test_quick_study_keeps_calibrated_apart_from_predicted(tmp_path):
     out = tmp_path / "out"
-    summary = ms.run(_trimmed_quick(tmp_path), out, quick=True, log=lambda *a: None)
+    summary = ms.run(ms.plan(_trimmed_quick(tmp_path)), out, Options(quick=True),
+                     log=lambda *a: None)
     saved = json.loads((out / "summary.json").read_text())
     assert (out / "report.html").exists() and (out / "model_selection.png").exists()
     calibrated = {c["quantity"] for c in saved["calibrated"]}
@@ -181,17 +183,18 @@ def test_spec_refuses_physics_in_the_stimulus(tmp_path):
     spec = _trimmed_quick(tmp_path)
     spec["stimulus"]["physics"] = "hertz"
     with pytest.raises(SpecError, match="stimulus.physics"):
-        ms.build(spec)
+        ms.plan(spec)
     spec = _trimmed_quick(tmp_path)
     spec["selection"]["candidates"] = [{"physics": "spring", "strengths": [1.0]}]
     with pytest.raises(SpecError, match="physics"):
-        ms.build(spec)
+        ms.plan(spec)
 
 
 @pytest.mark.slow
 def test_quick_profile_runs_end_to_end(tmp_path):
     spec = specs.load(SPEC, quick=True)
     spec["stimulus"]["cache_dir"] = str(tmp_path / "cache")
-    summary = ms.run(spec, tmp_path / "out", quick=True, log=lambda *a: None)
+    summary = ms.run(ms.plan(spec), tmp_path / "out", Options(quick=True),
+                     log=lambda *a: None)
     assert summary["candidates"]["friction"]["unreadable"] == [1.0]
     assert summary["selection"]["chosen"] in (*summary["candidates"], None)

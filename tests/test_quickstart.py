@@ -51,7 +51,7 @@ def test_quickstart_command_writes_the_report(tmp_path):
 
 def test_the_scene_keeps_driving_through_its_contacts():
     spec = specs.load(QUICKSTART)
-    scene = quickstart.build(spec).scene
+    scene = quickstart.plan(spec).parts.scene
     assert len(scene.contacts) >= 1 and scene.duration_s - scene.contacts[-1].t_s > 5
     assert (scene.speed_profile() == scene.speed_cm_s).all()
 
@@ -67,7 +67,7 @@ def test_the_read_out_never_sees_the_ground_truth(tmp_path, monkeypatch):
     """A fresh seed, run twice: once as generated, once with the scene's contacts replaced by
     garbage after generation. Every detection is the same; only the score changes."""
     spec = specs.load(QUICKSTART, ["seed=29"], quick=True)
-    honest = quickstart.run(spec, tmp_path / "honest", log=lambda *_: None)
+    honest = quickstart.run(quickstart.plan(spec), tmp_path / "honest", log=lambda *_: None)
     generate = RobotScene.generate
     rng = np.random.default_rng(0)
 
@@ -76,7 +76,8 @@ def test_the_read_out_never_sees_the_ground_truth(tmp_path, monkeypatch):
         return replace(rec, truth=GroundTruth(_garble(rec.truth.events, rng)))
 
     monkeypatch.setattr(RobotScene, "generate", garbled)
-    lied_to = quickstart.run(spec, tmp_path / "garbage", log=lambda *_: None)
+    lied_to = quickstart.run(quickstart.plan(spec), tmp_path / "garbage",
+                              log=lambda *_: None)
     assert honest["detections"], "the fresh seed should give at least one detection"
     assert lied_to["detections"] == honest["detections"]
     assert lied_to["motion_dominant_hz"] == honest["motion_dominant_hz"]
@@ -87,7 +88,7 @@ def test_the_read_out_never_sees_the_ground_truth(tmp_path, monkeypatch):
 def test_the_chain_is_fitted_on_the_warm_up_only():
     """What comes after the warm-up (the contacts) cannot change the fitted chain."""
     spec = specs.load(QUICKSTART, ["seed=5"], quick=True)
-    parts = quickstart.build(spec)
+    parts = quickstart.plan(spec).parts
     rec = parts.scene.generate(5)
     n = int(parts.warmup_s * rec.rate_hz)
     fit_warmup(parts.chain, rec.samples, rec.rate_hz, parts.warmup_s)
@@ -97,14 +98,14 @@ def test_the_chain_is_fitted_on_the_warm_up_only():
     fit_warmup(parts.chain, later, rec.rate_hz, parts.warmup_s)
     np.testing.assert_array_equal(parts.chain.named_steps["align"].axis_, axis)
     with pytest.raises(SpecError, match="warmup_s"):
-        quickstart.build(specs.load(QUICKSTART, ["preprocess.warmup_s=6.0"]))
+        quickstart.plan(specs.load(QUICKSTART, ["preprocess.warmup_s=6.0"]))
 
 
 # seed 1 in the default suite; seeds 2-4 (one quick run each) are the thorough check
 @pytest.mark.parametrize("seed", [1] + [pytest.param(s, marks=pytest.mark.slow) for s in (2, 3, 4)])
 def test_quickstart_meets_the_papers_fig10_in_kind(tmp_path, seed):
     spec = specs.load(QUICKSTART, [f"seed={seed}"], quick=True)
-    s = quickstart.run(spec, tmp_path, log=lambda *_: None)
+    s = quickstart.run(quickstart.plan(spec), tmp_path, log=lambda *_: None)
     # self-motion sits in the 7–8 Hz neurons (windows outside detections, read blind)
     assert 7.0 <= s["motion_dominant_hz"] <= 9.0
     # the contact found and nothing else, although the robot keeps driving (seeds 1-12 of

@@ -9,6 +9,7 @@ from snn_antenna.core.errors import SpecError
 from snn_antenna.networks import neurons
 from snn_antenna.evaluation import tradeoff
 from snn_antenna.studies import runner
+from snn_antenna.studies.contract import Options
 from snn_antenna.studies import speed_accuracy as study
 from snn_antenna.studies.speed_accuracy import report as study_report
 
@@ -32,7 +33,9 @@ DEFAULT_SUITE = ["bands.bands=[]", "precision.dtypes=[]", "sweep.scenes=['bench'
 def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tmp_path,
                                                                               overrides):
     spec = specs.load(SPEC, overrides, quick=True)
-    summary = runner("speed_accuracy").run(spec, tmp_path, quick=True, log=lambda *a: None)
+    study_module = runner("speed_accuracy")
+    summary = study_module.run(study_module.plan(spec), tmp_path, Options(quick=True),
+                               log=lambda *a: None)
     for name in ("report.html", "summary.json", "pareto.png", "stability_map.png"):
         assert (tmp_path / name).is_file(), name
     assert (tmp_path / "stability_map.zarr").is_dir()
@@ -85,7 +88,7 @@ def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tm
 def test_bad_specs_are_refused_before_any_work(override, field):
     spec = specs.load(SPEC, [override], quick=True)
     with pytest.raises(SpecError) as info:
-        study.build(spec)
+        study.plan(spec)
     assert info.value.field == field
 
 
@@ -120,7 +123,7 @@ def test_the_reference_verdict_says_what_was_measured():
 
 def test_the_quick_banner_names_the_methods_the_quick_sweep_leaves_out():
     spec = specs.load(SPEC, quick=True)
-    plan = study.build(spec)
+    plan = study.plan(spec).parts
     note = study.quick_note(plan.sweep, plan.stability)
     missing = [m for m in neurons.METHODS if m not in plan.sweep.methods]
     assert missing and all(m in note for m in missing)

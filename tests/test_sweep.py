@@ -93,11 +93,11 @@ def test_study_spec_refuses_unknown_axis_before_work(tmp_path):
 
     spec = specs.load(REPO / "studies/tuning_sweep.toml", ["axes.q=[1, 2]"], quick=True)
     with pytest.raises(SpecError) as err:
-        tuning_sweep.run(spec, tmp_path / "out")
+        tuning_sweep.plan(spec)
     assert err.value.field == "axes.q"
     spec = specs.load(REPO / "studies/tuning_sweep.toml", ["axes.k=[]"], quick=True)
     with pytest.raises(SpecError, match="empty"):
-        tuning_sweep.run(spec, tmp_path / "out")
+        tuning_sweep.plan(spec)
     assert not (tmp_path / "out").exists()
 
 

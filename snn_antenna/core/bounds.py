@@ -20,7 +20,10 @@ from .errors import SpecError, shown
 MAX_RATE_HZ = 1e6            # a MHz ADC is far beyond any antenna board (the paper's: 1 kHz)
 MIN_DT_MS = 1e-4             # 0.1 us: 50x finer than the finest step any study trades
 MAX_AMPLITUDE = 1e6          # drives and levels; squares and sums of it stay far inside float64
-MAX_SEED = 2**63 - 1         # NumPy's SeedSequence takes any integer >= 0; this fits an int64
+# A seed reaches NumPy's legacy RandomState (through Brian2's ``seed`` and scikit-learn's
+# ``random_state``), which takes 0 <= seed < 2**32; SeedSequence takes more, but one bound
+# for every seed keeps a seed valid wherever it goes.
+MAX_SEED = 2**32 - 1
 SCENE_BYTES_PER_SAMPLE = 256  # a scene's arrays per sample while it is generated (~30 float64)
 NAME_MAX = 255               # bytes in one path component (Linux, macOS)
 PATH_MAX = 4096              # bytes in a whole path (Linux)
@@ -81,7 +84,7 @@ def integer(field: str, value, lo: int | None = None, hi: int | None = None) -> 
 
 
 def seed(field: str, value):
-    """A random seed: an integer in [0, 2**63 - 1], or a NumPy ``SeedSequence`` (how a study
+    """A random seed: an integer in [0, MAX_SEED], or a NumPy ``SeedSequence`` (how a study
     hands each of its parts its own stream); returned as given."""
     import numpy as np
 
@@ -197,13 +200,51 @@ def positive_integer(field: str, value) -> int:
     return integer(field, value, 1)
 
 
-def parse_value(text: str):
+MAX_DEPTH = 32               # tables and lists nested in a spec value (its deepest has 4)
+
+
+def parse_value(text: str, field: str = "value"):
     """A value typed on the command line, read as TOML (``48``, ``[5, 40]``, ``inf``); text
-    that is not TOML stays the text it is."""
+    that is not TOML stays the text it is. A value TOML reads but Python cannot hold (an
+    integer of thousands of digits, lists nested past the interpreter's limit) is refused."""
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        value = tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:
         return text
+    except (ValueError, RecursionError, MemoryError) as exc:
+        raise SpecError(field, text, beyond_limits(exc)) from None
+    return nested(field, value)
+
+
+def beyond_limits(exc: BaseException) -> str:
+    """What is accepted, for a value Python could not read (``exc``)."""
+    if isinstance(exc, RecursionError):
+        return f"tables and lists nested at most {MAX_DEPTH} deep"
+    return (f"a number of at most {_max_digits()} digits (and values that fit in memory)"
+            if isinstance(exc, ValueError) else "a value that fits in memory")
+
+
+def _max_digits() -> int:
+    import sys
+
+    return sys.get_int_max_str_digits() or 4300
+
+
+def nested(field: str, value, depth: int = MAX_DEPTH):
+    """``value`` (a spec value read from TOML) refused when its tables and lists are nested
+    more than ``depth`` deep, naming the dotted key where it goes too deep. Iterative: a value
+    nested past the interpreter's recursion limit is refused, not a RecursionError."""
+    stack = [(field, value, 0)]
+    while stack:
+        where, item, level = stack.pop()
+        if level > depth:
+            raise SpecError(where, "(nested deeper)", f"tables and lists nested at most "
+                                                      f"{depth} deep")
+        if isinstance(item, dict):
+            stack += [(f"{where}.{k}", v, level + 1) for k, v in item.items()]
+        elif isinstance(item, list):
+            stack += [(f"{where}.{i}", v, level + 1) for i, v in enumerate(item)]
+    return value
 
 
 def memory_budget_bytes() -> int:

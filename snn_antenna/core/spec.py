@@ -21,8 +21,9 @@ from pathlib import Path
 from typing import Any, Iterable
 
 from . import calibration
-from .bounds import out_path, parse_value
-from .errors import SpecError, shown
+from .bounds import beyond_limits, nested, out_path, parse_value
+from .bounds import seed as checked_seed
+from .errors import NumericalInstabilityError, SpecError, shown
 
 INCLUDABLE = ("network", "stimulus")
 
@@ -54,12 +55,17 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
 def _read(path: Path, field: str = "spec") -> dict:
     try:
         with open(path, "rb") as f:
-            return tomllib.load(f)
+            table = tomllib.load(f)
     except tomllib.TOMLDecodeError as exc:
         raise SpecError(field, str(path), f"valid TOML ({exc})") from None
     except UnicodeDecodeError:              # tomllib reads bytes but wants UTF-8 text
         raise SpecError(field, str(path), "a TOML file in UTF-8 text (this one is binary "
                                            "or in another encoding)") from None
+    except (ValueError, RecursionError, MemoryError) as exc:   # TOML Python cannot hold
+        raise SpecError(field, str(path), f"a TOML file with {beyond_limits(exc)}") from None
+    for key, value in table.items():
+        nested(key, value)
+    return table
 
 
 def _flatten(table: dict, prefix: str = ""):
@@ -80,7 +86,8 @@ def apply_override(spec: dict, item: str) -> None:
     if "=" not in item:
         raise SpecError("--set", item, "key=value, e.g. network.n_neurons=48")
     dotted, text = item.split("=", 1)
-    dotted, value = dotted.strip(), parse_value(text.strip())
+    dotted = dotted.strip()
+    value = parse_value(text.strip(), dotted or "--set")
     before = get_field(spec, dotted, _MISSING) if dotted else _MISSING
     if before is not _MISSING:
         same_kind(dotted, before, value)
@@ -263,14 +270,13 @@ def check_top_level(spec: dict, sections: Iterable[str]) -> None:
         if key not in allowed:
             raise SpecError(key, spec[key],
                             f"a known top-level key of this study: {', '.join(sorted(allowed))}")
-    seed = spec.get("seed", 0)
-    if not isinstance(seed, int) or isinstance(seed, bool) or seed < 0:
-        raise SpecError("seed", seed, "an integer >= 0")
+    checked_seed("seed", spec.get("seed", 0))
 
 
 @contextmanager
 def section(name: str):
-    """Prefix the field of any SpecError raised inside with the spec section's name."""
+    """Prefix the field of any SpecError raised inside with the spec section's name; any other
+    error a value of the section caused while its parts were built names the section."""
     try:
         yield
     except SpecError as exc:
@@ -279,6 +285,14 @@ def section(name: str):
         raise SpecError(f"{name}.{exc.field}", exc.value, exc.accepted) from None
     except TypeError as exc:  # a wrong type that slipped past key checks
         raise SpecError(name, "a value of the wrong type", str(exc)) from None
+    except NumericalInstabilityError:
+        raise
+    except (ValueError, ArithmeticError, IndexError, KeyError) as exc:
+        # a value that slipped past the section's checks: building the parts needs nothing
+        # but the spec, so what failed there is the spec's (and the message says what)
+        raise SpecError(name, "one of its values",
+                        f"values its parts can be built from ({type(exc).__name__}: "
+                        f"{str(exc)[:200]})") from None
 
 
 def resolved(spec: dict) -> dict:

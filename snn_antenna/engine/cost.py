@@ -1,11 +1,14 @@
-"""What a sweep will cost before it starts: memory, worker processes, wall time.
+"""What a run will cost before it starts: memory, worker processes, wall time.
 
 A grid whose results (loaded for the report) or chunks would not fit in memory is refused
-(``check_memory``); ``estimate`` sizes a neuron sweep from the grid's shape alone, so the CLI
-can say how long a sweep will take (and ask for ``--yes`` beyond ``LONG_SWEEP_S``).
+(``check_memory``); ``estimate`` sizes a neuron sweep from the grid's shape alone and
+``job_estimate`` a study's Brian2 runs (scenes, bench sets, training), so a study's plan can
+say how long it will take (and the command ask for ``--yes`` beyond ``LONG_SWEEP_S``). The
+arithmetic is here, once; what each study runs is its plan's (``studies.contract.Plan``).
 """
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass
 
@@ -45,6 +48,15 @@ MEASURED_STEPS_PER_S = {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8}
 STANDALONE_COMPILE_S = 20.0        # one-off per worker process and group size (cached on disk)
 WORKER_MEMORY_BYTES = 500 * 2**20  # one worker process with Brian2 and Dask imported
 LONG_SWEEP_S = 3600.0              # beyond this the CLI asks for --yes
+ENGINES = {"cpp_standalone": "standalone"}   # Brian2 target -> the rate table's engine
+
+
+def engine_of(target) -> str:
+    """The engine of the rate tables for a Brian2 code target (None: Brian2's default)."""
+    if target is None:
+        return "cython"
+    return ENGINES.get(target, target) if target in (*ENGINES, *MEASURED_STEPS_PER_S) \
+        else "numpy"
 
 
 def max_workers() -> int:
@@ -116,8 +128,11 @@ class JobEstimate:
     seconds: float
     engine: str
     key: str = ""          # the spec key that sets the job's length, named when it is refused
+    value: object = None   # that key's value, as the spec holds it
 
     def describe(self) -> str:
+        if not self.steps:          # no Brian2 run: measured work alone
+            return f"{self.what}: about {_duration(self.seconds)}"
         return (f"{self.what}: {self.steps:.3g} steps, {self.neuron_steps:.3g} neuron-steps "
                 f"({self.engine}): about {_duration(self.seconds)}")
 
@@ -130,9 +145,55 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
     engine = runs[0][3] if runs else "numpy"
     for simulated_s, dt_ms, n_neurons, eng in runs:
         eng = eng if eng in MEASURED_NETWORK_STEPS_PER_S else "numpy"
-        n = simulated_s * 1000.0 / dt_ms
+        try:
+            n = float(simulated_s) * 1000.0 / float(dt_ms)
+            size = float(n_neurons)
+        except OverflowError:           # a size beyond any float: beyond any limit too
+            n = size = math.inf
         steps += n
-        neuron_steps += n * n_neurons
+        neuron_steps += n * size
         seconds += (n / MEASURED_NETWORK_STEPS_PER_S[eng]
-                    + n * n_neurons / MEASURED_STEPS_PER_S[eng])
+                    + n * size / MEASURED_STEPS_PER_S[eng])
     return JobEstimate(what, steps, neuron_steps, seconds, engine, key)
+
+
+def stages_estimate(what: str, stages: list[tuple]) -> JobEstimate:
+    """A study of several stages, each ``(key, value, runs)`` or ``(key, value, runs,
+    seconds)`` (``seconds``: measured work that is not Brian2, such as making a bench set):
+    the time of all of them, and the key (with its value) of the stage that costs most,
+    which a refusal names."""
+    sized = []
+    for key, value, runs, *other in stages:
+        one = job_estimate(what, runs, key)
+        one.seconds += sum(other)
+        sized.append((one, value))
+    whole = job_estimate(what, [r for _, _, runs, *_ in stages for r in runs])
+    whole.seconds = sum(one.seconds for one, _ in sized)
+    longest, whole.value = max(sized, key=lambda s: s[0].seconds)
+    whole.key = longest.key
+    return whole
+
+
+def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list:
+    """The Brian2 run that trains a ``networks.gate.SpeedGate``: every epoch presents each
+    training speed for ``present_s``, and ``curve_points + 1`` recall blocks present each test
+    speed (its learning curve)."""
+    presented = (gate.epochs * n_train + (gate.curve_points + 1) * n_test) * gate.present_s
+    return [(presented, gate.dt_ms, (gate.n_speed_neurons + 2) * copies,
+             engine_of(gate.target))]
+
+
+# Bench contact events generated, processed and read out by the paper's pipelines per second,
+# and the fixed cost of one bench set (loading, fitting, the report's statistics): from the
+# model-selection study's documented times on 2 shared cores (`snn-antenna run
+# studies/model_selection.toml`: 21 sets of 12,800 events in about 50 min; `--quick`: 7 sets of
+# 128 events in about a minute), rounded so the estimate errs long.
+MEASURED_BENCH_EVENTS_PER_S = 90.0
+BENCH_SET_S = 8.0
+
+
+def bench_seconds(n_events: int, n_jobs: int = 1) -> float:
+    """Time to make, process and read out a bench set of ``n_events`` on ``n_jobs``
+    processes."""
+    jobs = max(1, min(n_jobs, os.cpu_count() or 1))
+    return BENCH_SET_S + n_events / (MEASURED_BENCH_EVENTS_PER_S * jobs)

@@ -39,7 +39,7 @@ def axis_values(name: str, value) -> np.ndarray:
         raw = value if isinstance(value, (list, tuple, np.ndarray)) else [value]
         try:
             values = np.asarray(raw, dtype=float).ravel()
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):     # an int beyond any float, too
             raise SpecError(f"axes.{name}", value, "numbers") from None
     check(values.size >= 1, f"axes.{name}", value, "at least one value (the axis is empty)")
     check(bool(np.all(np.isfinite(values))), f"axes.{name}", value, "finite values")

@@ -6,6 +6,7 @@ wrote. Studies and the live bridge check their specs here, before they build any
 """
 from __future__ import annotations
 
+from ..core import bounds
 from ..core.errors import SpecError, check, is_number
 
 # Where make_chain's arguments come from in a study spec (the rest: ``preprocess.NAME``).
@@ -28,6 +29,29 @@ def check_spec(spec: dict, user_keys=(), rate_hz: float | None = None) -> None:
     _check_readout(spec, stimulus, rate)
     _check_network_rate(spec, rate, rate_key, set(user_keys))
     _check_workers(spec)
+    check_seeds(spec)
+
+
+SEED_KEYS = ("seed", "seeds")   # a seed, or a list of them, wherever a table holds one
+
+
+def check_seeds(spec: dict) -> None:
+    """Every seed of the spec, at any depth, within what every consumer of a seed takes
+    (``bounds.seed``): refused here, not when the stage that uses it starts."""
+    stack = [("", spec)]
+    while stack:
+        where, table = stack.pop()
+        for key, value in table.items():
+            dotted = f"{where}{key}"
+            if key in SEED_KEYS:
+                for i, one in enumerate(value if isinstance(value, list) else [value]):
+                    bounds.seed(dotted if not isinstance(value, list) else f"{dotted}.{i}",
+                                one)
+            elif isinstance(value, dict):
+                stack.append((f"{dotted}.", value))
+            elif isinstance(value, list):
+                stack += [(f"{dotted}.{i}.", v) for i, v in enumerate(value)
+                          if isinstance(v, dict)]
 
 
 def _check_preprocess(spec, stimulus, rate, rate_key) -> None:

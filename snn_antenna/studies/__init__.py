@@ -1,18 +1,15 @@
-"""Study runners: ``snn-antenna run studies/NAME.toml`` looks up the spec's ``study`` here.
+"""The studies: ``snn-antenna run studies/NAME.toml`` looks up the spec's ``study`` here.
 
-Each runner module defines ``run(spec, out_dir, quick=False) -> dict`` that validates the
-whole spec before any long work, writes the report folder and returns the summary, and
-``build(spec)`` that does the validating alone.
-
-Before a runner starts, the command checks what the studies share
-(``engine.spec_rules.check_spec``). For a sweep, :func:`plan` sizes the work from the grid's
-shape alone.
+Every study module keeps one contract (``contract``): it declares its spec's ``SECTIONS`` and
+the command-line ``OPTIONS`` it takes; ``plan(spec)`` checks the whole spec and builds every
+part that needs no simulation, and the plan sizes its own work (``Plan.estimate``);
+``run(plan, out_dir, options)`` runs the study on those parts and returns its summary.
+Before a plan is made, the command checks what the studies share
+(``engine.spec_rules.check_spec``).
 """
 from __future__ import annotations
 
 import importlib
-
-import numpy as np
 
 from ..core.errors import SpecError
 
@@ -28,26 +25,7 @@ STUDIES = {
 
 
 def runner(name: str):
+    """The module of study ``name`` (a SpecError naming the known ones otherwise)."""
     if not isinstance(name, str) or name not in STUDIES:
         raise SpecError("study", name, f"one of {sorted(STUDIES)}")
     return importlib.import_module(STUDIES[name])
-
-
-def plan(spec: dict):
-    """The estimate of a study's work: a neuron sweep (``[neuron]`` + ``[axes]``), sized by
-    its own ``build``, or the scenes, bench sets and sweeps of scenes of the other studies
-    (``costs``), or None where a value of the wrong type leaves nothing to size.
-
-    A grid whose results or chunks cannot fit in memory is refused here, before a worker starts.
-    """
-    if spec.get("study") != "tuning_sweep":
-        from .costs import estimate as job
-
-        return job(spec)
-    from ..engine.cost import check_memory, estimate
-    from ..engine.evaluators import NeuronSweep
-
-    neuron, grid, settings, _ = runner("tuning_sweep").build(spec)
-    block = grid.block_shape(settings.chunk_points)
-    check_memory(grid, NeuronSweep.OUTPUTS, int(np.prod(block)), neuron.bytes_per_point)
-    return estimate(grid, neuron, settings.chunk_points, settings.workers)

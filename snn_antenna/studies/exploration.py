@@ -13,13 +13,14 @@ Summary: ``cpg_period_s`` (measured while driving, and the spec's value at that 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..core import spec as specs
 from ..core.logfile import CPG_TOKEN_ORDER, logged
 from ..core.errors import SpecError, check
+from ..engine.cost import engine_of, gate_training_runs, stages_estimate
 from ..report.figures import draw_rate_map
 from ..networks.assembly import configure
 from ..networks.gate import GateTraining
@@ -33,14 +34,16 @@ from ..report.page import Calibrated, Predicted, Report, by_speed
 from ..core.truth import Event
 from ..sources import antenna
 from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
+from .contract import COMMON, Options, Plan
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
+OPTIONS = COMMON
 
 
 DISPLAY_MEAN_S = 0.5   # the rate map's running mean in the figure (not the read-out's)
 
 
-def build(spec: dict) -> ClosedLoop:
+def plan(spec: dict) -> Plan:
     """Check the whole spec and build every part of the loop before anything runs."""
     specs.check_top_level(spec, SECTIONS)
     with specs.section("network"):
@@ -64,18 +67,36 @@ def build(spec: dict) -> ClosedLoop:
         configured["gate"].check_speeds(examples[0], "speeds_cm_s")
     with specs.section("loop"):
         loop = LoopSettings(**specs.check_section(spec, "loop", LoopSettings))
+        for name in ("duration_s", "calibration_s"):
+            bounds.positive_seconds(name, getattr(loop, name))
+        bounds.number("chunk_ms", loop.chunk_ms, 1.0, bounds.MAX_SECONDS * 1000, unit=" ms")
         configured["gate"].check_speeds([loop.speed_cm_s], "speed_cm_s")
     readout = BlindReadOut(configured["resonators"], detector, window_s, scene.rate_hz,
                            settle_s=0.0)
-    return ClosedLoop(table, configured, scene, chain, readout, examples, loop)
+    return Plan("exploration", spec,
+                ClosedLoop(table, configured, scene, chain, readout, examples, loop), estimate)
+
+
+def estimate(parts: ClosedLoop):
+    """The gate's training, then the closed loop for ``loop.duration_s``: every part of the
+    network steps at the resonators' dt, each with its own groups (so its own per-step cost)."""
+    gate, loop, cfg = parts.configured["gate"], parts.loop, parts.configured
+    speeds = parts.gate_training[0]
+    resonators = cfg["resonators"]
+    loop_run = (float(loop.duration_s), resonators.dt_ms, resonators.n_neurons,
+                engine_of(resonators.target))
+    return stages_estimate("the gate's training and the closed loop", [
+        ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
+         gate_training_runs(gate, len(speeds), len(speeds))),
+        ("loop.duration_s", loop.duration_s, [loop_run] * len(cfg))])
 
 
 @logged
-def run(spec: dict, out_dir, quick: bool = False, log=print, **_) -> dict:
-    parts = build(spec)
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick = plan.spec, plan.parts, options.quick
     t_start = time.perf_counter()
     with log.expected(CPG_TOKEN_ORDER):
-        robot, world = parts.run(int(spec.get("seed", 0)), log)
+        robot, world = parts.run(plan.seed, log)
     log("[5/5] scoring against the world's contacts and writing the report")
     contacts = [Event("contact", c.t_s, c.hold_s, c.distance_cm, c.material)
                 for c in world.contacts]

@@ -25,6 +25,8 @@ import xarray as xr
 from ..core import spec as specs
 from ..core.logfile import logged
 from ..core.errors import check
+from ..engine.cost import engine_of, job_estimate
+from .contract import COMMON, Options, Plan, data_folder
 from ..report.figures import draw_rate_map
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray
@@ -45,7 +47,8 @@ from ..sources.scenes import scene_from_spec
 from ..sources.stimuli import RobotScene
 from ..report.stats import poisson_interval
 
-SECTIONS = ("network", "stimulus", "preprocess", "readout")
+SECTIONS = ("network", "stimulus", "preprocess", "readout", "data")
+OPTIONS = (*COMMON, "data")
 
 
 @dataclass
@@ -70,9 +73,10 @@ class ReadOut:
     simulation_wall_s: float
 
 
-def build(spec: dict) -> Parts:
+def plan(spec: dict) -> Plan:
     """Check the whole spec and build every part, before any simulation runs."""
-    specs.check_top_level(spec, SECTIONS + ("data",))
+    specs.check_top_level(spec, SECTIONS)
+    data_folder(spec)
     with specs.section("network"):
         net_table = specs.check_section(spec, "network", ResonatorArray)
         array = ResonatorArray(**net_table)
@@ -95,7 +99,15 @@ def build(spec: dict) -> Parts:
     detector, window_s = detector_from_spec(spec)
     with specs.section("network"):
         array.check_rate(scene.rate_hz)
-    return Parts(array, scene, chain, detector, window_s, warmup_s)
+    return Plan("quickstart", spec, Parts(array, scene, chain, detector, window_s, warmup_s),
+                estimate)
+
+
+def estimate(parts: Parts):
+    """The scene's one Brian2 run."""
+    array = parts.array
+    return job_estimate("the scene", [(parts.scene.duration_s, array.dt_ms, array.n_neurons,
+                                       engine_of(array.target))], "stimulus.duration_s")
 
 
 def read_out(samples: np.ndarray, rate_hz: float, parts: Parts) -> ReadOut:
@@ -148,10 +160,10 @@ def _scene_text(scene, description: str) -> str:
 
 
 @logged
-def run(spec: dict, out_dir, quick: bool = False, log=print) -> dict:
-    parts = build(spec)
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick = plan.spec, plan.parts, options.quick
     scene, array = parts.scene, parts.array
-    seed = int(spec.get("seed", 0))
+    seed = plan.seed
     t_start = time.perf_counter()
     if getattr(scene, "recorded", False):
         log(f"[1/4] the recorded drive {scene.drive.meta['source']} ({scene.duration_s:g} s at "

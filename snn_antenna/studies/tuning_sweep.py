@@ -19,7 +19,10 @@ import time
 from pathlib import Path
 from typing import NamedTuple
 
+import numpy as np
+
 from ..core import spec as specs
+from ..engine.cost import check_memory, estimate as sweep_estimate
 from ..engine.evaluators import NEURON_AXES, NeuronSweep
 from ..engine.executor import executor
 from ..engine.grid import Grid
@@ -31,8 +34,10 @@ from ..evaluation import tuning
 from ..evaluation.tuning import ReadPoint
 from ..core.provenance import provenance
 from ..report.page import Calibrated, Predicted, Report, fmt
+from .contract import COMMON, Options, Plan
 
 SECTIONS = ("neuron", "axes", "sweep", "reference")
+OPTIONS = (*COMMON, "fresh", "scheduler")
 
 
 @dataclasses.dataclass
@@ -45,7 +50,7 @@ class SweepSettings:
               "an integer >= 0 (0: one per CPU core)")
 
 
-class Plan(NamedTuple):
+class Parts(NamedTuple):
     """The checked spec: the neuron model, the grid, how to sweep it, where to read it."""
     neuron: NeuronSweep
     grid: Grid
@@ -53,13 +58,15 @@ class Plan(NamedTuple):
     reference: ReadPoint
 
 
-def build(spec: dict) -> Plan:
-    """Check the whole spec (the grid included) before any simulation runs."""
+def plan(spec: dict) -> Plan:
+    """Check the whole spec (the grid included) before any simulation runs; a grid whose
+    results or chunks cannot fit in memory is refused here, before a worker starts."""
     specs.check_top_level(spec, SECTIONS)
     with specs.section("neuron"):
         neuron = NeuronSweep(**specs.check_section(spec, "neuron", NeuronSweep,
                                                    exclude=["group_size", "shared"]))
-    grid = Grid.from_spec(spec.get("axes", {}), NEURON_AXES)
+    with specs.section("axes"):
+        grid = Grid.from_spec(spec.get("axes", {}), NEURON_AXES)
     check("input_hz" in grid.axes and len(grid.axes["input_hz"]) >= 3, "axes.input_hz",
           list(grid.axes.get("input_hz", [])),
           "an axis of at least 3 input frequencies (the tuning curve)")
@@ -67,21 +74,29 @@ def build(spec: dict) -> Plan:
         settings = SweepSettings(**specs.check_section(spec, "sweep", SweepSettings))
     with specs.section("reference"):
         point = ReadPoint(**specs.check_section(spec, "reference", ReadPoint))
-    neuron.for_grid(grid, grid.block_shape(settings.chunk_points))  # refuse a bad grid now
-    return Plan(neuron, grid, settings, point)
+    block = grid.block_shape(settings.chunk_points)
+    neuron.for_grid(grid, block)                    # refuse a bad grid now
+    check_memory(grid, NeuronSweep.OUTPUTS, int(np.prod(block)), neuron.bytes_per_point)
+    return Plan("tuning_sweep", spec, Parts(neuron, grid, settings, point), estimate)
 
 
-def sweep_grid(spec: dict, plan: Plan, out_dir: Path, fresh: bool, scheduler, log):
+def estimate(parts: Parts):
+    """The sweep's points, neuron-steps, time and memory, from the grid's shape alone."""
+    return sweep_estimate(parts.grid, parts.neuron, parts.settings.chunk_points,
+                          parts.settings.workers)
+
+
+def sweep_grid(spec: dict, parts: Parts, out_dir: Path, fresh: bool, scheduler, log):
     """Every grid point's spike rate into ``OUT/results.zarr`` (chunks already there kept)."""
-    neuron, grid = plan.neuron, plan.grid
+    neuron, grid = parts.neuron, parts.grid
     log(f"[1/3] sweeping {grid.describe()} ({neuron.engine}, dt {neuron.dt_ms:g} ms, "
         f"{neuron.duration_s:g} s per point) into {out_dir / 'results.zarr'}")
     attrs = {"spec": specs.resolved(spec),
              **{k: v for k, v in provenance(spec, neuron.engine).items() if k != "spec"}}
     attrs.pop("created", None)  # not part of what makes two runs the same sweep
-    with executor(plan.settings.workers, scheduler, log) as client:
+    with executor(parts.settings.workers, scheduler, log) as client:
         outcome = run_sweep(grid, neuron, out_dir / "results.zarr", NeuronSweep.OUTPUTS,
-                            client=client, chunk_points=plan.settings.chunk_points,
+                            client=client, chunk_points=parts.settings.chunk_points,
                             fresh=fresh, attrs=attrs, settings=dataclasses.asdict(neuron),
                             desc="chunks")
     log(f"      {len(outcome.chunks_computed)} chunk(s) computed, "
@@ -89,17 +104,16 @@ def sweep_grid(spec: dict, plan: Plan, out_dir: Path, fresh: bool, scheduler, lo
     return outcome
 
 
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
-        scheduler: str | None = None, log=print) -> dict:
-    plan = build(spec)
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick = plan.spec, plan.parts, options.quick
     out_dir = Path(out_dir)
     with LogFile(out_dir, log) as log:
         t0 = time.perf_counter()
-        outcome = sweep_grid(spec, plan, out_dir, fresh, scheduler, log)
+        outcome = sweep_grid(spec, parts, out_dir, options.fresh, options.scheduler, log)
         log("[2/3] deriving peak frequency, band width and spike rate maps")
-        data, neuron, grid = outcome.data, plan.neuron, plan.grid
+        data, neuron, grid = outcome.data, parts.neuron, parts.grid
         maps = tuning.derive(data.rate_hz)
-        summary = tuning.summarise(maps, data.input_hz.values, plan.reference)
+        summary = tuning.summarise(maps, data.input_hz.values, parts.reference)
         summary.update({
             "grid": {d: [float(x) for x in data[d].values] for d in grid.dims},
             "points": grid.size,
@@ -117,7 +131,7 @@ def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
                         quick=quick, quick_note=quick_note(summary, neuron))
         report.text(spec.get("description", ""))
         _provenance_rows(report, summary)
-        write_report(report, data.rate_hz, maps, summary, plan.reference)
+        write_report(report, data.rate_hz, maps, summary, parts.reference)
         summary = report.write(summary, spec, neuron.engine)
         cal = summary.get("calibration")
         if cal and cal["hz_per_k_peak"] is not None:

@@ -19,6 +19,7 @@ from ...core.logfile import logged
 from ...engine.events import cached_features, run_bank, run_cost
 from ...engine.executor import executor
 from ...core.errors import SpecError
+from ...engine.cost import bench_seconds, engine_of, max_workers, stages_estimate
 from ...core.files import write_json
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
@@ -34,10 +35,12 @@ from ...readout.spiking_decoders import (
 )
 from ...report.page import Report
 from ...sources import bench, recorded
+from ..contract import COMMON, Options, Plan, cache_folder, data_folder
 from .report import write_report
 from .tuned import tuned_stage
 
-SECTIONS = ("stimulus", "events", "evaluation", "spiking")
+SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
+OPTIONS = (*COMMON, "fresh", "scheduler", "data")
 # Events timed for the FFT's cost per event when the spec has no [spiking] section.
 COST_SAMPLE_EVENTS = 200
 
@@ -69,15 +72,17 @@ def _spiking_part(spec: dict, rate_hz: float) -> tuple:
         return (plan, *plan.build(rate_hz))
 
 
-def build(spec: dict) -> StudySpec:
-    """Check the whole spec before any long work; return its parts."""
-    specs.check_top_level(spec, SECTIONS + ("data",))
+def plan(spec: dict) -> Plan:
+    """Check the whole spec before any long work; build its parts."""
+    specs.check_top_level(spec, SECTIONS)
+    data_folder(spec)
     if spec.get("data") is not None:            # contacts imported from recordings
         bench_spec = bench.source_from_spec(spec)
     else:
         with specs.section("stimulus"):
             bench_spec = bench.source_from_spec(spec)
             bench_spec.validate()
+            cache_folder("cache_dir", bench_spec.cache_dir)
     with specs.section("events"):
         table = specs.check_section(spec, "events", events.EventProcessor, exclude=["rate_hz"])
         processor = events.EventProcessor(rate_hz=bench_spec.rate_hz, **table)
@@ -93,13 +98,33 @@ def build(spec: dict) -> StudySpec:
         raise SpecError("spiking.tuned", "a tuned bank", "none with recorded data (--set "
                         "spiking.tuned={}): the tuned bank places its channels on calibration "
                         "contacts the generator makes with another seed")
-    return parts
+    return Plan("baseline_comparison", spec, parts, estimate)
+
+
+def estimate(parts: StudySpec):
+    """The bench set (made once, then cached) and the spiking read-out of its events: every
+    band's bank over every event, ``batch_events`` events per Brian2 run, runs shared among
+    the workers."""
+    events = parts.bench.n_events
+    stages = [("stimulus.repetitions", parts.bench.repetitions, [],
+               bench_seconds(events, parts.bench.n_jobs))]
+    bank = parts.bank
+    if bank is not None:
+        workers = parts.plan.workers or max_workers()
+        chunks = -(-events // bank.batch_events)
+        runs = []
+        for band in bank.bands.values():
+            runs += [(bank.duration_s, band.dt_ms or bank.dt_ms,
+                      band.n_neurons * min(events, bank.batch_events),
+                      engine_of(bank.target))] * -(-chunks // workers)
+        stages.append(("stimulus.repetitions", parts.bench.repetitions, runs))
+    return stages_estimate("the bench set and its spiking read-out", stages)
 
 
 @logged
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
-        scheduler: str | None = None, log=print) -> dict:
-    parts = build(spec)
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick = plan.spec, plan.parts, options.quick
+    fresh, scheduler = options.fresh, options.scheduler
     out_dir, t_start = Path(out_dir), time.perf_counter()
     stages = 5 if parts.bank is not None else 4
     data, cmp, data_s = _signal_stage(parts, stages, log, fresh)

@@ -59,20 +59,32 @@ from ...evaluation.thresholds import (
 )
 from ...sources.scenes import SpeedProfile, ramp, random_steps
 from .recorded import score_drives
+from ..contract import COMMON, Options, Plan, data_folder
 from .report import Fig9Row, Results, SeedPlan, human_summary, write_report
 from .spec import (
     EVALUATION_SCENES,
     EVALUATION_STEPS,
     LOW_HIGH_CM_S,
+    SECTIONS,
     Parts,
     ThresholdSweep,
-    build,
     coded_at,
     condition,
+    estimate,
+    make_parts,
     make_scene,
     sweep_scene,
     sweep_settings,
 )
+
+OPTIONS = (*COMMON, "fresh", "scheduler", "data")
+
+
+def plan(spec: dict) -> Plan:
+    """Check the whole spec and build every part before any simulation runs."""
+    parts = make_parts(spec)
+    data_folder(spec)
+    return Plan("gating_threshold", spec, parts, estimate)
 
 
 # -- stages --------------------------------------------------------------------------------
@@ -233,12 +245,12 @@ def evaluate(evaluation: Evaluation, log) -> SeedPlan:
 
 
 @logged
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
-        scheduler: str | None = None, log=print) -> dict:
-    parts, out_dir, t_start = build(spec), Path(out_dir), time.perf_counter()
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick = plan.spec, plan.parts, options.quick
+    out_dir, t_start = Path(out_dir), time.perf_counter()
     # One Dask client (or none: ``sweep.workers = 1``) serves every Brian2 stage.
-    with executor(parts.sweep.workers, scheduler, log) as client:
-        outcome, fit = sweep(spec, parts, out_dir, fresh, client, log)
+    with executor(parts.sweep.workers, options.scheduler, log) as client:
+        outcome, fit = sweep(spec, parts, out_dir, options.fresh, client, log)
         codings = ScoredCodings(parts.readout, parts.sweep.codings_per_run, client)
         where = "on the Dask workers" if client is not None else "after the gate"
         log(f"[2/5] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed (runs {where})")

@@ -7,9 +7,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...engine.batches import ScoredCodings
 from ...core.errors import SpecError, check
+from ...engine.cost import engine_of, gate_training_runs, max_workers, stages_estimate
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
@@ -29,7 +31,7 @@ from ...sources.scenes import (
 )
 
 SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",
-            "gate", "evaluation")
+            "gate", "evaluation", "data")
 LOW_HIGH_CM_S = (12.0, 27.0)  # the paper's two speeds (Fig. 9)
 # Seed streams (first entry of every spawn key) and, within a scene's stream, its two draws.
 SWEEP_SCENES, EVALUATION_SCENES, EVALUATION_STEPS = 0, 1, 2
@@ -144,7 +146,7 @@ def _section(spec: dict, name: str, target, **kw):
     return target(**specs.check_section(spec, name, target, **kw))
 
 
-def build(spec: dict) -> Parts:
+def make_parts(spec: dict) -> Parts:
     """Check the whole spec and build every part before any simulation runs."""
     specs.check_top_level(spec, SECTIONS + ("data",))
     with specs.section("network"):
@@ -166,6 +168,7 @@ def build(spec: dict) -> Parts:
         course = _section(spec, "course", CourseLayout)
     with specs.section("sweep"):
         sweep = _section(spec, "sweep", SweepSettings)
+        bounds.positive_seconds("scene_s", sweep.scene_s)
         v = sweep.speeds_cm_s
         drive(scene, ramp(v.min(), v.max(), 1.0), 1.0, []).validate()
     with specs.section("gate"):
@@ -189,6 +192,34 @@ def build(spec: dict) -> Parts:
                            sweep.target)
     return Parts(int(spec.get("seed", 0)), array, scene, pre, cal, readout, course, sweep,
                  gate, train, ev, held, data=open_drives(spec, scene))
+
+
+def estimate(parts: Parts):
+    """Every Brian2 run of the study: the sweep's codings, Fig. 9's, the gate's training and
+    the evaluation at its seed budget (``evaluation.max_seeds``), codings grouped as the
+    study groups them and shared among its workers."""
+    sw, array, ev = parts.sweep, parts.array, parts.evaluation
+    workers = sw.workers or max_workers()
+    engine = engine_of(sw.target or array.target)
+
+    def codings(n: int) -> list:
+        runs = [(sw.scene_s, array.dt_ms, min(n, sw.codings_per_run) * array.n_neurons,
+                 engine)] * -(-n // sw.codings_per_run)
+        return runs[:-(-len(runs) // workers)] if workers > 1 else runs
+
+    n_th, n_v = len(sw.thresholds_g), len(sw.speeds_cm_s)
+    profiles = len(parts.held_out_speeds) + 2 + (
+        2 if ev.other_terrain != parts.scene.terrain else 0)
+    scenes = ev.max_seeds * profiles
+    recall = [(sw.scene_s, parts.gate.dt_ms, (parts.gate.n_speed_neurons + 2) * scenes,
+               engine_of(parts.gate.target))]
+    return stages_estimate("the threshold sweep, Fig. 9, the gate and the evaluation (at "
+                           "its seed budget)", [
+        ("sweep.n_scenes", sw.n_scenes, codings(n_v * sw.n_scenes * n_th)),
+        ("sweep.n_scenes", sw.n_scenes, codings(len(LOW_HIGH_CM_S) * sw.n_scenes * 3)),
+        ("gate", {"epochs": parts.gate.epochs, "present_s": parts.gate.present_s},
+         gate_training_runs(parts.gate, len(parts.train_speeds), n_v)),
+        ("evaluation.max_seeds", ev.max_seeds, codings(scenes * (n_th + 3)) + recall)])
 
 
 def sweep_settings(spec: dict) -> dict:
@@ -258,11 +289,11 @@ class ThresholdSweep:
     """The Th × speed sweep as a ``run_sweep`` evaluator over speed_cm_s × scene ×
     threshold_g: each (speed, scene) of a chunk is generated and conditioned once, coded at
     its thresholds, and the chunk's codings run as one Brian2 group. It holds the resolved
-    spec, so it pickles; ``build`` re-checks it on the worker (milliseconds)."""
+    spec, so it pickles; ``make_parts`` re-checks it on the worker (milliseconds)."""
     spec: dict
 
     def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        parts = build(self.spec)
+        parts = make_parts(self.spec)
         items, order = [], []
         pairs = np.stack([points["speed_cm_s"], points["scene"]], axis=1)
         for v, scene in np.unique(pairs, axis=0):

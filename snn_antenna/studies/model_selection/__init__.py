@@ -25,6 +25,7 @@ from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...evaluation.confusion import confusion
 from ...core.logfile import logged
+from ...engine.cost import bench_seconds, stages_estimate
 from ...readout import events
 from ...readout.baselines import distance_baselines, material_baselines, two_material_baseline
 from ...report.page import Report
@@ -39,9 +40,11 @@ from .protocol import (
     confused_pairs,
     select,
 )
+from ..contract import COMMON, Options, Plan, cache_folder
 from .report import write_report
 
 SECTIONS = ("stimulus", "events", "evaluation", "selection")
+OPTIONS = (*COMMON, "fresh")
 # A grid point whose events the paper's processing skips more often than this is unreadable.
 MAX_SKIPPED = 0.10
 
@@ -88,8 +91,8 @@ class StudySpec:
     selection: Selection
 
 
-def build(spec: dict) -> StudySpec:
-    """Check the whole spec before any long work; return its parts."""
+def plan(spec: dict) -> Plan:
+    """Check the whole spec before any long work; build its parts."""
     specs.check_top_level(spec, SECTIONS)
     for key in ("physics", "physics_strength"):
         if key in spec.get("stimulus", {}):
@@ -98,6 +101,7 @@ def build(spec: dict) -> StudySpec:
     with specs.section("stimulus"):
         bench_spec = bench.spec_from_table(spec.get("stimulus", {}), int(spec.get("seed", 0)))
         bench_spec.validate()
+        cache_folder("cache_dir", bench_spec.cache_dir)
     check({"wood", "aluminium", *PAPER_PAIR} <= set(bench_spec.materials),
           "stimulus.materials", list(bench_spec.materials),
           "a list holding wood, aluminium and brass (the targets and the paper's pair)")
@@ -108,15 +112,22 @@ def build(spec: dict) -> StudySpec:
         evaluation = cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
     with specs.section("selection"):
         selection = Selection(**specs.check_section(spec, "selection", Selection))
-    return StudySpec(bench_spec, processor, evaluation, selection)
+    return Plan("model_selection", spec,
+                StudySpec(bench_spec, processor, evaluation, selection), estimate)
+
+
+def estimate(parts: StudySpec):
+    """A bench set per grid point (every candidate's strengths), its events processed and
+    read out (no Brian2)."""
+    points = sum(len(c.strengths) for c in parts.selection.candidates)
+    return stages_estimate("the candidates' bench sets and read-outs", [
+        ("stimulus.repetitions", parts.bench.repetitions, [],
+         points * bench_seconds(parts.bench.n_events, parts.bench.n_jobs))])
 
 
 @logged
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False,
-        scheduler: str | None = None, log=print) -> dict:
-    parts = build(spec)
-    if scheduler:
-        log(f"--scheduler {scheduler} not used: this study has no Dask part")
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick, fresh = plan.spec, plan.parts, options.quick, options.fresh
     out_dir, t0 = Path(out_dir), time.perf_counter()
     grid = [(c.physics, float(s)) for c in parts.selection.candidates for s in c.strengths]
     points = []

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...engine.devices import (
     DTYPES,
@@ -38,26 +39,29 @@ from ...engine.devices import (
 )
 from ...engine.runlog import Measurements, RunLog
 from ...core.errors import check
+from ...engine.cost import engine_of, stages_estimate
 from ...core.logfile import FLOAT32_CHECK, UNSTABLE_ON_PURPOSE, LogFile
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain
 from ...evaluation import accuracy, tradeoff
 from ...evaluation.accuracy import Match, StabilityGrid
-from ...evaluation.bands import BandStudy
+from ...evaluation.bands import BENCH_BANDS, BandStudy
 from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
 from ...report.page import Report
-from ...sources import recorded
+from ...sources import antenna, recorded
 from ...sources.scenes import scene_from_spec
 from ...sources.stimuli import RobotScene
 from ...core.store import write_dataset
 from . import precision as engine_precision
 from .precision import Precision
+from ..contract import COMMON, Options, Plan, data_folder
 from .report import human_summary, quick_note, write_report
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
-            "stability", "reference", "match", "bands", "precision")
+            "stability", "reference", "match", "bands", "precision", "data")
+OPTIONS = (*COMMON, "fresh", "data")
 SCENES = ("tuning", "quickstart", "bench")
 
 
@@ -127,7 +131,7 @@ class ReferenceSettings:
 
 
 @dataclasses.dataclass
-class Plan:
+class Parts:
     """Every part of the study, built and checked from the spec before any simulation."""
     net: dict
     robot_scenes: dict
@@ -144,9 +148,10 @@ class Plan:
     precision: Precision
 
 
-def build(spec: dict) -> Plan:
+def plan(spec: dict) -> Plan:
     """Check the whole spec and build every part before any simulation runs."""
-    specs.check_top_level(spec, SECTIONS + ("data",))
+    specs.check_top_level(spec, SECTIONS)
+    data_folder(spec)
     with specs.section("network"):
         net = dict(specs.check_section(spec, "network", ResonatorArray))
         array = ResonatorArray(**net)
@@ -172,13 +177,91 @@ def build(spec: dict) -> Plan:
                       ("match", Match), ("bands", BandStudy), ("precision", Precision)):
         with specs.section(name):
             parts[name] = cls(**specs.check_section(spec, name, cls))
+    with specs.section("tuning"):        # one neuron per array neuron and frequency
+        bounds.integer("n_freqs", parts["tuning"].n_freqs, 2, 10_000)
+    with specs.section("stability"):
+        _check_stability(parts["stability"])
+    with specs.section("bands"):
+        _check_bands(parts["bands"])
     for scene in robot_scenes.values():
         array.check_rate(scene.rate_hz)
-    return Plan(net, robot_scenes, pre, detector, window_s, **parts)
+    return Plan("speed_accuracy", spec,
+                Parts(net, robot_scenes, pre, detector, window_s, **parts), estimate)
+
+
+def _check_stability(grid: StabilityGrid) -> None:
+    """What the stability map's grid is made of (sized by the estimate, run by stage 5)."""
+    low = bounds.number("k_dt_min", grid.k_dt_min, 0.0, lo_open=True)
+    bounds.number("k_dt_max", grid.k_dt_max, low, lo_open=True)
+    bounds.integer("n_k_dt", grid.n_k_dt, 2, 1000)
+    check(isinstance(grid.drives, list) and 1 <= len(grid.drives) <= 1000, "drives",
+          grid.drives, "a list of 1 to 1000 constant drives")
+    for i, drive in enumerate(grid.drives):
+        bounds.amplitude(f"drives.{i}", drive)
+    bounds.number("model_ms", grid.model_ms, 0.0, lo_open=True, unit=" ms")
+
+
+def _check_bands(study: BandStudy) -> None:
+    """The bench bands' sample events and steps (sized by the estimate, run by stage 6)."""
+    check(isinstance(study.materials, list) and study.materials, "materials",
+          study.materials, "a non-empty list of material names")
+    for material in study.materials:
+        antenna.check_material(material)
+    check(isinstance(study.positions_cm, list) and study.positions_cm, "positions_cm",
+          study.positions_cm, "a non-empty list of contact distances (cm)")
+    antenna.check_distance(study.positions_cm)
+    bounds.integer("repetitions", study.repetitions, 1, 1000)
+    bounds.integer("coarser_steps", study.coarser_steps, 0, 20)
+    check(isinstance(study.methods, list) and isinstance(study.windows_s, list), "methods",
+          study.methods, "a list of method names (and windows_s a list of windows)")
+    bounds.number("duration_s", study.duration_s, 0.0, 60.0, lo_open=True, unit=" s")
+    bounds.number("tuning_duration_s", study.tuning_duration_s, 0.0, 60.0, lo_open=True,
+                  unit=" s")
+
+
+def estimate(parts: Parts):
+    """The main sweep (every scene at every method and dt), the cost sweep (its settings at
+    every target, float type and array size), the stability map, the bench bands (their
+    sample events at every method and step, and the tuning that recalibrates them) and the
+    sweep engine's precision grid (per float type)."""
+    array = ResonatorArray(**dict(parts.net, force=True))
+    seconds = {"tuning": parts.tuning.duration_s,
+               **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
+    size = {"tuning": array.n_neurons * parts.tuning.n_freqs}
+    sweep, cost = parts.sweep, parts.cost
+    main = [(seconds[s], float(dt), size.get(s, array.n_neurons), engine_of(sweep.target))
+            for s in sweep.scenes for dt in sweep.dt_ms] * len(sweep.methods)
+    # the recommendation is the fastest setting that matches: sized as the spec's settings
+    settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
+    costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
+             for t in cost.targets for n in cost.n_neurons] * len(cost.dtypes)
+    stab = parts.stability          # every neuron runs model_ms at the finest k·dt
+    stability = [(stab.model_ms / stab.k_dt_min / 1000.0, 1.0, stab.n_k_dt * len(stab.drives),
+                  "numpy")] * len(sweep.methods)
+    bands = parts.bands
+    events = len(bands.materials) * len(bands.positions_cm) * bands.repetitions
+    band_runs = []
+    for name in bands.bands:
+        band = BENCH_BANDS[name]
+        dt = band.dt_ms or min(sweep.dt_ms)
+        band_runs += [(bands.duration_s, dt, band.n_neurons * events, engine_of(bands.target))
+                      ] * (len(bands.methods) * (bands.coarser_steps + 2))
+        if name in bands.calibrate:
+            band_runs.append((bands.tuning_duration_s, dt, band.n_neurons * bands.n_freqs,
+                              engine_of(bands.target)))
+    precision = parts.precision
+    points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
+    return stages_estimate("the method x dt sweep, the cost sweep, the stability map, the "
+                           "bench bands and the precision grid", [
+        ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs),
+        ("stability.model_ms", stab.model_ms, stability),
+        ("bands.repetitions", bands.repetitions, band_runs),
+        ("precision.n_k", precision.n_k,
+         [(precision.duration_s, 0.1, points, "standalone")] * len(precision.dtypes))])
 
 
 # -- stages ---------------------------------------------------------------------------------
-def prepare_workloads(plan: Plan, seed: int, log) -> dict:
+def prepare_workloads(plan: Parts, seed: int, log) -> dict:
     """The tuning workload, and each robot scene generated and coded as the quickstart does."""
     workloads = {}
     for name in dict.fromkeys(plan.sweep.scenes + [plan.cost.scene]):
@@ -197,7 +280,7 @@ def prepare_workloads(plan: Plan, seed: int, log) -> dict:
     return workloads
 
 
-def solve_references(plan: Plan, workloads: dict, log) -> tuple[dict, list, dict]:
+def solve_references(plan: Parts, workloads: dict, log) -> tuple[dict, list, dict]:
     """Each workload's reference and read-out, and how far one moves at a tighter tolerance."""
     tol = plan.reference
     refs = {name: solve_reference(w, tol.rtol, tol.atol) for name, w in workloads.items()}
@@ -216,7 +299,7 @@ def solve_references(plan: Plan, workloads: dict, log) -> tuple[dict, list, dict
     return refs, rows, convergence
 
 
-def cost_pairs(plan: Plan, recommendations: list[dict], own_size: int) -> list:
+def cost_pairs(plan: Parts, recommendations: list[dict], own_size: int) -> list:
     """The cost sweep's settings: the spec's (plus the quickstart recommendation) × targets ×
     dtypes × sizes; the workload's own size is scored against its reference."""
     cost = plan.cost
@@ -230,7 +313,7 @@ def cost_pairs(plan: Plan, recommendations: list[dict], own_size: int) -> list:
             for n in cost.n_neurons]
 
 
-def summarise(plan: Plan, rows: list[dict], refs: tuple[list, dict], recommendations: list,
+def summarise(plan: Parts, rows: list[dict], refs: tuple[list, dict], recommendations: list,
               smap) -> dict:
     ref_rows, convergence = refs
     ref_cost = {r["scene"]: r[tradeoff.COST] for r in ref_rows}
@@ -261,13 +344,13 @@ def summarise(plan: Plan, rows: list[dict], refs: tuple[list, dict], recommendat
     }
 
 
-def run(spec: dict, out_dir, quick: bool = False, fresh: bool = False, log=print) -> dict:
-    plan = build(spec)
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, quick, seed = plan.spec, options.quick, plan.seed
+    plan = plan.parts
     out_dir = Path(out_dir)
-    runlog = RunLog(out_dir / "runs.jsonl", spec, fresh)   # a damaged log is said before work
+    runlog = RunLog(out_dir / "runs.jsonl", spec, options.fresh)   # a damaged log: said first
     with LogFile(out_dir, log) as log:
         t_start = time.perf_counter()
-        seed = int(spec.get("seed", 0))
         sweep, stab = plan.sweep, plan.stability
         log(f"[1/7] scenes ({', '.join(dict.fromkeys(sweep.scenes + [plan.cost.scene]))}, "
             f"seed {seed})")
