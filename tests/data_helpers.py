@@ -56,3 +56,30 @@ def write_labels(path, rows, columns=("recording", "onset_s", "distance_cm", "ma
     lines = [",".join(columns)] + [",".join(str(v) for v in row) for row in rows]
     path.write_text("\n".join(lines) + "\n")
     return path
+
+
+def import_dir(recordings, labels, out):
+    """``snn-antenna data import RECORDINGS LABELS --out OUT``, quietly; the data set's folder."""
+    import contextlib
+    import io
+
+    from snn_antenna.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        assert main(["data", "import", str(recordings), str(labels), "--out", str(out)]) == 0, \
+            err.getvalue()
+    return out
+
+
+def import_quickstart_drive(tmp, spec):
+    """The quickstart's scene of ``spec``, recorded as the board sends it and its contacts
+    labelled, imported: ``(recording, data set folder)``."""
+    from snn_antenna.bridge.wire.recorder import record_counts
+    from snn_antenna.studies import quickstart
+
+    rec = quickstart.plan(spec).parts.scene.generate(int(spec["seed"]))
+    record_counts(tmp / "drives" / "drive1", rec.samples)
+    rows = [("drive1", c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts]
+    write_labels(tmp / "labels.csv", rows, ("recording", "contact_s", "distance_cm", "material"))
+    return rec, import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data")

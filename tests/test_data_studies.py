@@ -8,22 +8,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from data_helpers import RATE, ringing_counts, write_labels, write_record
+from data_helpers import (RATE, import_dir, import_quickstart_drive, ringing_counts,
+                          write_labels, write_record)
 from snn_antenna.bridge.wire.recorder import record_counts
 from snn_antenna.cli import main
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
 from snn_antenna.studies import baseline_comparison, quickstart, speed_accuracy
+from snn_antenna.studies.contract import Options
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def import_dir(recordings, labels, out) -> Path:
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-        assert main(["data", "import", str(recordings), str(labels), "--out", str(out)]) == 0, \
-            err.getvalue()
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -31,16 +25,13 @@ def drive(tmp_path_factory):
     """The quickstart's quick scene, recorded as the board sends it, its contacts labelled."""
     tmp = tmp_path_factory.mktemp("drive")
     spec = specs.load(ROOT / "studies" / "quickstart.toml", [], quick=True)
-    rec = quickstart.build(spec).scene.generate(int(spec["seed"]))
-    record_counts(tmp / "drives" / "drive1", rec.samples)
-    rows = [("drive1", c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts]
-    write_labels(tmp / "labels.csv", rows, ("recording", "contact_s", "distance_cm", "material"))
-    return spec, rec, import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data")
+    rec, data = import_quickstart_drive(tmp, spec)
+    return spec, rec, data
 
 
 def test_quickstart_reads_the_recorded_drive_sample_for_sample(drive):
     spec, generated, data = drive
-    parts = quickstart.build({**spec, "data": str(data)})
+    parts = quickstart.plan({**spec, "data": str(data)}).parts
     rec = parts.scene.generate(0)
     assert np.array_equal(rec.samples, generated.samples)
     assert rec.rate_hz == generated.rate_hz
@@ -52,7 +43,7 @@ def test_quickstart_reads_the_recorded_drive_sample_for_sample(drive):
 def test_speed_accuracy_takes_the_recorded_drive_as_its_quickstart_scene(drive):
     _, generated, data = drive
     spec = specs.load(ROOT / "studies" / "speed_accuracy.toml", [], quick=True)
-    plan = speed_accuracy.build({**spec, "data": str(data)})
+    plan = speed_accuracy.plan({**spec, "data": str(data)}).parts
     assert np.array_equal(plan.robot_scenes["quickstart"].generate(0).samples,
                           generated.samples)
 
@@ -60,10 +51,10 @@ def test_speed_accuracy_takes_the_recorded_drive_as_its_quickstart_scene(drive):
 def test_a_study_refuses_a_data_set_of_the_other_kind_in_one_line(drive, tmp_path):
     spec, _, data = drive
     with pytest.raises(SpecError, match="imported bench recordings"):
-        baseline_comparison.build({**specs.load(ROOT / "studies" / "baseline_comparison.toml",
+        baseline_comparison.plan({**specs.load(ROOT / "studies" / "baseline_comparison.toml",
                                                 [], quick=True), "data": str(data)})
     with pytest.raises(SpecError, match="data"):
-        quickstart.build({**spec, "data": str(tmp_path)})
+        quickstart.plan({**spec, "data": str(tmp_path)})
 
 
 def test_the_baseline_comparison_at_the_boards_rate_names_what_it_cannot_read(tmp_path):
@@ -76,22 +67,23 @@ def test_the_baseline_comparison_at_the_boards_rate_names_what_it_cannot_read(tm
     data = import_dir(tmp_path / "recs", tmp_path / "labels.csv", tmp_path / "data")
     spec = specs.load(ROOT / "studies" / "baseline_comparison.toml", [], quick=True)
     with pytest.raises(SpecError) as refused:
-        baseline_comparison.build({**spec, "data": str(data)})
+        baseline_comparison.plan({**spec, "data": str(data)})
     assert refused.value.field.startswith("events.")
     assert "500" in str(refused.value)
     spec = {**spec, "data": str(data), "events": {**spec["events"], "max_hz": 499.0},
             "evaluation": {**spec["evaluation"], "pipelines": ["distance", "material"]}}
     spec.pop("spiking")
-    parts = baseline_comparison.build(spec)
+    parts = baseline_comparison.plan(spec).parts
     assert parts.bench.recorded and parts.bench.n_events == 3 and parts.bench.rate_hz == RATE
 
 
 @pytest.mark.slow
 def test_quickstart_on_the_recorded_drive_scores_as_on_the_generated_scene(drive, tmp_path):
     spec, _, data = drive
-    generated = quickstart.run(spec, tmp_path / "generated", quick=True, log=lambda *a: None)
-    on_data = quickstart.run({**spec, "data": str(data)}, tmp_path / "recorded", quick=True,
-                             log=lambda *a: None)
+    quiet, quick = (lambda *a: None), Options(quick=True)
+    generated = quickstart.run(quickstart.plan(spec), tmp_path / "generated", quick, log=quiet)
+    on_data = quickstart.run(quickstart.plan({**spec, "data": str(data)}), tmp_path / "recorded",
+                             quick, log=quiet)
     for key in ("tp", "fp", "misses", "mean_abs_distance_error_cm"):
         assert on_data["score"][key] == generated["score"][key]
     shown = {c["quantity"] for c in on_data["calibrated"]}
@@ -117,7 +109,7 @@ def gating_drives(tmp_path_factory):
     """A calibration drive in the open and a drive along a course on a speed ramp, generated
     as the study generates its scenes, recorded and labelled."""
     from snn_antenna.sources.scenes import SpeedProfile, drive as open_drive, ramp
-    from snn_antenna.studies.gating_threshold.spec import build, make_scene
+    from snn_antenna.studies.gating_threshold.spec import make_parts as build, make_scene
 
     tmp = tmp_path_factory.mktemp("gating")
     spec = specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True)
@@ -137,7 +129,7 @@ def gating_drives(tmp_path_factory):
 
 
 def test_the_gating_study_takes_recorded_drives_with_their_speed_log(gating_drives, tmp_path):
-    from snn_antenna.studies.gating_threshold.spec import build
+    from snn_antenna.studies.gating_threshold.spec import make_parts as build
 
     spec, scored, data = gating_drives
     parts = build({**spec, "data": str(data)})
@@ -162,8 +154,8 @@ def test_the_gating_study_scores_the_gate_on_recorded_drives(gating_drives, tmp_
     from snn_antenna.studies import gating_threshold
 
     spec, scored, data = gating_drives
-    s = gating_threshold.run({**spec, "data": str(data)}, tmp_path / "out", quick=True,
-                             log=lambda *a: None)
+    s = gating_threshold.run(gating_threshold.plan({**spec, "data": str(data)}),
+                             tmp_path / "out", Options(quick=True), log=lambda *a: None)
     rows = {r["method"]: r for r in s["recorded"]["rows"]}
     n = len(scored.truth.contacts)
     # every method scored on the same contacts (those after the settling time, in or out of
@@ -191,7 +183,7 @@ def test_the_tuned_bank_is_refused_on_recorded_data_in_one_line(tmp_path):
             "spiking": {**spec["spiking"], "bank": {**spec["spiking"]["bank"],
                                                     "bands": {"low": bands["low"]}}}}
     with pytest.raises(SpecError) as refused:
-        baseline_comparison.build(spec)
+        baseline_comparison.plan(spec)
     assert refused.value.field == "spiking.tuned"
     spec["spiking"].pop("tuned")
-    assert baseline_comparison.build(spec).bank is not None
+    assert baseline_comparison.plan(spec).parts.bank is not None

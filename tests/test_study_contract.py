@@ -24,15 +24,32 @@ def spec_of(study: str) -> str:
     return str(ROOT / "studies" / f"{study}.toml")
 
 
-def flag_argv(name: str, tmp_path: Path) -> list[str]:
+@pytest.fixture(scope="module")
+def drive_data(tmp_path_factory):
+    """A recorded drive, imported: the data set every study taking --data is given."""
+    from data_helpers import import_quickstart_drive
+    from snn_antenna.core import spec as specs
+
+    spec = specs.load(ROOT / "studies" / "quickstart.toml", [], quick=True)
+    return import_quickstart_drive(tmp_path_factory.mktemp("drive"), spec)[1]
+
+
+def flag_argv(name: str, data: Path | None = None) -> list[str]:
     """The option ``name`` as a user types it (with a value where it takes one)."""
     if name == "scheduler":
-        return [flag(name), "tcp://127.0.0.1:1"]    # --check never connects
+        return [flag(name), "tcp://127.0.0.1:1"]    # the probe is stood in for (below)
     if name == "data":
-        folder = tmp_path / "recordings"
-        folder.mkdir(exist_ok=True)
-        return [flag(name), str(folder)]
+        return [flag(name), str(data)]
     return [flag(name)]
+
+
+@pytest.fixture
+def any_scheduler(monkeypatch):
+    """No Dask scheduler runs here: what --scheduler finds at an address is
+    tests/test_scheduler_probe.py's; these tests check that the flag reaches the study."""
+    import snn_antenna.engine.executor as executor
+
+    monkeypatch.setattr(executor, "probe_scheduler", lambda address, *a, **k: None)
 
 
 def outcome(argv, capsys) -> tuple[int, str, str]:
@@ -75,12 +92,14 @@ def test_no_keyword_catch_all_swallows_arguments_in_the_package():
 @pytest.mark.parametrize("study", sorted(STUDIES))
 @pytest.mark.parametrize("name", [n for n in OPTION_NAMES if n != "check"])
 def test_every_flag_of_every_study_reaches_it_or_is_refused_in_one_line(
-        tmp_path, capsys, monkeypatch, study, name):
+        tmp_path, capsys, monkeypatch, any_scheduler, drive_data, study, name):
     """--check for every flag; then the same command without --check, the study's run
-    replaced by one that keeps what it was given: the flag arrived, set."""
+    replaced by one that keeps what it was given: the flag arrived, set. A study given a data
+    set of another kind than it reads (a drive, to the bench comparison) refuses it in one
+    line naming ``data``: it read the flag."""
     module = runner(study)
     out = tmp_path / "out"
-    argv = ["run", spec_of(study), "--quick", "--out", str(out), *flag_argv(name, tmp_path)]
+    argv = ["run", spec_of(study), "--quick", "--out", str(out), *flag_argv(name, drive_data)]
     status, said, err = outcome([*argv, "--check"], capsys)
     assert "internal error" not in err and "Traceback" not in err, err
     if name not in module.OPTIONS:
@@ -90,6 +109,10 @@ def test_every_flag_of_every_study_reaches_it_or_is_refused_in_one_line(
         assert f"{flag(name)}: the {study} study takes " in line[0]
         assert all(flag(o) in line[0] for o in module.OPTIONS)
         assert not out.exists()
+        return
+    if name == "data" and status == 2:
+        line = err.strip().splitlines()
+        assert len(line) == 1 and line[0].startswith("snn-antenna: error: data = "), err
         return
     assert status == 0 and "nothing was run" in said, err
     given = {}
@@ -123,10 +146,9 @@ def test_a_data_key_in_a_study_that_reads_none_is_an_unknown_key(tmp_path, capsy
     assert status == 2 and "data" in err and "a known top-level key" in err
 
 
-def test_quickstart_runs_with_every_flag_it_takes(tmp_path, capsys):
+def test_quickstart_runs_with_every_flag_it_takes(tmp_path, capsys, drive_data):
     """The one real run of the default suite: quickstart's quick profile with all its flags."""
-    data = tmp_path / "recordings"
-    data.mkdir()
+    data = drive_data
     out = tmp_path / "out"
     status, said, err = outcome(["run", spec_of("quickstart"), "--quick", "--yes", "--force",
                                  "--data", str(data), "--out", str(out)], capsys)
@@ -137,14 +159,15 @@ def test_quickstart_runs_with_every_flag_it_takes(tmp_path, capsys):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("study", sorted(STUDIES))
-def test_every_study_runs_its_quick_profile_with_every_flag_it_takes(tmp_path, capsys, study):
+def test_every_study_runs_its_quick_profile_with_every_flag_it_takes(tmp_path, capsys, study,
+                                                                     drive_data):
     """Every study, for real, with all the flags it declares (no cluster: --scheduler is the
     one flag a machine without a Dask scheduler cannot run with)."""
     module = runner(study)
     argv = ["run", spec_of(study), "--quick", "--out", str(tmp_path / "out")]
     for name in module.OPTIONS:
         if name not in ("check", "scheduler"):
-            argv += flag_argv(name, tmp_path)
+            argv += flag_argv(name, drive_data)
     status, _, err = outcome(argv, capsys)
     assert status == 0, err[-3000:]
     assert (tmp_path / "out" / "report.html").is_file()
