@@ -150,3 +150,51 @@ def test_highpass_at_or_above_the_lowpass_is_refused(low, above):
         make_chain(RATE, lowpass_hz=low, highpass_hz=min(low + above, 499.9))
     assert err.value.field == "highpass_hz" and "lowpass_hz" in err.value.accepted
     make_chain(RATE, lowpass_hz=low, highpass_hz=low / 2)      # a band-pass is fine
+
+
+# -- the live path takes the coder from the spec ----------------------------------------------
+LIVE_CODERS = {"delta": ["preprocess.coder=\"delta\"", "preprocess.coder_levels=4",
+                         "preprocess.coder_step_g=0.05", "preprocess.coder_amplitude=0.3"],
+               "analog": ["preprocess.coder=\"analog\"", "preprocess.coder_gain=1.5",
+                          "preprocess.coder_amplitude=0.3"]}
+
+
+@pytest.mark.parametrize("name", sorted(LIVE_CODERS))
+def test_live_chain_takes_the_coder_from_the_spec(name):
+    """The live chain's last stage is the spec's coder, and codes a contact as one."""
+    from pathlib import Path
+
+    from snn_antenna.bridge.online.pipeline import CalibratedChain, build_online
+    from snn_antenna.sources.stimuli import Contact, RobotScene
+
+    network = Path(__file__).resolve().parents[1] / "networks" / "live.toml"
+    parts = build_online(network, ["preprocess.threshold=0.05", *LIVE_CODERS[name]])
+    assert isinstance(parts.chain.named_steps["coder"], CODERS[name])
+    counts = RobotScene(duration_s=3.0, contacts=[Contact(2.0, 19.0)]).generate(seed=1).samples
+    coded = CalibratedChain(parts.chain, 1000).push(counts.astype(float))
+    assert len(np.unique(coded)) > 3 and np.abs(coded).max() <= 0.3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(LIVE_CODERS))
+def test_live_path_runs_each_coder(tmp_path, name):
+    """networks/live.toml replayed with another coder: the chain's last stage is that coder,
+    the live coded stream equals the chain's offline coding, and contacts come out."""
+    from pathlib import Path
+
+    from snn_antenna.bridge.online.pipeline import CalibratedChain, build_online, run_online
+    from snn_antenna.bridge.wire.recorder import record_counts
+    from snn_antenna.bridge.wire.replay import ReplaySource
+    from snn_antenna.sources.stimuli import Contact, RobotScene
+
+    network = Path(__file__).resolve().parents[1] / "networks" / "live.toml"
+    overrides = ["preprocess.threshold=0.05", *LIVE_CODERS[name]]
+    parts = build_online(network, overrides)
+    assert isinstance(parts.chain.named_steps["coder"], CODERS[name])
+    counts = RobotScene(duration_s=4.0, contacts=[Contact(2.0, 19.0)]).generate(seed=1).samples
+    offline = CalibratedChain(parts.chain, 1000).push(counts.astype(float))
+    assert len(np.unique(offline)) > 3           # a staircase or a current, not ±amplitude
+    live = run_online(ReplaySource(record_counts(tmp_path / "rec", counts)).start(),
+                      build_online(network, overrides), no_data_timeout_s=60)
+    assert live["samples"] == len(counts)
+    assert len(live["contacts"]) >= 1
