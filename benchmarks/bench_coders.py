@@ -2,6 +2,7 @@
 neuron-free ceiling, the full-spectrum MLP and the costs, on the same contacts and splits.
 
     python benchmarks/bench_coders.py [--repetitions 100] [--out out/bench_coders.json]
+    python benchmarks/bench_coders.py --cost-only [--set spiking.cost_sample_events=400]
 
 The study's own code (``studies/baseline_comparison.toml``'s ``[spiking.tuned]``: the channels
 placed from calibration contacts of another seed, ``coder_stage``, ``best_costs``,
@@ -30,6 +31,7 @@ from snn_antenna.studies import baseline_comparison as study  # noqa: E402
 from snn_antenna.studies.baseline_comparison.tuned import (  # noqa: E402
     best_costs,
     calibration_bands,
+    coder_banks,
     coder_stage,
 )
 
@@ -41,6 +43,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--repetitions", type=int, default=100,
                     help="contacts per material and site (100: the whole bench set)")
     ap.add_argument("--out", default="out/bench_coders.json")
+    ap.add_argument("--cost-only", action="store_true",
+                    help="only the cost per event of the FFT and of every coder's bank")
     ap.add_argument("--set", action="append", default=[], dest="overrides",
                     help="a study spec override, e.g. spiking.tuned.coder_sizes=[24]")
     args = ap.parse_args(argv)
@@ -50,6 +54,18 @@ def main(argv=None) -> dict:
     t0 = time.perf_counter()
     data, cmp, _ = study._signal_stage(parts, 3, print, False)
     bands, where = calibration_bands(parts.bench, plan, print, False)
+    if args.cost_only:
+        costs = best_costs(data, parts, cmp.features["event"].values,
+                           coder_banks(plan, bands, parts.bank), plan.cost_repeats, print)
+        fft_us = costs["fft"]["features_us_per_event"]
+        for k, c in costs.items():
+            print(f"{k:20s} {c['features_us_per_event']:9.0f} µs/event = "
+                  f"{c['features_us_per_event'] / fft_us:5.2f} × FFT")
+        print(f"load average {os.getloadavg()[0]:.1f}")
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(json.dumps({"costs": costs, "load_average": os.getloadavg()},
+                                             indent=1, default=float))
+        return costs
     chosen = coder_stage(parts, data, cmp, bands, plan, print, False, None)
     banks = cmp.coders.pop("banks")
     costs = best_costs(data, parts, cmp.features["event"].values, banks, plan.cost_repeats,

@@ -86,18 +86,13 @@ def coder_stage(parts, data, cmp, bands: dict, plan: TunedPlan, log, fresh: bool
         return []
     ids = cmp.features["event"].values
     attrs = recording_attrs(data)
-    banks = {}
+    banks = coder_banks(plan, bands, parts.bank)
     for (label, n), tuning in plan.coder_tunings().items():
-        bank = plan.bank({k: replace(b, coder=tuning.coder,
-                                     coder_options=dict(tuning.coder_options),
-                                     coder_amplitude=tuning.coder_amplitude,
-                                     threshold_g=tuning.threshold_g)
-                          for k, b in bands[n].items()}, parts.bank)
+        bank = banks[coder_key(label, n)]
         log(f"      coder {label} ({tuning.coder}), {n} resonators")
         spikes = cached_features(data, bank, parts.bench, log, fresh, client)
         ceiling = coded_features(bank, data["counts"].values[ids], *attrs)
         cmp.features = coder_inputs(cmp.features, spikes, label, n, ceiling)
-        banks[coder_key(label, n)] = bank
     cmp.coders = {"coders": {k: dict(v) for k, v in plan.coders.items()},
                   "sizes": list(plan.coder_sizes), "banks": banks,
                   "default": next((coder_key(label, n) for (label, n), t
@@ -105,6 +100,16 @@ def coder_stage(parts, data, cmp, bands: dict, plan: TunedPlan, log, fresh: bool
                                    if n == plan.base.n_resonators and _same_coder(t, plan.base)),
                                   None)}
     return coder_baselines(plan.coders, plan.coder_sizes, parts.evaluation)
+
+
+def coder_banks(plan: TunedPlan, bands: dict, like) -> dict:
+    """The bank of each coder and size (``coder_key``): the size's channels, the coder's
+    fields, ``like``'s target and batching."""
+    return {coder_key(label, n): plan.bank(
+        {k: replace(b, coder=t.coder, coder_options=dict(t.coder_options),
+                    coder_amplitude=t.coder_amplitude, threshold_g=t.threshold_g)
+         for k, b in bands[n].items()}, like)
+        for (label, n), t in plan.coder_tunings().items()}
 
 
 def coder_key(label: str, n: int) -> str:
