@@ -1,7 +1,8 @@
 """Preprocessing as scikit-learn transformers with a streaming form.
 
 The paper's chain (Fig. 8J): ADC counts → g → PCA alignment (2 axes → 1) → low-pass at 30 Hz →
-centring → square-wave coder with amplitude threshold Th.
+centring → square-wave coder with amplitude threshold Th. The coder is one of
+``CODERS`` (square wave, level crossing, analog current), selected by name in ``make_chain``.
 
 Every stage is causal and keeps its state between calls, so the offline form (``transform`` on
 the whole array) and the streaming form (``partial_transform`` on successive chunks) give the
@@ -21,7 +22,7 @@ from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 
 from .core import bounds
-from .core.errors import SpecError, check
+from .core.errors import SpecError, check, is_number
 from .core.signals import validate_samples
 from .sources.antenna import ADC
 
@@ -193,6 +194,10 @@ class SquareWaveCoder(_Causal):
     The square wave removes amplitude so zero crossings alone trigger the resonators (the
     paper's Fig. 8I); the threshold Th discards sub-threshold fluctuations such as the robot's
     self-motion (Fig. 9). Th is in the units of the incoming signal (g after the chain above).
+
+    Every coder shares ``amplitude`` (the largest current it feeds the neurons) and
+    ``threshold`` (at or below it, nothing), and takes a per-sample ``threshold`` from the
+    speed gate in ``partial_transform``.
     """
 
     def __init__(self, amplitude: float = 0.15, threshold: float = 0.0):
@@ -214,15 +219,118 @@ class SquareWaveCoder(_Causal):
         return self._step(np.asarray(validate_samples(X, "X"), dtype=float), threshold)
 
 
+class LevelCoder(SquareWaveCoder):
+    """Level-crossing (send-on-delta) coder: the signal's level on a grid of ``levels`` edges
+    each side of zero, fed to the neurons as ``amplitude`` × sign × level / ``levels``.
+
+    The edges sit at ``threshold`` + ``step_g`` · (1 + r + … + r^(i−1)) for i = 0 … levels − 1
+    (r = ``ratio``: 1 spaces them evenly, 2 doubles each step, so a ringing line decaying
+    over decades still crosses a level every few periods). The output changes only when the
+    signal crosses an edge: each change is one send-on-delta event, and the staircase is what
+    a receiver of those events rebuilds. With ``levels = 1`` it is the square wave; more
+    levels keep the amplitude (and so the decay) that the square wave reduces to its sign.
+    Stateless per sample, so the streaming and offline forms agree trivially.
+    """
+
+    def __init__(self, amplitude: float = 0.15, threshold: float = 0.0, step_g: float = 0.01,
+                 levels: int = 4, ratio: float = 2.0):
+        super().__init__(amplitude, threshold)
+        self.step_g = step_g
+        self.levels = levels
+        self.ratio = ratio
+
+    def _validate_params_(self):
+        super()._validate_params_()
+        bounds.number("step_g", self.step_g, 0.0, bounds.MAX_AMPLITUDE, lo_open=True,
+                      unit=" g")
+        bounds.integer("levels", self.levels, 1, MAX_LEVELS)
+        bounds.number("ratio", self.ratio, 1.0, MAX_LEVEL_RATIO)
+        i = np.arange(self.levels)
+        steps = i if self.ratio == 1.0 else (self.ratio ** i - 1.0) / (self.ratio - 1.0)
+        self.edges_above_threshold_ = self.step_g * steps
+
+    def _step(self, X, threshold=None):
+        th = self.threshold if threshold is None else np.asarray(threshold, dtype=float)
+        over = np.abs(X) - th
+        level = np.zeros(np.shape(X))
+        for edge in self.edges_above_threshold_:      # a few edges: a count per sample
+            level += over > edge
+        return (self.amplitude / self.levels) * np.sign(X) * level
+
+
+class AnalogCoder(SquareWaveCoder):
+    """The conditioned signal itself as the neurons' current: ``gain`` (current per g) ×
+    (|x| − ``threshold``), with x's sign, saturating at ±``amplitude``; 0 within ±threshold.
+
+    Nothing of the band-passed signal is discarded (amplitude, decay and every component in
+    the band reach the resonators); the saturation keeps an impact within the current the
+    resonators were validated at. Stateless per sample, like the square wave.
+    """
+
+    def __init__(self, amplitude: float = 0.15, threshold: float = 0.0, gain: float = 10.0):
+        super().__init__(amplitude, threshold)
+        self.gain = gain
+
+    def _validate_params_(self):
+        super()._validate_params_()
+        bounds.number("gain", self.gain, 0.0, MAX_CODER_GAIN, lo_open=True, unit=" per g")
+
+    def _step(self, X, threshold=None):
+        th = self.threshold if threshold is None else np.asarray(threshold, dtype=float)
+        drive = np.minimum(self.gain * np.maximum(np.abs(X) - th, 0.0), self.amplitude)
+        return np.sign(X) * drive
+
+
+# Bounds of the coders' own parameters: more levels than this resolve nothing the sensor's
+# 10-bit ADC holds (and cost a pass per level); a ratio above 10 leaves one decade per
+# level; a gain above 1e4 per g saturates on the sensor's noise floor.
+MAX_LEVELS = 64
+MAX_LEVEL_RATIO = 10.0
+MAX_CODER_GAIN = 1e4
+# The coders by the name a spec selects them with (``preprocess.coder``), and which of
+# make_chain's ``coder_*`` arguments each takes (as its own parameter of the same name).
+CODERS = {"square": SquareWaveCoder, "delta": LevelCoder, "analog": AnalogCoder}
+CODER_OPTIONS = {"square": (), "delta": ("step_g", "levels", "ratio"), "analog": ("gain",)}
+
+
+def make_coder(coder: str = "square", amplitude: float = 0.15, threshold: float = 0.0,
+               **options) -> SquareWaveCoder:
+    """The coder named ``coder`` (``CODERS``) with its own options (``CODER_OPTIONS``),
+    checked: an option the coder does not take is refused, not ignored."""
+    bounds.choice("coder", coder, tuple(CODERS))
+    for name in options:
+        owners = [c for c, takes in CODER_OPTIONS.items() if name in takes]
+        check(name in CODER_OPTIONS[coder], name, options[name],
+              f"no value with coder = '{coder}' (it is coder "
+              f"{' or '.join(repr(o) for o in owners) or 'nothing'}'s option)")
+    stage = CODERS[coder](amplitude, threshold, **options)
+    stage._validate_params_()
+    return stage
+
+
 def make_chain(rate_hz: float, adc_bits: int = 10, full_scale_g: float = 18.0,
                lowpass_hz: float = 30.0, lowpass_order: int = 4, centre_tau_s: float = 1.0,
                coder_amplitude: float = 0.15, threshold: float = 0.0,
-               highpass_hz: float | None = None) -> Pipeline:
+               highpass_hz: float | None = None, coder: str = "square",
+               coder_step_g: float | None = None, coder_levels: int | None = None,
+               coder_ratio: float | None = None, coder_gain: float | None = None) -> Pipeline:
     """The paper's preprocessing chain from ADC counts (n, 2) to the coded input current.
 
     ``highpass_hz`` (default: none) adds a high-pass of the same order after the low-pass,
-    making the chain a band-pass, e.g. for resonators above the rod's low mode.
+    making the chain a band-pass, e.g. for resonators above the rod's low mode; it must lie
+    below ``lowpass_hz``. ``coder`` picks the last stage (``CODERS``: the paper's
+    ``"square"`` wave, the level-crossing ``"delta"`` coder, the ``"analog"`` current);
+    ``coder_amplitude`` and ``threshold`` are every coder's, ``coder_step_g``,
+    ``coder_levels``, ``coder_ratio`` (delta) and ``coder_gain`` (analog) its own (None: the
+    coder's default; given to a coder that does not take it: refused).
     """
+    if highpass_hz is not None and is_number(highpass_hz) and is_number(lowpass_hz):
+        check(highpass_hz < lowpass_hz, "highpass_hz", highpass_hz,
+              f"a cut-off below lowpass_hz = {lowpass_hz:g} Hz (a band-pass)")
+    options = {name: value for name, value in (("step_g", coder_step_g),
+                                               ("levels", coder_levels),
+                                               ("ratio", coder_ratio), ("gain", coder_gain))
+               if value is not None}
     steps = [
         ("to_g", CountsToG(adc_bits, full_scale_g)),
         ("align", PCAAlign()),
@@ -230,14 +338,18 @@ def make_chain(rate_hz: float, adc_bits: int = 10, full_scale_g: float = 18.0,
     ]
     if highpass_hz is not None:
         steps.append(("highpass", HighPass(rate_hz, highpass_hz, lowpass_order)))
-    steps += [("centre", Centre(rate_hz, centre_tau_s)),
-              ("coder", SquareWaveCoder(coder_amplitude, threshold))]
+    steps.append(("centre", Centre(rate_hz, centre_tau_s)))
     for name, stage in steps:   # refused where the values enter, not at the first fit
         try:
             stage._validate_params_()
         except SpecError as exc:  # named as make_chain's caller wrote it
             raise SpecError(CHAIN_ARGS.get((name, exc.field), exc.field), exc.value,
                             exc.accepted) from None
+    try:
+        steps.append(("coder", make_coder(coder, coder_amplitude, threshold, **options)))
+    except SpecError as exc:
+        raise SpecError(CHAIN_ARGS.get(("coder", exc.field), exc.field), exc.value,
+                        exc.accepted) from None
     return Pipeline(steps)
 
 
@@ -246,7 +358,9 @@ CHAIN_ARGS = {("to_g", "adc_bits"): "adc_bits", ("to_g", "full_scale_g"): "full_
               ("lowpass", "cutoff_hz"): "lowpass_hz", ("lowpass", "order"): "lowpass_order",
               ("highpass", "cutoff_hz"): "highpass_hz", ("highpass", "order"): "lowpass_order",
               ("centre", "tau_s"): "centre_tau_s", ("coder", "amplitude"): "coder_amplitude",
-              ("coder", "threshold"): "threshold"}
+              ("coder", "threshold"): "threshold", ("coder", "step_g"): "coder_step_g",
+              ("coder", "levels"): "coder_levels", ("coder", "ratio"): "coder_ratio",
+              ("coder", "gain"): "coder_gain"}
 
 
 def warmup_samples(samples, rate_hz: float, warmup_s: float) -> np.ndarray:

@@ -27,7 +27,8 @@ TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_c
         "spiking.designs=[{name='low_8', band='low', n_neurons=8}]",
         "spiking.tuned.curve=[4,8]", "spiking.tuned.tuning.n_resonators=4",
         "spiking.tuned.curve_repetitions=3", "spiking.tuned.calibration_repetitions=2",
-        "spiking.tuned.duration_s=0.3", "spiking.tuned.bin_edges_s=[0.1,0.2]"]
+        "spiking.tuned.duration_s=0.3", "spiking.tuned.bin_edges_s=[0.1,0.2]",
+        "spiking.tuned.coder_sizes=[4]", "spiking.tuned.cost_repeats=1"]
 
 
 @pytest.fixture(scope="module")

@@ -46,8 +46,18 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
         row = predicted["F1 gated − lookup table"]
         assert row["n"] == expected.n and row["interval"] == pytest.approx(
             [expected.low, expected.high])
+    # each coder of [evaluation.coders] with the gate's Th, paired by seed with the square wave
+    assert set(summary["coders"]) == {"delta", "analog"}
+    for label, row in summary["coders"].items():
+        f1 = np.array(row["f1_per_seed"], float)
+        keep = np.isfinite(f1) & np.isfinite(gated)
+        assert len(f1) == len(gated) and row["minus_own_coder"]["n"] == keep.sum()
+        if keep.sum() >= 2:
+            assert row["minus_own_coder"]["mean"] == pytest.approx(
+                paired_difference(f1[keep], gated[keep]).mean)
     assert summary["quick"] is True
     page = (out / "report.html").read_text()
+    assert "the study&#x27;s coder" in page or "the study's coder" in page
     assert "quick-banner" in page and "Too small to compare" in page
     assert "Calibrated to" in page and "Predicted" in page
     for name in summary["figures"]:
@@ -126,6 +136,21 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
     _, again = _quick_parts("calibration.seed=5")   # another calibration drive: same axis
     assert np.allclose(calibrated_chain(again).named_steps["align"].axis_, align.axis_,
                        atol=0.05)
+
+
+def test_a_bad_coder_of_the_evaluation_is_refused_by_name():
+    from snn_antenna.core.errors import SpecError
+    from snn_antenna.core import spec as specs
+    from snn_antenna.studies.gating_threshold import build
+    spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml", quick=True))
+    spec["evaluation"]["coders"]["delta"]["coder_options"]["levels"] = 0
+    with pytest.raises(SpecError) as err:
+        build(spec)
+    assert "coders.delta.levels" in err.value.field and err.value.value == 0
+    spec["evaluation"]["coders"]["delta"] = {"coder": "sigma"}
+    with pytest.raises(SpecError) as err:
+        build(spec)
+    assert "coders.delta.coder" in err.value.field
 
 
 def test_evaluation_speeds_must_be_held_out_from_the_gate():

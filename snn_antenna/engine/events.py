@@ -411,11 +411,12 @@ def _bank_fields(bank: SpikingBank) -> dict:
 
 def run_cost(data, bank: SpikingBank, n_events: int) -> dict:
     """Wall time (coding + Brian2) and neuron-steps per event, measured now on ``n_events``
-    events spread over the data set, in one chunk in this process (after a warm-up run on
-    two of them: code generation, compiling)."""
+    events spread over the data set, in one chunk of exactly that many events in this
+    process (a larger chunk would pad the run with copies and charge them to the sample),
+    after a warm-up run on two of them (code generation, compiling)."""
     ids = np.linspace(0, data.sizes["event"] - 1, n_events).astype(int)
     sample = data["counts"].values[ids]
-    one = replace(bank, batch_events=max(bank.batch_events, n_events))
+    one = replace(bank, batch_events=n_events)
     attrs = recording_attrs(data)
     run_bank(one, sample[:2], *attrs, progress=False)
     t0 = time.perf_counter()

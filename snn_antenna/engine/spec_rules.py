@@ -61,10 +61,11 @@ def _check_preprocess(spec, stimulus, rate, rate_key) -> None:
     from ..preprocess import make_chain
     from ..core.spec import declared_types
 
-    # The chain's parameters are all numbers (None where optional): text is never one.
+    # The chain's parameters are numbers (None where optional) but for the coder's name.
     for key, tp in declared_types(make_chain).items():
         value = table.get(key)
-        if key in table and not (is_number(value) or (value is None and tp is not float)):
+        if key in table and tp is not str and not (is_number(value) or
+                                                   (value is None and tp is not float)):
             raise SpecError(f"preprocess.{key}", value, "a finite number")
     # keys of the table that are not the chain's (e.g. warmup_s, how long the chain is fitted)
     # have rules of their own in the study; an unknown key is named by the study's own check

@@ -16,7 +16,14 @@ import xarray as xr
 from ..report import stats
 from .crossval import BaselineResult
 from .signal import PAPER_SIGNAL
-from ..readout.spiking_decoders import TRAINING_FREE, TUNED_READOUTS, input_of
+from ..readout.spiking_decoders import (
+    CODER_READOUTS,
+    TRAINING_FREE,
+    TUNED_READOUTS,
+    ceiling_input,
+    coder_input,
+    input_of,
+)
 
 LABELS = {
     "linear_low_peak": "linear regression, low peak",
@@ -48,6 +55,21 @@ def label(name: str) -> str:
     return LABELS.get(name, name.replace("_", " "))
 
 
+def _interval(values, bounds=None) -> dict:
+    """Mean of per-split values with its 95 % interval and n (just the mean below 2)."""
+    values = np.asarray(values, dtype=float)
+    if len(values) < 2:
+        return {"mean": float(values.mean()), "n": len(values)}
+    return stats.mean_interval(values, bounds=bounds).as_dict()
+
+
+def _difference(a, b) -> dict:
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if len(a) < 2:
+        return {"mean": float((a - b).mean()), "n": len(a)}
+    return stats.paired_difference(a, b).as_dict()
+
+
 def _mean_sd(summary: dict, key: str, **more) -> dict:
     return {"mean": summary[key], "sd": summary[f"{key}_sd"], **more}
 
@@ -64,6 +86,7 @@ class Comparison:
     spiking: dict | None = None
     designs: list = field(default_factory=list)
     tuned: dict | None = None      # the tuned bank: channels, calibration, curve
+    coders: dict | None = None     # the coders compared: their settings, sizes and costs
 
     @property
     def materials(self) -> list[str]:
@@ -107,8 +130,48 @@ class Comparison:
             "material_accuracy": {k: _mean_sd(v, "accuracy") for k, v in mat.items()
                                   if k.startswith("spiking_")},
             "against_fft": self.against_fft(),
-            "cost": self.costs.get("spiking"), **self.spiking,
-            "designs": list(self.designs), "tuned": self.tuned}
+            # the default read-out's (the tuned bank's) when there is one
+            "cost": self.costs.get("spiking_tuned") or self.costs.get("spiking"),
+            "cost_hand_set_bank": self.costs.get("spiking"), **self.spiking,
+            "designs": list(self.designs), "tuned": self.tuned,
+            "coders": self.coder_table()}
+
+    def coder_table(self) -> list[dict]:
+        """Per coder, size and read-out: accuracy over the splits (interval, n), its share
+        of the full-spectrum MLP, the neuron-free ceiling of the coded input, what coding
+        and the resonators each lose (paired by split), and the cost per event beside the
+        FFT pipeline's, both measured in this run (best of n)."""
+        if not self.coders:
+            return []
+        fft = self.results.get(FULL_SPECTRUM)
+        fft_us = self.costs.get("fft", {}).get("features_us_per_event")
+        rows = []
+        for label, table in self.coders["coders"].items():
+            for n in self.coders["sizes"]:
+                ceiling = self.results.get(ceiling_input(label, n))
+                cost = self.coders["costs"].get(f"coder_{label}_{n}", {})
+                for readout in CODER_READOUTS:
+                    r = self.results.get(coder_input(label, n, readout))
+                    if r is None:
+                        continue
+                    acc = r.values("accuracy")
+                    row = {"coder": label, "kind": table.get("coder", "square"),
+                           "resonators": n, "readout": readout, "n_splits": len(acc),
+                           "accuracy": _interval(acc, (0.0, 1.0)),
+                           "cost_us_per_event": cost.get("features_us_per_event"),
+                           "cost_best_of": cost.get("best_of"),
+                           "cost_of_fft": (cost["features_us_per_event"] / fft_us
+                                           if cost and fft_us else None)}
+                    if fft is not None:
+                        row["of_fft_mlp"] = _interval(acc / fft.values("accuracy"))
+                    if ceiling is not None:
+                        top = ceiling.values("accuracy")
+                        row["ceiling"] = _interval(top, (0.0, 1.0))
+                        row["lost_to_resonators"] = _difference(top, acc)
+                        if fft is not None:
+                            row["lost_to_coding"] = _difference(fft.values("accuracy"), top)
+                    rows.append(row)
+        return rows
 
     def cost_per_event(self) -> dict[str, float]:
         """Feature extraction + decoder, µs per event. The bank runs every band at once;
@@ -118,10 +181,15 @@ class Comparison:
         total = (self.spiking or {}).get("neurons_per_event", 1)
         out = {}
         for k, r in self.results.items():
+            if k.startswith("ceiling_"):  # an analysis of the coded input, not a read-out
+                continue
             kind = "spiking" if k.startswith("spiking_") else "fft"
             if k in TUNED_READOUTS:      # its own bank, charged whole
                 kind = "spiking_tuned"
-            front = self.costs.get(kind, {}).get("features_us_per_event", 0.0)
+            costs = self.costs
+            if k.startswith("coder_"):   # a compared coder's bank, charged whole
+                costs, kind = (self.coders or {}).get("costs", {}), k.rsplit("_", 1)[0]
+            front = costs.get(kind, {}).get("features_us_per_event", 0.0)
             if kind == "spiking":
                 front *= neurons.get(input_of(k), total) / total
             out[k] = front + r.summary["predict_us_per_event"]
@@ -192,7 +260,8 @@ def result_rows(summary: dict) -> list[dict]:
 
 def cost_items(summary: dict) -> list[tuple[str, dict]]:
     """(pipeline, its fit and predict times), in the order of the cost table's numbers."""
-    return [(k, v) for k, v in summary["timing"].items() if isinstance(v, dict)]
+    return [(k, v) for k, v in summary["timing"].items()
+            if isinstance(v, dict) and k in summary["cost_us_per_event"]]
 
 
 def cost_rows(summary: dict) -> list[dict]:
@@ -248,12 +317,14 @@ def tuned_text(summary: dict) -> str:
     t, curve = summary["spiking"]["tuned"], summary["spiking"]["tuned"]["curve"]
     c = summary["feature_costs"].get("spiking_tuned") or {}
     fft_us = summary["feature_costs"]["fft"]["features_us_per_event"]
+    best = f", best of {c['best_of']} runs taken in turn with the FFT's" if c.get("best_of") else ""
     channels = "; ".join(f"{ch['pass_hz'][0]:g}-{ch['pass_hz'][1]:g} Hz ×{ch['resonators']}"
                          for ch in t["channels"])
     return (f"Tuned bank: {t['neurons']} resonators in {len(t['channels'])} channels placed "
             f"from {t['calibration_events']} calibration contacts of seed "
-            f"{t['calibration_seed']} (never evaluated): {channels}. Its cost, measured in "
-            f"this run on {c.get('events_measured')} events: "
+            f"{t['calibration_seed']} (never evaluated), {t.get('coder', {}).get('coder', 'square')} "
+            f"coder: {channels}. Its cost (the default read-out's), measured in "
+            f"this run on {c.get('events_measured')} events{best}: "
             f"{c.get('features_us_per_event', 0):.0f} µs per event (coding + Brian2 "
             f"{c.get('target')}), {c.get('features_us_per_event', 0) / fft_us:.1f} × the FFT "
             f"pipeline's {fft_us:.0f} µs; {c.get('neuron_steps_per_event', 0):.3g} "
@@ -264,13 +335,44 @@ def tuned_text(summary: dict) -> str:
 
 def spiking_cost_text(summary: dict) -> str:
     sp = summary["spiking"]
-    c = sp.get("cost") or {}
-    return (f"Spiking cost, measured in this run on {c.get('events_measured')} events: "
-            f"{c.get('features_us_per_event', 0):.0f} µs per event for the whole bank "
+    c = sp.get("cost_hand_set_bank") or {}
+    return (f"Cost of the hand-set bands, measured in this run on {c.get('events_measured')} "
+            f"events: {c.get('features_us_per_event', 0):.0f} µs per event for the whole bank "
             f"({sp['neurons_per_event']} resonators, coding + Brian2 {c.get('target')}), "
             f"{c.get('neuron_steps_per_event', 0):.3g} neuron-steps per event, "
             f"{c.get('ns_per_neuron_step', 0):.1f} ns per neuron-step; dt {sp['dt_ms']} ms, "
-            f"{sp['duration_s']} s per event.")
+            f"{sp['duration_s']} s per event. The default read-out (the tuned bank) is "
+            f"costed below.")
+
+
+def _pct(iv: dict | None, scale: float = 100.0) -> str:
+    if not iv:
+        return "—"
+    if "low" not in iv:
+        return f"{scale * iv['mean']:.1f} (n {iv['n']})"
+    return f"{scale * iv['mean']:.1f} [{scale * iv['low']:.1f}–{scale * iv['high']:.1f}]"
+
+
+def _lost(iv: dict | None) -> str:
+    if not iv:
+        return "—"
+    if "low" not in iv:
+        return f"{100 * iv['mean']:+.1f} (n {iv['n']}, too few to resolve)"
+    return (f"{100 * iv['mean']:+.1f} [{100 * iv['low']:+.1f}–{100 * iv['high']:+.1f}]"
+            + ("" if iv["resolved"] else ", not resolved"))
+
+
+def coder_rows(summary: dict) -> list[dict]:
+    """The coders side by side (``Comparison.coder_table``): each size and read-out."""
+    return [{"coder": r["coder"], "resonators": r["resonators"], "read-out": r["readout"],
+             "accuracy (%)": _pct(r["accuracy"]), "of FFT-MLP (%)": _pct(r.get("of_fft_mlp")),
+             "ceiling, no neurons (%)": _pct(r.get("ceiling")),
+             "lost to coding (points)": _lost(r.get("lost_to_coding")),
+             "lost to resonators (points)": _lost(r.get("lost_to_resonators")),
+             "µs/event": (f"{r['cost_us_per_event']:.0f}" if r["cost_us_per_event"] else "—"),
+             "× FFT": f"{r['cost_of_fft']:.1f}" if r["cost_of_fft"] else "—",
+             "n": r["n_splits"]}
+            for r in summary["spiking"].get("coders", [])]
 
 
 def data_text(summary: dict) -> str:

@@ -172,7 +172,7 @@ def pareto(summary):
         # Pipelines sharing a front end share a cost: their labels alternate sides, in
         # order of the y value, so neighbours do not print over each other.
         for rank, (c, a, k) in enumerate(sorted(pts, key=lambda p: (round(p[0], -1), p[1]))):
-            colour = "tab:red" if k.startswith("spiking_") else "tab:blue"
+            colour = "tab:red" if k.startswith(("spiking_", "coder_")) else "tab:blue"
             ax.scatter(c, a, color=colour, s=22, zorder=3)
             ax.annotate(str(number.get(k, "")), (c, a), fontsize=7,
                         xytext=(5, -3) if rank % 2 == 0 else (-15, -3),

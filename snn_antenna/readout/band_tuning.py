@@ -18,13 +18,13 @@ largest k·dt stays within the k·dt the rod band was validated at.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..core import calibration
-from ..core import bounds
-from ..core.errors import check, is_number
+from ..core import bounds, calibration
+from ..core.errors import SpecError, check, is_number
+from ..preprocess import make_coder
 from .spiking import Band, align_events
 
 # The steps a band may take (ms), each dividing the bench's 0.5 ms input interval (the
@@ -58,6 +58,8 @@ class Tuning:
     method: str = "rk2"
     max_k_dt: float = calibration.value("rod_max_k_dt")
     spread: float = 0.03      # the channel's resonators span centre × (1 ± spread)
+    coder: str = "square"     # each channel's coder (``preprocess.CODERS``) and its options
+    coder_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
         check(isinstance(self.per_channel, int) and self.per_channel >= 1, "per_channel",
@@ -81,6 +83,15 @@ class Tuning:
         bounds.number("coder_amplitude", self.coder_amplitude, 0.0, bounds.MAX_AMPLITUDE,
                       lo_open=True)
         bounds.number("hz_per_k", self.hz_per_k, 0.0, bounds.MAX_RATE_HZ, lo_open=True)
+        check(isinstance(self.coder_options, dict), "coder_options", self.coder_options,
+              "a table of the coder's own parameters, e.g. {levels = 6}")
+        try:
+            make_coder(self.coder, self.coder_amplitude, self.threshold_g,
+                       **self.coder_options)
+        except SpecError as exc:   # named as the tuning table spells it
+            field_name = {"amplitude": "coder_amplitude", "threshold": "threshold_g"}.get(
+                exc.field, exc.field if exc.field == "coder" else f"coder_options.{exc.field}")
+            raise SpecError(field_name, exc.value, exc.accepted) from None
 
     @property
     def n_channels(self) -> int:
@@ -155,7 +166,7 @@ def tuned_bands(centres, low, high, tuning: Tuning, rate_hz: float) -> dict[str,
             threshold_g=tuning.threshold_g, lowpass_hz=float(min(hi, 0.45 * rate_hz)),
             highpass_hz=float(lo), hz_per_k=tuning.hz_per_k, method=tuning.method,
             dt_ms=coarsest_dt_ms(span[1], tuning.hz_per_k, tuning.max_k_dt),
-            filter_order=8)
+            filter_order=8, coder=tuning.coder, coder_options=dict(tuning.coder_options))
     return bands
 
 

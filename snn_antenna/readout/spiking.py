@@ -43,7 +43,7 @@ from ..core import calibration
 from ..core.errors import SpecError, check, is_number
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray
-from ..preprocess import make_chain
+from ..preprocess import make_chain, make_coder
 from ..sources import antenna
 from ..sources.antenna import ADC
 from .contacts import centroid_hz, dominant_hz
@@ -68,6 +68,15 @@ class Band:
     # square-wave coder's zero crossings (order 4 passes ~4 % of a low mode at 40 Hz below a
     # 92 Hz high-pass, more than the rod line itself)
     filter_order: int = 4
+    # The last stage of the band's chain (``preprocess.CODERS``: "square", "delta",
+    # "analog"), coding above ``threshold_g`` up to ``coder_amplitude``; ``coder_options``:
+    # the coder's own parameters (``preprocess.CODER_OPTIONS``, e.g. {levels = 6}).
+    coder: str = "square"
+    coder_options: dict = field(default_factory=dict)
+
+    def check_coder(self) -> None:
+        """The coder's name and parameters, refused before any work."""
+        make_coder(self.coder, self.coder_amplitude, self.threshold_g, **self.coder_options)
 
     def array(self, dt_ms: float, method: str, target: str) -> ResonatorArray:
         """The band's resonators at its own dt and method, or else ``dt_ms`` and ``method``."""
@@ -78,8 +87,10 @@ class Band:
 
     def chain(self, rate_hz: float, adc_bits: int, full_scale_g: float):
         return make_chain(rate_hz, adc_bits, full_scale_g, lowpass_hz=self.lowpass_hz,
-                          lowpass_order=self.filter_order, coder_amplitude=self.coder_amplitude, threshold=self.threshold_g,
-                          highpass_hz=self.highpass_hz)
+                          lowpass_order=self.filter_order, coder_amplitude=self.coder_amplitude,
+                          threshold=self.threshold_g, highpass_hz=self.highpass_hz,
+                          coder=self.coder, **{f"coder_{k}": v
+                                               for k, v in self.coder_options.items()})
 
 
 LOW_BAND = Band()
@@ -190,6 +201,7 @@ class SpikingBank:
                 check(band.dt_ms is None or is_number(band.dt_ms), "dt_ms", band.dt_ms,
                       "a step in ms, or none for the bank's dt_ms")
                 band.array(self.dt_ms, self.method, self.runtime_target)
+                band.check_coder()
             except SpecError as exc:
                 raise SpecError(f"bands.{name}.{exc.field}", exc.value, exc.accepted) from None
         check(np.isfinite(self.duration_s) and self.duration_s > 0, "duration_s",
@@ -252,6 +264,34 @@ class SpikingBank:
             after_align = Pipeline(chain.steps[2:])
             coded.append(after_align.fit(main).transform(main))
         return np.stack(coded, axis=2).reshape(n_samples, -1)
+
+
+def coded_features(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: int,
+                   full_scale_g: float) -> np.ndarray:
+    """What a bank's coded input carries before any resonator, per event (rows): for each
+    channel and time bin (``bank.bin_edges_s``), the half-cycles the coded current starts
+    (samples entering a sign it did not hold), its mean |current| over the coder's
+    amplitude, and its changes of value (a level-crossing coder's events). The same three
+    numbers for every coder, so a classifier on them bounds what any read-out of the coded
+    input can reach without neurons. Coded ``bank.batch_events`` events at a time."""
+    n_samples = min(counts.shape[1], int(round(bank.duration_s * rate_hz)))
+    cuts = [0, *(int(round(e * rate_hz)) for e in bank.bin_edges_s
+                 if 0 < e * rate_hz < n_samples), n_samples]
+    amplitude = np.array([b.coder_amplitude for b in bank.bands.values()])
+    rows = []
+    for start in range(0, len(counts), bank.batch_events):
+        chunk = counts[start:start + bank.batch_events]
+        c = bank.code(chunk, rate_hz, adc_bits, full_scale_g).reshape(
+            n_samples, len(chunk), len(amplitude)) / amplitude
+        sign = np.sign(c)
+        onset = np.zeros_like(c)
+        onset[1:] = (sign[1:] != sign[:-1]) & (sign[1:] != 0)
+        change = np.zeros_like(c)
+        change[1:] = c[1:] != c[:-1]
+        per_bin = [np.add.reduceat(x, cuts[:-1], axis=0) / np.diff(cuts)[:, None, None]
+                   for x in (onset, np.abs(c), change)]       # (bins, events, channels)
+        rows.append(np.stack(per_bin, axis=-1).transpose(1, 2, 0, 3).reshape(len(chunk), -1))
+    return np.concatenate(rows).astype(np.float32)
 
 
 def align_events(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.ndarray:

@@ -73,19 +73,69 @@ def decay_code(binned: np.ndarray) -> np.ndarray:
     return np.diff(logs, axis=2).reshape(len(logs), -1)
 
 
+def _codes(spikes: xr.Dataset, events) -> dict[str, np.ndarray]:
+    """Every code of a tuned bank's ``spikes`` on ``events``, one row per event."""
+    sp = spikes.sel(event=events)
+    n = sp.sizes["event"]
+    return {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
+            "span_s": sp["span_s"].values,
+            "binned_counts": sp["binned_counts"].values.reshape(n, -1),
+            "decay": decay_code(sp["binned_counts"].values)}
+
+
 def tuned_inputs(features: xr.Dataset, spikes: xr.Dataset) -> xr.Dataset:
     """The event features with one input matrix per tuned read-out (``TUNED_READOUTS``), from
     the tuned bank's ``spikes`` on the same events."""
-    sp = spikes.sel(event=features["event"].values)
-    n = sp.sizes["event"]
-    parts = {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
-             "span_s": sp["span_s"].values,
-             "binned_counts": sp["binned_counts"].values.reshape(n, -1),
-             "decay": decay_code(sp["binned_counts"].values)}
+    parts = _codes(spikes, features["event"].values)
     out = features.copy()
     for name, (codes, _) in TUNED_READOUTS.items():
         out[name] = (("event", f"{name}_feature"),
                      np.hstack([parts[c] for c in codes]).astype(np.float32))
+    return out
+
+
+# The read-outs every coder is compared on (``TUNED_READOUTS``' codes, by short name), and
+# the names of the comparison's inputs: a coder's bank of n resonators read one way, and the
+# neuron-free ceiling of its coded input (``spiking.coded_features``).
+CODER_READOUTS = {"bins": "spiking_tuned_bins", "decay": "spiking_tuned_decay"}
+
+
+def coder_input(label: str, n: int, readout: str) -> str:
+    return f"coder_{label}_{n}_{readout}"
+
+
+def ceiling_input(label: str, n: int) -> str:
+    return f"ceiling_{label}_{n}"
+
+
+def coder_inputs(features: xr.Dataset, spikes: xr.Dataset, label: str, n: int,
+                 ceiling: np.ndarray) -> xr.Dataset:
+    """The event features with coder ``label``'s bank of ``n`` resonators read each way of
+    ``CODER_READOUTS`` and its coded input's ``ceiling`` features (rows: the same events)."""
+    parts = _codes(spikes, features["event"].values)
+    out = features.copy()
+    for readout, tuned in CODER_READOUTS.items():
+        name = coder_input(label, n, readout)
+        out[name] = (("event", f"{name}_feature"), np.hstack(
+            [parts[c] for c in TUNED_READOUTS[tuned][0]]).astype(np.float32))
+    name = ceiling_input(label, n)
+    out[name] = (("event", f"{name}_feature"), np.asarray(ceiling, dtype=np.float32))
+    return out
+
+
+def coder_baselines(labels, sizes, evaluation) -> list[bl.Baseline]:
+    """An MLP 51 per coder, size and read-out, and one on each coding's ceiling features."""
+    out = []
+    for label in labels:
+        for n in sizes:
+            out += [mlp_baseline(coder_input(label, n, r), "material", coder_input(label, n, r),
+                                 evaluation, f"MLP 51, {label} coder, {n} resonators: "
+                                             f"{TUNED_READOUTS[t][1]}")
+                    for r, t in CODER_READOUTS.items()]
+            out.append(mlp_baseline(ceiling_input(label, n), "material",
+                                    ceiling_input(label, n), evaluation,
+                                    f"MLP 51 on the {label}-coded channels of the {n}-"
+                                    "resonator bank, no neurons (the coding's ceiling)"))
     return out
 
 
@@ -229,6 +279,11 @@ class SpikingPlan:
             return TunedPlan(**self.tuned)
 
 
+# What a coder of the comparison may set (``[spiking.tuned.coders.LABEL]``): a tuning's coder
+# fields; the channels' placement is the same for every coder.
+CODER_KEYS = ("coder", "coder_options", "coder_amplitude", "threshold_g")
+
+
 @dataclass
 class TunedPlan:
     """The tuned bank (``[spiking.tuned]``): ``band_tuning.Tuning`` fields (``tuning``) for
@@ -238,7 +293,10 @@ class TunedPlan:
     accuracy curve, each tuned the same way and scored on the events of the first
     ``curve_repetitions`` repetitions (first split) beside NMF with as many filters;
     ``duration_s`` and ``bin_edges_s``: the window each event is simulated for and its time
-    bins."""
+    bins. ``coders``: the coders compared side by side (label → ``CODER_KEYS`` fields of the
+    tuning), each at every size of ``coder_sizes`` on the same channels, read as
+    ``CODER_READOUTS`` and beside its coded input's neuron-free ceiling; their cost and the
+    FFT pipeline's are the best of ``cost_repeats`` runs taken in turn."""
     tuning: dict = field(default_factory=dict)
     calibration_repetitions: int = 5
     calibration_seed_offset: int = 1000
@@ -246,6 +304,9 @@ class TunedPlan:
     curve_repetitions: int = 20
     duration_s: float = 0.5
     bin_edges_s: tuple = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
+    coders: dict = field(default_factory=dict)
+    coder_sizes: list = field(default_factory=lambda: [24, 48])
+    cost_repeats: int = 3
 
     def __post_init__(self):
         with specs.section("tuning"):
@@ -264,11 +325,31 @@ class TunedPlan:
         for n in self.curve:      # each point's own checks, before any work
             with specs.section("curve"):
                 replace(self.base, n_resonators=n)
+        check(isinstance(self.coders, dict) and all(
+            isinstance(k, str) and k.isidentifier() for k in self.coders), "coders",
+            self.coders, "a table of named coders, e.g. {delta = {coder = \"delta\"}}")
+        check(isinstance(self.coder_sizes, list) and len(self.coder_sizes) >= 1 and all(
+            isinstance(n, int) and not isinstance(n, bool) for n in self.coder_sizes),
+            "coder_sizes", self.coder_sizes, "a list of numbers of resonators")
+        check(isinstance(self.cost_repeats, int) and not isinstance(self.cost_repeats, bool)
+              and 1 <= self.cost_repeats <= 20, "cost_repeats", self.cost_repeats,
+              "an integer in [1, 20] (the cost is the best of these runs)")
+        for label, table in self.coders.items():
+            with specs.section(f"coders.{label}"):
+                check(isinstance(table, dict) and set(table) <= set(CODER_KEYS), "coder",
+                      table, f"a table of {', '.join(CODER_KEYS)}")
+                for n in self.coder_sizes:
+                    replace(self.base, n_resonators=n, **table)
+
+    def coder_tunings(self) -> dict[tuple[str, int], Tuning]:
+        """The tuning of each coder (by label) at each of ``coder_sizes``."""
+        return {(label, n): replace(self.base, n_resonators=n, **table)
+                for label, table in self.coders.items() for n in self.coder_sizes}
 
     def tunings(self) -> dict[int, Tuning]:
         """The main bank's tuning and one per curve point, by number of resonators."""
-        return {n: replace(self.base, n_resonators=n)
-                for n in sorted({self.base.n_resonators, *self.curve})}
+        sizes = {self.base.n_resonators, *self.curve, *(self.coder_sizes if self.coders else ())}
+        return {n: replace(self.base, n_resonators=n) for n in sorted(sizes)}
 
     def bank(self, bands: dict, like: SpikingBank) -> SpikingBank:
         """A bank of ``bands`` with ``like``'s target and batching."""

@@ -7,6 +7,7 @@ from ...evaluation import comparison_figures as figures
 from ...evaluation import signal as bench_signal
 from ...evaluation.comparison import (
     Comparison,
+    coder_rows,
     cost_rows,
     data_text,
     design_rows,
@@ -102,6 +103,16 @@ def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:
                               "the paper)", note=f"{100 * row['fraction_of_fft_mlp']:.0f} % of "
                               "the full-spectrum MLP"))
     report.predicted(*pred)
+
+
+CODER_CAPTION = (
+    "Coders side by side, on the same channels, contacts and splits: 8-material accuracy "
+    "(mean [95 % interval] over the splits, n), its share of the full-spectrum MLP per "
+    "split, the ceiling of the coded input (an MLP 51 on each channel's half-cycles, mean "
+    "|current| and changes of value per time bin, no neurons), what coding loses (FFT-MLP − "
+    "ceiling) and what the resonators lose (ceiling − read-out), paired by split; cost per "
+    "event (coding + Brian2) and its ratio to the FFT pipeline's, both measured in this run, "
+    "best of n runs taken in turn.")
 
 
 def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> None:
@@ -234,6 +245,8 @@ def _write_spiking(report: Report, summary: dict) -> None:
         report.table(tuned_curve_rows(summary), "Accuracy vs resonators (first split, events "
                      "of the first repetitions): the curve above")
         report.text(tuned_text(summary))
+    if summary["spiking"].get("coders"):
+        report.table(coder_rows(summary), CODER_CAPTION)
     if summary["spiking"].get("designs"):
         report.table(design_rows(summary["spiking"]["designs"]), "Array designs (one band "
                      "changed at a time, first split, events of the first repetitions only)")

@@ -17,8 +17,17 @@ from ...engine.events import cached_features, run_bank, run_cost
 from ...evaluation import crossval as cv
 from ...readout import baselines as bl
 from ...readout.band_tuning import tune
-from ...readout.spiking import recording_attrs
-from ...readout.spiking_decoders import TunedPlan, decay_code, tuned_baselines, tuned_inputs
+from ...readout.events import extraction_cost
+from ...readout.spiking import coded_features, recording_attrs
+from ...readout.spiking_decoders import (
+    CODER_KEYS,
+    TunedPlan,
+    coder_baselines,
+    coder_inputs,
+    decay_code,
+    tuned_baselines,
+    tuned_inputs,
+)
 from ...sources import bench
 from ...core.truth import bench_labels
 
@@ -49,12 +58,84 @@ def tuned_stage(parts, data, cmp, log, fresh: bool, client) -> list:
         f"({_hz_text(main)})")
     spikes = cached_features(data, main, parts.bench, log, fresh, client)
     cmp.features = tuned_inputs(cmp.features, spikes)
-    cmp.costs["spiking_tuned"] = run_cost(data, main, parts.plan.cost_sample_events)
+    coders = coder_stage(parts, data, cmp, bands, plan, log, fresh, client)
+    # the default read-out's cost and the FFT's, best of n runs taken in turn
+    costs = best_costs(data, parts, cmp.features["event"].values,
+                       {"spiking_tuned": main, **(cmp.coders or {}).get("banks", {})},
+                       plan.cost_repeats, log)
+    cmp.costs.update(costs)
+    if cmp.coders:
+        cmp.coders["costs"] = {k: costs[k] for k in cmp.coders.pop("banks")}
     curve = run_curve(data, cmp.features, plan, bands, parts, log, client)
     cmp.tuned = {**where, "neurons": main.n_neurons, "channels": _channels(main),
                  "duration_s": plan.duration_s, "bin_edges_s": list(plan.bin_edges_s),
+                 "coder": {"coder": plan.base.coder, "coder_amplitude": plan.base.coder_amplitude,
+                           "threshold_g": plan.base.threshold_g,
+                           "coder_options": dict(plan.base.coder_options)},
                  "curve": curve}
-    return tuned_baselines(parts.evaluation)
+    return tuned_baselines(parts.evaluation) + coders
+
+
+def coder_stage(parts, data, cmp, bands: dict, plan: TunedPlan, log, fresh: bool, client
+                ) -> list:
+    """Each coder of ``plan.coders`` at each of ``plan.coder_sizes``, on the channels placed
+    for that size: the bank over every event (cached), its read-outs' inputs and its coded
+    input's neuron-free ceiling into ``cmp.features``; ``cmp.coders`` describes them (with
+    the banks, for the cost measurement). The MLPs to evaluate."""
+    if not plan.coders:
+        return []
+    ids = cmp.features["event"].values
+    attrs = recording_attrs(data)
+    banks = coder_banks(plan, bands, parts.bank)
+    for (label, n), tuning in plan.coder_tunings().items():
+        bank = banks[coder_key(label, n)]
+        log(f"      coder {label} ({tuning.coder}), {n} resonators")
+        spikes = cached_features(data, bank, parts.bench, log, fresh, client)
+        ceiling = coded_features(bank, data["counts"].values[ids], *attrs)
+        cmp.features = coder_inputs(cmp.features, spikes, label, n, ceiling)
+    cmp.coders = {"coders": {k: dict(v) for k, v in plan.coders.items()},
+                  "sizes": list(plan.coder_sizes), "banks": banks,
+                  "default": next((coder_key(label, n) for (label, n), t
+                                   in plan.coder_tunings().items()
+                                   if n == plan.base.n_resonators and _same_coder(t, plan.base)),
+                                  None)}
+    return coder_baselines(plan.coders, plan.coder_sizes, parts.evaluation)
+
+
+def coder_banks(plan: TunedPlan, bands: dict, like) -> dict:
+    """The bank of each coder and size (``coder_key``): the size's channels, the coder's
+    fields, ``like``'s target and batching."""
+    return {coder_key(label, n): plan.bank(
+        {k: replace(b, coder=t.coder, coder_options=dict(t.coder_options),
+                    coder_amplitude=t.coder_amplitude, threshold_g=t.threshold_g)
+         for k, b in bands[n].items()}, like)
+        for (label, n), t in plan.coder_tunings().items()}
+
+
+def coder_key(label: str, n: int) -> str:
+    return f"coder_{label}_{n}"
+
+
+def _same_coder(a, b) -> bool:
+    return all(getattr(a, k) == getattr(b, k) for k in CODER_KEYS)
+
+
+def best_costs(data, parts, event_ids, banks: dict, repeats: int, log) -> dict:
+    """Wall time per event of the FFT pipeline's features and of each bank of ``banks``
+    (name → bank), on the same ``cost_sample_events`` events, taken in turn ``repeats``
+    times in this process: each the best of its runs (the least disturbed by other work on
+    the machine)."""
+    ids = np.asarray(event_ids)[:parts.plan.cost_sample_events]
+    best: dict = {}
+    for _ in range(repeats):
+        runs = {"fft": extraction_cost(data, parts.processor, ids)}
+        runs.update({k: run_cost(data, bank, len(ids)) for k, bank in banks.items()})
+        for k, c in runs.items():
+            if k not in best or c["features_us_per_event"] < best[k]["features_us_per_event"]:
+                best[k] = {**c, "best_of": repeats}
+    log("      cost per event (best of " + f"{repeats}): " + ", ".join(
+        f"{k} {c['features_us_per_event']:.0f} µs" for k, c in best.items()))
+    return best
 
 
 def run_curve(data, features, plan: TunedPlan, bands: dict, parts, log, client) -> list[dict]:

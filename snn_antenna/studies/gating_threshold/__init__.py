@@ -52,8 +52,11 @@ from ...evaluation.thresholds import (
     GateRecall,
     LookupTable,
     MethodScores,
+    F1_BOUNDS,
     ThStarFit,
     compare,
+    difference,
+    interval,
     fit_th_star,
     fixed_method,
 )
@@ -203,10 +206,15 @@ class Evaluation:
         gated_th = self.parts.gate.thresholds(speed_cols, self.parts.scene.rate_hz)
         lookup_th = self.recall.table(speed_cols)
         items, keys = [], []
+        ev = self.parts.evaluation
+        others = {label: ev.coder(label) for label in ev.coders}
         for k, (slot, i, rec, x, coder) in enumerate(entries):
             items += [(rec, coder.partial_transform(x, threshold=lookup_th[:, k])),
                       (rec, coder.partial_transform(x, threshold=gated_th[:, k]))]
             keys += [("lookup", slot, i), ("gated", slot, i)]
+            for label, other in others.items():   # the same gate's Th, another coder
+                items.append((rec, other.fit(x).partial_transform(x, threshold=gated_th[:, k])))
+                keys.append((coder_method(label), slot, i))
             if self.example is None and self.scores.categories[i] == "ramp":
                 self.example = {"rec": rec, "gated_th": gated_th[:, k],
                                 "lookup_th": lookup_th[:, k], "key": keys[-1]}
@@ -220,6 +228,24 @@ class Evaluation:
                 if self.example is not None and key == self.example["key"]:
                     self.example["map"] = rates
         self.pending = []
+
+
+def coder_method(label: str) -> str:
+    """The method name of the gate's Th through coder ``label`` of ``evaluation.coders``."""
+    return f"gated, {label} coder"
+
+
+def compare_coders(scores: MethodScores, parts: Parts) -> dict:
+    """Each coder of ``evaluation.coders`` with the gate's Th, on the same scenes as the
+    study's own coder: F1 over seeds (interval, n) and its paired difference from it."""
+    own = scores.per_seed("gated")
+    out = {}
+    for label, table in parts.evaluation.coders.items():
+        f1 = scores.per_seed(coder_method(label))
+        out[label] = {"coder": table.get("coder", "square"), "f1": interval(f1, F1_BOUNDS),
+                      "f1_per_seed": [None if not np.isfinite(x) else float(x) for x in f1],
+                      "minus_own_coder": difference(f1, own)}
+    return out
 
 
 def evaluate(evaluation: Evaluation, log) -> SeedPlan:
@@ -273,7 +299,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         drives = parts.data and score_drives(parts, parts.data, fixed_th, fit.sweep_fixed_th_g,
                                              recall, codings, log)
     results = Results(outcome, fit, fig9, recall, seeds,
-                      compare(evaluation.scores, fixed_th, fit.sweep_fixed_th_g),
+                      {**compare(evaluation.scores, fixed_th, fit.sweep_fixed_th_g),
+                       "coders": compare_coders(evaluation.scores, parts)},
                       evaluation.example)
     summary = summarize(parts, results)
     if drives:

@@ -177,6 +177,10 @@ def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
                 **{k: table_cell(v) for k, v in r.items() if k not in ("scenes", "contacts scored")}}
                for r in s["per_category"]],
               "Per scene type: mean over seeds (95 % CI); differences paired by seed")
+    if s.get("coders"):
+        rep.table(coder_rows(s, parts), "Coders with the gate's Th on the same evaluation "
+                  "scenes: F1 over seeds (95 % CI, n) and its difference from the study's own "
+                  "coder, paired by seed (\"not resolved\" when the interval spans zero)")
     rep.figure(figures.f1_per_category(s), "f1_per_category",
                "F1 per scene type, mean over seeds with 95 % CI (clipped to [0, 1]): the gate, "
                "the lookup table, the best fixed Th in hindsight and the fixed Th chosen on "
@@ -213,6 +217,17 @@ def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
                "the lookup table.")
     recorded_section(rep, s)
     rep.write(s, spec, parts.array.target)
+
+
+def coder_rows(s: dict, parts: Parts) -> list[dict]:
+    """The study's own coder (``[preprocess] coder``) and each of ``evaluation.coders``."""
+    own = parts.preprocess.get("coder", "square")
+    rows = [{"coder": f"{own} (the study's)", "F1": table_cell(s["f1"]["gated"]),
+             "minus the study's coder": "—"}]
+    return rows + [{"coder": f"{label} ({v['coder']})", "F1": table_cell(v["f1"]),
+                    "minus the study's coder": f"{table_cell(v['minus_own_coder'])}, "
+                                               f"n = {v['minus_own_coder']['n']}"}
+                   for label, v in s["coders"].items()]
 
 
 def _sweep_row(ds, v, best, th_star) -> dict:

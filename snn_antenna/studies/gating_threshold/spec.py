@@ -3,7 +3,7 @@
 the dataclasses its stages return are in ``report``: what the summary and report are made of)."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -14,7 +14,7 @@ from ...core.errors import SpecError, check
 from ...engine.cost import engine_of, gate_training_runs, max_workers, stages_estimate
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
-from ...preprocess import make_chain
+from ...preprocess import make_chain, make_coder
 from ...readout.contacts import detector_from_spec
 from ...evaluation.scoring import score_columns
 from ...readout.detection import BlindReadOut
@@ -79,10 +79,17 @@ class EvaluationSettings:
     # Which family of evaluation scenes: 0 gives the reported ones; any other integer draws
     # scenes never used for them (validation seeds, to tune settings on).
     scene_stream: int = 0
+    # Coders evaluated beside the study's own (``[preprocess]``), each with the gate's Th on
+    # the same scenes, paired by seed: label -> {coder, coder_amplitude, coder_options}.
+    coders: dict = field(default_factory=dict)
 
     def __post_init__(self):
         check(isinstance(self.scene_stream, int) and self.scene_stream >= 0, "scene_stream",
               self.scene_stream, "an integer >= 0")
+        check(isinstance(self.coders, dict), "coders", self.coders,
+              "a table of named coders, e.g. {delta = {coder = \"delta\"}}")
+        for label in self.coders:
+            self.coder(label)      # each coder's own checks, before any work
         for name in ("pilot_seeds", "max_seeds", "n_steps"):
             value = getattr(self, name)
             check(isinstance(value, int) and value >= 1, name, value, "an integer >= 1")
@@ -91,6 +98,22 @@ class EvaluationSettings:
         check(np.isfinite(self.margin_f1) and 0 < self.margin_f1 < 1, "margin_f1",
               self.margin_f1, "an F1 difference in (0, 1) to resolve")
         antenna.terrain_noise_rms_g(0.0, self.other_terrain)   # refuses an unknown terrain
+
+    def coder(self, label: str):
+        """Coder ``label`` of ``coders``, checked (``preprocess.make_coder``); Th comes from
+        the gate at each sample."""
+        table = self.coders[label]
+        keys = ("coder", "coder_amplitude", "coder_options")
+        check(isinstance(table, dict) and set(table) <= set(keys), f"coders.{label}", table,
+              f"a table of {', '.join(keys)}")
+        options = table.get("coder_options", {})
+        check(isinstance(options, dict), f"coders.{label}.coder_options", options,
+              "a table of the coder's own parameters")
+        try:
+            return make_coder(table.get("coder", "square"), table.get("coder_amplitude", 0.15),
+                              0.0, **options)
+        except SpecError as exc:
+            raise SpecError(f"coders.{label}.{exc.field}", exc.value, exc.accepted) from None
 
     def held_out(self, swept: np.ndarray, trained: np.ndarray) -> np.ndarray:
         """The speeds to evaluate: the spec's, or the swept ones the gate does not learn,
