@@ -49,7 +49,7 @@ def main(argv=None) -> dict:
                     help="a study spec override, e.g. spiking.tuned.coder_sizes=[24]")
     args = ap.parse_args(argv)
     spec = specs.load(STUDY, [f"stimulus.repetitions={args.repetitions}", *args.overrides])
-    parts = study.build(spec)
+    parts = study.plan(spec).parts
     plan = parts.plan.tuned_plan()
     t0 = time.perf_counter()
     data, cmp, _ = study._signal_stage(parts, 3, print, False)

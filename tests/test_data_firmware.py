@@ -164,7 +164,7 @@ def test_a_drive_through_the_firmware_is_the_quickstarts_scene_sample_for_sample
     from snn_antenna.studies import quickstart
 
     spec = specs.load(ROOT / "studies" / "quickstart.toml", [])   # the scene the file holds
-    scene = quickstart.build(spec).scene
+    scene = quickstart.plan(spec).parts.scene
     n = int(scene.duration_s * scene.rate_hz)
     recordings, log = stream_through_firmware(tmp_path, None,
                                               ROOT / "stimuli" / "quickstart_scene.toml",
@@ -173,7 +173,7 @@ def test_a_drive_through_the_firmware_is_the_quickstarts_scene_sample_for_sample
     labels.write_text(from_emulator_log(log, "drive1", drive=True))
     assert main(["data", "import", str(recordings), str(labels), "--out",
                  str(tmp_path / "data")]) == 0
-    parts = quickstart.build({**spec, "data": str(tmp_path / "data")})
+    parts = quickstart.plan({**spec, "data": str(tmp_path / "data")}).parts
     rec, generated = parts.scene.generate(0), scene.generate(int(spec["seed"]))
     assert np.array_equal(rec.samples, generated.samples)
     assert [(c.t_s, c.distance_cm) for c in rec.truth.contacts] == \

@@ -141,7 +141,8 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
 def test_a_bad_coder_of_the_evaluation_is_refused_by_name():
     from snn_antenna.core.errors import SpecError
     from snn_antenna.core import spec as specs
-    from snn_antenna.studies.gating_threshold import build
+    from snn_antenna.studies.gating_threshold import plan as build
+
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml", quick=True))
     spec["evaluation"]["coders"]["delta"]["coder_options"]["levels"] = 0
     with pytest.raises(SpecError) as err:
