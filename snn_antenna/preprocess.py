@@ -39,7 +39,7 @@ class _Causal(TransformerMixin, BaseEstimator):
     def _validate_params_(self) -> None:
         pass
 
-    def reset(self) -> "_Causal":
+    def reset(self) -> _Causal:
         self.state_ = None
         return self
 

@@ -17,7 +17,7 @@ from snn_antenna.bridge.wire.recorder import Recorder, load_recording
 from snn_antenna.bridge.wire.source import SerialSource, run_source
 from snn_antenna.cli import main
 from snn_antenna.data.labels import from_emulator_log
-from snn_antenna.sources import bench, recorded
+from snn_antenna.sources import recorded
 from snn_antenna.studies import baseline_comparison
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -117,7 +117,6 @@ def assert_agree(on_recordings: dict, on_generated: dict) -> None:
     rec, gen = (s["distance_rmse_mm"]["linear_low_peak"]["mean"]
                 for s in (on_recordings, on_generated))
     assert abs(rec - gen) <= precision, (rec, gen, precision)
-    accuracy = {p["quantity"]: p for p in on_generated["predicted"]}
     recorded_accuracy = {p["quantity"]: p for p in on_recordings["predicted"]}
     row = recorded_accuracy["materials, full-spectrum MLP accuracy"]
     low, high = row["interval"]

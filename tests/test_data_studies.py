@@ -1,7 +1,5 @@
 """Every study reads recorded data where it read generated data (``data = "DIR"``): the same
 samples and labels reach it, and its report says where they came from."""
-import contextlib
-import io
 import json
 from pathlib import Path
 
@@ -10,8 +8,6 @@ import pytest
 
 from data_helpers import (RATE, import_dir, import_quickstart_drive, ringing_counts,
                           write_labels, write_record)
-from snn_antenna.bridge.wire.recorder import record_counts
-from snn_antenna.cli import main
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
 from snn_antenna.studies import baseline_comparison, quickstart, speed_accuracy

@@ -293,7 +293,7 @@ def test_a_staging_name_already_taken_is_passed_over(tmp_path, monkeypatch):
 from hypothesis import HealthCheck, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from hypothesis.stateful import (RuleBasedStateMachine, initialize, invariant,  # noqa: E402
-                                 precondition, rule)
+                                 rule)
 
 WRITES = ["run.log", "report.html", "summary.json", "results.zarr", "cache.zarr",
           "figures/a.png"]

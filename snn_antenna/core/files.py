@@ -38,7 +38,7 @@ import re
 import stat
 import threading
 from pathlib import Path
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 from .errors import SpecError
 

@@ -64,7 +64,7 @@ class LogFile:
         self._filter = _ExpectedFilter(self)
         self._consoles: list[logging.Handler] = []
 
-    def __enter__(self) -> "LogFile":
+    def __enter__(self) -> LogFile:
         # The file, its folder and the handlers come with the first line logged: a run refused
         # while its spec is checked (before anything is said) leaves no folder and imports no
         # Brian2.
@@ -77,7 +77,7 @@ class LogFile:
         # never through a symlink, and an existing log keeps the mode its owner gave it
         self._file = open_append(self.path)
         self._started = True
-        self._write(f"=== run started {_dt.datetime.now(_dt.timezone.utc).isoformat()} "
+        self._write(f"=== run started {_dt.datetime.now(_dt.UTC).isoformat()} "
                     f"({' '.join(sys.argv)})")
         # Python warnings through logging (as Brian2 sets up at import), re-armed in case
         # someone (a test runner, a notebook) replaced warnings.showwarning since

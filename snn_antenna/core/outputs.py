@@ -208,7 +208,7 @@ def claim(folder: OutputFolder) -> None:
     folder.path.mkdir(parents=True, exist_ok=True)
     if folder.lock_fd is None:
         folder.lock_fd = lock_folder(folder.path)
-    folder.started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    folder.started = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
     folder.listed = {name: ident for name, ident in folder.listed.items()
                      if files.matches(folder.path / name, ident, writing=True)}
     journal = files.Journal(folder.path,

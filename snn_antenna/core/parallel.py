@@ -4,7 +4,7 @@ progress bar. For grids of points (chunked, resumable, on a Dask cluster) use
 from __future__ import annotations
 
 from concurrent.futures import ProcessPoolExecutor
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 
 def _star(args):

@@ -25,7 +25,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1]
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def code_hash(*modules: str) -> str:
     """SHA-256 (16 hex digits) of the package version and of source files by relative path
     and content: with no argument every ``.py`` file of the package, else the
@@ -130,6 +130,6 @@ def provenance(spec: dict, target: str | None = None) -> dict:
         "sklearn_version": sklearn.__version__,
         "python": sys.version.split()[0],
         "platform": platform.platform(),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
         "command": " ".join(sys.argv),
     }

@@ -48,7 +48,7 @@ class Recording:
     def t_s(self) -> np.ndarray:
         return np.arange(self.n_samples) / self.rate_hz
 
-    def with_samples(self, samples: np.ndarray, units: str | None = None) -> "Recording":
+    def with_samples(self, samples: np.ndarray, units: str | None = None) -> Recording:
         """The same recording (rate, truth) with new samples, e.g. after a processing stage."""
         return replace(self, samples=np.asarray(samples), units=units or self.units)
 

@@ -18,7 +18,8 @@ import types
 import typing
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
+from collections.abc import Iterable
 
 from . import calibration
 from .bounds import beyond_limits, nested, out_path, parse_value

@@ -186,7 +186,7 @@ class ArrayWorkload:
             net["n_neurons"] = n_neurons
         return ResonatorArray(**net)
 
-    def run(self, setting: "Setting", warm_up: bool = False) -> Run:
+    def run(self, setting: Setting, warm_up: bool = False) -> Run:
         array = self.array(setting.method, setting.dt_ms, setting.target, setting.n_neurons)
         if warm_up:
             return warm_up_array(array, self.coded)
@@ -250,7 +250,7 @@ class TuningWorkload:
         self.input_of = np.tile(np.arange(len(self.freqs)), len(self.k))
         self.b = net.get("b", ResonatorArray.b)
 
-    def run(self, setting: "Setting", warm_up: bool = False) -> Run:
+    def run(self, setting: Setting, warm_up: bool = False) -> Run:
         check(setting.target in RUNTIME_TARGETS, "target", setting.target,
               "a runtime target for the tuning workload")
         with Timer() as timer:

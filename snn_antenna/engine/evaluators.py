@@ -93,7 +93,7 @@ class NeuronSweep:
               "settle_s", self.settle_s, f"a time in [0, duration_s = {self.duration_s:g}) s")
 
     # the grid's checks, before any work
-    def for_grid(self, grid: Grid, block_shape) -> "NeuronSweep":
+    def for_grid(self, grid: Grid, block_shape) -> NeuronSweep:
         for name in grid.dims:
             check(name in NEURON_AXES, f"axes.{name}", list(grid.axes[name]),
                   f"a parameter of the neuron sweep: {', '.join(NEURON_AXES)}")
@@ -241,7 +241,7 @@ class SceneSweep:
                            **spec["preprocess"])
         return scene, chain
 
-    def for_grid(self, grid: Grid, block_shape) -> "SceneSweep":
+    def for_grid(self, grid: Grid, block_shape) -> SceneSweep:
         scene_axes = [d for d in grid.dims if d.startswith(SCENE_PREFIXES)]
         for name in grid.dims:
             check(name in NEURON_AXES and name not in ("input_hz", "I") or name in scene_axes,

@@ -105,7 +105,7 @@ class EventSweep:
         return Grid({"event": np.arange(len(self.counts)),
                      "neuron": np.arange(self.bank.n_neurons)})
 
-    def for_grid(self, grid: Grid, block_shape) -> "EventSweep":
+    def for_grid(self, grid: Grid, block_shape) -> EventSweep:
         check(grid.dims == ("event", "neuron") and block_shape[1] == self.bank.n_neurons,
               "axes", list(grid.dims), "event × neuron, every neuron of the bank in a chunk")
         check(block_shape[0] == min(self.bank.batch_events, grid.shape[0]), "chunk_points",

@@ -103,7 +103,7 @@ def _first_message(address: str, host: str, port: int, timeout_s: float) -> None
                       ) from None
     except socket.gaierror as exc:
         raise _refuse(address, f"the host {host!r} is not known ({exc.strerror})") from None
-    except (TimeoutError, socket.timeout):
+    except TimeoutError:
         raise _refuse(address, f"no answer from {host}:{port} within {timeout_s:g} s (the host "
                                "is down, or a firewall drops the connection)") from None
     except OSError as exc:
@@ -118,7 +118,7 @@ def _first_message(address: str, host: str, port: int, timeout_s: float) -> None
                 if not piece:
                     break
                 head += piece
-    except (TimeoutError, socket.timeout):
+    except TimeoutError:
         pass
     except OSError as exc:
         raise _refuse(address, f"{host}:{port} dropped the connection ({exc.strerror or exc})"
@@ -157,7 +157,7 @@ def _check_identity(address: str, timeout_s: float) -> None:
 
     try:
         identity, versions = asyncio.run(asyncio.wait_for(ask(), timeout_s))
-    except (asyncio.TimeoutError, TimeoutError):
+    except TimeoutError:
         raise _refuse(address, f"a Dask peer that did not say who it is within {timeout_s:g} s"
                       ) from None
     except Exception as exc:        # reset, closed, or a reply that is not Dask's

@@ -58,7 +58,7 @@ class Grid:
         self.units = dict(units or {})
 
     @classmethod
-    def from_spec(cls, table: dict, known: dict[str, str] | None = None) -> "Grid":
+    def from_spec(cls, table: dict, known: dict[str, str] | None = None) -> Grid:
         """A grid from a spec's ``[axes]`` table; ``known`` maps accepted axis names to units."""
         check(isinstance(table, dict) and len(table) >= 1, "axes", table,
               "a table of at least one named axis")

@@ -46,7 +46,7 @@ class Score:
     minutes: float = 0.0
     latencies_s: list = field(default_factory=list)
 
-    def __add__(self, other: "Score") -> "Score":
+    def __add__(self, other: Score) -> Score:
         return Score(self.tp + other.tp, self.fp + other.fp, self.misses + other.misses,
                      self.duplicates + other.duplicates,
                      self.out_of_band_contacts + other.out_of_band_contacts,

@@ -211,7 +211,7 @@ class MaterialUnit:
             check(m in lookup, "materials", m, f"a material of the classes: {sorted(lookup)}")
         return np.array([lookup[m] for m in materials])
 
-    def fit(self, features: np.ndarray, materials) -> "MaterialUnit":
+    def fit(self, features: np.ndarray, materials) -> MaterialUnit:
         """Train the read-out: ``features``, one ``window_features`` row per contact, of this
         network's resonators; ``materials`` the contacts' materials (labels: fit only)."""
         from sklearn.linear_model import LogisticRegression

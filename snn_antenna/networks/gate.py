@@ -262,7 +262,7 @@ class SpeedGate:
         return (np.asarray(spikes.i[:], int), np.asarray(spikes.t_[:], float), w, read)
 
     # -- learning ---------------------------------------------------------------------------
-    def fit(self, speeds, th_star, test_speeds=None) -> "SpeedGate":
+    def fit(self, speeds, th_star, test_speeds=None) -> SpeedGate:
         """Learn Th*(speed) from examples; record recall on ``test_speeds`` while learning."""
         speeds = self.check_speeds(speeds, "speeds")
         th = np.asarray(th_star, dtype=float)

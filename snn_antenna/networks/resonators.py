@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 
 import numpy as np
 import xarray as xr
@@ -127,7 +127,7 @@ class ResonatorArray:
 
     # -- offline ----------------------------------------------------------------------------
     def run(self, coded: Recording, window_s: float = 0.1,
-            check_every_ms: float = 10.0) -> "ArrayResult":
+            check_every_ms: float = 10.0) -> ArrayResult:
         """Drive the array with a coded recording (one channel); spikes and a rate map."""
         if not isinstance(coded, Recording):
             raise SpecError("coded", type(coded).__name__,
@@ -172,7 +172,7 @@ class ResonatorArray:
                on_window: Callable[[float, np.ndarray], None] | None = None,
                max_duration_s: float = 365 * 86400.0,
                block_s: float = STREAM_BLOCK_S,
-               companions: Callable[[object], Iterable] | None = None) -> "StreamStats":
+               companions: Callable[[object], Iterable] | None = None) -> StreamStats:
         """Run the array live on coded samples as they arrive.
 
         ``chunks`` yields 1-D arrays of coded samples (any length, blocking until data come;

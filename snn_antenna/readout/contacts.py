@@ -200,7 +200,7 @@ class EpisodeTracker:
         return "contact", found
 
 
-def detector_from_spec(spec: dict) -> tuple["ContactDetector", float]:
+def detector_from_spec(spec: dict) -> tuple[ContactDetector, float]:
     """The ``[readout]`` table of a spec → (``ContactDetector``, rate-map window in s).
 
     Every study and the live pipeline read the section here, so its keys, defaults and

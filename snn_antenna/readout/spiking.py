@@ -127,7 +127,7 @@ class SpikeFeatures:
         """One row per event: counts, latencies and spans of every neuron (decoder input)."""
         return np.hstack([self.counts, self.latency_s, self.span_s]).astype(float)
 
-    def select(self, bands) -> "SpikeFeatures":
+    def select(self, bands) -> SpikeFeatures:
         keep = np.isin(self.band, list(bands))
         return SpikeFeatures(self.counts[:, keep], self.latency_s[:, keep], self.span_s[:, keep],
                              self.neuron_hz[keep], self.band[keep], self.duration_s,

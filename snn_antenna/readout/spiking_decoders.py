@@ -218,7 +218,7 @@ class Design:
     changes: dict = field(default_factory=dict)
 
     @classmethod
-    def from_table(cls, table: dict, index: int, bank: SpikingBank) -> "Design":
+    def from_table(cls, table: dict, index: int, bank: SpikingBank) -> Design:
         """A ``[[spiking.designs]]`` entry: ``{name, band, ...Band fields}``, checked."""
         changes = dict(table)
         name, band = changes.pop("name", f"design_{index}"), changes.pop("band", "low")
@@ -272,7 +272,7 @@ class SpikingPlan:
         bank.check_rate(rate_hz)
         return bank, designs
 
-    def tuned_plan(self) -> "TunedPlan | None":
+    def tuned_plan(self) -> TunedPlan | None:
         if not self.tuned:
             return None
         with specs.section("tuned"):

@@ -21,7 +21,7 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import xarray as xr
@@ -98,7 +98,7 @@ class BenchSpec:
               "an integer >= 1 (worker processes)")
         check(isinstance(self.seed, int) and self.seed >= 0, "seed", self.seed, "an integer >= 0")
         antenna.ADC(self.adc_bits, self.full_scale_g)
-        self.contact_physics    # names physics or physics_strength when they are bad
+        _ = self.contact_physics    # names physics or physics_strength when they are bad
 
     @property
     def contact_physics(self) -> contact_models.ContactPhysics:

@@ -158,7 +158,7 @@ class RecordedDrives:
                                "lost": ds["lost"].values[:n]})
 
 
-    def scene(self, drive: int = 0) -> "RecordedScene":
+    def scene(self, drive: int = 0) -> RecordedScene:
         """Drive ``drive`` where a study reads a generated scene."""
         return RecordedScene(self, self.recording(drive))
 

@@ -93,7 +93,7 @@ class FaultPlan:
     reset_s: float = 0.1
 
     @classmethod
-    def parse(cls, text: str) -> "FaultPlan":
+    def parse(cls, text: str) -> FaultPlan:
         """``"garbage=3,drop=2,stall_s=0.1"`` -> FaultPlan."""
         plan = cls()
         for item in filter(None, (part.strip() for part in (text or "").split(","))):

@@ -12,7 +12,6 @@ from __future__ import annotations
 import time
 import uuid
 
-import numpy as np
 
 PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second; a new rate-map
 # column is pushed to it on arrival (build_page's update_now)

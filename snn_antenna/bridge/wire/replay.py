@@ -42,7 +42,7 @@ class ReplaySource:
         self._t0 = None
         self._ended = False
 
-    def start(self) -> "ReplaySource":
+    def start(self) -> ReplaySource:
         self._raw = self.recording.raw_path.read_bytes()
         self._t0 = self.started_monotonic = time.monotonic()
         return self

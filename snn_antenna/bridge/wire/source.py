@@ -145,7 +145,7 @@ class SerialSource:
         self._last_valid_s = self._last_read_end_s = time.monotonic()
 
     # -- consumer side -------------------------------------------------------------------------
-    def start(self) -> "SerialSource":
+    def start(self) -> SerialSource:
         """Open the port now, so that a missing or busy port fails in the caller's thread."""
         self.transport.open()
         self.started_monotonic = time.monotonic()

@@ -68,7 +68,7 @@ from .spec import (
     EVALUATION_SCENES,
     EVALUATION_STEPS,
     LOW_HIGH_CM_S,
-    SECTIONS,
+    SECTIONS as SECTIONS,     # the study contract reads it from this module
     Parts,
     ThresholdSweep,
     coded_at,

@@ -113,7 +113,7 @@ def select(candidates: dict) -> dict:
     readable = [c for c in candidates.values() if c["point"] is not None]
     ranked = sorted((c for c in readable if c["calibrated"]),
                     key=lambda c: (-c["n_met"], c["shortfall"]))
-    missed = sorted((c["physics"] for c in readable if not c["calibrated"]))
+    missed = sorted(c["physics"] for c in readable if not c["calibrated"])
     if not ranked:
         return {"chosen": None, "strength": None, "wins_clearly": False, "ranking": [],
                 "not_calibrated": missed,
