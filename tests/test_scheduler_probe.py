@@ -130,7 +130,7 @@ def test_a_scheduler_of_this_version_passes_and_of_another_is_named(running_sche
 def test_run_refuses_the_scheduler_before_the_output_folder_exists(closed_port, tmp_path):
     out = tmp_path / "out"
     done = subprocess.run([sys.executable, "-m", "snn_antenna.cli", "run",
-                           "studies/quickstart.toml", "--scheduler", closed_port,
+                           "studies/tuning_sweep.toml", "--scheduler", closed_port,
                            "--out", str(out)],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 2, done.stderr
