@@ -109,7 +109,8 @@ def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
     for n, bank in banks.items():
         c = min(spiking[n], key=lambda r: r["features_us_per_event"])
         print(f"tuned spiking bank, {n:3d} resonators in {len(bank.bands):2d} channels, "
-              f"{bank.batch_events} contacts per Brian2 run: best {c['features_us_per_event']:8.0f} "
+              f"{bank.batch_events} contacts per Brian2 run: best "
+              f"{c['features_us_per_event']:8.0f} "
               f"µs per event = {c['features_us_per_event'] / fft:5.1f}x the FFT pipeline "
               f"({c['neuron_steps_per_event']:.3g} neuron-steps, {c['ns_per_neuron_step']:.1f} "
               f"ns each; {load()})", flush=True)

@@ -11,7 +11,8 @@
    factor: simulated seconds per second of computation in the steady state (Brian2's build
    and the time spent waiting for bytes excluded); per CPU second, it is simulated seconds per
    CPU second of the pipeline's own process (its threads, not the emulator's), which other
-   jobs on the machine leave alone. The same throughput run on ``--baseline`` (the offline array, dt 0.1 ms;
+   jobs on the machine leave alone. The same throughput run on ``--baseline`` (the offline array,
+   dt 0.1 ms;
    ``--baseline none`` skips it) gives the ratio of the two settings measured in one run, which
    a machine loaded by other jobs leaves more telling than either factor alone.
 2. Latency: the emulator runs as its own process at 1 kHz real time on a pseudo-terminal; the
@@ -134,7 +135,8 @@ def main(argv=None) -> int:
           f"machine: {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}")
     fast = stream_from_emulator(parts, args.seconds, fast=True)
     print(f"throughput (compute-only real-time factor): {fast['compute_realtime_factor']:.1f}x "
-          f"({fast['simulated_s']:.1f} s of 1 kHz input; Brian2 start-up {fast['startup_s']:.1f} s "
+          f"({fast['simulated_s']:.1f} s of 1 kHz input; Brian2 start-up "
+          f"{fast['startup_s']:.1f} s "
           f"not included); per CPU second of the pipeline's process: "
           f"{fast['cpu_realtime_factor']:.1f}x")
     if args.baseline != "none":
@@ -334,7 +336,7 @@ class Reloader:
 def _rtf(parts, seconds: float, view=None) -> float:
     """One throughput run's real-time factor. On a loaded machine the emulator's pty now and
     then loses its reader mid-run; such a run is said and done again, not counted."""
-    for attempt in range(3):
+    for _attempt in range(3):
         try:
             return stream_from_emulator(parts, seconds, True, view)["compute_realtime_factor"]
         except PortError as exc:

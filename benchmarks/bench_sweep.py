@@ -9,8 +9,8 @@ a naive per-point loop and a numba kernel.
 Every grid point is one resonator driven by the coder's square wave (``NeuronSweep``), for
 ``--duration-s`` at dt 0.1 ms. The grids sweep k, I and input_hz (``--sweep-b``: b too, a k/b/I
 tuning grid); the engine keeps what a grid does not sweep as one shared value, the floor reads
-every parameter per point (it keeps its blocks in L1, where that costs nothing). Measured in one run and printed side by side, in neuron-steps
-per second (points × steps / wall time):
+every parameter per point (it keeps its blocks in L1, where that costs nothing). Measured in one
+run and printed side by side, in neuron-steps per second (points × steps / wall time):
 
 - ``standalone`` / ``standalone32``: ``run_sweep`` with the compiled engine in float64 and
   float32, in this process (store writes included), after a warm-up chunk (the one-off
@@ -239,7 +239,7 @@ def main(argv=None) -> int:
         counts, seconds = {}, {}
         first_block = Grid({d: grid.axes[d][r] for d, r in grid.blocks(chunk)[0].items()})
 
-        def sweep_seconds(name):
+        def sweep_seconds(name, first_block=first_block, grid=grid, n=n, counts=counts):
             # warm-up on the first chunk: compiles (standalone, cython) outside the timing
             run_sweep(first_block, sweeps[name], tmp / f"warm-{name}-{n}.zarr",
                       NeuronSweep.OUTPUTS, chunk_points=chunk, progress=False, fresh=True)
@@ -249,7 +249,7 @@ def main(argv=None) -> int:
             counts[name] = out.data.spike_count.values.ravel()
             return time.perf_counter() - t0
 
-        def floor_seconds(name):
+        def floor_seconds(name, counts=counts, points=points):
             t0 = time.perf_counter()
             counts[name] = run_kernel(floors[name], base, points)
             return time.perf_counter() - t0
@@ -285,7 +285,7 @@ def main(argv=None) -> int:
     print(f"{'points':>9} {'standalone':>11} {'cython':>9} {'numpy':>9} {'numba':>9} "
           f"{'naive*':>9} {'sa/naive':>9} {'sa/numba':>9}  numba vs standalone counts")
     for r in rows:
-        def fmt(key):
+        def fmt(key, r=r):
             return f"{r[key]:.3g}" if key in r else "-"
         print(f"{r['points']:>9,} {fmt('standalone'):>11} {fmt('cython'):>9} {fmt('numpy'):>9} "
               f"{fmt('numba'):>9} {fmt('naive'):>9} {r['standalone'] / r['naive']:>8.0f}x "
@@ -322,7 +322,7 @@ def main(argv=None) -> int:
             first = None
             for w in args.workers:
                 with dask_client(workers=w) as client:
-                    for attempt in ("warm-up", "timed"):
+                    for _attempt in ("warm-up", "timed"):
                         before = load()
                         t0 = time.perf_counter()
                         run_sweep(grid, sweeps[name], tmp / f"dask-{name}-{w}.zarr",

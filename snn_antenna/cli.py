@@ -171,7 +171,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                      help="override a spec field, e.g. --set network.n_neurons=48 (repeatable)")
     run.add_argument("--quick", action="store_true",
-                     help="apply the spec's [quick] profile: a small run for tests and first looks")
+                     help="apply the spec's [quick] profile: "
+                          "a small run for tests and first looks")
     run.add_argument("--fresh", action="store_true",
                      help="studies that keep results or caches: discard them and start over")
     run.add_argument("--scheduler", metavar="tcp://HOST:PORT",

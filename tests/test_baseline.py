@@ -54,7 +54,8 @@ def test_nmf_filters_read_the_spectrum_s_shape_not_its_loudness():
     # reads 36 % (quick bench set). Classes here differ only in the ratio of two lines.
     rng = np.random.default_rng(1)
     f = np.arange(60)
-    line = lambda at: np.exp(-0.5 * ((f - at) / 1.5) ** 2)
+    def line(at):
+        return np.exp(-0.5 * ((f - at) / 1.5) ** 2)
     label = rng.integers(0, 2, 400)
     shape = line(15)[None] + np.where(label[:, None] == 1, 0.6, 0.3) * line(40)[None]
     loudness = rng.uniform(1, 3, (400, 1))

@@ -27,7 +27,8 @@ def _features(seed: int = 0) -> xr.Dataset:
     y = np.unique(material, return_inverse=True)[1]
     ds = xr.Dataset(coords={"event": np.arange(72), "material": ("event", material),
                             "repetition": ("event", repetition),
-                            "distance_cm": ("event", np.tile(np.repeat([10.0, 20, 30, 40], 6), 3))})
+                            "distance_cm": ("event",
+                                            np.tile(np.repeat([10.0, 20, 30, 40], 6), 3))})
     names = ["spectrum"] + [ceiling_input(lab, n) for lab in LABELS for n in SIZES] + [
         coder_input(lab, n, r) for lab in LABELS for n in SIZES for r in CODER_READOUTS]
     for k, name in enumerate(names):

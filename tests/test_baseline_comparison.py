@@ -17,9 +17,11 @@ from snn_antenna.studies import baseline_comparison as study
 from snn_antenna.studies.contract import Options
 
 SPEC = "studies/baseline_comparison.toml"
-TINY = ["stimulus.materials=['wood','aluminium','brass']", "stimulus.positions_cm=[10.0,20.0,30.0]",
+TINY = ["stimulus.materials=['wood','aluminium','brass']",
+        "stimulus.positions_cm=[10.0,20.0,30.0]",
         "stimulus.repetitions=6", "stimulus.n_jobs=1", "evaluation.seeds=[0,1]",
-        "evaluation.nmf_dims=[3,24,30]", "evaluation.mlp_max_iter=30", "evaluation.nmf_max_iter=50",
+        "evaluation.nmf_dims=[3,24,30]", "evaluation.mlp_max_iter=30",
+        "evaluation.nmf_max_iter=50",
         "evaluation.material_max_iter=30", "spiking.bank.target=numpy", "spiking.workers=1",
         "spiking.bank.duration_s=0.3",
         "spiking.design_repetitions=3",
@@ -127,7 +129,8 @@ def test_report_folder_and_summary_keys(tiny_run):
                 "spiking", "cost_us_per_event"):
         assert key in stored
     spiking = stored["spiking"]
-    assert {"spiking_dominant", "spiking_centroid", "spiking_mlp_distance"} <= set(spiking["distance_rmse_mm"])
+    assert ({"spiking_dominant", "spiking_centroid", "spiking_mlp_distance"}
+            <= set(spiking["distance_rmse_mm"]))
     assert "spiking_mlp_material" in spiking["material_accuracy"]
     # 0.3 s per event: the low band at the bank's 0.1 ms, the high and rod bands at their own
     # 0.005 ms

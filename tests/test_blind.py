@@ -92,7 +92,8 @@ def test_bench_features_and_spiking_decoders_ignore_the_labels(bench_data):
                           progress=False).to_dataset(data["event"].values, bank.bin_edges_s)
         inputs = decoder_inputs(with_labels(feats, data), spikes)
         X = inputs["spiking_low_counts"].values
-        dominant = {b.name: b.build(0).fit(X).predict(X) for b in spiking_baselines(spikes, Evaluation())
+        dominant = {b.name: b.build(0).fit(X).predict(X)
+                    for b in spiking_baselines(spikes, Evaluation())
                     if b.inputs == "spiking_low_counts"}
         return feats, spikes, inputs, dominant
 

@@ -74,7 +74,8 @@ def test_out_of_range_values_are_refused_by_the_encoder():
 
 
 @settings(max_examples=150, deadline=None)
-@given(samples_st, st.lists(st.integers(0, 800), max_size=30), st.sampled_from(["binary", "ascii"]))
+@given(samples_st, st.lists(st.integers(0, 800), max_size=30),
+       st.sampled_from(["binary", "ascii"]))
 def test_any_chunking_yields_exactly_the_frames(samples, cuts, wire_format):
     encode = encode_binary if wire_format == "binary" else encode_ascii
     data = b"".join(encode(*s) for s in samples)
@@ -149,7 +150,8 @@ def test_range_error_frame_is_skipped_and_leaves_a_gap():
     bad = cobs_encode(frame_payload(1, 1024, 5)) + b"\x00"
     samples, decoder = decode_all(encode_binary(0, 1, 1) + bad + encode_binary(2, 1, 1))
     assert [s.seq for s in samples] == [0, 2]
-    assert (decoder.stats.range_errors, decoder.stats.gaps, decoder.stats.lost_samples) == (1, 1, 1)
+    assert (decoder.stats.range_errors, decoder.stats.gaps,
+            decoder.stats.lost_samples) == (1, 1, 1)
 
 
 def test_overlong_noise_is_one_framing_error_and_memory_stays_bounded():

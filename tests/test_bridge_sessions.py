@@ -86,7 +86,8 @@ def host_feed(writes, stalls, chunk):
             group = []
         group.append(write)
     reads = []
-    for group in groups + [group]:
+    groups.append(group)
+    for group in groups:
         arrival = group[-1][1] + 0.001
         for start, end in held:
             if start <= arrival < end:

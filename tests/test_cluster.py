@@ -53,7 +53,8 @@ def _wait_for(path: Path, proc: subprocess.Popen, what: str) -> None:
     deadline = time.monotonic() + START_TIMEOUT_S
     while not path.exists():
         if proc.poll() is not None or time.monotonic() > deadline:
-            raise RuntimeError(f"{what} did not start: {proc.stderr.read() if proc.poll() else ''}")
+            raise RuntimeError(f"{what} did not start: "
+                               f"{proc.stderr.read() if proc.poll() else ''}")
         time.sleep(0.1)
 
 

@@ -71,7 +71,8 @@ def test_levels_keep_the_amplitude_the_square_wave_drops():
     ring = np.sin(2 * np.pi * 30 * t)
     weak, strong = 0.05 * ring, 0.4 * ring
     sq = SquareWaveCoder(0.2, 0.01).fit(weak)
-    np.testing.assert_array_equal(np.abs(sq.transform(weak)).max(), np.abs(sq.transform(strong)).max())
+    np.testing.assert_array_equal(np.abs(sq.transform(weak)).max(),
+                                  np.abs(sq.transform(strong)).max())
     for coder in (LevelCoder(0.2, 0.01, step_g=0.05, levels=6, ratio=1.0),
                   AnalogCoder(1.0, 0.0, gain=2.0)):
         coder.fit(weak)

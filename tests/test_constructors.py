@@ -101,7 +101,7 @@ def _refused_by_name(make, given_, name, value) -> None:
 
 
 def test_every_listed_field_is_made_well_with_its_default():
-    for make, given_, fields in CASES:
+    for make, given_, _fields in CASES:
         make(**given_)
 
 

@@ -106,7 +106,7 @@ def test_contact_loss_adds_pi_f_eta_share_to_the_decay_rate():
 
 
 def test_rod_decay_from_loss_factor_and_the_resting_antenna():
-    for name, m in antenna.MATERIALS.items():
+    for _name, m in antenna.MATERIALS.items():
         share = m._antenna_share()
         eta = m.loss + antenna.TUBE_LOSS * share
         assert m.rod_tau_s() == pytest.approx(1 / (np.pi * m.rod_mode_hz() * eta), rel=1e-9)

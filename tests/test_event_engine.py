@@ -15,7 +15,8 @@ from snn_antenna.sources import bench
 RATE, BITS, FULL_SCALE = 2000.0, 16, 10.0
 # the high band at its own, finer dt; 8 events per chunk, so 12 events make a full chunk and
 # a short one (padded in the compiled project)
-BANK = SpikingBank(bands={"low": LOW_BAND, "high": dataclasses.replace(HIGH_BAND, dt_ms=0.05, method="euler")},
+BANK = SpikingBank(bands={"low": LOW_BAND,
+                          "high": dataclasses.replace(HIGH_BAND, dt_ms=0.05, method="euler")},
                    duration_s=0.2, batch_events=8, target="standalone")
 
 

@@ -60,7 +60,8 @@ def test_low_and_high_band_give_the_runtime_paths_features_spike_for_spike(both,
 
 def test_rod_and_tuned_channels_give_the_runtime_paths_features(both):
     """First spikes and the early bins equal everywhere, every feature equal for most
-    neurons (docs/materials.md, "The fused event engine", gives the counts). A channel at the coder's low threshold (3-6 mg) fires for whatever side of its
+    neurons (docs/materials.md, "The fused event engine", gives the counts). A channel at the
+    coder's low threshold (3-6 mg) fires for whatever side of its
     threshold the state lands on, so the compilers' different rounding of the same rk2
     expression parts a few neurons' trains after some tens of spikes: the unfused compiled
     engine without fusion differs from the runtime path as much on these events

@@ -78,7 +78,7 @@ def tau_low_spread(proc, f_low, tau_low, n=40):
     """Relative bias and CV of τ_low over contacts that differ only in phase and noise."""
     rng = np.random.default_rng(7)
     taus = []
-    for i in range(n):
+    for _i in range(n):
         t = np.arange(int(RATE)) / RATE
         x = 2.0 * np.exp(-t / tau_low) * np.cos(2 * np.pi * f_low * t + rng.normal(0, 0.2))
         x += 0.9 * np.exp(-t / (tau_low / 5)) * np.cos(2 * np.pi * 7.5 * f_low * t

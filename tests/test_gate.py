@@ -110,7 +110,8 @@ def test_scoring_per_contact():
     # from the true distance, neither a true nor a false positive (and never dropped earlier).
     assert (s.tp, s.fp, s.misses, s.duplicates) == (1, 1, 1, 1)
     assert (s.out_of_band_contacts, s.out_of_band_hits) == (1, 1)
-    assert score(det[:3] + det[4:], contacts, 10.0, detector, array, 0.1, 1.0).out_of_band_hits == 0
+    assert score(det[:3] + det[4:], contacts, 10.0, detector, array, 0.1,
+                 1.0).out_of_band_hits == 0
     assert s.latencies_s == pytest.approx([0.0])
     assert s.f1 == pytest.approx(2 / 4) and s.fp_per_min == pytest.approx(1 / 0.15)
     total = s + Score(tp=1, minutes=1.5)

@@ -48,7 +48,7 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
             [expected.low, expected.high])
     # each coder of [evaluation.coders] with the gate's Th, paired by seed with the square wave
     assert set(summary["coders"]) == {"delta", "analog"}
-    for label, row in summary["coders"].items():
+    for _label, row in summary["coders"].items():
         f1 = np.array(row["f1_per_seed"], float)
         keep = np.isfinite(f1) & np.isfinite(gated)
         assert len(f1) == len(gated) and row["minus_own_coder"]["n"] == keep.sum()

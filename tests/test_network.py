@@ -56,7 +56,7 @@ def test_streaming_gives_the_same_spikes_as_offline_at_the_live_setting():
         offline = array.run(coded, window_s=window_s).rate_map.values * window_s
         windows = []
         stats = array.stream(iter(np.split(x, cuts)), 1000.0, window_s=window_s,
-                             on_window=lambda t_s, counts: windows.append(counts))
+                             on_window=lambda t_s, counts, windows=windows: windows.append(counts))
         assert stats.samples == len(x) and stats.windows == offline.shape[1]
         np.testing.assert_array_equal(np.stack(windows, axis=1), offline)
     assert offline.sum() > 100 and offline[array.neuron_hz > 12].sum() > 10

@@ -298,10 +298,12 @@ from hypothesis.stateful import (RuleBasedStateMachine, initialize, invariant,  
 WRITES = ["run.log", "report.html", "summary.json", "results.zarr", "cache.zarr",
           "figures/a.png"]
 USER_NAMES = ["notes.txt", "report.html", "run.log", "results.zarr", "cache.zarr",
-              "results.zarr.partial", "cache.zarr.partial", f".results.zarr.{os.getpid()}-0.partial",
+              "results.zarr.partial", "cache.zarr.partial",
+              f".results.zarr.{os.getpid()}-0.partial",
               f".report.html.{os.getpid()}-1.tmp", outputs.MANIFEST + ".tmp",
               f".{outputs.MANIFEST}.{os.getpid()}-3.tmp", "figures", "figures/a.png"]
-INSIDE = ["results.zarr/notes.txt", "results.zarr/rate/c", "results.zarr/rate/c/0", "results.zarr/chunk_done/c/1",
+INSIDE = ["results.zarr/notes.txt", "results.zarr/rate/c", "results.zarr/rate/c/0",
+          "results.zarr/chunk_done/c/1",
           "cache.zarr/v/c/0", "cache.zarr/zarr.json", "figures/mine.png"]
 
 

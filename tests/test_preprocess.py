@@ -56,7 +56,8 @@ def test_pca_recovers_the_oscillation_axis():
 def test_lowpass_keeps_the_band_and_removes_high_frequencies():
     t = np.arange(4000) / 1000
     lp = pp.LowPass(1000.0, 30.0).fit(t)
-    slow, fast = lp.transform(np.sin(2 * np.pi * 10 * t)), lp.transform(np.sin(2 * np.pi * 120 * t))
+    slow, fast = (lp.transform(np.sin(2 * np.pi * 10 * t)),
+                  lp.transform(np.sin(2 * np.pi * 120 * t)))
     assert slow[1000:].std() == pytest.approx(np.sqrt(0.5), rel=0.05)
     assert fast[1000:].std() < 0.01
 

@@ -102,7 +102,8 @@ def test_the_chain_is_fitted_on_the_warm_up_only():
 
 
 # seed 1 in the default suite; seeds 2-4 (one quick run each) are the thorough check
-@pytest.mark.parametrize("seed", [1] + [pytest.param(s, marks=pytest.mark.slow) for s in (2, 3, 4)])
+@pytest.mark.parametrize("seed", [1] + [pytest.param(s, marks=pytest.mark.slow)
+                                        for s in (2, 3, 4)])
 def test_quickstart_meets_the_papers_fig10_in_kind(tmp_path, seed):
     spec = specs.load(QUICKSTART, [f"seed={seed}"], quick=True)
     s = quickstart.run(quickstart.plan(spec), tmp_path, log=lambda *_: None)

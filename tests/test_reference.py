@@ -117,10 +117,14 @@ def test_reference_agrees_with_an_independent_fine_rk4_with_interpolated_thresho
     # interpolation and the reset applied there: a second, unrelated way to the same spikes.
     I, k, dt = 8.0, 1.0, 2.5e-4
     p = neurons.PRESETS["resonator"]
-    f = lambda v, u: np.array([k * (0.04 * v * v + 5 * v + 140 - u + I), p.a * k * (p.b * v - u)])
+    def f(v, u):
+        return np.array([k * (0.04 * v * v + 5 * v + 140 - u + I), p.a * k * (p.b * v - u)])
     y, t, spikes = np.array([p.c, p.b * p.c]), 0.0, []
     while t < 20.0:
-        k1 = f(*y); k2 = f(*(y + dt / 2 * k1)); k3 = f(*(y + dt / 2 * k2)); k4 = f(*(y + dt * k3))
+        k1 = f(*y)
+        k2 = f(*(y + dt / 2 * k1))
+        k3 = f(*(y + dt / 2 * k2))
+        k4 = f(*(y + dt * k3))
         new = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
         if new[0] >= neurons.V_PEAK:
             frac = (neurons.V_PEAK - y[0]) / (new[0] - y[0])

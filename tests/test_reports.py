@@ -336,8 +336,10 @@ def test_a_quick_report_reads_cleanly_in_chromium(quick_reports, chromium, study
     for name in ("report.html", "summary.json", "run.log"):   # README: a log in every folder
         assert (run.out / name).stat().st_mode & 0o044 == 0o044, f"{name} unreadable by others"
     assert "=== run started" in (run.out / "run.log").read_text()
+    shrunk = [(i["alt"], i["naturalWidth"], i["shownWidth"])
+              for i in seen["images"] if i["naturalWidth"] > i["shownWidth"]]
     print(f"{study}: {len(seen['images'])} images, page {seen['scrollWidth']} px, figures "
-          f"shrunk to fit: {[(i['alt'], i['naturalWidth'], i['shownWidth']) for i in seen['images'] if i['naturalWidth'] > i['shownWidth']]}")
+          f"shrunk to fit: {shrunk}")
 
 
 # A quantity's range from its name: these can never be negative; F1 and fractions never pass 1.

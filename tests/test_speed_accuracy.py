@@ -113,7 +113,8 @@ def test_the_reference_verdict_says_what_was_measured():
 
     def text(**shift):
         conv = dict(base, **shift)
-        return study_report.convergence_text(dict(conv, **tradeoff.convergence_verdict(conv, rows)))
+        return study_report.convergence_text(dict(conv,
+                                                  **tradeoff.convergence_verdict(conv, rows)))
 
     assert "converged far below" in text(max_shift_ms=1e-5)
     near = text(max_shift_ms=0.1)

@@ -159,7 +159,7 @@ def test_two_cli_runs_into_one_folder_one_is_refused_at_once(tmp_path):
         first.wait()
 
 
-# -- no symlink followed ---------------------------------------------------------------------------
+# -- no symlink followed --------------------------------------------------------------------------
 def _store(path: Path, **kw) -> SweepStore:
     store = SweepStore(path)
     store.prepare({"k": np.arange(4.0)}, {"rate": Output("f8")}, (2,), 2, **kw)
@@ -248,7 +248,7 @@ def test_atomic_write_refuses_to_replace_a_symlink(tmp_path):
     assert untouched_state(target) == kept and (tmp_path / "report.html").is_symlink()
 
 
-# -- emulate --log ---------------------------------------------------------------------------------
+# -- emulate --log --------------------------------------------------------------------------------
 def test_emulate_log_never_overwrites_without_force(tmp_path, capsys):
     log = tmp_path / "sent.json"
     kept = users_file(log, "my notes")
@@ -265,7 +265,7 @@ def test_emulate_log_never_overwrites_without_force(tmp_path, capsys):
     assert "symbolic link" in capsys.readouterr().err and untouched_state(log) == kept
 
 
-# -- provenance: no stale result -------------------------------------------------------------------
+# -- provenance: no stale result ------------------------------------------------------------------
 def test_a_store_made_by_other_code_is_refused_on_resume(tmp_path, monkeypatch):
     path = tmp_path / "results.zarr"
     _store(path)

@@ -113,7 +113,7 @@ def same_object(path: str | Path, ident: dict | None) -> bool:
                                    writing=True)
 
 
-# -- walking without following ---------------------------------------------------------------------
+# -- walking without following --------------------------------------------------------------------
 def walk(folder: str | Path) -> Iterator[tuple[str, os.stat_result]]:
     """``(relative name, lstat)`` of every entry below ``folder``; never enters a link."""
     folder = Path(folder)

@@ -16,7 +16,8 @@ one element; zarr's local store writes each file by an atomic rename) is set. A 
 its mark is redone on resume, whatever part of its data had reached the disk; a marked chunk
 is never recomputed. Before a store is resumed it is walked without following anything, and
 a link, device or hard-linked file anywhere inside it is refused by name
-(``files.check_tree``): zarr writes by path, and would write through it. The store's ``fingerprint`` attribute (grid, outputs, chunking, the
+(``files.check_tree``): zarr writes by path, and would write through it. The store's
+``fingerprint`` attribute (grid, outputs, chunking, the
 study's resolved settings and the code that computes them) must match to resume: a changed
 spec or changed code is refused, ``fresh=True`` starts over.
 """

@@ -87,7 +87,7 @@ def _plan_drives(streams, table, labels_path, options, seg: Segmentation, log) -
     label is checked against its recording's lost and clipped stretches around it."""
     by_name = {s.name: s for s in streams}
     kept, excluded = [], []
-    for k, lab in enumerate(table):
+    for _k, lab in enumerate(table):
         s = by_name[lab.recording]
         reason = segment.stretch_problem(s, lab.onset_s, seg)
         if reason:

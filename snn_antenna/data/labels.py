@@ -217,6 +217,6 @@ def from_emulator_log(log: dict, recording: str, drive: bool = False) -> str:
                      "material"])
     for event in log.get("events", []):
         if event.get("kind") == "contact":
-            writer.writerow([recording, repr(float(event["t_s"])), repr(float(event["distance_cm"])),
-                             event["material"]])
+            writer.writerow([recording, repr(float(event["t_s"])),
+                             repr(float(event["distance_cm"])), event["material"]])
     return out.getvalue()

@@ -16,7 +16,8 @@
 - ``evaluators``: what each point computes: ``NeuronSweep`` (square-wave input) and
   ``SceneSweep`` (coded robot scenes), each chunk one NeuronGroup.
 - ``standalone``: ``NeuronSweep``'s compiled cpp_standalone project, one per process.
-- ``sweep``: ``run_sweep``, the resumable chunk loop; ``snn_antenna.core.store`` writes the results.
+- ``sweep``: ``run_sweep``, the resumable chunk loop; ``snn_antenna.core.store`` writes the
+  results.
 - ``batches``: batches of scored codings submitted now and collected later (Dask or this
   process), for stages that are not grids (the gating study's evaluation).
 - ``devices`` and ``runlog``: one-off timed runs per code target and precision, and their

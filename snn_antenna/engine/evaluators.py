@@ -86,7 +86,8 @@ class NeuronSweep:
         bounds.dt_ms("dt_ms", self.dt_ms)        # the same bounds as every other step
         check(math.isfinite(self.input_rate_hz) and self.input_rate_hz > 0 and
               1000.0 / self.input_rate_hz >= self.dt_ms * (1 - 1e-9), "input_rate_hz",
-              self.input_rate_hz, f"a sample rate > 0 Hz and at most 1/dt ({1 / self.dt_ms:g} kHz)")
+              self.input_rate_hz,
+              f"a sample rate > 0 Hz and at most 1/dt ({1 / self.dt_ms:g} kHz)")
         check(math.isfinite(self.duration_s) and self.duration_s * 1000 >= 10 * self.dt_ms,
               "duration_s", self.duration_s, "a duration of at least 10 steps")
         check(math.isfinite(self.settle_s) and 0 <= self.settle_s < self.duration_s,

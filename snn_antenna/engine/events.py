@@ -127,7 +127,8 @@ class EventSweep:
         if self.bank.target == "standalone":
             parts = self._standalone(coded)
         else:
-            parts = [band_features(*self._runtime(array, np.ascontiguousarray(coded[:, j::n_bands])),
+            parts = [band_features(*self._runtime(array,
+                                                  np.ascontiguousarray(coded[:, j::n_bands])),
                                    len(events), array.n_neurons, self.duration_s,
                                    self.bank.bin_edges_s)
                      for j, array in enumerate(self.bank.arrays().values())]
@@ -218,7 +219,7 @@ class EventSweep:
             widths = [arrays[j].n_neurons for j in bands]
             n = m * sum(widths)
 
-            def read(name):
+            def read(name, group=group, n=n, widths=widths):
                 return np.asarray(getattr(group, name)[:])[:n].reshape(m, sum(widths))
 
             self._check_stable(group, arrays, bands, n)

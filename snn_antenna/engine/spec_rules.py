@@ -88,7 +88,8 @@ def _check_readout(spec, stimulus, rate) -> None:
     duration = stimulus.get("duration_s")
     longest = f" and at most stimulus.duration_s = {duration:g} s" if is_number(duration) else ""
     # one input sample at least: a finer rate map only repeats samples (and may not fit)
-    check(is_number(window) and window >= 1 / rate and (not is_number(duration) or window <= duration),
+    check(is_number(window) and window >= 1 / rate
+          and (not is_number(duration) or window <= duration),
           "readout.window_s", window, f"a window of at least one sample ({1 / rate:g} s at "
           f"{rate:g} Hz){longest}")
 

@@ -89,7 +89,7 @@ def _functions() -> dict:
     where.implementations.add_implementation("cpp", """
         template <typename A, typename B>
         inline A _where(const bool condition, const A a, const B b) { return condition ? a : (A)b; }
-        """, name="_where")
+        """, name="_where")  # noqa: E501 (the C++ source is kept byte for byte)
     square = Function(np.square, arg_units=[None], arg_names=["x"],
                       return_unit=lambda u: u ** 2, arg_types=["float"], return_type="highest")
     square.implementations.add_implementation(

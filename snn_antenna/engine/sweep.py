@@ -92,7 +92,8 @@ def run_sweep(grid: Grid, evaluate: Callable, store_path: str | Path,
     check_memory(grid, outputs, int(np.prod(block_shape)),
                  getattr(evaluate, "bytes_per_point", 0))
     regions = grid.blocks(chunk_points)
-    store = SweepStore(Path(os.path.abspath(store_path)))   # never resolved: a link is refused, not followed
+    # never resolved: a link is refused, not followed
+    store = SweepStore(Path(os.path.abspath(store_path)))
     settings = repr(evaluate) if settings is None else settings
     # the evaluator's module and its imports compute the results (the whole package when the
     # evaluator is not the package's own: provenance.import_closure)

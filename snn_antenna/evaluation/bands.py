@@ -205,7 +205,8 @@ def brian_spikes(events: BandEvents, setting: BandSetting, target: str = "cython
     if setting.duration_s is not None:
         n_samples = min(n_samples, int(round(setting.duration_s * events.rate_hz)))
     coded = np.tile(events.coded[:n_samples], (1, repeat))
-    kwargs = dict(_inputs(BandEvents(events.name, events.band, coded, events.rate_hz), array), method=setting.method, target=target, force=True)
+    kwargs = dict(_inputs(BandEvents(events.name, events.band, coded, events.rate_hz), array),
+                  method=setting.method, target=target, force=True)
     neurons.simulate("resonator", coded, setting.dt_ms, run_ms=WARM_UP_MS, **kwargs)
     t0, w0 = time.process_time(), time.perf_counter()
     res = neurons.simulate("resonator", coded, setting.dt_ms, **kwargs)

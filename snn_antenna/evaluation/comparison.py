@@ -317,12 +317,14 @@ def tuned_text(summary: dict) -> str:
     t, curve = summary["spiking"]["tuned"], summary["spiking"]["tuned"]["curve"]
     c = summary["feature_costs"].get("spiking_tuned") or {}
     fft_us = summary["feature_costs"]["fft"]["features_us_per_event"]
-    best = f", best of {c['best_of']} runs taken in turn with the FFT's" if c.get("best_of") else ""
+    best = (f", best of {c['best_of']} runs taken in turn with the FFT's" if c.get("best_of")
+            else "")
     channels = "; ".join(f"{ch['pass_hz'][0]:g}-{ch['pass_hz'][1]:g} Hz ×{ch['resonators']}"
                          for ch in t["channels"])
     return (f"Tuned bank: {t['neurons']} resonators in {len(t['channels'])} channels placed "
             f"from {t['calibration_events']} calibration contacts of seed "
-            f"{t['calibration_seed']} (never evaluated), {t.get('coder', {}).get('coder', 'square')} "
+            f"{t['calibration_seed']} (never evaluated), "
+            f"{t.get('coder', {}).get('coder', 'square')} "
             f"coder: {channels}. Its cost (the default read-out's), measured in "
             f"this run on {c.get('events_measured')} events{best}: "
             f"{c.get('features_us_per_event', 0):.0f} µs per event (coding + Brian2 "

@@ -178,7 +178,7 @@ def pareto(summary):
                         xytext=(5, -3) if rank % 2 == 0 else (-15, -3),
                         textcoords="offset points", color=colour)
         front, best = [], None
-        for c, a, k in pts:
+        for c, a, _k in pts:
             if best is None or (a > best if higher else a < best):
                 front.append((c, a))
                 best = a

@@ -183,7 +183,8 @@ def score_run(readout: BlindReadOut, detections: list, contacts, duration_s: flo
     f_first = float(antenna.low_mode_hz(first.distance_cm))
     out["first_contact"] = {
         "t_s": first.t_s, "true_distance_cm": first.distance_cm, "material": first.material,
-        "low_mode_hz": f_first, "within_array_band": bool(f_first <= float(readout.array.band_hz[1])),
+        "low_mode_hz": f_first,
+        "within_array_band": bool(f_first <= float(readout.array.band_hz[1])),
         "decoded_distance_cm": match.distance_cm if match else None,
         "distance_error_cm": (match.distance_cm - first.distance_cm) if match else None,
         "latency_s": (match.onset_s + readout.window_s - first.t_s) if match else None,

@@ -37,7 +37,8 @@ def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool 
 def with_labels(features: xr.Dataset, data: xr.Dataset) -> xr.Dataset:
     """Features of a bench data set's events with the events' labels as coordinates."""
     labels = bench_labels(data.sel(event=features["event"].values))
-    return features.assign_coords({name: ("event", np.asarray(v.values)) for name, v in labels.items()})
+    return features.assign_coords({name: ("event", np.asarray(v.values))
+                                   for name, v in labels.items()})
 
 
 # -- the signal's statistics beside the paper's measurements of its signal -----------------

@@ -17,7 +17,8 @@ f = f₀ · (1 + speed_gain · v / 30 cm/s).
 
 Joint angles are the ring's population vector, filtered: each neuron's spikes feed an
 alpha-shaped trace x_j (two exponential stages of τ_x, so the vector turns smoothly between
-spikes instead of jumping 360°/N at each); the phase φ = arg Σ x_j e^{2πij/N} drives pan = c_p + A_p cos φ and
+spikes instead of jumping 360°/N at each); the phase φ = arg Σ x_j e^{2πij/N} drives pan = c_p +
+A_p cos φ and
 tilt = c_t + A_t cos(φ − offset), so the tip sweeps an area (offset 90° by default) and both
 angles stay within their ranges (the paper's: pan 80° centred 40° to the side, tilt 90°
 centred 10° above the horizon).

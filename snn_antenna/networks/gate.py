@@ -10,8 +10,8 @@ motor command predicts by how much. Here that prediction is learned by spiking n
                                               teacher (Poisson, rate = encode(Th*(speed)))
 
 - Speed population: ``n_speed_neurons`` class-I neurons (``neurons.equations("class1")``) with
-  preferred speeds evenly spread over ``speed_range_cm_s`` (and one spacing beyond); neuron j receives
-  ``speed_offset + peak_current · exp(−(v − v_j)² / 2σ²)``. The offset sits just below the
+  preferred speeds evenly spread over ``speed_range_cm_s`` (and one spacing beyond); neuron j
+  receives ``speed_offset + peak_current · exp(−(v − v_j)² / 2σ²)``. The offset sits just below the
   rheobase, where the class-I rate grows about linearly with the drive, so each rate follows
   its Gaussian and, with σ equal to the spacing, the population's summed rate is nearly the
   same at every speed: the read-out then interpolates linearly between trained speeds

@@ -67,7 +67,8 @@ METHODS = ("euler", "rk2", "rk4", "izhikevich")
 
 # Largest k·dt (model milliseconds per step) at which each method stays finite for every
 # constant drive I in [-50, 50], started from the reset point: the stability map of
-# studies/speed_accuracy.toml (``snn_antenna.evaluation.accuracy.stability_map``, 25 log-spaced k·dt from
+# studies/speed_accuracy.toml (``snn_antenna.evaluation.accuracy.stability_map``, 25 log-spaced
+# k·dt from
 # 0.01 to 50; the next grid point, 1.43x larger, went non-finite for some drive). Measured
 # on the resonator; tests/test_stability.py re-checks both sides of each limit. Specs beyond
 # it are refused unless forced. Finite is not accurate: see the study's map for that.

@@ -43,7 +43,7 @@ def _neuron_spikes(v0: float, u0: float, k: float, a: float, b: float, c: float,
         t0, t1 = float(bounds[j]), float(bounds[j + 1])
         current = float(level)
 
-        def rhs(_t, s):
+        def rhs(_t, s, current=current):
             v, u = s
             return (k * (p2 * v * v + p1 * v + p0 - u + current), a * k * (b * v - u))
 

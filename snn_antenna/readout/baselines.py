@@ -168,8 +168,8 @@ def distance_baselines(n_bins: int, mlp: Mlp = Mlp()) -> list[Baseline]:
         return lambda seed: regressor_pipeline(mlp, DISTANCE_HIDDEN, seed, select)
     return [
         Baseline("linear_low_peak", "distance", "params",
-                 lambda seed: make_pipeline(columns(_param("F_low")), FunctionTransformer(np.log10),
-                                            LinearRegression()),
+                 lambda seed: make_pipeline(columns(_param("F_low")),
+                                            FunctionTransformer(np.log10), LinearRegression()),
                  "linear regression of distance on log10 of the low peak frequency", 6.2),
         Baseline("mlp_parametric", "distance", "params",
                  scaled_mlp(columns(_param("F_low", "A_low", "F_high", "A_high"))),

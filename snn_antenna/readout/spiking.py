@@ -2,8 +2,8 @@
 
 Each event goes through the real preprocessing chain (``preprocess.make_chain``: counts → g,
 PCA alignment, low-pass, centring, square-wave coder; ``SpikingBank.code``) and drives a bank
-of resonators (``networks.resonators.ResonatorArray`` sets their tuning). Running a bank over a data set
-is the sweep engine's work (``engine.events``: a chunk of events × a band's neurons is ONE
+of resonators (``networks.resonators.ResonatorArray`` sets their tuning). Running a bank over a
+data set is the sweep engine's work (``engine.events``: a chunk of events × a band's neurons is ONE
 NeuronGroup, compiled once per process in cpp_standalone and re-run with each chunk's coded
 inputs), so Brian2 runs once per chunk and band, never once per event.
 

@@ -4,12 +4,12 @@ The spiking features of a bench data set (``engine.events.cached_features``) bec
 (``decoder_inputs``): per resonator its spike count, first-spike latency and firing span, for
 one band or several, and for ``spiking_rod`` also its counts in the time bins. Each input set
 is read by an MLP (``spiking_baselines``), so the spiking and FFT pipelines are trained and
-tested on the same contacts and splits by ``evaluation.crossval.evaluate``. Two decoders learn nothing
-(``TRAINING_FREE``): they invert the generator's own frequency law.
+tested on the same contacts and splits by ``evaluation.crossval.evaluate``. Two decoders learn
+nothing (``TRAINING_FREE``): they invert the generator's own frequency law.
 
 Array designs (``Design``) change one band of the bank at a time and are run and decoded on
-a subset of the events (``evaluation.crossval.run_designs``), to see what the number, spacing or input of the
-resonators buys.
+a subset of the events (``evaluation.crossval.run_designs``), to see what the number, spacing or
+input of the resonators buys.
 """
 from __future__ import annotations
 
@@ -163,7 +163,8 @@ def decoder_inputs(features: xr.Dataset, spikes: xr.Dataset) -> xr.Dataset:
             parts.append(sp["binned_counts"].values[:, keep].reshape(len(sp["event"]), -1))
         out[name] = (("event", f"{name}_feature"), np.hstack(parts).astype(np.float32))
     if "low" in set(bands):
-        out["spiking_low_counts"] = (("event", "low_neuron"), sp["counts"].values[:, bands == "low"])
+        out["spiking_low_counts"] = (("event", "low_neuron"),
+                                     sp["counts"].values[:, bands == "low"])
     return out
 
 

@@ -26,7 +26,8 @@ def draw_rate_map(ax, rates, colorbar: bool | str = False, **mesh_kwargs):
     mesh = ax.pcolormesh(edges_t, edges_hz, rates.values,
                          **{"cmap": "magma", "shading": "flat", **mesh_kwargs})
     ax.set_yscale("log")
-    ticks = [f for f in (5, 7, 10, 15, 20, 30, 50, 100, 200, 500) if edges_hz[0] <= f <= edges_hz[-1]]
+    ticks = [f for f in (5, 7, 10, 15, 20, 30, 50, 100, 200, 500)
+             if edges_hz[0] <= f <= edges_hz[-1]]
     ax.set_yticks(ticks)
     ax.set_yticklabels([str(f) for f in ticks])
     ax.minorticks_off()

@@ -215,7 +215,8 @@ def cached(path: Path, build: Callable[[], xr.Dataset], computed_by: str, log=pr
 def _cache_problem(ds: xr.Dataset, computed_by: str) -> str | None:
     if ds.attrs.get("computed_by_sha256") != code_hash(computed_by):
         return (f"made by other code: {computed_by} and its imports were "
-                f"{ds.attrs.get('computed_by_sha256', 'unrecorded')}, now {code_hash(computed_by)}")
+                f"{ds.attrs.get('computed_by_sha256', 'unrecorded')}, "
+                f"now {code_hash(computed_by)}")
     for name, var in ds.data_vars.items():
         if var.dtype.kind in "fc" and not np.isfinite(var.values).all():
             return f"{name} holds NaN or infinite values"

@@ -291,6 +291,7 @@ def summary_entry(bench_source) -> dict | None:
             "recordings": meta["recordings"]}
 
 
-__all__ = ["RecordedBench", "RecordedDrives", "RecordedScene", "open_bench", "open_drives", "provenance_rows",
+__all__ = ["RecordedBench", "RecordedDrives", "RecordedScene", "open_bench", "open_drives",
+           "provenance_rows",
            "summary_entry", "DATASET", "DRIVES",
            "EXCLUSIONS", "IMPORT_FILE", "KIND", "FORMAT_VERSION"]

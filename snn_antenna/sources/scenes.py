@@ -20,7 +20,8 @@ with the square of speed too, five times more on ``rough`` ground than on ``flat
 (``antenna.IMPACT_TRANSFER``) are calibration choices, not measurements: the speed² law was
 chosen so that the best threshold at 27 cm/s is about five times that at 12 cm/s, and the
 impact share so that doubling that threshold loses contacts (the paper's Fig. 9,
-docs/reference.md). A study that finds those two numbers again reports them as calibrated. The pan-tilt sweep itself is assumed smooth: it adds no
+docs/reference.md). A study that finds those two numbers again reports them as calibrated. The
+pan-tilt sweep itself is assumed smooth: it adds no
 vibration, so a robot standing still produces no self-motion at all. When the robot stops
 after a contact (``stop_after_contact_s``) the antenna stops sweeping too.
 

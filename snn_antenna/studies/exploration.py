@@ -1,4 +1,5 @@
-"""Active exploration: the closed loop of the paper's Fig. 3, run in Brian2 with Python in the loop.
+"""Active exploration: the closed loop of the paper's Fig. 3, run in Brian2 with Python in the
+loop.
 
 The network is what ``networks/exploration.toml`` lists (``assembly.build``); the loop, its
 freeze reflex and the robot's blind record are ``readout.closed_loop.ClosedLoop`` (how it
@@ -214,7 +215,8 @@ def _provenance_rows(rep: Report, s: dict, parts: ClosedLoop) -> None:
                    "network cpg pan/tilt centre and amplitude"),
         Calibrated("gate's Th*(speed) training examples",
                    by_speed(dict(zip(v, th)), lambda t: f"{t:.3g} g"),
-                   "Th* of the gating study", "", "studies/gating_threshold.toml (seed 3), as listed in "
+                   "Th* of the gating study", "",
+                   "studies/gating_threshold.toml (seed 3), as listed in "
                    "studies/exploration.toml", "gate_training"),
     )
     rep.predicted(
@@ -236,7 +238,8 @@ def _provenance_rows(rep: Report, s: dict, parts: ClosedLoop) -> None:
 
 def human_summary(s: dict, out_dir) -> str:
     """Four lines a person reads at the end of a run (None where nothing happened)."""
-    fmt = lambda v, spec=".2f": "none" if v is None else format(v, spec)
+    def fmt(v, spec=".2f"):
+        return "none" if v is None else format(v, spec)
     d, p, sc = s["contact_distance_cm"], s["cpg_period_s"], s["score"]
     contact = "the antenna touched no post" if s["contact_t_s"] is None else (
         f"first contact at {s['contact_t_s']:.2f} s, {d['true']:.1f} cm along the rod, "

@@ -302,7 +302,8 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
 
 def human_summary(s: dict, out_dir) -> str:
     sc = s["score"]
-    fmt = lambda v, spec=".2f": "none" if v is None else format(v, spec)
+    def fmt(v, spec=".2f"):
+        return "none" if v is None else format(v, spec)
     lines = [f"self-motion activity centred at {fmt(s['motion_dominant_hz'], '.1f')} Hz "
              f"(windows outside detections, after a {s['warmup_s']:g} s warm-up)",
              f"{len(s['detections'])} detection(s): {sc['tp']} true positive(s), {sc['fp']} "

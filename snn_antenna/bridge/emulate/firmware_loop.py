@@ -1,9 +1,11 @@
-"""The board's own firmware in the loop: ``snn-antenna emulate --pty --firmware firmware/antenna_stream``.
+"""The board's own firmware in the loop:
+``snn-antenna emulate --pty --firmware firmware/antenna_stream``.
 
 The shipped firmware (``main.c``, unmodified) is built for the ATmega328P and run in simavr by
 the harness ``firmware/antenna_stream/sim/antenna_sim.c``: the stimulus's ADC counts are fed to
 the firmware's own Timer1-triggered conversions, and every byte its UART sends at 250000 baud is
-written to a pseudo-terminal (the same :class:`~snn_antenna.bridge.emulate.links.PtyLink` as ``emulate
+written to a pseudo-terminal (the same :class:`~snn_antenna.bridge.emulate.links.PtyLink` as
+``emulate
 --pty``), so ``record``, ``stream`` and ``replay`` read it as they read the board. Faults are the
 firmware's own: a UART the harness holds (``holds``) fills the firmware's queue, and what it drops
 reaches the host as a counted gap in the sequence numbers.

@@ -190,7 +190,8 @@ class SerialLink:
         import serial
 
         if isinstance(port_or_url, str):
-            self.port = serial.serial_for_url(port_or_url, baudrate=DEFAULT_BAUDRATE, write_timeout=1.0)
+            self.port = serial.serial_for_url(port_or_url, baudrate=DEFAULT_BAUDRATE,
+                                              write_timeout=1.0)
             self._owned = True
         else:
             self.port, self._owned = port_or_url, False

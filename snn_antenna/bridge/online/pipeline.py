@@ -2,8 +2,8 @@
 map and contact events, while the recorder keeps everything.
 
 All spiking is Brian2: the array runs in runtime mode through
-:meth:`snn_antenna.networks.resonators.ResonatorArray.stream`, which pulls coded samples from the generator
-built here. What this module adds on top of the foundation's streaming API:
+:meth:`snn_antenna.networks.resonators.ResonatorArray.stream`, which pulls coded samples from the
+generator built here. What this module adds on top of the foundation's streaming API:
 
 - calibration: the PCA alignment needs a fit, so the first ``calibration_s`` of samples fit the
   chain, then go through it like every later sample (same numbers as the offline chain);

@@ -83,7 +83,8 @@ def live_view(args, parts):
     from .hostguard import LOOPBACK   # with tornado, loaded only when a view is asked for
 
     out = getattr(args, "out", None)
-    save_dir = getattr(args, "view_save", None) or (Path(out) / "views" if out else Path("out") / "views")
+    save_dir = getattr(args, "view_save", None) or (Path(out) / "views" if out
+                                                    else Path("out") / "views")
     view = LiveView(parts, host=args.view_host, port=args.view_port, save_dir=str(save_dir))
     url = view.start()
     if args.view_host not in LOOPBACK:
@@ -140,8 +141,8 @@ def _tap_coder(coder, tap) -> None:
 
 
 class LiveView:
-    """Pipeline side of the live view: a :class:`~snn_antenna.bridge.wire.source.SourceLoop` handler
-    (``handle``, ``idle``) and a :class:`~snn_antenna.bridge.online.handler.WindowHandler`
+    """Pipeline side of the live view: a :class:`~snn_antenna.bridge.wire.source.SourceLoop`
+    handler (``handle``, ``idle``) and a :class:`~snn_antenna.bridge.online.handler.WindowHandler`
     (``run_online``'s ``view``); all of them only gather, and every ``FLUSH_S`` (a new
     rate-map column: ``WINDOW_FLUSH_S``) one frame goes to the view process without waiting.
     ``start`` spawns that process and returns the URL it is bound to; ``stop`` ends it."""

@@ -70,7 +70,8 @@ class Recorder:
         self.dir = Path(out_dir)
         if os.path.lexists(self.dir / META_FILE):
             raise SpecError("out", str(self.dir),
-                            "a new or empty directory (an existing recording is never overwritten)")
+                            "a new or empty directory "
+                            "(an existing recording is never overwritten)")
         if self.dir.exists() and not self.dir.is_dir():
             raise SpecError("out", str(self.dir), "a directory path")
         for name in (RAW_FILE, SAMPLES_FILE, EVENTS_FILE):  # a link would write elsewhere
@@ -219,7 +220,8 @@ class BridgeRecording:
                                "gaps": [g._asdict() for g in self.gaps]})
 
 
-RECORDING_ACCEPTED = "a directory written by `snn-antenna record` (meta.json, samples.bin, raw.bin)"
+RECORDING_ACCEPTED = ("a directory written by `snn-antenna record` "
+                      "(meta.json, samples.bin, raw.bin)")
 MAX_META_BYTES = 16 << 20               # a meta.json holds counts and link events: kilobytes
 MAX_EVENTS_BYTES = 16 << 20
 LINK_EVENTS = ("opened", "lost", "reconnected", "failed", "end")

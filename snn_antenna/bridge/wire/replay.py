@@ -1,8 +1,9 @@
 """Replay a recording through the same decoder and handlers as a live port.
 
 :class:`ReplaySource` reads ``raw.bin`` (every byte the port delivered) and offers the same
-``start / get / stop / counts`` interface as :class:`~snn_antenna.bridge.wire.source.SerialSource`, so
-:func:`~snn_antenna.bridge.wire.source.run_source` drives either. Decoding the raw bytes again, with a
+``start / get / stop / counts`` interface as :class:`~snn_antenna.bridge.wire.source.SerialSource`,
+so :func:`~snn_antenna.bridge.wire.source.run_source` drives either. Decoding the raw bytes again,
+with a
 resync wherever the recorder saw the port (re)open, and a new board session wherever the live
 decoder began one by the arrival times of the bytes (which a replay has not), must reproduce the
 recorded samples, sessions and counts exactly: replay doubles as a check of a recording.

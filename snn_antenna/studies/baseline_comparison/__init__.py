@@ -180,7 +180,8 @@ def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fre
     bank = parts.bank
     if bank is None:
         return []
-    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event ({', '.join(bank.bands)})"
+    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event "
+        f"({', '.join(bank.bands)})"
         f", Brian2 {bank.target}, {bank.batch_events} events per chunk")
     with executor(parts.plan.workers, scheduler, log) as client:
         spikes = cached_features(data, bank, parts.bench, log, fresh, client)

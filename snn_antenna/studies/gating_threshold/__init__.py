@@ -3,7 +3,8 @@
 Every read-out is blind: the preprocessing chain is fitted once on a separate calibration
 drive without posts (``calibrated_chain``), the coder's Th is fixed or comes from the speed
 command only, and the array and detector see only the coded signal
-(``readout.detection.BlindReadOut``); detections are scored against the labelled contacts afterwards.
+(``readout.detection.BlindReadOut``); detections are scored against the labelled contacts
+afterwards.
 
 Stages (each prints a progress line):
 
@@ -201,7 +202,8 @@ class Evaluation:
 
     def add_adaptive(self, slots) -> None:
         """Submit the lookup table's and the gate's codings (Th from the speed command)."""
-        entries = [(slot, i, *scene) for slot in slots for i, scene in enumerate(self.scenes[slot])]
+        entries = [(slot, i, *scene) for slot in slots
+                   for i, scene in enumerate(self.scenes[slot])]
         speed_cols = np.stack([rec.meta["speed_cm_s"] for _, _, rec, _, _ in entries], axis=1)
         gated_th = self.parts.gate.thresholds(speed_cols, self.parts.scene.rate_hz)
         lookup_th = self.recall.table(speed_cols)

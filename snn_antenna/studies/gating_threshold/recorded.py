@@ -50,7 +50,8 @@ def score_drives(parts, drives, fixed_th: np.ndarray, sweep_th: float, recall, c
     chain = make_chain(drives.rate_hz, drives.adc_bits, drives.full_scale_g,
                        **parts.preprocess).fit(calibration.samples)
     coder = chain.named_steps["coder"]
-    log(f"      recorded drives: {len(scored)} scored ({sum(len(r.truth.contacts) for r in scored)}"
+    log(f"      recorded drives: {len(scored)} scored "
+        f"({sum(len(r.truth.contacts) for r in scored)}"
         f" labelled contacts), the chain fitted on {calibration.meta['source']}")
     items, keys = [], []
     fixed = np.unique(np.r_[fixed_th, sweep_th])

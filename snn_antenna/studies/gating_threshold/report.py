@@ -174,7 +174,8 @@ def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
              "detection (true or false positive, duplicate, detection of an out-of-band "
              "contact) is scored against the labelled contacts afterwards.")
     rep.table([{"scenes": r["scenes"], "contacts scored": r["contacts scored"],
-                **{k: table_cell(v) for k, v in r.items() if k not in ("scenes", "contacts scored")}}
+                **{k: table_cell(v) for k, v in r.items()
+                   if k not in ("scenes", "contacts scored")}}
                for r in s["per_category"]],
               "Per scene type: mean over seeds (95 % CI); differences paired by seed")
     if s.get("coders"):

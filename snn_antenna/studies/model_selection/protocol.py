@@ -84,7 +84,8 @@ def choose(physics: str, points: list[dict]) -> dict:
             "grid": sorted([p["strength"] for p in points] + unreadable),
             "unreadable": unreadable,
             "residual": residual(best, targets), "point": best, "loto": loto,
-            "calibrated": meets_calibration(best), "criteria_met": met, "n_met": sum(met.values()), "shortfall": shortfall(best)}
+            "calibrated": meets_calibration(best), "criteria_met": met,
+            "n_met": sum(met.values()), "shortfall": shortfall(best)}
 
 
 def criteria(point: dict) -> dict:

@@ -71,7 +71,7 @@ def write_report(report: Report, summary: dict) -> None:
         row = {"candidate": name, "free constant": f"strength {c['strength']:g}",
                "calibration residual": c["residual"],
                "meets its calibration": "yes" if c["calibrated"] else "no"}
-        for quantity, (paper, bound, _, what) in PREDICTIONS.items():
+        for quantity, (paper, _bound, _, what) in PREDICTIONS.items():
             v = value(p, quantity) * _scale(quantity)
             interval, note = (None, "one data set, pooled over seeds") \
                 if quantity not in p["per_seed"] else seed_interval(p["per_seed"][quantity],

@@ -11,7 +11,8 @@ recommendation per scene, and the stability map (method × k·dt × drive).
 Stages: workloads → references → main sweep → cost sweep → stability map → bench bands
 (``evaluation.bands``: each band of the bench's spiking read-out before and at a setting inside
 the accurate range, against the reference, with its cost) → the sweep engine's float precision
-(``precision``: float32 against float64 on a tuning grid, with a rounding baseline) → report. Settings
+(``precision``: float32 against float64 on a tuning grid, with a rounding baseline) → report.
+Settings
 loop in this process (``engine.devices``): timing needs the machine to itself, and the knobs
 (method, target, dtype) are build settings rather than the numeric axes of a sweep grid.
 Finished runs are kept in ``OUT/runs.jsonl`` (``engine.runlog``): an interrupted run resumes.

@@ -52,7 +52,8 @@ def _provenance_rows(report: Report, summary: dict) -> None:
                 "" if supported else "; NOT supported by this run's map, which finds a "
                 "lower limit: the shipped value must come down")))
     if unchecked:
-        report.text(f"Shipped stability limits not checked by this quick run ({', '.join(unchecked)}): "
+        report.text("Shipped stability limits not checked by this quick run "
+                    f"({', '.join(unchecked)}): "
                     "its map's k·dt grid is too coarse to reach them, so they are not listed "
                     "under 'Calibrated to'; the full profile's map sets and checks them.")
     d = summary["shipped_default"]
@@ -154,7 +155,8 @@ def bands_section(report: Report, bands: dict, smap) -> None:
         report.table([{c: r.get(c) for c in BAND_COLS} for r in b["rows"]],
                      f"{name} band: before, each method from its accurate step to coarser "
                      "ones, chosen")
-        cut = "; ".join(f"{t['window_s']:g} s: {fmt(t['rate_map_error'])}" for t in b["truncation"])
+        cut = "; ".join(f"{t['window_s']:g} s: {fmt(t['rate_map_error'])}"
+                        for t in b["truncation"])
         report.text(f"{b['apply']}. A shorter window would cost this rate-map error even with "
                     f"exact integration (reference spikes after it): {cut}.")
         if "tuning" in b:
@@ -201,5 +203,6 @@ def quick_note(sweep, stab: StabilityGrid) -> str:
         note += (f"; {', '.join(missing)} {'is' if len(missing) == 1 else 'are'} not in the "
                  f"quick sweep, so a recommendation here is only the best of these")
     return note + (f". The stability map has {stab.n_k_dt} k·dt steps × {len(stab.drives)} "
-                   f"drives (the full map {StabilityGrid.n_k_dt} × {len(StabilityGrid().drives)}): "
+                   f"drives (the full map {StabilityGrid.n_k_dt} × "
+                   f"{len(StabilityGrid().drives)}): "
                    f"its limits are grid points, not the shipped ones.")
