@@ -32,7 +32,7 @@ matplotlib.use("Agg")  # tests never open windows
 # the properties that take the profile's count, and the slow-marked ones always use it.
 _PROFILE_COMMON = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow,
                                                              HealthCheck.function_scoped_fixture])
-settings.register_profile("suite", max_examples=100, derandomize=True, **_PROFILE_COMMON)
+settings.register_profile("suite", max_examples=40, derandomize=True, **_PROFILE_COMMON)
 settings.register_profile("slow", max_examples=10_000, **_PROFILE_COMMON)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "suite"))
 

@@ -40,8 +40,8 @@ def assert_recorded_exactly(rec, log):
     assert rec.complete and len(rec.gaps) == rec.counts["gaps"]
 
 
-@pytest.mark.parametrize("boot_frames, start_seq", [(True, 64_000), (False, 64_000),
-                                                   (False, 40_000)])
+@pytest.mark.parametrize("boot_frames, start_seq", [
+    (True, 64_000), pytest.param(False, 64_000, marks=pytest.mark.slow), (False, 40_000)])
 def test_board_resets_over_a_pty_are_restarts_never_loss_or_duplicates(tmp_path, boot_frames,
                                                                        start_seq):
     """Three resets of a board whose count starts at 64,000 (it wraps first) or 40,000 (its

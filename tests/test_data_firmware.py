@@ -156,6 +156,7 @@ def test_the_baseline_comparison_on_firmware_recordings_agrees_with_the_generate
 
 
 @needs_simavr
+@pytest.mark.slow
 def test_a_drive_through_the_firmware_is_the_quickstarts_scene_sample_for_sample(tmp_path):
     """The quickstart's scene streamed by the firmware, recorded, labelled from the emulator's
     log and imported as a drive: the study reads the board's counts and the scene's contacts."""

@@ -44,6 +44,7 @@ def site(tmp_path_factory) -> Path:
     return out / "html"
 
 
+@pytest.mark.slow    # a minute of Sphinx: .ci/run builds the site on every submission
 def test_the_site_builds_with_warnings_as_errors(site):
     for page in [
         "index",
@@ -67,6 +68,7 @@ def test_the_site_builds_with_warnings_as_errors(site):
         assert (site / f"{page}.html").is_file(), page
 
 
+@pytest.mark.slow    # a minute of Sphinx: .ci/run builds the site on every submission
 def test_the_api_reference_covers_every_public_module(site):
     modules = {
         ".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__")
@@ -80,6 +82,7 @@ def test_the_api_reference_covers_every_public_module(site):
     assert "k_for_frequency" in text  # members are documented, not just listed
 
 
+@pytest.mark.slow    # a minute of Sphinx: .ci/run builds the site on every submission
 def test_every_guide_image_and_page_link_resolves(site):
     for page in site.rglob("*.html"):
         html = page.read_text()
