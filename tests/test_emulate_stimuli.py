@@ -48,7 +48,10 @@ def test_every_shipped_stimulus_is_listed():
                                          "robot_ramp.toml", "robot_steps.toml"}
 
 
-@pytest.mark.parametrize("stimulus", STIMULI, ids=lambda p: p.stem)
+# the bench set's stimulus is the longest to emulate; the others cover the same path
+@pytest.mark.parametrize("stimulus", [pytest.param(p, marks=pytest.mark.slow)
+                                      if p.name == "bench.toml" else p for p in STIMULI],
+                         ids=lambda p: p.stem)
 def test_emulate_streams_the_stimulus(stimulus, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)     # a bench's data-set cache goes under ./out/.cache
     log = tmp_path / "emu.json"

@@ -137,6 +137,7 @@ def ask(page, label, value, button: str, shown: str) -> None:
     page.get_by_role("button", name=button).click()
     page.get_by_text(shown).wait_for(timeout=30_000)
 
+@pytest.mark.slow    # the page's Th and pause are also driven by test_live_page_chromium.py
 def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
     counts = two_contacts()
     with streamed_page(tmp_path, counts, ["--network", NETWORK, "--set",
