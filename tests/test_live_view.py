@@ -193,7 +193,7 @@ def stream_from_emulator(tmp_path, counts, name, view: bool):
     return load_recording(tmp_path / name), report, emulator.log.written
 
 
-@pytest.mark.slow    # a stalled page for many seconds; the view process's own counts are tested fast
+@pytest.mark.slow    # a page stalled for seconds; the view process's counts are tested fast
 def test_a_stalled_or_closed_page_loses_no_sample(tmp_path, scene_counts):
     """With --view and a frozen, a closed and a half-open client, the recording holds every
     frame the emulator wrote, exactly as a recording without --view does (the slow test below

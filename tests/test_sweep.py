@@ -264,7 +264,7 @@ def _profiler_callbacks(dask_worker):
     return sorted(name for name in dask_worker.periodic_callbacks if name.startswith("profile"))
 
 
-@pytest.mark.slow    # Dask's local cluster: tests/test_cluster.py and test_event_engine.py run it too
+@pytest.mark.slow    # a local Dask cluster: test_cluster.py and test_event_engine.py run one too
 def test_dask_local_cluster_gives_the_single_process_numbers(tmp_path):
     from snn_antenna.engine.executor import dask_client
 
