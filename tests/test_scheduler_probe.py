@@ -88,7 +88,9 @@ def test_a_malformed_address_is_refused_before_any_connection(address):
 
 
 def test_no_scheduler_given_passes():
-    probe_scheduler(None)
+    assert probe_scheduler(None) is None
+    with pytest.raises(SpecError):          # while any address given is probed
+        probe_scheduler("tcp://", SHORT_PROBE_S)
 
 
 @pytest.fixture(scope="module")
