@@ -53,7 +53,8 @@ def first_phase(args):
     prepared (locked) output folder and the options."""
     from .core import spec as specs
     from .engine.spec_rules import check_spec
-    from .studies.contract import Options, refused_options
+    from .core.files import cache_root
+    from .studies.contract import Options, cache_folder, refused_options
 
     options = Options(**{f.name: getattr(args, f.name) for f in dataclasses.fields(Options)})
     spec = specs.load(args.spec, args.set, quick=args.quick)
@@ -74,6 +75,8 @@ def first_phase(args):
     folder = outputs.prepare(out, study, force=options.force, fresh=options.fresh)  # locked
     try:
         check_names(folder)
+        if uses_standalone(spec):
+            cache_folder("SNN_ANTENNA_CACHE", cache_root())
         check_cost(plan, options)
     except BaseException:
         outputs.release(folder)
@@ -86,6 +89,17 @@ def first_phase(args):
 WRITTEN_NAMES = ("report.html", "summary.json", "run.log", "runs.jsonl", "predictions.json")
 WRITTEN_SUFFIXES = (".png", ".zarr")
 ROOM_IN_OUT = 160       # bytes below --out the deepest file a run writes needs (stores' chunks)
+
+
+def uses_standalone(spec) -> bool:
+    """Whether any part of the resolved spec runs on Brian2's standalone target (its compiled
+    projects are kept in the toolkit's cache, which the run must be able to create)."""
+    if isinstance(spec, dict):
+        return ("standalone" in (spec.get("target"), spec.get("engine"))
+                or any(map(uses_standalone, spec.values())))
+    if isinstance(spec, list):
+        return any(map(uses_standalone, spec))
+    return False
 
 
 def check_out(out: Path) -> None:
@@ -109,15 +123,14 @@ def check_names(folder) -> None:
     """No file of the user's where the run will write one of its own."""
     import os
 
+    from .core.files import not_ours
+
     if not folder.path.is_dir():
         return
     ours = folder.listed | folder.replace
     for name in sorted(os.listdir(folder.path)):
         if name not in ours and (name in WRITTEN_NAMES or name.endswith(WRITTEN_SUFFIXES)):
-            raise SpecError("--out", str(folder.path),
-                            f"a folder where snn-antenna may write {name}; that name is a file "
-                            "of yours there, which it never overwrites: move it, or choose "
-                            "another --out")
+            raise not_ours(folder.path, name)
 
 
 def check_cost(plan, options) -> None:

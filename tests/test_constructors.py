@@ -11,6 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from snn_antenna.core.bounds import MAX_SEED
+from snn_antenna.evaluation.accuracy import StabilityGrid
+from snn_antenna.evaluation.bands import BandStudy
 from snn_antenna.core.errors import SpecError
 from snn_antenna.networks.control import ControlLayer, MaterialUnit
 from snn_antenna.networks.cpg import CPG
@@ -72,6 +74,10 @@ CASES = [
                           "extreme_min_interval_ms": "nonnegative",
                           "extreme_min_fraction": "nonnegative"}),
     (CourseLayout, {}, {"spacing_cm": "positive"}),
+    (StabilityGrid, {}, {"k_dt_min": "positive", "n_k_dt": "count", "model_ms": "positive",
+                         "rate_tolerance": "positive"}),
+    (BandStudy, {}, {"repetitions": "count", "duration_s": "positive",
+                     "tuning_duration_s": "positive"}),
     (_fit_nmf, {}, {"max_iter": "count", "max_fit_samples": "count",
                     "random_state": "seed"}),
 ]
@@ -91,6 +97,19 @@ BAD = {
     "count": st.integers(max_value=0) | NON_FINITE | st.floats(0.5, 1e6).filter(
         lambda v: v != int(v)),
 }
+
+
+@pytest.mark.parametrize("make, name, value", [
+    (Tuning, "range_hz", []), (Tuning, "range_hz", [80.0]), (Tuning, "range_hz", [0.0, 450.0]),
+    (Tuning, "range_hz", [450.0, 80.0]), (Tuning, "range_hz", ["80", 450.0]),
+    (StabilityGrid, "drives", []), (StabilityGrid, "drives", [1.0, math.nan]),
+    (StabilityGrid, "k_dt_max", 0.001), (BandStudy, "materials", []),
+    (BandStudy, "materials", ["granite"]), (BandStudy, "positions_cm", "10"),
+    (BandStudy, "positions_cm", [10.0, 80.0]), (BandStudy, "methods", "rk4"),
+])
+def test_lists_and_ranges_are_refused_by_name(make, name, value):
+    err = _refused(make, {}, name, value)
+    assert name in err.field and "\n" not in str(err), (name, value, err.field)
 
 
 def _refused(make, given_, name, value) -> SpecError:

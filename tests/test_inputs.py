@@ -265,3 +265,14 @@ def test_values_past_pythons_limits_are_one_line(tmp_path, capsys, text, accepte
     line = refused(capsys, ["run", QUICKSTART, "--quick", "--check", "--out",
                             str(tmp_path / "o"), "--set", f"network.b={text}"], "network.b")
     assert accepted in line and len(line) < 400
+
+
+def test_a_standalone_cache_that_cannot_be_made_is_refused_at_check(tmp_path, capsys,
+                                                                     monkeypatch):
+    blocker = tmp_path / "cache"
+    blocker.write_text("mine")
+    monkeypatch.setenv("SNN_ANTENNA_CACHE", str(blocker / "snn_antenna"))
+    first_phase_refuses(capsys, monkeypatch, [
+        "run", "studies/tuning_sweep.toml", "--out", str(tmp_path / "o")],
+        "SNN_ANTENNA_CACHE", "is a file")
+    assert blocker.read_text() == "mine"

@@ -192,6 +192,9 @@ def is_staging(name: str, of: str | None = None) -> bool:
 
 
 # -- write-ahead journals -----------------------------------------------------------------------
+YOURS = "that name is a file of yours there"
+
+
 class Journal:
     """The top-level entries of ``folder`` the toolkit owns, by identity.
 
@@ -252,7 +255,7 @@ class Journal:
         elif os.path.lexists(entry):
             raise self._not_ours(name, "a run that was killed left it unfinished, so it may "
                                        "hold what is not snn-antenna's" if name in self.unfinished
-                                 else "that name is a file of yours there")
+                                 else YOURS)
         else:
             self.names[name] = None
         self.on_change(self.entries())
@@ -298,10 +301,14 @@ class Journal:
         self.owned = {n: i for n, i in self.owned.items() if os.path.lexists(self.folder / n)}
 
     def _not_ours(self, name: str, why: str) -> SpecError:
-        return SpecError("--out", str(self.folder),
-                         f"a folder where snn-antenna may write {name}; {why}, and it is "
-                         "never overwritten, appended to or removed: move it, or choose "
-                         "another --out")
+        return not_ours(self.folder, name, why)
+
+
+def not_ours(folder: Path, name: str, why: str = YOURS) -> SpecError:
+    """The refusal of an output folder where ``name`` is not the toolkit's to write."""
+    return SpecError("--out", str(folder),
+                     f"a folder where snn-antenna may write {name}; {why}, and it is never "
+                     "overwritten, appended to or removed: move it, or choose another --out")
 
 
 _journals: list[Journal] = []
@@ -351,6 +358,12 @@ def refuse_symlink(path: str | Path, what: str = "file") -> Path:
                         f"{os.readlink(path)}), which snn-antenna never follows when writing, "
                         "replacing or removing: remove the link or choose another --out")
     return path
+
+
+def cache_root() -> Path:
+    """The toolkit's own cache (compiled Brian2 standalone projects): ``SNN_ANTENNA_CACHE``,
+    by default ``~/.cache/snn_antenna``."""
+    return Path(os.environ.get("SNN_ANTENNA_CACHE", Path.home() / ".cache" / "snn_antenna"))
 
 
 def make_folder(path: str | Path) -> Path:

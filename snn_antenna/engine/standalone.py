@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.errors import NumericalInstabilityError
-from ..core.files import atomic_write, lock_folder, make_folder
+from ..core.files import atomic_write, cache_root, lock_folder, make_folder
 from ..networks import neurons
 
 # One compiled standalone project per process (Brian2's device is process-global); a worker
@@ -31,8 +31,7 @@ _PROJECT: dict = {}
 def _standalone_dir(key: str) -> tuple[Path, int]:
     """A project directory this process holds alone (the folder's own lock, per slot), kept
     across runs so an unchanged model is not recompiled next time."""
-    base = Path(os.environ.get("SNN_ANTENNA_CACHE", Path.home() / ".cache" / "snn_antenna"))
-    base = make_folder(base / "brian2_standalone")
+    base = make_folder(cache_root() / "brian2_standalone")
     for slot in range(1024):
         directory = make_folder(base / f"{key}-{slot}")
         lock = lock_folder(directory)

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..core.errors import check
 from ..networks import neurons, reference
 from ..networks.resonators import rate_map
@@ -341,6 +342,17 @@ class StabilityGrid:
         50])
     model_ms: float = 400.0
     rate_tolerance: float = 0.05
+
+    def __post_init__(self):
+        low = bounds.number("k_dt_min", self.k_dt_min, 0.0, lo_open=True)
+        bounds.number("k_dt_max", self.k_dt_max, low, lo_open=True)
+        bounds.integer("n_k_dt", self.n_k_dt, 2, 1000)
+        check(isinstance(self.drives, list) and 1 <= len(self.drives) <= 1000, "drives",
+              self.drives, "a list of 1 to 1000 constant drives")
+        for i, drive in enumerate(self.drives):
+            bounds.amplitude(f"drives.{i}", drive)
+        bounds.number("model_ms", self.model_ms, 0.0, lo_open=True, unit=" ms")
+        bounds.number("rate_tolerance", self.rate_tolerance, 0.0, 1.0, lo_open=True)
 
     def map(self, methods, b: float | None = None) -> xr.Dataset:
         return stability_map(methods, np.geomspace(self.k_dt_min, self.k_dt_max, self.n_k_dt),

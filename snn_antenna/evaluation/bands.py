@@ -27,12 +27,13 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from ..core import calibration
+from ..core import bounds, calibration
 from ..core.errors import NumericalInstabilityError, check, is_number
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
 from .accuracy import rate_map_error, spike_count_error, spike_time_error_ms
 from ..readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
+from ..sources import antenna
 
 # Largest k·dt (model ms per step) up to which every constant drive of the full stability map
 # (``accuracy.StabilityGrid().map``: 25 k·dt over 0.01-50, 20 drives in [-50, 50]) kept its
@@ -362,12 +363,29 @@ class BandStudy:
     target: str = "cython"
 
     def __post_init__(self):
+        for name in ("bands", "calibrate", "methods", "windows_s"):
+            check(isinstance(getattr(self, name), list), name, getattr(self, name), "a list")
         for name in self.bands + self.calibrate:
             check(name in BENCH_BANDS, "bands", name, f"names from {list(BENCH_BANDS)}")
         for m in self.methods:
             check(m in ACCURATE_K_DT, "methods", self.methods, f"names from {list(ACCURATE_K_DT)}")
         check(isinstance(self.n_freqs, int) and self.n_freqs >= 4, "n_freqs", self.n_freqs,
               "an integer >= 4")
+        check(isinstance(self.materials, list) and self.materials, "materials",
+              self.materials, "a non-empty list of material names")
+        for i, material in enumerate(self.materials):
+            check(material in antenna.MATERIALS, f"materials.{i}", material,
+                  f"one of {sorted(antenna.MATERIALS)}")
+        check(isinstance(self.positions_cm, list) and self.positions_cm, "positions_cm",
+              self.positions_cm, "a non-empty list of contact distances (cm)")
+        for i, distance in enumerate(self.positions_cm):
+            bounds.number(f"positions_cm.{i}", distance, 0.0, antenna.ROD_LENGTH_CM,
+                          lo_open=True, hi_open=True, unit=" cm")
+        bounds.integer("repetitions", self.repetitions, 1, 1000)
+        bounds.integer("coarser_steps", self.coarser_steps, 0, 20)
+        bounds.number("duration_s", self.duration_s, 0.0, 60.0, lo_open=True, unit=" s")
+        bounds.number("tuning_duration_s", self.tuning_duration_s, 0.0, 60.0, lo_open=True,
+                      unit=" s")
 
     def freqs_hz(self, band: Band, rate_hz: float) -> np.ndarray:
         lo = band.band_hz[0] / self.freq_margin

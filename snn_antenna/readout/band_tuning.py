@@ -71,8 +71,8 @@ class Tuning:
               and self.n_resonators % self.n_channels == 0, "n_resonators",
               self.n_resonators, f"a multiple of per_channel ({self.per_channel}) that "
                                  f"{self.max_channels} channels share evenly when it fills more")
-        lo, hi = (float(x) for x in self.range_hz)
-        check(0 < lo < hi, "range_hz", self.range_hz, "[low, high] in Hz, 0 < low < high")
+        lo, hi = bounds.pair("range_hz", self.range_hz, strict=True, unit=" in Hz")
+        check(lo > 0, "range_hz", self.range_hz, "[low, high] in Hz, 0 < low < high")
         check(is_number(self.quantile) and 0 <= self.quantile < 1, "quantile",
               self.quantile, "a fraction in [0, 1)")
         check(is_number(self.max_k_dt) and self.max_k_dt > 0, "max_k_dt", self.max_k_dt,

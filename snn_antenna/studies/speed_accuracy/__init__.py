@@ -51,7 +51,7 @@ from ...evaluation.bands import BENCH_BANDS, BandStudy
 from ...evaluation.bands import run_study as run_band_study
 from ...readout.contacts import detector_from_spec
 from ...report.page import Report
-from ...sources import antenna, recorded
+from ...sources import recorded
 from ...sources.scenes import scene_from_spec
 from ...sources.stimuli import RobotScene
 from ...core.store import write_dataset
@@ -180,44 +180,10 @@ def plan(spec: dict) -> Plan:
             parts[name] = cls(**specs.check_section(spec, name, cls))
     with specs.section("tuning"):        # one neuron per array neuron and frequency
         bounds.integer("n_freqs", parts["tuning"].n_freqs, 2, 10_000)
-    with specs.section("stability"):
-        _check_stability(parts["stability"])
-    with specs.section("bands"):
-        _check_bands(parts["bands"])
     for scene in robot_scenes.values():
         array.check_rate(scene.rate_hz)
     return Plan("speed_accuracy", spec,
                 Parts(net, robot_scenes, pre, detector, window_s, **parts), estimate)
-
-
-def _check_stability(grid: StabilityGrid) -> None:
-    """What the stability map's grid is made of (sized by the estimate, run by stage 5)."""
-    low = bounds.number("k_dt_min", grid.k_dt_min, 0.0, lo_open=True)
-    bounds.number("k_dt_max", grid.k_dt_max, low, lo_open=True)
-    bounds.integer("n_k_dt", grid.n_k_dt, 2, 1000)
-    check(isinstance(grid.drives, list) and 1 <= len(grid.drives) <= 1000, "drives",
-          grid.drives, "a list of 1 to 1000 constant drives")
-    for i, drive in enumerate(grid.drives):
-        bounds.amplitude(f"drives.{i}", drive)
-    bounds.number("model_ms", grid.model_ms, 0.0, lo_open=True, unit=" ms")
-
-
-def _check_bands(study: BandStudy) -> None:
-    """The bench bands' sample events and steps (sized by the estimate, run by stage 6)."""
-    check(isinstance(study.materials, list) and study.materials, "materials",
-          study.materials, "a non-empty list of material names")
-    for material in study.materials:
-        antenna.check_material(material)
-    check(isinstance(study.positions_cm, list) and study.positions_cm, "positions_cm",
-          study.positions_cm, "a non-empty list of contact distances (cm)")
-    antenna.check_distance(study.positions_cm)
-    bounds.integer("repetitions", study.repetitions, 1, 1000)
-    bounds.integer("coarser_steps", study.coarser_steps, 0, 20)
-    check(isinstance(study.methods, list) and isinstance(study.windows_s, list), "methods",
-          study.methods, "a list of method names (and windows_s a list of windows)")
-    bounds.number("duration_s", study.duration_s, 0.0, 60.0, lo_open=True, unit=" s")
-    bounds.number("tuning_duration_s", study.tuning_duration_s, 0.0, 60.0, lo_open=True,
-                  unit=" s")
 
 
 def estimate(parts: Parts):
