@@ -58,6 +58,16 @@ EXTRA_TABLES: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
             ("mean", "sd", "n_seeds"),
         ),
         ("Distance rmse per read-out (mm)", "/distance_rmse_mm", ("mean", "sd", "n_seeds")),
+        (
+            "Spiking read-outs against the full-spectrum MLP on the same splits",
+            "/spiking/against_fft",
+            ("neurons", "accuracy", "fraction_interval"),
+        ),
+        (
+            "The tuned bank by size, first split (accuracy, cost per contact in µs)",
+            "/spiking/tuned/curve",
+            ("n", "channels", "spiking", "nmf", "fft_mlp", "wall_us_per_event"),
+        ),
     ],
     "gating_threshold": [
         ("F1 on new scenes, mean over seeds", "/f1", ("mean", "low", "high", "n")),
@@ -167,14 +177,10 @@ def _extra_tables(summary: dict, run: str, study: str) -> list[str]:
     for title, ptr, columns in EXTRA_TABLES.get(study, []):
         try:
             entries = resolve(summary, ptr)
-        except (KeyError, IndexError, ValueError):
+        except (KeyError, IndexError, ValueError, TypeError):
             continue
-        rows = [
-            [_text(name)] + [_cell(entry.get(c), run, ptr + pointer(name, c)) for c in columns]
-            for name, entry in entries.items()
-            if isinstance(entry, dict)
-        ]
-        lines += [f"**{title}**", "", *_table(("", *columns), rows)]
+        if isinstance(entries, (dict, list)) and entries:
+            lines += _rows_table(title, entries, run, ptr, columns)
     return lines
 
 
@@ -238,13 +244,19 @@ def _value_cell(value: Any, run: str, ptr: str) -> str:
     return _cell(value, run, ptr)
 
 
-def _rows_table(title: str, rows: dict | list, run: str, ptr: str) -> list[str]:
-    """A table of a list of mappings (one row each) or a mapping of mappings (row names)."""
+def _rows_table(
+    title: str, rows: dict | list, run: str, ptr: str, columns: tuple[str, ...] = ()
+) -> list[str]:
+    """A table of a list of mappings (one row each) or a mapping of mappings (row names), of
+    the given columns (by default every key a row has)."""
     named = isinstance(rows, dict)
-    items = list(rows.items()) if named else list(enumerate(rows))
-    columns: list[str] = []
-    for _, row in items:
-        columns += [k for k in row if k not in columns]
+    items = [
+        (k, v) for k, v in (rows.items() if named else enumerate(rows)) if isinstance(v, dict)
+    ]
+    if not columns:
+        columns = []
+        for _, row in items:
+            columns += [k for k in row if k not in columns]
     body = [
         ([_text(name)] if named else [])
         + [_value_cell(row[c], run, ptr + pointer(name, c)) if c in row else "" for c in columns]
@@ -515,6 +527,14 @@ def adopt_output(path: Path, command: str) -> dict:
     return {"command": command, "stdout": text, "provenance": prov}
 
 
+def _bench_name(path: Path, record: dict) -> str:
+    """The name a benchmark's output is stored and cited under: its script's
+    (``benchmarks/NAME.py`` in its command), so the page's sections keep their anchors
+    whatever the output file was called."""
+    found = re.search(r"benchmarks/(\w+)\.py", record["provenance"]["command"])
+    return found.group(1) if found else path.stem
+
+
 def _shown(path: Path) -> str:
     """``path`` as the page names it: relative to the folder the command runs in (the
     repository), so the page reads the same on every checkout."""
@@ -535,7 +555,9 @@ def make_page(
     cited = collect(runs, store)
     stored_benches = []
     for path, record in records:
-        target = store / f"{path.stem}.json"
+        target = store / f"{_bench_name(path, record)}.json"
+        if target in stored_benches:
+            raise SpecError("--bench", str(path), f"one output per benchmark ({target.stem})")
         if path.resolve() != target.resolve():
             atomic_write(target, json.dumps(record, indent=1, default=float) + "\n")
         stored_benches.append(target)
