@@ -254,3 +254,15 @@ def test_the_scan_finds_a_measured_number():
         "7.5x",
         "82.0 %",
     ]
+
+
+def test_every_section_the_pages_cite_is_on_the_results_page():
+    """Pages cite a section of the results page by its label; one the page lacks would fail the
+    site's build (slow), so it is checked here without Sphinx."""
+    labels = set(re.findall(r"^\(run-([\w.-]+)\)=$", PAGE.read_text(), re.M))
+    cited = set()
+    for page in (ROOT / "docs").rglob("*.md"):
+        cited |= set(re.findall(r"<run-([\w.-]+)>`", page.read_text()))
+    assert cited and cited <= labels, f"cited but not on the page: {sorted(cited - labels)}"
+    studies = {p.stem for p in (ROOT / "studies").glob("*.toml")} - {"model_selection"}
+    assert studies <= labels, f"studies without a run on the page: {sorted(studies - labels)}"
