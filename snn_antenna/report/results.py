@@ -69,6 +69,43 @@ EXTRA_TABLES: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
             ("n", "channels", "spiking", "nmf", "fft_mlp", "wall_us_per_event"),
         ),
     ],
+    "speed_accuracy": [
+        (
+            "Recommended settings (each criterion and scene)",
+            "/recommendations",
+            (
+                "criterion",
+                "scene",
+                "method",
+                "dt_ms",
+                "target",
+                "dtype",
+                "cpu_s",
+                "rate_map_error",
+                "spike_time_error_ms",
+                "speedup_vs_reference",
+            ),
+        ),
+        (
+            "Largest stable and accurate k·dt per method (stability map)",
+            "/stability_limits",
+            ("shipped_max_stable_k_dt", "measured_max_stable_k_dt", "measured_max_accurate_k_dt"),
+        ),
+        (
+            "float32 against float64 on a tuning grid (the precision stage)",
+            "/precision/rows",
+            (
+                "dtype",
+                "engine",
+                "n_points",
+                "ns_per_neuron_step",
+                "spike_count_error",
+                "same_count_share",
+                "max_count_diff",
+                "within_tolerance",
+            ),
+        ),
+    ],
     "gating_threshold": [
         ("F1 on new scenes, mean over seeds", "/f1", ("mean", "low", "high", "n")),
         (
@@ -297,7 +334,7 @@ def bench_section(record: dict, run: str, file: str) -> list[str]:
     extra = f"; load average {load[0]:.2f} when it started" if load else ""
     if prov.get("provenance_added"):
         extra += f" ({_text(prov['provenance_added'])})"
-    lines = [f"### {run.replace('_', ' ')}", "", *_source(run, file, prov, extra)]
+    lines = [f"### `{run}`", "", *_source(run, file, prov, extra)]
     if isinstance(record.get("data"), dict):
         lines += bench_values(record["data"], run, "/data")
     elif "stdout" in record:
