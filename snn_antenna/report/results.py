@@ -307,7 +307,7 @@ def bench_values(values: dict, run: str, root: str = "") -> list[str]:
     """A benchmark's measured values as tables, every number linked to its source."""
     lines, single = [], []
     for key, value in values.items():
-        if key in BENCH_CONTEXT:
+        if key in BENCH_CONTEXT or value in ([], {}, None):
             continue
         ptr = root + pointer(key)
         title = key.replace("_", " ")
