@@ -281,11 +281,17 @@ def _value_cell(value: Any, run: str, ptr: str) -> str:
     return _cell(value, run, ptr)
 
 
+#: a table wider than this many columns is shown turned (one column per row) when it has
+#: at most as many rows as :data:`TURN_ROWS`, so it fits the page
+TURN_COLUMNS, TURN_ROWS = 6, 3
+
+
 def _rows_table(
     title: str, rows: dict | list, run: str, ptr: str, columns: tuple[str, ...] = ()
 ) -> list[str]:
     """A table of a list of mappings (one row each) or a mapping of mappings (row names), of
-    the given columns (by default every key a row has)."""
+    the given columns (by default every key a row has). Columns that hold one number in every
+    row are stated once above the table; a wide table of few rows is turned."""
     named = isinstance(rows, dict)
     items = [
         (k, v) for k, v in (rows.items() if named else enumerate(rows)) if isinstance(v, dict)
@@ -294,13 +300,39 @@ def _rows_table(
         columns = []
         for _, row in items:
             columns += [k for k in row if k not in columns]
-    body = [
-        ([_text(name)] if named else [])
-        + [_value_cell(row[c], run, ptr + pointer(name, c)) if c in row else "" for c in columns]
-        for name, row in items
+    lines = [f"**{_text(title)}**", ""]
+    first, row0 = items[0] if items else (None, {})
+    shared = [
+        c
+        for c in columns
+        if len(items) > 2
+        and _is_number(row0.get(c))  # a number, linked and so checked
+        and all(c in row and row[c] == row0[c] for _, row in items)
     ]
-    header = (("",) if named else ()) + tuple(_text(c) for c in columns)
-    return [f"**{_text(title)}**", "", *_table(header, body)]
+    if shared:
+        lines += [
+            "In every row: "
+            + ", ".join(
+                f"{_text(c)} {_value_cell(row0[c], run, ptr + pointer(first, c))}" for c in shared
+            ),
+            "",
+        ]
+    columns = [c for c in columns if c not in shared]
+    cells = {
+        (name, c): _value_cell(row[c], run, ptr + pointer(name, c)) if c in row else ""
+        for name, row in items
+        for c in columns
+    }
+    if named and len(columns) > TURN_COLUMNS and len(items) <= TURN_ROWS:
+        header = ("", *(_text(name) for name, _ in items))
+        body = [[_text(c)] + [cells[name, c] for name, _ in items] for c in columns]
+    else:
+        header = (("",) if named else ()) + tuple(_text(c) for c in columns)
+        body = [
+            ([_text(name)] if named else []) + [cells[name, c] for c in columns]
+            for name, _ in items
+        ]
+    return [*lines, *_table(header, body)]
 
 
 def bench_values(values: dict, run: str, root: str = "") -> list[str]:
