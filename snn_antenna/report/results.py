@@ -363,7 +363,7 @@ def bench_section(record: dict, run: str, file: str) -> list[str]:
     """The page's section of one benchmark: its values as tables, or its output as printed."""
     prov = record["provenance"]
     load = record.get("load_average") or prov.get("load_average")
-    extra = f"; load average {load[0]:.2f} when it started" if load else ""
+    extra = f"; load average {load[0]:.2f} (1 min)" if load else ""
     if prov.get("provenance_added"):
         extra += f" ({_text(prov['provenance_added'])})"
     lines = [f"### `{run}`", "", *_source(run, file, prov, extra)]
