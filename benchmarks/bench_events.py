@@ -14,7 +14,7 @@ chunk). Measured in one run and printed side by side, each with the machine's lo
   ``standalone`` in this process: per neuron-step for the whole run (coding, Brian2, store
   writes) and for Brian2 alone (the compiled binary's runs);
 - ``runtime path``: the same events with target ``cython`` (``neurons.simulate``, one group
-  per chunk with a 2-D input and ``input_index``: the read-out's path before the engine),
+  per chunk with a 2-D input and ``input_index``: the runtime read-out path),
   for the ratio; the spike counts of both paths are compared neuron by neuron;
 - ``whole bench set``: all ``--events`` events on a Dask LocalCluster of ``--workers``
   processes (timed on a second run: cluster start and each worker's compile excluded).
