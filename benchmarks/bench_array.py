@@ -18,6 +18,7 @@ from snn_antenna.networks import neurons
 from snn_antenna.networks.resonators import ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.core.signals import Recording
+from snn_antenna.report.results import write_benchmark_json
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 
@@ -70,6 +71,9 @@ def main():
     ap.add_argument("--neurons", type=int, default=24)
     ap.add_argument("--python-seconds", type=float, default=0.5,
                     help="simulated seconds for the (slow) plain Python loop, scaled up")
+    ap.add_argument("--json", metavar="PATH",
+                    help="also write the measured values and their provenance as JSON "
+                         "(for snn-antenna results)")
     args = ap.parse_args()
 
     rec = RobotScene(duration_s=args.seconds, contacts=[Contact(args.seconds * 0.7, 19.0)]
@@ -109,6 +113,14 @@ def main():
     for name, wall, n_spikes in rows:
         print(f"{name:44s} {wall:8.3f} {args.seconds / wall:11.1f} {wall / steps * 1e9:15.1f} "
               f"{ref / wall:9.2f} {'' if n_spikes is None else n_spikes:>7}")
+    if args.json:
+        write_benchmark_json(args.json, {
+            "neurons": args.neurons, "seconds": args.seconds, "dt_ms": array.dt_ms,
+            "implementations": {
+                name: {"wall_s": wall, "x_real_time": args.seconds / wall,
+                       "ns_per_neuron_step": wall / steps * 1e9, "of_cython": ref / wall,
+                       "spikes": n_spikes}
+                for name, wall, n_spikes in rows}})
 
 
 if __name__ == "__main__":

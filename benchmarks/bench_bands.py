@@ -7,9 +7,9 @@ For each band of the bench's spiking read-out (``evaluation.bands.BENCH_BANDS``)
 (``bands.SMALL_SIGNAL_EULER``: euler 0.1 ms, 24.52 Hz per k), the shipped (``bands.CHOSEN``)
 and the stability map's accurate step for euler and rk4, each against the exact reference
 (``networks.reference``, solve_ivp) at the same Hz per unit k: k·dt, spike-count and
-rate-map error, CPU ms per event and the cost ratio to "before", measured in one run with the
-load average printed. The speed/accuracy study's "bands" section chooses ``CHOSEN``; this
-prints the trade for a reader without the whole study.
+rate-map error, CPU ms per event and the cost ratio to the bank's own setting, measured in
+one run with the load average printed. The speed/accuracy study's "bands" section chooses
+``CHOSEN``; this prints the trade for a reader without the whole study.
 """
 from __future__ import annotations
 
@@ -33,7 +33,7 @@ def main() -> None:
         band, shipped = bands.BENCH_BANDS[name], bands.CHOSEN[name]
         events = bands.code_events(name, band, data, study.duration_s)
         refs = {}   # each setting against the exact solution of the same tuning (Hz per k)
-        settings = [("before", bands.SMALL_SIGNAL_EULER), ("shipped", shipped)] + [
+        settings = [("bank's own", bands.SMALL_SIGNAL_EULER), ("shipped", shipped)] + [
             (f"map-accurate {m}", bands.BandSetting(m, bands.accurate_dt_ms(band, m,
                                                                            shipped.hz_per_k),
                                                     shipped.hz_per_k))

@@ -2,6 +2,7 @@
 
     python benchmarks/bench_events.py [--events 12800] [--workers 2] [--runtime-events 400]
     python benchmarks/bench_events.py --cost-only [--cost-events 400] [--sizes 24 48]
+    ... [--json PATH]   (the measured values with their provenance, for ``snn-antenna results``)
 
 Every event (the real preprocessing chain, 0.5 s at 2 kHz) drives the 24-resonator low band
 at dt 0.1 ms (``engine.events.run_bank``: grid event × neuron, ``batch_events`` events per
@@ -13,7 +14,7 @@ chunk). Measured in one run and printed side by side, each with the machine's lo
   ``standalone`` in this process: per neuron-step for the whole run (coding, Brian2, store
   writes) and for Brian2 alone (the compiled binary's runs);
 - ``runtime path``: the same events with target ``cython`` (``neurons.simulate``, one group
-  per chunk with a 2-D input and ``input_index``: the read-out's path before the engine),
+  per chunk with a 2-D input and ``input_index``: the runtime read-out path),
   for the ratio; the spike counts of both paths are compared neuron by neuron;
 - ``whole bench set``: all ``--events`` events on a Dask LocalCluster of ``--workers``
   processes (timed on a second run: cluster start and each worker's compile excluded).
@@ -54,6 +55,7 @@ from snn_antenna.engine.executor import dask_client  # noqa: E402
 from snn_antenna.engine.sweep import run_sweep  # noqa: E402
 from snn_antenna.readout.spiking import LOW_BAND, SpikingBank  # noqa: E402
 from snn_antenna.readout.events import extraction_cost  # noqa: E402
+from snn_antenna.report.results import write_benchmark_json  # noqa: E402
 from snn_antenna.sources import bench  # noqa: E402
 from snn_antenna.studies import baseline_comparison as study  # noqa: E402
 from snn_antenna.studies.baseline_comparison.tuned import calibration_bands  # noqa: E402
@@ -87,7 +89,7 @@ def timed(bank, counts, attrs, warm_events: int = 2, **kw):
 
 
 def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
-                   repeats: int = 3) -> None:
+                   repeats: int = 3) -> dict:
     """Cost per event of the FFT pipeline and of the tuned spiking bank, measured now, each
     the best of ``repeats`` runs taken in turn (on a shared machine a single run of either
     can land in another process's burst: one such run read the FFT 7x its idle cost)."""
@@ -105,6 +107,9 @@ def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
     print(f"FFT pipeline (onset, spectrum, peaks, decay fits; {n_events} events): best "
           f"{min(fft):8.0f} µs per event of {', '.join(f'{x:.0f}' for x in fft)} ({load()})",
           flush=True)
+    measured = {"fft_pipeline": {"events": n_events, "us_per_event": min(fft),
+                                 "runs_us_per_event": fft, "load_average": os.getloadavg()[0]},
+                "tuned_banks": []}
     fft = min(fft)
     for n, bank in banks.items():
         c = min(spiking[n], key=lambda r: r["features_us_per_event"])
@@ -114,6 +119,14 @@ def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
               f"µs per event = {c['features_us_per_event'] / fft:5.1f}x the FFT pipeline "
               f"({c['neuron_steps_per_event']:.3g} neuron-steps, {c['ns_per_neuron_step']:.1f} "
               f"ns each; {load()})", flush=True)
+        row = {"resonators": n, "channels": len(bank.bands),
+               "contacts_per_run": bank.batch_events,
+               "us_per_event": c["features_us_per_event"],
+               "of_fft": c["features_us_per_event"] / fft,
+               "neuron_steps_per_event": c["neuron_steps_per_event"],
+               "ns_per_neuron_step": c["ns_per_neuron_step"],
+               "load_average": os.getloadavg()[0]}
+        measured["tuned_banks"].append(row)
         if n == plan.curve[0]:
             one = dataclasses.replace(bank, batch_events=1)
             counts = data["counts"].values[ids[:per_contact_events]]
@@ -123,6 +136,10 @@ def spiking_vs_fft(data, n_events: int, sizes, per_contact_events: int = 5,
             print(f"  the same bank, one Brian2 run per contact ({len(counts)} contacts): "
                   f"{per:8.0f} µs per event = {per / c['features_us_per_event']:.2f}x the "
                   f"batched run ({load()})", flush=True)
+            measured["one_run_per_contact"] = {
+                "resonators": n, "contacts": len(counts), "us_per_event": per,
+                "of_batched": per / c["features_us_per_event"]}
+    return measured
 
 
 def main(argv=None) -> int:
@@ -140,12 +157,16 @@ def main(argv=None) -> int:
                     help="events timed for the spiking-vs-FFT cost")
     ap.add_argument("--sizes", type=int, nargs="+", default=[24, 48],
                     help="resonators of the tuned banks timed beside the FFT pipeline")
+    ap.add_argument("--json", metavar="PATH",
+                    help="also write the measured values and their provenance as JSON")
     args = ap.parse_args(argv)
     if args.cost_only:
         data = bench.generate(bench.BenchSpec(repetitions=max(1, -(-args.cost_events // 128)),
                                               n_jobs=2), log=lambda *_: None)
         print(f"# {os.cpu_count()} CPU cores; spiking vs FFT, cost per event")
-        spiking_vs_fft(data, args.cost_events, args.sizes)
+        cost = spiking_vs_fft(data, args.cost_events, args.sizes)
+        if args.json:
+            write_benchmark_json(args.json, {"cpus": os.cpu_count(), **cost})
         return 0
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_events_"))
@@ -193,7 +214,7 @@ def main(argv=None) -> int:
               f"per neuron-step of wall time; Brian2 {f.wall_s:.1f} s summed over the workers "
               f"({1e9 * f.wall_s / f.neuron_steps:.2f} ns per neuron-step) ({load()})", flush=True)
 
-    spiking_vs_fft(data, args.cost_events, args.sizes)
+    cost = spiking_vs_fft(data, args.cost_events, args.sizes)
 
     print("\n## summary (measured in this run)")
     print(f"  event engine / sweep engine, ns per neuron-step: whole run {ns_whole / ref:.2f}x, "
@@ -202,6 +223,17 @@ def main(argv=None) -> int:
           f"({ns_runtime:.2f} vs {ns_whole:.2f} ns per neuron-step)")
     for w, seconds in whole.items():
         print(f"  whole bench set on {w} worker(s): {seconds:.1f} s (aim: <= 8 s)")
+    if args.json:
+        diff_share = float((diff == 0).mean())
+        write_benchmark_json(args.json, {
+            "cpus": os.cpu_count(), "events": len(counts), "sweep_ns_per_neuron_step": ref,
+            "event_engine": {"ns_per_neuron_step": ns_whole, "brian2_ns_per_neuron_step": ns_brian,
+                             "of_sweep": ns_whole / ref},
+            "runtime_path": {"ns_per_neuron_step": ns_runtime, "of_event_engine":
+                             ns_runtime / ns_whole},
+            "counts_equal_share": diff_share,
+            "whole_set": [{"workers": w, "seconds": s} for w, s in whole.items()],
+            **cost})
     return 0
 
 

@@ -54,6 +54,7 @@ from snn_antenna.engine.executor import dask_client
 from snn_antenna.engine.grid import Grid
 from snn_antenna.engine.sweep import run_sweep
 from snn_antenna.networks import neurons
+from snn_antenna.report.results import write_benchmark_json
 
 
 def grid_of(n_points: int, sweep_b: bool = False) -> Grid:
@@ -212,6 +213,9 @@ def main(argv=None) -> int:
                     help="grids over k, b, I and input_hz (b per point), not k, I and input_hz")
     ap.add_argument("--workers", type=int, nargs="*", default=[1, 2],
                     help="Dask worker counts of the scaling rows (none: no scaling rows)")
+    ap.add_argument("--json", metavar="PATH",
+                    help="also write the measured values and their provenance as JSON "
+                         "(for snn-antenna results)")
     args = ap.parse_args(argv)
 
     base = NeuronSweep(duration_s=args.duration_s, settle_s=min(0.25, args.duration_s / 4))
@@ -312,6 +316,7 @@ def main(argv=None) -> int:
         print(f"{r['points']:>9,} points: {r['float32 counts']}; float32 "
               f"{r['standalone32'] / r['standalone']:.2f}x the float64 throughput")
 
+    scaling = []
     if args.workers:
         grid = grid_of(max(args.sizes), args.sweep_b)
         work = grid.size * steps
@@ -334,6 +339,22 @@ def main(argv=None) -> int:
                 print(f"  {dtype}, {w} worker(s): {rate:.3g} neuron-steps/s, "
                       f"{rate / first:.2f}x of 1 worker, {seconds:.1f} s for the grid; load "
                       f"average {before:.1f} before, {load():.1f} after", flush=True)
+                scaling.append({"precision": dtype, "workers": w, "points": grid.size,
+                                "neuron_steps_per_s": rate, "of_first": rate / first,
+                                "seconds": seconds, "load_before": before})
+    if args.json:
+        shown = {}   # per grid: throughputs (neuron-steps/s) and the ratios to the C floor
+        for r in rows:
+            shown[f"{r['points']} points"] = {
+                **{k: r[k] for k in ("standalone", "standalone32", "floor64", "floor32",
+                                     "cython", "numpy", "numba", "naive") if k in r},
+                "standalone/floor64": float(np.median(r["standalone/floor64"])),
+                "standalone32/floor32": float(np.median(r["standalone32/floor32"])),
+                "float32 counts": r["float32 counts"],
+                "load_before": r["load_before"], "load_after": r["load_after"]}
+        write_benchmark_json(args.json, {
+            "cpus": os.cpu_count(), "duration_s": base.duration_s, "dt_ms": base.dt_ms,
+            "repeat": args.repeat, "per_grid": shown, "scaling": scaling})
     return 0
 
 

@@ -75,3 +75,194 @@ def test_a_run_without_a_summary_is_refused_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "summary.json" in err
     assert not (tmp_path / "page.md").exists()
+
+
+def test_a_benchmark_value_or_printed_line_changed_on_the_page_is_caught(tmp_path):
+    page, store = tmp_path / "results.md", tmp_path / "results"
+    shutil.copytree(SOURCES, store)
+    text = PAGE.read_text()
+    benches = [p.stem for p in SOURCES.glob("bench_*.json")]
+    assert benches, "the page cites no benchmark"
+    shown, run, ptr = next(link for link in results._LINK.findall(text) if link[1] in benches)
+    page.write_text(
+        text.replace(f'[{shown}](#run-{run} "{ptr}")', f'[{shown}9](#run-{run} "{ptr}")')
+    )
+    assert any(run in p for p in results.check_page(page, store))
+    printed = re.search(r"```text\n(.*?)\n```", text, re.S)
+    if printed:  # a benchmark shown as printed: a changed character is caught
+        first = printed.group(1).splitlines()[0]
+        page.write_text(text.replace(first, first + " 1.0 ms", 1))
+        assert any("printed output" in p for p in results.check_page(page, store))
+
+
+def test_a_benchmark_json_without_provenance_is_refused_in_one_line(tmp_path, capsys):
+    bare = tmp_path / "bench.json"
+    bare.write_text(json.dumps({"us_per_event": 12.5}))
+    out = tmp_path / "docs" / "results.md"
+    assert main(["results", "--bench", str(bare), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--bench-output" in err
+    # with the command that made it, its provenance is recorded and marked as added
+    assert (
+        main(
+            [
+                "results",
+                "--bench-output",
+                str(bare),
+                "python benchmarks/bench_x.py",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
+    stored = json.loads((out.parent / "results" / "bench_x.json").read_text())
+    assert stored["provenance"]["command"] == "python benchmarks/bench_x.py"
+    assert "provenance_added" in stored["provenance"]
+    assert '[12.5](#run-bench_x "/us_per_event")' in out.read_text()
+
+
+# -- no measured number typed into the reference pages ---------------------------------------
+
+#: the pages that explain; their measured numbers live on the results page
+EXPLAINING = ["reference.md", "materials.md", "live.md", "index.md", "contributing.md"] + [
+    f"guide/{name}.md"
+    for name in (
+        "quickstart",
+        "tuning_sweep",
+        "baseline_comparison",
+        "speed_accuracy",
+        "exploration",
+        "python",
+        "cluster",
+        "files",
+    )
+]
+
+#: a number with a unit of time, a ratio or a share: how a measurement reads
+MEASURED_LOOKING = re.compile(
+    r"(?<![\w.])[~≈]?\s?\d[\d,.]*(?:\s?[–-]\s?\d[\d,.]*)?\s?(?:ms|µs|us|ns|s|×|x|%)(?![\w/])"
+)
+
+#: the values these pages may state, per page, and why each is not a measurement
+DECLARED: dict[str, list[tuple[set[str], str]]] = {
+    "reference.md": [
+        (
+            {
+                "2s",
+                "3×",
+                "10%",
+                "3ms",
+                "0.10s",
+                "15ms",
+                "1%",
+                "0.7%",
+                "0.4%",
+                "87%",
+                "94.2%",
+                "9.4%",
+                "8.4%",
+                "86%",
+                "8%",
+                "95%",
+                "1s",
+                "5.5s",
+            },
+            "the paper's numbers (sections 1-4), each with its role: input, calibration target or "
+            "reference for predictions; 0.10 s and 15 ms are the assumed decay times' ends",
+        ),
+        ({"19ms"}, "the linearised resonator's decay, computed from the model's equations"),
+        ({"0.1ms"}, "the array's declared time step"),
+        ({"95%", "80%"}, "the statistics rules' declared confidence level and power"),
+    ],
+    "materials.md": [
+        (
+            {"0.6%", "1%", "2.2%", "94.2%", "86%", "87%"},
+            "calibrated constants of the generator and their targets from the paper",
+        ),
+        (
+            {"0.3%", "15%", "3%", "5%", "0.10s", "50%"},
+            "assumed scatters, decay times and friction ranges (declared, not fitted)",
+        ),
+        (
+            {"0.16–0.29ms", "2%", "~1%", "5–16%"},
+            "computed from the constants table by the formulas beside them",
+        ),
+        (
+            {"0.5ms", "0.5s", "0.005ms", "0.01ms", "20%", "5×"},
+            "declared settings: the generator's sample period, the event window, the channels' "
+            "time steps, the channel placement's top share, the cost budget",
+        ),
+    ],
+    "live.md": [
+        (
+            {
+                "10s",
+                "60s",
+                "0.5ms",
+                "0.1s",
+                "0.005ms",
+                "1ms",
+                "10ms",
+                "50ms",
+                "1s",
+                "5s",
+                "2s",
+                "3s",
+                "0.5s",
+                "1%",
+                "30s",
+                "8s",
+            },
+            "declared constants and settings: view spans, time steps, windows, flush periods, "
+            "timeouts, tolerances, and the benchmark's and tests' durations",
+        ),
+    ],
+    "guide/quickstart.md": [({"2s"}, "the declared calibration span")],
+    "guide/baseline_comparison.md": [
+        ({"10%", "95%"}, "the paper's event end rule and the declared confidence level"),
+    ],
+    "guide/speed_accuracy.md": [
+        ({"0.005–1ms", "0.1ms", "0.5ms"}, "the study's declared grid and the shipped settings"),
+    ],
+}
+
+
+def test_the_explaining_pages_type_no_measured_number():
+    """Costs, errors and accuracies are measured by a command and shown on the results page,
+    linked to their source; an explaining page states only declared values (the paper's
+    numbers, calibration targets, assumptions, settings, computed constants)."""
+    found = []
+    for name in EXPLAINING:
+        text = (ROOT / "docs" / name).read_text()
+        text = re.sub(r"```.*?```", "", text, flags=re.S)  # commands and code, not prose
+        allowed = set().union(*(values for values, _ in DECLARED.get(name, [])))
+        for line in text.splitlines():
+            if line.startswith("    "):  # an indented command
+                continue
+            for match in MEASURED_LOOKING.finditer(line):
+                value = re.sub(r"\s", "", match.group(0))
+                if value not in allowed:
+                    found.append(f"docs/{name}: {value!r} in {line.strip()[:80]!r}")
+    assert found == []
+
+
+def test_the_scan_finds_a_measured_number():
+    line = "the tuned bank costs 14.3 ms per contact (7.5x the FFT), 82.0 % correct"
+    assert [m.group(0).strip() for m in MEASURED_LOOKING.finditer(line)] == [
+        "14.3 ms",
+        "7.5x",
+        "82.0 %",
+    ]
+
+
+def test_every_section_the_pages_cite_is_on_the_results_page():
+    """Pages cite a section of the results page by its label; one the page lacks would fail the
+    site's build (slow), so it is checked here without Sphinx."""
+    labels = set(re.findall(r"^\(run-([\w.-]+)\)=$", PAGE.read_text(), re.M))
+    cited = set()
+    for page in (ROOT / "docs").rglob("*.md"):
+        cited |= set(re.findall(r"<run-([\w.-]+)>`", page.read_text()))
+    assert cited and cited <= labels, f"cited but not on the page: {sorted(cited - labels)}"
+    studies = {p.stem for p in (ROOT / "studies").glob("*.toml")}
+    assert studies <= labels, f"studies without a run on the page: {sorted(studies - labels)}"

@@ -1,20 +1,32 @@
 """The results page: every measured number of the documentation, regenerated from its sources.
 
     snn-antenna results out/quickstart out/gating ... --bench docs/results/bench_array.json \\
+        --bench-output out/bench_coders.json "python benchmarks/bench_coders.py" \\
         --out docs/results.md
     python -m snn_antenna.report.results record-bench docs/results/bench_array.json -- \\
         python benchmarks/bench_array.py --seconds 2
 
-The page is built from the ``summary.json`` of the study runs it is given and from the recorded
-output of benchmarks; nothing on it is typed by hand. Each run's summary is copied beside the
-page (``docs/results/STUDY.json``), so the page cites files that stay with it, and the page is
-a pure function of those files: running the command again on them gives the same page.
+The page is built from the ``summary.json`` of the study runs it is given and from the output
+of benchmarks; nothing on it is typed by hand. A benchmark's output is either
+
+- a benchmark's own JSON (``--json PATH`` of the benchmarks in ``benchmarks/``): its measured
+  values and a ``provenance`` block (:func:`machine_provenance`, written by the benchmark);
+- a record of ``record-bench``: what the benchmark printed, with its provenance, and with
+  ``--data FILE`` the JSON the benchmark wrote as well;
+- ``--bench-output FILE COMMAND``: a benchmark's JSON or printed text that carries no
+  provenance, with the command that made it. The page then records this machine and this
+  checkout's commit at the time the page is made, and says so (``provenance_added``).
+
+Each source is copied beside the page (``docs/results/NAME.json``, with its provenance), so
+the page cites files that stay with it, and the page is a pure function of those files:
+running the command again on them gives the same page.
 
 Every number on the page is a link to its run's source block (command, commit, machine) whose
 title is the JSON Pointer (RFC 6901) of the value in the cited file, for example
 ``[0.8519](#run-gating_threshold "/f1/gated/mean")``; :func:`check_page` reads each one back
-from its file and fails on any that differs. A benchmark's output is shown as it was printed,
-and the record keeps the command, the commit, the machine and its load.
+from its file and fails on any that differs. A benchmark's values are shown the same way
+(tables of linked numbers); printed output without values is shown as it was printed, and
+:func:`check_page` compares it with the record character by character.
 """
 
 from __future__ import annotations
@@ -46,6 +58,53 @@ EXTRA_TABLES: dict[str, list[tuple[str, str, tuple[str, ...]]]] = {
             ("mean", "sd", "n_seeds"),
         ),
         ("Distance rmse per read-out (mm)", "/distance_rmse_mm", ("mean", "sd", "n_seeds")),
+        (
+            "Spiking read-outs against the full-spectrum MLP on the same splits",
+            "/spiking/against_fft",
+            ("neurons", "accuracy", "fraction_interval"),
+        ),
+        (
+            "The tuned bank by size, first split (accuracy, cost per contact in µs)",
+            "/spiking/tuned/curve",
+            ("n", "channels", "spiking", "nmf", "fft_mlp", "wall_us_per_event"),
+        ),
+    ],
+    "speed_accuracy": [
+        (
+            "Recommended settings (each criterion and scene)",
+            "/recommendations",
+            (
+                "criterion",
+                "scene",
+                "method",
+                "dt_ms",
+                "target",
+                "dtype",
+                "cpu_s",
+                "rate_map_error",
+                "spike_time_error_ms",
+                "speedup_vs_reference",
+            ),
+        ),
+        (
+            "Largest stable and accurate k·dt per method (stability map)",
+            "/stability_limits",
+            ("shipped_max_stable_k_dt", "measured_max_stable_k_dt", "measured_max_accurate_k_dt"),
+        ),
+        (
+            "float32 against float64 on a tuning grid (the precision stage)",
+            "/precision/rows",
+            (
+                "dtype",
+                "engine",
+                "n_points",
+                "ns_per_neuron_step",
+                "spike_count_error",
+                "same_count_share",
+                "max_count_diff",
+                "within_tolerance",
+            ),
+        ),
     ],
     "gating_threshold": [
         ("F1 on new scenes, mean over seeds", "/f1", ("mean", "low", "high", "n")),
@@ -102,7 +161,7 @@ def _cell(value: Any, run: str, ptr: str) -> str:
             f"{_text(k)}: {_cell(v, run, ptr + pointer(k))}" for k, v in value.items()
         )
     if isinstance(value, list):
-        return "[" + ", ".join(_cell(v, run, ptr + pointer(i)) for i, v in enumerate(value)) + "]"
+        return ", ".join(_cell(v, run, ptr + pointer(i)) for i, v in enumerate(value))
     if isinstance(value, bool):
         return "yes" if value else "no"
     return _text(value)
@@ -129,7 +188,7 @@ def _row_list(summary: dict, run: str, key: str) -> list[str]:
         compare = "target" if key == "calibrated" else "paper"
         value = _cell(row.get("value"), run, here + "/value")
         if row.get("interval"):
-            value += " (" + _cell(row["interval"], run, here + "/interval")[1:-1] + ")"
+            value += " (" + _cell(row["interval"], run, here + "/interval") + ")"
         rows.append(
             [
                 _text(row.get("quantity", "")),
@@ -155,14 +214,10 @@ def _extra_tables(summary: dict, run: str, study: str) -> list[str]:
     for title, ptr, columns in EXTRA_TABLES.get(study, []):
         try:
             entries = resolve(summary, ptr)
-        except (KeyError, IndexError, ValueError):
+        except (KeyError, IndexError, ValueError, TypeError):
             continue
-        rows = [
-            [_text(name)] + [_cell(entry.get(c), run, ptr + pointer(name, c)) for c in columns]
-            for name, entry in entries.items()
-            if isinstance(entry, dict)
-        ]
-        lines += [f"**{title}**", "", *_table(("", *columns), rows)]
+        if isinstance(entries, (dict, list)) and entries:
+            lines += _rows_table(title, entries, run, ptr, columns)
     return lines
 
 
@@ -204,20 +259,121 @@ def study_section(summary: dict, run: str, file: str) -> list[str]:
     return lines
 
 
-def bench_section(record: dict, run: str, file: str) -> list[str]:
-    """The page's section of one recorded benchmark: its output as printed."""
-    prov = record["provenance"]
-    load = record.get("load_average")
-    extra = f"; load average {load[0]:.2f} when it started" if load else ""
-    return [
-        f"### `{record['command']}`",
-        "",
-        *_source(run, file, prov, extra),
-        "```text",
-        record["stdout"].rstrip("\n"),
-        "```",
-        "",
+#: what a benchmark's record or JSON holds beside its measured values
+BENCH_CONTEXT = ("provenance", "command", "stdout", "data", "load_average", "wall_s")
+
+#: the parts of a statistic's mapping (``report.stats``) one table cell shows
+_INTERVAL = ("mean", "low", "high")
+
+
+def _interval_cell(stat: dict, run: str, ptr: str) -> str:
+    """A statistic as one cell: mean (low–high), and its verdict when it does not resolve."""
+    mean, low, high = (_cell(stat[k], run, ptr + pointer(k)) for k in _INTERVAL)
+    text = f"{mean} ({low}–{high})"
+    if stat.get("resolved") is False and isinstance(stat.get("verdict"), str):
+        text += f", {_text(stat['verdict'])}"
+    return text
+
+
+def _value_cell(value: Any, run: str, ptr: str) -> str:
+    if isinstance(value, dict) and all(k in value for k in _INTERVAL):
+        return _interval_cell(value, run, ptr)
+    return _cell(value, run, ptr)
+
+
+#: a table wider than this many columns is shown turned (one column per row) when it has
+#: at most as many rows as :data:`TURN_ROWS`, so it fits the page
+TURN_COLUMNS, TURN_ROWS = 6, 3
+
+
+def _rows_table(
+    title: str, rows: dict | list, run: str, ptr: str, columns: tuple[str, ...] = ()
+) -> list[str]:
+    """A table of a list of mappings (one row each) or a mapping of mappings (row names), of
+    the given columns (by default every key a row has). Columns that hold one number in every
+    row are stated once above the table; a wide table of few rows is turned."""
+    named = isinstance(rows, dict)
+    items = [
+        (k, v) for k, v in (rows.items() if named else enumerate(rows)) if isinstance(v, dict)
     ]
+    if not columns:
+        columns = []
+        for _, row in items:
+            columns += [k for k in row if k not in columns]
+    lines = [f"**{_text(title)}**", ""]
+    first, row0 = items[0] if items else (None, {})
+    shared = [
+        c
+        for c in columns
+        if len(items) > 2
+        and _is_number(row0.get(c))  # a number, linked and so checked
+        and all(c in row and row[c] == row0[c] for _, row in items)
+    ]
+    if shared:
+        lines += [
+            "In every row: "
+            + ", ".join(
+                f"{_text(c)} {_value_cell(row0[c], run, ptr + pointer(first, c))}" for c in shared
+            ),
+            "",
+        ]
+    columns = [c for c in columns if c not in shared]
+    cells = {
+        (name, c): _value_cell(row[c], run, ptr + pointer(name, c)) if c in row else ""
+        for name, row in items
+        for c in columns
+    }
+    if named and len(columns) > TURN_COLUMNS and len(items) <= TURN_ROWS:
+        header = ("", *(_text(name) for name, _ in items))
+        body = [[_text(c)] + [cells[name, c] for name, _ in items] for c in columns]
+    else:
+        header = (("",) if named else ()) + tuple(_text(c) for c in columns)
+        body = [
+            ([_text(name)] if named else []) + [cells[name, c] for c in columns]
+            for name, _ in items
+        ]
+    return [*lines, *_table(header, body)]
+
+
+def bench_values(values: dict, run: str, root: str = "") -> list[str]:
+    """A benchmark's measured values as tables, every number linked to its source."""
+    lines, single = [], []
+    for key, value in values.items():
+        if key in BENCH_CONTEXT or value in ([], {}, None):
+            continue
+        ptr = root + pointer(key)
+        title = key.replace("_", " ")
+        if value and isinstance(value, list) and all(isinstance(v, dict) for v in value):
+            lines += _rows_table(title, value, run, ptr)
+        elif (
+            value
+            and isinstance(value, dict)
+            and all(isinstance(v, dict) for v in value.values())
+            and not all(k in value for k in _INTERVAL)
+        ):
+            lines += _rows_table(title, value, run, ptr)
+        else:
+            single.append([_text(key), _value_cell(value, run, ptr)])
+    if single:
+        lines = [*_table(("", "value"), single), *lines]
+    return lines
+
+
+def bench_section(record: dict, run: str, file: str) -> list[str]:
+    """The page's section of one benchmark: its values as tables, or its output as printed."""
+    prov = record["provenance"]
+    load = record.get("load_average") or prov.get("load_average")
+    extra = f"; load average {load[0]:.2f} (1 min)" if load else ""
+    if prov.get("provenance_added"):
+        extra += f" ({_text(prov['provenance_added'])})"
+    lines = [f"### `{run}`", "", *_source(run, file, prov, extra)]
+    if isinstance(record.get("data"), dict):
+        lines += bench_values(record["data"], run, "/data")
+    elif "stdout" in record:
+        lines += ["```text", record["stdout"].rstrip("\n"), "```", ""]
+    else:
+        lines += bench_values(record, run)
+    return lines
 
 
 def render(summaries: list[Path], benches: list[Path], command: str) -> str:
@@ -272,17 +428,33 @@ def check_page(page: Path, sources: Path) -> list[str]:
             continue
         if not _is_number(value) or fmt(value) != shown:
             problems.append(f"{shown!r} cites {ptr} in {file}, which holds {value!r}")
-    run = None
-    for line in text.splitlines():  # text in the tables: the cited file's own
+    run, printed = None, None
+    for line in text.splitlines():  # text in the tables and printed output: the cited file's
         label = re.fullmatch(r"\(run-([\w.-]+)\)=", line)
         if label:
             run = label.group(1)
+            if run not in cache:
+                file = sources / f"{run}.json"
+                cache[run] = json.loads(file.read_text()) if file.is_file() else None
+            continue
+        if run is not None and line == "```text":
+            printed = []
+            continue
+        if printed is not None:
+            if line != "```":
+                printed.append(line)
+                continue
+            stdout = (cache.get(run) or {}).get("stdout", "").rstrip("\n")
+            if "\n".join(printed) != stdout:
+                problems.append(f"the printed output of run {run} is not its record's stdout")
+            printed = None
+            continue
         if run is None or not line.startswith("| ") or set(line) <= set("|- "):
             continue
         source = json.dumps(cache.get(run), ensure_ascii=False)
         for cell in line.strip("|").split(" | "):
             for chunk in _LINK.split(cell)[::4]:
-                words = chunk.replace("\\|", "|").strip(" ,:;()[]")
+                words = chunk.replace("\\|", "|").strip(" ,:;()[]–")
                 if (
                     re.search(r"\d", words)
                     and json.dumps(words, ensure_ascii=False)[1:-1] not in source
@@ -326,10 +498,40 @@ def collect(runs: list[Path], store: Path) -> list[Path]:
     return list(cited.values())
 
 
-def record_benchmark(out: Path, command: list[str]) -> dict:
-    """Run a benchmark and keep what it printed with its provenance in ``out`` (JSON)."""
-    load = list(os.getloadavg())
+def machine_provenance(command: str | None = None, **extra) -> dict:
+    """What a benchmark's output records about how it was made: the command (this process's
+    own by default), the code (``code_identity``: version, source hash, commit), the machine,
+    its load and the time. A benchmark writing JSON puts it under ``"provenance"``."""
+    import datetime as _dt
+
+    if command is None:
+        command = " ".join(["python", *sys.argv])
+    return {
+        **code_identity(),
+        "platform": platform.platform(),
+        "python": sys.version.split()[0],
+        "cpus": os.cpu_count(),
+        "load_average": list(os.getloadavg()),
+        "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
+        "command": command,
+        **extra,
+    }
+
+
+def write_benchmark_json(path: str | Path, values: dict) -> Path:
+    """A benchmark's ``--json PATH``: its measured values with their provenance."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    record = {**values, "provenance": machine_provenance()}
+    atomic_write(path, json.dumps(record, indent=1, default=float) + "\n")
+    return path
+
+
+def record_benchmark(out: Path, command: list[str], data: Path | None = None) -> dict:
+    """Run a benchmark and keep what it printed with its provenance in ``out`` (JSON), and
+    with ``data`` the JSON the benchmark wrote there."""
     started = time.perf_counter()
+    prov = machine_provenance(" ".join(command))
     done = subprocess.run(command, capture_output=True, text=True, check=False)
     if done.returncode != 0:
         raise SpecError(
@@ -338,25 +540,68 @@ def record_benchmark(out: Path, command: list[str]) -> dict:
             f"a benchmark that ends well (it exited {done.returncode}: "
             f"{done.stderr.strip().splitlines()[-1:] or ''})",
         )
-    import datetime as _dt
-
     record = {
         "command": " ".join(command),
         "stdout": done.stdout,
         "wall_s": time.perf_counter() - started,
-        "load_average": load,
-        "provenance": {
-            **code_identity(),
-            "platform": platform.platform(),
-            "python": sys.version.split()[0],
-            "cpus": os.cpu_count(),
-            "created": _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds"),
-            "command": " ".join(command),
-        },
+        "load_average": prov["load_average"],
+        "provenance": prov,
     }
+    if data is not None:
+        record["data"] = json.loads(data.read_text())
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(out, json.dumps(record, indent=1) + "\n")
+    atomic_write(out, json.dumps(record, indent=1, default=float) + "\n")
     return record
+
+
+def _bench_record(path: Path) -> dict:
+    """A benchmark's output that carries its provenance (with the command)."""
+    try:
+        record = json.loads(path.read_text()) if path.is_file() else None
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        record = None
+    if not isinstance(record, dict) or "command" not in record.get("provenance", {}):
+        raise SpecError(
+            "--bench",
+            str(path),
+            "a benchmark's JSON with its provenance (--json of benchmarks/, or record-bench); "
+            "for output without it: --bench-output FILE COMMAND",
+        )
+    return record
+
+
+def adopt_output(path: Path, command: str) -> dict:
+    """A benchmark's JSON or printed text without provenance, given the command that made it:
+    the record, with this machine and this checkout as its provenance, marked as added."""
+    import datetime as _dt
+
+    if not path.is_file():
+        raise SpecError("--bench-output", str(path), "a benchmark's JSON or printed output")
+    text = path.read_text()
+    try:
+        values = json.loads(text)
+    except json.JSONDecodeError:
+        values = None
+    made = _dt.datetime.fromtimestamp(path.stat().st_mtime, _dt.UTC)
+    prov = machine_provenance(
+        command,
+        created=made.isoformat(timespec="seconds"),
+        provenance_added="commit and machine recorded when the results page was made",
+    )
+    prov.pop("load_average")
+    if isinstance(values, dict):
+        if "provenance" in values:
+            raise SpecError("--bench-output", str(path), "output without provenance (use --bench)")
+        return {**values, "provenance": prov}
+    return {"command": command, "stdout": text, "provenance": prov}
+
+
+def _bench_name(path: Path, record: dict) -> str:
+    """The name a benchmark's output is stored and cited under: its script's
+    (``benchmarks/NAME.py`` in its command), so the page's sections keep their anchors
+    whatever the output file was called."""
+    found = re.search(r"benchmarks/(\w+)\.py", record["provenance"]["command"])
+    return found.group(1) if found else path.stem
 
 
 def _shown(path: Path) -> str:
@@ -365,18 +610,25 @@ def _shown(path: Path) -> str:
     return Path(os.path.relpath(path.resolve())).as_posix()
 
 
-def make_page(runs: list[Path], benches: list[Path], out: Path) -> Path:
-    """Copy the runs' summaries and benchmark records beside ``out`` (into ``results/``),
-    write the page from those copies, and check every number on it against them."""
+def make_page(
+    runs: list[Path],
+    benches: list[Path],
+    out: Path,
+    outputs: list[tuple[Path, str]] = (),
+) -> Path:
+    """Copy the runs' summaries and the benchmarks' outputs beside ``out`` (into
+    ``results/``), write the page from those copies, and check every number on it."""
     store = out.parent / "results"
+    records = [(bench, _bench_record(bench)) for bench in benches]
+    records += [(path, adopt_output(path, command)) for path, command in outputs]
     cited = collect(runs, store)
     stored_benches = []
-    for bench in benches:
-        if not bench.is_file() or "stdout" not in json.loads(bench.read_text()):
-            raise SpecError("--bench", str(bench), "a record written by record-bench")
-        target = store / bench.name
-        if bench.resolve() != target.resolve():
-            atomic_write(target, bench.read_text())
+    for path, record in records:
+        target = store / f"{_bench_name(path, record)}.json"
+        if target in stored_benches:
+            raise SpecError("--bench", str(path), f"one output per benchmark ({target.stem})")
+        if path.resolve() != target.resolve():
+            atomic_write(target, json.dumps(record, indent=1, default=float) + "\n")
         stored_benches.append(target)
     command = " ".join(
         [
@@ -395,8 +647,14 @@ def make_page(runs: list[Path], benches: list[Path], out: Path) -> Path:
 
 
 def _results(args) -> int:
-    out = make_page([Path(p) for p in args.runs], [Path(p) for p in args.bench], Path(args.out))
-    print(f"{out}: written from {len(args.runs)} run(s) and {len(args.bench)} benchmark(s)")
+    outputs = [(Path(f), c) for f, c in args.bench_output]
+    out = make_page(
+        [Path(p) for p in args.runs], [Path(p) for p in args.bench], Path(args.out), outputs
+    )
+    print(
+        f"{out}: written from {len(args.runs)} run(s) and "
+        f"{len(args.bench) + len(outputs)} benchmark(s)"
+    )
     return 0
 
 
@@ -415,23 +673,40 @@ def add_subcommand(sub) -> None:
         action="append",
         default=[],
         metavar="FILE.json",
-        help="a benchmark's recorded output (python -m snn_antenna.report.results "
-        "record-bench FILE.json -- COMMAND)",
+        help="a benchmark's output with its provenance: the JSON of a benchmark's --json, "
+        "or a record (python -m snn_antenna.report.results record-bench FILE.json -- COMMAND)",
+    )
+    p.add_argument(
+        "--bench-output",
+        nargs=2,
+        action="append",
+        default=[],
+        metavar=("FILE", "COMMAND"),
+        help="a benchmark's JSON or printed output that carries no provenance, and the command "
+        "that made it (the page records this machine and checkout, and says so)",
     )
     p.add_argument("--out", default="docs/results.md", help="the page (default docs/results.md)")
     p.set_defaults(func=_results)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m snn_antenna.report.results record-bench OUT.json -- COMMAND ...``"""
+    """``python -m snn_antenna.report.results record-bench OUT.json [--data FILE] -- COMMAND``"""
     argv = list(sys.argv[1:] if argv is None else argv)
     if len(argv) >= 3 and argv[0] == "record-bench" and "--" in argv:
         split = argv.index("--")
-        record = record_benchmark(Path(argv[1]), argv[split + 1 :])
+        options = argv[2:split]
+        data = None
+        if options[:1] == ["--data"] and len(options) == 2:
+            data = Path(options[1])
+        elif options:
+            print(f"record-bench: unknown options {options}", file=sys.stderr)
+            return 2
+        record = record_benchmark(Path(argv[1]), argv[split + 1 :], data)
         print(record["stdout"], end="")
         return 0
     print(
-        "usage: python -m snn_antenna.report.results record-bench OUT.json -- COMMAND ...",
+        "usage: python -m snn_antenna.report.results record-bench OUT.json [--data FILE] "
+        "-- COMMAND ...",
         file=sys.stderr,
     )
     return 2
