@@ -15,7 +15,6 @@ and accuracy curve, which do not depend on the coder. Prints the table and write
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -27,6 +26,7 @@ from snn_antenna.core import spec as specs  # noqa: E402
 from snn_antenna.evaluation import crossval as cv  # noqa: E402
 from snn_antenna.evaluation.comparison import coder_rows  # noqa: E402
 from snn_antenna.readout import baselines as bl  # noqa: E402
+from snn_antenna.report.results import write_benchmark_json  # noqa: E402
 from snn_antenna.studies import baseline_comparison as study  # noqa: E402
 from snn_antenna.studies.baseline_comparison.tuned import (  # noqa: E402
     best_costs,
@@ -62,9 +62,7 @@ def main(argv=None) -> dict:
             print(f"{k:20s} {c['features_us_per_event']:9.0f} µs/event = "
                   f"{c['features_us_per_event'] / fft_us:5.2f} × FFT")
         print(f"load average {os.getloadavg()[0]:.1f}")
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(json.dumps({"costs": costs, "load_average": os.getloadavg()},
-                                             indent=1, default=float))
+        write_benchmark_json(args.out, {"costs": costs, "load_average": os.getloadavg()})
         return costs
     chosen = coder_stage(parts, data, cmp, bands, plan, print, False, None)
     banks = cmp.coders.pop("banks")
@@ -81,8 +79,7 @@ def main(argv=None) -> dict:
            "seeds": parts.evaluation.seeds, **where, "fft_mlp_accuracy": fft_acc.tolist(),
            "fft_cost": cmp.costs["fft"], "coders": table,
            "load_average": os.getloadavg(), "wall_s": time.perf_counter() - t0}
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(json.dumps(out, indent=1, default=float))
+    write_benchmark_json(args.out, out)
     print(f"{out['events']} events, {len(parts.evaluation.seeds)} splits; FFT-MLP "
           f"{100 * fft_acc.mean():.1f} %, FFT {cmp.costs['fft']['features_us_per_event']:.0f} "
           f"µs/event (best of {plan.cost_repeats}); load average {os.getloadavg()[0]:.1f}")
