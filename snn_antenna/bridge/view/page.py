@@ -13,8 +13,11 @@ import time
 import uuid
 
 
-PAGE_UPDATE_MS = 100           # each page pulls new points 10 times a second; a new rate-map
-# column is pushed to it on arrival (build_page's update_now)
+# Each page pulls new points 5 times a second (a new rate-map column is pushed to it on
+# arrival: build_page's update_now). Each pull moves the time axis and repaints every Bokeh
+# plot on the page, the bulk of what a page costs its browser; the lines move in steps of
+# a fiftieth of the 10 s they show.
+PAGE_UPDATE_MS = 200
 # A page that has not painted the last column sent waits (its points gather) rather than
 # queue more updates than its browser draws; one that never reports (a hidden tab does not
 # paint) still gets one this often.
