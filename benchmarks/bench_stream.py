@@ -39,7 +39,8 @@
    the display latency, "taken" is the part until the view process took the window from the
    pipeline's hand-off, "sent" until the page's update left the view process, "received"
    until the column was in the page's document (the rest is the browser drawing it); each is
-   a p95 of its own.
+   a p95 of its own. "CPU s/s" is what the view process and the pages' browsers (with their
+   renderers) used per second of the live run: on two cores, what the pages' drawing costs.
 """
 from __future__ import annotations
 
@@ -193,21 +194,27 @@ def compare_browsers(args, overrides, counts: list[int]) -> None:
             while _state(url)["sessions"] < n and time.monotonic() < deadline:
                 time.sleep(0.2)
             time.sleep(2.0)                     # the pages drew once and follow the stream
+            busy = _cpu_s([view.process.pid]), _cpu_s([page.pid for page in pages if page.pid])
+            began = time.monotonic()
             live = stream_from_emulator(parts, args.view_seconds, False, view)
+            elapsed = time.monotonic() - began
             state = _state(url)
+            cpu = ((_cpu_s([view.process.pid]) - busy[0]) / elapsed,
+                   (_cpu_s([page.pid for page in pages if page.pid]) - busy[1]) / elapsed)
             fast = stream_from_emulator(parts, args.seconds, True, view)
         finally:
             for page in pages:
                 page.close()
             summary = view.stop()
-        rows.append((n, state["sessions"], live, state["display_latency_ms"], fast, summary))
+        rows.append((n, state["sessions"], live, state["display_latency_ms"], fast, summary,
+                     cpu))
     print(f"live view with browsers open ({args.view_seconds:g} s live at 1 kHz, then "
           f"{args.seconds:g} s flat out; load {os.getloadavg()[0]:.1f}):")
     print(f"  {'pages':>5s}  {'rt factor live':>14s}  {'throughput':>10s}  {'per CPU s':>9s}  "
           f"{'rate map p95':>12s}  {'on screen median':>16s}  {'p95':>8s}  {'paints':>6s}  "
           f"{'of it: taken p95':>16s}  {'sent p95':>8s}  {'received p95':>12s}  "
-          f"{'frames dropped':>14s}")
-    for n, sessions, live, shown, fast, summary in rows:
+          f"{'frames dropped':>14s}  {'CPU s/s: view':>13s}  {'pages':>5s}")
+    for n, sessions, live, shown, fast, summary, cpu in rows:
         steady = live["steady_latency_ms"]
         p95 = f"{steady['p95']:.1f} ms" if steady["windows"] else "behind"
         screen = ((f"{shown['median']:.0f} ms", f"{shown['p95']:.0f} ms") if shown["n"]
@@ -218,7 +225,25 @@ def compare_browsers(args, overrides, counts: list[int]) -> None:
               f"{fast['compute_realtime_factor']:9.1f}x  {fast['cpu_realtime_factor']:8.1f}x  "
               f"{p95:>12s}  {screen[0]:>16s}  "
               f"{screen[1]:>8s}  {shown['n']:>6d}  {taken:>16s}  {sent:>8s}  {received:>12s}  "
-              f"{summary['frames_dropped']!s:>5s} of {summary['frames_published']:<6d}")
+              f"{summary['frames_dropped']!s:>5s} of {summary['frames_published']:<6d}  "
+              f"{cpu[0]:13.2f}  {cpu[1]:5.2f}")
+
+
+def _cpu_s(pids) -> float:
+    """CPU seconds used so far by these processes and all their children (a browser's
+    renderers and GPU process are its children)."""
+    import psutil
+
+    total = 0.0
+    for pid in pids:
+        try:
+            top = psutil.Process(pid)
+            for proc in [top, *top.children(recursive=True)]:
+                times = proc.cpu_times()
+                total += times.user + times.system
+        except psutil.NoSuchProcess:
+            pass
+    return total
 
 
 def compare_baseline(args, overrides, fast) -> None:
@@ -353,6 +378,10 @@ class OpenPage:
         self._proc = chromium and subprocess.Popen(
             [chromium, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1200,900",
              url], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    @property
+    def pid(self) -> int | None:
+        return self._proc.pid if self._proc else None
 
     def close(self) -> None:
         if self._proc:

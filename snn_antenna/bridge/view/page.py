@@ -13,16 +13,25 @@ import time
 import uuid
 
 
-PAGE_UPDATE_MS = 100            # each page pulls new points 10 times a second; a new rate-map
-# column is pushed to it on arrival (build_page's update_now)
+# Each page pulls new points 5 times a second (a new rate-map column is pushed to it on
+# arrival: build_page's update_now). Each pull moves the time axis and repaints every Bokeh
+# plot on the page, the bulk of what a page costs its browser; the lines move in steps of
+# a fiftieth of the 10 s they show.
+PAGE_UPDATE_MS = 200
 # A page that has not painted the last column sent waits (its points gather) rather than
 # queue more updates than its browser draws; one that never reports (a hidden tab does not
 # paint) still gets one this often.
 UNPAINTED_WAIT_S = 1.0
-# The counters and panels twice a second (a contact at once): a person reads them no faster,
-# and each change of their text costs the browser a layout and a repaint of every plot (one
-# page's Chromium: 0.63 -> 0.49 CPU s per s, measured with three plots at 10 Hz).
+# The counters and panels twice a second (a contact at once): a person reads them no faster.
 TEXT_UPDATE_S = 0.5
+# Their text is written into the Divs' own elements by the page: a change of a Div's ``text``
+# makes BokehJS lay the whole page out again and repaint every plot on it.
+TEXT_JS = """
+for (const div of divs) {
+  const shown = window.Bokeh && Bokeh.index && Bokeh.index.find_one(div);
+  if (shown && shown.markup_el) { shown.markup_el.innerHTML = source.data[div.name][0]; }
+}
+"""
 CONTACT_COLOUR = "#d62728"
 PANELS_WIDTH = 230
 
@@ -62,14 +71,16 @@ def build_page(view, doc) -> None:
     # for the plots keeps their time axes aligned.
     panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided")
     plots = column(antenna, coded, rate_map_div, sizing_mode="stretch_width")
-    update, update_map, reload, waiting = _updater(view, sources, counters, panels, x_range,
-                                                   mode)
+    sources["text"] = _text_source(doc, (counters, panels))
+    update, update_map, reload, waiting = _updater(view, sources, x_range, mode)
     bar, status = control_widgets(view, mode, reload, x_range)
     doc.add_root(column(counters, bar, status, row(plots, panels, sizing_mode="stretch_width"),
                         sizing_mode="stretch_width"))
     doc.title = "snn-antenna live view"
     reload(None)                    # the kept span, then its text
     update()
+    for div in (counters, panels):  # the text as the page loads
+        div.text = sources["text"].data[div.name][0]
 
     # A page nobody holds (reloaded, closed, or not connected yet) costs nothing until its
     # session is discarded or a browser connects: it then catches up from its cursors.
@@ -99,6 +110,20 @@ def connected(doc) -> bool:
     """Whether a browser holds the page's session now (a document outside a server: yes)."""
     session = doc.session_context.session if doc.session_context is not None else None
     return session is None or session.connection_count > 0
+
+
+def _text_source(doc, divs):
+    """The Divs' text, one column per Div's name, shown by the page's own script on each
+    change and as the page loads."""
+    from bokeh.events import DocumentReady
+    from bokeh.models import ColumnDataSource, CustomJS
+
+    source = ColumnDataSource({div.name: [""] for div in divs}, name="text")
+    show = CustomJS(args={"source": source, "divs": list(divs)}, code=TEXT_JS)
+    source.js_on_change("data", show)
+    doc.js_on_event(DocumentReady, show)
+    doc.add_root(source)            # nothing on the page holds it: a root of its own
+    return source
 
 
 def _legend_outside(fig) -> None:
@@ -148,7 +173,7 @@ def _mark_contacts(fig, source) -> None:
                             background_fill_alpha=0.75))
 
 
-def _updater(view, sources: dict, counters, panels, x_range, mode: dict):
+def _updater(view, sources: dict, x_range, mode: dict):
     """The page's periodic callback (stream what is new since this page's cursors, unless the
     page is paused) and ``reload(end_s)``: show the kept history up to ``end_s`` (None: the
     latest, and follow it again)."""
@@ -157,7 +182,7 @@ def _updater(view, sources: dict, counters, panels, x_range, mode: dict):
 
     cursor = {"xy": 0, "coded": 0, "windows": 0, "sent_t": None, "sent_at": 0.0,
               "text_at": 0.0}
-    shown = {"counters": None, "contacts": None, "panels": None, "text_marks": None}
+    shown = {"text": None, "contacts": None, "text_marks": None}
     rollover = view.shown_points
 
     def span(rows, end):
@@ -201,26 +226,25 @@ def _updater(view, sources: dict, counters, panels, x_range, mode: dict):
         return True
 
     def follow() -> None:
-        """The plots' time axis up to the window in progress: a column that comes before the
-        next pull is then already in sight, and only the rate map is redrawn for it."""
-        end = max(view.t_s, view.history_s) + view.window_s
+        """The plots' time axis up to the window in progress and one pull period beyond: the
+        columns that come before the next pull are then already in sight, and only the rate
+        map is redrawn for them (a move of the axis repaints every plot on the page)."""
+        end = max(view.t_s, view.history_s) + view.window_s + PAGE_UPDATE_MS / 1000
         if x_range.end != end:
             x_range.start, x_range.end = end - view.history_s, end
 
     def text(marks) -> None:
         """The counters, contacts and panels: text a person reads, refreshed TEXT_UPDATE_S
-        apart (each change of it re-lays the page out and repaints its plots), and at once
-        when a contact comes or changes."""
+        apart, and at once when a contact comes or changes."""
         now = time.monotonic()
         if now - cursor["text_at"] < TEXT_UPDATE_S and marks == shown["text_marks"]:
             return
         cursor["text_at"], shown["text_marks"] = now, marks
-        html = counters_html(view)
-        if html != shown["counters"]:
-            shown["counters"] = counters.text = html
-        html = panels_html(view) + controls_html(view)
-        if html != shown["panels"]:
-            shown["panels"] = panels.text = html
+        html = {"counters": counters_html(view),
+                "decided": panels_html(view) + controls_html(view)}
+        if html != shown["text"]:
+            shown["text"] = html
+            sources["text"].data = {name: [text] for name, text in html.items()}
 
     def update() -> None:
         following = update_map()    # it takes the frames in transit first

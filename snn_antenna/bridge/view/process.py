@@ -3,7 +3,7 @@ the pipeline hands over (bridge/view.py's :class:`~snn_antenna.bridge.view.view.
 
 Why a process of its own: a Bokeh server does real work while holding the GIL (a page that is
 reloaded tears its document down, ``Document.destroy`` → ``gc.collect``; each open page pulls
-and serialises new points ten times a second and each new column). In the pipeline's process that
+and serialises new points five times a second and each new column). In the pipeline's process that
 work stalled the
 stream itself. Here it can only slow the view: the pipeline never waits for this process, and
 frames the view could not take are counted here (``view_frames_dropped``), never a sample.

@@ -5,9 +5,11 @@ Why not a Bokeh plot: each paint of a Bokeh plot costs its page's main thread ~1
 tick labels, CSS look-ups), and with three pages on two cores the browsers' drawing is what
 delays a column. Here the view process sends each page only the new columns (a data source no
 glyph draws: a small message), and the page's script keeps the columns it shows and paints
-them with ``fillRect`` (one rectangle per resonator and window, ~1 ms for the 10 s shown). The
-plot follows the page's shared time axis (``x_range``: paused, scrubbed, panned), marks the
-contacts' onsets, and reports each live column it painted to ``/painted`` (the display delay,
+them with ``fillRect`` (one rectangle per resonator and window). It draws at most once per
+animation frame, whatever triggered it, and while the axes stand only the columns added since
+(a column then costs its page one rectangle per resonator, not the whole map). The plot follows the page's
+shared time axis (``x_range``: paused, scrubbed, panned), marks the contacts' onsets, and
+reports each live column it painted to ``/painted`` (the display delay,
 bridge/view/history.py).
 
 The source's columns, one row per window: ``t`` (start, s), ``w`` (width, s), ``rates``
@@ -30,11 +32,11 @@ FRAME = {"left": 70, "right": 110, "top": 26, "bottom": 40}
 # (the document as the page loaded it), "view" (the time axis or the contacts changed).
 RATE_MAP_JS = """
 const st = div._rate_map || (div._rate_map = {t: [], w: [], r: [], high: 10, live: true,
-                                               canvas: null});
+                                               canvas: null, dirty: true});
 const d = source.data;
 if (on !== 'view') {
   const n_new = d.t.length;
-  const clear = () => { st.t = []; st.w = []; st.r = []; };
+  const clear = () => { st.t = []; st.w = []; st.r = []; st.dirty = true; };
   if (n_new === 0 || d.reset[0]) { clear(); }
   for (let i = 0; i < n_new; i++) {
     if (st.t.length && d.t[i] <= st.t[st.t.length - 1]) { clear(); }   // a new stream
@@ -45,8 +47,17 @@ if (on !== 'view') {
   let k = 0;
   while (k < st.t.length && st.t[k] + st.w[k] < oldest) { k++; }
   if (k) { st.t.splice(0, k); st.w.splice(0, k); st.r.splice(0, k); }
+} else {
+  st.dirty = true;
 }
-const received = Date.now() / 1000;     // the columns reached this page's document
+// The columns reached this page's document; the latest live one is reported once painted.
+if (on === 'data' && d.t.length && d.live[d.t.length - 1]) {
+  st.report = {t_s: d.t[d.t.length - 1], received_unix_s: Date.now() / 1000};
+}
+// One drawing per animation frame, whatever triggered it (new rows and the time axis moving
+// with them come together): each trigger only asks for the next frame's.
+st.draw = draw;
+if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
 
 function find(root) {                   // Bokeh renders a Div's text in a shadow root
   for (const el of root.querySelectorAll('*')) {
@@ -55,86 +66,108 @@ function find(root) {                   // Bokeh renders a Div's text in a shado
   }
   return null;
 }
-if (!st.canvas || !st.canvas.isConnected) { st.canvas = find(document); }
-const canvas = st.canvas;
-const host = canvas && canvas.getRootNode().host;     // the Div, stretched to the column
-if (host && host.clientWidth > 0) {
-  const dpr = window.devicePixelRatio || 1;
-  const W = host.clientWidth, H = canvas.clientHeight;
-  if (canvas.style.width !== W + 'px') { canvas.style.width = W + 'px'; }
-  if (canvas.width !== Math.round(W * dpr) || canvas.height !== Math.round(H * dpr)) {
-    canvas.width = Math.round(W * dpr); canvas.height = Math.round(H * dpr);
+function column(ctx, g, j) {            // the window j's rectangles, one per resonator
+  const t = st.t[j], w = st.w[j];
+  if (t + w < g.start || t > g.end) { return; }
+  const a = Math.max(g.x0, Math.floor(g.x0 + (t - g.start) * g.sx));
+  const b = Math.min(g.x1, Math.ceil(g.x0 + (t + w - g.start) * g.sx));
+  const r = st.r[j], top = palette.length - 1;
+  for (let i = 0; i < n; i++) {
+    ctx.fillStyle = palette[Math.max(0, Math.min(top, Math.round(r[i] / g.high * top)))];
+    ctx.fillRect(a, g.y1 - (i + 1) * g.rowH, b - a, g.rowH + 0.5);
   }
-  const ctx = canvas.getContext('2d');
-  ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-  ctx.fillStyle = 'white'; ctx.fillRect(0, 0, W, H);
-  // The time axis where the plot above has its own (its frame, once laid out).
-  const above = window.Bokeh && Bokeh.index && Bokeh.index.find_one(align);
-  const bbox = above && above.frame && above.frame.bbox;
-  const shift = bbox ? above.el.getBoundingClientRect().left
-                       - canvas.getBoundingClientRect().left : 0;
-  const x0 = bbox ? bbox.left + shift : frame.left;
-  const x1 = bbox ? bbox.right + shift : W - frame.right;
-  const y0 = frame.top, y1 = H - frame.bottom;
-  const start = x_range.start, end = x_range.end, sx = (x1 - x0) / (end - start);
-  const rowH = (y1 - y0) / n, top = palette.length - 1, high = st.high > 0 ? st.high : 1;
-  for (let j = 0; j < st.t.length; j++) {
-    const t = st.t[j], w = st.w[j];
-    if (t + w < start || t > end) { continue; }
-    const a = Math.max(x0, Math.floor(x0 + (t - start) * sx));
-    const b = Math.min(x1, Math.ceil(x0 + (t + w - start) * sx));
-    const r = st.r[j];
-    for (let i = 0; i < n; i++) {
-      ctx.fillStyle = palette[Math.max(0, Math.min(top, Math.round(r[i] / high * top)))];
-      ctx.fillRect(a, y1 - (i + 1) * rowH, b - a, rowH + 0.5);
-    }
-  }
-  ctx.strokeStyle = '#e5e5e5'; ctx.lineWidth = 1;
-  ctx.strokeRect(x0 + 0.5, y0 + 0.5, x1 - x0 - 1, y1 - y0 - 1);
+}
+function marks(ctx, g, from_t, to_t) {  // the contacts' onsets within [from_t, to_t]
   ctx.strokeStyle = contact_colour; ctx.lineWidth = 2;
   for (const onset of contacts.data.t) {
-    if (onset < start || onset > end) { continue; }
-    const x = x0 + (onset - start) * sx;
-    ctx.beginPath(); ctx.moveTo(x, y0); ctx.lineTo(x, y1); ctx.stroke();
+    if (onset < Math.max(from_t, g.start) || onset > Math.min(to_t, g.end)) { continue; }
+    const x = g.x0 + (onset - g.start) * g.sx;
+    ctx.beginPath(); ctx.moveTo(x, g.y0); ctx.lineTo(x, g.y1); ctx.stroke();
   }
-  ctx.fillStyle = '#444'; ctx.font = '11px sans-serif';
-  ctx.textAlign = 'right'; ctx.textBaseline = 'middle';
-  for (const [i, label] of ticks) { ctx.fillText(label, x0 - 5, y1 - (i + 0.5) * rowH); }
-  ctx.textAlign = 'center'; ctx.textBaseline = 'top';
-  const step = [0.5, 1, 2, 5, 10, 20, 60].find(s => s * sx >= 50) || 60;
-  for (let s = Math.ceil(start / step) * step; s <= end; s += step) {
-    const x = x0 + (s - start) * sx;
-    ctx.fillText(String(+s.toFixed(2)), x, y1 + 4);
-    ctx.fillRect(x, y1, 1, 3);
-  }
-  ctx.fillText('stream time (s)', (x0 + x1) / 2, y1 + 20);
-  ctx.save(); ctx.translate(12, (y0 + y1) / 2); ctx.rotate(-Math.PI / 2);
-  ctx.fillText('resonator tuning (Hz)', 0, 0); ctx.restore();
-  ctx.font = 'bold 13px sans-serif'; ctx.textAlign = 'left';
-  ctx.fillText(title, x0, 6);
-  const bx = x1 + 14, bw = 12;          // the colour bar: 0 at the bottom, high at the top
-  for (let p = 0; p <= top; p++) {
-    ctx.fillStyle = palette[p];
-    const y = y1 - (p + 1) * (y1 - y0) / (top + 1);
-    ctx.fillRect(bx, y, bw, (y1 - y0) / (top + 1) + 0.5);
-  }
-  ctx.fillStyle = '#444'; ctx.font = '11px sans-serif';
-  ctx.textAlign = 'left'; ctx.textBaseline = 'middle';
-  ctx.fillText(String(+high.toFixed(1)), bx + bw + 4, y0 + 4);
-  ctx.fillText('0', bx + bw + 4, y1 - 4);
-  ctx.save(); ctx.translate(bx + bw + 40, (y0 + y1) / 2); ctx.rotate(-Math.PI / 2);
-  ctx.textAlign = 'center'; ctx.fillText('rate (spikes/s)', 0, 0); ctx.restore();
 }
-// A live column reported once painted: the next animation frame is the paint, and a task
-// queued from it runs once that paint is done.
-if (on === 'data' && d.t.length && d.live[d.t.length - 1]) {
-  const t = d.t[d.t.length - 1];
-  requestAnimationFrame(() => setTimeout(() => {
-    fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
-                      body: JSON.stringify({t_s: t, painted_unix_s: Date.now() / 1000,
-                                            received_unix_s: received, page: page})})
-      .catch(() => {});
-  }, 0));
+function draw() {
+  if (!st.canvas || !st.canvas.isConnected) { st.canvas = find(document); st.dirty = true; }
+  const canvas = st.canvas;
+  const host = canvas && canvas.getRootNode().host;     // the Div, stretched to the column
+  if (host && host.clientWidth > 0) {
+    const dpr = window.devicePixelRatio || 1;
+    const W = host.clientWidth, H = canvas.clientHeight;
+    // The time axis where the plot above has its own (its frame, once laid out).
+    const above = window.Bokeh && Bokeh.index && Bokeh.index.find_one(align);
+    const bbox = above && above.frame && above.frame.bbox;
+    const high = st.high > 0 ? st.high : 1;
+    const key = [W, H, dpr, x_range.start, x_range.end, high,
+                 bbox ? bbox.left : null, bbox ? bbox.right : null].join();
+    const ctx = canvas.getContext('2d');
+    const last = st.t.length ? st.t[st.t.length - 1] : -Infinity;
+    if (!st.dirty && key === st.key) {
+      // Only columns were added, the axes stand: draw those alone (and the marks over them).
+      let j = st.t.length;
+      while (j > 0 && st.t[j - 1] > st.drawn_t) { j--; }
+      for (let k = j; k < st.t.length; k++) { column(ctx, st.g, k); }
+      if (j < st.t.length) { marks(ctx, st.g, st.t[j], last + st.w[st.t.length - 1]); }
+    } else {
+      if (canvas.style.width !== W + 'px') { canvas.style.width = W + 'px'; }
+      if (canvas.width !== Math.round(W * dpr) || canvas.height !== Math.round(H * dpr)) {
+        canvas.width = Math.round(W * dpr); canvas.height = Math.round(H * dpr);
+      }
+      ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+      ctx.fillStyle = 'white'; ctx.fillRect(0, 0, W, H);
+      const shift = bbox ? above.el.getBoundingClientRect().left
+                           - canvas.getBoundingClientRect().left : 0;
+      const x0 = bbox ? bbox.left + shift : frame.left;
+      const x1 = bbox ? bbox.right + shift : W - frame.right;
+      const y0 = frame.top, y1 = H - frame.bottom;
+      const start = x_range.start, end = x_range.end, sx = (x1 - x0) / (end - start);
+      const g = {x0, x1, y0, y1, start, end, sx, high, rowH: (y1 - y0) / n};
+      for (let j = 0; j < st.t.length; j++) { column(ctx, g, j); }
+      ctx.strokeStyle = '#e5e5e5'; ctx.lineWidth = 1;
+      ctx.strokeRect(x0 + 0.5, y0 + 0.5, x1 - x0 - 1, y1 - y0 - 1);
+      marks(ctx, g, start, end);
+      const rowH = g.rowH, top = palette.length - 1;
+      ctx.fillStyle = '#444'; ctx.font = '11px sans-serif';
+      ctx.textAlign = 'right'; ctx.textBaseline = 'middle';
+      for (const [i, label] of ticks) { ctx.fillText(label, x0 - 5, y1 - (i + 0.5) * rowH); }
+      ctx.textAlign = 'center'; ctx.textBaseline = 'top';
+      const step = [0.5, 1, 2, 5, 10, 20, 60].find(s => s * sx >= 50) || 60;
+      for (let s = Math.ceil(start / step) * step; s <= end; s += step) {
+        const x = x0 + (s - start) * sx;
+        ctx.fillText(String(+s.toFixed(2)), x, y1 + 4);
+        ctx.fillRect(x, y1, 1, 3);
+      }
+      ctx.fillText('stream time (s)', (x0 + x1) / 2, y1 + 20);
+      ctx.save(); ctx.translate(12, (y0 + y1) / 2); ctx.rotate(-Math.PI / 2);
+      ctx.fillText('resonator tuning (Hz)', 0, 0); ctx.restore();
+      ctx.font = 'bold 13px sans-serif'; ctx.textAlign = 'left';
+      ctx.fillText(title, x0, 6);
+      const bx = x1 + 14, bw = 12;      // the colour bar: 0 at the bottom, high at the top
+      for (let p = 0; p <= top; p++) {
+        ctx.fillStyle = palette[p];
+        const y = y1 - (p + 1) * (y1 - y0) / (top + 1);
+        ctx.fillRect(bx, y, bw, (y1 - y0) / (top + 1) + 0.5);
+      }
+      ctx.fillStyle = '#444'; ctx.font = '11px sans-serif';
+      ctx.textAlign = 'left'; ctx.textBaseline = 'middle';
+      ctx.fillText(String(+high.toFixed(1)), bx + bw + 4, y0 + 4);
+      ctx.fillText('0', bx + bw + 4, y1 - 4);
+      ctx.save(); ctx.translate(bx + bw + 40, (y0 + y1) / 2); ctx.rotate(-Math.PI / 2);
+      ctx.textAlign = 'center'; ctx.fillText('rate (spikes/s)', 0, 0); ctx.restore();
+      st.g = g; st.key = key; st.dirty = false;
+    }
+    st.drawn_t = last;
+  }
+  // A live column reported once painted: this runs in an animation frame, whose paint
+  // follows it, and a task queued from it runs once that paint is done.
+  const report = st.report;
+  st.report = null;
+  if (report) {
+    setTimeout(() => {
+      fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
+                        body: JSON.stringify({...report, painted_unix_s: Date.now() / 1000,
+                                              page: page})})
+        .catch(() => {});
+    }, 0);
+  }
 }
 """
 
