@@ -83,3 +83,35 @@ def import_quickstart_drive(tmp, spec):
     rows = [("drive1", c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts]
     write_labels(tmp / "labels.csv", rows, ("recording", "contact_s", "distance_cm", "material"))
     return rec, import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data")
+
+
+def record_scene(path, rec) -> None:
+    """A generated drive written as `record` keeps a drive: its counts, the speed command it
+    started at and every change (as the live controls journal them)."""
+    speed = np.asarray(rec.meta["speed_cm_s"], dtype=float)
+    changes = [(int(i), float(speed[i])) for i in np.flatnonzero(np.diff(speed)) + 1]
+    write_record(path, rec.samples, speed_cm_s=float(speed[0]), speed_changes=changes)
+
+
+def import_gating_drives(tmp, spec, per_speed: int = 2, calibration_s: float = 5.0):
+    """Drives as the gating study of ``spec`` generates its scenes — ``per_speed`` course
+    drives at each swept speed, each on its own seeded course, and one drive in the open —
+    recorded with their speed log, their contacts labelled, imported: the data set's folder
+    and the generated recordings by drive name."""
+    from snn_antenna.sources.scenes import SpeedProfile, drive as open_drive
+    from snn_antenna.studies.gating_threshold.spec import make_parts, make_scene
+
+    parts = make_parts(spec)
+    recs = {"open": open_drive(parts.scene, SpeedProfile("constant", 15.0), calibration_s,
+                               []).generate(7)}
+    for v in parts.sweep.speeds_cm_s:
+        for k in range(per_speed):
+            course, seed = make_scene(parts, SpeedProfile("constant", float(v)),
+                                      (9, int(v * 10), k))
+            recs[f"v{v:g}_{k}"] = course.generate(seed)
+    rows = []
+    for name, rec in recs.items():
+        record_scene(tmp / "drives" / name, rec)
+        rows += [(name, c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts]
+    write_labels(tmp / "labels.csv", rows, ("recording", "contact_s", "distance_cm", "material"))
+    return import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data"), recs
