@@ -95,7 +95,8 @@ def record_scene(path, rec) -> None:
 
 def import_gating_drives(tmp, spec, per_speed: int = 2, calibration_s: float = 5.0):
     """Drives as the gating study of ``spec`` generates its scenes — ``per_speed`` course
-    drives at each swept speed, each on its own seeded course, and one drive in the open —
+    drives at each swept speed, each on its own seeded course with a contact after the
+    settling time, and one drive in the open —
     recorded with their speed log, their contacts labelled, imported: the data set's folder
     and the generated recordings by drive name."""
     from snn_antenna.sources.scenes import SpeedProfile, drive as open_drive
@@ -105,10 +106,13 @@ def import_gating_drives(tmp, spec, per_speed: int = 2, calibration_s: float = 5
     recs = {"open": open_drive(parts.scene, SpeedProfile("constant", 15.0), calibration_s,
                                []).generate(7)}
     for v in parts.sweep.speeds_cm_s:
-        for k in range(per_speed):
+        kept, k = 0, 0
+        while kept < per_speed:       # courses with a contact after the settling time
             course, seed = make_scene(parts, SpeedProfile("constant", float(v)),
                                       (9, int(v * 10), k))
-            recs[f"v{v:g}_{k}"] = course.generate(seed)
+            rec, k = course.generate(seed), k + 1
+            if any(c.t_s >= parts.sweep.settle_s for c in rec.truth.contacts):
+                recs[f"v{v:g}_{kept}"], kept = rec, kept + 1
     rows = []
     for name, rec in recs.items():
         record_scene(tmp / "drives" / name, rec)
