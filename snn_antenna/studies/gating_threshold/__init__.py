@@ -32,8 +32,13 @@ stream per sweep scene (shared by all speeds, so speeds are compared on the same
 per evaluation scene (``evaluation.scene_stream`` picks another family of them: validation
 scenes), so no two scenes share a seed whatever the counts.
 
+With recorded drives (``data = "DIR"``, ``--data DIR``) every stage reads recordings instead
+(``recorded``): the chain is fitted on the recordings' drive in the open, the sweep and the
+gate's targets come from the training drives, the evaluation scores only the held-out drives
+(split by drive, seeded); Fig. 9, a check of the generator's calibration, is left out.
+
 Outputs: report.html, summary.json, figures, and ``sweep.zarr`` (the scored grid, dims
-speed_cm_s × scene × threshold_g).
+speed_cm_s × scene × threshold_g; with recorded drives a scene is a training drive).
 """
 from __future__ import annotations
 

@@ -254,7 +254,7 @@ def report_section(rep, s: dict) -> None:
     if not rec:
         return
     rep.heading("The recorded drives")
-    rep.text(f"Every stage read recordings: the preprocessing was fitted on "
+    rep.text(f"This run read recorded drives in place of the scenes above, at every stage: the preprocessing was fitted on "
              f"{rec['calibration drive']} (no labelled contact); the Th × speed sweep, Th*(speed) "
              f"and the gate's training targets came from the training drives "
              f"({', '.join(rec['training drives'])}); the evaluation scored only the held-out "

@@ -66,6 +66,14 @@ def human_summary(s: dict, out_dir) -> str:
 
 def quick_note(parts: Parts) -> str:
     sw = parts.sweep
+    if parts.data is not None:
+        return (f"Quick profile on recorded drives: {len(sw.speeds_cm_s)} speeds × "
+                f"{len(sw.thresholds_g)} thresholds over {len(parts.data.training)} training "
+                f"drive(s), gate trained {parts.gate.epochs} epoch(s), "
+                f"{len(parts.data.held_out)} held-out drive(s). Too small to compare: Th* "
+                "rests on a handful of contacts per speed on a coarse grid, the gate is barely "
+                "trained, and the F1 intervals over so few drives are wide or missing. Run the "
+                "full profile for any number worth reading.")
     return (f"Quick profile: {len(sw.speeds_cm_s)} speeds × {len(sw.thresholds_g)} "
             f"thresholds × {sw.n_scenes} scene(s) of {sw.scene_s:g} s, gate trained "
             f"{parts.gate.epochs} epoch(s), {parts.evaluation.max_seeds} evaluation seed(s) at "
@@ -199,6 +207,7 @@ def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
     rep.calibrated(*_calibrated(s, parts))
     rep.predicted(*_predicted(s, parts))
     rep.text(spec.get("description", ""))
+    recorded_section(rep, s)
     rep.heading("Headline: the gate on " + ("held-out recorded drives" if parts.data is not None
                                             else "new scenes"))
     rep.text(_headline(s, parts))
@@ -238,7 +247,6 @@ def write_report(out_dir: Path, spec: dict, parts: Parts, r: Results, s: dict,
     rep.table([_sweep_row(ds, v, b, t) for v, b, t in
                zip(ds.speed_cm_s.values, ds.best_th_g.values, ds.th_star_g.values)],
               "Th*(speed) from the sweep: each speed's best Th and their monotone fit")
-    recorded_section(rep, s)
     if r.fig9:
         _fig9_section(rep, r, parts)
     rep.heading("The speed gate (Brian2 associative memory)")
