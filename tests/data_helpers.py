@@ -119,3 +119,17 @@ def import_gating_drives(tmp, spec, per_speed: int = 2, calibration_s: float = 5
         rows += [(name, c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts]
     write_labels(tmp / "labels.csv", rows, ("recording", "contact_s", "distance_cm", "material"))
     return import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data"), recs
+
+
+def import_board_bench(tmp, table: dict, seed: int = 0):
+    """The bench ``table``'s contacts as the shipped board streams them (1 kHz, 10 bits, back
+    to back), recorded and labelled from what was played, imported: the data set's folder."""
+    from snn_antenna.bridge.emulate.stimulus import bench_on_board
+    from snn_antenna.bridge.wire.recorder import record_counts
+
+    board = bench_on_board(table, seed=seed, log=lambda text: None)
+    record_counts(tmp / "recs" / "bench1", board.samples)
+    write_labels(tmp / "labels.csv", [("bench1", c.t_s, c.distance_cm, c.material)
+                                      for c in board.truth.contacts],
+                 ("recording", "onset_s", "distance_cm", "material"))
+    return import_dir(tmp / "recs", tmp / "labels.csv", tmp / "data")

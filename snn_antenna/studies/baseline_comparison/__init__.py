@@ -25,6 +25,7 @@ from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...readout import events
 from ...evaluation.comparison import Comparison
+from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
 from ...readout.spiking import SpikingBank
 from ...readout.spiking_decoders import (
     Design,
@@ -60,6 +61,78 @@ class StudySpec:
     plan: SpikingPlan | None = None
     bank: SpikingBank | None = None
     designs: list[Design] = field(default_factory=list)
+    left_out: list[str] = field(default_factory=list)   # what the data's rate cannot carry
+
+
+def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
+    """The spec with every part the data's rate cannot carry left out or clipped, and one
+    line naming each: the spectrum's bins above Nyquist, spiking bands (and the designs on
+    them) above the rate over ``MIN_SAMPLES_PER_CYCLE`` (the samples a resonator needs per
+    cycle of its input), band edges and filter cut-offs clipped to it. A spec whose parts all fit comes back unchanged, with no line."""
+    import copy
+
+    nyquist = rate_hz / 2
+    limit = rate_hz / MIN_SAMPLES_PER_CYCLE
+    why = f"above the {nyquist:g} Hz Nyquist of the recordings"
+    spec, notes = copy.deepcopy(spec), []
+    ev = spec.setdefault("events", {})
+    max_hz = float(ev.get("max_hz", events.EventProcessor.max_hz))
+    if max_hz > nyquist:
+        ev["max_hz"] = nyquist
+        notes.append(f"left out: the spectrum's bins from {nyquist:g} to {max_hz:g} Hz "
+                     f"(events.max_hz {max_hz:g} → {nyquist:g}), {why}")
+    spiking = spec.get("spiking")
+    if not isinstance(spiking, dict):
+        return spec, notes
+    spiking_why = (f"above {limit:g} Hz: a resonator reads {MIN_SAMPLES_PER_CYCLE} samples "
+                   f"per cycle, and the recordings' {rate_hz:g} Hz gives {limit:g} Hz at most "
+                   f"(their Nyquist is {nyquist:g} Hz)")
+    bands = (spiking.get("bank") or {}).get("bands") or {}
+    for name in list(bands):
+        if _fit_band(bands[name], f"spiking.bank.bands.{name}", limit, spiking_why, notes):
+            del bands[name]
+    designs = []
+    for i, design in enumerate(spiking.get("designs") or []):
+        label = f"spiking.designs[{i}] ({design.get('name', i)})"
+        if isinstance(design, dict) and design.get("band") not in (None, *bands):
+            notes.append(f"left out: {label}, on the band left out")
+        elif not (isinstance(design, dict) and
+                  _fit_band(design, label, limit, spiking_why, notes)):
+            designs.append(design)
+    if "designs" in spiking:
+        spiking["designs"] = designs
+    tuning = (spiking.get("tuned") or {}).get("tuning")
+    if isinstance(tuning, dict) and "range_hz" in tuning:
+        lo, hi = map(float, tuning["range_hz"])
+        if hi > limit:
+            tuning["range_hz"] = [lo, limit]
+            notes.append(f"clipped: spiking.tuned.tuning.range_hz {lo:g}–{hi:g} → "
+                         f"{lo:g}–{limit:g} Hz; left out: the channels {spiking_why}")
+    return spec, notes
+
+
+def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bool:
+    """Clip one band table to ``limit`` in place (band edge, cut-offs), noting each change;
+    True when the whole band lies above it (to be left out)."""
+    if not isinstance(band, dict):
+        return False
+    if "band_hz" in band:
+        lo, hi = map(float, band["band_hz"])
+        if lo >= limit:
+            notes.append(f"left out: {label} ({lo:g}–{hi:g} Hz), {why}")
+            return True
+        if hi > limit:
+            band["band_hz"] = [lo, limit]
+            notes.append(f"clipped: {label}.band_hz {lo:g}–{hi:g} → {lo:g}–{limit:g} Hz; "
+                         f"left out: its resonators {why}")
+    for cut in ("lowpass_hz", "highpass_hz"):
+        if band.get(cut) is not None and float(band[cut]) > limit:
+            if cut == "highpass_hz":
+                notes.append(f"left out: {label} (high-pass at {band[cut]:g} Hz), {why}")
+                return True
+            notes.append(f"clipped: {label}.{cut} {float(band[cut]):g} → {limit:g} Hz, {why}")
+            band[cut] = limit
+    return False
 
 
 def _spiking_part(spec: dict, rate_hz: float) -> tuple:
@@ -83,6 +156,7 @@ def plan(spec: dict) -> Plan:
             bench_spec = bench.source_from_spec(spec)
             bench_spec.validate()
             cache_folder("cache_dir", bench_spec.cache_dir)
+    spec, left_out = fit_to_rate(spec, bench_spec.rate_hz)
     with specs.section("events"):
         table = specs.check_section(spec, "events", events.EventProcessor, exclude=["rate_hz"])
         processor = events.EventProcessor(rate_hz=bench_spec.rate_hz, **table)
@@ -93,7 +167,8 @@ def plan(spec: dict) -> Plan:
         raise SpecError("data" if getattr(bench_spec, "recorded", False) else
                         "stimulus.materials", list(bench_spec.materials),
                         "a list that holds wood and aluminium for the two-material network")
-    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
+    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz),
+                      left_out=left_out)
     if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
         raise SpecError("spiking.tuned", "a tuned bank", "none with recorded data (--set "
                         "spiking.tuned={}): the tuned bank places its channels on calibration "
@@ -127,6 +202,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     fresh, scheduler = options.fresh, options.scheduler
     out_dir, t_start = Path(out_dir), time.perf_counter()
     stages = 5 if parts.bank is not None else 4
+    for line in parts.left_out:
+        log(f"      {line}")
     data, cmp, data_s = _signal_stage(parts, stages, log, fresh)
     extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
     log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
@@ -136,6 +213,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
+    summary["left_out"] = list(parts.left_out)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
     report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",

@@ -124,6 +124,10 @@ def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> 
     _predicted(report, cmp, summary)
     results, feats = cmp.results, cmp.features
     report.text(spec.get("description", ""))
+    if summary.get("left_out"):
+        report.table([{"what the data's rate cannot carry": line}
+                      for line in summary["left_out"]],
+                     f"Left out or clipped at the data's {summary['data']['rate_hz']:g} Hz")
     if recorded:
         _write_recorded(report, cmp, recorded)
     else:
