@@ -9,16 +9,18 @@ import numpy as np
 from snn_antenna.bridge.wire.protocol import BOARD_RATE_HZ, Sample, encode_binary
 from snn_antenna.bridge.wire.recorder import Recorder
 from snn_antenna.bridge.wire.source import DEFAULT_BAUDRATE, Batch
-from snn_antenna.sources.antenna import ADC, low_mode_hz
+from snn_antenna.sources.antenna import ADC, high_mode_hz, low_mode_hz
 
 RATE = BOARD_RATE_HZ
 BOARD = ADC(10, 18.0)
 
 
 def ringing_counts(onsets_s, distances_cm, duration_s: float, seed: int = 0,
-                   amplitude_g: float = 2.0, tau_s: float = 0.15) -> np.ndarray:
+                   amplitude_g: float = 2.0, tau_s: float = 0.15, high: float = 0.0
+                   ) -> np.ndarray:
     """(samples, 2) board counts: sensor noise, and at each onset the rod's low mode ringing
-    (its frequency from the distance) on both axes."""
+    (its frequency from the distance) on both axes, and its high mode at ``high`` × the low
+    mode's amplitude, decaying four times as fast."""
     rng = np.random.default_rng(seed)
     n = int(round(duration_s * RATE))
     g = rng.standard_normal((n, 2)) * 0.01
@@ -28,6 +30,8 @@ def ringing_counts(onsets_s, distances_cm, duration_s: float, seed: int = 0,
         s = t[after] - onset
         ring = amplitude_g * np.exp(-s / tau_s) * np.sin(2 * np.pi * float(low_mode_hz(d)) * s
                                                          + np.pi / 2)
+        ring += high * amplitude_g * np.exp(-4 * s / tau_s) * np.sin(
+            2 * np.pi * float(high_mode_hz(d)) * s)
         g[after, 0] += ring * np.cos(0.5)
         g[after, 1] += ring * np.sin(0.5)
     return BOARD.to_counts(g)

@@ -38,7 +38,7 @@ from ...report.page import Report
 from ...sources import bench, recorded
 from ..contract import COMMON, Options, Plan, cache_folder, data_folder
 from .report import write_report
-from .tuned import tuned_stage
+from .tuned import held_out_repetitions, tuned_stage
 
 SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
 OPTIONS = (*COMMON, "fresh", "scheduler", "data")
@@ -62,13 +62,16 @@ class StudySpec:
     bank: SpikingBank | None = None
     designs: list[Design] = field(default_factory=list)
     left_out: list[str] = field(default_factory=list)   # what the data's rate cannot carry
+    # recorded repetitions that place the tuned bank's channels, out of every split
+    calibration_repetitions: list[int] = field(default_factory=list)
 
 
 def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
     """The spec with every part the data's rate cannot carry left out or clipped, and one
     line naming each: the spectrum's bins above Nyquist, spiking bands (and the designs on
     them) above the rate over ``MIN_SAMPLES_PER_CYCLE`` (the samples a resonator needs per
-    cycle of its input), band edges and filter cut-offs clipped to it. A spec whose parts all fit comes back unchanged, with no line."""
+    cycle of its input), band edges clipped to it and their filters' cut-offs moved with
+    them. A spec whose parts all fit comes back unchanged, with no line."""
     import copy
 
     nyquist = rate_hz / 2
@@ -125,13 +128,16 @@ def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bo
             band["band_hz"] = [lo, limit]
             notes.append(f"clipped: {label}.band_hz {lo:g}–{hi:g} → {lo:g}–{limit:g} Hz; "
                          f"left out: its resonators {why}")
-    for cut in ("lowpass_hz", "highpass_hz"):
-        if band.get(cut) is not None and float(band[cut]) > limit:
-            if cut == "highpass_hz":
-                notes.append(f"left out: {label} (high-pass at {band[cut]:g} Hz), {why}")
-                return True
-            notes.append(f"clipped: {label}.{cut} {float(band[cut]):g} → {limit:g} Hz, {why}")
-            band[cut] = limit
+            for cut in ("lowpass_hz", "highpass_hz"):   # in the same place against the band
+                if band.get(cut) is not None and float(band[cut]) > limit:
+                    new = float(band[cut]) * limit / hi
+                    if new <= lo:
+                        notes.append(f"left out: {label} ({cut} {band[cut]:g} Hz), {why}")
+                        return True
+                    notes.append(f"clipped: {label}.{cut} {float(band[cut]):g} → {new:g} Hz, "
+                                 f"as far above the band's top as before ({hi:g} → {limit:g} "
+                                 "Hz)")
+                    band[cut] = new
     return False
 
 
@@ -170,9 +176,8 @@ def plan(spec: dict) -> Plan:
     parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz),
                       left_out=left_out)
     if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
-        raise SpecError("spiking.tuned", "a tuned bank", "none with recorded data (--set "
-                        "spiking.tuned={}): the tuned bank places its channels on calibration "
-                        "contacts the generator makes with another seed")
+        parts.calibration_repetitions = held_out_repetitions(bench_spec,
+                                                             parts.plan.tuned_plan())
     return Plan("baseline_comparison", spec, parts, estimate)
 
 
@@ -236,7 +241,13 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
     data_s = time.perf_counter() - t0
     skipped = events.skip_counts(everything)
-    feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
+    evaluated = everything["skipped"].values == ""
+    if parts.calibration_repetitions:      # they place the tuned channels: out of every split
+        held = np.isin(everything["repetition"].values, parts.calibration_repetitions)
+        log(f"      {int(held.sum())} contacts of repetitions {parts.calibration_repetitions} "
+            "held out to place the tuned bank's channels, out of every split")
+        evaluated &= ~held
+    feats = everything.isel(event=np.flatnonzero(evaluated))
     log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
     log(f"[2/{stages}] calibration against the paper's signal measurements")
     signal = bench_signal.signal_statistics(feats)

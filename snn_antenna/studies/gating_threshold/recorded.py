@@ -254,8 +254,9 @@ def report_section(rep, s: dict) -> None:
     if not rec:
         return
     rep.heading("The recorded drives")
-    rep.text(f"This run read recorded drives in place of the scenes above, at every stage: the preprocessing was fitted on "
-             f"{rec['calibration drive']} (no labelled contact); the Th × speed sweep, Th*(speed) "
+    rep.text(f"This run read recorded drives in place of the scenes above, at every stage: "
+             f"the preprocessing was fitted on {rec['calibration drive']} (no labelled "
+             "contact); the Th × speed sweep, Th*(speed) "
              f"and the gate's training targets came from the training drives "
              f"({', '.join(rec['training drives'])}); the evaluation scored only the held-out "
              f"drives ({', '.join(rec['held-out drives'])}), split by drive with the study's "

@@ -191,8 +191,9 @@ def _headline_recorded(s: dict) -> str:
         f"never trained on), the gate's F1 is {describe_interval(s['f1']['gated'])}. Against "
         f"the lookup table of the same Th*: {describe_difference(d['gated − lookup'])}. "
         f"Against the best single fixed Th in hindsight ({s['oracle_th_g']:g} g, chosen on "
-        f"these very drives: an oracle): {describe_difference(d['gated − best fixed in hindsight'])}"
-        f". Against the fixed Th chosen on the training drives ({s['sweep_fixed_th_g']:g} g): "
+        f"these very drives: an oracle): "
+        f"{describe_difference(d['gated − best fixed in hindsight'])}. Against the fixed Th "
+        f"chosen on the training drives ({s['sweep_fixed_th_g']:g} g): "
         f"{describe_difference(d['gated − fixed from the sweep'])}. Each held-out drive is one "
         f"paired unit (n = {seeds['used']}); resolving a difference of {seeds['margin_f1']:g} "
         f"in F1 at this spread needs {seeds['needed']}.")

@@ -168,7 +168,7 @@ class Parts:
     evaluation: EvaluationSettings
     held_out_speeds: np.ndarray
     chain: object = None      # fitted on first use (``calibrated_chain``)
-    data: object = None       # recorded drives in place of every scene (``recorded.RecordedSplit``)
+    data: object = None       # recorded drives in place of every scene (a RecordedSplit)
 
 
 def _section(spec: dict, name: str, target, **kw):
