@@ -183,8 +183,10 @@ def test_the_gating_study_on_recorded_drives_trains_and_scores_on_recordings_onl
     for key in ("th_star", "f1", "differences"):
         assert first[key] == second[key]
     assert "calibration_checks" not in first
-    assert all("generator" not in c["note"] and "SELF_MOTION" not in c["note"]
-               for c in first["calibrated"])
+    written = json.loads((tmp_path / "one" / "summary.json").read_text())
+    assert [c["source"] for c in written["calibrated"]] == [str(data.resolve())] * 2
+    assert all("antenna." not in c["how"] and "SELF_MOTION" not in c["how"]
+               for c in written["calibrated"])
     page = (tmp_path / "one" / "report.html").read_text()
     meta = json.loads((data / "import.json").read_text())
     assert all(r["files"][0]["sha256"][:16] in page for r in meta["recordings"])
