@@ -130,7 +130,7 @@ def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bo
                          f"left out: its resonators {why}")
             for cut in ("lowpass_hz", "highpass_hz"):   # in the same place against the band
                 if band.get(cut) is not None and float(band[cut]) > limit:
-                    new = float(band[cut]) * limit / hi
+                    new = round(float(band[cut]) * limit / hi, 1)
                     if new <= lo:
                         notes.append(f"left out: {label} ({cut} {band[cut]:g} Hz), {why}")
                         return True
