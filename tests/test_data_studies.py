@@ -138,6 +138,18 @@ def test_the_gating_study_refuses_recorded_drives_it_cannot_split_in_one_line(ga
             build({**spec, "data": str(small)})
 
 
+def test_check_refuses_a_speed_the_recorded_drives_lack_in_one_line(gating_drives, capsys):
+    from snn_antenna.cli import main
+
+    _, _, data = gating_drives
+    args = ["run", str(ROOT / "studies" / "gating_threshold.toml"), "--quick", "--check",
+            "--data", str(data), "--set", "sweep.speeds_cm_s=[0.0, 12.0, 27.0, 30.0]"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sweep.speeds_cm_s" in err and "[30.0]" in err
+    assert main(args[:-2]) == 0
+
+
 def test_a_recorded_drive_is_scored_at_the_speed_it_was_touched_at():
     """One drive at 0 then 27 cm/s: the contact and the detection on it count at the speed of
     the touch, a false positive at the speed of its onset, the minutes at each speed from
