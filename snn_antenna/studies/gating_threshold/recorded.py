@@ -240,7 +240,12 @@ def evaluate_drives(parts, fixed_th: np.ndarray, recall, codings, others: dict, 
 
 def summary_entry(split: RecordedSplit) -> dict:
     """What ``summary.json`` keeps: the data's origin and which drive played which part."""
+    def labelled(drives) -> int:
+        return sum(len(split.recording(d).truth.contacts) for d in drives)
+
     return {**split.roles(), "data": recorded.summary_entry(split.drives),
+            "labelled_contacts": {"training drives": labelled(split.training),
+                                  "held-out drives": labelled(split.held_out)},
             "parts_from_recordings": ["preprocessing (calibration drive)",
                                       "Th x speed sweep and Th*(speed) (training drives)",
                                       "the gate's training targets (training drives)",
@@ -260,6 +265,8 @@ def report_section(rep, s: dict) -> None:
              f"and the gate's training targets came from the training drives "
              f"({', '.join(rec['training drives'])}); the evaluation scored only the held-out "
              f"drives ({', '.join(rec['held-out drives'])}), split by drive with the study's "
-             "seed. No generated scene entered any number on this page.")
+             f"seed ({rec['labelled_contacts']['training drives']} and "
+             f"{rec['labelled_contacts']['held-out drives']} labelled contacts). No generated "
+             "scene entered any number on this page.")
     rep.table([{"what": w, "value": v} for w, v in rec["provenance"]],
               "Where the recorded drives came from")
