@@ -100,11 +100,11 @@ def split_drives(spec: dict, scene, sweep, held_out_share: float, seed: int
             driven[float(s)] = driven.get(float(s), 0) + len(c)
     missing = [s for s, n in driven.items() if n == 0]
     if missing:
-        held = logged_speeds([recs[d] for d in split.training])
+        ran_at = logged_speeds([recs[d] for d in split.training])
         raise SpecError("sweep.speeds_cm_s", sweep.speeds_cm_s.tolist(),
                         "speeds the training drives ran at with labelled contacts (training "
                         f"drives {', '.join(split.roles()['training drives'])} hold none at "
-                        f"{missing}; they ran at {held}: set the sweep's and the gate's speeds "
+                        f"{missing}; they ran at {ran_at}: set the sweep's and the gate's speeds "
                         "to those, or record more drives)")
     return split
 
