@@ -189,10 +189,16 @@ def run_curve(data, features, plan: TunedPlan, bands: dict, parts, log, client) 
     log(f"      accuracy vs resonators on {len(ids)} events (repetitions < "
         f"{plan.curve_repetitions}), split of seed {seed}")
     fft = bl.material_baselines([], evaluation.material_mlp, evaluation.nmf_max_iter)[0]
+    # NMF-n needs n <= its training events: a small recorded set leaves the larger sizes out
+    n_train = int(np.sum(train))
+    sizes = [n for n in plan.curve if n <= n_train]
+    if len(sizes) < len(plan.curve):
+        log(f"      left out of the curve: {[n for n in plan.curve if n not in sizes]} "
+            f"resonators (NMF-n needs n <= the split's {n_train} training events)")
     with threadpool_limits(1):
         reference = _accuracy(fft, spectrum, y, train, test, seed)
         rows = []
-        for n in plan.curve:
+        for n in sizes:
             t0 = time.perf_counter()
             f = run_bank(plan.bank(bands[n], parts.bank), data["counts"].values[ids],
                          *recording_attrs(data), client=client, progress=False)
