@@ -5,6 +5,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from data_helpers import (import_dir, import_gating_drives, import_quickstart_drive,
                           write_labels, write_record)
@@ -148,6 +150,21 @@ def test_check_refuses_a_speed_the_recorded_drives_lack_in_one_line(gating_drive
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "sweep.speeds_cm_s" in err and "[30.0]" in err
     assert main(args[:-2]) == 0
+
+
+@given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(),
+                 st.booleans(), st.none()))
+def test_a_held_out_share_outside_0_to_1_is_refused_in_one_line(value):
+    from snn_antenna.studies.gating_threshold.spec import EvaluationSettings
+
+    valid = (isinstance(value, (int, float)) and not isinstance(value, bool)
+             and 0 < value < 1)
+    if valid:
+        assert EvaluationSettings(held_out_drives=value).held_out_drives == value
+        return
+    with pytest.raises(SpecError) as refused:
+        EvaluationSettings(held_out_drives=value)
+    assert refused.value.field == "held_out_drives" and "\n" not in str(refused.value)
 
 
 def test_a_recorded_drive_is_scored_at_the_speed_it_was_touched_at():
