@@ -5,8 +5,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
-from data_helpers import (RATE, import_dir, import_quickstart_drive, ringing_counts,
+from data_helpers import (import_dir, import_gating_drives, import_quickstart_drive,
                           write_labels, write_record)
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
@@ -53,26 +55,6 @@ def test_a_study_refuses_a_data_set_of_the_other_kind_in_one_line(drive, tmp_pat
         quickstart.plan({**spec, "data": str(tmp_path)})
 
 
-def test_the_baseline_comparison_at_the_boards_rate_names_what_it_cannot_read(tmp_path):
-    """The board samples at 1 kHz: a spectrum to 508 Hz is refused in one line naming the
-    field, before any work."""
-    onsets = [1.0, 2.5, 4.0]
-    write_record(tmp_path / "recs" / "run1", ringing_counts(onsets, [10, 20, 30], 6.0))
-    write_labels(tmp_path / "labels.csv", [("run1", t, d, "wood", 0)
-                                          for t, d in zip(onsets, [10, 20, 30])])
-    data = import_dir(tmp_path / "recs", tmp_path / "labels.csv", tmp_path / "data")
-    spec = specs.load(ROOT / "studies" / "baseline_comparison.toml", [], quick=True)
-    with pytest.raises(SpecError) as refused:
-        baseline_comparison.plan({**spec, "data": str(data)})
-    assert refused.value.field.startswith("events.")
-    assert "500" in str(refused.value)
-    spec = {**spec, "data": str(data), "events": {**spec["events"], "max_hz": 499.0},
-            "evaluation": {**spec["evaluation"], "pipelines": ["distance", "material"]}}
-    spec.pop("spiking")
-    parts = baseline_comparison.plan(spec).parts
-    assert parts.bench.recorded and parts.bench.n_events == 3 and parts.bench.rate_hz == RATE
-
-
 @pytest.mark.slow
 def test_quickstart_on_the_recorded_drive_scores_as_on_the_generated_scene(drive, tmp_path):
     spec, _, data = drive
@@ -91,95 +73,150 @@ def test_quickstart_on_the_recorded_drive_scores_as_on_the_generated_scene(drive
     assert meta["recordings"][0]["files"][0]["sha256"][:16] in page
 
 
-# -- the gating threshold study on recorded drives ------------------------------------------------
-def record_scene(path, rec) -> None:
-    """A generated drive written as `record` keeps a drive: its counts, the speed command it
-    started at and every change (as the live controls journal them)."""
-    speed = np.asarray(rec.meta["speed_cm_s"], dtype=float)
-    changes = [(int(i), float(speed[i])) for i in np.flatnonzero(np.diff(speed)) + 1]
-    write_record(path, rec.samples, speed_cm_s=float(speed[0]), speed_changes=changes)
+# -- the gating threshold study on recorded drives -------------------------------------------
+GATING_QUICK = ["sweep.scene_s=4.0"]      # 4 s drives: the split and its checks, in seconds
 
 
 @pytest.fixture(scope="module")
 def gating_drives(tmp_path_factory):
-    """A calibration drive in the open and a drive along a course on a speed ramp, generated
-    as the study generates its scenes, recorded and labelled."""
-    from snn_antenna.sources.scenes import SpeedProfile, drive as open_drive, ramp
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build, make_scene
-
+    """Two course drives at each of the quick profile's speeds and one in the open, generated
+    as the study generates its scenes, recorded with their speed log, labelled, imported."""
     tmp = tmp_path_factory.mktemp("gating")
-    spec = specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True)
-    parts = build(spec)
-    calibration = open_drive(parts.scene, SpeedProfile("constant", 15.0), 5.0, []).generate(7)
-    v = parts.sweep.speeds_cm_s
-    course, seed = make_scene(parts, ramp(float(v.min()), float(v.max()), parts.sweep.scene_s),
-                              (9, 0))
-    scored = course.generate(seed)
-    assert scored.truth.contacts
-    record_scene(tmp / "drives" / "calibration", calibration)
-    record_scene(tmp / "drives" / "ramp", scored)
-    write_labels(tmp / "labels.csv", [("ramp", c.t_s, c.distance_cm, c.material)
-                                      for c in scored.truth.contacts],
-                 ("recording", "contact_s", "distance_cm", "material"))
-    return spec, scored, import_dir(tmp / "drives", tmp / "labels.csv", tmp / "data")
+    spec = specs.load(ROOT / "studies" / "gating_threshold.toml", GATING_QUICK, quick=True)
+    data, recs = import_gating_drives(tmp, spec, calibration_s=2.0)
+    return spec, recs, data
 
 
-def test_the_gating_study_takes_recorded_drives_with_their_speed_log(gating_drives, tmp_path):
+def test_the_gating_study_splits_recorded_drives_by_drive_within_each_speed(gating_drives):
+    """Every scored drive is either a training or a held-out drive, never both; the training
+    drives cover every swept speed; the open drive fits the chain; the seed draws the split."""
     from snn_antenna.studies.gating_threshold.spec import make_parts as build
 
-    spec, scored, data = gating_drives
-    parts = build({**spec, "data": str(data)})
-    ramp = parts.data.recording(parts.data.names.index("ramp"))
-    assert np.array_equal(ramp.samples, scored.samples)
-    assert np.array_equal(ramp.meta["speed_cm_s"], np.asarray(scored.meta["speed_cm_s"],
-                                                               dtype=np.float32))
-    # a drive without its speed log cannot drive the gate: one line, before any work
-    (tmp_path / "drives").mkdir()
-    write_record(tmp_path / "drives" / "ramp", scored.samples)
-    write_record(tmp_path / "drives" / "calibration", scored.samples[:2000])
-    write_labels(tmp_path / "labels.csv", [("ramp", c.t_s, c.distance_cm, c.material)
-                                           for c in scored.truth.contacts],
-                 ("recording", "contact_s", "distance_cm", "material"))
-    unlogged = import_dir(tmp_path / "drives", tmp_path / "labels.csv", tmp_path / "data")
-    with pytest.raises(SpecError, match="speed command is logged"):
-        build({**spec, "data": str(unlogged)})
+    spec, recs, data = gating_drives
+    splits = {}
+    for seed in range(6):
+        split = build({**spec, "seed": seed, "data": str(data)}).data
+        roles = split.roles()
+        train, held = set(roles["training drives"]), set(roles["held-out drives"])
+        assert roles["calibration drive"] == "open"
+        assert not train & held and train | held == set(recs) - {"open"}
+        assert {n.split("_")[0] for n in train} == {n.split("_")[0] for n in held} \
+            == {"v0", "v12", "v27"}
+        splits[seed] = tuple(sorted(held))
+    assert len(set(splits.values())) > 1
+    again = build({**spec, "seed": 3, "data": str(data)}).data
+    assert tuple(again.roles()["held-out drives"]) == splits[3]
+    ramp = again.recording(again.drives.names.index("v27_1"))
+    assert np.array_equal(ramp.samples, recs["v27_1"].samples)
+    assert np.all(ramp.meta["speed_cm_s"] == 27.0)
+
+
+def test_the_gating_study_refuses_recorded_drives_it_cannot_split_in_one_line(gating_drives,
+                                                                               tmp_path):
+    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+
+    spec, recs, data = gating_drives
+    on_data = {**spec, "data": str(data)}
+    with pytest.raises(SpecError) as refused:         # a speed no drive ran at
+        build({**on_data, "sweep": {**spec["sweep"], "speeds_cm_s": [0.0, 12.0, 27.0, 30.0]}})
+    assert refused.value.field == "sweep.speeds_cm_s" and "[30.0]" in str(refused.value)
+    with pytest.raises(SpecError) as refused:         # a share that holds out nothing
+        build({**on_data, "evaluation": {**spec["evaluation"], "held_out_drives": 0.2}})
+    assert refused.value.field == "evaluation.held_out_drives"
+    # one scored drive: nothing to hold out; a drive without its speed log: no gate input
+    for name, logged in (("v27_0", True), ("v12_0", False)):
+        folder = tmp_path / name
+        for drive in ("open", name):
+            write_record(folder / "drives" / drive, recs[drive].samples,
+                         speed_cm_s=float(recs[drive].meta["speed_cm_s"][0]) if logged
+                         else None)
+        write_labels(folder / "labels.csv", [(name, c.t_s, c.distance_cm, c.material)
+                                             for c in recs[name].truth.contacts],
+                     ("recording", "contact_s", "distance_cm", "material"))
+        if not logged:
+            write_record(folder / "drives" / "v12_1", recs["v12_1"].samples)
+        small = import_dir(folder / "drives", folder / "labels.csv", folder / "data")
+        with pytest.raises(SpecError, match="at least two drives|speed command is logged"):
+            build({**spec, "data": str(small)})
+
+
+def test_check_refuses_a_speed_the_recorded_drives_lack_in_one_line(gating_drives, capsys):
+    from snn_antenna.cli import main
+
+    _, _, data = gating_drives
+    args = ["run", str(ROOT / "studies" / "gating_threshold.toml"), "--quick", "--check",
+            "--data", str(data), "--set", "sweep.speeds_cm_s=[0.0, 12.0, 27.0, 30.0]"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "sweep.speeds_cm_s" in err and "[30.0]" in err
+    assert main(args[:-2]) == 0
+
+
+@given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(),
+                 st.booleans(), st.none()))
+def test_a_held_out_share_outside_0_to_1_is_refused_in_one_line(value):
+    from snn_antenna.studies.gating_threshold.spec import EvaluationSettings
+
+    valid = (isinstance(value, (int, float)) and not isinstance(value, bool)
+             and 0 < value < 1)
+    if valid:
+        assert EvaluationSettings(held_out_drives=value).held_out_drives == value
+        return
+    with pytest.raises(SpecError) as refused:
+        EvaluationSettings(held_out_drives=value)
+    assert refused.value.field == "held_out_drives" and "\n" not in str(refused.value)
+
+
+def test_a_recorded_drive_is_scored_at_the_speed_it_was_touched_at():
+    """One drive at 0 then 27 cm/s: the contact and the detection on it count at the speed of
+    the touch, a false positive at the speed of its onset, the minutes at each speed from
+    the log."""
+    from snn_antenna.core.signals import Recording
+    from snn_antenna.core.truth import Event, GroundTruth
+    from snn_antenna.readout.contacts import ContactEstimate
+    from snn_antenna.studies.gating_threshold.recorded import score_by_speed
+    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+
+    parts = build(specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True))
+    speed = np.r_[np.zeros(6000), np.full(4000, 27.0)]
+    rec = Recording(np.zeros((10_000, 2)), 1000.0, GroundTruth((
+        Event("contact", 2.0, 1.0, 20.0, "wood"), Event("contact", 5.95, 1.0, 20.0, "wood"),
+        Event("contact", 8.0, 1.0, 20.0, "wood"))), meta={"speed_cm_s": speed})
+    hit = ContactEstimate(2.0, 2.3, 12.0, 20.0)        # on the first contact (0 cm/s)
+    late = ContactEstimate(6.0, 6.4, 12.0, 20.0)       # onset at 27 cm/s, on the 0 cm/s touch
+    false = ContactEstimate(7.0, 7.2, 12.0, 20.0)      # on nothing, at 27 cm/s
+    at0, at12, at27 = score_by_speed(parts.readout, [hit, late, false], rec, [0.0, 12.0, 27.0])
+    assert (at0.tp, at0.fp, at0.misses) == (2, 0, 0)
+    assert (at27.tp, at27.fp, at27.misses) == (0, 1, 1)
+    assert (at12.tp, at12.fp, at12.misses, at12.minutes) == (0, 0, 0, 0.0)
+    assert at0.minutes == pytest.approx(5.0 / 60) and at27.minutes == pytest.approx(4.0 / 60)
 
 
 @pytest.mark.slow
-def test_the_gating_study_scores_the_gate_on_recorded_drives(gating_drives, tmp_path):
+def test_the_gating_study_on_recorded_drives_trains_and_scores_on_recordings_only(tmp_path):
+    """The whole quick study on recorded drives: the sweep holds only the training drives,
+    the evaluation only the held-out ones, the report names the recordings and their hashes
+    and lists no generator constant; a second run gives the same numbers."""
     from snn_antenna.studies import gating_threshold
 
-    spec, scored, data = gating_drives
-    s = gating_threshold.run(gating_threshold.plan({**spec, "data": str(data)}),
-                             tmp_path / "out", Options(quick=True), log=lambda *a: None)
-    rows = {r["method"]: r for r in s["recorded"]["rows"]}
-    n = len(scored.truth.contacts)
-    # every method scored on the same contacts (those after the settling time, in or out of
-    # the array's band)
-    counted = {r["tp"] + r["misses"] + r["out_of_band_contacts"] for r in rows.values()}
-    assert len(counted) == 1 and 1 <= counted.pop() <= n
-    page = (tmp_path / "out" / "report.html").read_text()
+    spec = specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True)
+    data, recs = import_gating_drives(tmp_path, spec)
+    plan = gating_threshold.plan({**spec, "data": str(data)})
+    quiet = lambda *a: None                                              # noqa: E731
+    first = gating_threshold.run(plan, tmp_path / "one", Options(quick=True), log=quiet)
+    second = gating_threshold.run(gating_threshold.plan({**spec, "data": str(data)}),
+                                  tmp_path / "two", Options(quick=True), log=quiet)
+    rec = first["recorded"]
+    assert len(rec["training drives"]) == 3 == len(rec["held-out drives"])
+    assert first["f1"]["gated"]["n"] <= 3
+    for key in ("th_star", "f1", "differences"):
+        assert first[key] == second[key]
+    assert "calibration_checks" not in first
+    written = json.loads((tmp_path / "one" / "summary.json").read_text())
+    assert [c["source"] for c in written["calibrated"]] == [str(data.resolve())] * 2
+    assert all("antenna." not in c["how"] and "SELF_MOTION" not in c["how"]
+               for c in written["calibrated"])
+    page = (tmp_path / "one" / "report.html").read_text()
     meta = json.loads((data / "import.json").read_text())
-    assert "The gate on recorded drives" in page
-    assert meta["recordings"][0]["files"][0]["sha256"][:16] in page
-
-
-def test_the_tuned_bank_is_refused_on_recorded_data_in_one_line(tmp_path):
-    """Its channels are placed on generated calibration contacts of another seed, which a
-    recording has not."""
-    onsets = [1.0, 2.5, 4.0]
-    write_record(tmp_path / "recs" / "run1", ringing_counts(onsets, [10, 20, 30], 6.0))
-    write_labels(tmp_path / "labels.csv", [("run1", t, d, "wood", 0)
-                                          for t, d in zip(onsets, [10, 20, 30])])
-    data = import_dir(tmp_path / "recs", tmp_path / "labels.csv", tmp_path / "data")
-    spec = specs.load(ROOT / "studies" / "baseline_comparison.toml", [], quick=True)
-    bands = spec["spiking"]["bank"]["bands"]
-    spec = {**spec, "data": str(data), "events": {**spec["events"], "max_hz": 499.0},
-            "evaluation": {**spec["evaluation"], "pipelines": ["distance", "material"]},
-            "spiking": {**spec["spiking"], "bank": {**spec["spiking"]["bank"],
-                                                    "bands": {"low": bands["low"]}}}}
-    with pytest.raises(SpecError) as refused:
-        baseline_comparison.plan(spec)
-    assert refused.value.field == "spiking.tuned"
-    spec["spiking"].pop("tuned")
-    assert baseline_comparison.plan(spec).parts.bank is not None
+    assert all(r["files"][0]["sha256"][:16] in page for r in meta["recordings"])
+    assert "Fig. 9 in kind" not in page and "The recorded drives" in page

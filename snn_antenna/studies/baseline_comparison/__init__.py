@@ -25,6 +25,7 @@ from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...readout import events
 from ...evaluation.comparison import Comparison
+from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
 from ...readout.spiking import SpikingBank
 from ...readout.spiking_decoders import (
     Design,
@@ -37,7 +38,7 @@ from ...report.page import Report
 from ...sources import bench, recorded
 from ..contract import COMMON, Options, Plan, cache_folder, data_folder
 from .report import write_report
-from .tuned import tuned_stage
+from .tuned import held_out_repetitions, tuned_stage
 
 SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
 OPTIONS = (*COMMON, "fresh", "scheduler", "data")
@@ -60,6 +61,84 @@ class StudySpec:
     plan: SpikingPlan | None = None
     bank: SpikingBank | None = None
     designs: list[Design] = field(default_factory=list)
+    left_out: list[str] = field(default_factory=list)   # what the data's rate cannot carry
+    # recorded repetitions that place the tuned bank's channels, out of every split
+    calibration_repetitions: list[int] = field(default_factory=list)
+
+
+def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
+    """The spec with every part the data's rate cannot carry left out or clipped, and one
+    line naming each: the spectrum's bins above Nyquist, spiking bands (and the designs on
+    them) above the rate over ``MIN_SAMPLES_PER_CYCLE`` (the samples a resonator needs per
+    cycle of its input), band edges clipped to it and their filters' cut-offs moved with
+    them. A spec whose parts all fit comes back unchanged, with no line."""
+    import copy
+
+    nyquist = rate_hz / 2
+    limit = rate_hz / MIN_SAMPLES_PER_CYCLE
+    why = f"above the {nyquist:g} Hz Nyquist of the recordings"
+    spec, notes = copy.deepcopy(spec), []
+    ev = spec.setdefault("events", {})
+    max_hz = float(ev.get("max_hz", events.EventProcessor.max_hz))
+    if max_hz > nyquist:
+        ev["max_hz"] = nyquist
+        notes.append(f"left out: the spectrum's bins from {nyquist:g} to {max_hz:g} Hz "
+                     f"(events.max_hz {max_hz:g} → {nyquist:g}), {why}")
+    spiking = spec.get("spiking")
+    if not isinstance(spiking, dict):
+        return spec, notes
+    spiking_why = (f"above {limit:g} Hz: a resonator reads {MIN_SAMPLES_PER_CYCLE} samples "
+                   f"per cycle, and the recordings' {rate_hz:g} Hz gives {limit:g} Hz at most "
+                   f"(their Nyquist is {nyquist:g} Hz)")
+    bands = (spiking.get("bank") or {}).get("bands") or {}
+    for name in list(bands):
+        if _fit_band(bands[name], f"spiking.bank.bands.{name}", limit, spiking_why, notes):
+            del bands[name]
+    designs = []
+    for i, design in enumerate(spiking.get("designs") or []):
+        label = f"spiking.designs[{i}] ({design.get('name', i)})"
+        if isinstance(design, dict) and design.get("band") not in (None, *bands):
+            notes.append(f"left out: {label}, on the band left out")
+        elif not (isinstance(design, dict) and
+                  _fit_band(design, label, limit, spiking_why, notes)):
+            designs.append(design)
+    if "designs" in spiking:
+        spiking["designs"] = designs
+    tuning = (spiking.get("tuned") or {}).get("tuning")
+    if isinstance(tuning, dict) and "range_hz" in tuning:
+        lo, hi = map(float, tuning["range_hz"])
+        if hi > limit:
+            tuning["range_hz"] = [lo, limit]
+            notes.append(f"clipped: spiking.tuned.tuning.range_hz {lo:g}–{hi:g} → "
+                         f"{lo:g}–{limit:g} Hz; left out: the channels {spiking_why}")
+    return spec, notes
+
+
+def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bool:
+    """Clip one band table to ``limit`` in place (band edge, cut-offs), noting each change;
+    True when the whole band lies above it (to be left out)."""
+    if not isinstance(band, dict):
+        return False
+    if "band_hz" in band:
+        lo, hi = map(float, band["band_hz"])
+        if lo >= limit:
+            notes.append(f"left out: {label} ({lo:g}–{hi:g} Hz), {why}")
+            return True
+        if hi > limit:
+            band["band_hz"] = [lo, limit]
+            notes.append(f"clipped: {label}.band_hz {lo:g}–{hi:g} → {lo:g}–{limit:g} Hz; "
+                         f"left out: its resonators {why}")
+            for cut in ("lowpass_hz", "highpass_hz"):   # in the same place against the band
+                if band.get(cut) is not None and float(band[cut]) > limit:
+                    new = round(float(band[cut]) * limit / hi, 1)
+                    if new <= lo:
+                        notes.append(f"left out: {label} ({cut} {band[cut]:g} Hz), {why}")
+                        return True
+                    notes.append(f"clipped: {label}.{cut} {float(band[cut]):g} → {new:g} Hz, "
+                                 f"as far above the band's top as before ({hi:g} → {limit:g} "
+                                 "Hz)")
+                    band[cut] = new
+    return False
 
 
 def _spiking_part(spec: dict, rate_hz: float) -> tuple:
@@ -83,6 +162,7 @@ def plan(spec: dict) -> Plan:
             bench_spec = bench.source_from_spec(spec)
             bench_spec.validate()
             cache_folder("cache_dir", bench_spec.cache_dir)
+    spec, left_out = fit_to_rate(spec, bench_spec.rate_hz)
     with specs.section("events"):
         table = specs.check_section(spec, "events", events.EventProcessor, exclude=["rate_hz"])
         processor = events.EventProcessor(rate_hz=bench_spec.rate_hz, **table)
@@ -93,11 +173,11 @@ def plan(spec: dict) -> Plan:
         raise SpecError("data" if getattr(bench_spec, "recorded", False) else
                         "stimulus.materials", list(bench_spec.materials),
                         "a list that holds wood and aluminium for the two-material network")
-    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
+    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz),
+                      left_out=left_out)
     if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
-        raise SpecError("spiking.tuned", "a tuned bank", "none with recorded data (--set "
-                        "spiking.tuned={}): the tuned bank places its channels on calibration "
-                        "contacts the generator makes with another seed")
+        parts.calibration_repetitions = held_out_repetitions(bench_spec,
+                                                             parts.plan.tuned_plan())
     return Plan("baseline_comparison", spec, parts, estimate)
 
 
@@ -127,6 +207,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     fresh, scheduler = options.fresh, options.scheduler
     out_dir, t_start = Path(out_dir), time.perf_counter()
     stages = 5 if parts.bank is not None else 4
+    for line in parts.left_out:
+        log(f"      {line}")
     data, cmp, data_s = _signal_stage(parts, stages, log, fresh)
     extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
     log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
@@ -136,6 +218,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
+    summary["left_out"] = list(parts.left_out)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
     report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",
@@ -158,7 +241,13 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
     data_s = time.perf_counter() - t0
     skipped = events.skip_counts(everything)
-    feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
+    evaluated = everything["skipped"].values == ""
+    if parts.calibration_repetitions:      # they place the tuned channels: out of every split
+        held = np.isin(everything["repetition"].values, parts.calibration_repetitions)
+        log(f"      {int(held.sum())} contacts of repetitions {parts.calibration_repetitions} "
+            "held out to place the tuned bank's channels, out of every split")
+        evaluated &= ~held
+    feats = everything.isel(event=np.flatnonzero(evaluated))
     log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
     log(f"[2/{stages}] calibration against the paper's signal measurements")
     signal = bench_signal.signal_statistics(feats)

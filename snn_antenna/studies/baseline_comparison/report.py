@@ -124,6 +124,10 @@ def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> 
     _predicted(report, cmp, summary)
     results, feats = cmp.results, cmp.features
     report.text(spec.get("description", ""))
+    if summary.get("left_out"):
+        report.table([{"what the data's rate cannot carry": line}
+                      for line in summary["left_out"]],
+                     f"Left out or clipped at the data's {summary['data']['rate_hz']:g} Hz")
     if recorded:
         _write_recorded(report, cmp, recorded)
     else:
@@ -206,6 +210,18 @@ def _write_recorded(report: Report, cmp: Comparison, recorded: dict) -> None:
                  f"The recordings and the labels table (data set {recorded['key']})")
 
 
+def _tuned_text(summary: dict) -> str:
+    """The tuned bank's account; on recordings, which recorded contacts placed its channels."""
+    t = summary["spiking"]["tuned"]
+    if "calibration_repetitions" not in t:
+        return tuned_text(summary)
+    reps = ", ".join(map(str, t["calibration_repetitions"]))
+    where = (f"{t['calibration_seed']}: the recorded contacts of repetitions {reps} "
+             f"in {t['calibration_source']}, held out of every split")
+    return tuned_text({**summary, "spiking": {**summary["spiking"],
+                                              "tuned": {**t, "calibration_seed": where}}})
+
+
 def _write_materials(report: Report, summary: dict, cmp: Comparison) -> None:
     results = cmp.results
     if "mlp_spectrum_material" in results:
@@ -244,7 +260,7 @@ def _write_spiking(report: Report, summary: dict) -> None:
                       "FFT pipeline's cost at the ns per neuron-step measured in this run.")
         report.table(tuned_curve_rows(summary), "Accuracy vs resonators (first split, events "
                      "of the first repetitions): the curve above")
-        report.text(tuned_text(summary))
+        report.text(_tuned_text(summary))
     if summary["spiking"].get("coders"):
         report.table(coder_rows(summary), CODER_CAPTION)
     if summary["spiking"].get("designs"):

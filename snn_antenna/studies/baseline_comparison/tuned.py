@@ -5,6 +5,10 @@ Calibration contacts are generated like the bench set but with another seed (the
 seed + ``calibration_seed_offset``) and a few repetitions: the robot's own session on the
 bench's rods, whose spectra and labels place the channels (``readout.band_tuning``). The
 evaluated events never enter the placement, so no test split can leak into it, for any seed.
+
+On recorded contacts nothing is generated: ``calibration_repetitions`` of the recorded
+repetitions, drawn with the study's seed (``held_out_repetitions``), place the channels, and
+the study removes their contacts from every split before any read-out is scored.
 """
 from __future__ import annotations
 
@@ -29,30 +33,59 @@ from ...readout.spiking_decoders import (
     tuned_inputs,
 )
 from ...sources import bench
+from ...core.errors import check
 from ...core.truth import bench_labels
 
+TUNED_CALIBRATION = 1     # seed stream of the recorded repetitions that place the channels
 
-def calibration_bands(bench_spec, plan: TunedPlan, log, fresh: bool) -> dict:
+
+def held_out_repetitions(bench_source, plan: TunedPlan) -> list[int]:
+    """The recorded repetitions whose contacts place the tuned channels: ``plan``'s
+    ``calibration_repetitions`` of them, drawn with the study's seed; checked to leave at
+    least two repetitions to split by."""
+    have = sorted(set(int(r) for r in bench_source.dataset["repetition"].values))
+    n = plan.calibration_repetitions
+    check(n <= len(have) - 2, "spiking.tuned.calibration_repetitions", n,
+          f"at most {len(have) - 2} of the recorded set's {len(have)} repetitions (its "
+          "contacts place the tuned channels and leave every split; two must remain to split "
+          "by), or no tuned bank (--set spiking.tuned={})")
+    rng = np.random.default_rng(np.random.SeedSequence(bench_source.seed,
+                                                       spawn_key=(TUNED_CALIBRATION,)))
+    return sorted(rng.choice(have, size=n, replace=False).tolist())
+
+
+def calibration_bands(parts, data, plan: TunedPlan, log, fresh: bool) -> dict:
     """The channels of every tuning of ``plan`` (by number of resonators), placed from the
-    calibration contacts, and a description of where they came from."""
-    spec = replace(bench_spec, seed=bench_spec.seed + plan.calibration_seed_offset,
-                   repetitions=plan.calibration_repetitions)
-    log(f"      calibration contacts: {spec.n_events} events (seed {spec.seed}), "
-        "never evaluated")
-    data = bench.load(spec, log, fresh)
+    calibration contacts (generated with another seed, or the recorded ones held out of every
+    split), and a description of where they came from."""
+    if parts.calibration_repetitions:
+        keep = np.isin(data["repetition"].values, parts.calibration_repetitions)
+        data = data.isel(event=np.flatnonzero(keep))
+        where = {"calibration_events": int(keep.sum()),
+                 "calibration_seed": int(parts.bench.seed),
+                 "calibration_repetitions": list(parts.calibration_repetitions),
+                 "calibration_source": str(parts.bench.path)}
+        log(f"      calibration contacts: {where['calibration_events']} recorded events of "
+            f"repetitions {where['calibration_repetitions']}, never evaluated")
+    else:
+        spec = replace(parts.bench, seed=parts.bench.seed + plan.calibration_seed_offset,
+                       repetitions=plan.calibration_repetitions)
+        where = {"calibration_events": int(spec.n_events), "calibration_seed": int(spec.seed)}
+        log(f"      calibration contacts: {spec.n_events} events (seed {spec.seed}), "
+            "never evaluated")
+        data = bench.load(spec, log, fresh)
     attrs = recording_attrs(data)
     n_samples = int(round(plan.duration_s * attrs[0]))
     counts = data["counts"].values[:, :n_samples]
     labels = np.asarray([str(m) for m in bench_labels(data)["material"].values])
-    return ({n: tune(counts, labels, *attrs, tuning) for n, tuning in plan.tunings().items()},
-            {"calibration_events": int(spec.n_events), "calibration_seed": int(spec.seed)})
+    return {n: tune(counts, labels, *attrs, tuning) for n, tuning in plan.tunings().items()}, where
 
 
 def tuned_stage(parts, data, cmp, log, fresh: bool, client) -> list:
     """The tuned bank over every event (cached), its read-outs' inputs into ``cmp.features``,
     its cost, and the accuracy-vs-resonators curve; the read-outs to evaluate."""
     plan: TunedPlan = parts.plan.tuned_plan()
-    bands, where = calibration_bands(parts.bench, plan, log, fresh)
+    bands, where = calibration_bands(parts, data, plan, log, fresh)
     main = plan.bank(bands[plan.base.n_resonators], parts.bank)
     log(f"      tuned bank: {main.n_neurons} resonators in {len(main.bands)} channels "
         f"({_hz_text(main)})")
@@ -156,10 +189,16 @@ def run_curve(data, features, plan: TunedPlan, bands: dict, parts, log, client) 
     log(f"      accuracy vs resonators on {len(ids)} events (repetitions < "
         f"{plan.curve_repetitions}), split of seed {seed}")
     fft = bl.material_baselines([], evaluation.material_mlp, evaluation.nmf_max_iter)[0]
+    # NMF-n needs n <= its training events: a small recorded set leaves the larger sizes out
+    n_train = int(np.sum(train))
+    sizes = [n for n in plan.curve if n <= n_train]
+    if len(sizes) < len(plan.curve):
+        log(f"      left out of the curve: {[n for n in plan.curve if n not in sizes]} "
+            f"resonators (NMF-n needs n <= the split's {n_train} training events)")
     with threadpool_limits(1):
         reference = _accuracy(fft, spectrum, y, train, test, seed)
         rows = []
-        for n in plan.curve:
+        for n in sizes:
             t0 = time.perf_counter()
             f = run_bank(plan.bank(bands[n], parts.bank), data["counts"].values[ids],
                          *recording_attrs(data), client=client, progress=False)

@@ -32,8 +32,13 @@ stream per sweep scene (shared by all speeds, so speeds are compared on the same
 per evaluation scene (``evaluation.scene_stream`` picks another family of them: validation
 scenes), so no two scenes share a seed whatever the counts.
 
+With recorded drives (``data = "DIR"``, ``--data DIR``) every stage reads recordings instead
+(``recorded``): the chain is fitted on the recordings' drive in the open, the sweep and the
+gate's targets come from the training drives, the evaluation scores only the held-out drives
+(split by drive, seeded); Fig. 9, a check of the generator's calibration, is left out.
+
 Outputs: report.html, summary.json, figures, and ``sweep.zarr`` (the scored grid, dims
-speed_cm_s × scene × threshold_g).
+speed_cm_s × scene × threshold_g; with recorded drives a scene is a training drive).
 """
 from __future__ import annotations
 
@@ -62,7 +67,8 @@ from ...evaluation.thresholds import (
     fixed_method,
 )
 from ...sources.scenes import SpeedProfile, ramp, random_steps
-from .recorded import score_drives
+from .recorded import RecordedSweep, evaluate_drives
+from .recorded import summary_entry as recorded_entry
 from ..contract import COMMON, Options, Plan, data_folder
 from .report import Fig9Row, Results, SeedPlan, human_summary, write_report
 from .spec import (
@@ -94,18 +100,32 @@ def plan(spec: dict) -> Plan:
 # -- stages --------------------------------------------------------------------------------
 def sweep(spec: dict, parts: Parts, out_dir: Path, fresh: bool, client, log):
     """Stage 1: the scored Th × speed grid (``sweep.zarr``) and Th*(speed) fitted on it."""
-    sw = parts.sweep
+    sw, split = parts.sweep, parts.data
     thresholds, speeds = sw.thresholds_g, sw.speeds_cm_s
-    log(f"[1/5] sweep: {len(speeds)} speeds x {len(thresholds)} thresholds x {sw.n_scenes} "
-        f"scenes of {sw.scene_s:g} s ({len(speeds) * len(thresholds) * sw.n_scenes} codings, "
-        f"{parts.array.n_neurons} resonators each)")
-    grid = Grid({"speed_cm_s": speeds, "scene": np.arange(sw.n_scenes),
-                 "threshold_g": thresholds}, {"speed_cm_s": "cm/s", "threshold_g": "g"})
-    outcome = run_sweep(grid, ThresholdSweep(specs.resolved(spec)), out_dir / "sweep.zarr",
-                        SCORE_OUTPUTS, client=client, fresh=fresh,
-                        chunk_points=sw.codings_per_run, settings=sweep_settings(spec),
+    units = {"speed_cm_s": "cm/s", "threshold_g": "g"}
+    if split is None:
+        log(f"[1/5] sweep: {len(speeds)} speeds x {len(thresholds)} thresholds x "
+            f"{sw.n_scenes} scenes of {sw.scene_s:g} s "
+            f"({len(speeds) * len(thresholds) * sw.n_scenes} codings, "
+            f"{parts.array.n_neurons} resonators each)")
+        grid = Grid({"speed_cm_s": speeds, "scene": np.arange(sw.n_scenes),
+                     "threshold_g": thresholds}, units)
+        evaluator, chunk = ThresholdSweep(specs.resolved(spec)), sw.codings_per_run
+    else:
+        # each training drive is coded once per Th and scored at every speed it logged: the
+        # speeds are the grid's last axis, so a chunk holds every speed of its codings
+        n = len(split.training)
+        log(f"[1/5] sweep on {n} recorded training drive(s): {len(thresholds)} thresholds "
+            f"({n * len(thresholds)} codings), scored at {len(speeds)} logged speeds")
+        grid = Grid({"scene": np.arange(n), "threshold_g": thresholds, "speed_cm_s": speeds},
+                    units)
+        evaluator, chunk = RecordedSweep(specs.resolved(spec)), sw.codings_per_run * len(speeds)
+    outcome = run_sweep(grid, evaluator, out_dir / "sweep.zarr", SCORE_OUTPUTS,
+                        client=client, fresh=fresh, chunk_points=chunk,
+                        settings=sweep_settings(spec, parts),
                         attrs={"description": "Th x speed sweep: detections scored per "
                                               "contact", "spec": specs.resolved(spec)})
+    outcome.data = outcome.data.transpose("speed_cm_s", "scene", "threshold_g")
     log(f"      {len(outcome.chunks_computed)} chunk(s) computed, "
         f"{len(outcome.chunks_skipped)} already in {out_dir / 'sweep.zarr'}, "
         f"{outcome.wall_s:.0f} s")
@@ -280,42 +300,72 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     with executor(parts.sweep.workers, options.scheduler, log) as client:
         outcome, fit = sweep(spec, parts, out_dir, options.fresh, client, log)
         codings = ScoredCodings(parts.readout, parts.sweep.codings_per_run, client)
-        where = "on the Dask workers" if client is not None else "after the gate"
-        log(f"[2/5] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed (runs {where})")
-        fig9, fig9_runs = submit_fig9(parts, fit, codings)
         # The fixed thresholds worth evaluating: the grid around Th*'s range (outside it F1
-        # only falls, see the sweep's curves) and the one chosen on the sweep. Their codings
-        # need no gate, so the pilot's start now and run while the gate learns.
+        # only falls, see the sweep's curves) and the one chosen on the sweep.
         th = parts.sweep.thresholds_g
         lo, hi = fit.th_star_g.min() / 2, fit.th_star_g.max() * 2
         fixed_th = np.unique(np.r_[th[(th >= lo) & (th <= hi)], fit.sweep_fixed_th_g])
-        evaluation = Evaluation(parts, fixed_th, codings)
-        evaluation.add_slots(range(parts.evaluation.pilot_seeds))
-        evaluation.recall = recall = train_gate(parts, fit, log)
-        categories = evaluation.scores.categories
-        log(f"[4/5] evaluation on new scenes, pilot of {parts.evaluation.pilot_seeds} seed(s): "
-            f"{len(categories)} scenes each ({', '.join(dict.fromkeys(categories))}); "
-            f"{len(fixed_th)} fixed Th, the lookup table and the gate")
-        collect_fig9(fig9, fig9_runs, codings)
-        seeds = evaluate(evaluation, log)
-        drives = parts.data and score_drives(parts, parts.data, fixed_th, fit.sweep_fixed_th_g,
-                                             recall, codings, log)
+        if parts.data is None:
+            fig9, scores, recall, seeds, example = generated_stages(parts, fit, fixed_th,
+                                                                    codings, client, log)
+        else:
+            fig9, (scores, recall, seeds, example) = {}, recorded_stages(parts, fit, fixed_th,
+                                                                         codings, log)
     results = Results(outcome, fit, fig9, recall, seeds,
-                      {**compare(evaluation.scores, fixed_th, fit.sweep_fixed_th_g),
-                       "coders": compare_coders(evaluation.scores, parts)},
-                      evaluation.example)
+                      {**compare(scores, fixed_th, fit.sweep_fixed_th_g),
+                       "coders": compare_coders(scores, parts)}, example)
     summary = summarize(parts, results)
-    if drives:
-        summary["recorded"] = drives
+    if parts.data is not None:
+        summary["recorded"] = recorded_entry(parts.data)
     summary["total_wall_s"] = time.perf_counter() - t_start
     write_report(out_dir, spec, parts, results, summary, quick)
     log(human_summary(summary, out_dir))
     return summary
 
 
+def generated_stages(parts: Parts, fit: ThStarFit, fixed_th: np.ndarray, codings, client,
+                     log):
+    """Stages 2-5 on generated scenes: Fig. 9, the gate, the evaluation on new scenes."""
+    where = "on the Dask workers" if client is not None else "after the gate"
+    log(f"[2/5] Fig. 9 in kind: Th = 0, Th*, 2·Th* at low and high speed (runs {where})")
+    fig9, fig9_runs = submit_fig9(parts, fit, codings)
+    # the fixed-Th codings need no gate: the pilot's start now and run while the gate learns
+    evaluation = Evaluation(parts, fixed_th, codings)
+    evaluation.add_slots(range(parts.evaluation.pilot_seeds))
+    evaluation.recall = recall = train_gate(parts, fit, log)
+    categories = evaluation.scores.categories
+    log(f"[4/5] evaluation on new scenes, pilot of {parts.evaluation.pilot_seeds} seed(s): "
+        f"{len(categories)} scenes each ({', '.join(dict.fromkeys(categories))}); "
+        f"{len(fixed_th)} fixed Th, the lookup table and the gate")
+    collect_fig9(fig9, fig9_runs, codings)
+    seeds = evaluate(evaluation, log)
+    return fig9, evaluation.scores, recall, seeds, evaluation.example
+
+
+def recorded_stages(parts: Parts, fit: ThStarFit, fixed_th: np.ndarray, codings, log):
+    """Stages 2-5 on recorded drives: no Fig. 9 (its two numbers are the generator's
+    calibration), the gate trained on the training drives' Th*, the evaluation on the
+    held-out drives, one paired unit per drive."""
+    log("[2/5] Fig. 9 left out: its numbers calibrate the generator, and no scene is generated")
+    recall = train_gate(parts, fit, log)
+    ev = parts.evaluation
+    others = {coder_method(label): ev.coder(label) for label in ev.coders}
+    scores, example = evaluate_drives(parts, fixed_th, recall, codings, others, log)
+    n = len(parts.data.held_out)
+    needed = scores.seeds_needed("gated", [fixed_method(scores.best_fixed(fixed_th)),
+                                           "lookup"], ev.margin_f1)
+    log(f"[5/5] resolving a difference of {ev.margin_f1:g} in F1 needs {needed} held-out "
+        f"drive(s) at this spread; {n} recorded")
+    return scores, recall, SeedPlan(n, needed, n, n, ev.margin_f1), example
+
+
 def summarize(parts: Parts, r: Results) -> dict:
     ds, speeds, fit, outcome = r.outcome.data, r.fit.speeds_cm_s, r.fit, r.outcome
     i12, i27 = (int(np.argmin(np.abs(speeds - v))) for v in LOW_HIGH_CM_S)
+    checks = {"calibration_checks": {
+        "th_star_ratio_27_to_12": float(fit.th_star_g[i27] / fit.th_star_g[i12]),
+        "tp_at_th_star_vs_double": {f"{v:g}": [row.scores[1].tp, row.scores[2].tp]
+                                    for v, row in r.fig9.items()}}} if r.fig9 else {}
     return {
         "th_star": {f"{v:g}": float(t) for v, t in zip(speeds, fit.th_star_g)},
         "best_th_per_speed": {f"{v:g}": float(t) for v, t in zip(speeds, fit.best_th_g)},
@@ -328,10 +378,7 @@ def summarize(parts: Parts, r: Results) -> dict:
         "recall_error_factor_trained": r.recall.error_factor(held_out=False),
         "train_speeds_cm_s": parts.train_speeds.tolist(),
         "gate_tau_read_s": parts.gate.tau_read_s,
-        "calibration_checks": {
-            "th_star_ratio_27_to_12": float(fit.th_star_g[i27] / fit.th_star_g[i12]),
-            "tp_at_th_star_vs_double": {f"{v:g}": [row.scores[1].tp, row.scores[2].tp]
-                                        for v, row in r.fig9.items()}},
+        **checks,
         "seeds": {"pilot": r.seeds.pilot, "needed": r.seeds.needed, "used": r.seeds.used,
                   "budget": r.seeds.budget, "margin_f1": r.seeds.margin_f1},
         **r.comparison,

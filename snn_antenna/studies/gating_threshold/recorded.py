@@ -1,99 +1,272 @@
-"""The gate on recorded drives (``data = "DIR"``: drives imported with their speed log).
+"""The gating study on recorded drives (``data = "DIR"``: drives imported with their speed log).
 
-After the gate has learned Th*(speed), every recorded drive that holds labelled contacts is read
-out blind with the Th each method sets: the gate's online Th and the lookup table's (both from
-the drive's logged speed command only), each fixed Th evaluated on the scenes, and the fixed Th
-chosen on the sweep. The preprocessing is fitted on the recordings' own calibration drive (the
-first drive without labelled contacts: as the scenes' chain is fitted on a drive in the open),
-never on a scored drive; the detections are then scored against the labels.
+With recorded drives every stage reads recordings, none a generated scene:
+
+- the **calibration drive** (the first drive without labelled contacts: a drive in the open)
+  fits the preprocessing chain, as the scenes' chain is fitted on a drive in the open;
+- the drives with labelled contacts are **split by drive**, seeded (``SeedSequence(seed,
+  spawn_key=(DRIVE_SPLIT,))``): ``evaluation.held_out_drives`` of them are held out for the
+  evaluation, the rest are the **training drives**;
+- the **sweep** codes every training drive at every Th once and scores its detections per
+  logged speed (``score_by_speed``: a contact counts at the speed the robot drove when it was
+  touched, a false positive at the speed of its onset, minutes at each speed from the speed
+  log), so Th*(speed) and the gate's training targets come from the training drives only;
+- the **evaluation** reads the held-out drives out blind with each method's Th (fixed, the
+  lookup table's and the gate's, both from the drive's logged speed command), one held-out
+  drive per paired unit (as a seed slot is for scenes): intervals over drives, with their n.
+
+Nothing is scored on what trained it. A set too small to split, or whose training drives lack
+a speed the sweep needs, is refused in one line when the spec is checked (``split_drives``).
 """
 from __future__ import annotations
+
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ...core.errors import SpecError
-from ...evaluation.scoring import Score
-from ...evaluation.thresholds import fixed_method
-from ...preprocess import make_chain
+from ...engine.batches import Batches, DetectColumns
+from ...evaluation.scoring import Score, first_match, score, score_columns
 from ...sources import recorded
 
+DRIVE_SPLIT = 3                # seed stream of the split (the scenes' streams are 0, 1, 2)
+SPEED_TOLERANCE_CM_S = 0.05    # a logged command this close to a swept speed is that speed
+CATEGORY = "held-out recorded drives"
 
-def open_drives(spec: dict, scene):
-    """The imported drives the spec names (None without ``data``), checked against the
-    scenes the study is calibrated on, before any work."""
+
+@dataclass
+class RecordedSplit:
+    """The imported drives and their roles: the calibration drive, training and held-out
+    drives (indices into ``drives.names``)."""
+    drives: object               # sources.recorded.RecordedDrives
+    calibration: int
+    training: list
+    held_out: list
+
+    def recording(self, drive: int):
+        return self.drives.recording(drive)
+
+    def name(self, drive: int) -> str:
+        return self.drives.names[drive]
+
+    def roles(self) -> dict:
+        return {"calibration drive": self.name(self.calibration),
+                "training drives": [self.name(d) for d in self.training],
+                "held-out drives": [self.name(d) for d in self.held_out]}
+
+
+def split_drives(spec: dict, scene, sweep, held_out_share: float, seed: int
+                 ) -> RecordedSplit | None:
+    """The drives the spec names, checked and split (None without ``data``), before any work:
+    the rate the array is checked at, a calibration drive, at least one training and one
+    held-out drive with labelled contacts, a speed log on each, and every swept speed driven
+    with labelled contacts on the training drives."""
     if spec.get("data") is None:
         return None
-    drives = recorded.open_drives(spec["data"])
+    path = spec["data"]
+    drives = recorded.open_drives(path)
     if drives.rate_hz != scene.rate_hz:
-        raise SpecError("data", spec["data"], f"drives sampled at the scenes' rate, "
-                                              f"{scene.rate_hz:g} Hz (these: {drives.rate_hz:g})")
+        raise SpecError("data", path, f"drives sampled at the scenes' rate, {scene.rate_hz:g} "
+                                      f"Hz (these: {drives.rate_hz:g})")
     recs = [drives.recording(d) for d in range(len(drives.names))]
-    scored = [r for r in recs if r.truth.contacts]
-    if not scored or len(scored) == len(recs):
-        raise SpecError("data", spec["data"], "drives of which at least one holds labelled "
-                                              "contacts (scored) and one none (the calibration "
-                                              "drive the preprocessing is fitted on)")
-    for name, rec in zip(drives.names, recs):
-        if rec.truth.contacts and not np.isfinite(rec.meta["speed_cm_s"]).all():
-            raise SpecError("data", f"{spec['data']}/{name}",
+    scored = [d for d, r in enumerate(recs) if r.truth.contacts]
+    open_space = [d for d, r in enumerate(recs) if not r.truth.contacts]
+    if not open_space:
+        raise SpecError("data", path, "drives of which one holds no labelled contact (the "
+                                      "calibration drive the preprocessing is fitted on)")
+    if len(scored) < 2:
+        raise SpecError("data", path, "at least two drives with labelled contacts (one to "
+                                      "train on, one held out to score; these hold "
+                                      f"{len(scored)})")
+    for d in scored:
+        if not np.isfinite(recs[d].meta["speed_cm_s"]).all():
+            raise SpecError("data", f"{path}/{drives.names[d]}",
                             "a drive whose speed command is logged from its first sample "
                             "(`record` keeps it in meta.json and events.jsonl)")
-    return drives
+    held = held_out_drives(recs, scored, held_out_share, seed)
+    if not held:
+        per_speed = {}
+        for d in scored:
+            per_speed[_mostly_at(recs[d])] = per_speed.get(_mostly_at(recs[d]), 0) + 1
+        raise SpecError("evaluation.held_out_drives", held_out_share,
+                        "a share that holds out at least one drive: of the n drives at each "
+                        "logged speed round(share × n) are held out, one always kept to train "
+                        f"on (drives per speed here: {per_speed})")
+    split = RecordedSplit(drives, open_space[0], [d for d in scored if d not in held], held)
+    driven = {}
+    for d in split.training:
+        for s, c in zip(sweep.speeds_cm_s, contacts_by_speed(recs[d], sweep.speeds_cm_s,
+                                                             sweep.settle_s)):
+            driven[float(s)] = driven.get(float(s), 0) + len(c)
+    missing = [s for s, n in driven.items() if n == 0]
+    if missing:
+        ran_at = logged_speeds([recs[d] for d in split.training])
+        raise SpecError("sweep.speeds_cm_s", sweep.speeds_cm_s.tolist(),
+                        "speeds the training drives ran at with labelled contacts (training "
+                        f"drives {', '.join(split.roles()['training drives'])} hold none at "
+                        f"{missing}; they ran at {ran_at}: set the sweep's and the gate's speeds "
+                        "to those, or record more drives)")
+    return split
 
 
-def score_drives(parts, drives, fixed_th: np.ndarray, sweep_th: float, recall, codings, log
-                 ) -> dict:
-    """Each method's score pooled over the recorded drives, and the data's origin."""
-    recs = [drives.recording(d) for d in range(len(drives.names))]
-    calibration = next(r for r in recs if not r.truth.contacts)
-    scored = [r for r in recs if r.truth.contacts]
-    chain = make_chain(drives.rate_hz, drives.adc_bits, drives.full_scale_g,
-                       **parts.preprocess).fit(calibration.samples)
-    coder = chain.named_steps["coder"]
-    log(f"      recorded drives: {len(scored)} scored "
-        f"({sum(len(r.truth.contacts) for r in scored)}"
-        f" labelled contacts), the chain fitted on {calibration.meta['source']}")
-    items, keys = [], []
-    fixed = np.unique(np.r_[fixed_th, sweep_th])
-    for rec in scored:
-        x = rec.samples
-        for _, step in chain.steps[:-1]:
-            x = step.transform(x)
-        speed = rec.meta["speed_cm_s"].astype(float)[:, None]
-        gated = parts.gate.thresholds(speed, drives.rate_hz)[:, 0]
+def held_out_drives(recs, scored: list, share: float, seed: int) -> list:
+    """The drives held out for the evaluation: within each group of drives that ran mostly
+    at one speed, ``share`` of them (rounded) drawn with ``seed``, always keeping one to
+    train on, so the training drives cover every speed the set drove at."""
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(DRIVE_SPLIT,)))
+    groups = {}
+    for d in scored:
+        groups.setdefault(_mostly_at(recs[d]), []).append(d)
+    held = []
+    for _, members in sorted(groups.items()):
+        n = int(min(round(share * len(members)), len(members) - 1))
+        held += rng.permutation(members)[:n].tolist()
+    return sorted(held)
+
+
+def _mostly_at(rec) -> float:
+    values, counts = np.unique(np.round(np.asarray(rec.meta["speed_cm_s"], float), 2),
+                               return_counts=True)
+    return float(values[np.argmax(counts)])
+
+
+def logged_speeds(recs) -> list[float]:
+    """The distinct speed commands logged in ``recs``."""
+    values = np.concatenate([np.asarray(r.meta["speed_cm_s"], dtype=float) for r in recs])
+    return sorted(set(np.round(values[np.isfinite(values)], 2).tolist()))
+
+
+def _speed_at(rec, t_s: float) -> float:
+    v = rec.meta["speed_cm_s"]
+    return float(v[min(max(int(t_s * rec.rate_hz), 0), len(v) - 1)])
+
+
+def _at(value: float, speed: float) -> bool:
+    return abs(value - speed) <= SPEED_TOLERANCE_CM_S
+
+
+def contacts_by_speed(rec, speeds, settle_s: float) -> list[list]:
+    """The drive's labelled contacts after ``settle_s`` at each of ``speeds``."""
+    return [[c for c in rec.truth.contacts if c.t_s >= settle_s and _at(_speed_at(rec, c.t_s), s)]
+            for s in speeds]
+
+
+def score_by_speed(readout, detections: list, rec, speeds) -> list[Score]:
+    """A whole drive's detections scored separately at each of ``speeds``: a contact counts at
+    the speed logged when it was touched; a detection at the speed of the contact it falls
+    on, failing one at the speed of its onset; the minutes at each speed from the speed log
+    (after the settling time)."""
+    window, settle = readout.window_s, readout.settle_s
+    v = np.asarray(rec.meta["speed_cm_s"], dtype=float)
+    contacts = list(rec.truth.contacts)
+
+    def speed_of(d) -> float:
+        on = [c for c in contacts if first_match([d], c, window) is not None]
+        return _speed_at(rec, on[0].t_s if on else d.onset_s)
+
+    scores = []
+    for s, mine in zip(speeds, contacts_by_speed(rec, speeds, settle)):
+        seconds = float(np.sum(np.abs(v[int(settle * rec.rate_hz):] - s)
+                               <= SPEED_TOLERANCE_CM_S)) / rec.rate_hz
+        dets = [d for d in detections if _at(speed_of(d), s)]
+        sc = score(dets, mine, rec.duration_s, readout.detector, readout.array, window, settle)
+        scores.append(replace(sc, minutes=seconds / 60.0))
+    return scores
+
+
+@dataclass(frozen=True)
+class RecordedSweep:
+    """The Th × speed sweep on the training drives as a ``run_sweep`` evaluator over
+    speed_cm_s × scene (a training drive) × threshold_g: each (drive, Th) of a chunk is coded
+    and read out once and scored at each speed of the chunk. It holds the resolved spec, so it
+    pickles; ``make_parts`` re-opens the drives on the worker."""
+    spec: dict
+
+    def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        from .spec import coded_at, condition, make_parts
+
+        parts = make_parts(self.spec)
+        split = parts.data
+        pairs = np.stack([points["scene"], points["threshold_g"]], axis=1)
+        unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
+        columns, recs = [], {}
+        for scene in np.unique(unique[:, 0]).astype(int):
+            rec = recs[scene] = split.recording(split.training[scene])
+            x, coder = condition(parts, rec)
+            columns += coded_at(coder, x, unique[unique[:, 0] == scene, 1])
+        runs = Batches(DetectColumns(parts.readout), parts.sweep.codings_per_run).run(columns)
+        speeds = parts.sweep.speeds_cm_s
+        by_pair = [score_by_speed(parts.readout, detections, recs[int(scene)], speeds)
+                   for (scene, _), (detections, _) in zip(unique, runs)]
+        return score_columns([by_pair[p][int(np.flatnonzero(speeds == v)[0])]
+                              for p, v in zip(inverse.ravel(), points["speed_cm_s"])])
+
+
+def evaluate_drives(parts, fixed_th: np.ndarray, recall, codings, others: dict, log):
+    """Every held-out drive read out blind with each method's Th: a ``MethodScores`` with one
+    slot per held-out drive, and the first drive's online Th and rate map (the example)."""
+    from ...evaluation.thresholds import MethodScores, fixed_method
+    from .spec import coded_at, condition
+
+    split, scores = parts.data, MethodScores([CATEGORY])
+    items, keys, example = [], [], None
+    for slot, d in enumerate(split.held_out):
+        rec = split.recording(d)
+        x, coder = condition(parts, rec)
+        speed = np.asarray(rec.meta["speed_cm_s"], dtype=float)[:, None]
+        gated = parts.gate.thresholds(speed, rec.rate_hz)[:, 0]
         lookup = recall.table(speed)[:, 0]
-        coded = coder.partial_transform(np.repeat(x[:, None], len(fixed), axis=1),
-                                        threshold=fixed[None, :])
-        items += [(rec, coded[:, j]) for j in range(len(fixed))]
-        keys += [fixed_method(t) for t in fixed]
+        items += [(rec, c) for c in coded_at(coder, x, fixed_th)]
         items += [(rec, coder.partial_transform(x, threshold=lookup)),
                   (rec, coder.partial_transform(x, threshold=gated))]
-        keys += ["lookup", "gated"]
-    scores, _ = codings.run(items, "recorded drives")
-    totals = {}
-    for key, sc in zip(keys, scores):
-        totals[key] = totals.get(key, Score()) + sc
-    best = max((fixed_method(t) for t in fixed), key=lambda k: totals[k].f1 or 0.0)
-    rows = [{"method": name, **totals[key].as_dict()} for name, key in (
-        ("gate (online Th from the logged speed)", "gated"), ("lookup table", "lookup"),
-        ("fixed Th chosen on the sweep", fixed_method(sweep_th)),
-        ("best fixed Th on these drives (hindsight)", best))]
-    return {"rows": rows, "drives": [r.meta["source"] for r in scored],
-            "calibration_drive": calibration.meta["source"],
-            "data": recorded.summary_entry(drives),
-            "provenance": recorded.provenance_rows(drives)}
+        items += [(rec, other.fit(x).partial_transform(x, threshold=gated))   # the gate's Th,
+                  for other in others.values()]                               # another coder
+        keys += [(m, slot) for m in [*(fixed_method(t) for t in fixed_th), "lookup", "gated",
+                                     *others]]
+        if example is None:
+            example = {"rec": rec, "gated_th": gated, "lookup_th": lookup,
+                       "key": ("gated", slot)}
+    n_contacts = sum(len(split.recording(d).truth.contacts) for d in split.held_out)
+    log(f"[4/5] evaluation on {len(split.held_out)} held-out recorded drive(s) "
+        f"({n_contacts} labelled contacts): {len(fixed_th)} fixed Th, the lookup table and "
+        "the gate")
+    results, maps = codings.run(items, "held-out drives")
+    for (method, slot), sc, rates in zip(keys, results, maps):
+        scores.add(method, slot, 0, sc)
+        if (method, slot) == example["key"]:
+            example["map"] = rates
+    return scores, example
+
+
+def summary_entry(split: RecordedSplit) -> dict:
+    """What ``summary.json`` keeps: the data's origin and which drive played which part."""
+    def labelled(drives) -> int:
+        return sum(len(split.recording(d).truth.contacts) for d in drives)
+
+    return {**split.roles(), "data": recorded.summary_entry(split.drives),
+            "labelled_contacts": {"training drives": labelled(split.training),
+                                  "held-out drives": labelled(split.held_out)},
+            "parts_from_recordings": ["preprocessing (calibration drive)",
+                                      "Th x speed sweep and Th*(speed) (training drives)",
+                                      "the gate's training targets (training drives)",
+                                      "evaluation (held-out drives)"],
+            "provenance": recorded.provenance_rows(split.drives)}
 
 
 def report_section(rep, s: dict) -> None:
-    """The recorded drives' scores and where they came from, in the study's report."""
+    """Where the recorded drives came from and which part each played, in the report."""
     rec = s.get("recorded")
     if not rec:
         return
-    rep.heading("The gate on recorded drives")
-    rep.text(f"{len(rec['drives'])} recorded drive(s) with their logged speed command, read out "
-             f"blind with the chain fitted on {rec['calibration_drive']}; every method's "
-             "detections scored against the drives' labels, pooled over the drives. One "
-             "recording set, no seeds: no interval.")
-    rep.table(rec["rows"], "Detections on the recorded drives per Th method")
+    rep.heading("The recorded drives")
+    rep.text(f"This run read recorded drives in place of the scenes above, at every stage: "
+             f"the preprocessing was fitted on {rec['calibration drive']} (no labelled "
+             "contact); the Th × speed sweep, Th*(speed) "
+             f"and the gate's training targets came from the training drives "
+             f"({', '.join(rec['training drives'])}); the evaluation scored only the held-out "
+             f"drives ({', '.join(rec['held-out drives'])}), split by drive with the study's "
+             f"seed ({rec['labelled_contacts']['training drives']} and "
+             f"{rec['labelled_contacts']['held-out drives']} labelled contacts). No generated "
+             "scene entered any number on this page.")
     rep.table([{"what": w, "value": v} for w, v in rec["provenance"]],
               "Where the recorded drives came from")

@@ -19,7 +19,7 @@ from ...readout.contacts import detector_from_spec
 from ...evaluation.scoring import score_columns
 from ...readout.detection import BlindReadOut
 from ...sources import antenna
-from .recorded import open_drives
+from .recorded import split_drives
 from ...sources.scenes import (
     CourseLayout,
     CourseScene,
@@ -82,8 +82,14 @@ class EvaluationSettings:
     # Coders evaluated beside the study's own (``[preprocess]``), each with the gate's Th on
     # the same scenes, paired by seed: label -> {coder, coder_amplitude, coder_options}.
     coders: dict = field(default_factory=dict)
+    # With recorded drives (``data``): the share of the drives with labelled contacts held out
+    # for the evaluation (split by drive, seeded); the others are the sweep's and the gate's.
+    held_out_drives: float = 0.5
 
     def __post_init__(self):
+        check(isinstance(self.held_out_drives, (int, float)) and
+              0 < self.held_out_drives < 1, "held_out_drives", self.held_out_drives,
+              "a share in (0, 1) of the recorded drives held out for the evaluation")
         check(isinstance(self.scene_stream, int) and self.scene_stream >= 0, "scene_stream",
               self.scene_stream, "an integer >= 0")
         check(isinstance(self.coders, dict), "coders", self.coders,
@@ -162,7 +168,7 @@ class Parts:
     evaluation: EvaluationSettings
     held_out_speeds: np.ndarray
     chain: object = None      # fitted on first use (``calibrated_chain``)
-    data: object = None       # recorded drives the gate is also scored on (``recorded``)
+    data: object = None       # recorded drives in place of every scene (a RecordedSplit)
 
 
 def _section(spec: dict, name: str, target, **kw):
@@ -213,8 +219,9 @@ def make_parts(spec: dict) -> Parts:
         array.check_rate(scene.rate_hz)
     readout = BlindReadOut(array, detector, window_s, scene.rate_hz, sweep.settle_s,
                            sweep.target)
-    return Parts(int(spec.get("seed", 0)), array, scene, pre, cal, readout, course, sweep,
-                 gate, train, ev, held, data=open_drives(spec, scene))
+    seed = int(spec.get("seed", 0))
+    return Parts(seed, array, scene, pre, cal, readout, course, sweep, gate, train, ev, held,
+                 data=split_drives(spec, scene, sweep, ev.held_out_drives, seed))
 
 
 def estimate(parts: Parts):
@@ -225,12 +232,23 @@ def estimate(parts: Parts):
     workers = sw.workers or max_workers()
     engine = engine_of(sw.target or array.target)
 
-    def codings(n: int) -> list:
-        runs = [(sw.scene_s, array.dt_ms, min(n, sw.codings_per_run) * array.n_neurons,
+    def codings(n: int, seconds: float = sw.scene_s) -> list:
+        runs = [(seconds, array.dt_ms, min(n, sw.codings_per_run) * array.n_neurons,
                  engine)] * -(-n // sw.codings_per_run)
         return runs[:-(-len(runs) // workers)] if workers > 1 else runs
 
     n_th, n_v = len(sw.thresholds_g), len(sw.speeds_cm_s)
+    gate = ("gate", {"epochs": parts.gate.epochs, "present_s": parts.gate.present_s},
+            gate_training_runs(parts.gate, len(parts.train_speeds), n_v))
+    if parts.data is not None:       # recorded drives: coded once per Th, no Fig. 9
+        split = parts.data
+        longest = max(split.drives.dataset["n_samples"].values) / split.drives.rate_hz
+        n_train, n_held = len(split.training), len(split.held_out)
+        return stages_estimate("the threshold sweep on the training drives, the gate and the "
+                               "evaluation on the held-out drives", [
+            ("data", str(split.drives.path), codings(n_train * n_th, longest)), gate,
+            ("data", str(split.drives.path),
+             codings(n_held * (n_th + 2 + len(ev.coders)), longest))])
     profiles = len(parts.held_out_speeds) + 2 + (
         2 if ev.other_terrain != parts.scene.terrain else 0)
     scenes = ev.max_seeds * profiles
@@ -240,18 +258,21 @@ def estimate(parts: Parts):
                            "its seed budget)", [
         ("sweep.n_scenes", sw.n_scenes, codings(n_v * sw.n_scenes * n_th)),
         ("sweep.n_scenes", sw.n_scenes, codings(len(LOW_HIGH_CM_S) * sw.n_scenes * 3)),
-        ("gate", {"epochs": parts.gate.epochs, "present_s": parts.gate.present_s},
-         gate_training_runs(parts.gate, len(parts.train_speeds), n_v)),
+        gate,
         ("evaluation.max_seeds", ev.max_seeds, codings(scenes * (n_th + 3)) + recall)])
 
 
-def sweep_settings(spec: dict) -> dict:
+def sweep_settings(spec: dict, parts: Parts | None = None) -> dict:
     """What makes two sweeps the same (the store's fingerprint): not the gate or evaluation
-    settings, nor where it runs, so changing those reuses a finished sweep."""
+    settings, nor where it runs, so changing those reuses a finished sweep; with recorded
+    drives, the data set's key and which drives trained."""
     resolved = specs.resolved(spec)
     settings = {k: resolved.get(k) for k in ("seed", "network", "stimulus", "preprocess",
                                              "readout", "course", "sweep")}
     settings["sweep"] = {k: v for k, v in (settings["sweep"] or {}).items() if k != "workers"}
+    if parts is not None and parts.data is not None:
+        split = parts.data
+        settings["data"] = {"key": split.drives.provenance["key"], **split.roles()}
     return settings
 
 
@@ -271,6 +292,11 @@ def calibrated_chain(parts: Parts):
     """The preprocessing chain fitted on a separate calibration drive, never on a test scene:
     ``calibration.duration_s`` at ``calibration.speed_cm_s`` in the open (no posts, so no
     contact can leak in); the scenes are then transformed causally from their first sample."""
+    if parts.chain is None and parts.data is not None:    # the recordings' own drive
+        rec = parts.data.recording(parts.data.calibration)
+        parts.chain = make_chain(rec.rate_hz, parts.data.drives.adc_bits,
+                                 parts.data.drives.full_scale_g,
+                                 **parts.preprocess).fit(rec.samples)
     if parts.chain is None:
         cal, scene = parts.calibration, parts.scene
         rec = drive(scene, SpeedProfile("constant", float(cal.speed_cm_s)), cal.duration_s,

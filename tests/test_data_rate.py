@@ -1,0 +1,160 @@
+"""The baseline comparison on the shipped board's 1 kHz recordings: what the rate cannot carry is
+left out or clipped and named, and the tuned bank places its channels on recorded contacts
+that no split ever scores."""
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from data_helpers import (RATE, import_board_bench, import_dir, ringing_counts, write_labels,
+                          write_record)
+from snn_antenna.core import spec as specs
+from snn_antenna.core.errors import SpecError
+from snn_antenna.networks.resonators import MIN_SAMPLES_PER_CYCLE
+from snn_antenna.studies import baseline_comparison
+from snn_antenna.studies.baseline_comparison import fit_to_rate
+
+ROOT = Path(__file__).resolve().parents[1]
+SITES = [("wood", 10.0), ("wood", 25.0), ("aluminium", 10.0), ("aluminium", 25.0)]
+
+
+def shipped(*overrides) -> dict:
+    return specs.load(ROOT / "studies" / "baseline_comparison.toml", list(overrides), quick=True)
+
+
+@pytest.fixture(scope="module")
+def board_set(tmp_path_factory):
+    """Contacts at four sites, five repetitions each, one after another on one 1 kHz board
+    recording, labelled with their repetitions and imported."""
+    tmp = tmp_path_factory.mktemp("board")
+    rows, onsets, distances = [], [], []
+    for rep in range(5):
+        for material, d in SITES:
+            onsets.append(1.0 + 1.2 * len(onsets))
+            distances.append(d)
+            rows.append(("run1", onsets[-1], d, material, rep))
+    write_record(tmp / "recs" / "run1", ringing_counts(onsets, distances, onsets[-1] + 1.5,
+                                                         high=0.3))
+    write_labels(tmp / "labels.csv", rows)
+    return import_dir(tmp / "recs", tmp / "labels.csv", tmp / "data")
+
+
+def test_the_shipped_comparison_fits_a_1khz_recording_and_names_each_part_it_drops():
+    spec = shipped()
+    fitted, notes = fit_to_rate(spec, RATE)
+    limit = RATE / MIN_SAMPLES_PER_CYCLE
+    assert fitted["events"]["max_hz"] == RATE / 2
+    for name, band in fitted["spiking"]["bank"]["bands"].items():
+        assert band["band_hz"][1] <= limit < band["lowpass_hz"] < RATE / 2 or name == "low"
+    assert fitted["spiking"]["tuned"]["tuning"]["range_hz"][1] <= limit
+    text = "\n".join(notes)
+    for part in ("events.max_hz", "bands.high.band_hz", "bands.rod.band_hz",
+                 "bands.high.lowpass_hz", "bands.rod.lowpass_hz", "tuned.tuning.range_hz"):
+        assert text.count(part) == 1, part
+    assert all("500 Hz" in line for line in notes if "lowpass_hz" not in line)
+    assert spec == shipped()                      # the caller's spec is left as it was
+    # the generated bench's 2 kHz carries every part: nothing changes, nothing is named
+    assert fit_to_rate(spec, 2000.0) == (spec, [])
+
+
+def test_a_band_wholly_above_the_limit_is_left_out_with_the_designs_on_it():
+    spec = shipped()
+    spec["spiking"]["bank"]["bands"]["ultra"] = {"n_neurons": 8, "band_hz": [300.0, 450.0]}
+    spec["spiking"]["designs"] = [{"name": "ultra_16", "band": "ultra", "n_neurons": 16},
+                                  {"name": "low_wide", "band": "low", "band_hz": [8.0, 400.0]}]
+    fitted, notes = fit_to_rate(spec, RATE)
+    assert "ultra" not in fitted["spiking"]["bank"]["bands"]
+    assert [d["name"] for d in fitted["spiking"]["designs"]] == ["low_wide"]
+    assert fitted["spiking"]["designs"][0]["band_hz"] == [8.0, RATE / MIN_SAMPLES_PER_CYCLE]
+    assert any(line.startswith("left out: spiking.bank.bands.ultra") for line in notes)
+    assert any("ultra_16" in line and line.startswith("left out") for line in notes)
+
+
+def test_the_shipped_comparison_plans_on_a_1khz_board_recording(board_set):
+    """The command a user of the shipped board runs is accepted: no part of the spec left
+    refused, the rate's cuts listed, the tuned bank's calibration repetitions drawn."""
+    parts = baseline_comparison.plan({**shipped(), "data": str(board_set)}).parts
+    assert parts.bench.recorded and parts.bench.rate_hz == RATE
+    assert len(parts.left_out) == 6
+    tuned = parts.plan.tuned_plan()
+    assert len(parts.calibration_repetitions) == tuned.calibration_repetitions
+    assert set(parts.calibration_repetitions) <= set(range(5))
+    again = baseline_comparison.plan({**shipped(), "data": str(board_set)}).parts
+    assert again.calibration_repetitions == parts.calibration_repetitions
+    draws = {tuple(baseline_comparison.plan({**shipped(), "seed": s, "data": str(board_set)})
+                   .parts.calibration_repetitions) for s in range(6)}
+    assert len(draws) > 1                          # the seed draws them
+
+
+def test_the_tuned_banks_calibration_contacts_leave_every_split(board_set):
+    parts = baseline_comparison.plan({**shipped(), "data": str(board_set)}).parts
+    _, cmp, _ = baseline_comparison._signal_stage(parts, 5, lambda *a: None, False)
+    reps = set(cmp.features["repetition"].values.tolist())
+    assert reps == set(range(5)) - set(parts.calibration_repetitions)
+    assert cmp.features.sizes["event"] == len(SITES) * len(reps)
+
+
+def test_a_recorded_set_too_small_to_hold_out_calibration_contacts_is_refused(board_set):
+    with pytest.raises(SpecError) as refused:
+        baseline_comparison.plan({**shipped("spiking.tuned.calibration_repetitions=4"),
+                                  "data": str(board_set)})
+    assert refused.value.field == "spiking.tuned.calibration_repetitions"
+    assert "at most 3" in str(refused.value)
+
+
+@pytest.mark.slow
+def test_a_clipped_band_reads_tones_up_to_its_limit_at_their_own_channels():
+    """The high band clipped for a 1 kHz recording, driven by the board's samples of decaying
+    tones: the most active resonators sit at each tone, up to the band's new top (no mirror
+    of a tone elsewhere, no silent top channel)."""
+    from snn_antenna.engine.events import run_bank
+    from snn_antenna.readout.spiking import SpikingBank
+    from snn_antenna.sources.antenna import ADC
+
+    band = {**fit_to_rate(shipped(), RATE)[0]["spiking"]["bank"]["bands"]["high"],
+            "dt_ms": 0.02}
+    bank = SpikingBank(bands={"high": band}, duration_s=0.2, target="numpy", batch_events=10)
+    t = np.arange(int(0.4 * RATE)) / RATE
+    tones = [80.0, 120.0, 170.0, 230.0]
+    counts = []
+    for f in tones:
+        x = np.where(t >= 0.05, np.exp(-(t - 0.05) / 0.1) * np.sin(2 * np.pi * f * (t - 0.05)),
+                     0.0)
+        counts.append(ADC(10, 18.0).to_counts(np.stack([x * np.cos(0.5), x * np.sin(0.5)], 1)))
+    spikes = run_bank(bank, np.stack(counts), RATE, 10, 18.0, progress=False)
+    hz = bank.bands["high"].array(0.02, "rk4", "numpy").neuron_hz
+    for f, c in zip(tones, spikes.counts):
+        top = hz[np.argsort(c)[-3:]]               # the three most active resonators
+        assert np.all(np.abs(np.log(top / f)) < np.log(1.3)), (f, top, c)
+
+
+@pytest.mark.slow
+def test_the_shipped_comparison_runs_on_the_boards_1khz_recordings(tmp_path):
+    """`run studies/baseline_comparison.toml --data DIR --quick` on the shipped board's
+    recordings, twice: the same numbers, the tuned bank among the read-outs, and a report
+    that names the recordings' hashes, what the rate left out and which contacts placed the
+    tuned channels."""
+    from snn_antenna.cli import main
+
+    table = {"kind": "bench", "materials": ["wood", "aluminium"],
+             "positions_cm": [10.0, 16.0, 22.0, 28.0], "repetitions": 10, "n_jobs": 1,
+             "cache_dir": str(tmp_path / "cache")}
+    data = import_board_bench(tmp_path, table)
+    args = ["run", str(ROOT / "studies" / "baseline_comparison.toml"), "--data", str(data),
+            "--quick", "--set", f"stimulus.cache_dir=\"{tmp_path / 'cache'}\""]
+    for out in ("one", "two"):
+        assert main([*args, "--out", str(tmp_path / out)]) == 0
+    one, two = (json.loads((tmp_path / o / "summary.json").read_text()) for o in ("one", "two"))
+    assert one["material_accuracy"] == two["material_accuracy"]
+    assert "spiking_tuned_bins" in one["material_accuracy"] or any(
+        k.startswith("spiking_tuned") for k in one["material_accuracy"])
+    assert len(one["left_out"]) == 6
+    tuned = one["spiking"]["tuned"]
+    assert len(tuned["calibration_repetitions"]) == 3
+    page = (tmp_path / "one" / "report.html").read_text()
+    meta = json.loads((data / "import.json").read_text())
+    assert meta["recordings"][0]["files"][0]["sha256"] in page
+    assert "above the 500 Hz Nyquist of the recordings" in page
+    assert f"repetitions {', '.join(map(str, tuned['calibration_repetitions']))}" in page
+    assert not one["calibrated"]
