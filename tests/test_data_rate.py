@@ -158,3 +158,21 @@ def test_the_shipped_comparison_runs_on_the_boards_1khz_recordings(tmp_path):
     assert "above the 500 Hz Nyquist of the recordings" in page
     assert f"repetitions {', '.join(map(str, tuned['calibration_repetitions']))}" in page
     assert not one["calibrated"]
+
+
+def test_nmf_sizes_a_small_split_cannot_fit_are_left_out_and_named():
+    import numpy as np
+    import xarray as xr
+
+    from snn_antenna.evaluation.crossval import Evaluation
+    from snn_antenna.readout.baselines import material_baselines
+    from snn_antenna.studies.baseline_comparison import _fitting_nmf
+
+    features = xr.Dataset(coords={"repetition": ("event", np.repeat(np.arange(10), 4))})
+    evaluation = Evaluation(seeds=[0, 1], test_fraction=0.3, nmf_dims=[3, 24, 30, 45])
+    kept, line = _fitting_nmf(material_baselines([3, 24, 30, 45]), features, evaluation)
+    names = [b.name for b in kept]
+    assert names == ["mlp_spectrum_material", "nmf_3", "nmf_24"], names
+    assert "nmf_30, nmf_45" in line and "28 training events" in line, line
+    everything, none = _fitting_nmf(material_baselines([3, 24]), features, evaluation)
+    assert len(everything) == 3 and none is None

@@ -243,13 +243,14 @@ def result_rows(summary: dict) -> list[dict]:
     rows = [{"pipeline": label(k), "task": "distance rmse (mm)",
              "ours": f"{v['mean']:.2f} ± {v['sd']:.2f}"}
             for k, v in summary["distance_rmse_mm"].items() if k not in TRAINING_FREE]
+    task = f"{len(summary['materials'])} materials (%)"
     for k, v in summary["material_accuracy"].items():
         if k == "nmf_curve":
-            rows += [{"pipeline": label(f"nmf_{r['n']}"), "task": "8 materials (%)",
+            rows += [{"pipeline": label(f"nmf_{r['n']}"), "task": task,
                       "ours": f"{100 * r['accuracy']:.1f} ± {100 * r['accuracy_sd']:.1f}"}
                      for r in v]
         else:
-            rows.append({"pipeline": label(k), "task": "8 materials (%)",
+            rows.append({"pipeline": label(k), "task": task,
                          "ours": f"{100 * v['mean']:.1f} ± {100 * v['sd']:.1f}"})
     two = summary["two_material"]
     if two:

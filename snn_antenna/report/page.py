@@ -122,8 +122,9 @@ class Report:
             rows = [{"quantity": c.quantity, "model": c.value, "target": c.target,
                      "unit": c.unit, "source": c.source, "tuned by": c.how}
                     for c in self._calibrated]
-            parts.append("<h2>Calibrated to</h2><p>The generator or a default was set to "
-                         "match these numbers; they are inputs, not results.</p>"
+            parts.append("<h2>Calibrated to</h2><p>The generator, a default or a fit to "
+                         "the data named in each row's source was set to match these numbers; "
+                         "they are inputs, not results.</p>"
                          + _table_html(rows))
         if self._predicted:
             rows = []

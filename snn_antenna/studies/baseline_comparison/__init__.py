@@ -201,6 +201,19 @@ def estimate(parts: StudySpec):
     return stages_estimate("the bench set and its spiking read-out", stages)
 
 
+def _fitting_nmf(baselines: list, features, evaluation) -> tuple[list, str | None]:
+    """The baselines without the NMF sizes a split cannot fit (NMF-n needs at least n training
+    events: a small recorded set), and the line that names those left out."""
+    repetition = features["repetition"].values
+    n_train = min(int(cv.split_by_repetition(repetition, evaluation.test_fraction, seed)[0].sum())
+                  for seed in evaluation.seeds)
+    kept = [b for b in baselines if not (b.name.startswith("nmf_")
+                                         and int(b.name.split("_")[1]) > n_train)]
+    dropped = [b.name for b in baselines if b not in kept]
+    return kept, (f"left out: {', '.join(dropped)} (NMF-n needs n <= the {n_train} training "
+                  "events of the smallest split)" if dropped else None)
+
+
 @logged
 def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     spec, parts, quick = plan.spec, plan.parts, options.quick
@@ -213,12 +226,15 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
     log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
         "repetition")
-    chosen = parts.evaluation.baselines(cmp.features.sizes["freq_hz"]) + extra
-    cmp.results = cv.evaluate(cmp.features, chosen, parts.evaluation, log)
+    chosen, too_large = _fitting_nmf(parts.evaluation.baselines(cmp.features.sizes["freq_hz"]),
+                                     cmp.features, parts.evaluation)
+    if too_large:
+        log(f"      {too_large}")
+    cmp.results = cv.evaluate(cmp.features, chosen + extra, parts.evaluation, log)
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
-    summary["left_out"] = list(parts.left_out)
+    summary["left_out"] = list(parts.left_out) + ([too_large] if too_large else [])
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
     report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",
