@@ -7,8 +7,8 @@ Here the view process streams each page the new points into its source (a small 
 ``ColumnDataSource.stream`` with a rollover), and the page's script draws the points within
 the shared time axis (``x_range``) with one path per line, at most once per animation frame
 whatever triggered it (new points, the axis moving with them, a reload, a contact). The plots
-follow the axis as the page moves it (live, paused, scrubbed); dragging a plot pans the axis
-and the wheel zooms it, as Bokeh's tools did.
+follow the axis as the page moves it (live, paused, scrubbed); dragging a plot pans it (the
+wheel is left to scroll the page).
 """
 from __future__ import annotations
 
@@ -23,8 +23,8 @@ const st = div._lines || (div._lines = {canvas: null, frame: 0});
 st.draw = draw;
 if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
 
-function ticks(lo, hi, px) {            // round steps at least 40 px apart
-  const span = hi - lo, raw = span / Math.max(1, px / 40);
+function ticks(lo, hi, px) {            // round steps at least 30 px apart
+  const span = hi - lo, raw = span / Math.max(1, px / 30);
   const p = Math.pow(10, Math.floor(Math.log10(raw)));
   const step = [1, 2, 5, 10].map(m => m * p).find(s => s >= raw) || 10 * p;
   const out = [];
@@ -33,7 +33,7 @@ function ticks(lo, hi, px) {            // round steps at least 40 px apart
   }
   return out;
 }
-function pan(canvas) {                  // drag: the axis moves with the pointer; wheel: zoom
+function pan(canvas) {                  // a drag moves the axis with the pointer
   let from = null;
   canvas.addEventListener('pointerdown', e => { from = e.clientX;
                                                 canvas.setPointerCapture(e.pointerId); });
@@ -44,14 +44,6 @@ function pan(canvas) {                  // drag: the axis moves with the pointer
     from = e.clientX;
     x_range.setv({start: x_range.start - dt, end: x_range.end - dt});
   });
-  canvas.addEventListener('wheel', e => {
-    if (!st.g) { return; }
-    e.preventDefault();
-    const r = canvas.getBoundingClientRect();
-    const at = st.g.start + (e.clientX - r.left - st.g.x0) / st.g.sx;
-    const k = e.deltaY > 0 ? 1.1 : 1 / 1.1;
-    x_range.setv({start: at - (at - x_range.start) * k, end: at + (x_range.end - at) * k});
-  }, {passive: false});
 }
 function draw() {
   if (!st.canvas || !st.canvas.isConnected) {
@@ -179,8 +171,8 @@ def line_plot(doc, source, x_range, contacts, *, title: str, y_label: str, serie
     source.js_on_change("streaming", draw)          # new points (ColumnDataSource.stream)
     source.js_on_change("data", draw)               # the kept span (a reload, a scrub)
     x_range.js_on_change("end", draw)               # the page's code moves both ends
-    x_range.js_on_change("start", draw)             # ... a pan or zoom may move one
+    x_range.js_on_change("start", draw)             # ... setv moves both, one signal each
     contacts.js_on_change("data", draw)
     doc.js_on_event(DocumentReady, draw)
-    doc.add_root(source)            # nothing on the page holds it: a root of its own
+    doc.add_root(source)            # the layout holds the Div alone: a root of its own
     return div
