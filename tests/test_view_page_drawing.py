@@ -10,6 +10,10 @@ with three pages on two cores, the browsers' drawing is what delays a column on 
   brings, it draws once, in the next animation frame; a column added while the axes stand
   costs its own rectangles only, in the right place and colour; a moved axis redraws all;
   each live column is reported painted once, after its frame.
+- The page holds no Bokeh plot: its line plots are canvases drawn by their own script from
+  sources no glyph draws. That script, run in Chromium: however many triggers a task brings,
+  it draws once, in the next animation frame; a line lands where its points say, within the
+  shared time axis; dragging the plot pans that axis.
 """
 import queue
 import time
@@ -17,6 +21,7 @@ import time
 import pytest
 
 from snn_antenna.bridge.view.history import ViewHistory
+from snn_antenna.bridge.view.lines import LINES_JS
 from snn_antenna.bridge.view.page import build_page
 from snn_antenna.bridge.view.rate_map import FRAME, RATE_MAP_JS
 from snn_antenna.bridge.view.view import LiveView
@@ -28,7 +33,7 @@ def test_a_column_between_pulls_changes_the_map_alone_and_no_div_text_changes(mo
     import types
 
     from bokeh.document import Document
-    from bokeh.models import CustomJS
+    from bokeh.models import CustomJS, GlyphRenderer, Plot
 
     from snn_antenna.bridge.view import page as page_module
 
@@ -37,6 +42,7 @@ def test_a_column_between_pulls_changes_the_map_alone_and_no_div_text_changes(mo
     history = ViewHistory(LiveView(_parts()).config)
     doc = Document()
     build_page(history, doc)
+    assert not [*doc.select({"type": Plot}), *doc.select({"type": GlyphRenderer})]
     (pull,) = doc.session_callbacks
     token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
     changed = []
@@ -86,10 +92,10 @@ SETUP_JS = """([code, n, frame]) => {
   const contacts = {data: {t: []}};
   const palette = Array.from({length: 256}, (_, i) => `rgb(${i},0,0)`);
   const run = new Function('source', 'x_range', 'contacts', 'div', 'n', 'page', 'palette',
-                           'ticks', 'history_s', 'frame', 'title', 'contact_colour', 'align',
-                           'on', code);
+                           'ticks', 'history_s', 'frame', 'title', 'contact_colour', 'on',
+                           code);
   window.trigger = on => run(source, x_range, contacts, div, n, 'p1', palette, [], 10, frame,
-                             'map', '#d62728', null, on);
+                             'map', '#d62728', on);
   window.rows = (rows, reset) => {
     source.data = {t: rows.map(r => r[0]), w: rows.map(() => 0.1),
                    rates: rows.map(r => new Float32Array(n).fill(r[1])),
@@ -140,4 +146,80 @@ def test_the_rate_map_draws_once_per_frame_and_a_new_column_alone():
         # The axis moved: everything again.
         assert fills("x_range.start = 0.5; x_range.end = 10.5; trigger('view');") > 40 * n
         assert len(page.evaluate("reports")) == 2           # no new column: nothing reported
+        browser.close()
+
+
+LINES_SETUP_JS = """([code, frame]) => {
+  const host = document.createElement('div');
+  host.style.cssText = 'display:block;width:1000px';
+  document.body.appendChild(host);
+  host.attachShadow({mode: 'open'}).innerHTML =
+    "<canvas style='display:block;width:100%;height:210px'></canvas>";
+  window.Bokeh = {index: {find_one: () => ({markup_el: host.shadowRoot})}};
+  window.counted = {stroke: 0};
+  const stroke = CanvasRenderingContext2D.prototype.stroke;
+  CanvasRenderingContext2D.prototype.stroke = function (...args) {
+    window.counted.stroke++;
+    return stroke.apply(this, args);
+  };
+  const t = Array.from({length: 1001}, (_, i) => i / 100);
+  // x: 0 until 5 s, 1 after; y: 0 throughout.
+  const source = {data: {t, x: t.map(s => s < 5 ? 0 : 1), y: t.map(() => 0)}};
+  const x_range = {start: 0, end: 10, setv(o) { Object.assign(this, o); }};
+  const contacts = {data: {t: [], label: []}};
+  const series = [{column: 'x', colour: 'rgb(0,0,255)', label: 'x', dashed: false,
+                   step: false, axis: 'left', alpha: 1},
+                  {column: 'y', colour: 'rgb(255,0,0)', label: 'y', dashed: false,
+                   step: false, axis: 'left', alpha: 1}];
+  const div = {};
+  const run = new Function('source', 'x_range', 'contacts', 'div', 'series', 'right', 'title',
+                           'y_label', 'frame', 'contact_colour', code);
+  window.trigger = () => run(source, x_range, contacts, div, series, null, 'lines', 'g', frame,
+                             '#d62728');
+  window.x_range = x_range;
+  window.canvas = host.shadowRoot.querySelector('canvas');
+  window.painted = () => new Promise(done => requestAnimationFrame(() => setTimeout(done, 0)));
+  window.colour = (x, y) => {       // a line's colour within a pixel of (x, y), if any
+    const d = window.canvas.getContext('2d').getImageData(x, y - 1, 1, 3).data;
+    for (let i = 0; i < 12; i += 4) {
+      if (d[i] > 150 && d[i + 1] < 120 && d[i + 2] < 120) { return 'red'; }
+      if (d[i + 2] > 150 && d[i] < 120 && d[i + 1] < 120) { return 'blue'; }
+    }
+    return null;
+  };
+}"""
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+def test_the_line_plots_draw_once_per_frame_on_the_shared_axis_and_pan_it():
+    playwright = pytest.importorskip("playwright.sync_api")
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                    args=["--no-sandbox"])
+        page = browser.new_page(viewport={"width": 1100, "height": 300},
+                                device_scale_factor=1)
+        page.set_content("<body style='margin:0'></body>")
+        page.evaluate(LINES_SETUP_JS, [LINES_JS, FRAME])
+        strokes = page.evaluate("""async () => {
+            trigger(); trigger(); trigger();
+            await painted();
+            return counted.stroke;
+        }""")
+        assert strokes == 2 * 2                 # one drawing: each line and its legend entry
+        x0, x1 = FRAME["left"], 1000 - FRAME["right"]
+        y0, y1 = FRAME["top"], 210 - FRAME["bottom"]
+        pad = 0.05 * (y1 - y0) / 1.1            # the left axis spans the points shown, ±5 %
+        at = lambda t_s: round(x0 + t_s * (x1 - x0) / 10)          # noqa: E731
+        assert page.evaluate(f"colour({at(2.5)}, {round(y1 - pad)})") == "red"    # y over x
+        assert page.evaluate(f"colour({at(7.5)}, {round(y0 + pad)})") == "blue"   # x at 1
+        assert page.evaluate(f"colour({at(7.5)}, {round(y1 - pad)})") == "red"
+        assert page.evaluate(f"colour({at(2.5)}, {round(y0 + pad)})") is None
+        # Dragging the plot 82 px to the right shows one second earlier.
+        box = page.evaluate("(() => { const r = canvas.getBoundingClientRect();"
+                            " return [r.left, r.top]; })()")
+        page.mouse.move(box[0] + 500, box[1] + 100)
+        page.mouse.down()
+        page.mouse.move(box[0] + 500 + (x1 - x0) / 10, box[1] + 100)
+        page.mouse.up()
+        assert page.evaluate("[x_range.start, x_range.end]") == pytest.approx([-1, 9])
         browser.close()

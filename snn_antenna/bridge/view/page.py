@@ -1,5 +1,6 @@
-"""The live view's browser page: Bokeh figures (the antenna's axes, the coded input) and the
-rate map's own canvas (bridge/view/rate_map.py), fed from the view process's history
+"""The live view's browser page: the line plots (the antenna's axes, the coded input;
+bridge/view/lines.py) and the rate map (bridge/view/rate_map.py), each a canvas of its own drawn
+by the page's script, the controls and the text around them, fed from the view process's history
 (:class:`~snn_antenna.bridge.view.view.history.ViewHistory`).
 
 Each open page is one Bokeh session with its own data sources; a periodic callback (every
@@ -14,9 +15,8 @@ import uuid
 
 
 # Each page pulls new points 5 times a second (a new rate-map column is pushed to it on
-# arrival: build_page's update_now). Each pull moves the time axis and repaints every Bokeh
-# plot on the page, the bulk of what a page costs its browser; the lines move in steps of
-# a fiftieth of the 10 s they show.
+# arrival: build_page's push). Each pull moves the time axis and redraws the page's three
+# canvases; the lines move in steps of a fiftieth of the 10 s they show.
 PAGE_UPDATE_MS = 200
 # A page that has not painted the last column sent waits (its points gather) rather than
 # queue more updates than its browser draws; one that never reports (a hidden tab does not
@@ -48,23 +48,16 @@ def build_page(view, doc) -> None:
     view.pages_served += 1
     doc.on_session_destroyed(lambda _ctx: setattr(view, "sessions", view.sessions - 1))
     x_range = Range1d(0, view.history_s, name="time")
-    # The same borders on every plot keep their time axes aligned.
-    common = dict(x_range=x_range, height=210, sizing_mode="stretch_width",
-                  tools="pan,wheel_zoom,reset,save", toolbar_location="right",
-                  min_border_left=70, min_border_right=110)
     sources = {"xy": ColumnDataSource({"t": [], "x": [], "y": []}, name="xy"),
                "coded": ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [],
-                                          "coded": []}),
+                                          "coded": []}, name="coded"),
                "contacts": ColumnDataSource({"t": [], "label": []}, name="contacts")}
     # This page's own mode: paused (its plots stop following) and how far back it scrubs.
     mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
-    antenna = _antenna_figure(sources["xy"], common)
-    coded = _coded_figure(sources["coded"], common, view.coder_amplitude)
+    antenna = _antenna_plot(doc, sources, x_range)
+    coded = _coded_plot(doc, sources, x_range, view.coder_amplitude)
     rate_map_div, sources["map"] = rate_map(doc, view, x_range, sources["contacts"],
-                                            mode["page"], CONTACT_COLOUR, coded)
-    for fig in (antenna, coded):
-        _legend_outside(fig)
-        _mark_contacts(fig, sources["contacts"])
+                                            mode["page"], CONTACT_COLOUR)
     # A fixed height: new text does not move the plots below it.
     counters = Div(text="", sizing_mode="stretch_width", height=80, name="counters")
     # Beside the plots, what the running network decides: a panel per part it has. One column
@@ -126,51 +119,32 @@ def _text_source(doc, divs):
     return source
 
 
-def _legend_outside(fig) -> None:
-    """The legend in the right margin, beside the data rather than over the latest points
-    (which arrive at the right edge)."""
-    legend = fig.legend[0]
-    legend.location, legend.orientation = "top_left", "vertical"
-    legend.border_line_alpha, legend.margin, legend.padding = 0, 4, 2
-    legend.label_text_font_size, legend.glyph_width = "11px", 16
-    fig.add_layout(legend, "right")
+def _antenna_plot(doc, sources, x_range):
+    from .lines import line_plot
+
+    return line_plot(doc, sources["xy"], x_range, sources["contacts"],
+                     title="Antenna: the two accelerometer axes", y_label="g",
+                     series=[{"column": "x", "colour": "#1f77b4", "label": "x"},
+                             {"column": "y", "colour": "#ff7f0e", "label": "y"}],
+                     contact_colour=CONTACT_COLOUR, name="antenna")
 
 
-def _antenna_figure(source, common):
-    from bokeh.plotting import figure
+def _coded_plot(doc, sources, x_range, amplitude: float):
+    from .lines import line_plot
 
-    fig = figure(title="Antenna: the two accelerometer axes", y_axis_label="g", **common)
-    fig.line("t", "x", source=source, color="#1f77b4", legend_label="x")
-    fig.line("t", "y", source=source, color="#ff7f0e", legend_label="y")
-    return fig
-
-
-def _coded_figure(source, common, amplitude: float):
-    from bokeh.models import LinearAxis, Range1d
-    from bokeh.plotting import figure
-
-    fig = figure(title="Coded input: filtered signal, the gate's threshold ±Th, and the "
-                       "square wave fed to the resonators", y_axis_label="signal (g)", **common)
-    fig.line("t", "signal", source=source, color="#555555", legend_label="signal")
-    fig.line("t", "th", source=source, color=CONTACT_COLOUR, line_dash="dashed",
-             legend_label="±Th")
-    fig.line("t", "neg_th", source=source, color=CONTACT_COLOUR, line_dash="dashed")
-    fig.extra_y_ranges = {"coded": Range1d(-1.3 * amplitude, 1.3 * amplitude)}
-    fig.add_layout(LinearAxis(y_range_name="coded", axis_label="coded input"), "right")
-    fig.step("t", "coded", source=source, y_range_name="coded", color="#2ca02c",
-             mode="after", alpha=0.8, legend_label="coded")
-    return fig
-
-
-def _mark_contacts(fig, source) -> None:
-    """A vertical line and a label at every contact's onset."""
-    from bokeh.models import LabelSet
-
-    fig.vspan(x="t", source=source, line_color=CONTACT_COLOUR, line_width=2)
-    fig.add_layout(LabelSet(x="t", y=5, y_units="screen", text="label", x_offset=4,
-                            source=source, text_color=CONTACT_COLOUR, text_font_style="bold",
-                            text_font_size="13px", background_fill_color="white",
-                            background_fill_alpha=0.75))
+    return line_plot(doc, sources["coded"], x_range, sources["contacts"],
+                     title="Coded input: filtered signal, the gate's threshold ±Th, and the "
+                           "square wave fed to the resonators", y_label="signal (g)",
+                     series=[{"column": "signal", "colour": "#555555", "label": "signal"},
+                             {"column": "th", "colour": CONTACT_COLOUR, "dashed": True,
+                              "label": "±Th"},
+                             {"column": "neg_th", "colour": CONTACT_COLOUR, "dashed": True,
+                              "label": None},
+                             {"column": "coded", "colour": "#2ca02c", "step": True,
+                              "axis": "right", "alpha": 0.8, "label": "coded"}],
+                     right={"label": "coded input",
+                            "range": [-1.3 * amplitude, 1.3 * amplitude]},
+                     contact_colour=CONTACT_COLOUR, name="coded_input")
 
 
 def _updater(view, sources: dict, x_range, mode: dict):

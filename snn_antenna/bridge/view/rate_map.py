@@ -24,8 +24,8 @@ import numpy as np
 HEIGHT = 260
 TITLE = "Rate map: resonators (tuning frequency) × time"
 
-# The plot's frame inside the canvas, in CSS pixels, until the plot above it is laid out (its
-# frame's left and right are then the map's, so that the time axes line up).
+# The plot's frame inside each of the page's canvases, in CSS pixels: the same on all of them
+# lines their time axes up (bridge/view/lines.py).
 FRAME = {"left": 70, "right": 110, "top": 26, "bottom": 40}
 
 # Shared by the three triggers (``on``): "data" (new rows from the view process), "ready"
@@ -92,12 +92,8 @@ function draw() {
   if (host && host.clientWidth > 0) {
     const dpr = window.devicePixelRatio || 1;
     const W = host.clientWidth, H = canvas.clientHeight;
-    // The time axis where the plot above has its own (its frame, once laid out).
-    const above = window.Bokeh && Bokeh.index && Bokeh.index.find_one(align);
-    const bbox = above && above.frame && above.frame.bbox;
     const high = st.high > 0 ? st.high : 1;
-    const key = [W, H, dpr, x_range.start, x_range.end, high,
-                 bbox ? bbox.left : null, bbox ? bbox.right : null].join();
+    const key = [W, H, dpr, x_range.start, x_range.end, high].join();
     const ctx = canvas.getContext('2d');
     const last = st.t.length ? st.t[st.t.length - 1] : -Infinity;
     if (!st.dirty && key === st.key) {
@@ -113,10 +109,7 @@ function draw() {
       }
       ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
       ctx.fillStyle = 'white'; ctx.fillRect(0, 0, W, H);
-      const shift = bbox ? above.el.getBoundingClientRect().left
-                           - canvas.getBoundingClientRect().left : 0;
-      const x0 = bbox ? bbox.left + shift : frame.left;
-      const x1 = bbox ? bbox.right + shift : W - frame.right;
+      const x0 = frame.left, x1 = W - frame.right;
       const y0 = frame.top, y1 = H - frame.bottom;
       const start = x_range.start, end = x_range.end, sx = (x1 - x0) / (end - start);
       const g = {x0, x1, y0, y1, start, end, sx, high, rowH: (y1 - y0) / n};
@@ -172,11 +165,11 @@ function draw() {
 """
 
 
-def rate_map(doc, view, x_range, contacts, page: str, colour: str, align):
+def rate_map(doc, view, x_range, contacts, page: str, colour: str):
     """The rate map of one page (the Bokeh document ``doc``): its Div (holding the canvas)
     and its data source, named ``map`` (rows as :func:`map_rows` makes them). ``contacts``:
     the page's contact marks (a source with ``t``); ``page``: the page's token for
-    ``/painted``; ``align``: the plot above, whose frame the map's time axis lines up with."""
+    ``/painted``."""
     from bokeh.events import DocumentReady
     from bokeh.models import ColumnDataSource, CustomJS, Div
     from bokeh.palettes import Viridis256
@@ -190,7 +183,7 @@ def rate_map(doc, view, x_range, contacts, page: str, colour: str, align):
     ticks = [[i, f"{view.neuron_hz[i]:.1f}"] for i in range(0, n, max(1, n // 8))]
     args = dict(source=source, x_range=x_range, contacts=contacts, div=div, n=n, page=page,
                 palette=list(Viridis256), ticks=ticks, history_s=view.history_s, frame=FRAME,
-                title=TITLE, contact_colour=colour, align=align)
+                title=TITLE, contact_colour=colour)
 
     def draw(on: str) -> CustomJS:
         return CustomJS(args={**args, "on": on}, code=RATE_MAP_JS)
