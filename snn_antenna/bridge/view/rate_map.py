@@ -7,9 +7,9 @@ delays a column. Here the view process sends each page only the new columns (a d
 glyph draws: a small message), and the page's script keeps the columns it shows and paints
 them with ``fillRect`` (one rectangle per resonator and window). It draws at most once per
 animation frame, whatever triggered it, and while the axes stand only the columns added since
-(a column then costs its page one rectangle per resonator, not the whole map). The plot follows the page's
-shared time axis (``x_range``: paused, scrubbed, panned), marks the contacts' onsets, and
-reports each live column it painted to ``/painted`` (the display delay,
+(a column then costs its page one rectangle per resonator, not the whole map). The plot
+follows the page's shared time axis (``x_range``: paused, scrubbed, panned), marks the
+contacts' onsets, and reports each live column it painted to ``/painted`` (the display delay,
 bridge/view/history.py).
 
 The source's columns, one row per window: ``t`` (start, s), ``w`` (width, s), ``rates``

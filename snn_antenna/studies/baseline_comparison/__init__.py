@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...core.logfile import logged
 from ...engine.events import cached_features, run_bank, run_cost
@@ -79,7 +80,10 @@ def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
     why = f"above the {nyquist:g} Hz Nyquist of the recordings"
     spec, notes = copy.deepcopy(spec), []
     ev = spec.setdefault("events", {})
-    max_hz = float(ev.get("max_hz", events.EventProcessor.max_hz))
+    # the raw spec, before its sections are checked: a value of the wrong shape is refused here
+    # by name (and any other is left to the checks that follow)
+    max_hz = (bounds.number("events.max_hz", ev.get("max_hz", events.EventProcessor.max_hz),
+                            0.0, lo_open=True, unit=" Hz") if isinstance(ev, dict) else 0.0)
     if max_hz > nyquist:
         ev["max_hz"] = nyquist
         notes.append(f"left out: the spectrum's bins from {nyquist:g} to {max_hz:g} Hz "
@@ -90,23 +94,28 @@ def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
     spiking_why = (f"above {limit:g} Hz: a resonator reads {MIN_SAMPLES_PER_CYCLE} samples "
                    f"per cycle, and the recordings' {rate_hz:g} Hz gives {limit:g} Hz at most "
                    f"(their Nyquist is {nyquist:g} Hz)")
-    bands = (spiking.get("bank") or {}).get("bands") or {}
+    bank = spiking.get("bank")
+    bands = bank.get("bands") if isinstance(bank, dict) else None
+    bands = bands if isinstance(bands, dict) else {}
     for name in list(bands):
         if _fit_band(bands[name], f"spiking.bank.bands.{name}", limit, spiking_why, notes):
             del bands[name]
     designs = []
-    for i, design in enumerate(spiking.get("designs") or []):
-        label = f"spiking.designs[{i}] ({design.get('name', i)})"
+    given = spiking.get("designs")
+    for i, design in enumerate(given if isinstance(given, list) else []):
+        label = f"spiking.designs.{i}"
         if isinstance(design, dict) and design.get("band") not in (None, *bands):
-            notes.append(f"left out: {label}, on the band left out")
+            notes.append(f"left out: {label} ({design.get('name', i)}), on the band left out")
         elif not (isinstance(design, dict) and
                   _fit_band(design, label, limit, spiking_why, notes)):
             designs.append(design)
-    if "designs" in spiking:
+    if isinstance(given, list):
         spiking["designs"] = designs
-    tuning = (spiking.get("tuned") or {}).get("tuning")
+    tuned = spiking.get("tuned")
+    tuning = tuned.get("tuning") if isinstance(tuned, dict) else None
     if isinstance(tuning, dict) and "range_hz" in tuning:
-        lo, hi = map(float, tuning["range_hz"])
+        lo, hi = bounds.pair("spiking.tuned.tuning.range_hz", tuning["range_hz"], strict=True,
+                             unit=" Hz")
         if hi > limit:
             tuning["range_hz"] = [lo, limit]
             notes.append(f"clipped: spiking.tuned.tuning.range_hz {lo:g}–{hi:g} → "
@@ -120,7 +129,7 @@ def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bo
     if not isinstance(band, dict):
         return False
     if "band_hz" in band:
-        lo, hi = map(float, band["band_hz"])
+        lo, hi = bounds.pair(f"{label}.band_hz", band["band_hz"], strict=True, unit=" Hz")
         if lo >= limit:
             notes.append(f"left out: {label} ({lo:g}–{hi:g} Hz), {why}")
             return True
@@ -129,12 +138,15 @@ def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bo
             notes.append(f"clipped: {label}.band_hz {lo:g}–{hi:g} → {lo:g}–{limit:g} Hz; "
                          f"left out: its resonators {why}")
             for cut in ("lowpass_hz", "highpass_hz"):   # in the same place against the band
-                if band.get(cut) is not None and float(band[cut]) > limit:
-                    new = round(float(band[cut]) * limit / hi, 1)
+                if band.get(cut) is None:
+                    continue
+                hz = bounds.number(f"{label}.{cut}", band[cut], 0.0, lo_open=True, unit=" Hz")
+                if hz > limit:
+                    new = round(hz * limit / hi, 1)
                     if new <= lo:
-                        notes.append(f"left out: {label} ({cut} {band[cut]:g} Hz), {why}")
+                        notes.append(f"left out: {label} ({cut} {hz:g} Hz), {why}")
                         return True
-                    notes.append(f"clipped: {label}.{cut} {float(band[cut]):g} → {new:g} Hz, "
+                    notes.append(f"clipped: {label}.{cut} {hz:g} → {new:g} Hz, "
                                  f"as far above the band's top as before ({hi:g} → {limit:g} "
                                  "Hz)")
                     band[cut] = new
