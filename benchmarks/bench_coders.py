@@ -53,7 +53,7 @@ def main(argv=None) -> dict:
     plan = parts.plan.tuned_plan()
     t0 = time.perf_counter()
     data, cmp, _ = study._signal_stage(parts, 3, print, False)
-    bands, where = calibration_bands(parts.bench, plan, print, False)
+    bands, where = calibration_bands(parts, data, plan, print, False)
     if args.cost_only:
         costs = best_costs(data, parts, cmp.features["event"].values,
                            coder_banks(plan, bands, parts.bank), plan.cost_repeats, print)
