@@ -19,7 +19,7 @@ from ...readout.contacts import detector_from_spec
 from ...evaluation.scoring import score_columns
 from ...readout.detection import BlindReadOut
 from ...sources import antenna
-from .recorded import split_drives
+from .drives import split_drives
 from ...sources.scenes import (
     CourseLayout,
     CourseScene,
