@@ -22,7 +22,7 @@
    ``window_s``. The real-time factor of a live run is measured on the wall clock: stream
    seconds processed per second elapsed since the stream began (1.0 = kept up with the board).
 3. ``--view``: the throughput run again, alternately without and with the live browser view
-   (bridge/view.py, its server in a process of its own) and a page open on it (headless
+   (bridge/view/view.py, its server in a process of its own) and a page open on it (headless
    Chromium, when installed), ``--repeats`` times each on ``--view-seconds`` of input; the
    throughputs are printed side by side. Chromium and the view process run on the same cores
    as the pipeline.
@@ -33,8 +33,8 @@
 5. ``--browsers 0,1,3``: for each number of headless Chromium pages open on the live view, a
    live run at 1 kHz (wall-clock real-time factor, sample-to-rate-map latency, and the display
    latency: from the arrival of a window's last sample on the host to its rate-map column
-   painted on a page, as the pages report it to ``/painted``, all pages together), then a
-   throughput run with the same pages open (compute-only real-time factor, and per CPU second
+   painted on a page, as the pages report it on their rate-map sockets, all pages together),
+   then a throughput run with the same pages open (compute-only real-time factor, and per CPU second
    of the pipeline's own process: what the pages' drawing on the same cores leaves out). Of
    the display latency, "taken" is the part until the view process took the window from the
    pipeline's hand-off, "sent" until the page's update left the view process, "received"
@@ -168,7 +168,7 @@ def main(argv=None) -> int:
 
 def online_parts(network, overrides, speed_cm_s: float):
     """``build_online`` with the speed command where the network reads one (a composed spec
-    with a gate or CPG: bridge/robot.py)."""
+    with a gate or CPG: bridge/online/robot.py)."""
     from snn_antenna.core import spec as specs
 
     raw = specs.load(network)

@@ -1,8 +1,8 @@
-"""The live controls (bridge/controls.py): the one parser of control requests refuses every bad
-value with a SpecError naming field, value and range; changes are scheduled at window
+"""The live controls (bridge/online/controls.py): the one parser of control requests refuses every
+bad value with a SpecError naming field, value and range; changes are scheduled at window
 boundaries ahead of the coder, journaled in events.jsonl, and a replay that re-applies them
 finds what the live run found; the view's paint reports and its saved views
-(bridge/saved_view.py) read back."""
+(bridge/view/saved_view.py) read back."""
 import json
 import math
 import queue
@@ -218,34 +218,88 @@ def _frame(seq: int, t_s: float) -> dict:
             "windows": [(t_s, np.ones(24), 1.0, 1.0, {}, 1.0, 0.1)]}
 
 
-def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does():
-    """Backpressure per page: updates wait (their points gather) while the browser has not
-    painted the column sent last, so a slow browser does not queue up seconds of updates."""
-    from bokeh.document import Document
-    from bokeh.models import CustomJS
+class PageSocket:
+    """Stands in for a page's rate-map socket (``/columns``): what the feed wrote, decoded."""
 
-    history = ViewHistory(LiveView(_parts()).config)
+    def __init__(self):
+        self.sent = []
+
+    def write_message(self, message, binary=False):
+        assert binary
+        a = np.frombuffer(message, dtype=np.float64)
+        reset, live, high, n, width = a[:5]
+        rows = a[5:].reshape(int(n), int(width))
+        self.sent.append({"reset": bool(reset), "live": bool(live), "high": float(high),
+                          "t": rows[:, 0].round(6).tolist(), "rates": rows[:, 2:]})
+
+    def close(self):
+        pass
+
+
+def _page(history):
+    """A page built for ``history`` with its socket open: (pull, feed, socket, xy source)."""
+    from bokeh.document import Document
+
     doc = Document()
     build_page(history, doc)
     (callback,) = doc.session_callbacks
-    update = callback.callback
-    token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
-    xy = doc.get_model_by_name("xy")
+    (feed,) = history.map_feeds.values()
+    socket = PageSocket()
+    feed.attach(socket)
+    return callback.callback, feed, socket, doc.get_model_by_name("xy")
+
+
+def _painted(feed, t_s: float) -> None:
+    feed.report(json.dumps({"t_s": t_s, "painted_unix_s": time.time()}))
+
+
+def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does():
+    """Backpressure per page: updates wait (their points gather) while the browser has not
+    painted the column sent last, so a slow browser does not queue up seconds of updates."""
+    history = ViewHistory(LiveView(_parts()).config)
+    update, feed, socket, xy = _page(history)
+    assert socket.sent == [{"reset": True, "live": True, "high": 10.0, "t": [],
+                            "rates": socket.sent[0]["rates"]}]     # the (empty) span at open
     history.take(_frame(0, 0.0))
     update()
-    assert len(xy.data["t"]) == 25 and doc.get_model_by_name("map").data["t"] == [0.0]
+    assert len(xy.data["t"]) == 25 and socket.sent[-1]["t"] == [0.0]
+    assert not socket.sent[-1]["reset"] and np.all(socket.sent[-1]["rates"] == 1.0)
     history.take(_frame(1, 0.1))
     update()                                        # column 0.0 not painted yet: waits
-    assert len(xy.data["t"]) == 25
-    # The paint report releases the held column at once (the next tick), the column alone.
-    history.painted(0.0, time.time(), page=token)
-    (push,) = (c for c in doc.session_callbacks if c is not callback)
-    push.callback()
-    assert doc.get_model_by_name("map").data["t"] == [0.1] and len(xy.data["t"]) == 25
-    history.painted(0.1, time.time(), page=token)   # nothing held back: nothing scheduled
-    assert doc.session_callbacks == [callback]
+    assert len(xy.data["t"]) == 25 and len(socket.sent) == 2
+    # The paint report releases the held column at once, the column alone.
+    _painted(feed, 0.0)
+    assert socket.sent[-1]["t"] == [0.1] and len(xy.data["t"]) == 25
+    _painted(feed, 0.1)                             # nothing held back: nothing sent
+    assert len(socket.sent) == 3
     update()                                        # the lines come with the periodic pull
     assert len(xy.data["t"]) == 50
+
+
+def test_a_paused_page_gets_no_column_and_its_resume_or_reopened_socket_shows_the_span():
+    history = ViewHistory(LiveView(_parts()).config)
+    update, feed, socket, _xy = _page(history)
+    history.take(_frame(0, 0.0))
+    update()
+    _painted(feed, 0.0)
+    feed.mode["paused"] = True
+    history.take(_frame(1, 0.1))
+    history.take(_frame(2, 0.2))
+    update()
+    assert [m["t"] for m in socket.sent] == [[], [0.0]]
+    feed.mode["paused"] = False
+    feed.show(None)                                 # resumed: the kept span to the latest
+    assert socket.sent[-1]["reset"] and socket.sent[-1]["t"] == [0.0, 0.1, 0.2]
+    feed.show(0.15)                                 # scrubbed back: the span to 0.15, not live
+    last = socket.sent[-1]
+    assert last["reset"] and not last["live"] and last["t"] == [0.0, 0.1]
+    again = PageSocket()                            # the page's socket reopened: its span
+    feed.detach(socket)
+    feed.attach(again)
+    assert again.sent[-1]["reset"] and again.sent[-1]["t"] == [0.0, 0.1]
+    counted = history.display_latency()["n"]
+    feed.report(b"not a report")                    # counted as nothing, refused as nothing
+    assert history.display_latency()["n"] == counted == 1
 
 
 def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkeypatch):
@@ -254,7 +308,6 @@ def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkey
     import types
 
     from bokeh.document import Document
-    from bokeh.models import CustomJS
 
     from snn_antenna.bridge.view import page as page_module
 
@@ -264,13 +317,11 @@ def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkey
     doc = Document()
     build_page(history, doc)
     (callback,) = doc.session_callbacks
-    token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
     text = doc.get_model_by_name("text")     # what the page's script writes into the Divs
     history.take(_frame(0, 0.0))
     clock[0] += page_module.TEXT_UPDATE_S
     callback.callback()
     assert "<b>stream time</b> 0.1 s" in text.data["counters"][0]
-    history.painted(0.0, time.time(), page=token)
     history.take(_frame(1, 0.1))
     clock[0] += page_module.PAGE_UPDATE_MS / 1000
     callback.callback()                             # the plots move on, the text waits
@@ -287,8 +338,8 @@ def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkey
 
 
 def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monkeypatch):
-    """Samples go in frames every FLUSH_S; a window does not wait for the next one: it goes
-    WINDOW_FLUSH_S after the last frame at the latest (the delay a person sees)."""
+    """Samples go in frames every FLUSH_S; a window does not wait for the next one: it goes at
+    once (the delay a person sees), and windows in a burst at most every WINDOW_FLUSH_S."""
     import types
 
     from snn_antenna.bridge.view import view as view_module
@@ -302,9 +353,12 @@ def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monk
     assert live.published == 1
     clock[0] += 0.001
     live.window(Window(0.1, 100, 0.0, Published(0.0, 0.1, np.ones(24), None, 1.0, 1.0, 1.0)))
-    assert live.published == 1                      # 1 ms after a frame: held back...
-    clock[0] += view_module.WINDOW_FLUSH_S + 1e-6
+    assert live.published == 2                      # 1 ms after a frame: at once
+    clock[0] += 0.001
+    live.window(Window(0.2, 200, 0.0, Published(0.1, 0.1, np.ones(24), None, 1.0, 1.0, 1.0)))
+    assert live.published == 2                      # 1 ms after a window: held back...
+    clock[0] += view_module.WINDOW_FLUSH_S
     live.idle()
-    assert live.published == 2                      # ... WINDOW_FLUSH_S, not FLUSH_S
+    assert live.published == 3                      # ... WINDOW_FLUSH_S, not FLUSH_S
     assert live._inbox.get(timeout=5)["seq"] == 0
-    assert len(live._inbox.get(timeout=5)["windows"]) == 1
+    assert [len(live._inbox.get(timeout=5)["windows"]) for _ in range(2)] == [1, 1]

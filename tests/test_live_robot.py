@@ -1,5 +1,5 @@
-"""The robot network, live (bridge/robot.py, networks/live_robot.toml): the speed gate, CPG and
-control layer run in Brian2 in the array's stream network; the gate's Th codes each next
+"""The robot network, live (bridge/online/robot.py, networks/live_robot.toml): the speed gate, CPG
+and control layer run in Brian2 in the array's stream network; the gate's Th codes each next
 window, a speed command (``--speed``, the page's) is applied at a window boundary, journaled
 and replayed; the control layer stops the robot on contact; each part has its panel and a
 part the spec lacks has none. Replays read flat out (a few seconds each)."""

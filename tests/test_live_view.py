@@ -1,4 +1,4 @@
-"""The live browser view (bridge/view.py): /state.json advances and shows the contact with its
+"""The live browser view (bridge/view/view.py): /state.json advances and shows the contact with its
 distance; a stalled or closed page costs no sample; headless Chromium draws the page.
 
 The Chromium test writes its screenshot where LIVE_VIEW_SCREENSHOT says (the README's is made

@@ -1,5 +1,5 @@
-"""The live view's panels of what the running network decides (bridge/live_state.py): a panel
-per part the live network runs and none for a part it does not, their values carried in the
+"""The live view's panels of what the running network decides (bridge/online/live_state.py): a
+panel per part the live network runs and none for a part it does not, their values carried in the
 pipeline's own frames, shown on the page and in /state.json."""
 import copy
 import json

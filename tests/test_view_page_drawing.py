@@ -1,74 +1,73 @@
 """What a live page's browser is made to draw (bridge/view/page.py, bridge/view/rate_map.py):
 with three pages on two cores, the browsers' drawing is what delays a column on screen.
 
-- Between two periodic pulls a new column changes the rate map's source alone: the time axis
-  (whose move repaints every plot on the page) moves with the pull, ahead of the columns that
-  come before the next one; no Div's text is ever changed (a Div's new text makes BokehJS lay
-  the whole page out again): the counters and panels go through a data source the page's own
-  script writes into them.
-- The rate map's script, run in Chromium on a bare canvas: however many triggers a task
-  brings, it draws once, in the next animation frame; a column added while the axes stand
-  costs its own rectangles only, in the right place and colour; a moved axis redraws all;
-  each live column is reported painted once, after its frame.
+- Between two periodic pulls a new column goes to the page's rate-map socket alone and changes
+  nothing in the page's Bokeh document: the time axis (whose move repaints every plot on the
+  page) moves with the pull, ahead of the columns that come before the next one; no Div's text
+  is ever changed (a Div's new text makes BokehJS lay the whole page out again): the counters
+  and panels go through a data source the page's own script writes into their contained boxes.
+- The rate map's script, run in Chromium on a bare canvas fed by a stand-in socket: it opens
+  its socket at the page's address; however many messages and triggers a task brings, it
+  draws once, in the next animation frame; a column added while the axes stand costs its own
+  rectangles only, in the right place and colour; a moved axis redraws all; each live column
+  is reported painted once, after its frame, on the socket.
 - The page holds no Bokeh plot: its line plots are canvases drawn by their own script from
   sources no glyph draws. That script, run in Chromium: however many triggers a task brings,
   it draws once, in the next animation frame; a line lands where its points say, within the
   shared time axis; dragging the plot pans that axis.
 """
 import queue
-import time
 
 import pytest
 
 from snn_antenna.bridge.view.history import ViewHistory
 from snn_antenna.bridge.view.lines import LINES_JS
-from snn_antenna.bridge.view.page import build_page
 from snn_antenna.bridge.view.rate_map import FRAME, RATE_MAP_JS
 from snn_antenna.bridge.view.view import LiveView
-from test_live_controls import _frame, _parts
+from test_live_controls import _frame, _page, _painted, _parts
 from test_live_controls_chromium import CHROMIUM
 
 
-def test_a_column_between_pulls_changes_the_map_alone_and_no_div_text_changes(monkeypatch):
+def test_a_column_between_pulls_goes_to_the_socket_alone_and_no_div_text_changes(monkeypatch):
     import types
 
-    from bokeh.document import Document
-    from bokeh.models import CustomJS, GlyphRenderer, Plot
+    from bokeh.models import Div, GlyphRenderer, Plot
 
     from snn_antenna.bridge.view import page as page_module
 
     clock = [500.0]
     monkeypatch.setattr(page_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
     history = ViewHistory(LiveView(_parts()).config)
-    doc = Document()
-    build_page(history, doc)
+    pull, feed, socket, xy = _page(history)
+    doc = xy.document
     assert not [*doc.select({"type": Plot}), *doc.select({"type": GlyphRenderer})]
-    (pull,) = doc.session_callbacks
-    token = next(m.args["page"] for m in doc.select({"type": CustomJS}) if "page" in m.args)
+    texts = [div for div in doc.select({"type": Div}) if div.name in ("counters", "decided")]
+    assert len(texts) == 2 and all(div.styles["contain"] == "strict" for div in texts)
     changed = []
     doc.on_change(lambda event: hasattr(event, "model") and changed.append(
         (type(event.model).__name__, event.model.name, getattr(event, "attr", "data"))))
     history.take(_frame(0, 12.0))                   # past the 10 s the plots show
     clock[0] += page_module.TEXT_UPDATE_S
-    pull.callback()
+    pull()
     x_range = doc.get_model_by_name("time")
     at_pull = (x_range.start, x_range.end)
     assert at_pull[1] > history.t_s                 # the axis leads the stream
     assert {("ColumnDataSource", "text", "data"), ("ColumnDataSource", "xy", "data"),
-            ("ColumnDataSource", "map", "data"), ("Range1d", "time", "end")} <= set(changed)
+            ("Range1d", "time", "end")} <= set(changed)
     assert not [key for key in changed if key[0] == "Div"]
-    history.painted(12.0, time.time(), page=token)
+    assert socket.sent[-1]["t"] == [12.0]
+    _painted(feed, 12.0)
     changed.clear()
+    scheduled = len(doc.session_callbacks)
     clock[0] += 0.01
-    # A column ending half a window past the stream time of the pull: pushed alone.
+    # A column ending half a window past the stream time of the pull: sent alone, at once.
     arrived = queue.Queue()
     arrived.put(_frame(1, 12.15))
     history.drain(arrived)
-    (push,) = (c for c in doc.session_callbacks if c is not pull)
-    push.callback()
-    assert doc.get_model_by_name("map").data["t"] == [12.15]
+    assert socket.sent[-1]["t"] == [12.15] and not socket.sent[-1]["reset"]
     assert (x_range.start, x_range.end) == at_pull
-    assert changed == [("ColumnDataSource", "map", "data")]
+    assert changed == [] and len(doc.session_callbacks) == scheduled   # nor an axis move
+
 
 
 SETUP_JS = """([code, n, frame]) => {
@@ -84,23 +83,23 @@ SETUP_JS = """([code, n, frame]) => {
     return fill.apply(this, args);
   };
   window.reports = [];
-  window.fetch = (url, options) => {
-    window.reports.push(JSON.parse(options.body));
-    return Promise.resolve();
+  window.sockets = [];
+  window.WebSocket = class {                 // the page's socket, as the view process's end
+    constructor(url) { this.url = String(url); this.readyState = 1; sockets.push(this); }
+    send(message) { reports.push(JSON.parse(message)); }
   };
-  const div = {}, source = {data: {}}, x_range = {start: 0, end: 10};
+  window.WebSocket.OPEN = 1;
+  const div = {}, x_range = {start: 0, end: 10};
   const contacts = {data: {t: []}};
   const palette = Array.from({length: 256}, (_, i) => `rgb(${i},0,0)`);
-  const run = new Function('source', 'x_range', 'contacts', 'div', 'n', 'page', 'palette',
-                           'ticks', 'history_s', 'frame', 'title', 'contact_colour', 'on',
-                           code);
-  window.trigger = on => run(source, x_range, contacts, div, n, 'p1', palette, [], 10, frame,
-                             'map', '#d62728', on);
-  window.rows = (rows, reset) => {
-    source.data = {t: rows.map(r => r[0]), w: rows.map(() => 0.1),
-                   rates: rows.map(r => new Float32Array(n).fill(r[1])),
-                   high: rows.map(() => 10), live: rows.map(() => true),
-                   reset: rows.map(() => reset)};
+  const run = new Function('x_range', 'contacts', 'div', 'n', 'page', 'palette', 'ticks',
+                           'history_s', 'frame', 'title', 'contact_colour', 'on', code);
+  window.trigger = on => run(x_range, contacts, div, n, 'p1', palette, [], 10, frame, 'map',
+                             '#d62728', on);
+  window.rows = (rows, reset) => {          // a message: reset, live, high, rows, width, rows
+    const a = [reset ? 1 : 0, 1, 10, rows.length, 2 + n];
+    for (const [t, rate] of rows) { a.push(t, 0.1, ...Array(n).fill(rate)); }
+    sockets[0].onmessage({data: new Float64Array(a).buffer});
   };
   window.x_range = x_range;
   window.painted = () => new Promise(done => requestAnimationFrame(() => setTimeout(done, 0)));
@@ -118,7 +117,9 @@ def test_the_rate_map_draws_once_per_frame_and_a_new_column_alone():
                                     args=["--no-sandbox"])
         page = browser.new_page(viewport={"width": 1100, "height": 400},
                                 device_scale_factor=1)
-        page.set_content("<body style='margin:0'></body>")
+        page.route("http://view.test/", lambda route: route.fulfill(
+            body="<body style='margin:0'></body>", content_type="text/html"))
+        page.goto("http://view.test/")
         page.evaluate(SETUP_JS, [RATE_MAP_JS, n, FRAME])
 
         def fills(script: str) -> int:
@@ -129,23 +130,31 @@ def test_the_rate_map_draws_once_per_frame_and_a_new_column_alone():
                 return counted.fillRect - before;
             }}""")
 
+        # The page loaded: its socket opens at the page's own address, once.
+        fills("trigger('ready'); trigger('ready');")
+        assert page.evaluate("sockets.map(s => s.url)") == ["ws://view.test/columns?page=p1"]
         # 50 columns (0-5 s) and the axis moving with them, all in one task: one drawing.
         once = fills("rows(Array.from({length: 50}, (_, i) => [i / 10, 6]), true);"
-                     "trigger('data'); trigger('view'); trigger('view');")
+                     "trigger('view'); trigger('view');")
         full = fills("trigger('view');")
         assert once == full > 50 * n
         assert [r["t_s"] for r in page.evaluate("reports")] == [4.9]
         # A column while the axes stand: its own rectangles, where and as it should be.
-        assert fills("rows([[5.0, 4]], false); trigger('data');") == n
+        assert fills("rows([[5.0, 4]], false);") == n
         x0, x1 = FRAME["left"], 1000 - FRAME["right"]
         x = int(x0 + 5.05 * (x1 - x0) / 10)
         y = (FRAME["top"] + 260 - FRAME["bottom"]) // 2
         assert page.evaluate(f"red_at({x}, {y})") == round(4 / 10 * 255)      # the new one
         assert page.evaluate(f"red_at({x - 10}, {y})") == round(6 / 10 * 255)
-        assert [r["t_s"] for r in page.evaluate("reports")] == [4.9, 5.0]
+        reports = page.evaluate("reports")
+        assert [r["t_s"] for r in reports] == [4.9, 5.0]
+        assert all(r["received_unix_s"] <= r["painted_unix_s"] for r in reports)
         # The axis moved: everything again.
         assert fills("x_range.start = 0.5; x_range.end = 10.5; trigger('view');") > 40 * n
         assert len(page.evaluate("reports")) == 2           # no new column: nothing reported
+        # A reset with no rows: an empty map (white where the columns were).
+        fills("rows([], true);")
+        assert page.evaluate(f"red_at({x}, {y})") == page.evaluate(f"red_at({x - 10}, {y})") == 255
         browser.close()
 
 

@@ -118,7 +118,7 @@ def _speed_arg(p, text: str) -> None:
 
 
 def _speed(field: str, value) -> float:
-    """A speed in cm/s (the running network's gate names its own range: bridge/robot.py)."""
+    """A speed in cm/s (the running network's gate names its own range: bridge/online/robot.py)."""
     return bounds.number(field, value, 0.0, None, unit=" cm/s")
 
 
@@ -375,7 +375,7 @@ def cmd_stream(args) -> int:
 
 
 def live_controls(parts, view, **kwargs):
-    """Th and the rate-map window under the page's hands (bridge/controls.py): requests from
+    """Th and the rate-map window under the page's hands (bridge/online/controls.py): requests from
     the view, changes shown on it; ``journal``/``scheduled`` as the command records or replays."""
     from .online.controls import Controls
     from .wire.protocol import BOARD_RATE_HZ

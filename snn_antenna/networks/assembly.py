@@ -110,7 +110,7 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
 def part_objects(configured: dict, resonators=None) -> dict:
     """The Brian2 objects of the configured parts other than the array, by name, wired to the
     array's group ``resonators``: ``build`` here, and the live stream, whose array is built by
-    ``ResonatorArray.stream`` (bridge/online.py). The gate and CPG read the shared
+    ``ResonatorArray.stream`` (bridge/online/pipeline.py). The gate and CPG read the shared
     ``speed_cm_s`` the caller writes; the CPG also ``hold_input`` (the freeze reflex). The gate
     recalls only (``SpeedGate.objects(learning=False)``): it learns in ``SpeedGate.fit``, and
     its weights (``weights_``, zero unfitted) go into the network.

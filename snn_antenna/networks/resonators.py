@@ -187,7 +187,7 @@ class ResonatorArray:
 
         ``companions(group)``, when given, returns further Brian2 objects that run in the same
         network as the array (the other parts of a composed live network, wired to the
-        array's group: bridge/online.py); ``on_window`` may read and steer them.
+        array's group: bridge/online/pipeline.py); ``on_window`` may read and steer them.
         """
         import brian2 as b2
 

@@ -126,7 +126,7 @@ class ClosedLoop:
 def steer(objects: dict, speed_cm_s: float, moving: bool) -> float:
     """The speed command in force (0 once the motor unit stopped the robot) into the parts
     that read it, the speed gate and the CPG, and the freeze hold on the CPG once stopped.
-    The closed loop here and the live stream (bridge/online.py) steer with it."""
+    The closed loop here and the live stream (bridge/online/pipeline.py) steer with it."""
     speed = float(speed_cm_s) if moving else 0.0
     if "cpg" in objects:
         objects["cpg"].speed_cm_s = speed

@@ -2,7 +2,7 @@
 
 It writes the wire format to a pseudo-terminal it creates (``links.PtyLink``, optionally behind a
 symlink that survives a disconnect) or to any pyserial URL (``links.SerialLink``); what it
-streams for a stimulus file is ``bridge/stimulus.py``'s. Faults are
+streams for a stimulus file is ``bridge/emulate/stimulus.py``'s. Faults are
 placed by a seeded generator and every one is logged, so a test can compare what the receiver
 counted with what was injected:
 

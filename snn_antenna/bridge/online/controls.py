@@ -1,10 +1,10 @@
 """Hands on the live pipeline: the input threshold Th, the rate-map window and (on a network
-with a speed gate or CPG: bridge/robot.py) the robot's speed command, changed from the live
+with a speed gate or CPG: bridge/online/robot.py) the robot's speed command, changed from the live
 page (or ``POST /control``), applied at a window boundary, journaled into the recording and
 replayed from it.
 
-A request travels: the page (bridge/page.py) or ``/control`` → :func:`parse_control` in the view
-process (the one parser: a bad value is refused there, naming the field, the value and the
+A request travels: the page (bridge/view/page.py) or ``/control`` → :func:`parse_control` in the
+view process (the one parser: a bad value is refused there, naming the field, the value and the
 accepted range) → a bounded queue → :class:`Controls` in the pipeline, which takes it without
 waiting and schedules it at the first window boundary the coder has not reached yet (and
 after calibration). The change is thus applied at a sample index, which the recording's
@@ -153,7 +153,7 @@ class Controls:
 
     def apply_th(self, item) -> None:
         """A Th change, at its sample: on a network with a speed gate, a manual override of
-        the gate's Th from here on (bridge/robot.py)."""
+        the gate's Th from here on (bridge/online/robot.py)."""
         index, change, by, asked = item
         self.pending.remove(item)
         was = float(self.coder.threshold)

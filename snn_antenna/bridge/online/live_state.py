@@ -1,16 +1,16 @@
 """What the running network decides, window by window, for the live view's panels.
 
 A panel per part the running network contains, and none for a part it does not. The live
-pipeline (bridge/online.py's ``build_online``) always runs the resonator array, fed by the
+pipeline (bridge/online/pipeline.py's ``build_online``) always runs the resonator array, fed by the
 coder whose gate compares the filtered signal with the input threshold Th, and read out by the
 contact episode logic (panels ``threshold`` and ``readout``). A composed network
 (``networks/live_robot.toml``) also runs its speed gate, CPG and control layer beside it
-(bridge/robot.py), each with its panel; with a speed gate, the gate's panel shows the Th in
+(bridge/online/robot.py), each with its panel; with a speed gate, the gate's panel shows the Th in
 force and where it came from, in place of ``threshold``.
 
 Each window the pipeline publishes (``LiveView.window``) gathers one ``decided`` dict here,
 ``{panel: {field: value}}`` of plain numbers and strings; it travels in the same frame as the
-window's rates and the view shows the latest (bridge/view_process.py, bridge/page.py).
+window's rates and the view shows the latest (bridge/view/process.py, bridge/view/page.py).
 """
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ PANELS = {"threshold": ("Gate: input threshold Th", "resonators", "gate"),
 class Decisions:
     """Per window: the Th in force and where it came from, the read-out's decision on the
     window (a contact window or not, the episode it keeps open, the last contact's distance),
-    and what a composed network's other parts decided (bridge/robot.py)."""
+    and what a composed network's other parts decided (bridge/online/robot.py)."""
 
     def __init__(self, parts):
         self.coder = parts.chain.named_steps["coder"]

@@ -17,8 +17,8 @@ generator built here. What this module adds on top of the foundation's streaming
   ``ContactDetector.detect`` runs offline, so live and offline detections are the same.
 
 - a composed network (``networks/live_robot.toml``): its speed gate, CPG and control layer run
-  in Brian2 in the array's own network (bridge/robot.py), and each of the network's windows is
-  coded with the gate's Th once the network has integrated the window before it.
+  in Brian2 in the array's own network (bridge/online/robot.py), and each of the network's windows
+  is coded with the gate's Th once the network has integrated the window before it.
 
 Gaps in the stream are not filled: the network sees the received samples back to back.
 """
@@ -53,7 +53,7 @@ class OnlineParts:
     detector: ContactDetector
     window_s: float
     spec: dict
-    robot: object = None                # bridge/robot.py's LiveRobot: a composed spec's parts
+    robot: object = None                # online/robot.py's LiveRobot: a composed spec's parts
 
 
 def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
@@ -63,7 +63,7 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
     A network file (``networks/*.toml``, the fields of ResonatorArray) or a study-style file
     with ``[network]``, ``[preprocess]`` and ``[readout]`` tables; ``--set`` overrides apply to
     the study form (``--set preprocess.threshold=0.05``). A composed network (``parts = [...]``,
-    e.g. networks/live_robot.toml) runs its other parts beside the array (bridge/robot.py),
+    e.g. networks/live_robot.toml) runs its other parts beside the array (bridge/online/robot.py),
     starting at the speed command ``speed_cm_s``; its gate learns from ``[gate_training]``.
     """
     path = Path(network_path)

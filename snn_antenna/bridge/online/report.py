@@ -1,6 +1,6 @@
-"""What a live or replayed stream did (bridge/online.py's ``run_online``): samples, windows,
-the real-time factors (wall clock, compute-only, per CPU second) and the latency from a sample's
-arrival to its rate-map window; ``as_dict`` is the run's JSON report."""
+"""What a live or replayed stream did (bridge/online/pipeline.py's ``run_online``): samples,
+windows, the real-time factors (wall clock, compute-only, per CPU second) and the latency from a
+sample's arrival to its rate-map window; ``as_dict`` is the run's JSON report."""
 from __future__ import annotations
 
 import time

@@ -7,8 +7,8 @@ they are steered as the closed exploration loop steers them (``closed_loop.steer
 each of the network's windows, :meth:`LiveRobot.window` reads them:
 
 - the speed command in force is the robot's own: ``--speed`` at the start, then each speed
-  the page sets (bridge/controls.py: applied at a window boundary, journaled, replayed); once
-  the control layer's motor unit fires the robot stops (speed 0, the CPG frozen:
+  the page sets (bridge/online/controls.py: applied at a window boundary, journaled, replayed);
+  once the control layer's motor unit fires the robot stops (speed 0, the CPG frozen:
   ``closed_loop.FREEZE_HOLD``) until the next speed command drives it on;
 - the gate's recalled Th (``SpeedGate.decode`` of its read-out trace) codes the next window:
   the paper's state-dependent modulation of the coder. A Th set from the page is a manual

@@ -1,8 +1,8 @@
 """What the live view shows, kept in the view's own process: the frames the pipeline hands over
 become rolling histories (the antenna's axes, the coded input, rate-map windows), the contacts,
 the panels' latest decisions, the link's counters, the display delay the pages report and the
-control requests from them (:class:`ViewHistory`). bridge/view_process.py serves it; the pages
-(bridge/page.py) read it.
+control requests from them (:class:`ViewHistory`). bridge/view/process.py serves it; the pages
+(bridge/view/page.py) read it.
 """
 from __future__ import annotations
 
@@ -38,11 +38,11 @@ class ViewConfig:
     coder_amplitude: float
     th_g: float
     parts: tuple = ()               # the parts of the running network
-    panels: dict = None             # panel → title: what it decides (bridge/live_state.py)
+    panels: dict = None             # panel → title: what it decides (bridge/online/live_state.py)
     keep_s: float = 60.0            # what the view keeps: a paused page scrubs back through it
-    save_dir: str | None = None     # where "save view" writes (bridge/saved_view.py)
+    save_dir: str | None = None     # where "save view" writes (bridge/view/saved_view.py)
     # The speeds the running network accepts from the page (None: no part reads a speed), and
-    # the speed command at the start (bridge/robot.py).
+    # the speed command at the start (bridge/online/robot.py).
     speed_range_cm_s: tuple | None = None
     speed_cm_s: float | None = None
 
@@ -66,7 +66,7 @@ class _Ring:
 
 class ViewHistory:
     """The view's side: the last ``history_s`` of what the frames carried, read by the pages
-    (bridge/page.py) and ``/state.json``. A frame is a dict made by ``LiveView.flush``; its
+    (bridge/view/page.py) and ``/state.json``. A frame is a dict made by ``LiveView.flush``; its
     ``seq`` numbers frames, so a frame the pipeline could not hand over shows as a gap here."""
 
     def __init__(self, config: ViewConfig):
@@ -108,12 +108,11 @@ class ViewHistory:
         self.n_samples = 0
         self.peak_rate_hz = 10.0
         self.sessions = 0                           # pages open now
-        # Each open page's "update me now" (bridge/page.py): called when new rate-map columns
-        # arrive, so a column goes out on arrival instead of at the page's next periodic pull.
+        # Each open page's "send me the new columns" (rate_map.MapFeed.send_new): called when
+        # new rate-map columns arrive, so a column goes out on arrival, not at the next pull.
         self.column_listeners: set = set()
-        # ... and each page's own, called when that page reports it painted: a page held back
-        # until its browser drew the last column (page.py) goes on at once, not at its next pull.
-        self.painted_listeners: dict = {}
+        # ... and each page's feed by the page's token: its socket (/columns) finds it here.
+        self.map_feeds: dict = {}
         self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen
@@ -213,8 +212,6 @@ class ViewHistory:
         trusted only between arrival and now (this host's clock)."""
         if page is not None and len(self.painted_by) < 1000:
             self.painted_by[page] = round(float(t_s), 6)
-            if page in self.painted_listeners:
-                self.painted_listeners[page]()
         arrived = self.arrivals.get(round(float(t_s), 6))
         if arrived is None:
             return

@@ -4,8 +4,9 @@ by the page's script, the controls and the text around them, fed from the view p
 (:class:`~snn_antenna.bridge.view.view.history.ViewHistory`).
 
 Each open page is one Bokeh session with its own data sources; a periodic callback (every
-``PAGE_UPDATE_MS``) pulls what is new in the history since that page's cursor. All of it runs
-in the view's own process, so a page that falls behind, closes or is reloaded costs the
+``PAGE_UPDATE_MS``) pulls what is new in the history since that page's cursors. The rate map's
+columns go out as they arrive, on the page's own websocket (``rate_map.MapFeed``). All of it
+runs in the view's own process, so a page that falls behind, closes or is reloaded costs the
 pipeline nothing.
 """
 from __future__ import annotations
@@ -14,24 +15,23 @@ import time
 import uuid
 
 
-# Each page pulls new points 5 times a second (a new rate-map column is pushed to it on
-# arrival: build_page's push). Each pull moves the time axis and redraws the page's three
-# canvases; the lines move in steps of a fiftieth of the 10 s they show.
+# Each page pulls new points 5 times a second (a new rate-map column goes to it on arrival:
+# rate_map.MapFeed). Each pull moves the time axis and redraws the page's three canvases; the
+# lines move in steps of a fiftieth of the 10 s they show.
 PAGE_UPDATE_MS = 200
-# A page that has not painted the last column sent waits (its points gather) rather than
-# queue more updates than its browser draws; one that never reports (a hidden tab does not
-# paint) still gets one this often.
-UNPAINTED_WAIT_S = 1.0
 # The counters and panels twice a second (a contact at once): a person reads them no faster.
 TEXT_UPDATE_S = 0.5
 # Their text is written into the Divs' own elements by the page: a change of a Div's ``text``
-# makes BokehJS lay the whole page out again and repaint every plot on it.
+# makes BokehJS lay the whole page out again and repaint every plot on it. Each box is
+# contained (CSS ``contain: strict``, its size fixed): new text lays out that box alone, not
+# the page around it (~20 ms of a page's main thread otherwise, twice a second).
 TEXT_JS = """
 for (const div of divs) {
   const shown = window.Bokeh && Bokeh.index && Bokeh.index.find_one(div);
   if (shown && shown.markup_el) { shown.markup_el.innerHTML = source.data[div.name][0]; }
 }
 """
+CONTAINED = {"contain": "strict"}
 CONTACT_COLOUR = "#d62728"
 PANELS_WIDTH = 230
 
@@ -42,7 +42,7 @@ def build_page(view, doc) -> None:
     from bokeh.models import ColumnDataSource, Div, Range1d
 
     from .page_controls import control_widgets
-    from .rate_map import rate_map
+    from .rate_map import MapFeed, rate_map
 
     view.sessions += 1
     view.pages_served += 1
@@ -56,16 +56,21 @@ def build_page(view, doc) -> None:
     mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
     antenna = _antenna_plot(doc, sources, x_range)
     coded = _coded_plot(doc, sources, x_range, view.coder_amplitude)
-    rate_map_div, sources["map"] = rate_map(doc, view, x_range, sources["contacts"],
-                                            mode["page"], CONTACT_COLOUR)
+    rate_map_div = rate_map(doc, view, x_range, sources["contacts"], mode["page"],
+                            CONTACT_COLOUR)
     # A fixed height: new text does not move the plots below it.
-    counters = Div(text="", sizing_mode="stretch_width", height=80, name="counters")
+    counters = Div(text="", sizing_mode="stretch_width", height=80, name="counters",
+                   styles=CONTAINED)
     # Beside the plots, what the running network decides: a panel per part it has. One column
     # for the plots keeps their time axes aligned.
-    panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided")
+    panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided", styles=CONTAINED)
     plots = column(antenna, coded, rate_map_div, sizing_mode="stretch_width")
     sources["text"] = _text_source(doc, (counters, panels))
-    update, update_map, reload, waiting = _updater(view, sources, x_range, mode)
+    feed = MapFeed(view, mode["page"], mode)
+    update, reload, follow = _updater(view, sources, x_range, mode, feed)
+    # A column that would fall past the time axis moves it (with the page's document locked).
+    feed.on_sent = lambda t_s: (t_s + view.window_s > x_range.end
+                                and doc.add_next_tick_callback(follow))
     bar, status = control_widgets(view, mode, reload, x_range)
     doc.add_root(column(counters, bar, status, row(plots, panels, sizing_mode="stretch_width"),
                         sizing_mode="stretch_width"))
@@ -83,20 +88,18 @@ def build_page(view, doc) -> None:
 
     doc.add_periodic_callback(pull, PAGE_UPDATE_MS)
 
-    # A new rate-map column is pushed as it arrives, alone: a small message, and the browser
-    # redraws the rate map only (the lines, panels and counters come with the periodic pull).
-    def push() -> None:
-        if connected(doc):
-            doc.add_next_tick_callback(update_map)
+    # A new rate-map column goes out as it arrives, alone, on the page's own socket: the
+    # browser redraws the rate map only (the lines, panels and counters come with the pull).
+    view.map_feeds[mode["page"]] = feed
+    view.column_listeners.add(feed.send_new)
 
-    def painted() -> None:          # columns held back while the browser drew: now
-        if waiting():
-            push()
+    def ended(_context) -> None:
+        view.column_listeners.discard(feed.send_new)
+        view.map_feeds.pop(mode["page"], None)
+        if feed.socket is not None:
+            feed.socket.close()
 
-    view.column_listeners.add(push)
-    view.painted_listeners[mode["page"]] = painted
-    doc.on_session_destroyed(lambda _context: (view.column_listeners.discard(push),
-                                               view.painted_listeners.pop(mode["page"], None)))
+    doc.on_session_destroyed(ended)
 
 
 def connected(doc) -> bool:
@@ -147,15 +150,14 @@ def _coded_plot(doc, sources, x_range, amplitude: float):
                      contact_colour=CONTACT_COLOUR, name="coded_input")
 
 
-def _updater(view, sources: dict, x_range, mode: dict):
+def _updater(view, sources: dict, x_range, mode: dict, feed):
     """The page's periodic callback (stream what is new since this page's cursors, unless the
-    page is paused) and ``reload(end_s)``: show the kept history up to ``end_s`` (None: the
-    latest, and follow it again)."""
+    page is paused or its browser behind), ``reload(end_s)``: show the kept history up to
+    ``end_s`` (None: the latest, and follow it again), and ``follow()``: move the time axis
+    to the stream."""
     from .page_controls import controls_html
-    from .rate_map import map_rows
 
-    cursor = {"xy": 0, "coded": 0, "windows": 0, "sent_t": None, "sent_at": 0.0,
-              "text_at": 0.0}
+    cursor = {"xy": 0, "coded": 0, "text_at": 0.0}
     shown = {"text": None, "contacts": None, "text_marks": None}
     rollover = view.shown_points
 
@@ -163,46 +165,21 @@ def _updater(view, sources: dict, x_range, mode: dict):
         return rows[(rows[:, 0] >= end - view.history_s) & (rows[:, 0] <= end)]
 
     def reload(end_s=None) -> None:
-        live = end_s is None
-        end = max(view.t_s, view.history_s) if live else end_s
+        end = max(view.t_s, view.history_s) if end_s is None else end_s
         xy, coded = span(view.xy.rows, end), span(view.coded.rows, end)
         sources["xy"].data = {"t": xy[:, 0], "x": xy[:, 1], "y": xy[:, 2]}
         sources["coded"].data = {"t": coded[:, 0], "signal": coded[:, 1], "th": coded[:, 2],
                                  "neg_th": -coded[:, 2], "coded": coded[:, 3]}
-        shown = span(view.windows.rows, end)
-        sources["map"].data = map_rows(shown, live, view.peak_rate_hz, reset=True)
-        if live and len(shown):
-            cursor["sent_t"], cursor["sent_at"] = float(shown[-1, 0]), time.monotonic()
-        cursor.update(xy=view.xy.total, coded=view.coded.total, windows=view.windows.total)
+        feed.show(end_s)
+        cursor.update(xy=view.xy.total, coded=view.coded.total)
         x_range.start, x_range.end = end - view.history_s, end
-
-    def behind() -> bool:
-        """The browser has not painted the last column sent to it yet (for a while)."""
-        return (cursor["sent_t"] is not None
-                and view.painted_by.get(mode["page"]) != round(cursor["sent_t"], 6)
-                and time.monotonic() - cursor["sent_at"] < UNPAINTED_WAIT_S)
-
-    def update_map() -> bool:
-        """The rate map's new columns, unless the page is paused or its browser has not
-        drawn the last ones; whether the page follows the stream now."""
-        view.pull()                 # the frames in transit now
-        if mode["paused"] or behind():
-            return False
-        if cursor["windows"] != view.windows.total:
-            new = view.windows.since(cursor["windows"])
-            cursor["windows"] = view.windows.total
-            sources["map"].data = map_rows(new, True, view.peak_rate_hz)
-            last = float(new[-1, 0])
-            view.sending(last)
-            cursor["sent_t"], cursor["sent_at"] = last, time.monotonic()
-            if last + view.window_s > x_range.end:
-                follow()            # the new column in sight, not past the plot's right edge
-        return True
 
     def follow() -> None:
         """The plots' time axis up to the window in progress and one pull period beyond: the
         columns that come before the next pull are then already in sight, and only the rate
         map is redrawn for them (a move of the axis repaints every plot on the page)."""
+        if mode["paused"]:
+            return
         end = max(view.t_s, view.history_s) + view.window_s + PAGE_UPDATE_MS / 1000
         if x_range.end != end:
             x_range.start, x_range.end = end - view.history_s, end
@@ -221,7 +198,8 @@ def _updater(view, sources: dict, x_range, mode: dict):
             sources["text"].data = {name: [text] for name, text in html.items()}
 
     def update() -> None:
-        following = update_map()    # it takes the frames in transit first
+        view.pull()                 # the frames in transit now
+        following = feed.send_new()
         marks = contact_marks(view)
         text(marks)                 # paused or not: the pipeline goes on
         if not following:
@@ -242,7 +220,7 @@ def _updater(view, sources: dict, x_range, mode: dict):
             sources["contacts"].data = {"t": [m[0] for m in marks], "label": [m[1] for m in marks]}
         follow()
 
-    return update, update_map, reload, lambda: cursor["windows"] != view.windows.total
+    return update, reload, follow
 
 
 def contact_marks(view) -> list[tuple[float, str]]:

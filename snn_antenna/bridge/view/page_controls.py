@@ -1,10 +1,10 @@
-"""The live page's hands on the controls (bridge/page.py lays them out): pause and resume the
+"""The live page's hands on the controls (bridge/view/page.py lays them out): pause and resume the
 display, scrub back through the kept minute, change Th, the rate-map window and (on a network
 whose gate or CPG reads one) the robot's speed command, save the view.
 
 Pausing is the page's own business (its plots stop following; the pipeline and the other pages
 go on). Th and the window go through the view process's one parser to the pipeline
-(bridge/controls.py), which applies them at a window boundary and journals them; the page
+(bridge/online/controls.py), which applies them at a window boundary and journals them; the page
 shows what was asked and what was applied. A small script draws the page's canvases (the
 rate map's among them, bridge/view/rate_map.py) into one PNG and posts it to ``/save``.
 """

@@ -1,5 +1,5 @@
 """The live view's own process: the Bokeh server, its pages and ``/state.json``, fed by the frames
-the pipeline hands over (bridge/view.py's :class:`~snn_antenna.bridge.view.view.LiveView`).
+the pipeline hands over (bridge/view/view.py's :class:`~snn_antenna.bridge.view.view.LiveView`).
 
 Why a process of its own: a Bokeh server does real work while holding the GIL (a page that is
 reloaded tears its document down, ``Document.destroy`` → ``gc.collect``; each open page pulls
@@ -9,9 +9,10 @@ stream itself. Here it can only slow the view: the pipeline never waits for this
 frames the view could not take are counted here (``view_frames_dropped``), never a sample.
 
 What it shows is kept in :class:`~snn_antenna.bridge.view.view.history.ViewHistory`
-(bridge/view_history.py). Besides the pages and ``/state.json``, it answers the pages' POSTs:
-``/control`` (checked here, then queued to the pipeline), ``/painted`` (the display delay) and
-``/save`` (bridge/saved_view.py).
+(bridge/view/history.py). Besides the pages and ``/state.json``, it answers the pages' POSTs
+``/control`` (checked here, then queued to the pipeline) and ``/save``
+(bridge/view/saved_view.py), and holds each page's rate-map socket, ``/columns``: the columns
+out as they arrive, the paint reports (the display delay) back (bridge/view/rate_map.py).
 
 Started with the ``spawn`` context, so this module and what it imports are all the process
 holds: no Brian2, no port, no recorder.
@@ -82,7 +83,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
                        extra_websocket_origins=sorted(allowed),
                        extra_patterns=[(r"/state\.json", handlers["state"], routed),
                                        (r"/control", handlers["control"], routed),
-                                       (r"/painted", handlers["painted"], routed),
+                                       (r"/columns", handlers["columns"], routed),
                                        (r"/save", handlers["save"], routed)],
                        websocket_ping_interval=10, websocket_ping_timeout=10,
                        unused_session_lifetime_milliseconds=SESSION_LINGER_MS,
@@ -164,10 +165,11 @@ def _answer_stop(control, arrived: _Arrived) -> None:
 
 
 def _handlers() -> dict:
-    """``/state.json`` (GET), and the page's POSTs: ``/control`` (a change of Th or the
-    window), ``/painted`` (when a page painted a window's column), ``/save`` (the view's PNG:
-    written with the shown span's data). All behind the HostGuard (bridge/hostguard.py)."""
+    """``/state.json`` (GET), the page's POSTs: ``/control`` (a change of Th or the window),
+    ``/save`` (the view's PNG: written with the shown span's data), and its rate-map socket
+    ``/columns``. All behind the HostGuard (bridge/view/hostguard.py)."""
     from tornado.web import RequestHandler
+    from tornado.websocket import WebSocketHandler
 
     class Base(RequestHandler):
         def initialize(self, history: ViewHistory, inbox) -> None:
@@ -196,19 +198,32 @@ def _handlers() -> dict:
                 return
             self.reply(202, {"requested": asked})
 
-    class Painted(Base):
-        def post(self) -> None:
-            try:
-                report = json.loads(self.request.body[:300])
-                received = report.get("received_unix_s")
-                self.history.painted(float(report["t_s"]), float(report["painted_unix_s"]),
-                                     page=str(report.get("page"))[:40],
-                                     received_unix_s=None if received is None
-                                     else float(received))
-            except (ValueError, KeyError, TypeError):
-                self.reply(400, {"error": "expected {t_s, painted_unix_s}"})
+    class Columns(WebSocketHandler):
+        """A page's rate-map socket, ``/columns?page=TOKEN``: the page's feed
+        (rate_map.MapFeed, found by the token its page was built with) writes the columns;
+        the page sends its paint reports."""
+
+        def initialize(self, history: ViewHistory, inbox) -> None:
+            self.history, self.feed = history, None
+
+        def check_origin(self, origin) -> bool:     # the HostGuard checked Host and Origin
+            return True
+
+        def open(self) -> None:
+            self.feed = self.history.map_feeds.get(self.get_query_argument("page", ""))
+            if self.feed is None:
+                self.close(4404, "no such page: reload it")
                 return
-            self.set_status(204)
+            self.set_nodelay(True)                  # a column is one small message: now
+            self.feed.attach(self)
+
+        def on_message(self, message) -> None:
+            if self.feed is not None:
+                self.feed.report(message)
+
+        def on_close(self) -> None:
+            if self.feed is not None:
+                self.feed.detach(self)
 
     class Save(Base):
         def post(self) -> None:
@@ -226,4 +241,4 @@ def _handlers() -> dict:
                 return
             self.reply(200, {"saved": saved})
 
-    return {"state": State, "control": Control, "painted": Painted, "save": Save}
+    return {"state": State, "control": Control, "columns": Columns, "save": Save}

@@ -1,23 +1,29 @@
 """The live page's rate map: a canvas of its own, drawn by a small script in the page, fed over
-the page's Bokeh websocket.
+a websocket of its own (``/columns``: :class:`MapFeed`).
 
 Why not a Bokeh plot: each paint of a Bokeh plot costs its page's main thread ~10 ms (axes,
 tick labels, CSS look-ups), and with three pages on two cores the browsers' drawing is what
-delays a column. Here the view process sends each page only the new columns (a data source no
-glyph draws: a small message), and the page's script keeps the columns it shows and paints
-them with ``fillRect`` (one rectangle per resonator and window). It draws at most once per
-animation frame, whatever triggered it, and while the axes stand only the columns added since
-(a column then costs its page one rectangle per resonator, not the whole map). The plot
-follows the page's shared time axis (``x_range``: paused, scrubbed, panned), marks the
-contacts' onsets, and reports each live column it painted to ``/painted`` (the display delay,
-bridge/view/history.py).
+delays a column. Why not the page's Bokeh websocket either: a Bokeh message is a document
+patch in several websocket frames, each a task of the page's main thread, and the paint
+report an HTTP POST; a column here is one binary message (float64 rows), and the report goes
+back on the same socket. The page's script keeps the columns it shows and paints them with
+``fillRect`` (one rectangle per resonator and window). It draws at most once per animation
+frame, whatever triggered it, and while the axes stand only the columns added since (a column
+then costs its page one rectangle per resonator, not the whole map). The plot follows the
+page's shared time axis (``x_range``: paused, scrubbed, panned) and marks the contacts'
+onsets.
 
-The source's columns, one row per window: ``t`` (start, s), ``w`` (width, s), ``rates``
-(spikes/s per resonator, float32), ``high`` (the colour scale's top, spikes/s), ``live``
-(shown live: only those are reported painted) and ``reset`` (the page starts its map again
-from these rows: a reload, a scrub). No rows at all is a reset to an empty map.
+A message, float64 in this machine's byte order: ``reset`` (1: the page starts its map again
+from these rows: a reload, a scrub, the socket opening), ``live`` (shown live: only those
+columns are reported painted), ``high`` (the colour scale's top, spikes/s), the number of rows
+and their width, then the rows: ``t`` (window start, s), ``w`` (width, s), the rates (spikes/s
+per resonator). A report: ``{t_s, received_unix_s, painted_unix_s}`` of the latest live column
+painted (bridge/view/history.py turns it into the display delay).
 """
 from __future__ import annotations
+
+import json
+import time
 
 import numpy as np
 
@@ -27,38 +33,51 @@ TITLE = "Rate map: resonators (tuning frequency) × time"
 # The plot's frame inside each of the page's canvases, in CSS pixels: the same on all of them
 # lines their time axes up (bridge/view/lines.py).
 FRAME = {"left": 70, "right": 110, "top": 26, "bottom": 40}
+# A page that has not painted the last column sent waits (its columns and points gather)
+# rather than queue more than its browser draws; one that never reports (a hidden tab does
+# not paint) still gets one this often.
+UNPAINTED_WAIT_S = 1.0
 
-# Shared by the three triggers (``on``): "data" (new rows from the view process), "ready"
-# (the document as the page loaded it), "view" (the time axis or the contacts changed).
+# Run on two triggers (``on``): "ready" (the document as the page loaded it: the socket opens,
+# and its first message is the kept span) and "view" (the time axis or the contacts changed).
 RATE_MAP_JS = """
 const st = div._rate_map || (div._rate_map = {t: [], w: [], r: [], high: 10, live: true,
-                                               canvas: null, dirty: true});
-const d = source.data;
-if (on !== 'view') {
-  const n_new = d.t.length;
+                                               canvas: null, dirty: true, socket: null});
+st.draw = draw;
+if (on === 'ready' && !st.socket) { connect(); }
+if (on === 'view') { st.dirty = true; }
+ask();
+
+// One drawing per animation frame, whatever triggered it (new rows and the time axis moving
+// with them come together): each trigger only asks for the next frame's.
+function ask() {
+  if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
+}
+function connect() {
+  const url = new URL('columns?page=' + page, document.baseURI);
+  url.protocol = url.protocol === 'https:' ? 'wss:' : 'ws:';
+  const socket = st.socket = new WebSocket(url);
+  socket.binaryType = 'arraybuffer';
+  socket.onmessage = event => { take(new Float64Array(event.data)); ask(); };
+}
+function take(a) {                      // a message: header, then rows (module docstring)
+  const reset = a[0] === 1, live = a[1] === 1, rows = a[3], width = a[4];
   const clear = () => { st.t = []; st.w = []; st.r = []; st.dirty = true; };
-  if (n_new === 0 || d.reset[0]) { clear(); }
-  for (let i = 0; i < n_new; i++) {
-    if (st.t.length && d.t[i] <= st.t[st.t.length - 1]) { clear(); }   // a new stream
-    st.t.push(d.t[i]); st.w.push(d.w[i]); st.r.push(d.rates[i]);
+  if (reset) { clear(); }
+  for (let k = 0, o = 5; k < rows; k++, o += width) {
+    if (st.t.length && a[o] <= st.t[st.t.length - 1]) { clear(); }   // a new stream
+    st.t.push(a[o]); st.w.push(a[o + 1]); st.r.push(a.subarray(o + 2, o + width));
   }
-  if (n_new) { st.high = d.high[n_new - 1]; st.live = d.live[n_new - 1]; }
+  st.high = a[2]; st.live = live;
   const oldest = st.t.length ? st.t[st.t.length - 1] - 2 * history_s : 0;
   let k = 0;
   while (k < st.t.length && st.t[k] + st.w[k] < oldest) { k++; }
   if (k) { st.t.splice(0, k); st.w.splice(0, k); st.r.splice(0, k); }
-} else {
-  st.dirty = true;
+  // The columns reached this page's document; the latest live one is reported once painted.
+  if (live && rows) {
+    st.report = {t_s: st.t[st.t.length - 1], received_unix_s: Date.now() / 1000};
+  }
 }
-// The columns reached this page's document; the latest live one is reported once painted.
-if (on === 'data' && d.t.length && d.live[d.t.length - 1]) {
-  st.report = {t_s: d.t[d.t.length - 1], received_unix_s: Date.now() / 1000};
-}
-// One drawing per animation frame, whatever triggered it (new rows and the time axis moving
-// with them come together): each trigger only asks for the next frame's.
-st.draw = draw;
-if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
-
 function find(root) {                   // Bokeh renders a Div's text in a shadow root
   for (const el of root.querySelectorAll('*')) {
     if (el.tagName === 'CANVAS' && el.dataset.rateMap === page) { return el; }
@@ -155,10 +174,9 @@ function draw() {
   st.report = null;
   if (report) {
     setTimeout(() => {
-      fetch('painted', {method: 'POST', headers: {'Content-Type': 'application/json'},
-                        body: JSON.stringify({...report, painted_unix_s: Date.now() / 1000,
-                                              page: page})})
-        .catch(() => {});
+      if (st.socket.readyState === WebSocket.OPEN) {
+        st.socket.send(JSON.stringify({...report, painted_unix_s: Date.now() / 1000}));
+      }
     }, 0);
   }
 }
@@ -166,39 +184,130 @@ function draw() {
 
 
 def rate_map(doc, view, x_range, contacts, page: str, colour: str):
-    """The rate map of one page (the Bokeh document ``doc``): its Div (holding the canvas)
-    and its data source, named ``map`` (rows as :func:`map_rows` makes them). ``contacts``:
-    the page's contact marks (a source with ``t``); ``page``: the page's token for
-    ``/painted``."""
+    """The rate map of one page (the Bokeh document ``doc``): the Div holding its canvas.
+    ``contacts``: the page's contact marks (a source with ``t``); ``page``: the page's token,
+    which names its feed (:class:`MapFeed`) on ``/columns``."""
     from bokeh.events import DocumentReady
-    from bokeh.models import ColumnDataSource, CustomJS, Div
+    from bokeh.models import CustomJS, Div
     from bokeh.palettes import Viridis256
 
     n = len(view.neuron_hz)
-    source = ColumnDataSource(map_rows(np.empty((0, 2 + n)), True, view.peak_rate_hz),
-                              name="map")
     div = Div(text=f"<canvas data-rate-map='{page}' style='display:block;width:100%;"
                    f"height:{HEIGHT}px'></canvas>", sizing_mode="stretch_width", height=HEIGHT,
               name="rate_map")
     ticks = [[i, f"{view.neuron_hz[i]:.1f}"] for i in range(0, n, max(1, n // 8))]
-    args = dict(source=source, x_range=x_range, contacts=contacts, div=div, n=n, page=page,
+    args = dict(x_range=x_range, contacts=contacts, div=div, n=n, page=page,
                 palette=list(Viridis256), ticks=ticks, history_s=view.history_s, frame=FRAME,
                 title=TITLE, contact_colour=colour)
 
     def draw(on: str) -> CustomJS:
         return CustomJS(args={**args, "on": on}, code=RATE_MAP_JS)
 
-    source.js_on_change("data", draw("data"))
     x_range.js_on_change("end", draw("view"))       # the page's code moves both ends
     x_range.js_on_change("start", draw("view"))     # ... a pan or zoom may move one
     contacts.js_on_change("data", draw("view"))
-    doc.js_on_event(DocumentReady, draw("ready"))   # the rows the page loaded with
-    return div, source
+    doc.js_on_event(DocumentReady, draw("ready"))   # the socket opens with the page
+    return div
 
 
-def map_rows(windows: np.ndarray, live: bool, high: float, reset: bool = False) -> dict:
-    """The map source's data for kept windows (rows: t_s, width_s, rates...)."""
-    n = len(windows)
-    return {"t": windows[:, 0].tolist(), "w": windows[:, 1].tolist(),
-            "rates": [np.ascontiguousarray(row[2:], dtype=np.float32) for row in windows],
-            "high": [float(high)] * n, "live": [bool(live)] * n, "reset": [bool(reset)] * n}
+class MapFeed:
+    """One page's rate map, fed over the page's own websocket (``/columns?page=TOKEN``,
+    bridge/view/process.py): on opening and at each reload the kept span up to the shown end
+    (a reset), then each new column as it arrives, unless the page is paused or its browser
+    has not painted the last column sent (for up to ``UNPAINTED_WAIT_S``). The page's paint
+    reports come back on the same socket (:meth:`report`).
+
+    ``view``: the :class:`~snn_antenna.bridge.view.history.ViewHistory`; ``mode``: the page's
+    own (``paused``); ``on_sent(t_s)``: told the start of the latest live column sent (the
+    page moves its time axis when a column would fall past it). All of it runs on the view
+    process's server loop."""
+
+    def __init__(self, view, page: str, mode: dict, on_sent=None):
+        self.view, self.page, self.mode, self.on_sent = view, page, mode, on_sent
+        self.socket = None
+        self.end_s = None               # the end of the span shown; None: the latest, live
+        self.cursor = view.windows.total
+        self.sent_t, self.sent_at = None, 0.0
+
+    def attach(self, socket) -> None:
+        """The page's socket opened (a reopened one replaces it): it starts with the span."""
+        self.socket = socket
+        self._reset()
+
+    def detach(self, socket) -> None:
+        if self.socket is socket:
+            self.socket = None
+
+    def show(self, end_s: float | None = None) -> None:
+        """The kept span up to ``end_s`` (None: the latest, and follow the stream again)."""
+        self.end_s = end_s
+        self._reset()
+
+    def behind(self) -> bool:
+        """The browser has not painted the last column sent to it yet (for a while)."""
+        return (self.sent_t is not None
+                and self.view.painted_by.get(self.page) != round(self.sent_t, 6)
+                and time.monotonic() - self.sent_at < UNPAINTED_WAIT_S)
+
+    def waiting(self) -> bool:
+        """Columns arrived that this page has not been sent."""
+        return self.cursor != self.view.windows.total
+
+    def send_new(self) -> bool:
+        """Send the columns that came since the last ones sent, unless the page is paused or
+        behind; whether it follows the stream now."""
+        if self.mode["paused"] or self.behind():
+            return False
+        if self.socket is not None and self.waiting():
+            new = self.view.windows.since(self.cursor)
+            self.cursor = self.view.windows.total
+            self._write(new, live=True, reset=False)
+        return True
+
+    def report(self, message) -> None:
+        """A paint report from the page: the display delay, and what waited for it goes."""
+        try:
+            report = json.loads(message[:300])
+            received = report.get("received_unix_s")
+            self.view.painted(float(report["t_s"]), float(report["painted_unix_s"]),
+                              page=self.page,
+                              received_unix_s=None if received is None else float(received))
+        except (ValueError, KeyError, TypeError, AttributeError):
+            return                      # not a report: nothing to count
+        if self.waiting():
+            self.send_new()
+
+    def _reset(self) -> None:
+        view = self.view
+        live = self.end_s is None
+        end = max(view.t_s, view.history_s) if live else self.end_s
+        rows = view.windows.rows
+        self.cursor = view.windows.total
+        self._write(rows[(rows[:, 0] >= end - view.history_s) & (rows[:, 0] <= end)],
+                    live=live, reset=True)
+
+    def _write(self, rows: np.ndarray, live: bool, reset: bool) -> None:
+        if self.socket is None:
+            return
+        from tornado.websocket import WebSocketClosedError
+
+        try:
+            self.socket.write_message(encode(rows, live, self.view.peak_rate_hz, reset),
+                                      binary=True)
+        except WebSocketClosedError:
+            self.socket = None
+            return
+        if live and len(rows):
+            last = float(rows[-1, 0])
+            self.view.sending(last)
+            self.sent_t, self.sent_at = last, time.monotonic()
+            if self.on_sent is not None:
+                self.on_sent(last)
+
+
+def encode(rows: np.ndarray, live: bool, high: float, reset: bool = False) -> bytes:
+    """One message of the rate map's socket: the header, then the rows (t_s, width_s,
+    rates...), float64 in this machine's byte order (a Float64Array's in the page)."""
+    rows = np.asarray(rows, dtype=np.float64)
+    header = [float(reset), float(live), float(high), float(len(rows)), float(rows.shape[-1])]
+    return np.concatenate([np.array(header), rows.ravel()]).tobytes()

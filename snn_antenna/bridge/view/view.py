@@ -7,17 +7,17 @@ a rollover) without any hand-written JavaScript, and it ships its own BokehJS, s
 on a robot's laptop with no internet.
 
 The view never touches the pipeline's time. Its server runs in a process of its own
-(bridge/view_process.py, started with ``spawn``): a page reloaded twice a second makes Bokeh
+(bridge/view/process.py, started with ``spawn``): a page reloaded twice a second makes Bokeh
 tear documents down (``gc.collect`` under the GIL), which in the pipeline's process stalled the
 stream. The pipeline only gathers what it already has (samples, the coder's input, each
 rate-map window, contact events) and every 50 ms hands one frame to a bounded
 ``multiprocessing`` queue with ``put_nowait``: it never waits. When the view process falls
 behind (or is stopped), the frames it cannot take are dropped and counted by it
 (``view_frames_dropped`` on the page and in the report), never a sample, which the recorder has
-already written. The page itself is ``bridge/page.py``; its controls (pause, scrub, Th, the
-rate-map window, save view) are ``bridge/page_controls.py``. A change of Th or window travels the
-other way through a second bounded queue (``LiveView.requests``), which the pipeline reads
-without waiting (bridge/controls.py).
+already written. The page itself is ``bridge/view/page.py``; its controls (pause, scrub, Th, the
+rate-map window, save view) are ``bridge/view/page_controls.py``. A change of Th or window travels
+the other way through a second bounded queue (``LiveView.requests``), which the pipeline reads
+without waiting (bridge/online/controls.py).
 """
 from __future__ import annotations
 
@@ -41,9 +41,10 @@ from .process import serve
 HISTORY_S = 10.0                # what the plots show
 SCRUB_S = 60.0                  # what the view keeps: a paused page scrubs back through it
 REQUESTS = 16                   # control requests from the page not yet taken by the pipeline
-FLUSH_S = 0.05                  # the pipeline hands a frame over at most this often
-# ... except that a new rate-map column goes at once (at most this often): the delay from a
-# window's last sample to its column on screen is what a person watching sees.
+FLUSH_S = 0.05                  # the pipeline hands a frame of samples over at most this often
+# ... except that a new rate-map column goes at once, whenever the last frame went (the delay
+# from a window's last sample to its column on screen is what a person watching sees), and
+# at most this often: a backlog worked off (or a replay flat out) publishes windows in bursts.
 WINDOW_FLUSH_S = 0.01
 INBOX_FRAMES = 200              # 10 s of frames: the view may stall that long and lose nothing
 START_TIMEOUT_S = 60.0          # a spawned interpreter imports Bokeh: seconds on a busy machine
@@ -167,7 +168,7 @@ class LiveView:
         _tap_coder(coder, self._coded)
         self._context = multiprocessing.get_context("spawn")
         self._inbox = self._context.Queue(inbox_frames)
-        # The page's control requests, checked in the view process (bridge/controls.py);
+        # The page's control requests, checked in the view process (bridge/online/controls.py);
         # the pipeline takes them without waiting.
         self.requests = self._context.Queue(REQUESTS)
         self.requests.cancel_join_thread()
@@ -183,7 +184,7 @@ class LiveView:
         self._events: list = []
         self._applied: list = []
         self._n_xy = self._n_in = 0
-        self._flushed = time.monotonic()
+        self._flushed = self._window_flushed = time.monotonic()
         self.url = self.port = None
         self.process = self._control = None
         self._counts_sent = self._view_count = None
@@ -227,7 +228,7 @@ class LiveView:
         self._due()
 
     def applied(self, event: dict) -> None:
-        """A control change the pipeline applied (bridge/controls.py): shown on the page."""
+        """A control change the pipeline applied (bridge/online/controls.py): shown on the page."""
         self._applied.append(event)
         self._due()
 
@@ -237,13 +238,16 @@ class LiveView:
             self._events.append((kind, what if kind == "onset" else what.as_dict()))
 
     def _due(self) -> None:
-        since = time.monotonic() - self._flushed
-        if since >= FLUSH_S or (self._windows and since >= WINDOW_FLUSH_S):
+        now = time.monotonic()
+        if now - self._flushed >= FLUSH_S or (self._windows
+                                              and now - self._window_flushed >= WINDOW_FLUSH_S):
             self.flush()
 
     def flush(self) -> None:
         """Hand what was gathered to the view process as one frame, without waiting."""
         self._flushed = time.monotonic()
+        if self._windows:
+            self._window_flushed = self._flushed
         if not (self._xy or self._in or self._windows or self._events or self._applied
                 or self._counts is not self._counts_sent):     # e.g. a link lost: counts only
             return

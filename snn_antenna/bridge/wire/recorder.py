@@ -8,8 +8,8 @@ A recording is a directory:
                  board session (the board restarted before it). Appending whole records means a
                  crash can only tear the last one, which the reader drops.
 ``events.jsonl`` the live controls' changes (Th, the rate-map window), a JSON line each with the
-                 sample index it applied at, written and flushed as it happens (bridge/controls.py
-                 reads them back; ``replay`` applies them again).
+                 sample index it applied at, written and flushed as it happens
+                 (bridge/online/controls.py reads them back; ``replay`` applies them again).
 ``meta.json``    port, format, link events (opens, losses, reconnects, with their offset in
                  ``raw.bin``), the board sessions (where each began, and why) and the counts;
                  rewritten atomically (tmp + ``os.replace``) so it is never half-written.
@@ -54,7 +54,7 @@ SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("flags", "
                          ("host_time_s", "<f8")])
 SESSION_START = 1                       # samples.bin flag: a board session begins here
 RAW_FILE, SAMPLES_FILE, META_FILE = "raw.bin", "samples.bin", "meta.json"
-EVENTS_FILE = "events.jsonl"            # bridge/controls.py reads it
+EVENTS_FILE = "events.jsonl"            # bridge/online/controls.py reads it
 FORMAT_VERSION = 1
 COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
                 "duplicates", "reordered", "late", "seq_restarts", "boot_frames", "reconnects")
@@ -139,7 +139,7 @@ class Recorder:
             self._last_meta = now
 
     def note_event(self, event: dict) -> None:
-        """A control change applied by the pipeline (bridge/controls.py): one JSON line in
+        """A control change applied by the pipeline (bridge/online/controls.py): one JSON line in
         ``events.jsonl``, flushed at once (it is rare, and replay needs every one)."""
         if self._events is None:
             self._events = open_append(self.dir / EVENTS_FILE)
