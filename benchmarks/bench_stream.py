@@ -34,8 +34,9 @@
    live run at 1 kHz (wall-clock real-time factor, sample-to-rate-map latency, and the display
    latency: from the arrival of a window's last sample on the host to its rate-map column
    painted on a page, as the pages report it on their rate-map sockets, all pages together),
-   then a throughput run with the same pages open (compute-only real-time factor, and per CPU second
-   of the pipeline's own process: what the pages' drawing on the same cores leaves out). Of
+   then a throughput run with the same pages open (compute-only real-time factor, and per CPU
+   second of the pipeline's own process: what the pages' drawing on the same cores leaves
+   out). Of
    the display latency, "taken" is the part until the view process took the window from the
    pipeline's hand-off, "sent" until the page's update left the view process, "received"
    until the column was in the page's document (the rest is the browser drawing it); each is
