@@ -165,11 +165,16 @@ LINES_SETUP_JS = """([code, frame]) => {
   host.attachShadow({mode: 'open'}).innerHTML =
     "<canvas style='display:block;width:100%;height:210px'></canvas>";
   window.Bokeh = {index: {find_one: () => ({markup_el: host.shadowRoot})}};
-  window.counted = {stroke: 0};
+  window.counted = {stroke: 0, lineTo: 0};
   const stroke = CanvasRenderingContext2D.prototype.stroke;
   CanvasRenderingContext2D.prototype.stroke = function (...args) {
     window.counted.stroke++;
     return stroke.apply(this, args);
+  };
+  const lineTo = CanvasRenderingContext2D.prototype.lineTo;
+  CanvasRenderingContext2D.prototype.lineTo = function (...args) {
+    window.counted.lineTo++;
+    return lineTo.apply(this, args);
   };
   const t = Array.from({length: 1001}, (_, i) => i / 100);
   // x: 0 until 5 s, 1 after; y: 0 throughout.
@@ -215,6 +220,9 @@ def test_the_line_plots_draw_once_per_frame_on_the_shared_axis_and_pan_it():
             return counted.stroke;
         }""")
         assert strokes == 2 * 2                 # one drawing: each line and its legend entry
+        # 1,001 points a line, flat but for x's step at 5 s: only the turns are in the paths
+        # (x: 0 → 4.99 s, 5 s → 10 s; y: 0 → 10 s), and a line in each legend entry.
+        assert page.evaluate("counted.lineTo") == 3 + 1 + 2
         x0, x1 = FRAME["left"], 1000 - FRAME["right"]
         y0, y1 = FRAME["top"], 210 - FRAME["bottom"]
         pad = 0.05 * (y1 - y0) / 1.1            # the left axis spans the points shown, ±5 %

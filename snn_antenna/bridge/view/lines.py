@@ -91,6 +91,9 @@ function draw() {
     ctx.setLineDash(s.dashed ? [6, 4] : []);
     ctx.beginPath();
     for (let i = a; i < b; i++) {
+      // A point whose value its neighbours share adds nothing to the path (a flat run, a held
+      // step, the threshold between changes): only the points where the line turns are drawn.
+      if (i > a && i < b - 1 && y[i] === y[i - 1] && (s.step || y[i] === y[i + 1])) { continue; }
       const x = x0 + (t[i] - start) * sx, v = yOf(s.axis, y[i]);
       if (i === a) { ctx.moveTo(x, v); continue; }
       if (s.step) { ctx.lineTo(x, yOf(s.axis, y[i - 1])); }

@@ -34,6 +34,9 @@ from .page import build_page
 from .history import ViewConfig, ViewHistory
 
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
+# The thread that takes a frame from the hand-off needs the GIL while the server's loop builds
+# a page's update: at Python's default 5 ms interval a column waited that long for it.
+GIL_SWITCH_S = 0.001
 LAST_FRAMES_S = 2.0             # at the end, how long the view waits for frames still in transit
 # A page's session outlives its page by this much (Bokeh's default: 15 s, checked every 17 s):
 # a storm of reloads leaves a session per load until then (page.py keeps one nobody holds
@@ -52,6 +55,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     # When the cores are busy, the pipeline comes first: a page may update late, a sample not.
     os.nice(VIEW_NICENESS)
+    sys.setswitchinterval(GIL_SWITCH_S)
     from bokeh.application import Application
     from bokeh.application.handlers.function import FunctionHandler
     from bokeh.server.server import BaseServer
