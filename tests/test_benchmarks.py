@@ -58,6 +58,7 @@ def bands_ran(out: str, tmp_path: Path) -> None:
 
 def coders_ran(out: str, tmp_path: Path) -> None:
     record = cited(tmp_path / "bench.json", tmp_path)
+    assert record["name"] == "bench_coders_cost_only"     # a section beside the full run's
     assert "fft" in record["costs"] and len(record["costs"]) > 1
     assert all(c["features_us_per_event"] > 0 for c in record["costs"].values())
     assert "× FFT" in out
