@@ -10,6 +10,7 @@ ratios hold). Spike counts are printed too, so a fast but wrong kernel shows.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 import numpy as np
@@ -65,7 +66,7 @@ def numba_kernel():
     return run
 
 
-def main():
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--neurons", type=int, default=24)
@@ -74,7 +75,7 @@ def main():
     ap.add_argument("--json", metavar="PATH",
                     help="also write the measured values and their provenance as JSON "
                          "(for snn-antenna results)")
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
 
     rec = RobotScene(duration_s=args.seconds, contacts=[Contact(args.seconds * 0.7, 19.0)]
                      ).generate(seed=1)
@@ -121,7 +122,8 @@ def main():
                        "ns_per_neuron_step": wall / steps * 1e9, "of_cython": ref / wall,
                        "spikes": n_spikes}
                 for name, wall, n_spikes in rows}})
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

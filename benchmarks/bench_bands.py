@@ -1,6 +1,7 @@
 """The bench bands' settings against the exact reference: error and cost side by side.
 
     python benchmarks/bench_bands.py [--bands high rod] [--target cython]
+    python benchmarks/bench_bands.py --bands high --materials wood --seconds 0.1   # a short run
 
 For each band of the bench's spiking read-out (``evaluation.bands.BENCH_BANDS``), on the same
 8 sample bench events (4 materials × 10/30 cm, 0.5 s each): the bank's own setting
@@ -9,23 +10,30 @@ and the stability map's accurate step for euler and rk4, each against the exact 
 (``networks.reference``, solve_ivp) at the same Hz per unit k: k·dt, spike-count and
 rate-map error, CPU ms per event and the cost ratio to the bank's own setting, measured in
 one run with the load average printed. The speed/accuracy study's "bands" section chooses
-``CHOSEN``; this prints the trade for a reader without the whole study.
+``CHOSEN``; this prints the trade for a reader without the whole study. ``--materials`` and
+``--seconds`` shrink the sample (fewer materials, shorter events) for a quick look; its errors
+then rest on fewer spikes.
 """
 from __future__ import annotations
 
 import argparse
 import os
+import sys
 
 from snn_antenna.evaluation import bands
 
 
-def main() -> None:
+def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bands", nargs="+", default=list(bands.CHOSEN), choices=list(bands.CHOSEN))
     ap.add_argument("--target", default="cython", choices=["numpy", "cython"])
     ap.add_argument("--cost-events", type=int, default=48, help="events per timed group")
-    args = ap.parse_args()
-    study = bands.BandStudy()
+    ap.add_argument("--materials", nargs="+", metavar="NAME",
+                    help="the sample events' materials (default: the study's four)")
+    ap.add_argument("--seconds", type=float, help="seconds per event (default: the study's)")
+    args = ap.parse_args(argv)
+    study = bands.BandStudy(**{field: value for field, value in (
+        ("materials", args.materials), ("duration_s", args.seconds)) if value is not None})
     data = bands.sample_data(study.materials, study.positions_cm, study.repetitions)
     print(f"# {data.sizes['event']} bench events, {study.duration_s} s each, target "
           f"{args.target}; load average {os.getloadavg()[0]:.1f}")
@@ -52,7 +60,8 @@ def main() -> None:
                   f"{row['spike_count_error']:>8.1%} {row['rate_map_error']:>9.1%} "
                   f"{row['cpu_ms_per_event']:>9.1f} {row['cpu_ms_per_event'] / base:>5.1f}x")
     print(f"\nload average {os.getloadavg()[0]:.1f}")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -11,6 +11,8 @@ material and site (100: the whole set, what ``snn-antenna run
 studies/baseline_comparison.toml`` measures with everything else), split by repetition for
 every seed of ``[evaluation] seeds``. Without the study's hand-set bands, designs, NMF curve
 and accuracy curve, which do not depend on the coder. Prints the table and writes it as JSON.
+``--cost-only`` JSON carries its own name (``bench_coders_cost_only``): on the results page it
+is a section of its own, beside the full run's.
 """
 from __future__ import annotations
 
@@ -62,7 +64,8 @@ def main(argv=None) -> dict:
             print(f"{k:20s} {c['features_us_per_event']:9.0f} µs/event = "
                   f"{c['features_us_per_event'] / fft_us:5.2f} × FFT")
         print(f"load average {os.getloadavg()[0]:.1f}")
-        write_benchmark_json(args.out, {"costs": costs, "load_average": os.getloadavg()})
+        write_benchmark_json(args.out, {"costs": costs, "load_average": os.getloadavg()},
+                             name=f"{Path(__file__).stem}_cost_only")
         return costs
     chosen = coder_stage(parts, data, cmp, bands, plan, print, False, None)
     banks = cmp.coders.pop("banks")

@@ -25,6 +25,8 @@ from .studies.contract import scheduler_address
 def _run(args) -> int:
     plan, folder, options = first_phase(args)
     if options.check:                   # everything a run would refuse has been said
+        for line in plan.left_out:      # and what it would leave out of the spec
+            print(f"{args.spec}: {line}")
         print(f"{args.spec}: the spec and --out {folder.path} are accepted ({plan.study}); "
               "nothing was run")
         outputs.release(folder)

@@ -74,9 +74,10 @@ def test_a_band_wholly_above_the_limit_is_left_out_with_the_designs_on_it():
 def test_the_shipped_comparison_plans_on_a_1khz_board_recording(board_set):
     """The command a user of the shipped board runs is accepted: no part of the spec left
     refused, the rate's cuts listed, the tuned bank's calibration repetitions drawn."""
-    parts = baseline_comparison.plan({**shipped(), "data": str(board_set)}).parts
+    plan = baseline_comparison.plan({**shipped(), "data": str(board_set)})
+    parts = plan.parts
     assert parts.bench.recorded and parts.bench.rate_hz == RATE
-    assert len(parts.left_out) == 6
+    assert len(plan.left_out) == 6
     tuned = parts.plan.tuned_plan()
     assert len(parts.calibration_repetitions) == tuned.calibration_repetitions
     assert set(parts.calibration_repetitions) <= set(range(5))
@@ -85,6 +86,23 @@ def test_the_shipped_comparison_plans_on_a_1khz_board_recording(board_set):
     draws = {tuple(baseline_comparison.plan({**shipped(), "seed": s, "data": str(board_set)})
                    .parts.calibration_repetitions) for s in range(6)}
     assert len(draws) > 1                          # the seed draws them
+
+
+def test_check_prints_what_the_rate_leaves_out(board_set, tmp_path, capsys):
+    """`run SPEC --data DIR --check` on a 1 kHz set says each part the run would leave out or
+    clip, the lines the run logs; on the generated 2 kHz bench it names none."""
+    from snn_antenna.cli import main
+
+    study = str(ROOT / "studies" / "baseline_comparison.toml")
+    left_out = baseline_comparison.plan({**shipped(), "data": str(board_set)}).left_out
+    assert main(["run", study, "--quick", "--data", str(board_set), "--check",
+                 "--out", str(tmp_path / "recorded")]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert [line.split(": ", 1)[1] for line in printed[:-1]] == left_out
+    assert "nothing was run" in printed[-1]
+    assert main(["run", study, "--quick", "--check", "--out", str(tmp_path / "bench")]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert len(printed) == 1 and "nothing was run" in printed[0]
 
 
 def test_the_tuned_banks_calibration_contacts_leave_every_split(board_set):

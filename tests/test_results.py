@@ -122,6 +122,37 @@ def test_a_benchmark_json_without_provenance_is_refused_in_one_line(tmp_path, ca
     assert '[12.5](#run-bench_x "/us_per_event")' in out.read_text()
 
 
+def test_a_mode_that_names_its_output_is_a_section_beside_the_default_run(tmp_path, capsys):
+    """Two outputs of one script are one section too many, unless one carries a name of its
+    own (``bench_coders --cost-only``): then each is its own section, stored and cited under
+    its name."""
+    full, cost, twin = (tmp_path / f"{n}.json" for n in ("full", "cost", "twin"))
+    results.write_benchmark_json(full, {"us_per_event": 12.5})
+    results.write_benchmark_json(cost, {"us_per_event": 3.25}, name="bench_x_cost_only")
+    for path, mode in ((full, ""), (cost, " --cost-only")):
+        record = json.loads(path.read_text())
+        record["provenance"]["command"] = f"python benchmarks/bench_x.py{mode}"
+        path.write_text(json.dumps(record))
+    twin.write_text(full.read_text())
+    out = tmp_path / "docs" / "results.md"
+    assert main(["results", "--bench", str(full), "--bench", str(twin), "--out", str(out)]) == 2
+    assert "one output per benchmark (bench_x)" in capsys.readouterr().err
+    assert main(["results", "--bench", str(full), "--bench", str(cost), "--out", str(out)]) == 0
+    page = out.read_text()
+    assert "### `bench_x`" in page and "### `bench_x_cost_only`" in page
+    assert '[12.5](#run-bench_x "/us_per_event")' in page
+    assert '[3.25](#run-bench_x_cost_only "/us_per_event")' in page
+    assert "| name |" not in page  # the section's title, not one of its values
+    assert (out.parent / "results" / "bench_x_cost_only.json").is_file()
+    assert results.check_page(out, out.parent / "results") == []
+    # a name that cannot be an anchor and a file name is refused in one line
+    record = json.loads(cost.read_text())
+    cost.write_text(json.dumps({**record, "name": "../elsewhere"}))
+    assert main(["results", "--bench", str(cost), "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "'../elsewhere'" in err
+
+
 # -- no measured number typed into the reference pages ---------------------------------------
 
 #: the pages that explain; their measured numbers live on the results page

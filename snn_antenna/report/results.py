@@ -17,9 +17,11 @@ of benchmarks; nothing on it is typed by hand. A benchmark's output is either
   provenance, with the command that made it. The page then records this machine and this
   checkout's commit at the time the page is made, and says so (``provenance_added``).
 
-Each source is copied beside the page (``docs/results/NAME.json``, with its provenance), so
-the page cites files that stay with it, and the page is a pure function of those files:
-running the command again on them gives the same page.
+Each source is copied beside the page (``docs/results/NAME.json``, with its provenance; NAME is
+the benchmark script's, or the name its output carries for a mode that stands beside the
+default run, such as ``bench_coders_cost_only``), so the page cites files that stay with it,
+and the page is a pure function of those files: running the command again on them gives the
+same page.
 
 Every number on the page is a link to its run's source block (command, commit, machine) whose
 title is the JSON Pointer (RFC 6901) of the value in the cited file, for example
@@ -260,7 +262,10 @@ def study_section(summary: dict, run: str, file: str) -> list[str]:
 
 
 #: what a benchmark's record or JSON holds beside its measured values
-BENCH_CONTEXT = ("provenance", "command", "stdout", "data", "load_average", "wall_s")
+BENCH_CONTEXT = ("provenance", "command", "stdout", "data", "load_average", "wall_s", "name")
+
+#: a name a benchmark's output may carry: the page's anchor and its stored file's name
+_BENCH_NAME = re.compile(r"\w[\w.-]*")
 
 #: the parts of a statistic's mapping (``report.stats``) one table cell shows
 _INTERVAL = ("mean", "low", "high")
@@ -518,11 +523,13 @@ def machine_provenance(command: str | None = None, **extra) -> dict:
     }
 
 
-def write_benchmark_json(path: str | Path, values: dict) -> Path:
-    """A benchmark's ``--json PATH``: its measured values with their provenance."""
+def write_benchmark_json(path: str | Path, values: dict, name: str | None = None) -> Path:
+    """A benchmark's ``--json PATH``: its measured values with their provenance. ``name``: the
+    results page's section for a mode whose output stands beside the script's default run
+    (``bench_coders_cost_only``); without it the section is the script's (:func:`_bench_name`)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    record = {**values, "provenance": machine_provenance()}
+    record = {**values, **({"name": name} if name else {}), "provenance": machine_provenance()}
     atomic_write(path, json.dumps(record, indent=1, default=float) + "\n")
     return path
 
@@ -549,6 +556,8 @@ def record_benchmark(out: Path, command: list[str], data: Path | None = None) ->
     }
     if data is not None:
         record["data"] = json.loads(data.read_text())
+        if isinstance(record["data"], dict) and "name" in record["data"]:
+            record["name"] = record["data"]["name"]  # the section the data names
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write(out, json.dumps(record, indent=1, default=float) + "\n")
     return record
@@ -597,9 +606,20 @@ def adopt_output(path: Path, command: str) -> dict:
 
 
 def _bench_name(path: Path, record: dict) -> str:
-    """The name a benchmark's output is stored and cited under: its script's
+    """The name a benchmark's output is stored and cited under: the name it carries (a mode
+    of a script beside its default run: ``bench_coders_cost_only``), else its script's
     (``benchmarks/NAME.py`` in its command), so the page's sections keep their anchors
     whatever the output file was called."""
+    if "name" in record:
+        name = record["name"]
+        if not (isinstance(name, str) and _BENCH_NAME.fullmatch(name)):
+            raise SpecError(
+                "--bench",
+                f"{path} (name {name!r})",
+                "a benchmark's output named by letters, digits, '_', '.' and '-' "
+                "(its section's anchor and file name)",
+            )
+        return name
     found = re.search(r"benchmarks/(\w+)\.py", record["provenance"]["command"])
     return found.group(1) if found else path.stem
 

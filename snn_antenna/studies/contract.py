@@ -19,7 +19,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 from collections.abc import Callable
@@ -91,11 +91,15 @@ class Plan:
 
     ``parts`` is the study's own (its dataclass of built objects); ``sizes`` turns them into
     the cost of the run (``engine.cost.JobEstimate`` or, for a neuron sweep,
-    ``engine.cost.Estimate``), or None for a study with nothing to size."""
+    ``engine.cost.Estimate``), or None for a study with nothing to size. ``left_out``: one
+    line per part of the spec the run leaves out or clips because its data cannot carry it
+    (a recorded set's rate); the run logs them and keeps them in its summary, ``--check``
+    prints them."""
     study: str
     spec: dict
     parts: Any
     sizes: Callable[[Any], Any] | None = None
+    left_out: list[str] = field(default_factory=list)
 
     def estimate(self):
         return self.sizes(self.parts) if self.sizes is not None else None

@@ -62,7 +62,6 @@ class StudySpec:
     plan: SpikingPlan | None = None
     bank: SpikingBank | None = None
     designs: list[Design] = field(default_factory=list)
-    left_out: list[str] = field(default_factory=list)   # what the data's rate cannot carry
     # recorded repetitions that place the tuned bank's channels, out of every split
     calibration_repetitions: list[int] = field(default_factory=list)
 
@@ -185,12 +184,11 @@ def plan(spec: dict) -> Plan:
         raise SpecError("data" if getattr(bench_spec, "recorded", False) else
                         "stimulus.materials", list(bench_spec.materials),
                         "a list that holds wood and aluminium for the two-material network")
-    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz),
-                      left_out=left_out)
+    parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
     if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
         parts.calibration_repetitions = held_out_repetitions(bench_spec,
                                                              parts.plan.tuned_plan())
-    return Plan("baseline_comparison", spec, parts, estimate)
+    return Plan("baseline_comparison", spec, parts, estimate, left_out)
 
 
 def estimate(parts: StudySpec):
@@ -232,7 +230,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     fresh, scheduler = options.fresh, options.scheduler
     out_dir, t_start = Path(out_dir), time.perf_counter()
     stages = 5 if parts.bank is not None else 4
-    for line in parts.left_out:
+    for line in plan.left_out:
         log(f"      {line}")
     data, cmp, data_s = _signal_stage(parts, stages, log, fresh)
     extra = _spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
@@ -246,7 +244,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
-    summary["left_out"] = list(parts.left_out) + ([too_large] if too_large else [])
+    summary["left_out"] = list(plan.left_out) + ([too_large] if too_large else [])
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
     report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",
