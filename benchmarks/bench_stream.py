@@ -30,17 +30,18 @@
    ``GET /`` twice a second (a tab reloading); the wall-clock real-time factor, the latency
    (median, p95), the samples lost or processed late and the view's dropped frames are printed
    side by side.
-5. ``--browsers 0,1,3``: for each number of headless Chromium pages open on the live view, a
-   live run at 1 kHz (wall-clock real-time factor, sample-to-rate-map latency, and the display
-   latency: from the arrival of a window's last sample on the host to its rate-map column
-   painted on a page, as the pages report it on their rate-map sockets, all pages together),
-   then a throughput run with the same pages open (compute-only real-time factor, and per CPU
+5. ``--browsers 0,1,3``: for each number of headless Chromium pages open on the live view,
+   ``--repeats`` times (each on a fresh view with fresh pages), a live run at 1 kHz
+   (wall-clock real-time factor, sample-to-rate-map latency, and the display latency: from
+   the arrival of a window's last sample on the host to its rate-map column painted on a
+   page, as the pages report it on their rate-map sockets, all pages together), then a
+   throughput run with the same pages open (compute-only real-time factor, and per CPU
    second of the pipeline's own process: what the pages' drawing on the same cores leaves
-   out). Of
-   the display latency, "taken" is the part until the view process took the window from the
-   pipeline's hand-off, "sent" until the page's update left the view process, "received"
-   until the column was in the page's document (the rest is the browser drawing it); each is
-   a p95 of its own. "CPU s/s" is what the view process and the pages' browsers (with their
+   out); then per number of pages the median [min–max] over the runs. Of the display
+   latency, "taken" is the part until the view process took the window from the pipeline's
+   hand-off, "sent" until the page's update left the view process, "received" until the
+   column was in the page's document (the rest is the browser drawing it); each is a p95 of
+   its own. "CPU s/s" is what the view process and the pages' browsers (with their
    renderers) used per second of the live run: on two cores, what the pages' drawing costs.
 """
 from __future__ import annotations
@@ -117,7 +118,8 @@ def main(argv=None) -> int:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--view", action="store_true",
                     help="also compare the real-time factor with the live view open")
-    ap.add_argument("--repeats", type=int, default=3, help="runs each, with --view")
+    ap.add_argument("--repeats", type=int, default=3,
+                    help="runs each, with --view or --browsers (the median and range printed)")
     ap.add_argument("--view-seconds", type=float, default=30.0,
                     help="seconds of input per run, with --view (longer runs, steadier ratio)")
     ap.add_argument("--browsers", default=None, metavar="N,N,...",
@@ -179,38 +181,13 @@ def online_parts(network, overrides, speed_cm_s: float):
 
 
 def compare_browsers(args, overrides, counts: list[int]) -> None:
-    """With 0, 1, 3... pages open: the live run's real-time factor and latencies, the display
-    latency the pages report, and the throughput."""
-    from snn_antenna.bridge.view.view import LiveView
-
-    rows = []
-    for n in counts:
-        parts = online_parts(args.network, overrides, args.speed)
-        warm_up(parts)
-        view = LiveView(parts, port=0)
-        url = view.start()
-        pages = [OpenPage(url) for _ in range(n)]
-        try:
-            deadline = time.monotonic() + 90
-            while _state(url)["sessions"] < n and time.monotonic() < deadline:
-                time.sleep(0.2)
-            time.sleep(2.0)                     # the pages drew once and follow the stream
-            busy = _cpu_s([view.process.pid]), _cpu_s([page.pid for page in pages if page.pid])
-            began = time.monotonic()
-            live = stream_from_emulator(parts, args.view_seconds, False, view)
-            elapsed = time.monotonic() - began
-            state = _state(url)
-            cpu = ((_cpu_s([view.process.pid]) - busy[0]) / elapsed,
-                   (_cpu_s([page.pid for page in pages if page.pid]) - busy[1]) / elapsed)
-            fast = stream_from_emulator(parts, args.seconds, True, view)
-        finally:
-            for page in pages:
-                page.close()
-            summary = view.stop()
-        rows.append((n, state["sessions"], live, state["display_latency_ms"], fast, summary,
-                     cpu))
+    """With 0, 1, 3... pages open, ``--repeats`` runs each: the live run's real-time factor and
+    latencies, the display latency the pages report, and the throughput; then, per number
+    of pages, the median and range over the runs."""
+    rows = [browsers_run(args, overrides, n) for n in counts for _ in range(args.repeats)]
     print(f"live view with browsers open ({args.view_seconds:g} s live at 1 kHz, then "
-          f"{args.seconds:g} s flat out; load {os.getloadavg()[0]:.1f}):")
+          f"{args.seconds:g} s flat out; {args.repeats} run(s) each; load "
+          f"{os.getloadavg()[0]:.1f}):")
     print(f"  {'pages':>5s}  {'rt factor live':>14s}  {'throughput':>10s}  {'per CPU s':>9s}  "
           f"{'rate map p95':>12s}  {'on screen median':>16s}  {'p95':>8s}  {'paints':>6s}  "
           f"{'of it: taken p95':>16s}  {'sent p95':>8s}  {'received p95':>12s}  "
@@ -228,6 +205,51 @@ def compare_browsers(args, overrides, counts: list[int]) -> None:
               f"{screen[1]:>8s}  {shown['n']:>6d}  {taken:>16s}  {sent:>8s}  {received:>12s}  "
               f"{summary['frames_dropped']!s:>5s} of {summary['frames_published']:<6d}  "
               f"{cpu[0]:13.2f}  {cpu[1]:5.2f}")
+    for n in counts:
+        runs = [row for row in rows if row[0] == n]
+        throughput = [row[4]["compute_realtime_factor"] for row in runs]
+        shown = [row[3] for row in runs if row[3]["n"]]
+        line = (f"  {n} page(s), median [min–max] of {len(runs)} run(s): throughput "
+                f"{_spread(throughput, '.1f')}x")
+        if shown:
+            line += (f"; on screen median {_spread([s['median'] for s in shown], '.0f')} ms, "
+                     f"p95 {_spread([s['p95'] for s in shown], '.0f')} ms")
+        print(line)
+
+
+def _spread(values, fmt: str) -> str:
+    return (f"{statistics.median(values):{fmt}} [{min(values):{fmt}}–{max(values):{fmt}}]")
+
+
+def browsers_run(args, overrides, n: int) -> tuple:
+    """One live run and one throughput run with ``n`` headless Chromium pages open on a
+    fresh view: (n, sessions, live report, display latency, throughput report, the view's
+    summary, CPU s/s of the view process and of the pages)."""
+    from snn_antenna.bridge.view.view import LiveView
+
+    parts = online_parts(args.network, overrides, args.speed)
+    warm_up(parts)
+    view = LiveView(parts, port=0)
+    url = view.start()
+    pages = [OpenPage(url) for _ in range(n)]
+    try:
+        deadline = time.monotonic() + 90
+        while _state(url)["sessions"] < n and time.monotonic() < deadline:
+            time.sleep(0.2)
+        time.sleep(2.0)                     # the pages drew once and follow the stream
+        busy = _cpu_s([view.process.pid]), _cpu_s([page.pid for page in pages if page.pid])
+        began = time.monotonic()
+        live = stream_from_emulator(parts, args.view_seconds, False, view)
+        elapsed = time.monotonic() - began
+        state = _state(url)
+        cpu = ((_cpu_s([view.process.pid]) - busy[0]) / elapsed,
+               (_cpu_s([page.pid for page in pages if page.pid]) - busy[1]) / elapsed)
+        fast = stream_from_emulator(parts, args.seconds, True, view)
+    finally:
+        for page in pages:
+            page.close()
+        summary = view.stop()
+    return n, state["sessions"], live, state["display_latency_ms"], fast, summary, cpu
 
 
 def _cpu_s(pids) -> float:

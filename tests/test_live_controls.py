@@ -23,6 +23,7 @@ from snn_antenna.bridge.online.controls import (
 )
 from snn_antenna.bridge.online.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.bridge.view.feed import KINDS
 from snn_antenna.bridge.view.page import build_page
 from snn_antenna.bridge.wire.recorder import EVENTS_FILE, Recorder, record_counts
 from snn_antenna.bridge.wire.replay import ReplaySource
@@ -219,7 +220,7 @@ def _frame(seq: int, t_s: float) -> dict:
 
 
 class PageSocket:
-    """Stands in for a page's rate-map socket (``/columns``): what the feed wrote, decoded."""
+    """Stands in for a page's own socket (``/feed``): what its feed wrote, decoded."""
 
     def __init__(self):
         self.sent = []
@@ -227,26 +228,37 @@ class PageSocket:
     def write_message(self, message, binary=False):
         assert binary
         a = np.frombuffer(message, dtype=np.float64)
-        reset, live, high, n, width = a[:5]
-        rows = a[5:].reshape(int(n), int(width))
-        self.sent.append({"reset": bool(reset), "live": bool(live), "high": float(high),
-                          "t": rows[:, 0].round(6).tolist(), "rates": rows[:, 2:]})
+        kind, reset, live, high, n, width = a[:6]
+        rows = a[6:].reshape(int(n), int(width))
+        (name,) = (name for name, code in KINDS.items() if code == kind)
+        self.sent.append({"kind": name, "reset": bool(reset), "live": bool(live),
+                          "high": float(high), "t": rows[:, 0].round(6).tolist(), "rows": rows})
+
+    def of(self, kind: str) -> list[dict]:
+        return [m for m in self.sent if m["kind"] == kind]
+
+    def points(self, kind: str) -> int:
+        """The points of ``kind`` the page holds: since its last reset."""
+        held = 0
+        for m in self.of(kind):
+            held = len(m["t"]) + (0 if m["reset"] else held)
+        return held
 
     def close(self):
         pass
 
 
 def _page(history):
-    """A page built for ``history`` with its socket open: (pull, feed, socket, xy source)."""
+    """A page built for ``history`` with its socket open: (pull, feed, socket, document)."""
     from bokeh.document import Document
 
     doc = Document()
     build_page(history, doc)
     (callback,) = doc.session_callbacks
-    (feed,) = history.map_feeds.values()
+    (feed,) = history.feeds.values()
     socket = PageSocket()
     feed.attach(socket)
-    return callback.callback, feed, socket, doc.get_model_by_name("xy")
+    return callback.callback, feed, socket, doc
 
 
 def _painted(feed, t_s: float) -> None:
@@ -257,28 +269,33 @@ def test_a_page_that_has_not_painted_the_last_column_gets_no_more_until_it_does(
     """Backpressure per page: updates wait (their points gather) while the browser has not
     painted the column sent last, so a slow browser does not queue up seconds of updates."""
     history = ViewHistory(LiveView(_parts()).config)
-    update, feed, socket, xy = _page(history)
-    assert socket.sent == [{"reset": True, "live": True, "high": 10.0, "t": [],
-                            "rates": socket.sent[0]["rates"]}]     # the (empty) span at open
+    update, feed, socket, _doc = _page(history)
+    # The socket opens with the (empty) span of each plot.
+    assert [(m["kind"], m["reset"], m["t"]) for m in socket.sent] == [
+        ("map", True, []), ("xy", True, []), ("coded", True, [])]
     history.take(_frame(0, 0.0))
     update()
-    assert len(xy.data["t"]) == 25 and socket.sent[-1]["t"] == [0.0]
-    assert not socket.sent[-1]["reset"] and np.all(socket.sent[-1]["rates"] == 1.0)
+    assert socket.points("xy") == socket.points("coded") == 25
+    (column,) = socket.of("map")[1:]
+    assert column["t"] == [0.0] and not column["reset"] and np.all(column["rows"][:, 2:] == 1)
+    in_g = history.config.to_g.transform(np.full((1, 2), 2048.0))       # the frame's counts
+    assert np.allclose(socket.of("xy")[-1]["rows"][:, 1:], in_g)
     history.take(_frame(1, 0.1))
     update()                                        # column 0.0 not painted yet: waits
-    assert len(xy.data["t"]) == 25 and len(socket.sent) == 2
+    assert socket.points("xy") == 25 and len(socket.of("map")) == 2
     # The paint report releases the held column at once, the column alone.
     _painted(feed, 0.0)
-    assert socket.sent[-1]["t"] == [0.1] and len(xy.data["t"]) == 25
+    assert socket.sent[-1]["kind"] == "map" and socket.sent[-1]["t"] == [0.1]
+    assert socket.points("xy") == 25
     _painted(feed, 0.1)                             # nothing held back: nothing sent
-    assert len(socket.sent) == 3
+    assert len(socket.of("map")) == 3
     update()                                        # the lines come with the periodic pull
-    assert len(xy.data["t"]) == 50
+    assert socket.points("xy") == socket.points("coded") == 50
 
 
 def test_a_paused_page_gets_no_column_and_its_resume_or_reopened_socket_shows_the_span():
     history = ViewHistory(LiveView(_parts()).config)
-    update, feed, socket, _xy = _page(history)
+    update, feed, socket, _doc = _page(history)
     history.take(_frame(0, 0.0))
     update()
     _painted(feed, 0.0)
@@ -286,17 +303,20 @@ def test_a_paused_page_gets_no_column_and_its_resume_or_reopened_socket_shows_th
     history.take(_frame(1, 0.1))
     history.take(_frame(2, 0.2))
     update()
-    assert [m["t"] for m in socket.sent] == [[], [0.0]]
+    assert [m["t"] for m in socket.of("map")] == [[], [0.0]] and socket.points("xy") == 25
     feed.mode["paused"] = False
     feed.show(None)                                 # resumed: the kept span to the latest
-    assert socket.sent[-1]["reset"] and socket.sent[-1]["t"] == [0.0, 0.1, 0.2]
+    assert socket.of("map")[-1]["reset"] and socket.of("map")[-1]["t"] == [0.0, 0.1, 0.2]
+    assert socket.points("xy") == 75
     feed.show(0.15)                                 # scrubbed back: the span to 0.15, not live
-    last = socket.sent[-1]
+    last = socket.of("map")[-1]
     assert last["reset"] and not last["live"] and last["t"] == [0.0, 0.1]
+    assert max(socket.of("xy")[-1]["t"]) <= 0.15
     again = PageSocket()                            # the page's socket reopened: its span
     feed.detach(socket)
     feed.attach(again)
-    assert again.sent[-1]["reset"] and again.sent[-1]["t"] == [0.0, 0.1]
+    assert [m["kind"] for m in again.sent] == ["map", "xy", "coded"]
+    assert again.of("map")[-1]["reset"] and again.of("map")[-1]["t"] == [0.0, 0.1]
     counted = history.display_latency()["n"]
     feed.report(b"not a report")                    # counted as nothing, refused as nothing
     assert history.display_latency()["n"] == counted == 1
@@ -326,7 +346,6 @@ def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkey
     clock[0] += page_module.PAGE_UPDATE_MS / 1000
     callback.callback()                             # the plots move on, the text waits
     assert "<b>stream time</b> 0.1 s" in text.data["counters"][0]
-    assert doc.get_model_by_name("xy").data["t"][-1] >= 0.1
     history.take({**_frame(2, 0.2), "events": [("onset", 0.25)]})
     clock[0] += page_module.PAGE_UPDATE_MS / 1000
     callback.callback()                             # a contact's onset: at once

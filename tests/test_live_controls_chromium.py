@@ -151,18 +151,18 @@ def test_the_page_changes_th_pauses_and_the_replay_reproduces_it(tmp_path):
         page.get_by_text(re.compile(r"→ \d+\.\d cm")).first.wait_for(timeout=30_000)
         ask(page, "Th (g)", HIGH_TH_G, "Apply Th", "asked Th 5 g")
         ask(page, None, None, "Pause display", "display paused")
-        paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        paused_at = page.evaluate("() => " + model("antenna", "_lines?.d.t.at(-1)"))
         paused_end = page.evaluate("() => " + model("time", "end"))
         session.second_half.set()
         session.board.join(30)
         _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000)
         state = get_json(url + "state.json")
-        still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        still = page.evaluate("() => " + model("antenna", "_lines?.d.t.at(-1)"))
         page.evaluate("() => { " + model("scrub", "value = 1.0") + " }")    # 1 s back
         page.wait_for_function(f"() => {model('time', 'end')} <= {paused_end} - 0.99",
                                timeout=30_000)
         page.get_by_role("button", name="Resume display").click()
-        page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
+        page.wait_for_function(f"() => {model('antenna', '_lines?.d.t.at(-1)')} > {paused_at}",
                                timeout=30_000)
         screenshot(session, 0.3)
         final = get_json(url + "state.json")

@@ -110,7 +110,7 @@ def test_the_page_draws_takes_th_pauses_reports_paints_and_saves(tmp_path):
             page.wait_for_function("() => window.Bokeh && Bokeh.documents.length > 0",
                                    timeout=30_000)
             pipeline.start()
-            last_t = f"({model('xy', 'data.t.at(-1)')} ?? 0)"
+            last_t = f"({model('antenna', '_lines?.d.t.at(-1)')} ?? 0)"
             latest = f"() => {last_t}"
             page.get_by_text(re.compile(r"→ 19\.3 cm")).first.wait_for(timeout=30_000)
             page.get_by_label("Th (g)").fill("0.2")

@@ -53,14 +53,14 @@ def test_the_page_reads_the_robot_panels_steers_and_the_replay_reproduces_it(tmp
         ask(page, "Th (g)", HIGH_TH_G, "Apply Th", "asked Th 5 g")
         ask(page, "speed (cm/s)", DRIVE_ON, "Apply speed", "asked speed 6 cm/s")
         ask(page, None, None, "Pause display", "display paused")
-        paused_at = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        paused_at = page.evaluate("() => " + model("antenna", "_lines?.d.t.at(-1)"))
         session.second_half.set()
         session.board.join(30)
         _wait(lambda: get_json(url + "state.json")["t_s"] >= len(counts) / 1000, 60)
         state = get_json(url + "state.json")
-        still = page.evaluate("() => " + model("xy", "data.t.at(-1)"))
+        still = page.evaluate("() => " + model("antenna", "_lines?.d.t.at(-1)"))
         page.get_by_role("button", name="Resume display").click()
-        page.wait_for_function(f"() => {model('xy', 'data.t.at(-1)')} > {paused_at}",
+        page.wait_for_function(f"() => {model('antenna', '_lines?.d.t.at(-1)')} > {paused_at}",
                                timeout=30_000)
         screenshot(session, 0.5)
         final = get_json(url + "state.json")

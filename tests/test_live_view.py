@@ -304,9 +304,9 @@ def test_chromium_draws_the_live_page_while_the_emulator_streams(tmp_path, scene
             canvases = page.locator("canvas")
             server.start()
             page.wait_for_function(
-                "() => Bokeh.documents[0].get_model_by_name('xy').data.t.length > 100",
+                "() => Bokeh.documents[0].get_model_by_name('antenna')._lines?.d.t.length > 100",
                 timeout=60_000)
-            latest = "() => Bokeh.documents[0].get_model_by_name('xy').data.t.at(-1)"
+            latest = "() => Bokeh.documents[0].get_model_by_name('antenna')._lines.d.t.at(-1)"
             first_t = page.evaluate(latest)
             first = page.screenshot()
             time.sleep(1.5)

@@ -1,26 +1,29 @@
 """What a live page's browser is made to draw (bridge/view/page.py, bridge/view/rate_map.py):
 with three pages on two cores, the browsers' drawing is what delays a column on screen.
 
-- Between two periodic pulls a new column goes to the page's rate-map socket alone and changes
-  nothing in the page's Bokeh document: the time axis (whose move repaints every plot on the
-  page) moves with the pull, ahead of the columns that come before the next one; no Div's text
-  is ever changed (a Div's new text makes BokehJS lay the whole page out again): the counters
-  and panels go through a data source the page's own script writes into their contained boxes.
+- Between two periodic pulls a new column goes to the page's own socket alone and changes
+  nothing in the page's Bokeh document (the lines' points go on the socket too, at the pull):
+  the time axis (whose move repaints every plot on the page) moves with the pull, ahead of the
+  columns that come before the next one; no Div's text is ever changed (a Div's new text makes
+  BokehJS lay the whole page out again): the counters and panels go through a data source the
+  page's own script writes into their contained boxes.
 - The rate map's script, run in Chromium on a bare canvas fed by a stand-in socket: it opens
   its socket at the page's address; however many messages and triggers a task brings, it
   draws once, in the next animation frame; a column added while the axes stand costs its own
   rectangles only, in the right place and colour; a moved axis redraws all; each live column
   is reported painted once, after its frame, on the socket.
 - The page holds no Bokeh plot: its line plots are canvases drawn by their own script from
-  sources no glyph draws. That script, run in Chromium: however many triggers a task brings,
-  it draws once, in the next animation frame; a line lands where its points say, within the
-  shared time axis; dragging the plot pans that axis.
+  the points the socket brings. That script, run in Chromium: however many triggers a task
+  brings, it draws once, in the next animation frame; a line lands where its points say,
+  within the shared time axis, its path holding only the points where it turns; dragging the
+  plot pans that axis.
 """
 import queue
 
 import pytest
 
 from snn_antenna.bridge.view.history import ViewHistory
+from snn_antenna.bridge.view.feed import FEED_JS
 from snn_antenna.bridge.view.lines import LINES_JS
 from snn_antenna.bridge.view.rate_map import FRAME, RATE_MAP_JS
 from snn_antenna.bridge.view.view import LiveView
@@ -38,8 +41,7 @@ def test_a_column_between_pulls_goes_to_the_socket_alone_and_no_div_text_changes
     clock = [500.0]
     monkeypatch.setattr(page_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
     history = ViewHistory(LiveView(_parts()).config)
-    pull, feed, socket, xy = _page(history)
-    doc = xy.document
+    pull, feed, socket, doc = _page(history)
     assert not [*doc.select({"type": Plot}), *doc.select({"type": GlyphRenderer})]
     texts = [div for div in doc.select({"type": Div}) if div.name in ("counters", "decided")]
     assert len(texts) == 2 and all(div.styles["contain"] == "strict" for div in texts)
@@ -52,10 +54,10 @@ def test_a_column_between_pulls_goes_to_the_socket_alone_and_no_div_text_changes
     x_range = doc.get_model_by_name("time")
     at_pull = (x_range.start, x_range.end)
     assert at_pull[1] > history.t_s                 # the axis leads the stream
-    assert {("ColumnDataSource", "text", "data"), ("ColumnDataSource", "xy", "data"),
-            ("Range1d", "time", "end")} <= set(changed)
+    assert {("ColumnDataSource", "text", "data"), ("Range1d", "time", "end")} <= set(changed)
+    assert not [key for key in changed if key[0] == "ColumnDataSource" and key[1] != "text"]
     assert not [key for key in changed if key[0] == "Div"]
-    assert socket.sent[-1]["t"] == [12.0]
+    assert socket.of("map")[-1]["t"] == [12.0] and socket.of("xy")[-1]["t"][-1] > 12.0
     _painted(feed, 12.0)
     changed.clear()
     scheduled = len(doc.session_callbacks)
@@ -65,9 +67,17 @@ def test_a_column_between_pulls_goes_to_the_socket_alone_and_no_div_text_changes
     arrived.put(_frame(1, 12.15))
     history.drain(arrived)
     assert socket.sent[-1]["t"] == [12.15] and not socket.sent[-1]["reset"]
+    assert socket.sent[-1]["kind"] == "map" and socket.sent[-2]["kind"] != "map"
     assert (x_range.start, x_range.end) == at_pull
     assert changed == [] and len(doc.session_callbacks) == scheduled   # nor an axis move
 
+
+
+def _blank(page) -> None:
+    """An empty page at an http address (a page's socket opens relative to its address)."""
+    page.route("http://view.test/", lambda route: route.fulfill(
+        body="<body style='margin:0'></body>", content_type="text/html"))
+    page.goto("http://view.test/")
 
 
 SETUP_JS = """([code, n, frame]) => {
@@ -93,11 +103,11 @@ SETUP_JS = """([code, n, frame]) => {
   const contacts = {data: {t: []}};
   const palette = Array.from({length: 256}, (_, i) => `rgb(${i},0,0)`);
   const run = new Function('x_range', 'contacts', 'div', 'n', 'page', 'palette', 'ticks',
-                           'history_s', 'frame', 'title', 'contact_colour', 'on', code);
+                           'history_s', 'frame', 'title', 'contact_colour', 'kind', 'on', code);
   window.trigger = on => run(x_range, contacts, div, n, 'p1', palette, [], 10, frame, 'map',
-                             '#d62728', on);
-  window.rows = (rows, reset) => {          // a message: reset, live, high, rows, width, rows
-    const a = [reset ? 1 : 0, 1, 10, rows.length, 2 + n];
+                             '#d62728', 0, on);
+  window.rows = (rows, reset) => {    // a message: kind, reset, live, high, rows, width, rows
+    const a = [0, reset ? 1 : 0, 1, 10, rows.length, 2 + n];
     for (const [t, rate] of rows) { a.push(t, 0.1, ...Array(n).fill(rate)); }
     sockets[0].onmessage({data: new Float64Array(a).buffer});
   };
@@ -117,10 +127,8 @@ def test_the_rate_map_draws_once_per_frame_and_a_new_column_alone():
                                     args=["--no-sandbox"])
         page = browser.new_page(viewport={"width": 1100, "height": 400},
                                 device_scale_factor=1)
-        page.route("http://view.test/", lambda route: route.fulfill(
-            body="<body style='margin:0'></body>", content_type="text/html"))
-        page.goto("http://view.test/")
-        page.evaluate(SETUP_JS, [RATE_MAP_JS, n, FRAME])
+        _blank(page)
+        page.evaluate(SETUP_JS, [FEED_JS + RATE_MAP_JS, n, FRAME])
 
         def fills(script: str) -> int:
             return page.evaluate(f"""async () => {{
@@ -132,7 +140,7 @@ def test_the_rate_map_draws_once_per_frame_and_a_new_column_alone():
 
         # The page loaded: its socket opens at the page's own address, once.
         fills("trigger('ready'); trigger('ready');")
-        assert page.evaluate("sockets.map(s => s.url)") == ["ws://view.test/columns?page=p1"]
+        assert page.evaluate("sockets.map(s => s.url)") == ["ws://view.test/feed?page=p1"]
         # 50 columns (0-5 s) and the axis moving with them, all in one task: one drawing.
         once = fills("rows(Array.from({length: 50}, (_, i) => [i / 10, 6]), true);"
                      "trigger('view'); trigger('view');")
@@ -176,20 +184,27 @@ LINES_SETUP_JS = """([code, frame]) => {
     window.counted.lineTo++;
     return lineTo.apply(this, args);
   };
-  const t = Array.from({length: 1001}, (_, i) => i / 100);
-  // x: 0 until 5 s, 1 after; y: 0 throughout.
-  const source = {data: {t, x: t.map(s => s < 5 ? 0 : 1), y: t.map(() => 0)}};
+  window.sockets = [];
+  window.WebSocket = class {
+    constructor(url) { this.url = String(url); sockets.push(this); }
+  };
   const x_range = {start: 0, end: 10, setv(o) { Object.assign(this, o); }};
   const contacts = {data: {t: [], label: []}};
   const series = [{column: 'x', colour: 'rgb(0,0,255)', label: 'x', dashed: false,
-                   step: false, axis: 'left', alpha: 1},
+                   negated: false, step: false, axis: 'left', alpha: 1},
                   {column: 'y', colour: 'rgb(255,0,0)', label: 'y', dashed: false,
-                   step: false, axis: 'left', alpha: 1}];
+                   negated: false, step: false, axis: 'left', alpha: 1}];
   const div = {};
-  const run = new Function('source', 'x_range', 'contacts', 'div', 'series', 'right', 'title',
-                           'y_label', 'frame', 'contact_colour', code);
-  window.trigger = () => run(source, x_range, contacts, div, series, null, 'lines', 'g', frame,
-                             '#d62728');
+  const run = new Function('x_range', 'contacts', 'div', 'series', 'right', 'title',
+                           'y_label', 'frame', 'contact_colour', 'kind', 'columns', 'keep',
+                           'page', 'on', code);
+  window.trigger = on => run(x_range, contacts, div, series, null, 'lines', 'g', frame,
+                             '#d62728', 1, ['x', 'y'], 2501, 'p1', on);
+  window.points = () => {   // a message of 1,001 points: x 0 until 5 s, 1 after; y 0
+    const a = [1, 1, 1, 0, 1001, 3];
+    for (let i = 0; i <= 1000; i++) { a.push(i / 100, i < 500 ? 0 : 1, 0); }
+    sockets[0].onmessage({data: new Float64Array(a).buffer});
+  };
   window.x_range = x_range;
   window.canvas = host.shadowRoot.querySelector('canvas');
   window.painted = () => new Promise(done => requestAnimationFrame(() => setTimeout(done, 0)));
@@ -212,10 +227,10 @@ def test_the_line_plots_draw_once_per_frame_on_the_shared_axis_and_pan_it():
                                     args=["--no-sandbox"])
         page = browser.new_page(viewport={"width": 1100, "height": 300},
                                 device_scale_factor=1)
-        page.set_content("<body style='margin:0'></body>")
-        page.evaluate(LINES_SETUP_JS, [LINES_JS, FRAME])
+        _blank(page)
+        page.evaluate(LINES_SETUP_JS, [FEED_JS + LINES_JS, FRAME])
         strokes = page.evaluate("""async () => {
-            trigger(); trigger(); trigger();
+            trigger('ready'); points(); trigger('view'); trigger('view');
             await painted();
             return counted.stroke;
         }""")

@@ -108,11 +108,11 @@ class ViewHistory:
         self.n_samples = 0
         self.peak_rate_hz = 10.0
         self.sessions = 0                           # pages open now
-        # Each open page's "send me the new columns" (rate_map.MapFeed.send_new): called when
+        # Each open page's "send me the new columns" (feed.PageFeed.send_columns): called when
         # new rate-map columns arrive, so a column goes out on arrival, not at the next pull.
         self.column_listeners: set = set()
-        # ... and each page's feed by the page's token: its socket (/columns) finds it here.
-        self.map_feeds: dict = {}
+        # ... and each page's feed by the page's token: its socket (/feed) finds it here.
+        self.feeds: dict = {}
         self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen

@@ -1,27 +1,51 @@
 """The live page's line plots (the antenna's axes, the coded input): canvases of their own,
-drawn by a small script in the page from data sources no glyph draws.
+drawn by a small script in the page from the points its socket brings (bridge/view/feed.py).
 
 Why not Bokeh plots: each paint of a Bokeh plot costs its page's main thread ~10 ms (axes,
 tick labels, CSS look-ups), and a page repaints them at every pull (the time axis moves).
-Here the view process streams each page the new points into its source (a small message:
-``ColumnDataSource.stream`` with a rollover), and the page's script draws the points within
-the shared time axis (``x_range``) with one path per line, at most once per animation frame
-whatever triggered it (new points, the axis moving with them, a reload, a contact). The plots
-follow the axis as the page moves it (live, paused, scrubbed); dragging a plot pans it (the
-wheel is left to scroll the page).
+Here each pull sends the page the new points (one binary message a plot), and the page's
+script keeps the last ``keep`` of them and draws the points within the shared time axis
+(``x_range``) with one path per line, holding only the points where the line turns, at most
+once per animation frame whatever triggered it (new points, the axis moving with them, a
+reload, a contact). The plots follow the axis as the page moves it (live, paused, scrubbed);
+dragging a plot pans it (the wheel is left to scroll the page).
 """
 from __future__ import annotations
 
+from .feed import FEED_JS, KINDS
 from .rate_map import FRAME
 
 HEIGHT = 210
 
-# Shared by the triggers: new points, a reload of the source, the time axis or the contacts
-# moving, the document as the page loaded it. Each only asks for the next animation frame.
+# Run on two triggers (``on``): "ready" (the document as the page loaded it: the page's socket
+# opens) and "view" (the time axis or the contacts moved); new points come as messages. Each
+# only asks for the next animation frame. FEED_JS (bridge/view/feed.py) comes first.
 LINES_JS = """
-const st = div._lines || (div._lines = {canvas: null, frame: 0});
+const st = div._lines || (div._lines = {canvas: null, frame: 0, d: {t: []}});
 st.draw = draw;
-if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
+feed.take[kind] = take;
+if (on === 'ready') { open_feed(); }
+ask();
+
+function ask() {
+  if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
+}
+function take(a) {                      // a message (bridge/view/feed.py): header, then rows
+  const reset = a[1] === 1, rows = a[4], width = a[5];
+  if (reset || !st.d[columns[0]]) {
+    st.d = {t: []};
+    for (const c of columns) { st.d[c] = []; }
+  }
+  for (let k = 0, o = 6; k < rows; k++, o += width) {
+    st.d.t.push(a[o]);
+    for (let c = 0; c < columns.length; c++) { st.d[columns[c]].push(a[o + 1 + c]); }
+  }
+  const over = st.d.t.length - keep;
+  if (over > keep / 4) {                // drop the oldest now and then, not at every message
+    for (const c in st.d) { st.d[c].splice(0, over); }
+  }
+  ask();
+}
 
 function ticks(lo, hi, px) {            // round steps at least 30 px apart
   const span = hi - lo, raw = span / Math.max(1, px / 30);
@@ -66,7 +90,7 @@ function draw() {
   const x0 = frame.left, x1 = W - frame.right, y0 = frame.top, y1 = H - frame.bottom;
   const start = x_range.start, end = x_range.end, sx = (x1 - x0) / (end - start);
   st.g = {x0, start, sx};
-  const d = source.data, t = d.t || [];
+  const d = st.d, t = d.t;
   // The points within the axis (and one either side, so the lines reach the frame's edges).
   let a = 0, b = t.length;
   while (a < b && t[a] < start) { a++; }
@@ -75,8 +99,12 @@ function draw() {
   let lo = Infinity, hi = -Infinity;
   for (const s of series) {
     if (s.axis !== 'left') { continue; }
-    const y = d[s.column];
-    for (let i = a; i < b; i++) { if (y[i] < lo) { lo = y[i]; } if (y[i] > hi) { hi = y[i]; } }
+    const y = d[s.column] || [], sign = s.negated ? -1 : 1;
+    for (let i = a; i < b; i++) {
+      const v = sign * y[i];
+      if (v < lo) { lo = v; }
+      if (v > hi) { hi = v; }
+    }
   }
   if (!(hi > lo)) { lo = isFinite(lo) ? lo - 0.5 : -1; hi = lo + 1; }
   const pad = 0.05 * (hi - lo);
@@ -86,7 +114,7 @@ function draw() {
   ctx.save();
   ctx.beginPath(); ctx.rect(x0, y0, x1 - x0, y1 - y0); ctx.clip();
   for (const s of series) {
-    const y = d[s.column];
+    const y = d[s.column] || [], sign = s.negated ? -1 : 1;
     ctx.strokeStyle = s.colour; ctx.lineWidth = 1; ctx.globalAlpha = s.alpha;
     ctx.setLineDash(s.dashed ? [6, 4] : []);
     ctx.beginPath();
@@ -94,9 +122,9 @@ function draw() {
       // A point whose value its neighbours share adds nothing to the path (a flat run, a held
       // step, the threshold between changes): only the points where the line turns are drawn.
       if (i > a && i < b - 1 && y[i] === y[i - 1] && (s.step || y[i] === y[i + 1])) { continue; }
-      const x = x0 + (t[i] - start) * sx, v = yOf(s.axis, y[i]);
+      const x = x0 + (t[i] - start) * sx, v = yOf(s.axis, sign * y[i]);
       if (i === a) { ctx.moveTo(x, v); continue; }
-      if (s.step) { ctx.lineTo(x, yOf(s.axis, y[i - 1])); }
+      if (s.step) { ctx.lineTo(x, yOf(s.axis, sign * y[i - 1])); }
       ctx.lineTo(x, v);
     }
     ctx.stroke();
@@ -153,29 +181,33 @@ function draw() {
 """
 
 
-def line_plot(doc, source, x_range, contacts, *, title: str, y_label: str, series: list,
-              right: dict | None = None, contact_colour: str, name: str):
-    """A line plot of ``source`` (its ``t`` column against the ``series``' columns) on a canvas
-    of its own, a Div named ``name``. ``series``: dicts with ``column``, ``colour``,
-    ``label`` (None: not in the legend), and optionally ``dashed``, ``step`` (held from each
-    point to the next), ``axis`` ("left", scaled to the points shown; "right": ``right``'s
-    fixed ``range``, labelled ``right["label"]``) and ``alpha``."""
+def line_plot(doc, kind: str, columns: list, keep: int, x_range, contacts, *, page: str,
+              title: str, y_label: str, series: list, right: dict | None = None,
+              contact_colour: str, name: str):
+    """A line plot on a canvas of its own, a Div named ``name``, of the points the page's
+    socket brings for ``kind`` (bridge/view/feed.py: rows of t and ``columns``), the last
+    ``keep`` of them kept. ``series``: dicts with ``column``, ``colour``, ``label`` (None: not
+    in the legend), and optionally ``dashed``, ``negated`` (drawn at minus the column's
+    value), ``step`` (held from each point to the next), ``axis`` ("left", scaled to the
+    points shown; "right": ``right``'s fixed ``range``, labelled ``right["label"]``) and
+    ``alpha``. ``page``: the page's token, which names its socket."""
     from bokeh.events import DocumentReady
     from bokeh.models import CustomJS, Div
 
     div = Div(text=f"<canvas style='display:block;width:100%;height:{HEIGHT}px;"
                    f"touch-action:none'></canvas>", sizing_mode="stretch_width", height=HEIGHT,
               name=name)
-    series = [{"dashed": False, "step": False, "axis": "left", "alpha": 1.0, **s}
-              for s in series]
-    draw = CustomJS(args=dict(source=source, x_range=x_range, contacts=contacts, div=div,
-                              series=series, right=right, title=title, y_label=y_label,
-                              frame=FRAME, contact_colour=contact_colour), code=LINES_JS)
-    source.js_on_change("streaming", draw)          # new points (ColumnDataSource.stream)
-    source.js_on_change("data", draw)               # the kept span (a reload, a scrub)
-    x_range.js_on_change("end", draw)               # the page's code moves both ends
-    x_range.js_on_change("start", draw)             # ... setv moves both, one signal each
-    contacts.js_on_change("data", draw)
-    doc.js_on_event(DocumentReady, draw)
-    doc.add_root(source)            # the layout holds the Div alone: a root of its own
+    series = [{"dashed": False, "negated": False, "step": False, "axis": "left", "alpha": 1.0,
+               **s} for s in series]
+    args = dict(x_range=x_range, contacts=contacts, div=div, series=series, right=right,
+                title=title, y_label=y_label, frame=FRAME, contact_colour=contact_colour,
+                kind=KINDS[kind], columns=list(columns), keep=int(keep), page=page)
+
+    def draw(on: str) -> CustomJS:
+        return CustomJS(args={**args, "on": on}, code=FEED_JS + LINES_JS)
+
+    x_range.js_on_change("end", draw("view"))       # the page's code moves both ends
+    x_range.js_on_change("start", draw("view"))     # ... setv moves both, one signal each
+    contacts.js_on_change("data", draw("view"))
+    doc.js_on_event(DocumentReady, draw("ready"))
     return div

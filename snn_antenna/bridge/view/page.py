@@ -3,9 +3,9 @@ bridge/view/lines.py) and the rate map (bridge/view/rate_map.py), each a canvas 
 by the page's script, the controls and the text around them, fed from the view process's history
 (:class:`~snn_antenna.bridge.view.view.history.ViewHistory`).
 
-Each open page is one Bokeh session with its own data sources; a periodic callback (every
-``PAGE_UPDATE_MS``) pulls what is new in the history since that page's cursors. The rate map's
-columns go out as they arrive, on the page's own websocket (``rate_map.MapFeed``). All of it
+Each open page is one Bokeh session (the time axis, the controls, the text) and a socket of its
+own (bridge/view/feed.py) that brings its plots their data: the rate map's columns as they
+arrive, the lines' new points at each periodic pull (every ``PAGE_UPDATE_MS``). All of it
 runs in the view's own process, so a page that falls behind, closes or is reloaded costs the
 pipeline nothing.
 """
@@ -16,7 +16,7 @@ import uuid
 
 
 # Each page pulls new points 5 times a second (a new rate-map column goes to it on arrival:
-# rate_map.MapFeed). Each pull moves the time axis and redraws the page's three canvases; the
+# feed.PageFeed). Each pull moves the time axis and redraws the page's three canvases; the
 # lines move in steps of a fiftieth of the 10 s they show.
 PAGE_UPDATE_MS = 200
 # The counters and panels twice a second (a contact at once): a person reads them no faster.
@@ -31,7 +31,7 @@ for (const div of divs) {
   if (shown && shown.markup_el) { shown.markup_el.innerHTML = source.data[div.name][0]; }
 }
 """
-CONTAINED = {"contain": "strict"}
+CONTAINED = {"contain": "strict", "overflow-y": "auto"}   # a longer text scrolls in its box
 CONTACT_COLOUR = "#d62728"
 PANELS_WIDTH = 230
 
@@ -41,32 +41,31 @@ def build_page(view, doc) -> None:
     from bokeh.layouts import column, row
     from bokeh.models import ColumnDataSource, Div, Range1d
 
+    from .feed import PageFeed
     from .page_controls import control_widgets
-    from .rate_map import MapFeed, rate_map
+    from .rate_map import rate_map
 
     view.sessions += 1
     view.pages_served += 1
     doc.on_session_destroyed(lambda _ctx: setattr(view, "sessions", view.sessions - 1))
     x_range = Range1d(0, view.history_s, name="time")
-    sources = {"xy": ColumnDataSource({"t": [], "x": [], "y": []}, name="xy"),
-               "coded": ColumnDataSource({"t": [], "signal": [], "th": [], "neg_th": [],
-                                          "coded": []}, name="coded"),
-               "contacts": ColumnDataSource({"t": [], "label": []}, name="contacts")}
+    sources = {"contacts": ColumnDataSource({"t": [], "label": []}, name="contacts")}
     # This page's own mode: paused (its plots stop following) and how far back it scrubs.
     mode = {"paused": False, "frozen_end": None, "page": uuid.uuid4().hex}
-    antenna = _antenna_plot(doc, sources, x_range)
-    coded = _coded_plot(doc, sources, x_range, view.coder_amplitude)
+    antenna = _antenna_plot(doc, view, sources["contacts"], x_range, mode["page"])
+    coded = _coded_plot(doc, view, sources["contacts"], x_range, mode["page"])
     rate_map_div = rate_map(doc, view, x_range, sources["contacts"], mode["page"],
                             CONTACT_COLOUR)
-    # A fixed height: new text does not move the plots below it.
-    counters = Div(text="", sizing_mode="stretch_width", height=80, name="counters",
+    # A fixed height: new text does not move the plots below it (the counters, and the last
+    # five contacts).
+    counters = Div(text="", sizing_mode="stretch_width", height=150, name="counters",
                    styles=CONTAINED)
     # Beside the plots, what the running network decides: a panel per part it has. One column
     # for the plots keeps their time axes aligned.
     panels = Div(text="", width=PANELS_WIDTH, height=680, name="decided", styles=CONTAINED)
     plots = column(antenna, coded, rate_map_div, sizing_mode="stretch_width")
     sources["text"] = _text_source(doc, (counters, panels))
-    feed = MapFeed(view, mode["page"], mode)
+    feed = PageFeed(view, mode["page"], mode)
     update, reload, follow = _updater(view, sources, x_range, mode, feed)
     # A column that would fall past the time axis moves it (with the page's document locked).
     feed.on_sent = lambda t_s: (t_s + view.window_s > x_range.end
@@ -90,12 +89,12 @@ def build_page(view, doc) -> None:
 
     # A new rate-map column goes out as it arrives, alone, on the page's own socket: the
     # browser redraws the rate map only (the lines, panels and counters come with the pull).
-    view.map_feeds[mode["page"]] = feed
-    view.column_listeners.add(feed.send_new)
+    view.feeds[mode["page"]] = feed
+    view.column_listeners.add(feed.send_columns)
 
     def ended(_context) -> None:
-        view.column_listeners.discard(feed.send_new)
-        view.map_feeds.pop(mode["page"], None)
+        view.column_listeners.discard(feed.send_columns)
+        view.feeds.pop(mode["page"], None)
         if feed.socket is not None:
             feed.socket.close()
 
@@ -122,27 +121,29 @@ def _text_source(doc, divs):
     return source
 
 
-def _antenna_plot(doc, sources, x_range):
+def _antenna_plot(doc, view, contacts, x_range, page: str):
     from .lines import line_plot
 
-    return line_plot(doc, sources["xy"], x_range, sources["contacts"],
+    return line_plot(doc, "xy", ["x", "y"], view.shown_points, x_range, contacts, page=page,
                      title="Antenna: the two accelerometer axes", y_label="g",
                      series=[{"column": "x", "colour": "#1f77b4", "label": "x"},
                              {"column": "y", "colour": "#ff7f0e", "label": "y"}],
                      contact_colour=CONTACT_COLOUR, name="antenna")
 
 
-def _coded_plot(doc, sources, x_range, amplitude: float):
+def _coded_plot(doc, view, contacts, x_range, page: str):
     from .lines import line_plot
 
-    return line_plot(doc, sources["coded"], x_range, sources["contacts"],
+    amplitude = view.coder_amplitude
+    return line_plot(doc, "coded", ["signal", "th", "coded"], view.shown_points, x_range,
+                     contacts, page=page,
                      title="Coded input: filtered signal, the gate's threshold ±Th, and the "
                            "square wave fed to the resonators", y_label="signal (g)",
                      series=[{"column": "signal", "colour": "#555555", "label": "signal"},
                              {"column": "th", "colour": CONTACT_COLOUR, "dashed": True,
                               "label": "±Th"},
-                             {"column": "neg_th", "colour": CONTACT_COLOUR, "dashed": True,
-                              "label": None},
+                             {"column": "th", "colour": CONTACT_COLOUR, "dashed": True,
+                              "negated": True, "label": None},
                              {"column": "coded", "colour": "#2ca02c", "step": True,
                               "axis": "right", "alpha": 0.8, "label": "coded"}],
                      right={"label": "coded input",
@@ -157,21 +158,12 @@ def _updater(view, sources: dict, x_range, mode: dict, feed):
     to the stream."""
     from .page_controls import controls_html
 
-    cursor = {"xy": 0, "coded": 0, "text_at": 0.0}
+    cursor = {"text_at": 0.0}
     shown = {"text": None, "contacts": None, "text_marks": None}
-    rollover = view.shown_points
-
-    def span(rows, end):
-        return rows[(rows[:, 0] >= end - view.history_s) & (rows[:, 0] <= end)]
 
     def reload(end_s=None) -> None:
         end = max(view.t_s, view.history_s) if end_s is None else end_s
-        xy, coded = span(view.xy.rows, end), span(view.coded.rows, end)
-        sources["xy"].data = {"t": xy[:, 0], "x": xy[:, 1], "y": xy[:, 2]}
-        sources["coded"].data = {"t": coded[:, 0], "signal": coded[:, 1], "th": coded[:, 2],
-                                 "neg_th": -coded[:, 2], "coded": coded[:, 3]}
         feed.show(end_s)
-        cursor.update(xy=view.xy.total, coded=view.coded.total)
         x_range.start, x_range.end = end - view.history_s, end
 
     def follow() -> None:
@@ -199,22 +191,12 @@ def _updater(view, sources: dict, x_range, mode: dict, feed):
 
     def update() -> None:
         view.pull()                 # the frames in transit now
-        following = feed.send_new()
+        following = feed.send_columns()
         marks = contact_marks(view)
         text(marks)                 # paused or not: the pipeline goes on
         if not following:
             return
-        new_xy = view.xy.since(cursor["xy"])
-        cursor["xy"] = view.xy.total
-        if len(new_xy):
-            sources["xy"].stream({"t": new_xy[:, 0], "x": new_xy[:, 1], "y": new_xy[:, 2]},
-                                 rollover=rollover)
-        new_in = view.coded.since(cursor["coded"])
-        cursor["coded"] = view.coded.total
-        if len(new_in):
-            sources["coded"].stream({"t": new_in[:, 0], "signal": new_in[:, 1],
-                                     "th": new_in[:, 2], "neg_th": -new_in[:, 2],
-                                     "coded": new_in[:, 3]}, rollover=rollover)
+        feed.send_points()
         if marks != shown["contacts"]:
             shown["contacts"] = marks
             sources["contacts"].data = {"t": [m[0] for m in marks], "label": [m[1] for m in marks]}

@@ -11,8 +11,8 @@ frames the view could not take are counted here (``view_frames_dropped``), never
 What it shows is kept in :class:`~snn_antenna.bridge.view.view.history.ViewHistory`
 (bridge/view/history.py). Besides the pages and ``/state.json``, it answers the pages' POSTs
 ``/control`` (checked here, then queued to the pipeline) and ``/save``
-(bridge/view/saved_view.py), and holds each page's rate-map socket, ``/columns``: the columns
-out as they arrive, the paint reports (the display delay) back (bridge/view/rate_map.py).
+(bridge/view/saved_view.py), and holds each page's own socket, ``/feed``: the plots' data
+out, the paint reports (the display delay) back (bridge/view/feed.py).
 
 Started with the ``spawn`` context, so this module and what it imports are all the process
 holds: no Brian2, no port, no recorder.
@@ -87,7 +87,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
                        extra_websocket_origins=sorted(allowed),
                        extra_patterns=[(r"/state\.json", handlers["state"], routed),
                                        (r"/control", handlers["control"], routed),
-                                       (r"/columns", handlers["columns"], routed),
+                                       (r"/feed", handlers["feed"], routed),
                                        (r"/save", handlers["save"], routed)],
                        websocket_ping_interval=10, websocket_ping_timeout=10,
                        unused_session_lifetime_milliseconds=SESSION_LINGER_MS,
@@ -170,8 +170,8 @@ def _answer_stop(control, arrived: _Arrived) -> None:
 
 def _handlers() -> dict:
     """``/state.json`` (GET), the page's POSTs: ``/control`` (a change of Th or the window),
-    ``/save`` (the view's PNG: written with the shown span's data), and its rate-map socket
-    ``/columns``. All behind the HostGuard (bridge/view/hostguard.py)."""
+    ``/save`` (the view's PNG: written with the shown span's data), and its own socket
+    ``/feed``. All behind the HostGuard (bridge/view/hostguard.py)."""
     from tornado.web import RequestHandler
     from tornado.websocket import WebSocketHandler
 
@@ -202,10 +202,10 @@ def _handlers() -> dict:
                 return
             self.reply(202, {"requested": asked})
 
-    class Columns(WebSocketHandler):
-        """A page's rate-map socket, ``/columns?page=TOKEN``: the page's feed
-        (rate_map.MapFeed, found by the token its page was built with) writes the columns;
-        the page sends its paint reports."""
+    class Feed(WebSocketHandler):
+        """A page's own socket, ``/feed?page=TOKEN``: the page's feed (feed.PageFeed, found by
+        the token its page was built with) writes the plots' data; the page sends its paint
+        reports."""
 
         def initialize(self, history: ViewHistory, inbox) -> None:
             self.history, self.feed = history, None
@@ -214,7 +214,7 @@ def _handlers() -> dict:
             return True
 
         def open(self) -> None:
-            self.feed = self.history.map_feeds.get(self.get_query_argument("page", ""))
+            self.feed = self.history.feeds.get(self.get_query_argument("page", ""))
             if self.feed is None:
                 self.close(4404, "no such page: reload it")
                 return
@@ -245,4 +245,4 @@ def _handlers() -> dict:
                 return
             self.reply(200, {"saved": saved})
 
-    return {"state": State, "control": Control, "columns": Columns, "save": Save}
+    return {"state": State, "control": Control, "feed": Feed, "save": Save}

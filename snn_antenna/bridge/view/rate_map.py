@@ -1,31 +1,18 @@
-"""The live page's rate map: a canvas of its own, drawn by a small script in the page, fed over
-a websocket of its own (``/columns``: :class:`MapFeed`).
+"""The live page's rate map: a canvas of its own, drawn by a small script in the page, fed
+over the page's own socket (bridge/view/feed.py).
 
 Why not a Bokeh plot: each paint of a Bokeh plot costs its page's main thread ~10 ms (axes,
 tick labels, CSS look-ups), and with three pages on two cores the browsers' drawing is what
-delays a column. Why not the page's Bokeh websocket either: a Bokeh message is a document
-patch in several websocket frames, each a task of the page's main thread, and the paint
-report an HTTP POST; a column here is one binary message (float64 rows), and the report goes
-back on the same socket. The page's script keeps the columns it shows and paints them with
+delays a column. The page's script keeps the columns it shows and paints them with
 ``fillRect`` (one rectangle per resonator and window). It draws at most once per animation
 frame, whatever triggered it, and while the axes stand only the columns added since (a column
 then costs its page one rectangle per resonator, not the whole map). The plot follows the
-page's shared time axis (``x_range``: paused, scrubbed, panned) and marks the contacts'
-onsets.
-
-A message, float64 in this machine's byte order: ``reset`` (1: the page starts its map again
-from these rows: a reload, a scrub, the socket opening), ``live`` (shown live: only those
-columns are reported painted), ``high`` (the colour scale's top, spikes/s), the number of rows
-and their width, then the rows: ``t`` (window start, s), ``w`` (width, s), the rates (spikes/s
-per resonator). A report: ``{t_s, received_unix_s, painted_unix_s}`` of the latest live column
-painted (bridge/view/history.py turns it into the display delay).
+page's shared time axis (``x_range``: paused, scrubbed, panned), marks the contacts' onsets,
+and reports each live column it painted back on the socket.
 """
 from __future__ import annotations
 
-import json
-import time
-
-import numpy as np
+from .feed import FEED_JS, KINDS
 
 HEIGHT = 260
 TITLE = "Rate map: resonators (tuning frequency) × time"
@@ -33,18 +20,16 @@ TITLE = "Rate map: resonators (tuning frequency) × time"
 # The plot's frame inside each of the page's canvases, in CSS pixels: the same on all of them
 # lines their time axes up (bridge/view/lines.py).
 FRAME = {"left": 70, "right": 110, "top": 26, "bottom": 40}
-# A page that has not painted the last column sent waits (its columns and points gather)
-# rather than queue more than its browser draws; one that never reports (a hidden tab does
-# not paint) still gets one this often.
-UNPAINTED_WAIT_S = 1.0
 
-# Run on two triggers (``on``): "ready" (the document as the page loaded it: the socket opens,
-# and its first message is the kept span) and "view" (the time axis or the contacts changed).
+# Run on two triggers (``on``): "ready" (the document as the page loaded it: the page's socket
+# opens, and its first message is the kept span) and "view" (the time axis or the contacts
+# changed). FEED_JS (bridge/view/feed.py) comes first.
 RATE_MAP_JS = """
 const st = div._rate_map || (div._rate_map = {t: [], w: [], r: [], high: 10, live: true,
-                                               canvas: null, dirty: true, socket: null});
+                                               canvas: null, dirty: true});
 st.draw = draw;
-if (on === 'ready' && !st.socket) { connect(); }
+feed.take[kind] = take;
+if (on === 'ready') { open_feed(); }
 if (on === 'view') { st.dirty = true; }
 ask();
 
@@ -53,22 +38,15 @@ ask();
 function ask() {
   if (!st.frame) { st.frame = requestAnimationFrame(() => { st.frame = 0; st.draw(); }); }
 }
-function connect() {
-  const url = new URL('columns?page=' + page, document.baseURI);
-  url.protocol = url.protocol === 'https:' ? 'wss:' : 'ws:';
-  const socket = st.socket = new WebSocket(url);
-  socket.binaryType = 'arraybuffer';
-  socket.onmessage = event => { take(new Float64Array(event.data)); ask(); };
-}
-function take(a) {                      // a message: header, then rows (module docstring)
-  const reset = a[0] === 1, live = a[1] === 1, rows = a[3], width = a[4];
+function take(a) {                      // a message (bridge/view/feed.py): header, then rows
+  const reset = a[1] === 1, live = a[2] === 1, rows = a[4], width = a[5];
   const clear = () => { st.t = []; st.w = []; st.r = []; st.dirty = true; };
   if (reset) { clear(); }
-  for (let k = 0, o = 5; k < rows; k++, o += width) {
+  for (let k = 0, o = 6; k < rows; k++, o += width) {
     if (st.t.length && a[o] <= st.t[st.t.length - 1]) { clear(); }   // a new stream
     st.t.push(a[o]); st.w.push(a[o + 1]); st.r.push(a.subarray(o + 2, o + width));
   }
-  st.high = a[2]; st.live = live;
+  st.high = a[3]; st.live = live;
   const oldest = st.t.length ? st.t[st.t.length - 1] - 2 * history_s : 0;
   let k = 0;
   while (k < st.t.length && st.t[k] + st.w[k] < oldest) { k++; }
@@ -77,6 +55,7 @@ function take(a) {                      // a message: header, then rows (module 
   if (live && rows) {
     st.report = {t_s: st.t[st.t.length - 1], received_unix_s: Date.now() / 1000};
   }
+  ask();
 }
 function find(root) {                   // Bokeh renders a Div's text in a shadow root
   for (const el of root.querySelectorAll('*')) {
@@ -174,8 +153,8 @@ function draw() {
   st.report = null;
   if (report) {
     setTimeout(() => {
-      if (st.socket.readyState === WebSocket.OPEN) {
-        st.socket.send(JSON.stringify({...report, painted_unix_s: Date.now() / 1000}));
+      if (feed.socket && feed.socket.readyState === WebSocket.OPEN) {
+        feed.socket.send(JSON.stringify({...report, painted_unix_s: Date.now() / 1000}));
       }
     }, 0);
   }
@@ -186,7 +165,7 @@ function draw() {
 def rate_map(doc, view, x_range, contacts, page: str, colour: str):
     """The rate map of one page (the Bokeh document ``doc``): the Div holding its canvas.
     ``contacts``: the page's contact marks (a source with ``t``); ``page``: the page's token,
-    which names its feed (:class:`MapFeed`) on ``/columns``."""
+    which names its socket (bridge/view/feed.py)."""
     from bokeh.events import DocumentReady
     from bokeh.models import CustomJS, Div
     from bokeh.palettes import Viridis256
@@ -198,116 +177,13 @@ def rate_map(doc, view, x_range, contacts, page: str, colour: str):
     ticks = [[i, f"{view.neuron_hz[i]:.1f}"] for i in range(0, n, max(1, n // 8))]
     args = dict(x_range=x_range, contacts=contacts, div=div, n=n, page=page,
                 palette=list(Viridis256), ticks=ticks, history_s=view.history_s, frame=FRAME,
-                title=TITLE, contact_colour=colour)
+                title=TITLE, contact_colour=colour, kind=KINDS["map"])
 
     def draw(on: str) -> CustomJS:
-        return CustomJS(args={**args, "on": on}, code=RATE_MAP_JS)
+        return CustomJS(args={**args, "on": on}, code=FEED_JS + RATE_MAP_JS)
 
     x_range.js_on_change("end", draw("view"))       # the page's code moves both ends
     x_range.js_on_change("start", draw("view"))     # ... a pan or zoom may move one
     contacts.js_on_change("data", draw("view"))
     doc.js_on_event(DocumentReady, draw("ready"))   # the socket opens with the page
     return div
-
-
-class MapFeed:
-    """One page's rate map, fed over the page's own websocket (``/columns?page=TOKEN``,
-    bridge/view/process.py): on opening and at each reload the kept span up to the shown end
-    (a reset), then each new column as it arrives, unless the page is paused or its browser
-    has not painted the last column sent (for up to ``UNPAINTED_WAIT_S``). The page's paint
-    reports come back on the same socket (:meth:`report`).
-
-    ``view``: the :class:`~snn_antenna.bridge.view.history.ViewHistory`; ``mode``: the page's
-    own (``paused``); ``on_sent(t_s)``: told the start of the latest live column sent (the
-    page moves its time axis when a column would fall past it). All of it runs on the view
-    process's server loop."""
-
-    def __init__(self, view, page: str, mode: dict, on_sent=None):
-        self.view, self.page, self.mode, self.on_sent = view, page, mode, on_sent
-        self.socket = None
-        self.end_s = None               # the end of the span shown; None: the latest, live
-        self.cursor = view.windows.total
-        self.sent_t, self.sent_at = None, 0.0
-
-    def attach(self, socket) -> None:
-        """The page's socket opened (a reopened one replaces it): it starts with the span."""
-        self.socket = socket
-        self._reset()
-
-    def detach(self, socket) -> None:
-        if self.socket is socket:
-            self.socket = None
-
-    def show(self, end_s: float | None = None) -> None:
-        """The kept span up to ``end_s`` (None: the latest, and follow the stream again)."""
-        self.end_s = end_s
-        self._reset()
-
-    def behind(self) -> bool:
-        """The browser has not painted the last column sent to it yet (for a while)."""
-        return (self.sent_t is not None
-                and self.view.painted_by.get(self.page) != round(self.sent_t, 6)
-                and time.monotonic() - self.sent_at < UNPAINTED_WAIT_S)
-
-    def waiting(self) -> bool:
-        """Columns arrived that this page has not been sent."""
-        return self.cursor != self.view.windows.total
-
-    def send_new(self) -> bool:
-        """Send the columns that came since the last ones sent, unless the page is paused or
-        behind; whether it follows the stream now."""
-        if self.mode["paused"] or self.behind():
-            return False
-        if self.socket is not None and self.waiting():
-            new = self.view.windows.since(self.cursor)
-            self.cursor = self.view.windows.total
-            self._write(new, live=True, reset=False)
-        return True
-
-    def report(self, message) -> None:
-        """A paint report from the page: the display delay, and what waited for it goes."""
-        try:
-            report = json.loads(message[:300])
-            received = report.get("received_unix_s")
-            self.view.painted(float(report["t_s"]), float(report["painted_unix_s"]),
-                              page=self.page,
-                              received_unix_s=None if received is None else float(received))
-        except (ValueError, KeyError, TypeError, AttributeError):
-            return                      # not a report: nothing to count
-        if self.waiting():
-            self.send_new()
-
-    def _reset(self) -> None:
-        view = self.view
-        live = self.end_s is None
-        end = max(view.t_s, view.history_s) if live else self.end_s
-        rows = view.windows.rows
-        self.cursor = view.windows.total
-        self._write(rows[(rows[:, 0] >= end - view.history_s) & (rows[:, 0] <= end)],
-                    live=live, reset=True)
-
-    def _write(self, rows: np.ndarray, live: bool, reset: bool) -> None:
-        if self.socket is None:
-            return
-        from tornado.websocket import WebSocketClosedError
-
-        try:
-            self.socket.write_message(encode(rows, live, self.view.peak_rate_hz, reset),
-                                      binary=True)
-        except WebSocketClosedError:
-            self.socket = None
-            return
-        if live and len(rows):
-            last = float(rows[-1, 0])
-            self.view.sending(last)
-            self.sent_t, self.sent_at = last, time.monotonic()
-            if self.on_sent is not None:
-                self.on_sent(last)
-
-
-def encode(rows: np.ndarray, live: bool, high: float, reset: bool = False) -> bytes:
-    """One message of the rate map's socket: the header, then the rows (t_s, width_s,
-    rates...), float64 in this machine's byte order (a Float64Array's in the page)."""
-    rows = np.asarray(rows, dtype=np.float64)
-    header = [float(reset), float(live), float(high), float(len(rows)), float(rows.shape[-1])]
-    return np.concatenate([np.array(header), rows.ravel()]).tobytes()

@@ -2,9 +2,10 @@
 gate's threshold Th, the resonators' rate map and each contact with its distance, plus the
 link's counters; and ``/state.json`` with the same state for scripts and tests.
 
-Why Bokeh: its server streams new points into a browser plot (``ColumnDataSource.stream`` with
-a rollover) without any hand-written JavaScript, and it ships its own BokehJS, so the page works
-on a robot's laptop with no internet.
+Why Bokeh: its server keeps a page's widgets, time axis and text in step with the view
+process (a person's click reaches a Python callback), and it ships its own BokehJS, so the
+page works on a robot's laptop with no internet. What streams (the plots' data) goes to each
+page on a socket of its own (bridge/view/feed.py), drawn by the page's own small scripts.
 
 The view never touches the pipeline's time. Its server runs in a process of its own
 (bridge/view/process.py, started with ``spawn``): a page reloaded twice a second makes Bokeh
