@@ -3,6 +3,7 @@ bad value with a SpecError naming field, value and range; changes are scheduled 
 boundaries ahead of the coder, journaled in events.jsonl, and a replay that re-applies them
 finds what the live run found; the view's paint reports and its saved views
 (bridge/view/saved_view.py) read back."""
+import concurrent.futures
 import json
 import math
 import queue
@@ -233,6 +234,9 @@ class PageSocket:
         (name,) = (name for name, code in KINDS.items() if code == kind)
         self.sent.append({"kind": name, "reset": bool(reset), "live": bool(live),
                           "high": float(high), "t": rows[:, 0].round(6).tolist(), "rows": rows})
+        written = concurrent.futures.Future()
+        written.set_result(None)
+        return written
 
     def of(self, kind: str) -> list[dict]:
         return [m for m in self.sent if m["kind"] == kind]
@@ -320,6 +324,24 @@ def test_a_paused_page_gets_no_column_and_its_resume_or_reopened_socket_shows_th
     counted = history.display_latency()["n"]
     feed.report(b"not a report")                    # counted as nothing, refused as nothing
     assert history.display_latency()["n"] == counted == 1
+
+
+def test_a_page_gone_while_a_message_was_on_its_way_is_forgotten_not_an_error():
+    from tornado.websocket import WebSocketClosedError
+
+    class Gone(PageSocket):
+        def write_message(self, message, binary=False):
+            super().write_message(message, binary)
+            written = concurrent.futures.Future()
+            written.set_exception(WebSocketClosedError())
+            return written
+
+    history = ViewHistory(LiveView(_parts()).config)
+    _update, feed, _socket, _doc = _page(history)
+    feed.attach(Gone())
+    assert feed.socket is None                      # its first message failed: forgotten
+    history.take(_frame(0, 0.0))
+    assert feed.send_columns() and feed.socket is None
 
 
 def test_the_page_text_refreshes_twice_a_second_and_at_once_for_a_contact(monkeypatch):

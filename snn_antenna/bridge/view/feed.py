@@ -148,12 +148,16 @@ class PageFeed:
             return
         from tornado.websocket import WebSocketClosedError
 
+        socket = self.socket
         try:
-            self.socket.write_message(encode(kind, rows, live, self.view.peak_rate_hz, reset),
-                                      binary=True)
+            written = socket.write_message(encode(kind, rows, live, self.view.peak_rate_hz,
+                                                  reset), binary=True)
         except WebSocketClosedError:
-            self.socket = None
+            self.detach(socket)
             return
+        # A page that goes away while a message is on its way: the socket is closed (and
+        # forgotten) then, not an error.
+        written.add_done_callback(lambda done: done.exception() and self.detach(socket))
         if kind == "map" and live and len(rows):
             last = float(rows[-1, 0])
             self.view.sending(last)
