@@ -149,6 +149,7 @@ def serve(link, counts):
     return emulator, thread
 
 
+@pytest.mark.slow    # 9 s at 1 kHz; the stream path is in the default suite by test_bridge_stream
 def test_one_window_contact_streams(tmp_path, one_window_counts):
     link = PtyLink(tmp_path / "tty")
     _, server = serve(link, one_window_counts)
