@@ -1,6 +1,6 @@
 """Online pipeline benchmark: real-time factor and sample-to-rate-map latency, one run each.
 
-    python benchmarks/bench_stream.py [--network networks/live.toml] [--seconds 28]
+    python benchmarks/bench_stream.py [--network networks/live.toml] [--seconds 8]
                                       [--set network.dt_ms=0.25 ...] [--speed 12]
                                       [--baseline networks/resonator_array.toml] [--view]
                                       [--browsers 0,1,3]
@@ -81,9 +81,8 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
         try:
             emulator.stdout.readline()              # the pty exists once its path is printed
             source = SerialSource(link).start()
-            consumed = _StopAfter(n_frames)
-            report = run_online(source, parts, stop=consumed.stop,
-                                handlers=[consumed, *([view] if view else [])], view=view)
+            report = run_online(source, parts, stop=_stop_when_consumed(source, n_frames),
+                                handlers=[view] if view else [], view=view)
             source.stop()
         finally:
             emulator.kill()
@@ -94,20 +93,17 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
     return report
 
 
-class _StopAfter:
-    """A handler that stops the run once ``n_frames`` samples were handed to the pipeline: a
-    run measures the input it was asked for, however far the port's reader got ahead."""
+def _stop_when_consumed(source, n_frames):
+    """Stop once every frame was decoded and handed to the pipeline."""
+    stop = threading.Event()
 
-    def __init__(self, n_frames: int):
-        self.n_frames, self.handed, self.stop = n_frames, 0, threading.Event()
+    def watch():
+        while source.decoder.stats.frames < n_frames or source.pending():
+            time.sleep(0.005)
+        stop.set()
 
-    def handle(self, batch) -> None:
-        self.handed += len(batch.samples)
-        if self.handed >= self.n_frames:
-            self.stop.set()
-
-    def idle(self) -> None:
-        pass
+    threading.Thread(target=watch, daemon=True).start()
+    return stop
 
 
 def main(argv=None) -> int:
@@ -115,8 +111,7 @@ def main(argv=None) -> int:
     ap.add_argument("--network", default=str(ROOT / "networks" / "live.toml"))
     ap.add_argument("--baseline", default=str(ROOT / "networks" / "resonator_array.toml"),
                     help="a second network, throughput only, for the ratio ('none': skip)")
-    ap.add_argument("--seconds", type=float, default=28.0,
-                    help="seconds of input per throughput run and for the first live run")
+    ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--speed", type=float, default=12.0,
                     help="the speed command (cm/s) for a network whose gate or CPG reads one "
                          "(networks/live_robot.toml); ignored by the others")

@@ -102,7 +102,7 @@ SMALL_RUNS = {
                       "--set", "spiking.cost_sample_events=8"], coders_ran),
     "bench_events": (["--cost-only", "--cost-events", "4", "--sizes", "24",
                       "--json", "bench.json"], events_ran),
-    "bench_stream": (["--seconds", "2", "--baseline", "none"], stream_ran),
+    "bench_stream": (["--seconds", "1", "--baseline", "none"], stream_ran),
     "bench_sweep": (["--sizes", "40", "--duration-s", "0.05", "--repeat", "1",
                      "--runtime-max", "40", "--naive-sample", "1", "--workers",
                      "--json", "bench.json"], sweep_ran),
