@@ -73,6 +73,34 @@ def test_a_column_between_pulls_goes_to_the_socket_alone_and_no_div_text_changes
 
 
 
+def test_a_pull_due_just_before_a_column_waits_until_after_it():
+    """A pull moves the axis and the browser redraws every plot for it: one due within
+    COLUMN_GUARD_S of the next column goes COLUMN_GUARD_S after that column instead."""
+    from snn_antenna.bridge.view.page import COLUMN_GUARD_S
+
+    history = ViewHistory(LiveView(_parts()).config)
+    pull, feed, socket, doc = _page(history)
+    arrived = queue.Queue()
+    arrived.put(_frame(0, 0.0))
+    history.drain(arrived)                          # a column came in: sent at once
+    _painted(feed, 0.0)
+    history.take(_frame(1, 0.1))                    # points for the next pull
+    sent = len(socket.sent)
+    history.column_at -= history.window_s - 0.01    # the next column is due in 10 ms
+    pull()
+    assert len(socket.sent) == sent                 # nothing now...
+    (later,) = [c for c in doc.session_callbacks if type(c).__name__ == "TimeoutCallback"]
+    assert later.timeout == pytest.approx((0.01 + COLUMN_GUARD_S) * 1000, abs=3)
+    later.callback()                                # ... but just after that column
+    assert {m["kind"] for m in socket.sent[sent:]} == {"map", "xy", "coded"}
+    history.column_at -= 0.05                       # mid-way between columns: at once
+    _painted(feed, 0.1)
+    history.take(_frame(2, 0.2))
+    sent = len(socket.sent)
+    pull()
+    assert {m["kind"] for m in socket.sent[sent:]} == {"map", "xy", "coded"}
+
+
 def _blank(page) -> None:
     """An empty page at an http address (a page's socket opens relative to its address)."""
     page.route("http://view.test/", lambda route: route.fulfill(

@@ -113,6 +113,7 @@ class ViewHistory:
         self.column_listeners: set = set()
         # ... and each page's feed by the page's token: its socket (/feed) finds it here.
         self.feeds: dict = {}
+        self.column_at: float | None = None         # when the latest columns came in
         self.pages_served = 0                       # pages built, ever (each load makes one)
         self.received = 0                           # frames taken
         self.dropped = 0                            # frames the pipeline published, never seen
@@ -130,9 +131,17 @@ class ViewHistory:
             self.take(frame)
             taken += 1
         if self.windows.total != columns:
+            self.column_at = time.monotonic()
             for update_now in list(self.column_listeners):
                 update_now()
         return taken
+
+    def next_column_in(self) -> float | None:
+        """Seconds until the next rate-map column is expected (a window after the last came
+        in), None before the first; negative when it is late."""
+        if self.column_at is None:
+            return None
+        return self.column_at + self.window_s - time.monotonic()
 
     def pull(self) -> None:
         """Take the frames waiting in the inbox, if this history has one."""

@@ -19,6 +19,10 @@ import uuid
 # feed.PageFeed). Each pull moves the time axis and redraws the page's three canvases; the
 # lines move in steps of a fiftieth of the 10 s they show.
 PAGE_UPDATE_MS = 200
+# A pull moves the time axis, and the browser redraws all of the page's plots for it: a column
+# that came meanwhile would wait for that. A pull due this close before the next column is
+# expected waits until this long after it: pulls fall between columns.
+COLUMN_GUARD_S = 0.04
 # The counters and panels twice a second (a contact at once): a person reads them no faster.
 TEXT_UPDATE_S = 0.5
 # Their text is written into the Divs' own elements by the page: a change of a Div's ``text``
@@ -82,8 +86,14 @@ def build_page(view, doc) -> None:
     # A page nobody holds (reloaded, closed, or not connected yet) costs nothing until its
     # session is discarded or a browser connects: it then catches up from its cursors.
     def pull() -> None:
-        if connected(doc):
-            update()
+        if not connected(doc):
+            return
+        wait_s = view.next_column_in()
+        if wait_s is not None and 0 <= wait_s < COLUMN_GUARD_S:
+            doc.add_timeout_callback(lambda: connected(doc) and update(),
+                                     (wait_s + COLUMN_GUARD_S) * 1000)
+            return
+        update()
 
     doc.add_periodic_callback(pull, PAGE_UPDATE_MS)
 
