@@ -175,5 +175,6 @@ def test_a_benchmark_runs_its_small_mode_end_to_end(name, monkeypatch, capsys, t
     module = script(name, monkeypatch)
     monkeypatch.chdir(tmp_path)
     argv, promised = SMALL_RUNS[name]
-    module.main(argv)
-    promised(capsys.readouterr().out, tmp_path)
+    ended = module.main(argv)
+    assert ended == 0 or isinstance(ended, dict), ended   # bench_coders returns its table
+    promised(capsys.readouterr().out, tmp_path)             # each asserts what its script promises

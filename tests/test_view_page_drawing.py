@@ -101,11 +101,16 @@ def test_a_pull_due_just_before_a_column_waits_until_after_it():
     assert {m["kind"] for m in socket.sent[sent:]} == {"map", "xy", "coded"}
 
 
-def _blank(page) -> None:
-    """An empty page at an http address (a page's socket opens relative to its address)."""
+def _blank(playwright, height: int):
+    """Chromium and an empty page 1100 px wide at an http address (a page's socket opens
+    relative to its address): (browser, page)."""
+    browser = playwright.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                         args=["--no-sandbox"])
+    page = browser.new_page(viewport={"width": 1100, "height": height}, device_scale_factor=1)
     page.route("http://view.test/", lambda route: route.fulfill(
         body="<body style='margin:0'></body>", content_type="text/html"))
     page.goto("http://view.test/")
+    return browser, page
 
 
 SETUP_JS = """([code, n, frame]) => {
@@ -151,11 +156,7 @@ def test_the_rate_map_draws_once_per_frame_and_a_new_column_alone():
     playwright = pytest.importorskip("playwright.sync_api")
     n = 24
     with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                    args=["--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1100, "height": 400},
-                                device_scale_factor=1)
-        _blank(page)
+        browser, page = _blank(p, height=400)
         page.evaluate(SETUP_JS, [FEED_JS + RATE_MAP_JS, n, FRAME])
 
         def fills(script: str) -> int:
@@ -251,11 +252,7 @@ LINES_SETUP_JS = """([code, frame]) => {
 def test_the_line_plots_draw_once_per_frame_on_the_shared_axis_and_pan_it():
     playwright = pytest.importorskip("playwright.sync_api")
     with playwright.sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
-                                    args=["--no-sandbox"])
-        page = browser.new_page(viewport={"width": 1100, "height": 300},
-                                device_scale_factor=1)
-        _blank(page)
+        browser, page = _blank(p, height=300)
         page.evaluate(LINES_SETUP_JS, [FEED_JS + LINES_JS, FRAME])
         strokes = page.evaluate("""async () => {
             trigger('ready'); points(); trigger('view'); trigger('view');
