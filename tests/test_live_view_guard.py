@@ -50,12 +50,30 @@ def test_a_foreign_host_is_refused_on_every_path(view, path):
                                              "Origin: http://attacker.example"]) == 403
 
 
-def test_a_websocket_from_a_foreign_origin_or_host_is_refused(view):
+@pytest.mark.parametrize("path", ["/ws", "/feed?page=0"])
+def test_a_websocket_from_a_foreign_origin_or_host_is_refused(view, path):
     port = view.port
-    assert status("127.0.0.1", port, "/ws", websocket_upgrade(
+    assert status("127.0.0.1", port, path, websocket_upgrade(
         f"127.0.0.1:{port}", f"http://attacker.example:{port}")) == 403
-    assert status("127.0.0.1", port, "/ws", websocket_upgrade(
+    assert status("127.0.0.1", port, path, websocket_upgrade(
         f"rebound.example:{port}", f"http://rebound.example:{port}")) == 403
+    assert status("127.0.0.1", port, path, websocket_upgrade(
+        f"127.0.0.1:{port}", f"http://127.0.0.1:{port}")) == 101
+
+
+def test_a_page_socket_for_no_page_of_this_view_is_closed_saying_so(view):
+    """``/feed`` with a token no page of this view was built with: closed (4404), nothing
+    sent."""
+    from tornado.ioloop import IOLoop
+    from tornado.websocket import websocket_connect
+
+    async def first_message():
+        socket = await websocket_connect(f"ws://127.0.0.1:{view.port}/feed?page=nope")
+        message = await socket.read_message()
+        return message, socket.close_code, socket.close_reason
+
+    assert IOLoop().run_sync(first_message, timeout=30) == (None, 4404,
+                                                            "no such page: reload it")
 
 
 def view_args(host):
