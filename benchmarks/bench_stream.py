@@ -70,7 +70,7 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         link = os.path.join(tmp, "tty")
         emulator = subprocess.Popen(
-            [sys.executable, "-m", "snn_antenna.bridge.cli", "emulate", "--pty", "--link", link,
+            [sys.executable, "-m", "snn_antenna.cli", "emulate", "--pty", "--link", link,
              # More frames than measured: an emulator that ends closes the pty, and bytes
              # still unread in it would be lost (the run would wait for them in vain). Flat
              # out, it ends as soon as the reader has taken all but the pty's buffer (tens of

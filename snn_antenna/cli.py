@@ -10,80 +10,70 @@ study on the plan that phase built.
 from __future__ import annotations
 
 import argparse
-import dataclasses
+import os
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
-from .core import bounds, outputs
-from .core.bounds import option
+from . import __version__
+from .bridge import cli as bridge_cli
+from .core import bounds, commands, outputs
+from .core import spec as specs
+from .core.commands import LIST, POSITIONAL, Command, Option
 from .core.errors import SpecError, guarded
+from .core.files import cache_root, not_ours
+from .data import command as data_command
+from .engine import executor
+from .engine.cost import LONG_SWEEP_S
+from .engine.spec_rules import check_spec
+from .networks.neurons import raise_on_ctrl_c
 from .report import results as results_page
 from .studies import runner
-from .studies.contract import scheduler_address
+from .studies.contract import STUDY_OPTIONS, Options, cache_folder, check_options
 
 
-def _run(args) -> int:
-    plan, folder, options = first_phase(args)
-    if options.check:                   # everything a run would refuse has been said
-        for line in plan.left_out:      # and what it would leave out of the spec
-            print(f"{args.spec}: {line}")
-        print(f"{args.spec}: the spec and --out {folder.path} are accepted ({plan.study}); "
-              "nothing was run")
-        outputs.release(folder)
-        return 0
-    try:
-        folder.clear()                  # --force: another study's files, now that all passed
-        outputs.claim(folder)
-    except BaseException:
-        outputs.release(folder)
-        raise
-    from .networks.neurons import raise_on_ctrl_c
-    raise_on_ctrl_c()                   # Ctrl-C stops the study, never just one Brian2 run
-    try:
-        runner(plan.study).run(plan, folder.path, options)
-    finally:
-        outputs.record(folder)          # what this run wrote, however it ended; unlock
-    return 0
+def _run(options) -> int:
+    with first_phase(options) as (plan, folder, study_options):
+        if study_options.check:         # everything a run would refuse has been said
+            for line in plan.left_out:  # and what it would leave out of the spec
+                print(f"{options.spec}: {line}")
+            print(f"{options.spec}: the spec and --out {folder.path} are accepted "
+                  f"({plan.study}); nothing was run")
+            return 0                    # the folder is released as it was
+        folder.claim()                  # --force: another study's files go, now all passed
+        raise_on_ctrl_c()               # Ctrl-C stops the study, never just one Brian2 run
+        runner(plan.study).run(plan, folder.path, study_options)
+    return 0                            # what the run wrote is recorded, however it ended
 
 
-def first_phase(args):
+@contextmanager
+def first_phase(options):
     """Every check a run makes before its work, in one path (``--check`` stops after it):
     the options against what the study takes, the spec as resolved (its seeds included),
     the rules joining its sections, every part the study builds without simulating, the
     output folder and the names the run will write there, the caches, and the cost. Nothing
-    here imports Brian2 or starts a worker. Returns the plan the run goes on with, the
-    prepared (locked) output folder and the options."""
-    from .core import spec as specs
-    from .engine.spec_rules import check_spec
-    from .core.files import cache_root
-    from .studies.contract import Options, cache_folder, refused_options
-
-    options = Options(**{f.name: getattr(args, f.name) for f in dataclasses.fields(Options)})
-    spec = specs.load(args.spec, args.set, quick=args.quick)
+    here imports Brian2 or starts a worker. Yields the plan the run goes on with, the output
+    folder (checked and locked: the first phase of ``outputs.output_folder``) and the
+    study's options."""
+    study_options = Options(**{o.name: getattr(options, o.name) for o in STUDY_OPTIONS})
+    spec = specs.load(options.spec, options.set, quick=study_options.quick)
     study = spec.get("study")
     module = runner(study)
-    refusal = refused_options(study, module.OPTIONS, options)
-    if refusal:
-        args.parser.error(refusal)
-    if options.data is not None:
-        spec["data"] = options.data
-    check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in args.set])
+    check_options(study, module.OPTIONS, study_options)
+    if study_options.data is not None:
+        spec["data"] = study_options.data
+    check_spec(spec, user_keys=[item.split("=", 1)[0].strip() for item in options.set])
     plan = module.plan(spec)            # every field in its bounds, every part built
-    out = Path(args.out) if args.out else Path("out") / Path(args.spec).stem
+    out = Path(options.out) if options.out else Path("out") / Path(options.spec).stem
     check_out(out)
-    from .engine.executor import probe_scheduler
-
-    probe_scheduler(options.scheduler)  # what listens there, before --out is touched
-    folder = outputs.prepare(out, study, force=options.force, fresh=options.fresh)  # locked
-    try:
+    executor.probe_scheduler(study_options.scheduler)  # what listens there, before --out
+    with outputs.output_folder(out, study, force=study_options.force,
+                               fresh=study_options.fresh) as folder:
         check_names(folder)
         if uses_standalone(spec):
             cache_folder("SNN_ANTENNA_CACHE", cache_root())
-        check_cost(plan, options)
-    except BaseException:
-        outputs.release(folder)
-        raise
-    return plan, folder, options
+        check_cost(plan, study_options)
+        yield plan, folder, study_options
 
 
 # Names a study writes at the top of its output folder (its report, summary, log, figures,
@@ -107,8 +97,6 @@ def uses_standalone(spec) -> bool:
 def check_out(out: Path) -> None:
     """An --out the file system can hold with what a run writes below it, reached by no
     link that leads nowhere."""
-    import os
-
     absolute = os.path.abspath(out)
     if len(absolute.encode("utf-8", "surrogateescape")) + ROOM_IN_OUT > bounds.PATH_MAX:
         raise SpecError("--out", str(out), f"a path short enough for the files a run writes "
@@ -123,10 +111,6 @@ def check_out(out: Path) -> None:
 
 def check_names(folder) -> None:
     """No file of the user's where the run will write one of its own."""
-    import os
-
-    from .core.files import not_ours
-
     if not folder.path.is_dir():
         return
     ours = folder.listed | folder.replace
@@ -138,8 +122,6 @@ def check_names(folder) -> None:
 def check_cost(plan, options) -> None:
     """A study expected to run beyond the limit is refused without ``--yes``, naming the key
     that sets its length. The estimate is the plan's own."""
-    from .engine.cost import LONG_SWEEP_S
-
     estimate = plan.estimate()
     if estimate is None:
         return
@@ -156,72 +138,28 @@ def check_cost(plan, options) -> None:
                         "--yes to run it anyway")
 
 
-class OneLineParser(argparse.ArgumentParser):
-    """Bad options are one line too (the usage is one ``-h`` away), exit status 2; the
-    subcommands' parsers are of this class as well."""
+RUN = Command(
+    "run", "run a study spec (studies/*.toml) and write its report", _run, (
+        Option("spec", "path of a study spec, e.g. studies/quickstart.toml", kind=POSITIONAL),
+        Option("out", "output folder (default out/SPEC-NAME)", check=bounds.out_path,
+               text=True),
+        Option("set", "override a spec field, e.g. --set network.n_neurons=48 (repeatable)",
+               kind=LIST, metavar="KEY=VALUE"),
+        *STUDY_OPTIONS))
 
-    def error(self, message):
-        hint = ""
-        if message.startswith("unrecognized arguments:"):    # a misspelt option: suggest
-            import difflib
-
-            known = [o for a in self._actions for o in a.option_strings]
-            close = {m for given in message.split(":", 1)[1].split()
-                     for m in difflib.get_close_matches(given, known, n=1)}
-            hint = f"; did you mean {', '.join(sorted(close))}?" if close else ""
-        self.exit(2, f"{self.prog}: error: {message}{hint} (see {self.prog} -h)\n")
+# Every subcommand, in the order ``snn-antenna -h`` lists them.
+COMMANDS = (RUN, *results_page.COMMANDS, *bridge_cli.COMMANDS, *data_command.COMMANDS)
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = OneLineParser(
-        prog="snn-antenna",
-        description="Spiking neural networks (Brian2) that read an insect-inspired antenna.")
-    from . import __version__
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a study spec (studies/*.toml) and write its report")
-    run.add_argument("spec", help="path of a study spec, e.g. studies/quickstart.toml")
-    run.add_argument("--out", type=option(bounds.out_path, text=True),
-                     help="output folder (default out/SPEC-NAME)")
-    run.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                     help="override a spec field, e.g. --set network.n_neurons=48 (repeatable)")
-    run.add_argument("--quick", action="store_true",
-                     help="apply the spec's [quick] profile: "
-                          "a small run for tests and first looks")
-    run.add_argument("--fresh", action="store_true",
-                     help="studies that keep results or caches: discard them and start over")
-    run.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                     type=option(scheduler_address, text=True),
-                     help="studies with Dask workers: run on an existing Dask cluster instead "
-                          "of a local one")
-    run.add_argument("--data", metavar="PATH", type=option(bounds.out_path, text=True),
-                     help="studies that read recorded data sets: the folder they are in (sets "
-                          "the spec's data)")
-    run.add_argument("--force", action="store_true",
-                     help="reuse an --out folder that holds another study's outputs or other "
-                          "files: what snn-antenna wrote there is replaced, other files are kept")
-    run.add_argument("--check", action="store_true",
-                     help="check the spec, its estimate and --out as a run would, then stop "
-                          "without running or writing anything")
-    run.add_argument("--yes", action="store_true",
-                     help="run even when the estimate is beyond the limit (1 h)")
-    run.set_defaults(func=_run, parser=run)
-    results_page.add_subcommand(sub)
-    from .bridge.cli import add_subcommands
-    from .data.command import add_subcommands as add_data_subcommands
-
-    add_subcommands(sub)
-    add_data_subcommands(sub)
-    return parser
+    return commands.build_parser(
+        "snn-antenna", "Spiking neural networks (Brian2) that read an insect-inspired antenna.",
+        __version__, COMMANDS)
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
-    args, unknown = parser.parse_known_args(argv)
-    if unknown:   # a misspelt option (--quik) gets its own command's usage, not the top one
-        commands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-        commands.choices[args.command].error(f"unrecognized arguments: {' '.join(unknown)}")
-    return guarded(args.func, args, "snn-antenna")
+    args = commands.parse(build_parser(), argv)
+    return guarded(args.command, args, "snn-antenna")
 
 
 if __name__ == "__main__":

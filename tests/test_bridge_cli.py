@@ -14,7 +14,7 @@ from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulate.emulator import Emulator
 from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
 
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 
 
 def run_cli(*args, timeout=30):

@@ -18,7 +18,7 @@ from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
 from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 NETWORK = ROOT / "networks" / "resonator_array.toml"
 
 

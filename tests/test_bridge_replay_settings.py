@@ -100,7 +100,7 @@ def test_replay_reports_the_live_contacts_beside_its_own(tmp_path):
     meta.update(network="networks/live.toml", set=["preprocess.threshold=0.07"],
                 live={"contacts": live_contacts})
     meta_path.write_text(json.dumps(meta))
-    done = subprocess.run([sys.executable, "-m", "snn_antenna.bridge.cli", "replay", str(rec),
+    done = subprocess.run([sys.executable, "-m", "snn_antenna.cli", "replay", str(rec),
                            "--network", "networks/live.toml", "--set",
                            "preprocess.threshold=0.03"], capture_output=True, text=True,
                           timeout=300)

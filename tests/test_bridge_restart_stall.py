@@ -17,7 +17,7 @@ from snn_antenna.bridge.emulate.emulator import Emulator, FaultPlan
 from snn_antenna.bridge.emulate.links import PtyLink
 from snn_antenna.bridge.wire.recorder import COUNT_FIELDS
 
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 
 
 def start_record(port, out, *options):

@@ -22,7 +22,7 @@ from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "resonator_array.toml"
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 
 
 def test_stream_detects_a_contact_live_and_records_everything(tmp_path):

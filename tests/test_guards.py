@@ -15,6 +15,7 @@ import pytest
 from snn_antenna.core import outputs
 from snn_antenna.core.files import atomic_write
 from snn_antenna.cli import main
+from folder_runs import Run, checked, claimed
 from snn_antenna.core.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -139,7 +140,7 @@ def fake_outputs(folder: Path, study: str, files=("report.html", "summary.json")
     """A finished run of ``study`` into ``folder``, written as the toolkit writes (journaled)."""
     from snn_antenna.core.files import atomic_write, make_folder
 
-    with outputs.output_folder(folder, study):
+    with claimed(folder, study):
         for name in files:
             atomic_write(folder / name, study)
         make_folder(folder / "results.zarr")
@@ -169,13 +170,11 @@ def test_force_clears_only_what_the_toolkit_wrote(tmp_path):
     folder = tmp_path / "o"
     fake_outputs(folder, "tuning_sweep")
     (folder / "notes.txt").write_text("my notes")
-    prepared = outputs.prepare(folder, "quickstart", force=True)
-    assert (folder / "report.html").exists()             # not yet
-    prepared.clear()
-    assert sorted(p.name for p in folder.iterdir()) == [outputs.MANIFEST, "notes.txt"]
-    outputs.claim(prepared)
-    atomic_write(folder / "report.html", "new report")
-    outputs.record(prepared)
+    with outputs.output_folder(folder, "quickstart", force=True) as prepared:
+        assert (folder / "report.html").exists()             # not yet
+        prepared.claim()
+        assert sorted(p.name for p in folder.iterdir()) == [outputs.MANIFEST, "notes.txt"]
+        atomic_write(folder / "report.html", "new report")
     manifest = outputs.read_manifest(folder)
     assert manifest["study"] == "quickstart" and manifest["files"] == ["report.html"]
 
@@ -183,11 +182,10 @@ def test_force_clears_only_what_the_toolkit_wrote(tmp_path):
 def test_a_study_reruns_into_its_own_folder(tmp_path):
     folder = tmp_path / "o"
     fake_outputs(folder, "quickstart")
-    prepared = outputs.prepare(folder, "quickstart")       # no refusal, nothing removed
-    assert (folder / "results.zarr" / "zarr.json").is_file()
-    outputs.claim(prepared)
-    atomic_write(folder / "rate_map.png", "new figure")
-    outputs.record(prepared)
+    with outputs.output_folder(folder, "quickstart") as prepared:   # no refusal
+        assert (folder / "results.zarr" / "zarr.json").is_file()  # nothing removed
+        prepared.claim()
+        atomic_write(folder / "rate_map.png", "new figure")
     assert outputs.read_manifest(folder)["files"] == ["rate_map.png", "report.html",
                                                       "results.zarr", "summary.json"]
 
@@ -412,18 +410,16 @@ def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(t
     from snn_antenna.core.files import make_folder, open_append
 
     out = tmp_path / "sweep"
-    folder = outputs.prepare(out, "tuning_sweep")
-    outputs.claim(folder)
+    run = Run(out, "tuning_sweep")
     make_folder(out / "results.zarr")
     with open_append(out / "run.log") as f:
         f.write("started\n")
-    outputs.release(folder)                  # the run is killed here: record never runs
+    run.kill()                               # the run is killed here: record never runs
     (out / "notes.txt").write_text("mine")   # the user's, added after the kill
-    again = outputs.prepare(out, "tuning_sweep", force=True)
-    outputs.release(again)
+    again = checked(out, "tuning_sweep", force=True)
     assert set(again.listed) == {"results.zarr", "run.log"}
     with pytest.raises(SpecError, match="tuning_sweep"):
-        outputs.prepare(out, "quickstart")
+        checked(out, "quickstart")
 
 
 def test_a_refused_run_leaves_no_folder_behind(tmp_path):
@@ -431,7 +427,7 @@ def test_a_refused_run_leaves_no_folder_behind(tmp_path):
 
     out = tmp_path / "new"
     with pytest.raises(SpecError):
-        with outputs.output_folder(out, "quickstart"):
+        with claimed(out, "quickstart"):        # made, then refused before any write
             raise SpecError("seed", -1, "a seed ≥ 0")
     assert not out.exists()
 

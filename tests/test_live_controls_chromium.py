@@ -30,7 +30,7 @@ from test_live_view import get_json, view_url
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "live.toml"
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 PACE = 2.0                  # the emulator sends at twice the board's rate: 7 s of scene in 3.5 s
 SECOND_CONTACT_S = 5.0

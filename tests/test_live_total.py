@@ -19,6 +19,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from snn_antenna.bridge import cli as bridge_cli
+from snn_antenna.cli import main
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulate.emulator import Emulator
 from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
@@ -31,7 +32,7 @@ from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "resonator_array.toml"
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 # A contact 50 ms into a 1 s window rings out (≈ 0.3 s) inside that window: the episode is
 # exactly one window long, the shape that crashed the read-out.
 ONE_WINDOW = ["--set", "readout.window_s=1.0", "--set", "preprocess.threshold=0.05"]
@@ -192,7 +193,7 @@ def test_stream_failure_marks_the_recording_incomplete(tmp_path, monkeypatch, ca
     link = PtyLink(tmp_path / "tty")
     _, server = serve(link, one_window_counts[:2500])
     try:
-        code = bridge_cli.main(["stream", "--port", link.path, "--network", str(NETWORK),
+        code = main(["stream", "--port", link.path, "--network", str(NETWORK),
                                 "--out", str(tmp_path / "rec"), "--duration", "9"])
     finally:
         link.close()

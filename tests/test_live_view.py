@@ -33,7 +33,7 @@ from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "resonator_array.toml"
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 TH = ["--set", "preprocess.threshold=0.05"]
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 

@@ -22,7 +22,7 @@ from snn_antenna.sources.stimuli import Contact, RobotScene
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORK = ROOT / "networks" / "live.toml"
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 # Parts a live network does not run: none of their panels may appear.
 ABSENT = ("Speed gate", "speed (cm/s)", "CPG", "phase", "pan-tilt", "stop signal", "Control")
 

@@ -21,6 +21,7 @@ from snn_antenna.core import outputs
 from snn_antenna.core.errors import SpecError
 from snn_antenna.core.files import atomic_write, make_folder, open_append
 from snn_antenna.core.store import Output, SweepStore, write_dataset
+from folder_runs import Run, claimed
 
 
 def users_file(path: Path, text: str = "mine") -> tuple:
@@ -52,7 +53,7 @@ def _dataset():
 
 
 def finished_run(out: Path, study: str, names=("report.html",), store: str | None = None):
-    with outputs.output_folder(out, study):
+    with claimed(out, study):
         for name in names:
             atomic_write(out / name, f"{study} {name}")
         if store:
@@ -66,7 +67,7 @@ def test_force_keeps_a_users_file_that_bears_a_staging_name(tmp_path, staged):
     finished_run(out, "quickstart")
     mine = users_file(out / staged, "my partial results")
     try:
-        with outputs.output_folder(out, "tuning_sweep", force=True):
+        with claimed(out, "tuning_sweep", force=True):
             write_dataset(_dataset(), out / "results.zarr")
     except SpecError:
         pass                                        # a refusal is fine; a deletion is not
@@ -138,7 +139,7 @@ def test_a_link_inside_a_store_is_kept_when_the_store_would_be_removed(tmp_path)
     link = out / "results.zarr" / "mine"
     link.symlink_to(theirs, target_is_directory=True)
     try:
-        with outputs.output_folder(out, "quickstart", force=True):
+        with claimed(out, "quickstart", force=True):
             atomic_write(out / "report.html", "quickstart")
     except SpecError as exc:
         assert "mine" in str(exc)
@@ -148,7 +149,7 @@ def test_a_link_inside_a_store_is_kept_when_the_store_would_be_removed(tmp_path)
 def test_a_write_below_a_link_inside_the_output_folder_is_refused(tmp_path):
     theirs = _outside(tmp_path)
     out = tmp_path / "out"
-    with outputs.output_folder(out, "quickstart"):
+    with claimed(out, "quickstart"):
         make_folder(out / "figures")
         (theirs / "sub").mkdir()
         (out / "figures" / "maps").symlink_to(theirs, target_is_directory=True)
@@ -171,12 +172,12 @@ def test_an_output_the_user_replaced_or_edited_is_theirs(tmp_path, how):
             f.write("<!-- my notes -->")
         mine = state(report)
     # another study with --force removes only what is still the toolkit's
-    with outputs.output_folder(out, "quickstart", force=True):
+    with claimed(out, "quickstart", force=True):
         pass
     assert state(report) == mine and not (out / "summary.json").exists()
     # a rerun never replaces it either
     with pytest.raises(SpecError, match="report.html"):
-        with outputs.output_folder(out, "quickstart", force=True):
+        with claimed(out, "quickstart", force=True):
             atomic_write(report, "quickstart's report")
     assert state(report) == mine
 
@@ -188,7 +189,7 @@ def test_a_store_the_user_replaced_is_not_removed_by_force(tmp_path):
     shutil.rmtree(out / "results.zarr")
     (out / "results.zarr").mkdir()
     mine = users_file(out / "results.zarr" / "zarr.json", "my own store")
-    with outputs.output_folder(out, "quickstart", force=True):
+    with claimed(out, "quickstart", force=True):
         pass
     assert state(out / "results.zarr" / "zarr.json") == mine
 
@@ -197,25 +198,23 @@ def test_a_file_the_user_put_inside_a_store_is_not_removed_by_force(tmp_path):
     out = tmp_path / "out"
     finished_run(out, "tuning_sweep", (), store="results.zarr")
     mine = users_file(out / "results.zarr" / "notes.txt")
-    with outputs.output_folder(out, "quickstart", force=True):
+    with claimed(out, "quickstart", force=True):
         pass
     assert state(out / "results.zarr" / "notes.txt") == mine
 
 
 def test_a_killed_sweep_resumes_and_no_other_study_removes_it(tmp_path):
     out = tmp_path / "out"
-    folder = outputs.prepare(out, "tuning_sweep")
-    outputs.claim(folder)
+    run = Run(out, "tuning_sweep")
     _store(out / "results.zarr").write_chunk(0, {"k": slice(0, 2)}, {"rate": np.ones(2)})
-    outputs.release(folder)                     # killed: its journal says "running"
-    with outputs.output_folder(out, "tuning_sweep"):
+    run.kill()                                  # killed: its journal says "running"
+    with claimed(out, "tuning_sweep"):
         assert _store(out / "results.zarr").done_chunks() == {0}       # resumed
-    folder = outputs.prepare(out, "tuning_sweep")
-    outputs.claim(folder)
+    run = Run(out, "tuning_sweep")
     _store(out / "results.zarr").write_chunk(1, {"k": slice(2, 4)}, {"rate": np.ones(2)})
-    outputs.release(folder)                     # killed again, mid-sweep
+    run.kill()                                  # killed again, mid-sweep
     mine = users_file(out / "results.zarr" / "mine.txt")
-    with outputs.output_folder(out, "quickstart", force=True):
+    with claimed(out, "quickstart", force=True):
         with pytest.raises(SpecError, match="killed left it unfinished"):
             _store(out / "results.zarr")        # what a killed run left is never removed
     assert state(out / "results.zarr" / "mine.txt") == mine
@@ -235,13 +234,13 @@ def test_an_append_refuses_a_file_with_another_hard_link(tmp_path):
 
 def test_an_append_to_a_journaled_log_the_user_replaced_is_refused(tmp_path):
     out = tmp_path / "out"
-    with outputs.output_folder(out, "quickstart"):
+    with claimed(out, "quickstart"):
         with open_append(out / "run.log") as f:
             f.write("line\n")
     (out / "run.log").unlink()
     mine = users_file(out / "run.log", "my log\n")
     with pytest.raises(SpecError, match="run.log"):
-        with outputs.output_folder(out, "quickstart", force=True):
+        with claimed(out, "quickstart", force=True):
             with open_append(out / "run.log") as f:
                 f.write("line\n")
     assert state(out / "run.log") == mine
@@ -283,7 +282,7 @@ def test_a_staging_name_already_taken_is_passed_over(tmp_path, monkeypatch):
     taken = [tmp_path / f".report.html.{os.getpid()}-{n}.tmp" for n in range(2)] + \
         [tmp_path / f".{outputs.MANIFEST}.{os.getpid()}-2.tmp"]
     mine = [users_file(path) for path in taken]
-    with outputs.output_folder(tmp_path, "quickstart", force=True):
+    with claimed(tmp_path, "quickstart", force=True):
         atomic_write(tmp_path / "report.html", "report")
     assert [state(path) for path in taken] == mine
     assert (tmp_path / "report.html").read_text() == "report"
@@ -424,13 +423,7 @@ class UserAndToolkit(RuleBasedStateMachine):
     def _run(self, study, writes, force, fresh, killed):
         STATS["runs"] += 1
         try:
-            folder = outputs.prepare(self.out, study, force=force, fresh=fresh)
-            try:
-                folder.clear()
-                outputs.claim(folder)
-            except BaseException:
-                outputs.release(folder)
-                raise
+            run = Run(self.out, study, force=force, fresh=fresh)
             try:
                 for i, name in enumerate(writes):
                     if i == killed:
@@ -441,9 +434,9 @@ class UserAndToolkit(RuleBasedStateMachine):
                          else self.unfinished.discard)(name)
             finally:
                 if killed is None:
-                    outputs.record(folder)
+                    run.end()
                 else:
-                    outputs.release(folder)         # killed: the journal says "running"
+                    run.kill()                      # killed: the journal says "running"
         except SpecError:
             STATS["refusals"] += 1
 

@@ -30,7 +30,7 @@ from snn_antenna.bridge.wire.recorder import (
 from snn_antenna.bridge.wire.source import Batch
 from snn_antenna.core.errors import SpecError
 
-CLI = [sys.executable, "-m", "snn_antenna.bridge.cli"]
+CLI = [sys.executable, "-m", "snn_antenna.cli"]
 FILES = (META_FILE, SAMPLES_FILE, RAW_FILE, EVENTS_FILE)
 ODD_VALUES = [None, "x", -1, 0, 1.5, [], {}, True, float("inf"), 2 ** 70, "binary", [1, 2]]
 

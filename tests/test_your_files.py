@@ -28,6 +28,7 @@ from snn_antenna.cli import main
 from snn_antenna.core.errors import SpecError
 from snn_antenna.core.files import atomic_write, open_append
 from snn_antenna.core.store import DamagedStore, Output, SweepStore
+from folder_runs import checked, claimed
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICKSTART = str(ROOT / "studies" / "quickstart.toml")
@@ -58,7 +59,7 @@ def _killed_child(folder: Path, study: str, writes, force=False, kill_at=None,
     if pid == 0:                                        # the child: a run, as the CLI runs one
         code = 0
         try:
-            with outputs.output_folder(folder, study, force=force, fresh=fresh):
+            with claimed(folder, study, force=force, fresh=fresh):
                 for i, name in enumerate(writes):
                     if i == kill_at:
                         os.kill(os.getpid(), signal.SIGKILL)
@@ -87,7 +88,7 @@ def test_a_users_file_added_after_a_killed_run_survives_rerun_and_force(tmp_path
     mine = users_file(out / "notes.txt")
     # the user's file is not taken for the killed run's output (its journal says what it made)
     with pytest.raises(SpecError, match="notes.txt"):
-        outputs.release(outputs.prepare(out, "quickstart"))
+        checked(out, "quickstart")
     assert _killed_child(out, "quickstart", ["report.html"], force=True) == 0
     assert _killed_child(out, "tuning_sweep", ["results.zarr"], force=True) == 0
     assert untouched_state(out / "notes.txt") == mine
@@ -117,23 +118,18 @@ def test_force_never_overwrites_a_users_file_that_bears_a_toolkit_name(tmp_path)
 
 def test_a_second_run_into_a_busy_folder_is_refused_with_the_holder(tmp_path):
     out = tmp_path / "out"
-    first = outputs.prepare(out, "quickstart")
-    outputs.claim(first)
-    try:
+    with claimed(out, "quickstart"):
         with pytest.raises(SpecError, match=f"PID {os.getpid()}") as err:
-            outputs.prepare(out, "quickstart")
+            checked(out, "quickstart")
         assert "quickstart" in str(err.value) and "since" in str(err.value)
-    finally:
-        outputs.record(first)
-    outputs.release(outputs.prepare(out, "quickstart"))      # free again once it ended
+    checked(out, "quickstart")                              # free again once it ended
 
 
 def test_a_lock_left_by_a_dead_process_is_taken_over(tmp_path):
     out = tmp_path / "out"
     assert _killed_child(out, "quickstart", ["run.log", "a.png"], kill_at=1) < 0
-    again = outputs.prepare(out, "quickstart")      # the kernel released the dead run's lock
-    outputs.claim(again)
-    outputs.record(again)
+    with claimed(out, "quickstart"):                # the kernel released the dead run's lock
+        pass
     assert outputs.read_manifest(out)["status"] == "ended"
 
 
@@ -218,7 +214,7 @@ def test_a_recording_file_that_is_a_symlink_is_refused(tmp_path):
     rec = tmp_path / "rec"
     rec.mkdir()
     (rec / "raw.bin").symlink_to(target)
-    with pytest.raises(SpecError, match="symbolic link"):
+    with pytest.raises(SpecError, match="new or empty folder; it holds raw.bin"):
         Recorder(rec, port="x", wire_format="binary", baudrate=250000)
     assert untouched_state(target) == kept
 
@@ -232,7 +228,7 @@ def test_force_keeps_a_listed_entry_replaced_by_a_symlink(tmp_path):
     import shutil
     shutil.rmtree(out / "results.zarr")
     (out / "results.zarr").symlink_to(theirs, target_is_directory=True)
-    with outputs.output_folder(out, "quickstart", force=True) as folder:
+    with claimed(out, "quickstart", force=True) as folder:
         assert "results.zarr" not in folder.listed       # no longer the toolkit's entry
         with pytest.raises(SpecError, match="results.zarr"):
             atomic_write(out / "results.zarr" / "zarr.json", "{}")
@@ -436,7 +432,7 @@ def test_a_damaged_manifest_is_named(tmp_path):
     out.mkdir()
     (out / outputs.MANIFEST).write_text("{not json")
     with pytest.raises(SpecError, match="damaged"):
-        outputs.prepare(out, "quickstart")
+        checked(out, "quickstart")
 
 
 def test_summary_and_store_attributes_record_the_code(tmp_path):

@@ -1,12 +1,11 @@
-"""The bridge's subcommands: ``record``, ``replay``, ``emulate``, ``stream``.
-
-``snn_antenna.cli`` mounts them with :func:`add_subcommands`; ``python -m snn_antenna.bridge.cli``
-runs them on their own. Every command exits non-zero with a one-line message for a port that
-does not exist, is busy, or stays silent, and never waits forever for one.
+"""The bridge's subcommands: ``record``, ``replay``, ``emulate``, ``stream``, declared in
+:data:`COMMANDS` (``snn_antenna.cli`` mounts them). Every command exits non-zero with a one-line
+message for a port that does not exist, is busy, or stays silent, and never waits forever for
+one.
 """
 from __future__ import annotations
 
-import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -14,107 +13,16 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..core import bounds
-from ..core.bounds import option
-from ..core.errors import NumericalInstabilityError, PipelineError, SpecError, guarded
-from .wire.protocol import WIRE_FORMATS
-from .wire.recorder import COUNT_FIELDS
+from ..core.commands import LIST, POSITIONAL, SWITCH, Command, Option
+from ..core.errors import PipelineError, SpecError
+from ..core.outputs import output_folder
 from .emulate.command import cmd_emulate, faults_help
+from .wire.protocol import WIRE_FORMATS
+from .wire.recorder import COUNT_FIELDS, RECORDING, Recorder
 from .wire.source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
-from .view.view import add_view_args, live_view
+from .view.view import live_view
 
-EXIT_BAD_INPUT, EXIT_PORT, EXIT_INSTABILITY = 2, 1, 3
-EXIT_FAILED = 1                         # a stage of the pipeline itself failed
-
-
-def add_subcommands(subparsers) -> None:
-    """Add ``record``, ``replay``, ``emulate`` and ``stream`` to an argparse subparsers object."""
-    p = subparsers.add_parser("record", help="record a serial stream (raw bytes, samples, counts)",
-                              description="Record every byte and every valid sample from a "
-                                          "serial port; survives kill -9 with at most the last "
-                                          "100 ms missing.")
-    _port_args(p)
-    p.add_argument("--out", required=True, type=option(bounds.out_path, text=True),
-                   help="recording directory (new or empty)")
-    p.add_argument("--duration", type=option(bounds.positive_seconds), default=None,
-                   help="seconds (default: until Ctrl-C)")
-    p.set_defaults(func=cmd_record)
-
-    p = subparsers.add_parser("replay", help="replay a recording through the decoder "
-                                             "(and a network)")
-    p.add_argument("recording", help="directory written by `record` or `stream`")
-    p.add_argument("--realtime", action="store_true",
-                   help="pace at the recorded sample rate (default: as fast as possible)")
-    p.add_argument("--network", default=None,
-                   help="networks/NAME.toml: run the online pipeline on the replay "
-                        "(networks/live.toml: the live setting)")
-    _set_arg(p)
-    _speed_arg(p, "the speed command at the start (default: the recording's, from its "
-                  "meta.json)")
-    add_view_args(p)
-    _retype(p, "--view-hold", option(bounds.seconds))
-    p.set_defaults(func=cmd_replay)
-
-    p = subparsers.add_parser("emulate", help="emulate the sensor board (pty or URL), with faults")
-    where = p.add_mutually_exclusive_group(required=True)
-    where.add_argument("--pty", action="store_true",
-                       help="create a pseudo-terminal and print its path")
-    where.add_argument("--port", help="pyserial URL or device to write to")
-    p.add_argument("--link", default=None,
-                   help="with --pty: a symlink path to the pty that survives disconnect faults")
-    p.add_argument("--stimulus", default=None,
-                   help="stimuli/NAME.toml to stream: a scene, or the bench's contact events "
-                        "back to back (default: a robot scene with contacts at 19 and 27 cm)")
-    p.add_argument("--frames", type=option(bounds.positive_integer), default=None,
-                   help="frames to send (default: the stimulus's length; a scene loops)")
-    p.add_argument("--faults", default="", help=faults_help())
-    p.add_argument("--no-boot-frame", action="store_true",
-                   help="send no boot frame at start and reset (a board whose restarts the "
-                        "host must infer)")
-    p.add_argument("--seed", type=option(bounds.seed), default=0,
-                   help="seed of the stimulus noise and of where faults fall (default 0)")
-    p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
-                   help="wire format of the frames (default binary)")
-    p.add_argument("--fast", action="store_true", help="as fast as the link takes, not 1 kHz")
-    p.add_argument("--peer-timeout", type=option(bounds.positive_seconds), default=None,
-                   help="give up if nobody opens the pty within this many seconds")
-    p.add_argument("--log", default=None, help="write the injected faults, expected counts and "
-                                                "the stimulus's labelled contacts (JSON) here")
-    p.add_argument("--force", action="store_true", help="replace an existing --log file")
-    p.add_argument("--firmware", default=None, metavar="DIR",
-                   help="run the board's own firmware instead, in simavr (with --pty): DIR is "
-                        "its folder (firmware/antenna_stream), built with make and fed the "
-                        "stimulus's counts; prints the simulated-to-real-time ratio")
-    p.set_defaults(func=_guarded(cmd_emulate))
-
-    p = subparsers.add_parser("stream", help="run the network live on a serial stream")
-    _port_args(p)
-    p.add_argument("--network", required=True,
-                   help="networks/NAME.toml; networks/live.toml is the array set for live "
-                        "use (rk2 at dt 0.5 ms: 5x fewer steps than resonator_array.toml, "
-                        "the same read-out)")
-    p.add_argument("--out", default=None, type=option(bounds.out_path, text=True),
-                   help="recording directory (default: out/stream-YYYYmmdd-HHMMSS)")
-    p.add_argument("--duration", type=option(bounds.positive_seconds), default=None,
-                   help="seconds (default: until Ctrl-C)")
-    _set_arg(p)
-    _speed_arg(p, "the robot's speed command at the start, for a network whose speed gate or "
-                  "CPG reads it (networks/live_robot.toml); the page's speed control changes it")
-    add_view_args(p)
-    p.add_argument("--json", action="store_true",
-                   help="end with the full run report as JSON (for machines) instead of the "
-                        "short summary")
-    _retype(p, "--view-hold", option(bounds.seconds))
-    p.set_defaults(func=cmd_stream)
-
-
-def _set_arg(p) -> None:
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a field of the network spec, e.g. --set network.dt_ms=0.25, "
-                        "--set preprocess.threshold=0.05, --set readout.window_s=0.05")
-
-
-def _speed_arg(p, text: str) -> None:
-    p.add_argument("--speed", type=option(_speed), default=None, metavar="CM_S", help=text)
+EXIT_MISMATCH = 1                       # a replay whose counts differ from what was recorded
 
 
 def _speed(field: str, value) -> float:
@@ -122,49 +30,45 @@ def _speed(field: str, value) -> float:
     return bounds.number(field, value, 0.0, None, unit=" cm/s")
 
 
-def _port_args(p) -> None:
-    p.add_argument("--port", required=True,
-                   help="device path (/dev/ttyACM0) or pyserial URL (socket://host:port, ...)")
-    p.add_argument("--format", choices=WIRE_FORMATS, default="binary",
-                   help="wire format the board sends (default binary)")
-    p.add_argument("--baudrate", type=option(bounds.baudrate), default=DEFAULT_BAUDRATE,
-                   help=f"serial speed in bit/s (default {DEFAULT_BAUDRATE}; ignored by URLs)")
-    p.add_argument("--no-data-timeout", type=option(bounds.positive_seconds), default=5.0,
-                   help="fail when no valid frame arrives for this many seconds (default 5; a "
-                        "board reset by opening the port is silent for 1-3 s)")
-    p.add_argument("--reconnect-timeout", type=option(bounds.positive_seconds), default=30.0,
-                   help="how long to retry a port that disappeared (default 30 s)")
+def _view_port(field: str, value) -> int:
+    return bounds.integer(field, value, 0, 65535)
 
 
-def _retype(parser, flag: str, parse) -> None:
-    """Give an option another parser defines (``--view-hold``) its bounded type."""
-    for action in parser._actions:
-        if flag in action.option_strings:
-            action.type = parse
+PORT = (
+    Option("port", "device path (/dev/ttyACM0) or pyserial URL (socket://host:port, ...)",
+           required=True),
+    Option("format", "wire format the board sends (default binary)", choices=WIRE_FORMATS,
+           default="binary"),
+    Option("baudrate", f"serial speed in bit/s (default {DEFAULT_BAUDRATE}; ignored by URLs)",
+           check=bounds.baudrate, default=DEFAULT_BAUDRATE),
+    Option("no_data_timeout", "fail when no valid frame arrives for this many seconds (default "
+                              "5; a board reset by opening the port is silent for 1-3 s)",
+           check=bounds.positive_seconds, default=5.0),
+    Option("reconnect_timeout", "how long to retry a port that disappeared (default 30 s)",
+           check=bounds.positive_seconds, default=30.0),
+)
+DURATION = Option("duration", "seconds (default: until Ctrl-C)", check=bounds.positive_seconds)
+SET = Option("set", "override a field of the network spec, e.g. --set network.dt_ms=0.25, "
+                    "--set preprocess.threshold=0.05, --set readout.window_s=0.05",
+             kind=LIST, metavar="KEY=VALUE")
 
 
-def _guarded(command):
-    """Run a command; bad input and port trouble become one line on stderr and an exit code."""
-    def run(args) -> int:
-        try:
-            return command(args)
-        except SpecError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_BAD_INPUT
-        except PortError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_PORT
-        except NumericalInstabilityError as exc:
-            print(f"numerical instability: {exc}", file=sys.stderr)
-            return EXIT_INSTABILITY
-        except PipelineError as exc:
-            where = getattr(args, "out", None)
-            kept = f" (the recording in {where} is kept, marked incomplete)" if where else ""
-            print(f"error: {exc}{kept}", file=sys.stderr)
-            return EXIT_FAILED
-    run.__name__ = command.__name__
-    run.__doc__ = command.__doc__
-    return run
+def speed_option(help_text: str) -> Option:
+    return Option("speed", help_text, check=_speed, metavar="CM_S")
+
+
+VIEW = (
+    Option("view", "serve a live browser view (rate map, coded input, contacts) and print its "
+                   "URL", kind=SWITCH),
+    Option("view_host", "address the view listens on (default 127.0.0.1: this machine only; "
+                        "0.0.0.0 exposes it to the network deliberately)", default="127.0.0.1"),
+    Option("view_port", "port of the view (default 5006; 0 = any free port)", check=_view_port,
+           default=5006),
+    Option("view_save", "where the page's 'save view' button writes (default: the recording's "
+                        "views/ folder for stream, out/views for replay)", metavar="DIR"),
+    Option("view_hold", "seconds to keep the view up after the stream ends (default: until "
+                        "Ctrl-C; 0 closes it at once)", check=bounds.seconds),
+)
 
 
 def open_source(args) -> SerialSource:
@@ -207,18 +111,16 @@ class Progress:
 
 
 @contextmanager
-def recording_session(args, extra_meta: dict | None = None):
-    """Open the port, then the recording; yield (source, recorder, stop). However the session
+def recording_session(options, folder, extra_meta: dict | None = None):
+    """Open the port, then the recording in ``folder`` (an output folder the caller has
+    checked: ``outputs.output_folder``); yield (source, recorder, stop). However the session
     ends, the port is released and the recording closed with that ending as its status."""
-    from .wire.recorder import Recorder
-
-    _check_recording_dir(args.out)          # before the port is opened
     stop = stop_on_signals()
-    source = open_source(args)
+    source = open_source(options)
     try:
-        recorder = Recorder(args.out, port=args.port, wire_format=args.format,
-                            baudrate=args.baudrate, extra_meta=extra_meta)
-    except SpecError:
+        recorder = Recorder(folder, port=options.port, wire_format=options.format,
+                            baudrate=options.baudrate, extra_meta=extra_meta)
+    except BaseException:
         source.stop()
         raise
     status, message, complete = "ok", "", True
@@ -234,25 +136,26 @@ def recording_session(args, extra_meta: dict | None = None):
         message = str(exc) or type(exc).__name__
         if isinstance(exc, KeyboardInterrupt):
             status, message = "interrupted", "interrupted"
+        if isinstance(exc, PipelineError):
+            raise PipelineError(exc.stage, f"{exc.reason} (the recording in {folder.path} is "
+                                           "kept, marked incomplete)") from exc
         raise
     finally:
         source.stop()
         recorder.close(status, message, complete=complete)
-        print(f"\nrecording in {args.out}: {format_counts(recorder.counts)}", file=sys.stderr,
-              flush=True)
+        print(f"\nrecording in {folder.path}: {format_counts(recorder.counts)}",
+              file=sys.stderr, flush=True)
 
 
-@_guarded
-def cmd_record(args) -> int:
-    """Record a serial stream into ``args.out``."""
-    _check_duration(args.duration)
-    with recording_session(args) as (source, recorder, stop):
-        run_source(source, [recorder, Progress()], duration_s=args.duration,
-                   no_data_timeout_s=args.no_data_timeout, stop=stop)
+def cmd_record(options) -> int:
+    """Record a serial stream into ``--out``."""
+    with output_folder(options.out, RECORDING, new=True) as folder, \
+            recording_session(options, folder) as (source, recorder, stop):
+        run_source(source, [recorder, Progress()], duration_s=options.duration,
+                   no_data_timeout_s=options.no_data_timeout, stop=stop)
     return 0
 
 
-@_guarded
 def replay_overrides(args) -> list[str]:
     """The ``--set`` a replay runs with: the ones the recording was streamed with (its
     meta.json), then the explicit ones, which win. Said on stderr, so that a replay that
@@ -331,46 +234,39 @@ def cmd_replay(args) -> int:
     print(json.dumps({"replayed": replayed, "recorded": recorded, "match": same}, indent=1))
     if not same and recording.complete:
         print("error: the replayed counts differ from meta.json", file=sys.stderr)
-        return EXIT_PORT
+        return EXIT_MISMATCH
     return 0
 
 
-def _check_recording_dir(path) -> None:
-    """A recording goes into a new or empty folder: never beside (or into) a user's files."""
-    from ..core.outputs import check_writable
-
-    path = check_writable(path)
-    if path.is_dir() and any(path.iterdir()):
-        raise SpecError("out", str(path), "a new or empty directory (an existing recording or "
-                                          "other files are never written into)")
-
-
-@_guarded
-def cmd_stream(args) -> int:
+def cmd_stream(options) -> int:
     """Run the online pipeline on a live port, recording while streaming."""
     from .online.pipeline import build_online, run_online, warm_up
     from .online.terminal import LiveDisplay
 
-    _check_duration(args.duration)
     # A bad spec (or speed) fails before the port opens.
-    parts = build_online(args.network, args.set, speed_cm_s=args.speed)
-    if args.out is None:
-        args.out = str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S"))
-    _check_recording_dir(args.out)
-    print("preparing the network (Brian2 compiles on the first run, then uses its cache)",
-          file=sys.stderr, flush=True)
-    warm_up(parts)
-    with live_view(args, parts) as view, recording_session(
-            args, {"network": str(args.network), "set": args.set,
-                   "speed_cm_s": args.speed}) as (source, recorder, stop):
-        report = run_online(source, parts, handlers=[recorder, view] if view else [recorder],
-                            duration_s=args.duration, no_data_timeout_s=args.no_data_timeout,
-                            stop=stop, display=LiveDisplay(sys.stdout), view=view,
-                            controls=live_controls(parts, view, journal=recorder.note_event))
-        recorder.note_outcome(contacts=report.get("contacts"))
+    parts = build_online(options.network, options.set, speed_cm_s=options.speed)
+    if options.out is None:
+        options = dataclasses.replace(
+            options, out=str(Path("out") / time.strftime("stream-%Y%m%d-%H%M%S")))
+    with output_folder(options.out, RECORDING, new=True) as folder:   # before the warm-up
+        print("preparing the network (Brian2 compiles on the first run, then uses its cache)",
+              file=sys.stderr, flush=True)
+        warm_up(parts)
+        with live_view(options, parts) as view, recording_session(
+                options, folder, {"network": str(options.network), "set": options.set,
+                                  "speed_cm_s": options.speed}) as (source, recorder, stop):
+            report = run_online(source, parts,
+                                handlers=[recorder, view] if view else [recorder],
+                                duration_s=options.duration,
+                                no_data_timeout_s=options.no_data_timeout,
+                                stop=stop, display=LiveDisplay(sys.stdout), view=view,
+                                controls=live_controls(parts, view,
+                                                       journal=recorder.note_event))
+            recorder.note_outcome(contacts=report.get("contacts"))
     if view is not None:                # stopped by now: its process counted what it dropped
         report["view"] = view.summary()
-    print(json.dumps(report, indent=1) if args.json else stream_summary(report, args.out))
+    print(json.dumps(report, indent=1) if options.json
+          else stream_summary(report, options.out))
     return 0
 
 
@@ -401,17 +297,64 @@ def stream_summary(report: dict, out) -> str:
         f"recording in {out} (--json prints the full report)"])
 
 
-def _check_duration(duration) -> None:
-    if duration is not None and not duration > 0:
-        raise SpecError("duration", duration, "a number of seconds > 0")
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="snn-antenna", description="snn-antenna serial bridge")
-    add_subcommands(parser.add_subparsers(dest="command", required=True))
-    args = parser.parse_args(argv)
-    return guarded(args.func, args, "snn-antenna")
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+COMMANDS = (
+    Command("record", "record a serial stream (raw bytes, samples, counts)", cmd_record, (
+        *PORT,
+        Option("out", "recording directory (new or empty)", check=bounds.out_path, text=True,
+               required=True),
+        DURATION),
+        description="Record every byte and every valid sample from a serial port; survives "
+                    "kill -9 with at most the last 100 ms missing."),
+    Command("replay", "replay a recording through the decoder (and a network)", cmd_replay, (
+        Option("recording", "directory written by `record` or `stream`", kind=POSITIONAL),
+        Option("realtime", "pace at the recorded sample rate (default: as fast as possible)",
+               kind=SWITCH),
+        Option("network", "networks/NAME.toml: run the online pipeline on the replay "
+                          "(networks/live.toml: the live setting)"),
+        SET,
+        speed_option("the speed command at the start (default: the recording's, from its "
+              "meta.json)"),
+        *VIEW)),
+    Command("emulate", "emulate the sensor board (pty or URL), with faults", cmd_emulate, (
+        Option("pty", "create a pseudo-terminal and print its path", kind=SWITCH),
+        Option("port", "pyserial URL or device to write to"),
+        Option("link", "with --pty: a symlink path to the pty that survives disconnect "
+                       "faults"),
+        Option("stimulus", "stimuli/NAME.toml to stream: a scene, or the bench's contact "
+                           "events back to back (default: a robot scene with contacts at 19 "
+                           "and 27 cm)"),
+        Option("frames", "frames to send (default: the stimulus's length; a scene loops)",
+               check=bounds.positive_integer),
+        Option("faults", faults_help(), default=""),
+        Option("no_boot_frame", "send no boot frame at start and reset (a board whose "
+                                "restarts the host must infer)", kind=SWITCH),
+        Option("seed", "seed of the stimulus noise and of where faults fall (default 0)",
+               check=bounds.seed, default=0),
+        Option("format", "wire format of the frames (default binary)", choices=WIRE_FORMATS,
+               default="binary"),
+        Option("fast", "as fast as the link takes, not 1 kHz", kind=SWITCH),
+        Option("peer_timeout", "give up if nobody opens the pty within this many seconds",
+               check=bounds.positive_seconds),
+        Option("log", "write the injected faults, expected counts and the stimulus's "
+                      "labelled contacts (JSON) here"),
+        Option("force", "replace an existing --log file", kind=SWITCH),
+        Option("firmware", "run the board's own firmware instead, in simavr (with --pty): DIR "
+                           "is its folder (firmware/antenna_stream), built with make and fed "
+                           "the stimulus's counts; prints the simulated-to-real-time ratio",
+               metavar="DIR")),
+        one_of=("pty", "port")),
+    Command("stream", "run the network live on a serial stream", cmd_stream, (
+        *PORT,
+        Option("network", "networks/NAME.toml; networks/live.toml is the array set for live "
+                          "use (rk2 at dt 0.5 ms: 5x fewer steps than resonator_array.toml, "
+                          "the same read-out)", required=True),
+        Option("out", "recording directory (default: out/stream-YYYYmmdd-HHMMSS)",
+               check=bounds.out_path, text=True),
+        DURATION,
+        SET,
+        speed_option("the robot's speed command at the start, for a network whose speed gate or CPG "
+              "reads it (networks/live_robot.toml); the page's speed control changes it"),
+        *VIEW,
+        Option("json", "end with the full run report as JSON (for machines) instead of the "
+                       "short summary", kind=SWITCH))),
+)

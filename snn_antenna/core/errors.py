@@ -83,6 +83,12 @@ class PipelineError(RuntimeError):
         return type(self), (self.stage, self.reason)
 
 
+class DeviceError(RuntimeError):
+    """A device or link outside the toolkit cannot be used: a serial port that is busy, lost
+    for good or silent (``bridge.wire.source.PortError``). Not the user's typing, not a bug:
+    one line and exit status 1."""
+
+
 def check(condition: bool, field: str, value, accepted: str) -> None:
     """Raise SpecError(field, value, accepted) unless condition holds."""
     if not condition:
@@ -114,7 +120,9 @@ def is_integer(value) -> bool:
 
 
 def guarded(func, args, prog: str) -> int:
-    """Run a command; whatever goes wrong is one line on stderr and an exit status.
+    """Run a command; whatever goes wrong is one line on stderr and an exit status: 2 for
+    what the user gave (SpecError), 3 for a numerical instability, 130 for Ctrl-C, 1 for a
+    device, a stage of a live pipeline or the file system failing, and 1 for a bug.
 
     Catching everything here also keeps Brian2's temporary files (``brian_debug_*``,
     ``brian_script_*``) from piling up: Brian2 keeps them only when an exception reaches its
@@ -136,7 +144,7 @@ def guarded(func, args, prog: str) -> int:
         logging.getLogger("brian2").setLevel(logging.ERROR)
         print(f"{prog}: interrupted", file=sys.stderr)
         return 130
-    except PipelineError as exc:
+    except (PipelineError, DeviceError) as exc:
         print(f"{prog}: error: {exc}", file=sys.stderr)
         return 1
     except OSError as exc:

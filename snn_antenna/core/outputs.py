@@ -8,25 +8,31 @@ what identifies it (the toolkit's writers call ``files.declare`` and ``files.not
 listed; nothing else in the folder, and no listed entry that has since been replaced or edited,
 is ever taken as the toolkit's.
 
-Before a study starts, :func:`prepare` decides the folder:
+:func:`output_folder` is the one door to an output folder (a study run's, a recording's, an
+imported data set's), in three phases:
 
-- a path that is a file, lies under a file, or cannot be written is refused (before any work);
-- a folder another run is writing (it holds the folder's lock) is refused, naming its PID and
-  start time; a lock left by a dead process is released by the kernel and simply taken;
-- a new or empty folder is used as it is;
-- a folder of this same study (its manifest says so) is reused: re-running a study into its own
-  folder updates its report and resumes its stores (also after a killed run: its journal lists
-  what it made); staging files a killed run left are removed;
-- a folder holding another study's outputs, or files snn-antenna did not write (or wrote and
-  the user has replaced or edited since), is refused, unless ``force``: then the entries the
-  manifest lists that are still the toolkit's are removed (:meth:`OutputFolder.clear`, once
-  every other check has passed) and the user's files are kept. No link is followed at any
-  depth: a folder holding a link, a device or a hard-linked file is refused, not removed.
+1. **check**, on entering: the folder is decided and, when it exists, locked; everything it
+   would refuse is refused here, before anything is created (``--check`` leaves after this
+   phase, and the folder is released as it was):
 
-:func:`claim` takes the folder's lock (``fcntl.flock`` on the folder itself, held for the run)
-and opens the journal; :func:`record` closes it, however the run ended; :func:`release` gives
-up a prepared folder without running. :func:`output_folder` does all four in order: the one way
-a run claims a folder (the CLI, the bridge's recorder and the tests).
+   - a path that is a file, lies under a file, or cannot be written is refused;
+   - a folder another run is writing (it holds the folder's lock) is refused, naming its PID
+     and start time; a lock left by a dead process is released by the kernel and simply taken;
+   - a new or empty folder is used as it is (``new``: only such a folder: a recording is
+     never written into one that holds anything);
+   - a folder of this same study (its manifest says so) is reused: re-running a study into
+     its own folder updates its report and resumes its stores (also after a killed run: its
+     journal lists what it made); staging files a killed run left are removed;
+   - a folder holding another study's outputs, or files snn-antenna did not write (or wrote
+     and the user has replaced or edited since), is refused, unless ``force``: then the
+     entries the manifest lists that are still the toolkit's are removed (at the claim, once
+     every other check has passed) and the user's files are kept. No link is followed at any
+     depth: a folder holding a link, a device or a hard-linked file is refused, not removed.
+
+2. **claim** (:meth:`OutputFolder.claim`): remove what ``force`` replaces, create and lock the
+   folder, write its manifest before anything else and open the write-ahead journal.
+3. **record**, on leaving however the block ended: close the journal, write the manifest
+   (what the run wrote) and release the lock.
 """
 from __future__ import annotations
 
@@ -35,6 +41,7 @@ import json
 import os
 import socket
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -58,30 +65,33 @@ class OutputFolder:
     journal: files.Journal | None = None
     started: str | None = None
 
-    def clear(self) -> None:
-        """Remove the other study's entries (``--force``): only what the manifest lists.
-        Called once every check has passed, so a refused run removes nothing."""
-        for entry, ident in sorted(self.replace.items()):
-            files.remove_entry(self.path / entry, ident)
+    def claim(self) -> None:
+        """The second phase: every check has passed, so the run takes the folder (see
+        :func:`output_folder`); a refused run has removed and created nothing."""
+        for entry, ident in sorted(self.replace.items()):   # --force: only what its manifest
+            files.remove_entry(self.path / entry, ident)      # lists, still the toolkit's
         self.replace = {}
+        _claim(self)
 
 
-def check_writable(path) -> Path:
-    """Refuse an output path that is a file, lies under a file, or cannot be written."""
+def check_writable(path, field: str = "--out", what: str = "a folder path") -> Path:
+    """Refuse a folder path that is a file, lies under a file, or cannot be written (by the
+    user running the toolkit), naming ``field`` and ``what`` the folder is for. A link is
+    not followed to decide (a link to a file is refused as one)."""
     path = Path(path)
-    if path.exists() and not path.is_dir():
-        raise SpecError("--out", str(path), "a folder path (this is an existing file)")
-    ancestor = path
-    while not ancestor.exists():
-        if ancestor.parent == ancestor:
-            break
+    if os.path.lexists(path) and not path.is_dir():
+        raise SpecError(field, str(path), f"{what} ({path} is a symbolic link to nothing)"
+                        if path.is_symlink() and not path.exists()
+                        else f"{what} (this is an existing file)")
+    ancestor = path                         # the nearest part of the path that exists
+    while not os.path.lexists(ancestor) and ancestor.parent != ancestor:
         ancestor = ancestor.parent
     if ancestor != path and not ancestor.is_dir():
-        raise SpecError("--out", str(path), f"a folder path ({ancestor} is a file, so nothing "
-                                            "can be created under it)")
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise SpecError("--out", str(path), f"a folder you can write to ({ancestor} is not "
-                                            "writable)")
+        raise SpecError(field, str(path), f"{what} ({ancestor} is a file, so nothing can be "
+                                          "created under it)")
+    if not os.access(ancestor if ancestor.is_dir() else ancestor.parent, os.W_OK | os.X_OK):
+        raise SpecError(field, str(path), f"a folder you can write to ({ancestor} is not "
+                                          "writable)")
     return path
 
 
@@ -114,13 +124,13 @@ def _entries(path: Path) -> list[str]:
                   if e != MANIFEST and not files.is_staging(e, MANIFEST))
 
 
-def prepare(path, study: str, force: bool = False, fresh: bool = False) -> OutputFolder:
-    """Decide the output folder of a ``study`` run (see the module docstring) and take its
-    lock when the folder exists; creates nothing."""
+def _prepare(path, study: str, force: bool, fresh: bool, new: bool) -> OutputFolder:
+    """The first phase: decide the output folder of a ``study`` run (see the module
+    docstring) and take its lock when the folder exists; creates nothing."""
     path = check_writable(path)
     lock_fd = lock_folder(path) if path.is_dir() else None
     try:
-        folder = _decide(path, study, force, fresh)
+        folder = _decide(path, study, force, fresh, new)
     except BaseException:
         _unlock(lock_fd)
         raise
@@ -128,8 +138,14 @@ def prepare(path, study: str, force: bool = False, fresh: bool = False) -> Outpu
     return folder
 
 
-def _decide(path: Path, study: str, force: bool, fresh: bool) -> OutputFolder:
+def _decide(path: Path, study: str, force: bool, fresh: bool, new: bool) -> OutputFolder:
     entries = _entries(path)
+    if new and entries:
+        shown = ", ".join(entries[:4]) + (", …" if len(entries) > 4 else "")
+        raise SpecError("--out", str(path), f"a new or empty folder; it holds {shown} (an "
+                                            "existing recording or other files are never "
+                                            "overwritten or written into): choose another "
+                                            "--out")
     manifest = read_manifest(path)
     owner = manifest.get("study") if manifest else None
     known = {name: (manifest.get("identity") or {}).get(name) for name in manifest["files"]
@@ -192,15 +208,15 @@ def _unlock(fd: int | None) -> None:
         os.close(fd)                        # closing releases the flock
 
 
-def release(folder: OutputFolder) -> None:
-    """Give up a prepared folder without running (a refusal after ``prepare``)."""
+def _release(folder: OutputFolder) -> None:
+    """Give up the folder: close its journal (if claimed) and unlock it."""
     if folder.journal is not None:
         files.close_journal(folder.journal)
     _unlock(folder.lock_fd)
     folder.lock_fd = None
 
 
-def claim(folder: OutputFolder) -> None:
+def _claim(folder: OutputFolder) -> None:
     """Create and lock the folder, write its manifest before anything else, open the
     write-ahead journal that lists every name the run creates before it is created, and
     remove the staging files a killed run of the toolkit's left (its journal proves them)."""
@@ -224,7 +240,7 @@ def claim(folder: OutputFolder) -> None:
             journal.forget(name)
 
 
-def record(folder: OutputFolder) -> None:
+def _record(folder: OutputFolder) -> None:
     """Close the journal and write the manifest: every entry this run created, with what
     identifies it now that it is written, and the toolkit's earlier entries that are still
     there; release the lock. Atomic (a reader sees the old or the new manifest)."""
@@ -244,7 +260,7 @@ def record(folder: OutputFolder) -> None:
             return
         _write_manifest(folder, journal.entries(), "ended")
     finally:
-        release(folder)
+        _release(folder)
 
 
 def _write_manifest(folder: OutputFolder, entries: dict, status: str) -> None:
@@ -256,17 +272,23 @@ def _write_manifest(folder: OutputFolder, entries: dict, status: str) -> None:
 
 
 @contextmanager
-def output_folder(path, study: str, force: bool = False, fresh: bool = False):
-    """``prepare`` and ``clear`` the folder, ``claim`` it, yield it, and ``record`` what the
-    run wrote however it ended."""
-    folder = prepare(path, study, force=force, fresh=fresh)
-    try:
-        folder.clear()
-        claim(folder)
-    except BaseException:
-        release(folder)
-        raise
+def output_folder(path, study: str, *, force: bool = False, fresh: bool = False,
+                  new: bool = False) -> Iterator[OutputFolder]:
+    """The one door to an output folder (see the module docstring): entering checks it,
+    ``folder.claim()`` takes it, leaving records what was written however the block ended
+    (a folder never claimed is released as it was)::
+
+        with output_folder(out, "quickstart") as folder:    # check: refused here, or locked
+            if check_only:
+                return                                      # nothing created
+            folder.claim()
+            ...                                             # write into folder.path
+    """
+    folder = _prepare(path, study, force, fresh, new)
     try:
         yield folder
     finally:
-        record(folder)
+        if folder.journal is not None:
+            _record(folder)
+        else:
+            _release(folder)

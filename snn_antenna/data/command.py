@@ -4,67 +4,71 @@ from __future__ import annotations
 import sys
 
 from ..core import bounds
-from ..core.bounds import option
-from .inputs import Options
+from ..core.commands import POSITIONAL, SWITCH, Command, Option
+from ..core.outputs import output_folder
+from .importer import STUDY, plan_import, write_import
+from .inputs import Options as InputOptions
 from .segment import Segmentation
 
-
-def add_subcommands(subparsers) -> None:
-    """Add ``data import`` to an argparse subparsers object."""
-    data = subparsers.add_parser("data", help="turn recordings of a real antenna into a "
-                                              "labelled data set the studies read")
-    actions = data.add_subparsers(dest="data_command", required=True, metavar="ACTION",
-                                  help="import: recordings and their labels into a data set")
-    p = actions.add_parser(
-        "import", help="check recordings and their labels, then write the data set",
-        description="Read every recording (folders written by `snn-antenna record`, CSV, NumPy, "
-                    "WAV, ROS 2 bags) and the labels table, find the contacts by the paper's "
-                    "onset rule, match them to the labels, and write the data set whole (every "
-                    "check first; nothing is written when one fails). A study reads it with "
-                    "data = \"DIR\" in its spec.")
-    p.add_argument("recordings", help="a folder of recordings (or one `record` folder)")
-    p.add_argument("labels", help="the labels table (CSV: recording, onset_s, distance_cm, "
-                                  "material, optionally repetition)")
-    p.add_argument("--out", required=True, type=option(bounds.out_path, text=True),
-                   help="the data set's folder (new or empty, or an earlier import's)")
-    p.add_argument("--force", action="store_true",
-                   help="use an --out folder holding other files: what snn-antenna wrote there "
-                        "is replaced, other files are kept")
-    p.add_argument("--rate", type=option(bounds.rate_hz), default=None, metavar="HZ",
-                   help="sample rate of recordings that state none (.npy, CSV without t_s); "
-                        "must agree with the rate any recording states")
-    defaults, seg = Options(), Segmentation()
-    p.add_argument("--adc-bits", type=option(lambda f, v: bounds.integer(f, v, 4, 24)),
-                   default=defaults.adc_bits,
-                   help=f"ADC bits of CSV/NumPy counts (default {defaults.adc_bits}, the board's)")
-    p.add_argument("--full-scale-g", type=option(lambda f, v: bounds.number(
-        f, v, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)), default=defaults.full_scale_g,
-        help=f"the sensor's range ± g (default {defaults.full_scale_g:g}, the board's)")
-    p.add_argument("--topic", default=None, help="ROS 2 bags: the sensor_msgs/msg/Imu topic "
-                                                 "(default: the bag's only one)")
-    for name, help_text in (
-            ("onset_threshold_g", "a contact starts where |main axis| first exceeds this (g)"),
-            ("quiet_s", "below the threshold this long just before an onset (s)"),
-            ("dead_s", "at least this long after the previous onset (s)"),
-            ("match_s", "a label and an onset at most this far apart are one contact (s)"),
-            ("pre_trigger_s", "each event starts this long before its onset (s)"),
-            ("duration_s", "and lasts this long after it (s)")):
-        p.add_argument(f"--{name.replace('_', '-')}", dest=name, default=getattr(seg, name),
-                       type=option(bounds.number),
-                       help=f"{help_text}; default {getattr(seg, name):g}")
-    p.set_defaults(func=cmd_import)
+DEFAULTS, SEGMENTATION = InputOptions(), Segmentation()
+SEGMENTATION_HELP = (
+    ("onset_threshold_g", "a contact starts where |main axis| first exceeds this (g)"),
+    ("quiet_s", "below the threshold this long just before an onset (s)"),
+    ("dead_s", "at least this long after the previous onset (s)"),
+    ("match_s", "a label and an onset at most this far apart are one contact (s)"),
+    ("pre_trigger_s", "each event starts this long before its onset (s)"),
+    ("duration_s", "and lasts this long after it (s)"))
 
 
-def cmd_import(args) -> int:
-    from .importer import check_out, plan_import, write_import
+def _adc_bits(field: str, value) -> int:
+    return bounds.integer(field, value, 4, 24)
 
+
+def _full_scale_g(field: str, value) -> float:
+    return bounds.number(field, value, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
+
+
+def cmd_import(options) -> int:
     log = lambda text: print(text, file=sys.stderr, flush=True)    # noqa: E731
-    check_out(args.out, args.force)               # before reading anything
-    options = Options(rate_hz=args.rate, adc_bits=args.adc_bits,
-                      full_scale_g=args.full_scale_g, topic=args.topic)
-    seg = Segmentation(**{name: getattr(args, name) for name in (
-        "onset_threshold_g", "quiet_s", "dead_s", "match_s", "pre_trigger_s", "duration_s")})
-    plan = plan_import(args.recordings, args.labels, options, seg, log=log)
-    write_import(plan, args.out, force=args.force, log=log)
-    print(args.out)
+    with output_folder(options.out, STUDY, force=options.force) as folder:  # before any reading
+        inputs = InputOptions(rate_hz=options.rate, adc_bits=options.adc_bits,
+                              full_scale_g=options.full_scale_g, topic=options.topic)
+        seg = Segmentation(**{name: getattr(options, name) for name, _ in SEGMENTATION_HELP})
+        plan = plan_import(options.recordings, options.labels, inputs, seg, log=log)
+        folder.claim()
+        write_import(plan, folder.path, log=log)
+    print(options.out)
     return 0
+
+
+COMMANDS = (
+    Command("import", "check recordings and their labels, then write the data set", cmd_import, (
+        Option("recordings", "a folder of recordings (or one `record` folder)",
+               kind=POSITIONAL),
+        Option("labels", "the labels table (CSV: recording, onset_s, distance_cm, material, "
+                         "optionally repetition)", kind=POSITIONAL),
+        Option("out", "the data set's folder (new or empty, or an earlier import's)",
+               check=bounds.out_path, text=True, required=True),
+        Option("force", "use an --out folder holding other files: what snn-antenna wrote "
+                        "there is replaced, other files are kept", kind=SWITCH),
+        Option("rate", "sample rate of recordings that state none (.npy, CSV without t_s); "
+                       "must agree with the rate any recording states", check=bounds.rate_hz,
+               metavar="HZ"),
+        Option("adc_bits", f"ADC bits of CSV/NumPy counts (default {DEFAULTS.adc_bits}, the "
+                           "board's)", check=_adc_bits, default=DEFAULTS.adc_bits),
+        Option("full_scale_g", f"the sensor's range ± g (default {DEFAULTS.full_scale_g:g}, "
+                               "the board's)", check=_full_scale_g,
+               default=DEFAULTS.full_scale_g),
+        Option("topic", "ROS 2 bags: the sensor_msgs/msg/Imu topic (default: the bag's only "
+                        "one)"),
+        *(Option(name, f"{text}; default {getattr(SEGMENTATION, name):g}",
+                 check=bounds.number, default=getattr(SEGMENTATION, name))
+          for name, text in SEGMENTATION_HELP)),
+        description="Read every recording (folders written by `snn-antenna record`, CSV, "
+                    "NumPy, WAV, ROS 2 bags) and the labels table, find the contacts by the "
+                    "paper's onset rule, match them to the labels, and write the data set whole "
+                    "(every check first; nothing is written when one fails). A study reads it "
+                    "with data = \"DIR\" in its spec.",
+        group=("data", "turn recordings of a real antenna into a labelled data set the "
+                       "studies read", "import: recordings and their labels into a data set")),
+)

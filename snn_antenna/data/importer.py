@@ -217,25 +217,17 @@ def exclusions_csv(exclusions: list[segment.Exclusion]) -> str:
     return out.getvalue()
 
 
-def write_import(plan: ImportPlan, out, force: bool = False, log=print) -> Path:
-    """Write the planned data set into ``out`` (an output folder of the toolkit's)."""
-    from ..core import outputs
+def write_import(plan: ImportPlan, out, log=print) -> Path:
+    """Write the planned data set into ``out``, an output folder its caller has claimed
+    (``outputs.output_folder``: the command checks it before reading anything)."""
     from ..core.files import atomic_write, write_json
     from ..core.store import write_dataset
 
     out = Path(out)
     store = recorded.DRIVES if plan.meta["data"] == "drives" else recorded.DATASET
-    with outputs.output_folder(out, STUDY, force=force):
-        write_dataset(plan.dataset, out.absolute() / store)
-        atomic_write(out / recorded.EXCLUSIONS, exclusions_csv(plan.exclusions))
-        write_json(out / recorded.IMPORT_FILE, plan.meta)
+    write_dataset(plan.dataset, out.absolute() / store)
+    atomic_write(out / recorded.EXCLUSIONS, exclusions_csv(plan.exclusions))
+    write_json(out / recorded.IMPORT_FILE, plan.meta)
     log(f"data: wrote {out} ({plan.meta['counts']['events']} contacts; "
         f"{len(plan.exclusions)} left out, listed in {recorded.EXCLUSIONS})")
     return out
-
-
-def check_out(out, force: bool) -> None:
-    """Refuse an output folder before any reading: the same decision ``write_import`` makes."""
-    from ..core import outputs
-
-    outputs.release(outputs.prepare(out, STUDY, force=force))

@@ -43,6 +43,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from ..core.bounds import out_path
+from ..core.commands import LIST, POSITIONALS, Command, Option
 from ..core.errors import SpecError
 from ..core.files import atomic_write
 from ..core.provenance import code_identity
@@ -666,47 +668,56 @@ def make_page(
     return out
 
 
-def _results(args) -> int:
-    outputs = [(Path(f), c) for f, c in args.bench_output]
+def _results(options) -> int:
+    outputs = [(Path(f), c) for f, c in options.bench_output]
     out = make_page(
-        [Path(p) for p in args.runs], [Path(p) for p in args.bench], Path(args.out), outputs
+        [Path(p) for p in options.runs], [Path(p) for p in options.bench], Path(options.out),
+        outputs
     )
     print(
-        f"{out}: written from {len(args.runs)} run(s) and "
-        f"{len(args.bench) + len(outputs)} benchmark(s)"
+        f"{out}: written from {len(options.runs)} run(s) and "
+        f"{len(options.bench) + len(outputs)} benchmark(s)"
     )
     return 0
 
 
-def add_subcommand(sub) -> None:
-    """``snn-antenna results``: registered by the command line (cli.py)."""
-    p = sub.add_parser(
-        "results", help="write the results page from runs' summary.json and recorded benchmarks"
-    )
-    p.add_argument(
-        "runs",
-        nargs="*",
-        help="output folders of study runs (or summary.json files), one per study",
-    )
-    p.add_argument(
-        "--bench",
-        action="append",
-        default=[],
-        metavar="FILE.json",
-        help="a benchmark's output with its provenance: the JSON of a benchmark's --json, "
-        "or a record (python -m snn_antenna.report.results record-bench FILE.json -- COMMAND)",
-    )
-    p.add_argument(
-        "--bench-output",
-        nargs=2,
-        action="append",
-        default=[],
-        metavar=("FILE", "COMMAND"),
-        help="a benchmark's JSON or printed output that carries no provenance, and the command "
-        "that made it (the page records this machine and checkout, and says so)",
-    )
-    p.add_argument("--out", default="docs/results.md", help="the page (default docs/results.md)")
-    p.set_defaults(func=_results)
+COMMANDS = (
+    Command(
+        "results",
+        "write the results page from runs' summary.json and recorded benchmarks",
+        _results,
+        (
+            Option(
+                "runs",
+                "output folders of study runs (or summary.json files), one per study",
+                kind=POSITIONALS,
+            ),
+            Option(
+                "bench",
+                "a benchmark's output with its provenance: the JSON of a benchmark's --json, "
+                "or a record (python -m snn_antenna.report.results record-bench FILE.json -- "
+                "COMMAND)",
+                kind=LIST,
+                metavar="FILE.json",
+            ),
+            Option(
+                "bench_output",
+                "a benchmark's JSON or printed output that carries no provenance, and the "
+                "command that made it (the page records this machine and checkout, and says so)",
+                kind=LIST,
+                nargs=2,
+                metavar=("FILE", "COMMAND"),
+            ),
+            Option(
+                "out",
+                "the page (default docs/results.md)",
+                check=out_path,
+                text=True,
+                default="docs/results.md",
+            ),
+        ),
+    ),
+)
 
 
 def main(argv: list[str] | None = None) -> int:

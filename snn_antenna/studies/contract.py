@@ -4,8 +4,9 @@ A study module declares
 
 - ``SECTIONS``: the top-level keys its spec may hold besides ``study``, ``seed`` and
   ``description``: its tables, and ``data`` for a study that reads recorded data sets;
-- ``OPTIONS``: the command-line options it takes (names of :class:`Options` fields); an option
-  it does not take is refused before any work, naming the study and the ones it takes;
+- ``OPTIONS``: the command-line options it takes (names of :class:`Options` fields, declared
+  once in :data:`STUDY_OPTIONS`); an option it does not take is refused before any work,
+  naming the study and the ones it takes;
 - ``plan(spec) -> Plan``: the whole spec checked and every part built that needs no
   simulation; the plan sizes its own work (:meth:`Plan.estimate`) from those parts, so the
   study's defaults are written once, in its own dataclasses;
@@ -18,40 +19,16 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 from collections.abc import Callable
+from urllib.parse import urlsplit
 
-from ..core.errors import SpecError
 from ..core.bounds import out_path
-
-# What every study takes: the quick profile, stopping after the checks, running beyond the
-# cost limit, reusing a folder that holds another study's outputs.
-COMMON = ("quick", "check", "yes", "force")
-
-
-@dataclass(frozen=True)
-class Options:
-    """The command-line options of ``snn-antenna run``, as a study receives them."""
-    quick: bool = False          # the spec's [quick] profile was applied
-    check: bool = False          # stop after the first phase (every check), run nothing
-    yes: bool = False            # run even when the estimate is beyond the limit
-    force: bool = False          # replace another study's outputs in --out
-    fresh: bool = False          # discard stored results or caches and start over
-    scheduler: str | None = None  # an existing Dask cluster's address
-    data: str | None = None      # a folder of recorded data sets (the spec's ``data``)
-
-    def given(self) -> list[str]:
-        """The options set to something other than their default, in declaration order."""
-        return [f.name for f in dataclasses.fields(self)
-                if getattr(self, f.name) != f.default]
-
-
-def flag(name: str) -> str:
-    return "--" + name.replace("_", "-")
-
+from ..core.commands import SWITCH, Option, options_class
+from ..core.errors import SpecError
+from ..core.outputs import check_writable
 
 # Dask's address schemes (``distributed.comm``): what --scheduler may name
 SCHEDULER_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
@@ -60,10 +37,10 @@ SCHEDULER_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
 def scheduler_address(field: str, value: str) -> str:
     """A Dask scheduler's address, ``[SCHEME://]HOST:PORT`` (checked by its form: connecting
     is the run's first step)."""
-    from urllib.parse import urlsplit
-
     accepted = (f"an address such as tcp://HOST:8786 (schemes: "
                 f"{', '.join(SCHEDULER_SCHEMES)})")
+    if not isinstance(value, str):
+        raise SpecError(field, value, accepted)
     try:
         parts = urlsplit(value if "://" in value else f"tcp://{value}")   # Dask's default
         port = parts.port
@@ -76,13 +53,46 @@ def scheduler_address(field: str, value: str) -> str:
     return value
 
 
-def refused_options(study: str, accepted, options: Options) -> str | None:
-    """The message refusing the first option ``study`` does not take, or None."""
+# The options of ``snn-antenna run`` a study receives, declared once: the command line's
+# flags, their help and bounds, and the fields of :class:`Options`.
+STUDY_OPTIONS = (
+    Option("quick", "apply the spec's [quick] profile: a small run for tests and first looks",
+           kind=SWITCH),
+    Option("fresh", "studies that keep results or caches: discard them and start over",
+           kind=SWITCH),
+    Option("scheduler", "studies with Dask workers: run on an existing Dask cluster instead "
+                        "of a local one", check=scheduler_address, text=True,
+           metavar="tcp://HOST:PORT"),
+    Option("data", "studies that read recorded data sets: the folder they are in (sets the "
+                   "spec's data)", check=out_path, text=True, metavar="PATH"),
+    Option("force", "reuse an --out folder that holds another study's outputs or other "
+                    "files: what snn-antenna wrote there is replaced, other files are kept",
+           kind=SWITCH),
+    Option("check", "check the spec, its estimate and --out as a run would, then stop "
+                    "without running or writing anything", kind=SWITCH),
+    Option("yes", "run even when the estimate is beyond the limit (1 h)", kind=SWITCH),
+)
+Options = options_class("Options", STUDY_OPTIONS, __name__,
+                        "The options of ``snn-antenna run``, as a study receives them.")
+
+# What every study takes: the quick profile, stopping after the checks, running beyond the
+# cost limit, reusing a folder that holds another study's outputs.
+COMMON = ("quick", "check", "yes", "force")
+
+
+def flag(name: str) -> str:
+    """The command-line flag of the study option ``name``."""
+    return next(o.flag for o in STUDY_OPTIONS if o.name == name)
+
+
+def check_options(study: str, accepted, options: Options) -> None:
+    """Refuse the first option ``study`` does not take, naming the ones it takes."""
     for name in options.given():
         if name not in accepted:
             takes = ", ".join(flag(o) for o in accepted)
-            return f"{flag(name)}: the {study} study takes {takes}"
-    return None
+            raise SpecError(flag(name), getattr(options, name),
+                            f"an option of a study that takes it; the {study} study takes "
+                            f"{takes}")
 
 
 @dataclass
@@ -157,16 +167,4 @@ def data_folder(spec: dict) -> Path | None:
 
 def cache_folder(field: str, value) -> Path:
     """A cache folder the run can create or reuse: not a file, nor under one, and writable."""
-    path = Path(out_path(field, value))
-    if os.path.lexists(path) and not path.is_dir():
-        raise SpecError(field, str(value), "a folder for the cache (this path is a file)")
-    ancestor = path
-    while not os.path.lexists(ancestor) and ancestor.parent != ancestor:
-        ancestor = ancestor.parent
-    if ancestor != path and not ancestor.is_dir():
-        raise SpecError(field, str(value), f"a folder for the cache ({ancestor} is a file, so "
-                                           "nothing can be created under it)")
-    if not os.access(ancestor if ancestor.is_dir() else ancestor.parent, os.W_OK | os.X_OK):
-        raise SpecError(field, str(value), f"a folder you can write to ({ancestor} is not "
-                                           "writable)")
-    return path
+    return check_writable(out_path(field, value), field, "a folder for the cache")

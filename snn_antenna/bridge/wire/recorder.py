@@ -29,6 +29,7 @@ import math
 import os
 import stat
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -37,7 +38,7 @@ import numpy as np
 from ... import __version__ as package_version
 from ...core.errors import SpecError
 from ...core import outputs
-from ...core.files import open_append, refuse_symlink, write_json
+from ...core.files import open_append, write_json
 from ...core.signals import Recording
 from .protocol import (
     BOARD_RATE_HZ,
@@ -55,6 +56,7 @@ SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("flags", "
 SESSION_START = 1                       # samples.bin flag: a board session begins here
 RAW_FILE, SAMPLES_FILE, META_FILE = "raw.bin", "samples.bin", "meta.json"
 EVENTS_FILE = "events.jsonl"            # bridge/online/controls.py reads it
+RECORDING = "recording"                 # what a recording's output folder holds
 FORMAT_VERSION = 1
 COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
                 "duplicates", "reordered", "late", "seq_restarts", "boot_frames", "reconnects")
@@ -63,21 +65,22 @@ COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps"
 class Recorder:
     """Writes :class:`~snn_antenna.bridge.wire.source.Batch` objects into a recording directory."""
 
-    def __init__(self, out_dir, *, port: str, wire_format: str, baudrate: int,
+    def __init__(self, out, *, port: str, wire_format: str, baudrate: int,
                  rate_hz: float = BOARD_RATE_HZ, flush_interval_s: float = 0.05,
                  fsync_interval_s: float = 1.0, meta_interval_s: float = 0.5,
                  extra_meta: dict | None = None):
-        self.dir = Path(out_dir)
-        if os.path.lexists(self.dir / META_FILE):
-            raise SpecError("out", str(self.dir),
-                            "a new or empty directory "
-                            "(an existing recording is never overwritten)")
-        if self.dir.exists() and not self.dir.is_dir():
-            raise SpecError("out", str(self.dir), "a directory path")
-        for name in (RAW_FILE, SAMPLES_FILE, EVENTS_FILE):  # a link would write elsewhere
-            refuse_symlink(self.dir / name)
-        self._folder = outputs.prepare(self.dir, "recording")  # one recorder per folder,
-        outputs.claim(self._folder)                            # journaled until close
+        """``out``: the recording's folder, new or empty. A path goes through
+        ``outputs.output_folder`` here (checked, claimed, recorded on ``close``); the commands
+        pass the folder they checked before opening the port, and record it themselves."""
+        self._door = ExitStack()
+        try:
+            folder = out if isinstance(out, outputs.OutputFolder) else \
+                self._door.enter_context(outputs.output_folder(out, RECORDING, new=True))
+            folder.claim()                  # one recorder per folder, journaled until close
+        except BaseException:
+            self._door.close()
+            raise
+        self.dir = folder.path
         self.flush_interval_s = flush_interval_s
         self.fsync_interval_s = fsync_interval_s
         self.meta_interval_s = meta_interval_s
@@ -164,7 +167,7 @@ class Recorder:
         self.meta.update(status=status, message=message, complete=complete,
                          stopped_unix_s=time.time())
         self._write_meta()
-        outputs.record(self._folder)
+        self._door.close()
 
     def _write_meta(self) -> None:
         self.meta["counts"] = dict(self.counts)

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import serial
 
-from ...core.errors import SpecError
+from ...core.errors import DeviceError, SpecError
 from .protocol import Decoder, Sample, Session, check_wire_format
 
 DEFAULT_BAUDRATE = 250000
@@ -30,7 +30,7 @@ ACCEPTED_PORTS = ("an existing serial device path (e.g. /dev/ttyACM0) or a pyser
                   "(loop://, socket://HOST:PORT, rfc2217://HOST:PORT)")
 
 
-class PortError(RuntimeError):
+class PortError(DeviceError):
     """The port exists but cannot be used: busy, lost for good, or silent."""
 
 
