@@ -11,7 +11,7 @@ import pytest
 
 from snn_antenna.core import bounds
 from snn_antenna.cli import main
-from snn_antenna.core.errors import MAX_SHOWN, SpecError
+from snn_antenna.core.errors import MAX_SHOWN, SpecError, shown
 from snn_antenna.preprocess import fit_warmup, make_chain
 from snn_antenna.sources import stimuli
 from snn_antenna.sources.stimuli import Contact, RobotScene
@@ -67,7 +67,8 @@ def test_an_out_the_file_system_cannot_hold_is_refused(tmp_path, capsys, out):
 def test_stream_options_are_typed_and_bounded(capsys, option, value):
     line = refused(capsys, ["stream", "--port", "loop://", "--network", "networks/live.toml",
                             option, value], option)
-    assert value in line and "accepted" in line       # the value, and what would be
+    # the value as read (1e308 is the number 1e+308), and what would be accepted
+    assert shown(bounds.parse_value(value)) in line and "accepted" in line
 
 
 def test_a_long_value_is_cut_in_the_message(tmp_path, capsys):

@@ -105,8 +105,8 @@ def test_every_flag_of_every_study_reaches_it_or_is_refused_in_one_line(
     if name not in module.OPTIONS:
         line = err.strip().splitlines()
         assert status == 2 and len(line) == 1, err
-        assert line[0].startswith("snn-antenna run: error: ")
-        assert f"{flag(name)}: the {study} study takes " in line[0]
+        assert line[0].startswith(f"snn-antenna: error: {flag(name)} = ")
+        assert f"the {study} study takes " in line[0]
         assert all(flag(o) in line[0] for o in module.OPTIONS)
         assert not out.exists()
         return

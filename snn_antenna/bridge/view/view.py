@@ -52,24 +52,6 @@ START_TIMEOUT_S = 60.0          # a spawned interpreter imports Bokeh: seconds o
 STOP_TIMEOUT_S = 5.0
 
 
-def add_view_args(parser) -> None:
-    """``--view``, ``--view-host``, ``--view-port``, ``--view-hold`` for ``stream``/``replay``."""
-    parser.add_argument("--view", action="store_true",
-                        help="serve a live browser view (rate map, coded input, contacts) and "
-                             "print its URL")
-    parser.add_argument("--view-host", default="127.0.0.1",
-                        help="address the view listens on (default 127.0.0.1: this machine "
-                             "only; 0.0.0.0 exposes it to the network deliberately)")
-    parser.add_argument("--view-port", type=int, default=5006,
-                        help="port of the view (default 5006; 0 = any free port)")
-    parser.add_argument("--view-save", default=None, metavar="DIR",
-                        help="where the page's 'save view' button writes (default: the "
-                             "recording's views/ folder for stream, out/views for replay)")
-    parser.add_argument("--view-hold", type=float, default=None,
-                        help="seconds to keep the view up after the stream ends (default: "
-                             "until Ctrl-C; 0 closes it at once)")
-
-
 @contextmanager
 def live_view(args, parts):
     """Yield a started :class:`LiveView` when ``args.view`` (else None); stop it at the end,
