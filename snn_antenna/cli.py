@@ -2,10 +2,13 @@
 
     snn-antenna run studies/quickstart.toml [--out DIR] [--set key=value ...] [--quick]
 
-Every subcommand takes ``--out DIR``. Errors a user can cause print one clear line and exit
-with status 2; they never show a traceback from deep inside Brian2 or numpy. ``run`` checks
-everything in one first phase (``first_phase``; ``--check`` stops after it), then runs the
-study on the plan that phase built.
+:data:`COMMANDS` is the registry: every subcommand, declared where it is implemented (``run``
+here, ``results`` in report/results.py, the bridge's in bridge/cli.py, ``data import`` in
+data/command.py), each with its options declared once (``core.commands``). Errors a user can
+cause print one clear line and exit with status 2 (``core.errors.guarded`` maps every exit);
+they never show a traceback from deep inside Brian2 or numpy. ``run`` checks everything in one
+first phase (``first_phase``; ``--check`` stops after it), then runs the study on the plan that
+phase built, in the output folder that phase checked.
 """
 from __future__ import annotations
 

@@ -196,7 +196,8 @@ def test_firmware_option_refuses_what_the_firmware_cannot_do(tmp_path):
         result = subprocess.run([*CLI, "emulate", "--pty", "--firmware", firmware, *options],
                                 capture_output=True, text=True, timeout=60, env=ENV)
         assert result.returncode == 2, result.stderr
-        assert result.stderr.startswith(f"snn-antenna: error: {field} = ") and "/dev/" not in result.stdout
+        assert result.stderr.startswith(f"snn-antenna: error: {field} = ")
+        assert "/dev/" not in result.stdout
 
 
 @needs_simavr

@@ -36,7 +36,7 @@ def test_the_two_commands_open_the_readme_verbatim():
     assert len(lines) <= 200
 
 
-def test_every_snn_antenna_command_parses_and_names_files_that_exist():
+def test_every_snn_antenna_command_is_accepted_and_names_files_that_exist():
     commands = _command_lines()
     assert len(commands) >= 10
     parser = build_parser()
@@ -45,6 +45,7 @@ def test_every_snn_antenna_command_parses_and_names_files_that_exist():
         if "NAME" in line:  # the generic form: every shipped study
             argv = [a.replace("NAME", "quickstart") for a in argv]
         args = parser.parse_args(argv)
+        args.command.options_from(args)  # every value in its declared bounds
         for value in vars(args).values():
             if isinstance(value, str) and re.match(r"(studies|networks|stimuli|firmware)/", value):
                 assert (ROOT / value).exists(), f"{line}: {value} does not exist"

@@ -313,7 +313,7 @@ COMMANDS = (
                           "(networks/live.toml: the live setting)"),
         SET,
         speed_option("the speed command at the start (default: the recording's, from its "
-              "meta.json)"),
+                     "meta.json)"),
         *VIEW)),
     Command("emulate", "emulate the sensor board (pty or URL), with faults", cmd_emulate, (
         Option("pty", "create a pseudo-terminal and print its path", kind=SWITCH),
@@ -352,8 +352,9 @@ COMMANDS = (
                check=bounds.out_path, text=True),
         DURATION,
         SET,
-        speed_option("the robot's speed command at the start, for a network whose speed gate or CPG "
-              "reads it (networks/live_robot.toml); the page's speed control changes it"),
+        speed_option("the robot's speed command at the start, for a network whose speed gate "
+                     "or CPG reads it (networks/live_robot.toml); the page's speed control "
+                     "changes it"),
         *VIEW,
         Option("json", "end with the full run report as JSON (for machines) instead of the "
                        "short summary", kind=SWITCH))),
