@@ -12,6 +12,7 @@ from data_helpers import (RATE, import_board_bench, import_dir, ringing_counts, 
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
 from snn_antenna.networks.resonators import MIN_SAMPLES_PER_CYCLE
+from snn_antenna.sources.recorded import RecordedBench
 from snn_antenna.studies import baseline_comparison
 from snn_antenna.studies.baseline_comparison import fit_to_rate
 
@@ -76,7 +77,7 @@ def test_the_shipped_comparison_plans_on_a_1khz_board_recording(board_set):
     refused, the rate's cuts listed, the tuned bank's calibration repetitions drawn."""
     plan = baseline_comparison.plan({**shipped(), "data": str(board_set)})
     parts = plan.parts
-    assert parts.bench.recorded and parts.bench.rate_hz == RATE
+    assert isinstance(parts.bench, RecordedBench) and parts.bench.rate_hz == RATE
     assert len(plan.left_out) == 6
     tuned = parts.plan.tuned_plan()
     assert len(parts.calibration_repetitions) == tuned.calibration_repetitions

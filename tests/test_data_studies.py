@@ -12,6 +12,7 @@ from data_helpers import (import_dir, import_gating_drives, import_quickstart_dr
                           write_labels, write_record)
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
+from snn_antenna.sources.source import Scene
 from snn_antenna.studies import baseline_comparison, quickstart, speed_accuracy
 from snn_antenna.studies.contract import Options
 
@@ -36,6 +37,24 @@ def test_quickstart_reads_the_recorded_drive_sample_for_sample(drive):
     assert [(c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts] == \
         [(c.t_s, c.distance_cm, c.material) for c in generated.truth.contacts]
     assert (parts.scene.adc_bits, parts.scene.full_scale_g) == (10, 18.0)
+
+
+def test_a_scene_answers_the_same_questions_generated_or_recorded(drive):
+    """Both kinds answer every question of ``source.Scene``; only the answers differ: where
+    the data came from (rows, summary entry) and what the generator was set to match."""
+    spec, _, data = drive
+    generated = quickstart.plan(spec).parts.scene
+    on_data = quickstart.plan({**spec, "data": str(data)}).parts.scene
+    assert isinstance(generated, Scene) and isinstance(on_data, Scene)
+    assert generated.provenance_rows() == [] and generated.summary_entry() is None
+    meta = json.loads((data / "import.json").read_text())
+    assert on_data.summary_entry()["key"] == meta["key"]
+    assert dict(on_data.provenance_rows())["labels"].endswith(f"{meta['labels']['sha256']})")
+    assert on_data.calibrated() == []
+    assert any("generator" in c.quantity for c in generated.calibrated())
+    assert "recorded drive" in on_data.describe()
+    assert f"{generated.speed_cm_s:g} cm/s" in generated.describe()
+    assert (on_data.rate_hz, on_data.duration_s) == (generated.rate_hz, generated.duration_s)
 
 
 def test_speed_accuracy_takes_the_recorded_drive_as_its_quickstart_scene(drive):

@@ -196,6 +196,14 @@ class CourseScene(RobotScene):
     def profile(self) -> SpeedProfile:
         return self.speed if self.speed is not None else SpeedProfile("constant", self.speed_cm_s)
 
+    def describe(self) -> str:
+        speed = self.profile
+        pace = (f"at {speed.speed_cm_s:g} cm/s" if speed.kind == "constant" else
+                f"at speeds {speed.kind} through " + ", ".join(f"{v:g}" for _, v in speed.points)
+                + " cm/s")
+        return (f"A robot drives {pace} for {self.duration_s:g} s (sampled at "
+                f"{self.rate_hz:g} Hz) past {len(self.obstacles)} post(s).")
+
     def validate(self) -> None:
         bounds.instance("speed", self.speed, (SpeedProfile, type(None)), "a SpeedProfile")
         self.profile.validate()

@@ -16,6 +16,7 @@ self-motion keeps competing with the contacts, so false positives can arise and 
 """
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 
@@ -146,17 +147,11 @@ def score(readout: ReadOut, contacts, duration_s: float, parts: Parts) -> dict:
 
 
 def _scene_text(scene, description: str) -> str:
-    """The scene this run drove (its profile's speed, contacts and length), then the spec's
-    description after its first sentence, which tells the full profile's scene."""
-    import re
-
-    touches = "; ".join(f"at {c.t_s:g} s on {c.material} {c.distance_cm:g} cm along the rod"
-                        for c in scene.contacts) or "nothing"
-    last = max((c.t_s for c in scene.contacts), default=0.0)
+    """The scene this run read (what its source says of it), then the spec's description
+    after its first sentence (which tells the full profile's scene)."""
     rest = re.split(r"\.\s+(?=[A-Z])", description, maxsplit=1)
-    return (f"A robot drives at {scene.speed_cm_s:g} cm/s for {scene.duration_s:g} s; its "
-            f"antenna touches {touches}, then it drives on for {scene.duration_s - last:g} s. "
-            + (rest[1] if len(rest) > 1 else ""))
+    return (f"{scene.describe()} The read-out sees only the sensor's samples; the contacts "
+            "score it afterwards. " + (rest[1] if len(rest) > 1 else ""))
 
 
 @logged
@@ -165,12 +160,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     scene, array = parts.scene, parts.array
     seed = plan.seed
     t_start = time.perf_counter()
-    if getattr(scene, "recorded", False):
-        log(f"[1/4] the recorded drive {scene.drive.meta['source']} ({scene.duration_s:g} s at "
-            f"{scene.rate_hz:g} Hz, {len(scene.contacts)} labelled contact(s))")
-    else:
-        log(f"[1/4] generating the scene ({scene.duration_s:g} s at {scene.rate_hz:g} Hz, "
-            f"{scene.speed_cm_s:g} cm/s, {len(scene.contacts)} contact(s), seed {seed})")
+    log(f"[1/4] the scene: {scene.describe()}")
     rec = scene.generate(seed)
     log(f"[2/4] reading out from the samples alone: chain fitted on the first "
         f"{parts.warmup_s:g} s, then {array.n_neurons} resonators ({array.band_hz[0]:g}–"
@@ -201,13 +191,11 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     report = Report(out_dir, "snn-antenna quickstart: contacts on a driving robot", quick=quick,
                     quick_note="quick profile: a shorter scene with fewer contacts; its "
                                "false-positive rate rests on too few minutes to compare")
-    if getattr(parts.scene, "recorded", False):
-        report.text(_recorded_text(parts.scene))
-        report.table([{"what": w, "value": v} for w, v in recorded.provenance_rows(parts.scene)],
-                     "Where the data came from")
-        summary["data"] = recorded.summary_entry(parts.scene)
-    else:
-        report.text(_scene_text(parts.scene, spec.get("description", "")))
+    report.text(_scene_text(parts.scene, spec.get("description", "")))
+    report.table([{"what": w, "value": v} for w, v in parts.scene.provenance_rows()],
+                 "Where the data came from")
+    if (origin := parts.scene.summary_entry()) is not None:
+        summary["data"] = origin
     _provenance_rows(report, summary, parts)
     report.table([{"quantity": "true positives", "value": scored["tp"]},
                   {"quantity": "misses", "value": scored["misses"]},
@@ -232,33 +220,15 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     return summary
 
 
-def _recorded_text(scene) -> str:
-    touches = "; ".join(f"at {c.t_s:g} s{f' on {c.material}' if c.material else ''} "
-                        f"{c.distance_cm:g} cm along the rod" for c in scene.contacts) or "nothing"
-    speed = scene.speed_cm_s
-    return (f"A recorded drive ({scene.duration_s:g} s{f' at {speed:g} cm/s' if speed else ''}"
-            f"): its labels say the antenna touched {touches}. The read-out sees only the "
-            "recorded samples; the labels score it afterwards.")
-
-
 def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
     sc = s["score"]
     law_19 = float(antenna.low_mode_hz(19.0))
-    generated = not getattr(parts.scene, "recorded", False)
-    report.calibrated(*[c for c in (
-        Calibrated("free probe's self-oscillation while driving (generator)", antenna.NATURAL_HZ,
-                   7.8, "Hz", "docs/reference.md, robot experiments (paper: Results, "
-                   "spiking-based processing)", "antenna.NATURAL_HZ set to the paper's peak")
-        if generated else None,
-        Calibrated(f"low-mode frequency law ({'generator and ' if generated else ''}read-out)",
+    report.calibrated(
+        *parts.scene.calibrated(),
+        Calibrated("low-mode frequency law (read-out)",
                    f"log10 F = {antenna.LOW_LAW[0]} d + {antenna.LOW_LAW[1]}",
                    "log10 F = 0.0268 d + 0.69", "", "docs/reference.md, Fig. 2C",
                    "antenna.LOW_LAW; readout inverts the same law"),
-        Calibrated("self-motion amplitude at 27 vs 12 cm/s (∝ speed²), made to match the "
-                   "optimal threshold's ratio", (27 / 12) ** 2, "> 5", "×",
-                   "docs/reference.md, Fig. 9",
-                   "antenna.SELF_MOTION_G_AT_12 (0.25 g, assumed) and the speed² law")
-        if generated else None,
         # set to this project's own measured tuning curve; the paper's 7 Hz neuron (k =
         # 0.3425, 20.4 Hz per k) is never its target: tuning_sweep sets it beside a prediction
         Calibrated("hertz per unit k of a resonator", neurons.DRIVEN_HZ_PER_K,
@@ -268,7 +238,7 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
         Calibrated("coder threshold Th at 12 cm/s", parts.chain.named_steps["coder"].threshold,
                    "above sensor noise (0.01 g), below self-motion (0.25 g rms)", "g",
                    "studies/quickstart.toml", "set by hand"),
-    ) if c is not None])
+    )
     interval = tuple(sc["fp_per_min_interval"])
     report.predicted(
         Predicted("false positives per minute while driving (12 cm/s)", sc["fp_per_min"],
@@ -281,22 +251,22 @@ def _provenance_rows(report: Report, s: dict, parts: Parts) -> None:
                   sc["tp"], "from the contact to the end of the first detected window"),
         Predicted("array's self-motion centroid", s["motion_dominant_hz"], "Hz", None,
                   "this run, windows outside detections", None, None,
-                  "its input was generated at the calibrated 7.8 Hz: this checks the "
-                  "array's tuning, not the paper" if generated else
-                  "the recorded antenna's own self-motion, as the array reads it"),
+                  "the antenna's self-motion as the array reads it; where the scene's "
+                  "self-oscillation was set (Calibrated to, above), this checks the array's "
+                  "tuning, not the paper"),
     )
     fig10 = [c for c in sc["contacts"] if c["true_distance_cm"] == 19.0 and c["dominant_hz"]]
     if fig10:   # the paper's Fig. 10 contact
         report.predicted(Predicted(
             "most active neuron on the contact at 19 cm", fig10[0]["dominant_hz"], "Hz", 17.0,
             "docs/reference.md, Fig. 10E", None, None, f"the paper's own law gives "
-            f"{law_19:.1f} Hz at 19 cm{', which the generator rings at' if generated else ''}"))
+            f"{law_19:.1f} Hz at 19 cm"))
     report.predicted(
         Predicted("mean |distance error|", sc["mean_abs_distance_error_cm"], "cm", None,
                   "this run", None, sc["tp"],
-                  "the read-out inverts the generator's own law: self-consistency of the "
-                  "array's frequency estimate, not a reproduction" if generated else
-                  "against the labelled distances of the recorded contacts"),
+                  "against the scene's contacts; where the scene rings at the law the "
+                  "read-out inverts (Calibrated to, above), this is self-consistency of the "
+                  "array's frequency estimate, not a reproduction"),
     )
 
 

@@ -36,10 +36,10 @@ from ...readout.spiking_decoders import (
     spiking_baselines,
 )
 from ...report.page import Report
-from ...sources import bench, recorded
+from ...sources import bench
 from ..contract import COMMON, Options, Plan, cache_folder, data_folder
 from .report import write_report
-from .tuned import held_out_repetitions, tuned_stage
+from .tuned import tuned_stage
 
 SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
 OPTIONS = (*COMMON, "fresh", "scheduler", "data")
@@ -181,13 +181,14 @@ def plan(spec: dict) -> Plan:
         evaluation = cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
     if "two_material" in evaluation.pipelines and \
             not {"wood", "aluminium"} <= set(bench_spec.materials):
-        raise SpecError("data" if getattr(bench_spec, "recorded", False) else
-                        "stimulus.materials", list(bench_spec.materials),
+        raise SpecError("data" if spec.get("data") is not None else "stimulus.materials",
+                        list(bench_spec.materials),
                         "a list that holds wood and aluminium for the two-material network")
     parts = StudySpec(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
-    if getattr(bench_spec, "recorded", False) and parts.plan and parts.plan.tuned_plan():
-        parts.calibration_repetitions = held_out_repetitions(bench_spec,
-                                                             parts.plan.tuned_plan())
+    if parts.plan and parts.plan.tuned_plan():
+        parts.calibration_repetitions = bench_spec.calibration_repetitions(
+            parts.plan.tuned_plan().calibration_repetitions,
+            "spiking.tuned.calibration_repetitions")
     return Plan("baseline_comparison", spec, parts, estimate, left_out)
 
 
@@ -260,9 +261,7 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     """The bench data set, its processed events and their statistics beside the paper's,
     and the FFT's cost per event: (data, a Comparison with no results yet, the seconds
     spent making or loading the data and its features)."""
-    log(f"[1/{stages}] {'recorded' if getattr(parts.bench, 'recorded', False) else 'bench'} "
-        f"data set: {parts.bench.n_events} events at "
-        f"{parts.bench.rate_hz:g} Hz")
+    log(f"[1/{stages}] {parts.bench.describe()}")
     t0 = time.perf_counter()
     data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
     data_s = time.perf_counter() - t0
@@ -284,8 +283,7 @@ def _signal_stage(parts: StudySpec, stages: int, log, fresh) -> tuple:
     return data, Comparison(feats, signal, {}, skipped, costs, data={
         "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
         "bench_key": parts.bench.key(),
-        **({"recorded": recorded.summary_entry(parts.bench)}
-           if getattr(parts.bench, "recorded", False) else {})}), data_s
+        **({"recorded": origin} if (origin := parts.bench.summary_entry()) else {})}), data_s
 
 
 def _spiking_stage(parts: StudySpec, data, cmp: Comparison, stage: str, log, fresh,

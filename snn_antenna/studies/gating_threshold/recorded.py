@@ -26,7 +26,6 @@ import numpy as np
 
 from ...engine.batches import Batches, DetectColumns
 from ...evaluation.scoring import Score, first_match, score, score_columns
-from ...sources import recorded
 from .drives import (CATEGORY, SPEED_TOLERANCE_CM_S, RecordedSplit, at_speed,
                      contacts_by_speed, speed_at)
 
@@ -122,14 +121,14 @@ def summary_entry(split: RecordedSplit) -> dict:
     def labelled(drives) -> int:
         return sum(len(split.recording(d).truth.contacts) for d in drives)
 
-    return {**split.roles(), "data": recorded.summary_entry(split.drives),
+    return {**split.roles(), "data": split.drives.summary_entry(),
             "labelled_contacts": {"training drives": labelled(split.training),
                                   "held-out drives": labelled(split.held_out)},
             "parts_from_recordings": ["preprocessing (calibration drive)",
                                       "Th x speed sweep and Th*(speed) (training drives)",
                                       "the gate's training targets (training drives)",
                                       "evaluation (held-out drives)"],
-            "provenance": recorded.provenance_rows(split.drives)}
+            "provenance": split.drives.provenance_rows()}
 
 
 def report_section(rep, s: dict) -> None:

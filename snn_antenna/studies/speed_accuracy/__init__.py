@@ -355,10 +355,10 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
                         quick=quick, quick_note=quick_note(plan.sweep, plan.stability))
         report.text(spec.get("description", ""))
         drive = plan.robot_scenes["quickstart"]
-        if getattr(drive, "recorded", False):
-            summary["data"] = recorded.summary_entry(drive)
-            report.table([{"what": w, "value": v} for w, v in recorded.provenance_rows(drive)],
-                         "The quickstart scene is a recorded drive: where it came from")
+        if (origin := drive.summary_entry()) is not None:
+            summary["data"] = origin
+        report.table([{"what": w, "value": v} for w, v in drive.provenance_rows()],
+                     "Where the quickstart scene came from")
         write_report(report, summary, smap)
         engine_precision.report_section(report, precision)
         report.write(summary, spec, sweep.target)
