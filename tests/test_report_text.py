@@ -1,7 +1,7 @@
 """Report prose comes from the run, not from the full profile's description."""
 
 from snn_antenna.sources.stimuli import Contact, RobotScene
-from snn_antenna.studies.quickstart import _scene_text
+from snn_antenna.studies.quickstart.report import scene_text
 
 DESCRIPTION = ("A robot drives at 12 cm/s and keeps driving; at 5.5 s its antenna touches an "
                "obstacle 19 cm along the rod (the paper's Fig. 10), then it drives on for "
@@ -10,7 +10,7 @@ DESCRIPTION = ("A robot drives at 12 cm/s and keeps driving; at 5.5 s its antenn
 
 def test_quickstart_tells_the_scene_it_ran():
     quick = RobotScene(speed_cm_s=12.0, duration_s=7.0, contacts=[Contact(3.0, 19.0, "wood")])
-    text = _scene_text(quick, DESCRIPTION)
+    text = scene_text(quick, DESCRIPTION)
     assert "for 7 s" in text and "drives on for 4 s" in text and "9.5 s" not in text
     assert text.endswith("Self-motion drives the 7-8 Hz resonators.")
 

@@ -33,8 +33,9 @@ from ..core.signals import Recording
 from ..core.truth import Event, GroundTruth
 from ..core.files import refuse_symlink
 from ..core.provenance import code_hash, code_identity
+from ..core.spec import check_section
 from ..core.store import DamagedStore, short_reason, read_dataset, write_dataset
-from . import antenna, contact_models
+from . import antenna, contact_models, recorded
 from .source import Generated
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
@@ -260,8 +261,6 @@ def event_recording(ds: xr.Dataset, i: int) -> Recording:
 
 def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
     """Build a BenchSpec from the ``[stimulus]`` table of a study spec (``kind = "bench"``)."""
-    from ..core.spec import check_section
-
     table = dict(table)
     kind = table.pop("kind", "bench")
     if kind != "bench":
@@ -274,8 +273,6 @@ def source_from_spec(spec: dict):
     """The bench contacts a study reads: the imported recordings its top-level ``data`` names
     (``recorded.open_bench``; its ``[stimulus]`` then gives only ``n_jobs`` and ``cache_dir``),
     or the generator's contacts of its ``[stimulus]`` table."""
-    from . import recorded
-
     seed, table = int(spec.get("seed", 0)), dict(spec.get("stimulus", {}))
     if spec.get("data") is None:
         return spec_from_table(table, seed)

@@ -37,6 +37,7 @@ import numpy as np
 from ..core import bounds
 from ..core.errors import SpecError, check
 from ..core.signals import Recording
+from ..core.spec import check_section
 from . import antenna
 from .stimuli import Contact, RobotScene
 
@@ -363,8 +364,6 @@ def scene_from_spec(spec: dict) -> RobotScene:
     """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` (a ``RobotScene``, the
     default) or ``kind = "course"`` (a ``CourseScene``: obstacles, a speed profile). The one
     way every study, sweep and the emulator turn a stimulus table into a scene."""
-    from ..core.spec import check_section
-
     spec = dict(spec)
     kind = spec.pop("kind", "robot")
     check(kind in ("robot", "course"), "stimulus.kind", kind, "'robot' or 'course'")
