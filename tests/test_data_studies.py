@@ -109,7 +109,7 @@ def gating_drives(tmp_path_factory):
 def test_the_gating_study_splits_recorded_drives_by_drive_within_each_speed(gating_drives):
     """Every scored drive is either a training or a held-out drive, never both; the training
     drives cover every swept speed; the open drive fits the chain; the seed draws the split."""
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+    from snn_antenna.studies.gating_threshold.plan import make_parts as build
 
     spec, recs, data = gating_drives
     splits = {}
@@ -132,7 +132,7 @@ def test_the_gating_study_splits_recorded_drives_by_drive_within_each_speed(gati
 
 def test_the_gating_study_refuses_recorded_drives_it_cannot_split_in_one_line(gating_drives,
                                                                                tmp_path):
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+    from snn_antenna.studies.gating_threshold.plan import make_parts as build
 
     spec, recs, data = gating_drives
     on_data = {**spec, "data": str(data)}
@@ -174,7 +174,7 @@ def test_check_refuses_a_speed_the_recorded_drives_lack_in_one_line(gating_drive
 @given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(),
                  st.booleans(), st.none()))
 def test_a_held_out_share_outside_0_to_1_is_refused_in_one_line(value):
-    from snn_antenna.studies.gating_threshold.spec import EvaluationSettings
+    from snn_antenna.studies.gating_threshold.plan import EvaluationSettings
 
     valid = (isinstance(value, (int, float)) and not isinstance(value, bool)
              and 0 < value < 1)
@@ -194,7 +194,7 @@ def test_a_recorded_drive_is_scored_at_the_speed_it_was_touched_at():
     from snn_antenna.core.truth import Event, GroundTruth
     from snn_antenna.readout.contacts import ContactEstimate
     from snn_antenna.studies.gating_threshold.recorded import score_by_speed
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+    from snn_antenna.studies.gating_threshold.plan import make_parts as build
 
     parts = build(specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True))
     speed = np.r_[np.zeros(6000), np.full(4000, 27.0)]
