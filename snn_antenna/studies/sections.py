@@ -9,7 +9,11 @@
 - the **array**: ``[network]``, a ``ResonatorArray`` (:func:`network_table`,
   :func:`array_section`, :func:`check_rates`);
 - the **detector**: ``[readout]``, read by ``readout.contacts.detector_from_spec``, which the
-  live path shares.
+  live path shares;
+- the **bench set** and what reads it: the recorded contacts ``data`` names or the
+  generator's ``[stimulus]`` (:func:`bench_section`), ``[events]`` (the paper's processing of
+  each contact, :func:`events_section`) and ``[evaluation]`` (the splits and read-outs,
+  :func:`evaluation_section`).
 
 Every reader checks its section before anything runs and names the section in its refusals.
 """
@@ -20,11 +24,15 @@ from dataclasses import dataclass
 
 from ..core import spec as specs
 from ..core.errors import check
+from ..evaluation import crossval as cv
 from ..networks.resonators import ResonatorArray
 from ..preprocess import make_chain
-from ..sources import recorded
+from ..readout.events import EventProcessor
+from ..sources import bench, recorded
 from ..sources.scenes import CourseScene, scene_from_spec
+from ..sources.source import BenchSet
 from ..sources.stimuli import RobotScene
+from .contract import cache_folder
 
 # make_chain's arguments that describe the sensor: each source gives its own
 SENSOR = ("rate_hz", "adc_bits", "full_scale_g")
@@ -101,5 +109,31 @@ def check_rates(array: ResonatorArray, scenes: Iterable) -> None:
             array.check_rate(scene.rate_hz)
 
 
+def bench_section(spec: dict) -> BenchSet:
+    """The bench set a study reads: the recorded contacts of the folder the spec's ``data``
+    names, or the generator's of its ``[stimulus]`` (whose cache folder must be usable)."""
+    if spec.get("data") is not None:
+        return bench.source_from_spec(spec)
+    with specs.section("stimulus"):
+        source = bench.source_from_spec(spec)
+        source.validate()
+        cache_folder("cache_dir", source.cache_dir)
+    return source
+
+
+def events_section(spec: dict, rate_hz: float) -> EventProcessor:
+    """``[events]``: the paper's processing of each contact, at the bench set's rate."""
+    with specs.section("events"):
+        table = specs.check_section(spec, "events", EventProcessor, exclude=["rate_hz"])
+        return EventProcessor(rate_hz=rate_hz, **table)
+
+
+def evaluation_section(spec: dict) -> cv.Evaluation:
+    """``[evaluation]``: the splits by repetition, their seeds and the read-outs to train."""
+    with specs.section("evaluation"):
+        return cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
+
+
 __all__ = ["SENSOR", "scene_section", "source_section", "Preprocessing", "chain_section",
-           "network_table", "array_section", "check_rates"]
+           "network_table", "array_section", "check_rates", "bench_section", "events_section",
+           "evaluation_section"]
