@@ -30,6 +30,7 @@ from snn_antenna.evaluation.comparison import coder_rows  # noqa: E402
 from snn_antenna.readout import baselines as bl  # noqa: E402
 from snn_antenna.report.results import write_benchmark_json  # noqa: E402
 from snn_antenna.studies import baseline_comparison as study  # noqa: E402
+from snn_antenna.studies.baseline_comparison.run import signal_stage  # noqa: E402
 from snn_antenna.studies.baseline_comparison.tuned import (  # noqa: E402
     best_costs,
     calibration_bands,
@@ -54,7 +55,7 @@ def main(argv=None) -> dict:
     parts = study.plan(spec).parts
     plan = parts.plan.tuned_plan()
     t0 = time.perf_counter()
-    data, cmp, _ = study._signal_stage(parts, 3, print, False)
+    data, cmp, _ = signal_stage(parts, 3, print, False)
     bands, where = calibration_bands(parts, data, plan, print, False)
     if args.cost_only:
         costs = best_costs(data, parts, cmp.features["event"].values,

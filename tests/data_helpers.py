@@ -104,7 +104,8 @@ def import_gating_drives(tmp, spec, per_speed: int = 2, calibration_s: float = 5
     recorded with their speed log, their contacts labelled, imported: the data set's folder
     and the generated recordings by drive name."""
     from snn_antenna.sources.scenes import SpeedProfile, drive as open_drive
-    from snn_antenna.studies.gating_threshold.spec import make_parts, make_scene
+    from snn_antenna.studies.gating_threshold.plan import make_parts
+    from snn_antenna.studies.gating_threshold.scenes import make_scene
 
     parts = make_parts(spec)
     recs = {"open": open_drive(parts.scene, SpeedProfile("constant", 15.0), calibration_s,

@@ -19,6 +19,7 @@ from data_helpers import RATE, ringing_counts, write_labels, write_record
 from snn_antenna.cli import main
 from snn_antenna.core.errors import SpecError
 from snn_antenna.sources import bench, recorded
+from snn_antenna.sources.source import BenchSet
 
 ONSETS = [1.0, 2.5, 4.0, 5.5, 7.0, 8.5]
 DISTANCES = [10.0, 20.0, 30.0, 10.0, 20.0, 30.0]
@@ -54,6 +55,7 @@ def imported(tmp_path, counts):
 
 def test_an_import_has_the_generators_layout_and_every_contact_window(imported, counts):
     source = recorded.open_bench(imported / "ds")
+    assert isinstance(source, BenchSet) and isinstance(bench.BenchSpec(), BenchSet)
     ds = bench.load(source)
     generated = bench.generate(bench.BenchSpec(materials=["wood"], positions_cm=[10.0],
                                                repetitions=1, duration_s=0.1))
@@ -81,7 +83,7 @@ def test_the_provenance_holds_the_sha256_of_every_raw_file_and_of_the_labels(imp
     assert set(files) == {"meta.json", "samples.bin", "raw.bin"}
     for name, digest in files.items():
         assert digest == sha(imported / "recs" / "run1" / name)
-    rows = dict(recorded.provenance_rows(recorded.open_bench(imported / "ds")))
+    rows = dict(recorded.open_bench(imported / "ds").provenance_rows())
     assert meta["labels"]["sha256"] in rows["labels"]
     assert rows["contacts imported"].startswith("6 of 6")
 

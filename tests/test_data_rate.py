@@ -12,8 +12,10 @@ from data_helpers import (RATE, import_board_bench, import_dir, ringing_counts, 
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
 from snn_antenna.networks.resonators import MIN_SAMPLES_PER_CYCLE
+from snn_antenna.sources.recorded import RecordedBench
 from snn_antenna.studies import baseline_comparison
-from snn_antenna.studies.baseline_comparison import fit_to_rate
+from snn_antenna.studies.baseline_comparison.plan import fit_to_rate
+from snn_antenna.studies.baseline_comparison.run import signal_stage
 
 ROOT = Path(__file__).resolve().parents[1]
 SITES = [("wood", 10.0), ("wood", 25.0), ("aluminium", 10.0), ("aluminium", 25.0)]
@@ -76,7 +78,7 @@ def test_the_shipped_comparison_plans_on_a_1khz_board_recording(board_set):
     refused, the rate's cuts listed, the tuned bank's calibration repetitions drawn."""
     plan = baseline_comparison.plan({**shipped(), "data": str(board_set)})
     parts = plan.parts
-    assert parts.bench.recorded and parts.bench.rate_hz == RATE
+    assert isinstance(parts.bench, RecordedBench) and parts.bench.rate_hz == RATE
     assert len(plan.left_out) == 6
     tuned = parts.plan.tuned_plan()
     assert len(parts.calibration_repetitions) == tuned.calibration_repetitions
@@ -107,7 +109,7 @@ def test_check_prints_what_the_rate_leaves_out(board_set, tmp_path, capsys):
 
 def test_the_tuned_banks_calibration_contacts_leave_every_split(board_set):
     parts = baseline_comparison.plan({**shipped(), "data": str(board_set)}).parts
-    _, cmp, _ = baseline_comparison._signal_stage(parts, 5, lambda *a: None, False)
+    _, cmp, _ = signal_stage(parts, 5, lambda *a: None, False)
     reps = set(cmp.features["repetition"].values.tolist())
     assert reps == set(range(5)) - set(parts.calibration_repetitions)
     assert cmp.features.sizes["event"] == len(SITES) * len(reps)
@@ -184,7 +186,7 @@ def test_nmf_sizes_a_small_split_cannot_fit_are_left_out_and_named():
 
     from snn_antenna.evaluation.crossval import Evaluation
     from snn_antenna.readout.baselines import material_baselines
-    from snn_antenna.studies.baseline_comparison import _fitting_nmf
+    from snn_antenna.studies.baseline_comparison.run import _fitting_nmf
 
     features = xr.Dataset(coords={"repetition": ("event", np.repeat(np.arange(10), 4))})
     evaluation = Evaluation(seeds=[0, 1], test_fraction=0.3, nmf_dims=[3, 24, 30, 45])

@@ -12,6 +12,7 @@ from data_helpers import (import_dir, import_gating_drives, import_quickstart_dr
                           write_labels, write_record)
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
+from snn_antenna.sources.source import Scene
 from snn_antenna.studies import baseline_comparison, quickstart, speed_accuracy
 from snn_antenna.studies.contract import Options
 
@@ -36,6 +37,24 @@ def test_quickstart_reads_the_recorded_drive_sample_for_sample(drive):
     assert [(c.t_s, c.distance_cm, c.material) for c in rec.truth.contacts] == \
         [(c.t_s, c.distance_cm, c.material) for c in generated.truth.contacts]
     assert (parts.scene.adc_bits, parts.scene.full_scale_g) == (10, 18.0)
+
+
+def test_a_scene_answers_the_same_questions_generated_or_recorded(drive):
+    """Both kinds answer every question of ``source.Scene``; only the answers differ: where
+    the data came from (rows, summary entry) and what the generator was set to match."""
+    spec, _, data = drive
+    generated = quickstart.plan(spec).parts.scene
+    on_data = quickstart.plan({**spec, "data": str(data)}).parts.scene
+    assert isinstance(generated, Scene) and isinstance(on_data, Scene)
+    assert generated.provenance_rows() == [] and generated.summary_entry() is None
+    meta = json.loads((data / "import.json").read_text())
+    assert on_data.summary_entry()["key"] == meta["key"]
+    assert dict(on_data.provenance_rows())["labels"].endswith(f"{meta['labels']['sha256']})")
+    assert on_data.calibrated() == []
+    assert any("generator" in c.quantity for c in generated.calibrated())
+    assert "recorded drive" in on_data.describe()
+    assert f"{generated.speed_cm_s:g} cm/s" in generated.describe()
+    assert (on_data.rate_hz, on_data.duration_s) == (generated.rate_hz, generated.duration_s)
 
 
 def test_speed_accuracy_takes_the_recorded_drive_as_its_quickstart_scene(drive):
@@ -90,7 +109,7 @@ def gating_drives(tmp_path_factory):
 def test_the_gating_study_splits_recorded_drives_by_drive_within_each_speed(gating_drives):
     """Every scored drive is either a training or a held-out drive, never both; the training
     drives cover every swept speed; the open drive fits the chain; the seed draws the split."""
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+    from snn_antenna.studies.gating_threshold.plan import make_parts as build
 
     spec, recs, data = gating_drives
     splits = {}
@@ -113,7 +132,7 @@ def test_the_gating_study_splits_recorded_drives_by_drive_within_each_speed(gati
 
 def test_the_gating_study_refuses_recorded_drives_it_cannot_split_in_one_line(gating_drives,
                                                                                tmp_path):
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+    from snn_antenna.studies.gating_threshold.plan import make_parts as build
 
     spec, recs, data = gating_drives
     on_data = {**spec, "data": str(data)}
@@ -155,7 +174,7 @@ def test_check_refuses_a_speed_the_recorded_drives_lack_in_one_line(gating_drive
 @given(st.one_of(st.floats(allow_nan=True, allow_infinity=True), st.integers(), st.text(),
                  st.booleans(), st.none()))
 def test_a_held_out_share_outside_0_to_1_is_refused_in_one_line(value):
-    from snn_antenna.studies.gating_threshold.spec import EvaluationSettings
+    from snn_antenna.studies.gating_threshold.plan import EvaluationSettings
 
     valid = (isinstance(value, (int, float)) and not isinstance(value, bool)
              and 0 < value < 1)
@@ -175,7 +194,7 @@ def test_a_recorded_drive_is_scored_at_the_speed_it_was_touched_at():
     from snn_antenna.core.truth import Event, GroundTruth
     from snn_antenna.readout.contacts import ContactEstimate
     from snn_antenna.studies.gating_threshold.recorded import score_by_speed
-    from snn_antenna.studies.gating_threshold.spec import make_parts as build
+    from snn_antenna.studies.gating_threshold.plan import make_parts as build
 
     parts = build(specs.load(ROOT / "studies" / "gating_threshold.toml", [], quick=True))
     speed = np.r_[np.zeros(6000), np.full(4000, 27.0)]

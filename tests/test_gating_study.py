@@ -66,7 +66,7 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
 
 def _quick_parts(*overrides):
     from snn_antenna.core import spec as specs
-    from snn_antenna.studies.gating_threshold import make_parts
+    from snn_antenna.studies.gating_threshold.plan import make_parts
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=6.0", *overrides], quick=True))
     return spec, make_parts(spec)
@@ -84,7 +84,7 @@ def test_the_read_out_never_sees_the_ground_truth():
     from test_blind import scrambles
     from snn_antenna.core.truth import Event, GroundTruth
     from snn_antenna.sources.scenes import SpeedProfile
-    from snn_antenna.studies.gating_threshold import condition, make_scene
+    from snn_antenna.studies.gating_threshold.scenes import condition, make_scene
 
     spec, parts = _quick_parts("sweep.scene_s=5.0")
     scene, seed = make_scene(parts, SpeedProfile("ramp", points=[[0, 0.0], [5, 27.0]]), (11,))
@@ -121,7 +121,7 @@ def test_preprocessing_is_fitted_on_the_calibration_drive_and_is_causal():
     """The chain is fitted on a separate drive without posts, never on a scored scene: the
     conditioned signal of a scene's first seconds does not depend on what comes later."""
     from snn_antenna.sources.scenes import SpeedProfile
-    from snn_antenna.studies.gating_threshold.spec import calibrated_chain, condition, make_scene
+    from snn_antenna.studies.gating_threshold.scenes import calibrated_chain, condition, make_scene
 
     _, parts = _quick_parts()
     scene, seed = make_scene(parts, SpeedProfile("constant", 27.0), (5,))
@@ -180,7 +180,8 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
     from snn_antenna.engine.sweep import run_sweep
     from snn_antenna.core.errors import SpecError
     from snn_antenna.evaluation.scoring import SCORE_OUTPUTS
-    from snn_antenna.studies.gating_threshold import ThresholdSweep, make_parts, sweep_settings
+    from snn_antenna.studies.gating_threshold.plan import make_parts, sweep_settings
+    from snn_antenna.studies.gating_threshold.scenes import ThresholdSweep
 
     def sweep(*overrides):
         spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
@@ -212,7 +213,8 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     from snn_antenna.core import spec as specs
     from snn_antenna.engine.batches import ScoredCodings
     from snn_antenna.engine.executor import dask_client
-    from snn_antenna.studies.gating_threshold import coded_at, make_parts, sweep_scene
+    from snn_antenna.studies.gating_threshold.plan import make_parts
+    from snn_antenna.studies.gating_threshold.scenes import coded_at, sweep_scene
 
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
                                      ["sweep.scene_s=3.0", "sweep.codings_per_run=2"],

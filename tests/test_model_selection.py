@@ -12,6 +12,7 @@ from snn_antenna.core.errors import SpecError
 from snn_antenna.sources import antenna, bench
 from snn_antenna.sources.contact_models import ContactPhysics
 from snn_antenna.studies import model_selection as ms
+from snn_antenna.studies.model_selection import protocol
 from snn_antenna.studies.contract import Options
 
 RATE = 2000.0
@@ -107,28 +108,28 @@ def test_calibration_uses_only_the_targets_and_loto_predicts_the_left_out():
     points = [_point(1.0, 0.94, 2.0, nmf=0.99),     # best NMF-30, bad sites
               _point(2.0, 0.90, 12.0, nmf=0.10),    # worse accuracy, sites right
               _point(3.0, 0.60, 13.0, nmf=0.10)]
-    c = ms.choose("x", points)
+    c = protocol.choose("x", points)
     assert c["strength"] == 2.0
     assert c["loto"]["wood_aluminium_sites"]["strength"] == 1.0     # from accuracy alone
     assert c["loto"]["wood_aluminium_sites"]["predicted"] == 2.0
     assert c["loto"]["material_accuracy_spectrum"]["strength"] == 2.0
     unreadable = {"physics": "x", "strength": 9.0, "unreadable": "skipped 50 %"}
-    assert ms.choose("x", points + [unreadable])["strength"] == 2.0
-    assert ms.choose("x", [unreadable])["point"] is None
+    assert protocol.choose("x", points + [unreadable])["strength"] == 2.0
+    assert protocol.choose("x", [unreadable])["point"] is None
 
 
 def test_a_candidate_that_misses_its_calibration_is_not_chosen_for_its_predictions():
     """Predictions choose only among candidates that reproduce their calibration targets:
     a mechanism that wrecks the fitted accuracy (0.2 for 0.942) but predicts NMF-30 perfectly
     is refused, and when nothing calibrates nothing is chosen."""
-    good = ms.choose("current", [_point(1.0, 0.94, 12.0, nmf=0.5)])
-    wild = ms.choose("hertz", [_point(1.0, 0.20, 12.0, nmf=0.99)])
+    good = protocol.choose("current", [_point(1.0, 0.94, 12.0, nmf=0.5)])
+    wild = protocol.choose("hertz", [_point(1.0, 0.20, 12.0, nmf=0.99)])
     wild["physics"] = "hertz"
     assert good["calibrated"] and not wild["calibrated"]
     assert wild["n_met"] > good["n_met"]
-    decision = ms.select({"current": good, "hertz": wild})
+    decision = protocol.select({"current": good, "hertz": wild})
     assert decision["chosen"] == "current" and decision["not_calibrated"] == ["hertz"]
-    nothing = ms.select({"hertz": wild})
+    nothing = protocol.select({"hertz": wild})
     assert nothing["chosen"] is None and "calibration" in nothing["reason"]
 
 
@@ -162,14 +163,14 @@ def test_quick_study_keeps_calibrated_apart_from_predicted(tmp_path):
     assert not calibrated & predicted
     for name in ("current", "boundary"):
         assert calibrated == {f"{n}: {t[2]}" for n in ("current", "boundary")
-                              for t in ms.CALIBRATION_TARGETS.values()}
-        for what in (p[3] for p in ms.PREDICTIONS.values()):
+                              for t in protocol.CALIBRATION_TARGETS.values()}
+        for what in (p[3] for p in protocol.PREDICTIONS.values()):
             assert f"{name}: {what}" in predicted
         # the seeds' values are kept, with a verdict the statistics rules allow at n = 2
         nmf = next(p for p in saved["predicted"] if p["quantity"] == f"{name}: 8 materials, "
                    "NMF-30 accuracy")
         assert nmf["n"] == 2 and "too small to resolve" in nmf["note"]
-        assert set(saved["candidates"][name]["loto"]) == set(ms.CALIBRATION_TARGETS)
+        assert set(saved["candidates"][name]["loto"]) == set(protocol.CALIBRATION_TARGETS)
     # the outcome leads the page, above the calibrated and predicted tables
     page = (out / "report.html").read_text()
     assert page.index('class="lead"') < page.index("Calibrated to")

@@ -1,7 +1,7 @@
 """Report prose comes from the run, not from the full profile's description."""
-from types import SimpleNamespace
 
-from snn_antenna.studies.quickstart import _scene_text
+from snn_antenna.sources.stimuli import Contact, RobotScene
+from snn_antenna.studies.quickstart.report import scene_text
 
 DESCRIPTION = ("A robot drives at 12 cm/s and keeps driving; at 5.5 s its antenna touches an "
                "obstacle 19 cm along the rod (the paper's Fig. 10), then it drives on for "
@@ -9,9 +9,8 @@ DESCRIPTION = ("A robot drives at 12 cm/s and keeps driving; at 5.5 s its antenn
 
 
 def test_quickstart_tells_the_scene_it_ran():
-    quick = SimpleNamespace(speed_cm_s=12.0, duration_s=7.0, contacts=[
-        SimpleNamespace(t_s=3.0, material="wood", distance_cm=19.0)])
-    text = _scene_text(quick, DESCRIPTION)
+    quick = RobotScene(speed_cm_s=12.0, duration_s=7.0, contacts=[Contact(3.0, 19.0, "wood")])
+    text = scene_text(quick, DESCRIPTION)
     assert "for 7 s" in text and "drives on for 4 s" in text and "9.5 s" not in text
     assert text.endswith("Self-motion drives the 7-8 Hz resonators.")
 
@@ -55,30 +54,30 @@ def test_speed_to_value_mappings_are_written_one_way():
 
 def test_speed_accuracy_lists_only_the_shipped_limits_its_map_supports(tmp_path):
     from snn_antenna.report.page import Report
-    from snn_antenna.studies.speed_accuracy.report import _provenance_rows
+    from snn_antenna.studies.speed_accuracy.report import calibrated_and_predicted
 
     summary = {"stability_limits": {
         "euler": {"shipped_max_stable_k_dt": 0.5, "measured_max_stable_k_dt": 0.6},
         "izhikevich": {"shipped_max_stable_k_dt": 1.4, "measured_max_stable_k_dt": 0.5}},
         "shipped_default": {"method": "euler", "dt_ms": 0.1, "default_rows": []}}
     quick = Report(tmp_path, "t", quick=True)
-    _provenance_rows(quick, summary)
+    calibrated_and_predicted(quick, summary)
     assert [c.quantity for c in quick._calibrated] == ["largest stable k·dt, euler"]
     assert any("izhikevich" in part and "not checked" in part for part in quick._parts)
     full = Report(tmp_path, "t")
-    _provenance_rows(full, summary)                 # a full map below the shipped value: said
+    calibrated_and_predicted(full, summary)        # a full map below the shipped value: said
     izh = [c for c in full._calibrated if "izhikevich" in c.quantity][0]
     assert "NOT supported" in izh.how
 
 
 def test_tuning_puts_the_spread_of_peak_per_k_in_words_not_in_the_interval_column(tmp_path):
     from snn_antenna.report.page import Report
-    from snn_antenna.studies.tuning_sweep import _provenance_rows
+    from snn_antenna.studies.tuning_sweep.report import calibrated_and_predicted
 
     summary = {"reference_used": {"k": 1.0}, "calibration": {
         "hz_per_k_centroid": 20.7, "hz_per_k_peak": 23.9, "hz_per_k_peak_range": [22.0, 24.0],
         "responding_k": 4, "input_hz_step": 1.0}}
     report = Report(tmp_path, "t", quick=True)
-    _provenance_rows(report, summary)
+    calibrated_and_predicted(report, summary)
     peak = report._predicted[0]
     assert peak.interval is None and "22 to 24 Hz" in peak.note

@@ -125,7 +125,7 @@ def test_the_reference_verdict_says_what_was_measured():
 def test_the_quick_banner_names_the_methods_the_quick_sweep_leaves_out():
     spec = specs.load(SPEC, quick=True)
     plan = study.plan(spec).parts
-    note = study.quick_note(plan.sweep, plan.stability)
+    note = study_report.quick_note(plan.sweep, plan.stability)
     missing = [m for m in neurons.METHODS if m not in plan.sweep.methods]
     assert missing and all(m in note for m in missing)
     assert note.startswith("quick profile")

@@ -33,14 +33,16 @@ from ..core.signals import Recording
 from ..core.truth import Event, GroundTruth
 from ..core.files import refuse_symlink
 from ..core.provenance import code_hash, code_identity
+from ..core.spec import check_section
 from ..core.store import DamagedStore, short_reason, read_dataset, write_dataset
-from . import antenna, contact_models
+from . import antenna, contact_models, recorded
+from .source import Generated
 
 PAPER_POSITIONS_CM = tuple([float(d) for d in range(8, 37, 2)] + [37.5])
 
 
 @dataclass
-class BenchSpec:
+class BenchSpec(Generated):
     """What to generate; every field is a key of ``stimuli/bench.toml``."""
     materials: Sequence[str] = tuple(antenna.MATERIALS)
     positions_cm: Sequence[float] = PAPER_POSITIONS_CM
@@ -111,6 +113,22 @@ class BenchSpec:
     @property
     def n_samples(self) -> int:
         return int(round((self.pre_trigger_s + self.duration_s) * self.rate_hz))
+
+    def describe(self) -> str:
+        return (f"bench data set: {self.n_events} events at {self.rate_hz:g} Hz, generated "
+                f"({len(self.materials)} materials × {len(self.positions_cm)} positions × "
+                f"{self.repetitions} repetitions, seed {self.seed})")
+
+    def open_dataset(self, log=print, fresh: bool = False) -> xr.Dataset:
+        """The data set, from the cache when it was made before."""
+        self.validate()
+        path = Path(self.cache_dir) / f"bench-{self.key()}.zarr"
+        return cached(path, lambda: generate(self, log), __name__, log, fresh)
+
+    def calibration_repetitions(self, n: int, field: str) -> list[int]:
+        """None of its repetitions: a generator makes calibration contacts afresh, with
+        another seed, so no evaluated contact is spent on calibration."""
+        return []
 
     def key(self) -> str:
         """Hash of everything that changes the data: the spec (not where or how fast it is
@@ -223,15 +241,10 @@ def _cache_problem(ds: xr.Dataset, computed_by: str) -> str | None:
     return None
 
 
-def load(spec: BenchSpec, log=print, fresh: bool = False) -> xr.Dataset:
-    """The data set of ``spec``, from the cache when it was made before; for contacts imported
-    from recordings (``recorded.RecordedBench``), the imported data set."""
-    if getattr(spec, "recorded", False):
-        log(f"data: {spec.n_events} recorded contacts from {spec.path}")
-        return spec.dataset
-    spec.validate()
-    path = Path(spec.cache_dir) / f"bench-{spec.key()}.zarr"
-    return cached(path, lambda: generate(spec, log), __name__, log, fresh)
+def load(source, log=print, fresh: bool = False) -> xr.Dataset:
+    """The data set of a bench source (``source.BenchSet``): a ``BenchSpec``'s, generated or
+    from the cache; a ``recorded.RecordedBench``'s, as imported."""
+    return source.open_dataset(log, fresh)
 
 
 def event_recording(ds: xr.Dataset, i: int) -> Recording:
@@ -248,8 +261,6 @@ def event_recording(ds: xr.Dataset, i: int) -> Recording:
 
 def spec_from_table(table: dict, seed: int = 0) -> BenchSpec:
     """Build a BenchSpec from the ``[stimulus]`` table of a study spec (``kind = "bench"``)."""
-    from ..core.spec import check_section
-
     table = dict(table)
     kind = table.pop("kind", "bench")
     if kind != "bench":
@@ -262,8 +273,6 @@ def source_from_spec(spec: dict):
     """The bench contacts a study reads: the imported recordings its top-level ``data`` names
     (``recorded.open_bench``; its ``[stimulus]`` then gives only ``n_jobs`` and ``cache_dir``),
     or the generator's contacts of its ``[stimulus]`` table."""
-    from . import recorded
-
     seed, table = int(spec.get("seed", 0)), dict(spec.get("stimulus", {}))
     if spec.get("data") is None:
         return spec_from_table(table, seed)

@@ -23,37 +23,84 @@ was logged), ``n_samples`` and ``start_s`` per drive, and the labelled contacts 
 A study whose spec names such a folder at its top level (``data = "DIR"``) reads its contacts in
 place of the generator's: :func:`open_bench` gives an object that stands where a
 ``bench.BenchSpec`` stands (``bench.load`` returns its data set), so splits by repetition, seeds
-and intervals work unchanged, and the report lists :func:`provenance_rows`.
+and intervals work unchanged; it answers what every source answers (``source.Source``), so
+the report lists its provenance rows and the summary keeps its entry.
 """
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..core.errors import SpecError
+from ..core.errors import SpecError, check
+from ..core.signals import Recording
+from ..core.store import DamagedStore, read_dataset
+from ..core.truth import Event, GroundTruth
 
 DATASET, DRIVES = "bench.zarr", "drives.zarr"
 EXCLUSIONS, IMPORT_FILE = "exclusions.csv", "import.json"
 KIND = "snn-antenna recorded data set"
 FORMAT_VERSION = 1
+CALIBRATION_REPETITIONS = 1   # seed stream of the repetitions held out to calibrate on
 ACCEPTED = ("a folder written by `snn-antenna data import` (import.json, bench.zarr or "
             "drives.zarr, exclusions.csv)")
 
 
 @dataclass
-class RecordedBench:
-    """Contacts imported from recordings, in place of a ``bench.BenchSpec``: the fields and
-    methods the studies read of a spec, answered from the data set itself."""
+class ImportedSet:
+    """A folder written by ``snn-antenna data import``, opened and checked: its data set
+    (the generator's layout) and its ``import.json``; what a study's report and summary say of
+    its origin (``source.Source``)."""
     path: Path
     dataset: object                      # xarray.Dataset, the generator's layout
     provenance: dict
+
+    @property
+    def rate_hz(self) -> float:
+        return float(self.dataset.attrs["rate_hz"])
+
+    @property
+    def adc_bits(self) -> int:
+        return int(self.dataset.attrs["adc_bits"])
+
+    @property
+    def full_scale_g(self) -> float:
+        return float(self.dataset.attrs["full_scale_g"])
+
+    def provenance_rows(self) -> list[tuple[str, str]]:
+        """(what, value) rows saying where the data came from, for a study's report."""
+        meta = self.provenance
+        counts = meta["counts"]
+        rows = [("data", f"{meta['data']} recordings imported into "
+                         f"{Path(self.path).resolve()} (data set {meta['key']})"),
+                ("labels", f"{meta['labels']['file']} (sha256 {meta['labels']['sha256']})"),
+                ("contacts imported", f"{counts['events']} of {counts['labels']} labelled "
+                                      f"({_excluded_text(counts['excluded'])})")]
+        rows += [(f"recording {r['name']}", f"{r['kind']}, {r['samples']} samples at "
+                                            f"{r['rate_hz']:g} Hz; sha256 "
+                                            + ", ".join(f"{f['file']} {f['sha256'][:16]}…"
+                                                        for f in r["files"]))
+                 for r in meta["recordings"]]
+        return rows
+
+    def summary_entry(self) -> dict:
+        """What a study's ``summary.json`` keeps of the data's origin."""
+        meta = self.provenance
+        return {"path": str(Path(self.path).resolve()), "key": meta["key"],
+                "labels": meta["labels"], "counts": meta["counts"],
+                "recordings": meta["recordings"]}
+
+
+@dataclass
+class RecordedBench(ImportedSet):
+    """Contacts imported from recordings, in place of a ``bench.BenchSpec``: the fields and
+    methods the studies read of a bench set (``source.BenchSet``), answered from the data set
+    itself."""
     seed: int = 0
     n_jobs: int = 1
     cache_dir: str = "out/.cache"
-    recorded: bool = field(default=True, init=False)
 
     @property
     def materials(self) -> list[str]:
@@ -68,20 +115,8 @@ class RecordedBench:
         return int(self.dataset["repetition"].values.max()) + 1
 
     @property
-    def rate_hz(self) -> float:
-        return float(self.dataset.attrs["rate_hz"])
-
-    @property
     def pre_trigger_s(self) -> float:
         return float(self.dataset.attrs["pre_trigger_s"])
-
-    @property
-    def adc_bits(self) -> int:
-        return int(self.dataset.attrs["adc_bits"])
-
-    @property
-    def full_scale_g(self) -> float:
-        return float(self.dataset.attrs["full_scale_g"])
 
     @property
     def n_events(self) -> int:
@@ -103,6 +138,27 @@ class RecordedBench:
     def validate(self) -> None:
         """Checked when opened (:func:`open_bench`)."""
 
+    def describe(self) -> str:
+        return (f"recorded data set: {self.n_events} events at {self.rate_hz:g} Hz, imported "
+                f"into {self.path}")
+
+    def open_dataset(self, log=print, fresh: bool = False):
+        """The imported data set (nothing to make, so ``fresh`` changes nothing)."""
+        log(f"data: {self.n_events} recorded contacts from {self.path}")
+        return self.dataset
+
+    def calibration_repetitions(self, n: int, field: str) -> list[int]:
+        """``n`` of the recorded repetitions, drawn with the study's seed, whose contacts
+        calibrate and leave every split; checked to leave at least two to split by (``field``
+        names ``n`` in the refusal)."""
+        have = sorted(set(int(r) for r in self.dataset["repetition"].values))
+        check(n <= len(have) - 2, field, n,
+              f"at most {len(have) - 2} of the recorded set's {len(have)} repetitions (their "
+              "contacts calibrate and leave every split; two must remain to split by)")
+        rng = np.random.default_rng(np.random.SeedSequence(
+            self.seed, spawn_key=(CALIBRATION_REPETITIONS,)))
+        return sorted(rng.choice(have, size=n, replace=False).tolist())
+
 
 def open_bench(path, seed: int = 0, n_jobs: int = 1,
                cache_dir: str = "out/.cache") -> RecordedBench:
@@ -113,35 +169,17 @@ def open_bench(path, seed: int = 0, n_jobs: int = 1,
 
 
 @dataclass
-class RecordedDrives:
-    """Drives imported from recordings: ``recordings()`` gives each as a labelled Recording."""
-    path: Path
-    dataset: object
-    provenance: dict
-    recorded: bool = field(default=True, init=False)
-
-    @property
-    def rate_hz(self) -> float:
-        return float(self.dataset.attrs["rate_hz"])
-
-    @property
-    def adc_bits(self) -> int:
-        return int(self.dataset.attrs["adc_bits"])
-
-    @property
-    def full_scale_g(self) -> float:
-        return float(self.dataset.attrs["full_scale_g"])
+class RecordedDrives(ImportedSet):
+    """Drives imported from recordings: ``recording(d)`` gives each as a labelled Recording,
+    ``scene(d)`` as a ``RecordedScene``."""
 
     @property
     def names(self) -> list[str]:
         return [str(n) for n in self.dataset["drive"].values]
 
-    def recording(self, drive: int = 0):
+    def recording(self, drive: int = 0) -> Recording:
         """Drive ``drive`` as a ``Recording`` of ADC counts, its labelled contacts as truth,
         its speed command per sample and lost samples in ``meta``."""
-        from ..core.signals import Recording
-        from ..core.truth import Event, GroundTruth
-
         ds = self.dataset.isel(drive=drive)
         n = int(ds["n_samples"])
         mine = np.flatnonzero(self.dataset["contact_drive"].values == drive)
@@ -157,63 +195,59 @@ class RecordedDrives:
                                "speed_cm_s": ds["speed_cm_s"].values[:n],
                                "lost": ds["lost"].values[:n]})
 
-
     def scene(self, drive: int = 0) -> RecordedScene:
         """Drive ``drive`` where a study reads a generated scene."""
-        return RecordedScene(self, self.recording(drive))
+        rec = self.recording(drive)
+        return RecordedScene(rec, self, rec.rate_hz, self.adc_bits, self.full_scale_g,
+                             rec.duration_s, rec.truth.contacts, _mostly(rec.meta["speed_cm_s"]))
 
 
-@dataclass
+def _mostly(speed: np.ndarray) -> float | None:
+    """The speed command most of a drive ran at (None when none was logged)."""
+    known = speed[np.isfinite(speed)]
+    if not len(known):
+        return None
+    values, counts = np.unique(known, return_counts=True)
+    return float(values[np.argmax(counts)])
+
+
+@dataclass(frozen=True)
 class RecordedScene:
-    """A recorded drive standing where a ``RobotScene`` stands: ``generate`` gives the
-    recording (whatever the seed: it was recorded once)."""
-    source: RecordedDrives
-    drive: object                       # the Recording
-    recorded: bool = field(default=True, init=False)
-
-    @property
-    def path(self) -> Path:
-        return self.source.path
-
-    @property
-    def provenance(self) -> dict:
-        return self.source.provenance
-
-    @property
-    def rate_hz(self) -> float:
-        return self.drive.rate_hz
-
-    @property
-    def adc_bits(self) -> int:
-        return self.source.adc_bits
-
-    @property
-    def full_scale_g(self) -> float:
-        return self.source.full_scale_g
-
-    @property
-    def duration_s(self) -> float:
-        return self.drive.duration_s
-
-    @property
-    def contacts(self):
-        return self.drive.truth.contacts
-
-    @property
-    def speed_cm_s(self) -> float | None:
-        """The speed command most of the drive ran at (None when none was logged)."""
-        speed = self.drive.meta["speed_cm_s"]
-        known = speed[np.isfinite(speed)]
-        if not len(known):
-            return None
-        values, counts = np.unique(known, return_counts=True)
-        return float(values[np.argmax(counts)])
+    """A recorded drive standing where a ``RobotScene`` stands (``source.Scene``): the
+    sensor's settings, the drive's length, its labelled contacts and the speed it mostly ran
+    at; ``generate`` gives the recording (whatever the seed: it was recorded once)."""
+    recording: Recording
+    drives: RecordedDrives               # where it came from
+    rate_hz: float
+    adc_bits: int
+    full_scale_g: float
+    duration_s: float
+    contacts: tuple
+    speed_cm_s: float | None
 
     def validate(self) -> None:
         """Checked when opened (:func:`open_drives`)."""
 
-    def generate(self, seed: int = 0):
-        return self.drive
+    def generate(self, seed: int = 0) -> Recording:
+        return self.recording
+
+    def describe(self) -> str:
+        touches = "; ".join(f"at {c.t_s:g} s{f' on {c.material}' if c.material else ''} "
+                            f"{c.distance_cm:g} cm along the rod" for c in self.contacts)
+        speed = f" at {self.speed_cm_s:g} cm/s" if self.speed_cm_s else ""
+        return (f"A recorded drive ({self.recording.meta['source']}, {self.duration_s:g} s"
+                f"{speed}, sampled at {self.rate_hz:g} Hz): its labels say the antenna "
+                f"touched {touches or 'nothing'}.")
+
+    def provenance_rows(self) -> list[tuple[str, str]]:
+        return self.drives.provenance_rows()
+
+    def summary_entry(self) -> dict:
+        return self.drives.summary_entry()
+
+    def calibrated(self) -> list:
+        """Nothing: a recording was set to match no number."""
+        return []
 
 
 def open_drives(path) -> RecordedDrives:
@@ -223,8 +257,6 @@ def open_drives(path) -> RecordedDrives:
 
 
 def _open(path, kind: str, store: str):
-    from ..core.store import DamagedStore, read_dataset
-
     folder = Path(path)
     if not folder.is_dir():
         raise SpecError("data", str(path), ACCEPTED)
@@ -257,41 +289,11 @@ def _open(path, kind: str, store: str):
     return ds, meta
 
 
-def provenance_rows(bench_source) -> list[tuple[str, str]]:
-    """(what, value) rows saying where a study's contacts came from, for its report."""
-    if not getattr(bench_source, "recorded", False):
-        return []
-    meta = bench_source.provenance
-    counts = meta["counts"]
-    rows = [("data", f"{meta['data']} recordings imported into "
-                     f"{Path(bench_source.path).resolve()} (data set {meta['key']})"),
-            ("labels", f"{meta['labels']['file']} (sha256 {meta['labels']['sha256']})"),
-            ("contacts imported", f"{counts['events']} of {counts['labels']} labelled "
-                                  f"({_excluded_text(counts['excluded'])})")]
-    rows += [(f"recording {r['name']}", f"{r['kind']}, {r['samples']} samples at "
-                                        f"{r['rate_hz']:g} Hz; sha256 "
-                                        + ", ".join(f"{f['file']} {f['sha256'][:16]}…"
-                                                    for f in r["files"]))
-             for r in meta["recordings"]]
-    return rows
-
-
 def _excluded_text(excluded: dict) -> str:
     shown = [f"{n} {reason.replace('_', ' ')}" for reason, n in excluded.items() if n]
     return "excluded: " + ", ".join(shown) if shown else "none excluded"
 
 
-def summary_entry(bench_source) -> dict | None:
-    """What a study's ``summary.json`` keeps of the data's origin (None: generated data)."""
-    if not getattr(bench_source, "recorded", False):
-        return None
-    meta = bench_source.provenance
-    return {"path": str(Path(bench_source.path).resolve()), "key": meta["key"],
-            "labels": meta["labels"], "counts": meta["counts"],
-            "recordings": meta["recordings"]}
-
-
-__all__ = ["RecordedBench", "RecordedDrives", "RecordedScene", "open_bench", "open_drives",
-           "provenance_rows",
-           "summary_entry", "DATASET", "DRIVES",
+__all__ = ["ImportedSet", "RecordedBench", "RecordedDrives", "RecordedScene", "open_bench",
+           "open_drives", "DATASET", "DRIVES",
            "EXCLUSIONS", "IMPORT_FILE", "KIND", "FORMAT_VERSION"]

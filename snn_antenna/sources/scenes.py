@@ -37,6 +37,7 @@ import numpy as np
 from ..core import bounds
 from ..core.errors import SpecError, check
 from ..core.signals import Recording
+from ..core.spec import check_section
 from . import antenna
 from .stimuli import Contact, RobotScene
 
@@ -195,6 +196,14 @@ class CourseScene(RobotScene):
     @property
     def profile(self) -> SpeedProfile:
         return self.speed if self.speed is not None else SpeedProfile("constant", self.speed_cm_s)
+
+    def describe(self) -> str:
+        speed = self.profile
+        pace = (f"at {speed.speed_cm_s:g} cm/s" if speed.kind == "constant" else
+                f"at speeds {speed.kind} through " + ", ".join(f"{v:g}" for _, v in speed.points)
+                + " cm/s")
+        return (f"A robot drives {pace} for {self.duration_s:g} s (sampled at "
+                f"{self.rate_hz:g} Hz) past {len(self.obstacles)} post(s).")
 
     def validate(self) -> None:
         bounds.instance("speed", self.speed, (SpeedProfile, type(None)), "a SpeedProfile")
@@ -355,8 +364,6 @@ def scene_from_spec(spec: dict) -> RobotScene:
     """Build a scene from a ``[stimulus]`` table: ``kind = "robot"`` (a ``RobotScene``, the
     default) or ``kind = "course"`` (a ``CourseScene``: obstacles, a speed profile). The one
     way every study, sweep and the emulator turn a stimulus table into a scene."""
-    from ..core.spec import check_section
-
     spec = dict(spec)
     kind = spec.pop("kind", "robot")
     check(kind in ("robot", "course"), "stimulus.kind", kind, "'robot' or 'course'")

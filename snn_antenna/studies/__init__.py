@@ -6,6 +6,12 @@ part that needs no simulation, and the plan sizes its own work (``Plan.estimate`
 ``run(plan, out_dir, options)`` runs the study on those parts and returns its summary.
 Before a plan is made, the command checks what the studies share
 (``engine.spec_rules.check_spec``).
+
+Every study is a package of the same shape: ``plan`` (its sections, its parts, named
+``Parts``, and its cost), ``run`` (its stages and summary) and ``report`` (its page), and
+modules of its own beside them where it has more to say; its ``__init__`` names the contract's
+parts. The sections several studies share (the source, the preprocessing chain, the
+resonator array) are read once, in ``sections``.
 """
 from __future__ import annotations
 

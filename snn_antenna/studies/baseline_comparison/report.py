@@ -25,6 +25,11 @@ from ...report import stats
 from ...report.page import Calibrated, Predicted, Report
 
 SOURCE = "paper (docs/reference.md)"
+QUICK_NOTE = ("Quick profile: 10 contacts per material and site, 2 seeds. The signal statistics "
+              "(r², precision, CV of τ_low, wood/aluminium sites: ten contacts each, as the "
+              "paper's test) are comparable with the full run; every classifier and regressor "
+              "here trained on a tenth of the contacts, so accuracies, rmse and the confusion "
+              "matrix are too small to compare with the paper or the full run.")
 _pair = "{0[0]:.4f}, {0[1]:.3f}".format  # a law's (slope, intercept)
 def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
     """What the generator was set to match, apart from what it predicts."""

@@ -7,8 +7,8 @@ bench's rods, whose spectra and labels place the channels (``readout.band_tuning
 evaluated events never enter the placement, so no test split can leak into it, for any seed.
 
 On recorded contacts nothing is generated: ``calibration_repetitions`` of the recorded
-repetitions, drawn with the study's seed (``held_out_repetitions``), place the channels, and
-the study removes their contacts from every split before any read-out is scored.
+repetitions, drawn with the study's seed (``RecordedBench.calibration_repetitions``), place the
+channels, and the study removes their contacts from every split before any read-out is scored.
 """
 from __future__ import annotations
 
@@ -33,26 +33,7 @@ from ...readout.spiking_decoders import (
     tuned_inputs,
 )
 from ...sources import bench
-from ...core.errors import check
 from ...core.truth import bench_labels
-
-TUNED_CALIBRATION = 1     # seed stream of the recorded repetitions that place the channels
-
-
-def held_out_repetitions(bench_source, plan: TunedPlan) -> list[int]:
-    """The recorded repetitions whose contacts place the tuned channels: ``plan``'s
-    ``calibration_repetitions`` of them, drawn with the study's seed; checked to leave at
-    least two repetitions to split by."""
-    have = sorted(set(int(r) for r in bench_source.dataset["repetition"].values))
-    n = plan.calibration_repetitions
-    check(n <= len(have) - 2, "spiking.tuned.calibration_repetitions", n,
-          f"at most {len(have) - 2} of the recorded set's {len(have)} repetitions (its "
-          "contacts place the tuned channels and leave every split; two must remain to split "
-          "by), or no tuned bank (--set spiking.tuned={})")
-    rng = np.random.default_rng(np.random.SeedSequence(bench_source.seed,
-                                                       spawn_key=(TUNED_CALIBRATION,)))
-    return sorted(rng.choice(have, size=n, replace=False).tolist())
-
 
 def calibration_bands(parts, data, plan: TunedPlan, log, fresh: bool) -> dict:
     """The channels of every tuning of ``plan`` (by number of resonators), placed from the

@@ -26,9 +26,11 @@ import numpy as np
 
 from ...engine.batches import Batches, DetectColumns
 from ...evaluation.scoring import Score, first_match, score, score_columns
-from ...sources import recorded
+from ...evaluation.thresholds import MethodScores, fixed_method
 from .drives import (CATEGORY, SPEED_TOLERANCE_CM_S, RecordedSplit, at_speed,
                      contacts_by_speed, speed_at)
+from .plan import make_parts
+from .scenes import coded_at, condition
 
 def score_by_speed(readout, detections: list, rec, speeds) -> list[Score]:
     """A whole drive's detections scored separately at each of ``speeds``: a contact counts at
@@ -62,8 +64,6 @@ class RecordedSweep:
     spec: dict
 
     def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        from .spec import coded_at, condition, make_parts
-
         parts = make_parts(self.spec)
         split = parts.data
         pairs = np.stack([points["scene"], points["threshold_g"]], axis=1)
@@ -84,9 +84,6 @@ class RecordedSweep:
 def evaluate_drives(parts, fixed_th: np.ndarray, recall, codings, others: dict, log):
     """Every held-out drive read out blind with each method's Th: a ``MethodScores`` with one
     slot per held-out drive, and the first drive's online Th and rate map (the example)."""
-    from ...evaluation.thresholds import MethodScores, fixed_method
-    from .spec import coded_at, condition
-
     split, scores = parts.data, MethodScores([CATEGORY])
     items, keys, example = [], [], None
     for slot, d in enumerate(split.held_out):
@@ -122,14 +119,14 @@ def summary_entry(split: RecordedSplit) -> dict:
     def labelled(drives) -> int:
         return sum(len(split.recording(d).truth.contacts) for d in drives)
 
-    return {**split.roles(), "data": recorded.summary_entry(split.drives),
+    return {**split.roles(), "data": split.drives.summary_entry(),
             "labelled_contacts": {"training drives": labelled(split.training),
                                   "held-out drives": labelled(split.held_out)},
             "parts_from_recordings": ["preprocessing (calibration drive)",
                                       "Th x speed sweep and Th*(speed) (training drives)",
                                       "the gate's training targets (training drives)",
                                       "evaluation (held-out drives)"],
-            "provenance": recorded.provenance_rows(split.drives)}
+            "provenance": split.drives.provenance_rows()}
 
 
 def report_section(rep, s: dict) -> None:

@@ -18,7 +18,7 @@ from ...evaluation.thresholds import (
 )
 from ...evaluation.thresholds import GateRecall, ThStarFit
 from ...report.page import Calibrated, Predicted, Report, by_speed
-from .spec import Parts
+from .plan import Parts
 from .recorded import report_section as recorded_section
 
 

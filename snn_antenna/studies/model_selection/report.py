@@ -8,6 +8,9 @@ from ...report.page import Calibrated, Predicted, Report
 from .protocol import CALIBRATION_TARGETS, PREDICTIONS, value
 
 SOURCE = "paper (docs/reference.md)"
+QUICK_NOTE = ("Quick profile: a handful of contacts per material and site, two seeds, short "
+              "training and one or two grid values per candidate. It checks the pipeline; "
+              "its accuracies and rmse are not results and choose nothing.")
 # Shown in % (accuracies) or as they are (mm, ranks, sites).
 FULL_REPETITIONS = 100     # the paper's protocol (stimuli/bench.toml)
 PERCENT = {"material_accuracy_spectrum", "nmf30_accuracy", "two_material_accuracy"}

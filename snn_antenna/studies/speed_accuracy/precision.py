@@ -23,6 +23,7 @@ from ...engine.evaluators import NeuronSweep
 from ...engine.grid import Grid
 from ...core.errors import check
 from ...evaluation import accuracy
+from ...report.page import fmt
 
 
 @dataclasses.dataclass
@@ -102,8 +103,6 @@ def run(precision: Precision, tolerance: float, log) -> dict:
 
 
 def report_section(report, result: dict | None) -> None:
-    from ...report.page import fmt
-
     if result is None:
         return
     report.heading("Sweep engine: float precision")

@@ -34,7 +34,7 @@ def convergence_text(conv: dict) -> str:
         "are partly the reference's own, read them with that margin."
 
 
-def _provenance_rows(report: Report, summary: dict) -> None:
+def calibrated_and_predicted(report: Report, summary: dict) -> None:
     """The shipped stability limits are set from this map (calibrated); the integration
     errors are measured against the reference (predicted; the paper has none)."""
     unchecked = []
@@ -93,7 +93,7 @@ def _recommendation_section(report: Report, summary: dict) -> None:
 
 def write_report(report: Report, summary: dict, smap) -> None:
     rows = summary["rows"]
-    _provenance_rows(report, summary)
+    calibrated_and_predicted(report, summary)
     report.heading("Reference")
     report.text(convergence_text(summary["reference_convergence"]))
     report.table([{k: r[k] for k in ("scene", "cpu_s", "wall_s", "n_spikes", "distance_cm")}

@@ -1,143 +1,17 @@
-"""Active exploration: the closed loop of the paper's Fig. 3, run in Brian2 with Python in the
-loop.
-
-The network is what ``networks/exploration.toml`` lists (``assembly.build``); the loop, its
-freeze reflex and the robot's blind record are ``readout.closed_loop.ClosedLoop`` (how it
-runs, and which seed each recording draws). The world's contacts are compared with the
-robot's record afterwards (``scoring.score_run``: true and false positives, misses, latency,
-distance error).
-
-Summary: ``cpg_period_s`` (measured while driving, and the spec's value at that speed),
-``pan_tilt_phase_deg``, ``contact_distance_cm`` (true and decoded from the rate map),
-``stopped_after_contact_s``, ``score``.
-"""
+"""The exploration loop's page: the robot's own record, the score against the world's
+contacts, what was calibrated and what is predicted, and the loop's figure."""
 from __future__ import annotations
-
-import time
 
 import numpy as np
 
-from ..core import bounds
-from ..core import spec as specs
-from ..core.logfile import CPG_TOKEN_ORDER, logged
-from ..core.errors import SpecError, check
-from ..engine.cost import engine_of, gate_training_runs, stages_estimate
-from ..report.figures import draw_rate_map
-from ..networks.assembly import configure
-from ..networks.gate import GateTraining
-from ..networks.cpg import cycle_periods, phase_lag_deg
-from ..preprocess import make_chain
-from ..readout.closed_loop import ClosedLoop, LoopSettings, RobotRecord
-from ..readout.contacts import detector_from_spec
-from ..evaluation.scoring import score_run
-from ..readout.detection import BlindReadOut
-from ..report.page import Calibrated, Predicted, Report, by_speed
-from ..core.truth import Event
-from ..sources import antenna
-from ..sources.scenes import CourseScene, OnlineAntenna, scene_from_spec
-from .contract import COMMON, Options, Plan
-
-SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
-OPTIONS = COMMON
-
+from ...readout.closed_loop import RobotRecord
+from ...report.figures import draw_rate_map
+from ...report.page import Calibrated, Predicted, Report, by_speed
+from ...sources import antenna
+from ...sources.scenes import CourseScene
+from .plan import Parts
 
 DISPLAY_MEAN_S = 0.5   # the rate map's running mean in the figure (not the read-out's)
-
-
-def plan(spec: dict) -> Plan:
-    """Check the whole spec and build every part of the loop before anything runs."""
-    specs.check_top_level(spec, SECTIONS)
-    with specs.section("network"):
-        table = spec.get("network", {})
-        configured = configure(table)
-        for need in ("resonators", "gate", "cpg", "control"):
-            if need not in configured:
-                raise SpecError("network.parts", table.get("parts"),
-                                f"the exploration loop needs {need!r} among the parts")
-    with specs.section("stimulus"):
-        scene = scene_from_spec(spec.get("stimulus", {"kind": "course"}))
-        check(isinstance(scene, CourseScene), "kind", "robot", "'course'")
-    with specs.section("preprocess"):
-        pre = specs.check_section(spec, "preprocess", make_chain,
-                                  exclude=["rate_hz", "adc_bits", "full_scale_g", "threshold"])
-        chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
-    detector, window_s = detector_from_spec(spec)
-    with specs.section("gate_training"):
-        examples = GateTraining(**specs.check_section(spec, "gate_training",
-                                                      GateTraining)).examples()
-        configured["gate"].check_speeds(examples[0], "speeds_cm_s")
-    with specs.section("loop"):
-        loop = LoopSettings(**specs.check_section(spec, "loop", LoopSettings))
-        for name in ("duration_s", "calibration_s"):
-            bounds.positive_seconds(name, getattr(loop, name))
-        bounds.number("chunk_ms", loop.chunk_ms, 1.0, bounds.MAX_SECONDS * 1000, unit=" ms")
-        configured["gate"].check_speeds([loop.speed_cm_s], "speed_cm_s")
-    readout = BlindReadOut(configured["resonators"], detector, window_s, scene.rate_hz,
-                           settle_s=0.0)
-    return Plan("exploration", spec,
-                ClosedLoop(table, configured, scene, chain, readout, examples, loop), estimate)
-
-
-def estimate(parts: ClosedLoop):
-    """The gate's training, then the closed loop for ``loop.duration_s``: every part of the
-    network steps at the resonators' dt, each with its own groups (so its own per-step cost)."""
-    gate, loop, cfg = parts.configured["gate"], parts.loop, parts.configured
-    speeds = parts.gate_training[0]
-    resonators = cfg["resonators"]
-    loop_run = (float(loop.duration_s), resonators.dt_ms, resonators.n_neurons,
-                engine_of(resonators.target))
-    return stages_estimate("the gate's training and the closed loop", [
-        ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
-         gate_training_runs(gate, len(speeds), len(speeds))),
-        ("loop.duration_s", loop.duration_s, [loop_run] * len(cfg))])
-
-
-@logged
-def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
-    spec, parts, quick = plan.spec, plan.parts, options.quick
-    t_start = time.perf_counter()
-    with log.expected(CPG_TOKEN_ORDER):
-        robot, world = parts.run(plan.seed, log)
-    log("[5/5] scoring against the world's contacts and writing the report")
-    contacts = [Event("contact", c.t_s, c.hold_s, c.distance_cm, c.material)
-                for c in world.contacts]
-    scored = score_run(parts.readout, robot.detections, contacts, float(parts.loop.duration_s),
-                       robot.stopped_at)
-    summary = summarize(robot, world, scored, parts)
-    summary["total_wall_s"] = time.perf_counter() - t_start
-    summary["built_objects"] = robot.built
-    summary = write_report(spec, parts, robot, summary, out_dir, quick)
-    log(human_summary(summary, out_dir))
-    return summary
-
-
-def summarize(robot: RobotRecord, world: OnlineAntenna, scored: dict, parts: ClosedLoop) -> dict:
-    """The CPG's rhythm while driving, the first contact and the stop, and the score."""
-    cpg, speed_cmd = parts.configured["cpg"], float(parts.loop.speed_cm_s)
-    t, pan, tilt, driving = robot.t, robot.pan, robot.tilt, robot.speed > 0
-    periods = cycle_periods(t[driving], pan[driving]) if driving.sum() > 10 else np.array([])
-    period = float(np.median(periods)) if len(periods) else None
-    phase = (phase_lag_deg(t[driving], pan[driving], tilt[driving], period)
-             if period else None)
-    first = scored["first_contact"] or {}
-    return {
-        "cpg_period_s": {"measured": period, "spec": float(1 / cpg.frequency_hz(speed_cmd))},
-        "pan_tilt_phase_deg": {"measured": phase, "spec": float(cpg.phase_offset_deg)},
-        "contact_distance_cm": {"true": first.get("true_distance_cm"),
-                                "decoded": first.get("decoded_distance_cm")},
-        "contact_t_s": first.get("t_s"),
-        "stopped_at_s": robot.stopped_at,
-        "stopped_after_contact_s": first.get("stopped_after_s"),
-        "score": scored,
-        "contacts": [{"t_s": c.t_s, "distance_cm": c.distance_cm, "material": c.material}
-                     for c in world.contacts],
-        "detections": [d.as_dict() for d in robot.detections],
-        "pan_range_deg": [float(pan.min()), float(pan.max())],
-        "tilt_range_deg": [float(tilt.min()), float(tilt.max())],
-        "gate_th_g_while_driving": (float(np.median(robot.th[driving]))
-                                    if driving.any() else None),
-        "simulation_wall_s": robot.wall_s,
-    }
 
 
 def _record_rows(s: dict, cpg) -> list[dict]:
@@ -167,14 +41,14 @@ def _score_rows(sc: dict) -> list[dict]:
     return [{"quantity": q, "value": v} for q, v in rows]
 
 
-def write_report(spec: dict, parts: ClosedLoop, robot: RobotRecord, summary: dict, out_dir,
+def write_report(spec: dict, parts: Parts, robot: RobotRecord, summary: dict, out_dir,
                  quick: bool) -> dict:
     array, first = parts.configured["resonators"], summary["score"]["first_contact"]
     rep = Report(out_dir, "snn-antenna: active exploration, closed loop", quick=quick,
                  quick_note="quick profile: a shorter loop, a briefly trained gate and the "
                             "numpy target; one contact at most, too few to compare")
     rep.text(spec.get("description", ""))
-    _provenance_rows(rep, summary, parts)
+    calibrated_and_predicted(rep, summary, parts)
     rep.table(_record_rows(summary, parts.configured["cpg"]),
               "Closed loop: the robot's own record")
     rep.table(_score_rows(summary["score"]),
@@ -194,7 +68,7 @@ def write_report(spec: dict, parts: ClosedLoop, robot: RobotRecord, summary: dic
     return rep.write(summary, spec, array.target)
 
 
-def _provenance_rows(rep: Report, s: dict, parts: ClosedLoop) -> None:
+def calibrated_and_predicted(rep: Report, s: dict, parts: Parts) -> None:
     cpg = parts.configured["cpg"]
     v, th = parts.gate_training
     sc = s["score"]

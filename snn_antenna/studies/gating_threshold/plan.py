@@ -1,6 +1,6 @@
-"""The gating study's spec (sections as dataclasses, checked before any work), its scenes
-(seeded courses, the calibration drive that fits the chain, the Th × speed sweep's evaluator;
-the dataclasses its stages return are in ``report``: what the summary and report are made of)."""
+"""The gating study's plan: its spec's sections as dataclasses, checked before any work, and
+the parts built from them (the array, the course, the preprocessing settings, the blind
+read-out, the gate, the recorded drives' split); its cost at the seed budget."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -9,29 +9,22 @@ import numpy as np
 
 from ...core import bounds
 from ...core import spec as specs
-from ...engine.batches import ScoredCodings
 from ...core.errors import SpecError, check
 from ...engine.cost import engine_of, gate_training_runs, max_workers, stages_estimate
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
-from ...preprocess import make_chain, make_coder
+from ...preprocess import make_coder
 from ...readout.contacts import detector_from_spec
-from ...evaluation.scoring import score_columns
 from ...readout.detection import BlindReadOut
 from ...sources import antenna
-from .drives import split_drives
-from ...sources.scenes import (
-    CourseLayout,
-    CourseScene,
-    SpeedProfile,
-    course_drive,
-    drive,
-    ramp,
-    scene_from_spec,
-)
+from ...sources.scenes import CourseLayout, CourseScene, SpeedProfile, drive, ramp
+from ..contract import COMMON, Plan, data_folder
+from ..sections import Preprocessing, array_section, chain_section, check_rates, scene_section
+from .drives import RecordedSplit, split_drives
 
 SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",
             "gate", "evaluation", "data")
+OPTIONS = (*COMMON, "fresh", "scheduler", "data")
 LOW_HIGH_CM_S = (12.0, 27.0)  # the paper's two speeds (Fig. 9)
 # Seed streams (first entry of every spawn key) and, within a scene's stream, its two draws.
 SWEEP_SCENES, EVALUATION_SCENES, EVALUATION_STEPS = 0, 1, 2
@@ -158,7 +151,7 @@ class Parts:
     seed: int
     array: ResonatorArray
     scene: CourseScene
-    preprocess: dict
+    preprocess: Preprocessing
     calibration: CalibrationSettings
     readout: BlindReadOut
     course: CourseLayout
@@ -168,27 +161,27 @@ class Parts:
     evaluation: EvaluationSettings
     held_out_speeds: np.ndarray
     chain: object = None      # fitted on first use (``calibrated_chain``)
-    data: object = None       # recorded drives in place of every scene (a RecordedSplit)
+    data: RecordedSplit | None = None     # recorded drives in place of every scene
 
 
 def _section(spec: dict, name: str, target, **kw):
     return target(**specs.check_section(spec, name, target, **kw))
 
 
-def make_parts(spec: dict) -> Parts:
+def plan(spec: dict) -> Plan:
     """Check the whole spec and build every part before any simulation runs."""
-    specs.check_top_level(spec, SECTIONS + ("data",))
-    with specs.section("network"):
-        array = _section(spec, "network", ResonatorArray)
-    with specs.section("stimulus"):
-        scene = scene_from_spec(spec.get("stimulus", {"kind": "course"}))
-        if not isinstance(scene, CourseScene):
-            raise SpecError("stimulus.kind", "robot", "'course' (scenes with obstacles)")
-        scene.validate()
-    with specs.section("preprocess"):
-        pre = specs.check_section(spec, "preprocess", make_chain,
-                                  exclude=["rate_hz", "adc_bits", "full_scale_g", "threshold"])
-        make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g, **pre)
+    parts = make_parts(spec)
+    data_folder(spec)
+    return Plan("gating_threshold", spec, parts, estimate)
+
+
+def make_parts(spec: dict) -> Parts:
+    """Check the whole spec and build every part (a sweep's worker builds them again from the
+    resolved spec: ``scenes.ThresholdSweep``)."""
+    specs.check_top_level(spec, SECTIONS)
+    array = array_section(spec)
+    scene = scene_section(spec, course=True)
+    pre, _ = chain_section(spec, [scene], gated=True)
     with specs.section("calibration"):
         cal = _section(spec, "calibration", CalibrationSettings)
         drive(scene, SpeedProfile("constant", float(cal.speed_cm_s)), 1.0, []).validate()
@@ -215,8 +208,7 @@ def make_parts(spec: dict) -> Parts:
     with specs.section("evaluation"):
         ev = _section(spec, "evaluation", EvaluationSettings)
         held = gate.check_speeds(ev.held_out(v, train), "speeds_cm_s")
-    with specs.section("network"):
-        array.check_rate(scene.rate_hz)
+    check_rates(array, [scene])
     readout = BlindReadOut(array, detector, window_s, scene.rate_hz, sweep.settle_s,
                            sweep.target)
     seed = int(spec.get("seed", 0))
@@ -274,84 +266,3 @@ def sweep_settings(spec: dict, parts: Parts | None = None) -> dict:
         split = parts.data
         settings["data"] = {"key": split.drives.provenance["key"], **split.roles()}
     return settings
-
-
-# -- scenes and the blind read-out ----------------------------------------------------------
-def make_scene(parts: Parts, speed: SpeedProfile, key: tuple, terrain: str | None = None
-               ) -> tuple[CourseScene, np.random.SeedSequence]:
-    """A new course scene along ``speed`` and the seed of its recording, both from the
-    stream ``key`` of the study's seed."""
-    course_rng = np.random.default_rng(np.random.SeedSequence(parts.seed,
-                                                              spawn_key=(*key, COURSE_DRAW)))
-    scene = course_drive(parts.scene, speed, parts.sweep.scene_s, parts.course, course_rng,
-                         terrain)
-    return scene, np.random.SeedSequence(parts.seed, spawn_key=(*key, NOISE_DRAW))
-
-
-def calibrated_chain(parts: Parts):
-    """The preprocessing chain fitted on a separate calibration drive, never on a test scene:
-    ``calibration.duration_s`` at ``calibration.speed_cm_s`` in the open (no posts, so no
-    contact can leak in); the scenes are then transformed causally from their first sample."""
-    if parts.chain is None and parts.data is not None:    # the recordings' own drive
-        rec = parts.data.recording(parts.data.calibration)
-        parts.chain = make_chain(rec.rate_hz, parts.data.drives.adc_bits,
-                                 parts.data.drives.full_scale_g,
-                                 **parts.preprocess).fit(rec.samples)
-    if parts.chain is None:
-        cal, scene = parts.calibration, parts.scene
-        rec = drive(scene, SpeedProfile("constant", float(cal.speed_cm_s)), cal.duration_s,
-                    []).generate(cal.seed)
-        assert not rec.truth.contacts   # an open-space drive: nothing to touch
-        parts.chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g,
-                                 **parts.preprocess).fit(rec.samples)
-    return parts.chain
-
-
-def condition(parts: Parts, rec):
-    """The recording's signal just before the coder (g, one channel) and the coder: only
-    ``rec.samples`` is read."""
-    chain = calibrated_chain(parts)
-    x = rec.samples
-    for _, step in chain.steps[:-1]:
-        x = step.transform(x)
-    return x, chain.named_steps["coder"]
-
-
-def sweep_scene(parts: Parts, speed_cm_s: float, scene: int):
-    """The sweep's course scene ``scene`` at a constant speed: recording, conditioned signal,
-    coder. The same course and noise at every speed (speeds are compared on equal scenes)."""
-    course, seed = make_scene(parts, SpeedProfile("constant", float(speed_cm_s)),
-                              (SWEEP_SCENES, int(scene)))
-    rec = course.generate(seed)
-    return (rec, *condition(parts, rec))
-
-
-def coded_at(coder, x: np.ndarray, thresholds) -> list[np.ndarray]:
-    """``x`` coded at each of ``thresholds``: one column each."""
-    th = np.asarray(thresholds, dtype=float)
-    coded = coder.partial_transform(np.repeat(x[:, None], len(th), axis=1), threshold=th[None, :])
-    return [coded[:, j] for j in range(len(th))]
-
-
-@dataclass(frozen=True)
-class ThresholdSweep:
-    """The Th × speed sweep as a ``run_sweep`` evaluator over speed_cm_s × scene ×
-    threshold_g: each (speed, scene) of a chunk is generated and conditioned once, coded at
-    its thresholds, and the chunk's codings run as one Brian2 group. It holds the resolved
-    spec, so it pickles; ``make_parts`` re-checks it on the worker (milliseconds)."""
-    spec: dict
-
-    def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-        parts = make_parts(self.spec)
-        items, order = [], []
-        pairs = np.stack([points["speed_cm_s"], points["scene"]], axis=1)
-        for v, scene in np.unique(pairs, axis=0):
-            idx = np.flatnonzero((pairs[:, 0] == v) & (pairs[:, 1] == scene))
-            rec, x, coder = sweep_scene(parts, v, scene)
-            items += [(rec, c) for c in coded_at(coder, x, points["threshold_g"][idx])]
-            order += list(idx)
-        scores, _ = ScoredCodings(parts.readout, parts.sweep.codings_per_run).run(items)
-        ordered = [None] * len(order)
-        for i, sc in zip(order, scores):
-            ordered[i] = sc
-        return score_columns(ordered)

@@ -1,0 +1,171 @@
+"""The baseline comparison's plan: the bench source (generated or recorded), the spec fitted
+to its rate, the event processor, the evaluation and the spiking read-out's parts, checked
+before any long work; its cost."""
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass, field
+
+from ...core import bounds
+from ...core import spec as specs
+from ...core.errors import SpecError
+from ...engine.cost import bench_seconds, engine_of, max_workers, stages_estimate
+from ...evaluation import crossval as cv
+from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
+from ...readout import events
+from ...readout.spiking import SpikingBank
+from ...readout.spiking_decoders import Design, SpikingPlan
+from ...sources.source import BenchSet
+from ..contract import COMMON, Plan, data_folder
+from ..sections import bench_section, evaluation_section, events_section
+
+SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
+OPTIONS = (*COMMON, "fresh", "scheduler", "data")
+
+
+@dataclass
+class Parts:
+    """The whole spec, every part built and checked before any long work."""
+    bench: BenchSet                      # bench.BenchSpec or recorded.RecordedBench
+    processor: events.EventProcessor
+    evaluation: cv.Evaluation
+    plan: SpikingPlan | None = None
+    bank: SpikingBank | None = None
+    designs: list[Design] = field(default_factory=list)
+    # recorded repetitions that place the tuned bank's channels, out of every split
+    calibration_repetitions: list[int] = field(default_factory=list)
+
+
+def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
+    """The spec with every part the data's rate cannot carry left out or clipped, and one
+    line naming each: the spectrum's bins above Nyquist, spiking bands (and the designs on
+    them) above the rate over ``MIN_SAMPLES_PER_CYCLE`` (the samples a resonator needs per
+    cycle of its input), band edges clipped to it and their filters' cut-offs moved with
+    them. A spec whose parts all fit comes back unchanged, with no line."""
+    nyquist = rate_hz / 2
+    limit = rate_hz / MIN_SAMPLES_PER_CYCLE
+    why = f"above the {nyquist:g} Hz Nyquist of the recordings"
+    spec, notes = copy.deepcopy(spec), []
+    ev = spec.setdefault("events", {})
+    # the raw spec, before its sections are checked: a value of the wrong shape is refused here
+    # by name (and any other is left to the checks that follow)
+    max_hz = (bounds.number("events.max_hz", ev.get("max_hz", events.EventProcessor.max_hz),
+                            0.0, lo_open=True, unit=" Hz") if isinstance(ev, dict) else 0.0)
+    if max_hz > nyquist:
+        ev["max_hz"] = nyquist
+        notes.append(f"left out: the spectrum's bins from {nyquist:g} to {max_hz:g} Hz "
+                     f"(events.max_hz {max_hz:g} → {nyquist:g}), {why}")
+    spiking = spec.get("spiking")
+    if not isinstance(spiking, dict):
+        return spec, notes
+    spiking_why = (f"above {limit:g} Hz: a resonator reads {MIN_SAMPLES_PER_CYCLE} samples "
+                   f"per cycle, and the recordings' {rate_hz:g} Hz gives {limit:g} Hz at most "
+                   f"(their Nyquist is {nyquist:g} Hz)")
+    bank = spiking.get("bank")
+    bands = bank.get("bands") if isinstance(bank, dict) else None
+    bands = bands if isinstance(bands, dict) else {}
+    for name in list(bands):
+        if _fit_band(bands[name], f"spiking.bank.bands.{name}", limit, spiking_why, notes):
+            del bands[name]
+    designs = []
+    given = spiking.get("designs")
+    for i, design in enumerate(given if isinstance(given, list) else []):
+        label = f"spiking.designs.{i}"
+        if isinstance(design, dict) and design.get("band") not in (None, *bands):
+            notes.append(f"left out: {label} ({design.get('name', i)}), on the band left out")
+        elif not (isinstance(design, dict) and
+                  _fit_band(design, label, limit, spiking_why, notes)):
+            designs.append(design)
+    if isinstance(given, list):
+        spiking["designs"] = designs
+    tuned = spiking.get("tuned")
+    tuning = tuned.get("tuning") if isinstance(tuned, dict) else None
+    if isinstance(tuning, dict) and "range_hz" in tuning:
+        lo, hi = bounds.pair("spiking.tuned.tuning.range_hz", tuning["range_hz"], strict=True,
+                             unit=" Hz")
+        if hi > limit:
+            tuning["range_hz"] = [lo, limit]
+            notes.append(f"clipped: spiking.tuned.tuning.range_hz {lo:g}–{hi:g} → "
+                         f"{lo:g}–{limit:g} Hz; left out: the channels {spiking_why}")
+    return spec, notes
+
+
+def _fit_band(band: dict, label: str, limit: float, why: str, notes: list) -> bool:
+    """Clip one band table to ``limit`` in place (band edge, cut-offs), noting each change;
+    True when the whole band lies above it (to be left out)."""
+    if not isinstance(band, dict):
+        return False
+    if "band_hz" in band:
+        lo, hi = bounds.pair(f"{label}.band_hz", band["band_hz"], strict=True, unit=" Hz")
+        if lo >= limit:
+            notes.append(f"left out: {label} ({lo:g}–{hi:g} Hz), {why}")
+            return True
+        if hi > limit:
+            band["band_hz"] = [lo, limit]
+            notes.append(f"clipped: {label}.band_hz {lo:g}–{hi:g} → {lo:g}–{limit:g} Hz; "
+                         f"left out: its resonators {why}")
+            for cut in ("lowpass_hz", "highpass_hz"):   # in the same place against the band
+                if band.get(cut) is None:
+                    continue
+                hz = bounds.number(f"{label}.{cut}", band[cut], 0.0, lo_open=True, unit=" Hz")
+                if hz > limit:
+                    new = round(hz * limit / hi, 1)
+                    if new <= lo:
+                        notes.append(f"left out: {label} ({cut} {hz:g} Hz), {why}")
+                        return True
+                    notes.append(f"clipped: {label}.{cut} {hz:g} → {new:g} Hz, "
+                                 f"as far above the band's top as before ({hi:g} → {limit:g} "
+                                 "Hz)")
+                    band[cut] = new
+    return False
+
+
+def _spiking_part(spec: dict, rate_hz: float) -> tuple:
+    """(plan, bank, designs) of ``[spiking]``, or Nones when the spec has none."""
+    if "spiking" not in spec:
+        return None, None, []
+    with specs.section("spiking"):
+        plan = SpikingPlan(**specs.check_section(spec, "spiking", SpikingPlan))
+        plan.tuned_plan()      # its checks, before any work
+        return (plan, *plan.build(rate_hz))
+
+
+def plan(spec: dict) -> Plan:
+    """Check the whole spec before any long work; build its parts."""
+    specs.check_top_level(spec, SECTIONS)
+    data_folder(spec)
+    bench_spec = bench_section(spec)
+    spec, left_out = fit_to_rate(spec, bench_spec.rate_hz)
+    processor = events_section(spec, bench_spec.rate_hz)
+    evaluation = evaluation_section(spec)
+    if "two_material" in evaluation.pipelines and \
+            not {"wood", "aluminium"} <= set(bench_spec.materials):
+        raise SpecError("data" if spec.get("data") is not None else "stimulus.materials",
+                        list(bench_spec.materials),
+                        "a list that holds wood and aluminium for the two-material network")
+    parts = Parts(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
+    if parts.plan and parts.plan.tuned_plan():
+        parts.calibration_repetitions = bench_spec.calibration_repetitions(
+            parts.plan.tuned_plan().calibration_repetitions,
+            "spiking.tuned.calibration_repetitions")
+    return Plan("baseline_comparison", spec, parts, estimate, left_out)
+
+
+def estimate(parts: Parts):
+    """The bench set (made once, then cached) and the spiking read-out of its events: every
+    band's bank over every event, ``batch_events`` events per Brian2 run, runs shared among
+    the workers."""
+    events = parts.bench.n_events
+    stages = [("stimulus.repetitions", parts.bench.repetitions, [],
+               bench_seconds(events, parts.bench.n_jobs))]
+    bank = parts.bank
+    if bank is not None:
+        workers = parts.plan.workers or max_workers()
+        chunks = -(-events // bank.batch_events)
+        runs = []
+        for band in bank.bands.values():
+            runs += [(bank.duration_s, band.dt_ms or bank.dt_ms,
+                      band.n_neurons * min(events, bank.batch_events),
+                      engine_of(bank.target))] * -(-chunks // workers)
+        stages.append(("stimulus.repetitions", parts.bench.repetitions, runs))
+    return stages_estimate("the bench set and its spiking read-out", stages)

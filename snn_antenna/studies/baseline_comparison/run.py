@@ -1,0 +1,129 @@
+"""The baseline comparison's stages: the bench data set and its processed events beside the
+paper's signal statistics, the spiking read-out (and the tuned bank), the baselines on splits
+by repetition; the summary and the report."""
+from __future__ import annotations
+
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+
+from ...core.files import write_json
+from ...core.logfile import logged
+from ...engine.events import cached_features, run_bank, run_cost
+from ...engine.executor import executor
+from ...evaluation import crossval as cv
+from ...evaluation import signal as bench_signal
+from ...evaluation.comparison import Comparison
+from ...readout import events
+from ...readout.spiking_decoders import decoder_inputs, neurons_per_input, spiking_baselines
+from ...report.page import Report
+from ..contract import Options, Plan
+from .plan import Parts
+from .report import QUICK_NOTE, write_report
+from .tuned import tuned_stage
+
+# Events timed for the FFT's cost per event when the spec has no [spiking] section.
+COST_SAMPLE_EVENTS = 200
+
+
+def _fitting_nmf(baselines: list, features, evaluation) -> tuple[list, str | None]:
+    """The baselines without the NMF sizes a split cannot fit (NMF-n needs at least n training
+    events: a small recorded set), and the line that names those left out."""
+    repetition = features["repetition"].values
+    n_train = min(int(cv.split_by_repetition(repetition, evaluation.test_fraction, seed)[0].sum())
+                  for seed in evaluation.seeds)
+    kept = [b for b in baselines if not (b.name.startswith("nmf_")
+                                         and int(b.name.split("_")[1]) > n_train)]
+    dropped = [b.name for b in baselines if b not in kept]
+    return kept, (f"left out: {', '.join(dropped)} (NMF-n needs n <= the {n_train} training "
+                  "events of the smallest split)" if dropped else None)
+
+
+@logged
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    spec, parts, quick = plan.spec, plan.parts, options.quick
+    fresh, scheduler = options.fresh, options.scheduler
+    out_dir, t_start = Path(out_dir), time.perf_counter()
+    stages = 5 if parts.bank is not None else 4
+    for line in plan.left_out:
+        log(f"      {line}")
+    data, cmp, data_s = signal_stage(parts, stages, log, fresh)
+    extra = spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
+    log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
+        "repetition")
+    chosen, too_large = _fitting_nmf(parts.evaluation.baselines(cmp.features.sizes["freq_hz"]),
+                                     cmp.features, parts.evaluation)
+    if too_large:
+        log(f"      {too_large}")
+    cmp.results = cv.evaluate(cmp.features, chosen + extra, parts.evaluation, log)
+    log(f"[{stages}/{stages}] report")
+    summary = cmp.summary({"data_and_features_s": data_s,
+                           "total_s": time.perf_counter() - t_start})
+    summary["left_out"] = list(plan.left_out) + ([too_large] if too_large else [])
+    out_dir.mkdir(parents=True, exist_ok=True)
+    write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
+    report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",
+                    quick=quick, quick_note=QUICK_NOTE)
+    write_report(report, spec, summary, cmp)
+    summary = report.write(summary, spec, parts.bank.target if parts.bank
+                           else "none (no spiking part)")
+    log(f"report in {out_dir}/report.html ({summary['timing']['total_s']:.0f} s)")
+    return summary
+
+
+def signal_stage(parts: Parts, stages: int, log, fresh) -> tuple:
+    """The bench data set, its processed events and their statistics beside the paper's,
+    and the FFT's cost per event: (data, a Comparison with no results yet, the seconds
+    spent making or loading the data and its features)."""
+    log(f"[1/{stages}] {parts.bench.describe()}")
+    t0 = time.perf_counter()
+    data, everything = bench_signal.load_features(parts.bench, parts.processor, log, fresh)
+    data_s = time.perf_counter() - t0
+    skipped = events.skip_counts(everything)
+    evaluated = everything["skipped"].values == ""
+    if parts.calibration_repetitions:      # they place the tuned channels: out of every split
+        held = np.isin(everything["repetition"].values, parts.calibration_repetitions)
+        log(f"      {int(held.sum())} contacts of repetitions {parts.calibration_repetitions} "
+            "held out to place the tuned bank's channels, out of every split")
+        evaluated &= ~held
+    feats = everything.isel(event=np.flatnonzero(evaluated))
+    log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
+    log(f"[2/{stages}] calibration against the paper's signal measurements")
+    signal = bench_signal.signal_statistics(feats)
+    log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
+        f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
+    n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
+    costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
+    return data, Comparison(feats, signal, {}, skipped, costs, data={
+        "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
+        "bench_key": parts.bench.key(),
+        **({"recorded": origin} if (origin := parts.bench.summary_entry()) else {})}), data_s
+
+
+def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
+                   scheduler) -> list:
+    """The bank over every event (cached) and the designs, on ``[spiking] workers`` or at
+    ``scheduler``; decoder inputs into ``cmp.features``, cost; the spiking decoders."""
+    bank = parts.bank
+    if bank is None:
+        return []
+    log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event "
+        f"({', '.join(bank.bands)})"
+        f", Brian2 {bank.target}, {bank.batch_events} events per chunk")
+    with executor(parts.plan.workers, scheduler, log) as client:
+        spikes = cached_features(data, bank, parts.bench, log, fresh, client)
+        cmp.features = decoder_inputs(cmp.features, spikes)
+        if parts.designs:
+            cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
+                                      run=partial(run_bank, client=client, progress=False),
+                                      repetitions=parts.plan.design_repetitions,
+                                      evaluation=parts.evaluation)
+        tuned = (tuned_stage(parts, data, cmp, log, fresh, client)
+                 if parts.plan.tuned_plan() else [])
+    cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
+    neurons = neurons_per_input(spikes)
+    neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
+    cmp.spiking = {**bank.description(), "neurons": neurons}
+    return spiking_baselines(spikes, parts.evaluation) + tuned

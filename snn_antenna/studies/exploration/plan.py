@@ -1,0 +1,82 @@
+"""The exploration loop's parts: the network table and its configured parts, the course,
+the preprocessing chain, the blind read-out, the gate's training examples and the loop's
+settings; checked before anything runs."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ...core import bounds
+from ...core import spec as specs
+from ...core.errors import SpecError
+from ...engine.cost import engine_of, gate_training_runs, stages_estimate
+from ...networks.assembly import configure
+from ...networks.gate import GateTraining
+from ...readout.closed_loop import LoopSettings
+from ...readout.contacts import detector_from_spec
+from ...readout.detection import BlindReadOut
+from ...sources.scenes import CourseScene
+from ..contract import COMMON, Plan
+from ..sections import chain_section, scene_section
+
+SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
+OPTIONS = COMMON
+
+
+@dataclass
+class Parts:
+    """Everything the loop is built from: the network table (``assembly``) and its
+    configured parts, the course, the preprocessing chain, the blind read-out, the gate's
+    training examples (speeds, Th*) and the loop's settings."""
+    network: dict
+    configured: dict
+    scene: CourseScene
+    chain: object
+    readout: BlindReadOut
+    gate_training: tuple
+    loop: LoopSettings
+
+
+def plan(spec: dict) -> Plan:
+    """Check the whole spec and build every part of the loop before anything runs."""
+    specs.check_top_level(spec, SECTIONS)
+    with specs.section("network"):
+        table = spec.get("network", {})
+        configured = configure(table)
+        for need in ("resonators", "gate", "cpg", "control"):
+            if need not in configured:
+                raise SpecError("network.parts", table.get("parts"),
+                                f"the exploration loop needs {need!r} among the parts")
+    scene = scene_section(spec, course=True)
+    pre, _ = chain_section(spec, [scene], gated=True)
+    detector, window_s = detector_from_spec(spec)
+    with specs.section("gate_training"):
+        examples = GateTraining(**specs.check_section(spec, "gate_training",
+                                                      GateTraining)).examples()
+        configured["gate"].check_speeds(examples[0], "speeds_cm_s")
+    with specs.section("loop"):
+        loop = LoopSettings(**specs.check_section(spec, "loop", LoopSettings))
+        for name in ("duration_s", "calibration_s"):
+            bounds.positive_seconds(name, getattr(loop, name))
+        bounds.number("chunk_ms", loop.chunk_ms, 1.0, bounds.MAX_SECONDS * 1000, unit=" ms")
+        configured["gate"].check_speeds([loop.speed_cm_s], "speed_cm_s")
+    readout = BlindReadOut(configured["resonators"], detector, window_s, scene.rate_hz,
+                           settle_s=0.0)
+    return Plan("exploration", spec,
+                Parts(table, configured, scene, pre.chain(scene), readout, examples, loop),
+                estimate)
+
+
+def estimate(parts: Parts):
+    """The gate's training, then the closed loop for ``loop.duration_s``: every part of the
+    network steps at the resonators' dt, each with its own groups (so its own per-step cost)."""
+    gate, loop, cfg = parts.configured["gate"], parts.loop, parts.configured
+    speeds = parts.gate_training[0]
+    resonators = cfg["resonators"]
+    loop_run = (float(loop.duration_s), resonators.dt_ms, resonators.n_neurons,
+                engine_of(resonators.target))
+    return stages_estimate("the gate's training and the closed loop", [
+        ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
+         gate_training_runs(gate, len(speeds), len(speeds))),
+        ("loop.duration_s", loop.duration_s, [loop_run] * len(cfg))])
+
+

@@ -1,0 +1,172 @@
+"""The speed/accuracy study's plan: the array's table, the robot scenes (the quickstart's
+generated or recorded, the bench contact), the preprocessing settings, the detector and
+every sweep's settings, checked before any simulation; its cost."""
+from __future__ import annotations
+
+import dataclasses
+
+from ...core import bounds
+from ...core import spec as specs
+from ...core.errors import check
+from ...engine.cost import engine_of, stages_estimate
+from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
+from ...evaluation.accuracy import Match, StabilityGrid
+from ...evaluation.bands import BENCH_BANDS, BandStudy
+from ...networks import neurons, reference
+from ...networks.resonators import ResonatorArray
+from ...readout.contacts import detector_from_spec
+from ..contract import COMMON, Plan, data_folder
+from ..sections import (Preprocessing, array_section, chain_section, check_rates,
+                        network_table, scene_section, source_section)
+from .precision import Precision
+
+SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
+            "stability", "reference", "match", "bands", "precision", "data")
+OPTIONS = (*COMMON, "fresh", "data")
+SCENES = ("tuning", "quickstart", "bench")
+
+
+def _names_from(values, known, field: str) -> None:
+    for v in values:
+        check(v in known, field, values, f"names from {list(known)}")
+
+
+@dataclasses.dataclass
+class Sweep:
+    """The main sweep: every method × dt on every scene, at one target and float type."""
+    scenes: list = dataclasses.field(default_factory=lambda: list(SCENES))
+    methods: list = dataclasses.field(default_factory=lambda: list(neurons.METHODS))
+    dt_ms: list = dataclasses.field(default_factory=lambda: [0.005, 0.01, 0.025, 0.05, 0.1,
+                                                            0.2, 0.5, 1.0])
+    target: str = "cython"
+    dtype: str = "float64"
+
+    def __post_init__(self):
+        _names_from(self.scenes, SCENES, "scenes")
+        _names_from(self.methods, neurons.METHODS, "methods")
+        check(len(self.dt_ms) >= 1 and all(isinstance(d, (int, float)) and 0 < d <= 1.0
+                                           for d in self.dt_ms),
+              "dt_ms", self.dt_ms, "steps in (0, 1] ms")
+        check(self.target in RUNTIME_TARGETS, "target", self.target,
+              "'numpy' or 'cython' (the runtime targets; the cost sweep covers standalone)")
+        check(self.dtype in DTYPES, "dtype", self.dtype, f"one of {list(DTYPES)}")
+
+
+@dataclasses.dataclass
+class Cost:
+    """Targets × dtypes × array sizes at ``settings`` (plus the quickstart recommendation)."""
+    scene: str = "quickstart"
+    settings: list = dataclasses.field(default_factory=lambda: [["euler", 0.1]])
+    include_recommended: bool = True
+    targets: list = dataclasses.field(default_factory=lambda: list(TARGETS))
+    dtypes: list = dataclasses.field(default_factory=lambda: list(DTYPES))
+    n_neurons: list = dataclasses.field(default_factory=lambda: [24, 2400])
+
+    def __post_init__(self):
+        check(self.scene in ("quickstart", "bench"), "scene", self.scene,
+              "'quickstart' or 'bench'")
+        _names_from(self.targets, TARGETS, "targets")
+        _names_from(self.dtypes, DTYPES, "dtypes")
+        for n in self.n_neurons:
+            check(isinstance(n, int) and 1 <= n <= 100_000, "n_neurons", self.n_neurons,
+                  "integers in [1, 100000]")
+        for s in self.settings:
+            check(isinstance(s, list) and len(s) == 2 and s[0] in neurons.METHODS
+                  and isinstance(s[1], (int, float)) and 0 < s[1] <= 1, "settings",
+                  self.settings, "pairs [method, dt_ms] with dt_ms in (0, 1]")
+
+
+@dataclasses.dataclass
+class ReferenceSettings:
+    rtol: float = reference.DEFAULT_RTOL
+    atol: float = reference.DEFAULT_ATOL
+    check_rtol: float = 1e-12   # the convergence check re-runs one scene at this tolerance
+    check_scene: str = "bench"
+    # ... and at this fraction of atol (tightened with rtol, so atol does not cap the check)
+    check_atol_factor: float = 1e-3
+
+    def __post_init__(self):
+        check(1e-14 <= self.check_rtol < self.rtol <= 1e-6, "check_rtol", self.check_rtol,
+              "a tolerance tighter than rtol (both in [1e-14, 1e-6])")
+        check(self.check_scene in SCENES, "check_scene", self.check_scene, f"one of {SCENES}")
+
+
+@dataclasses.dataclass
+class Parts:
+    """Every part of the study, built and checked from the spec before any simulation."""
+    net: dict
+    robot_scenes: dict
+    preprocess: Preprocessing
+    detector: object
+    window_s: float
+    tuning: TuningStimuli
+    sweep: Sweep
+    cost: Cost
+    stability: StabilityGrid
+    reference: ReferenceSettings
+    match: Match
+    bands: BandStudy
+    precision: Precision
+
+
+def plan(spec: dict) -> Plan:
+    """Check the whole spec and build every part before any simulation runs."""
+    specs.check_top_level(spec, SECTIONS)
+    data_folder(spec)
+    net = network_table(spec)
+    array = array_section(spec)
+    robot_scenes = {"quickstart": source_section(spec), "bench": scene_section(spec, "bench")}
+    pre, _ = chain_section(spec, robot_scenes.values())
+    detector, window_s = detector_from_spec(spec)
+    parts = {}
+    for name, cls in (("tuning", TuningStimuli), ("sweep", Sweep), ("cost", Cost),
+                      ("stability", StabilityGrid), ("reference", ReferenceSettings),
+                      ("match", Match), ("bands", BandStudy), ("precision", Precision)):
+        with specs.section(name):
+            parts[name] = cls(**specs.check_section(spec, name, cls))
+    with specs.section("tuning"):        # one neuron per array neuron and frequency
+        bounds.integer("n_freqs", parts["tuning"].n_freqs, 2, 10_000)
+    check_rates(array, robot_scenes.values())
+    return Plan("speed_accuracy", spec,
+                Parts(net, robot_scenes, pre, detector, window_s, **parts), estimate)
+
+
+def estimate(parts: Parts):
+    """The main sweep (every scene at every method and dt), the cost sweep (its settings at
+    every target, float type and array size), the stability map, the bench bands (their
+    sample events at every method and step, and the tuning that recalibrates them) and the
+    sweep engine's precision grid (per float type)."""
+    array = ResonatorArray(**dict(parts.net, force=True))
+    seconds = {"tuning": parts.tuning.duration_s,
+               **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
+    size = {"tuning": array.n_neurons * parts.tuning.n_freqs}
+    sweep, cost = parts.sweep, parts.cost
+    main = [(seconds[s], float(dt), size.get(s, array.n_neurons), engine_of(sweep.target))
+            for s in sweep.scenes for dt in sweep.dt_ms] * len(sweep.methods)
+    # the recommendation is the fastest setting that matches: sized as the spec's settings
+    settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
+    costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
+             for t in cost.targets for n in cost.n_neurons] * len(cost.dtypes)
+    stab = parts.stability          # every neuron runs model_ms at the finest k·dt
+    stability = [(stab.model_ms / stab.k_dt_min / 1000.0, 1.0, stab.n_k_dt * len(stab.drives),
+                  "numpy")] * len(sweep.methods)
+    bands = parts.bands
+    events = len(bands.materials) * len(bands.positions_cm) * bands.repetitions
+    band_runs = []
+    for name in bands.bands:
+        band = BENCH_BANDS[name]
+        dt = band.dt_ms or min(sweep.dt_ms)
+        band_runs += [(bands.duration_s, dt, band.n_neurons * events, engine_of(bands.target))
+                      ] * (len(bands.methods) * (bands.coarser_steps + 2))
+        if name in bands.calibrate:
+            band_runs.append((bands.tuning_duration_s, dt, band.n_neurons * bands.n_freqs,
+                              engine_of(bands.target)))
+    precision = parts.precision
+    points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
+    return stages_estimate("the method x dt sweep, the cost sweep, the stability map, the "
+                           "bench bands and the precision grid", [
+        ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs),
+        ("stability.model_ms", stab.model_ms, stability),
+        ("bands.repetitions", bands.repetitions, band_runs),
+        ("precision.n_k", precision.n_k,
+         [(precision.duration_s, 0.1, points, "standalone")] * len(precision.dtypes))])
