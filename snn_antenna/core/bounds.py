@@ -25,6 +25,14 @@ MAX_AMPLITUDE = 1e6          # drives and levels; squares and sums of it stay fa
 # for every seed keeps a seed valid wherever it goes.
 MAX_SEED = 2**32 - 1
 SCENE_BYTES_PER_SAMPLE = 256  # a scene's arrays per sample while it is generated (~30 float64)
+# The widest setting of any constructor in its own unit (rates, durations, currents, lengths
+# are far below it): a setting beyond it is a typo, and products of two such numbers stay
+# far inside float64. A count (iterations, epochs, samples) beyond MAX_COUNT would never finish.
+MAX_MAGNITUDE = 1e9
+MAX_COUNT = 2**32 - 1
+# A nonzero number below the smallest normal float64 (a subnormal, e.g. 1e-320) underflows
+# every product it enters and makes a reciprocal infinite: no setting is that small.
+MIN_NORMAL = 2.2250738585072014e-308
 NAME_MAX = 255               # bytes in one path component (Linux, macOS)
 PATH_MAX = 4096              # bytes in a whole path (Linux)
 
@@ -49,6 +57,9 @@ def number(field: str, value, lo: float | None = None, hi: float | None = None, 
     if not ok:
         raise SpecError(field, value, accepted)
     x = float(value)
+    if 0.0 < abs(x) < MIN_NORMAL:
+        raise SpecError(field, value, f"{accepted} (0 or at least {MIN_NORMAL:.3g} in "
+                                      "magnitude: a subnormal float underflows)")
     if lo is not None and (x < lo or (lo_open and x == lo)):
         raise SpecError(field, value, accepted)
     if hi is not None and (x > hi or (hi_open and x == hi)):
@@ -255,3 +266,152 @@ def memory_budget_bytes() -> int:
     except ImportError:  # psutil comes with distributed; this is a fallback
         available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     return int(available) // 4
+
+
+# -- checks read from a class's declaration ------------------------------------------------
+# A constructor's annotations are its declaration: the spec checks read them (``spec.
+# check_type``) and so does ``declared`` below, with one wording (``describe_type``) for what
+# each accepts. ``declared`` is strict where the spec check is lenient: a constructor is
+# handed Python values, not TOML, so a word is not a number there.
+
+def describe_type(tp, none: bool = True) -> str:
+    """What a value of the annotation ``tp`` is, in the words of a refusal (``none``: whether
+    an optional field says it may be none; a TOML spec has no none to give)."""
+    import types
+    import typing
+
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is bool:
+        return "true or false"
+    if tp is int:
+        return "an integer (not true/false)"
+    if tp is float:
+        return "a number (not true/false)"
+    if tp is str:
+        return "a string"
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        if all(a in (int, float) for a in args):
+            return f"a list of {len(args)} numbers, e.g. {list(range(7, 7 + len(args)))}"
+        return f"a list of {len(args)} ({', '.join(describe_type(a, none) for a in args)})"
+    if origin in (tuple, list) or tp in (tuple, list) or _is_sequence(origin or tp):
+        return f"a list of {describe_type(args[0], none) if args else 'values'}"
+    if origin is dict or tp is dict:
+        return "a table"
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join("none" if a is type(None) else describe_type(a, none)
+                           for a in args if none or a is not type(None))
+    return getattr(tp, "__name__", str(tp))
+
+
+def _is_sequence(tp) -> bool:
+    import collections.abc
+
+    return tp is collections.abc.Sequence
+
+
+_HINTS: dict = {}
+
+
+def _hints(cls) -> dict:
+    """The resolved annotations of a dataclass's fields or a class's ``__init__`` (cached)."""
+    import dataclasses
+    import typing
+
+    if cls not in _HINTS:
+        target = cls if dataclasses.is_dataclass(cls) else cls.__init__
+        try:
+            hints = typing.get_type_hints(target)
+        except Exception:    # an annotation that cannot be resolved is not checked here
+            hints = {}
+        hints.pop("return", None)
+        if dataclasses.is_dataclass(cls):
+            init = {f.name for f in dataclasses.fields(cls) if f.init}
+            hints = {k: v for k, v in hints.items() if k in init}
+        _HINTS[cls] = hints
+    return _HINTS[cls]
+
+
+def declared(obj, **values) -> None:
+    """Refuse a field of ``obj`` whose value is not of its declared type, or is a number no
+    setting takes (NaN, inf, a subnormal, beyond MAX_MAGNITUDE, a count beyond MAX_COUNT).
+
+    A dataclass is checked on its fields (``declared(self)`` first in ``__post_init__``);
+    another class on the ``values`` its ``__init__`` was given (``declared(self, rate_hz=
+    rate_hz)``). Ranges of one field (a rate > 0, a probability <= 1) are its class's own
+    checks, after this one."""
+    import dataclasses
+
+    hints = _hints(type(obj))
+    if not values and dataclasses.is_dataclass(obj):
+        values = {name: getattr(obj, name) for name in hints}
+    for name, value in values.items():
+        if name in hints:
+            typed(name, value, hints[name])
+
+
+def typed(field: str, value, tp) -> None:
+    """``value`` is of the annotation ``tp`` (see ``declared``), or a SpecError naming it."""
+    if not _fits(field, value, tp):
+        raise SpecError(field, value, describe_type(tp))
+
+
+def _fits(field: str, value, tp) -> bool:
+    import types
+    import typing
+
+    import numpy as np
+
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is typing.Any or tp is object:
+        return True
+    if tp is bool:
+        return isinstance(value, (bool, np.bool_))
+    if tp is float:
+        if not _real(value):
+            return False
+        number(field, value, -MAX_MAGNITUDE, MAX_MAGNITUDE)
+        return True
+    if tp is int:
+        if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)):
+            return False
+        integer(field, value, -MAX_COUNT, MAX_COUNT)
+        return True
+    if tp is str:
+        return isinstance(value, str)
+    if origin in (typing.Union, types.UnionType):
+        if value is None:
+            return type(None) in args
+        kinds = [a for a in args if a is not type(None)]
+        errors = []
+        for kind in kinds:                  # the first kind the value is of decides
+            try:
+                if _fits(field, value, kind):
+                    return True
+            except SpecError as exc:
+                errors.append(exc)
+        if errors:
+            raise errors[0]
+        return False
+    container = origin or tp
+    if container in (tuple, list) or _is_sequence(container):
+        if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) == 0:
+            return False
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            if len(value) != len(args):
+                return False
+            return all(_fits(f"{field}.{i}", v, a) for i, (v, a) in enumerate(zip(value, args)))
+        kind = args[0] if args else None
+        for i, item in enumerate(value):
+            if kind is not None:
+                if not _fits(f"{field}.{i}", item, kind):
+                    raise SpecError(f"{field}.{i}", item, describe_type(kind))
+            elif _real(item):               # an undeclared entry that is a number is sane
+                number(f"{field}.{i}", item, -MAX_MAGNITUDE, MAX_MAGNITUDE)
+            elif isinstance(item, complex):
+                raise SpecError(f"{field}.{i}", item, "a real number, a string or a table")
+        return True
+    if container is dict:
+        return isinstance(value, dict)
+    if isinstance(tp, type) and tp.__module__.startswith("snn_antenna"):
+        return isinstance(value, tp)        # one of the package's own classes
+    return True                             # arrays, protocols, callables: their own checks

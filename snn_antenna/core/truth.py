@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from . import bounds
+
 # The labels of a bench data set (sources.bench): coordinates along its ``event`` dimension.
 BENCH_LABELS = ("material", "distance_cm", "position", "repetition")
 
@@ -31,6 +33,9 @@ class Event:
     distance_cm: float | None = None
     material: str | None = None
 
+    def __post_init__(self):
+        bounds.declared(self)
+
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if v is not None}
 
@@ -41,6 +46,7 @@ class GroundTruth:
     events: tuple[Event, ...] = ()
 
     def __post_init__(self):
+        bounds.declared(self)
         object.__setattr__(self, "events", tuple(self.events))
 
     @property

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..readout.events import EventProcessor, main_axis_g
 from .inputs import Stream
 from .labels import Label
@@ -41,6 +42,9 @@ class Segmentation:
     match_s: float = 0.1
     pre_trigger_s: float = 0.05
     duration_s: float = 1.0
+
+    def __post_init__(self):
+        bounds.declared(self)
 
     def n_samples(self, rate_hz: float) -> int:
         return int(round((self.pre_trigger_s + self.duration_s) * rate_hz))

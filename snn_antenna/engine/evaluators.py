@@ -74,6 +74,7 @@ class NeuronSweep:
                "rate_hz": Output("f8", "Hz", "spike rate after settle_s")}
 
     def __post_init__(self):
+        bounds.declared(self)
         check(self.preset in neurons.PRESETS, "preset", self.preset,
               f"one of {sorted(neurons.PRESETS)}")
         check(self.method in neurons.METHODS, "method", self.method,
@@ -223,6 +224,7 @@ class SceneSweep:
     OUTPUTS = {"spike_count": Output("i4", "1", "spikes counted from count_from_s")}
 
     def __post_init__(self):
+        bounds.declared(self)
         check(self.engine in ("cython", "numpy"), "engine", self.engine,
               "'cython' or 'numpy' (scene inputs need a runtime target)")
         NeuronSweep(preset=self.preset, dt_ms=self.dt_ms, method=self.method)  # same checks

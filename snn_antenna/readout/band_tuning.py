@@ -62,6 +62,7 @@ class Tuning:
     coder_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.per_channel, int) and self.per_channel >= 1, "per_channel",
               self.per_channel, "an integer >= 1")
         check(isinstance(self.max_channels, int) and self.max_channels >= 1, "max_channels",

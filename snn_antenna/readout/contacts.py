@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..core.errors import SpecError, check, is_integer, is_number
 from ..networks.resonators import SELF_MOTION_BAND_HZ, tuned_above
 from ..sources import antenna
@@ -73,6 +74,7 @@ class ContactDetector:
     max_gap_windows: int = 1
 
     def __post_init__(self):
+        bounds.declared(self)
         band = self.motion_band_hz
         band_ok = (isinstance(band, (list, tuple, np.ndarray)) and len(band) == 2
                    and all(is_number(x) for x in band))
@@ -165,6 +167,7 @@ class EpisodeTracker:
     """
 
     def __init__(self, detector: ContactDetector, neuron_hz, window_s: float):
+        bounds.declared(self, detector=detector, neuron_hz=neuron_hz, window_s=window_s)
         self.detector, self.window_s = detector, window_s
         self.neuron_hz = np.asarray(neuron_hz, dtype=float)
         self._above = tuned_above(self.neuron_hz, detector.motion_band_hz)

@@ -39,6 +39,7 @@ import xarray as xr
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
+from ..core import bounds
 from ..core import calibration
 from ..core.errors import SpecError, check, is_number
 from ..networks import neurons
@@ -73,6 +74,9 @@ class Band:
     # the coder's own parameters (``preprocess.CODER_OPTIONS``, e.g. {levels = 6}).
     coder: str = "square"
     coder_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        bounds.declared(self)
 
     def check_coder(self) -> None:
         """The coder's name and parameters, refused before any work."""
@@ -190,6 +194,7 @@ class SpikingBank:
     bin_edges_s: tuple = (0.1, 0.2, 0.3)
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.bands, dict) and len(self.bands) >= 1, "bands", self.bands,
               "a table of named bands, e.g. {low = {...}, high = {...}}")
         self.bands = {name: b if isinstance(b, Band) else Band(**b)

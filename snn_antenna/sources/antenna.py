@@ -76,6 +76,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import SpecError, check
 from .contact_models import DEFAULT as DEFAULT_PHYSICS, ContactPhysics
 
@@ -141,6 +142,9 @@ class Material:
     loss: float
     poisson: float
     contact_gpa: float
+
+    def __post_init__(self):
+        bounds.declared(self)
 
     @property
     def bar_speed_m_s(self) -> float:
@@ -423,6 +427,7 @@ class ADC:
     full_scale_g: float = 18.0   # ± range of the sensor (ADXL321: ±18 g)
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.bits, int) and 4 <= self.bits <= 24, "adc_bits", self.bits,
               "an integer number of bits in [4, 24]")
         check(np.isfinite(self.full_scale_g) and self.full_scale_g > 0, "full_scale_g",

@@ -62,6 +62,7 @@ class BenchSpec:
     cache_dir: str = "out/.cache"
 
     def __post_init__(self):
+        bounds.declared(self)
         self.validate()
 
     def validate(self) -> None:

@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 from collections.abc import Callable
 
+from ..core import bounds
 from ..core.errors import SpecError
 from ..core.bounds import out_path
 
@@ -42,6 +43,9 @@ class Options:
     fresh: bool = False          # discard stored results or caches and start over
     scheduler: str | None = None  # an existing Dask cluster's address
     data: str | None = None      # a folder of recorded data sets (the spec's ``data``)
+
+    def __post_init__(self):
+        bounds.declared(self)
 
     def given(self) -> list[str]:
         """The options set to something other than their default, in declaration order."""

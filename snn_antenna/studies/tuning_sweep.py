@@ -21,6 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..core import bounds
 from ..core import spec as specs
 from ..engine.cost import check_memory, estimate as sweep_estimate
 from ..engine.evaluators import NEURON_AXES, NeuronSweep
@@ -46,6 +47,7 @@ class SweepSettings:
     workers: int = 0  # 0: one worker process per CPU core; 1: run in this process
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.workers, int) and self.workers >= 0, "workers", self.workers,
               "an integer >= 0 (0: one per CPU core)")
 

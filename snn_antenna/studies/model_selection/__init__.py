@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check, is_number
 from ...evaluation import crossval as cv
@@ -59,6 +60,7 @@ class Candidate:
     strengths: list
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.strengths, list) and len(self.strengths) >= 1
               and all(is_number(s) for s in self.strengths), "selection.candidates.strengths",
               self.strengths, "a non-empty list of factors on the mechanism's constant")
