@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import importlib
 import inspect
-import math
 import pkgutil
 import tracemalloc
 import types
 import typing
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import pytest
@@ -357,7 +356,7 @@ def hostile(tp) -> list:
 
 def _fields(cls, case: Case) -> dict[str, list]:
     """Each field of ``cls`` with the hostile values its annotation gives."""
-    hints = bounds._hints(cls)
+    hints = bounds.declared_types(cls)
     return {name: hostile(tp) for name, tp in hints.items()
             if name not in case.skip and hostile(tp)}
 
@@ -375,6 +374,7 @@ def test_every_configured_class_is_made_from_its_defaults():
 
 
 @pytest.mark.parametrize("qualname", sorted(CONFIGURED))
+@settings(max_examples=6)              # per class, in the default suite; the slow test: all
 @given(data=st.data())
 def test_a_hostile_field_is_refused_naming_it(qualname, data):
     """Any field of any configured class, given a value its declaration excludes, is refused

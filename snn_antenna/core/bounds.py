@@ -309,26 +309,27 @@ def _is_sequence(tp) -> bool:
     return tp is collections.abc.Sequence
 
 
-_HINTS: dict = {}
+_DECLARED: dict = {}
 
 
-def _hints(cls) -> dict:
-    """The resolved annotations of a dataclass's fields or a class's ``__init__`` (cached)."""
+def declared_types(target) -> dict:
+    """The annotations of a dataclass's fields (those ``__init__`` takes), a class's
+    ``__init__`` or a function's parameters, resolved ({} where they cannot be); cached."""
     import dataclasses
     import typing
 
-    if cls not in _HINTS:
-        target = cls if dataclasses.is_dataclass(cls) else cls.__init__
+    if target not in _DECLARED:
+        plain_class = isinstance(target, type) and not dataclasses.is_dataclass(target)
         try:
-            hints = typing.get_type_hints(target)
-        except Exception:    # an annotation that cannot be resolved is not checked here
+            hints = typing.get_type_hints(target.__init__ if plain_class else target)
+        except Exception:   # annotations that cannot be resolved: no type check, not a crash
             hints = {}
         hints.pop("return", None)
-        if dataclasses.is_dataclass(cls):
-            init = {f.name for f in dataclasses.fields(cls) if f.init}
+        if dataclasses.is_dataclass(target):
+            init = {f.name for f in dataclasses.fields(target) if f.init}
             hints = {k: v for k, v in hints.items() if k in init}
-        _HINTS[cls] = hints
-    return _HINTS[cls]
+        _DECLARED[target] = hints
+    return dict(_DECLARED[target])
 
 
 def declared(obj, **values) -> None:
@@ -339,23 +340,27 @@ def declared(obj, **values) -> None:
     another class on the ``values`` its ``__init__`` was given (``declared(self, rate_hz=
     rate_hz)``). Ranges of one field (a rate > 0, a probability <= 1) are its class's own
     checks, after this one."""
-    import dataclasses
-
-    hints = _hints(type(obj))
-    if not values and dataclasses.is_dataclass(obj):
-        values = {name: getattr(obj, name) for name in hints}
+    cls = type(obj)
+    checks = _CHECKS.get(cls)
+    if checks is None:                  # each class's checks are made once, from its types
+        checks = {name: (tp, _check_for(tp)) for name, tp in declared_types(cls).items()}
+        checks = _CHECKS[cls] = {k: v for k, v in checks.items() if v[1] is not None}
+    if not values and hasattr(cls, "__dataclass_fields__"):
+        values = {name: getattr(obj, name) for name in checks}
     for name, value in values.items():
-        if name in hints:
-            typed(name, value, hints[name])
+        if name in checks:
+            tp, check = checks[name]
+            if not check(name, value):
+                raise SpecError(name, value, describe_type(tp))
 
 
-def typed(field: str, value, tp) -> None:
-    """``value`` is of the annotation ``tp`` (see ``declared``), or a SpecError naming it."""
-    if not _fits(field, value, tp):
-        raise SpecError(field, value, describe_type(tp))
+_CHECKS: dict = {}
 
 
-def _fits(field: str, value, tp) -> bool:
+def _check_for(tp):
+    """A check ``(field, value) -> bool`` for the annotation ``tp``: False for a value of
+    another type, a SpecError for one of this type out of every bound, True otherwise; None
+    where the annotation says nothing to check (arrays, protocols, callables)."""
     import types
     import typing
 
@@ -363,55 +368,80 @@ def _fits(field: str, value, tp) -> bool:
 
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if tp is typing.Any or tp is object:
-        return True
+        return None
     if tp is bool:
-        return isinstance(value, (bool, np.bool_))
+        return lambda field, value: isinstance(value, (bool, np.bool_))
     if tp is float:
-        if not _real(value):
-            return False
-        number(field, value, -MAX_MAGNITUDE, MAX_MAGNITUDE)
-        return True
+        def real(field, value) -> bool:
+            if type(value) is float and (MIN_NORMAL <= abs(value) <= MAX_MAGNITUDE
+                                         or value == 0.0):
+                return True             # the common case, at once
+            if not _real(value):
+                return False
+            number(field, value, -MAX_MAGNITUDE, MAX_MAGNITUDE)
+            return True
+        return real
     if tp is int:
-        if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)):
-            return False
-        integer(field, value, -MAX_COUNT, MAX_COUNT)
-        return True
+        def count(field, value) -> bool:
+            if type(value) is int and -MAX_COUNT <= value <= MAX_COUNT:
+                return True
+            if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)):
+                return False
+            integer(field, value, -MAX_COUNT, MAX_COUNT)
+            return True
+        return count
     if tp is str:
-        return isinstance(value, str)
+        return lambda field, value: isinstance(value, str)
     if origin in (typing.Union, types.UnionType):
-        if value is None:
-            return type(None) in args
-        kinds = [a for a in args if a is not type(None)]
-        errors = []
-        for kind in kinds:                  # the first kind the value is of decides
-            try:
-                if _fits(field, value, kind):
-                    return True
-            except SpecError as exc:
-                errors.append(exc)
-        if errors:
-            raise errors[0]
-        return False
+        optional = type(None) in args
+        kinds = [_check_for(a) for a in args if a is not type(None)]
+        if any(k is None for k in kinds):
+            return (lambda field, value: True) if optional else None
+
+        def either(field, value) -> bool:
+            if value is None:
+                return optional
+            errors = []
+            for kind in kinds:              # the first kind the value is of decides
+                try:
+                    if kind(field, value):
+                        return True
+                except SpecError as exc:
+                    errors.append(exc)
+            if errors:
+                raise errors[0]
+            return False
+        return either
     container = origin or tp
     if container in (tuple, list) or _is_sequence(container):
-        if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) == 0:
-            return False
         if origin is tuple and args and args[-1] is not Ellipsis:
-            if len(value) != len(args):
+            entries = [_check_for(a) for a in args]
+
+            def fixed(field, value) -> bool:
+                if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) != 1 \
+                        or len(value) != len(entries):
+                    return False
+                return all(check is None or check(f"{field}.{i}", v)
+                           for i, (v, check) in enumerate(zip(value, entries)))
+            return fixed
+        entry = _check_for(args[0]) if args else None
+        entry_text = describe_type(args[0]) if args else ""
+
+        def listed(field, value) -> bool:
+            if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) == 0:
                 return False
-            return all(_fits(f"{field}.{i}", v, a) for i, (v, a) in enumerate(zip(value, args)))
-        kind = args[0] if args else None
-        for i, item in enumerate(value):
-            if kind is not None:
-                if not _fits(f"{field}.{i}", item, kind):
-                    raise SpecError(f"{field}.{i}", item, describe_type(kind))
-            elif _real(item):               # an undeclared entry that is a number is sane
-                number(f"{field}.{i}", item, -MAX_MAGNITUDE, MAX_MAGNITUDE)
-            elif isinstance(item, complex):
-                raise SpecError(f"{field}.{i}", item, "a real number, a string or a table")
-        return True
+            for i, item in enumerate(value):
+                if entry is not None:
+                    if not entry(f"{field}.{i}", item):
+                        raise SpecError(f"{field}.{i}", item, entry_text)
+                elif _real(item):           # an undeclared entry that is a number is sane
+                    number(f"{field}.{i}", item, -MAX_MAGNITUDE, MAX_MAGNITUDE)
+                elif isinstance(item, complex):
+                    raise SpecError(f"{field}.{i}", item, "a real number, a string or a table")
+            return True
+        return listed
     if container is dict:
-        return isinstance(value, dict)
+        return lambda field, value: isinstance(value, dict)
     if isinstance(tp, type) and tp.__module__.startswith("snn_antenna"):
-        return isinstance(value, tp)        # one of the package's own classes
-    return True                             # arrays, protocols, callables: their own checks
+        return lambda field, value: isinstance(value, tp)   # one of the package's own
+    return None

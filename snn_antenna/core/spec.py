@@ -22,7 +22,7 @@ from typing import Any
 from collections.abc import Iterable
 
 from . import calibration
-from .bounds import beyond_limits, describe_type, nested, out_path, parse_value
+from .bounds import beyond_limits, declared_types, describe_type, nested, out_path, parse_value
 from .bounds import seed as checked_seed
 from .errors import NumericalInstabilityError, SpecError, shown
 
@@ -203,17 +203,6 @@ def check_section(spec: dict, section: str, target, exclude: Iterable[str] = (),
         if key in hints:
             check_type(f"{section}.{key}", value, hints[key])
     return table
-
-
-def declared_types(target) -> dict[str, Any]:
-    """The annotations of a dataclass's fields or a callable's parameters ({} if unknown)."""
-    try:
-        plain_class = isinstance(target, type) and not dataclasses.is_dataclass(target)
-        hints = typing.get_type_hints(target.__init__ if plain_class else target)
-    except Exception:       # annotations that cannot be resolved: no type check, not a crash
-        return {}
-    hints.pop("return", None)
-    return hints
 
 
 def _matches(value, tp) -> bool:

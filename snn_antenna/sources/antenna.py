@@ -382,6 +382,11 @@ def mode_filter(freq_hz: float, tau_s: float, rate_hz: float) -> tuple[list, lis
     so unit-variance white noise comes out with unit rms (for ``scipy.signal.lfilter``)."""
     from scipy.signal import lfilter
 
+    bounds.rate_hz("rate_hz", rate_hz)
+    bounds.number("freq_hz", freq_hz, 0.0, bounds.MAX_RATE_HZ, unit=" Hz")
+    # the impulse response is summed over 20 time constants: one that fits in memory
+    bounds.n_samples("tau_s", 20 * bounds.number("tau_s", tau_s, 0.0, lo_open=True, unit=" s"),
+                     rate_hz, bytes_per_sample=8)
     r = np.exp(-1.0 / (tau_s * rate_hz))
     a = [1.0, -2 * r * np.cos(2 * np.pi * freq_hz / rate_hz), r * r]
     # The output variance for unit-variance input is the impulse response's energy.
