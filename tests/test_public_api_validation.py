@@ -451,3 +451,52 @@ def test_the_spec_and_the_constructor_say_the_same_of_one_field(tmp_path):
         ResonatorArray(**specs.check_section(table, "network", ResonatorArray))
     assert through_spec.value.field == f"network.{direct.value.field}"
     assert through_spec.value.accepted == direct.value.accepted
+
+
+NOT_A_DIVISOR = [0, -1.0, float("nan"), float("inf"), 1e-320, 1e300, "1", None]
+NOT_A_COUNT = [-1.0, float("nan"), float("inf"), 1e300, "1", None]   # 0 events may happen
+
+
+def _functions():
+    from snn_antenna.engine.standalone import tick_substeps
+    from snn_antenna.networks.neurons import max_stable_dt_ms
+    from snn_antenna.readout.band_tuning import coarsest_dt_ms
+    from snn_antenna.report.stats import binomial_interval, poisson_interval, t_test_power
+    from snn_antenna.sources.antenna import mode_filter
+
+    # (function, arguments it accepts, {argument: values it refuses}): what they divide by,
+    # size memory with or count
+    return [
+        (max_stable_dt_ms, {"k": 1.0}, {"k": NOT_A_DIVISOR}),
+        (mode_filter, {"freq_hz": 8.0, "tau_s": 0.1, "rate_hz": 1e3},
+         {"tau_s": NOT_A_DIVISOR, "rate_hz": NOT_A_DIVISOR}),
+        (coarsest_dt_ms, {"top_hz": 30.0, "hz_per_k": 20.0, "max_k_dt": 4.0},
+         {"top_hz": NOT_A_DIVISOR, "hz_per_k": NOT_A_DIVISOR}),
+        (tick_substeps, {"sample_ms": 1.0, "dt_ms": 0.1, "run_ms": 10.0},
+         {"sample_ms": NOT_A_DIVISOR, "dt_ms": NOT_A_DIVISOR, "run_ms": NOT_A_DIVISOR}),
+        (t_test_power, {"n": 10, "effect": 0.5}, {"n": NOT_A_DIVISOR, "level": NOT_A_DIVISOR}),
+        (binomial_interval, {"successes": 3, "trials": 10},
+         {"successes": NOT_A_COUNT, "trials": NOT_A_DIVISOR, "level": NOT_A_DIVISOR}),
+        (poisson_interval, {"count": 3}, {"count": NOT_A_COUNT, "level": NOT_A_DIVISOR}),
+    ]
+
+
+@given(data=st.data())
+def test_public_functions_refuse_what_they_would_divide_by_or_overflow_on(data):
+    function, accepted, refused = data.draw(st.sampled_from(_functions()), label="function")
+    function(**accepted)
+    name = data.draw(st.sampled_from(sorted(refused)), label="argument")
+    value = data.draw(st.sampled_from(refused[name]), label="value")
+    with pytest.raises(SpecError) as caught:
+        function(**{**accepted, name: value})
+    assert caught.value.field == name
+
+
+@pytest.mark.slow
+def test_public_functions_refuse_every_such_value():
+    for function, accepted, refused in _functions():
+        for name, values in refused.items():
+            for value in values:
+                with pytest.raises(SpecError) as caught:
+                    function(**{**accepted, name: value})
+                assert caught.value.field == name, (function.__name__, name, value)

@@ -35,6 +35,10 @@ class Event:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("t_s", self.t_s, 0.0, unit=" s")
+        bounds.number("duration_s", self.duration_s, 0.0, unit=" s")
+        if self.distance_cm is not None:
+            bounds.number("distance_cm", self.distance_cm, 0.0, unit=" cm")
 
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if v is not None}

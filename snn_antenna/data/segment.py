@@ -45,6 +45,10 @@ class Segmentation:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("onset_threshold_g", self.onset_threshold_g, 0.0, lo_open=True, unit=" g")
+        for name in ("quiet_s", "dead_s", "match_s", "pre_trigger_s"):
+            bounds.seconds(name, getattr(self, name))
+        bounds.positive_seconds("duration_s", self.duration_s)
 
     def n_samples(self, rate_hz: float) -> int:
         return int(round((self.pre_trigger_s + self.duration_s) * rate_hz))

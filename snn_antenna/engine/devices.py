@@ -221,6 +221,8 @@ class TuningStimuli:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.positive_seconds("duration_s", self.duration_s)
+        bounds.amplitude("amplitude", self.amplitude)
         check(0 < self.f_min_hz < self.f_max_hz < self.rate_hz / 4, "f_max_hz", self.f_max_hz,
               "0 < f_min_hz < f_max_hz < rate_hz / 4")
         check(isinstance(self.n_freqs, int) and self.n_freqs >= 2, "n_freqs", self.n_freqs,
@@ -290,6 +292,9 @@ class Setting:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.dt_ms("dt_ms", self.dt_ms)
+        if self.n_neurons is not None:
+            bounds.positive_integer("n_neurons", self.n_neurons)
 
 
 @dataclass

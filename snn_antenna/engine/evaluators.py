@@ -75,6 +75,10 @@ class NeuronSweep:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("k", self.k, 0.0, lo_open=True)
+        bounds.number("input_hz", self.input_hz, 0.0, bounds.MAX_RATE_HZ, unit=" Hz")
+        if self.group_size is not None:
+            bounds.positive_integer("group_size", self.group_size)
         check(self.preset in neurons.PRESETS, "preset", self.preset,
               f"one of {sorted(neurons.PRESETS)}")
         check(self.method in neurons.METHODS, "method", self.method,
@@ -225,6 +229,9 @@ class SceneSweep:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.seed("seed", self.seed)
+        bounds.seconds("count_from_s", self.count_from_s)
+        bounds.number("k", self.k, 0.0, lo_open=True)
         check(self.engine in ("cython", "numpy"), "engine", self.engine,
               "'cython' or 'numpy' (scene inputs need a runtime target)")
         NeuronSweep(preset=self.preset, dt_ms=self.dt_ms, method=self.method)  # same checks

@@ -102,6 +102,9 @@ class Match:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("distance_cm", self.distance_cm, 0.0, unit=" cm")
+        bounds.number("detection_f1", self.detection_f1, 0.0, 1.0)
+        bounds.number("rate_map_error", self.rate_map_error, 0.0)
 
 
 @dataclass

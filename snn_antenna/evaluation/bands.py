@@ -365,6 +365,9 @@ class BandStudy:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("freq_margin", self.freq_margin, 0.0)
+        bounds.number("rate_map_error", self.rate_map_error, 0.0)
+        bounds.positive_integer("cost_events", self.cost_events)
         for name in ("bands", "calibrate", "methods", "windows_s"):
             check(isinstance(getattr(self, name), list), name, getattr(self, name), "a list")
         for name in self.bands + self.calibrate:

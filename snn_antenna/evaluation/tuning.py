@@ -31,6 +31,7 @@ class ReadPoint:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("k", self.k, 0.0, lo_open=True)
 
 
 def derive(rate: xr.DataArray) -> xr.Dataset:

@@ -168,6 +168,8 @@ class EpisodeTracker:
 
     def __init__(self, detector: ContactDetector, neuron_hz, window_s: float):
         bounds.declared(self, detector=detector, neuron_hz=neuron_hz, window_s=window_s)
+        if window_s is not None:
+            bounds.number("window_s", window_s, 0.0, lo_open=True, unit=" s")
         self.detector, self.window_s = detector, window_s
         self.neuron_hz = np.asarray(neuron_hz, dtype=float)
         self._above = tuned_above(self.neuron_hz, detector.motion_band_hz)

@@ -57,6 +57,9 @@ class BlindReadOut:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("window_s", self.window_s, 0.0, lo_open=True, unit=" s")
+        bounds.rate_hz("rate_hz", self.rate_hz)
+        bounds.seconds("settle_s", self.settle_s)
 
     def detect(self, coded: np.ndarray) -> tuple[list, list[xr.DataArray]]:
         """(detections, rate map) of each column of ``coded``."""

@@ -77,6 +77,15 @@ class Band:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.positive_integer("n_neurons", self.n_neurons)
+        for name in ("coder_amplitude", "lowpass_hz", "hz_per_k"):
+            bounds.number(name, getattr(self, name), 0.0, lo_open=True)
+        bounds.number("threshold_g", self.threshold_g, 0.0, unit=" g")
+        if self.highpass_hz is not None:
+            bounds.number("highpass_hz", self.highpass_hz, 0.0, lo_open=True, unit=" Hz")
+        if self.dt_ms is not None:
+            bounds.dt_ms("dt_ms", self.dt_ms)
+        bounds.integer("filter_order", self.filter_order, 1, 8)
 
     def check_coder(self) -> None:
         """The coder's name and parameters, refused before any work."""

@@ -266,6 +266,9 @@ class SpikingPlan:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.positive_integer("design_repetitions", self.design_repetitions)
+        bounds.positive_integer("cost_sample_events", self.cost_sample_events)
+        bounds.integer("workers", self.workers, 0)
 
     def build(self, rate_hz: float) -> tuple[SpikingBank, list[Design]]:
         """The bank and its designs, checked (for input sampled at ``rate_hz``)."""
@@ -318,6 +321,7 @@ class TunedPlan:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.positive_seconds("duration_s", self.duration_s)
         with specs.section("tuning"):
             self.base = Tuning(**specs.check_section({"tuning": self.tuning}, "tuning", Tuning))
         for name in ("calibration_repetitions", "curve_repetitions"):

@@ -145,6 +145,11 @@ class Material:
 
     def __post_init__(self):
         bounds.declared(self)
+        for name in ("density_kg_m3", "youngs_gpa", "contact_gpa"):
+            bounds.number(name, getattr(self, name), 0.0, lo_open=True)
+        bounds.number("loss", self.loss, 0.0)
+        # isotropic elastic solids: -1 < Poisson ratio <= 0.5
+        bounds.number("poisson", self.poisson, -1.0, 0.5, lo_open=True)
 
     @property
     def bar_speed_m_s(self) -> float:

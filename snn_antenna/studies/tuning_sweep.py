@@ -48,6 +48,8 @@ class SweepSettings:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.positive_integer("chunk_points", self.chunk_points)
+        bounds.integer("workers", self.workers, 0)
         check(isinstance(self.workers, int) and self.workers >= 0, "workers", self.workers,
               "an integer >= 0 (0: one per CPU core)")
 

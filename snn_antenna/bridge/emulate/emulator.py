@@ -95,6 +95,7 @@ class FaultPlan:
 
     def __post_init__(self):
         bounds.declared(self)
+        self.validate()
 
     @classmethod
     def parse(cls, text: str) -> FaultPlan:
@@ -206,6 +207,9 @@ class Emulator:
         bounds.declared(self, counts=counts, rate_hz=rate_hz, faults=faults, seed=seed,
                         wire_format=wire_format, start_seq=start_seq, fault_margin=fault_margin,
                         boot_frames=boot_frames)
+        bounds.seed("seed", seed)
+        bounds.integer("start_seq", start_seq, 0, bounds.MAX_COUNT)
+        bounds.integer("fault_margin", fault_margin, 0, bounds.MAX_COUNT)
         counts = np.asarray(counts)
         if counts.ndim != 2 or counts.shape[1] != 2 or counts.shape[0] == 0:
             raise SpecError("counts", f"array of shape {counts.shape}", "shape (n_samples, 2)")

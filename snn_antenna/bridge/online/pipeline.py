@@ -203,6 +203,7 @@ class ArrivalClock:
 
     def __init__(self, rate_hz: float = BOARD_RATE_HZ):
         bounds.declared(self, rate_hz=rate_hz)
+        bounds.rate_hz("rate_hz", rate_hz)
         self._chunks: deque[tuple[int, float]] = deque()    # (end index, arrival time)
         self.n = 0
         self.rate_hz = rate_hz

@@ -238,6 +238,7 @@ class Decoder:
                  rate_hz: float = BOARD_RATE_HZ, restarts_at: dict[int, str] | None = None):
         bounds.declared(self, wire_format=wire_format, synced=synced, rate_hz=rate_hz,
                         restarts_at=restarts_at)
+        bounds.rate_hz("rate_hz", rate_hz)
         self.wire_format = check_wire_format(wire_format)
         self._terminator = DELIMITER if wire_format == "binary" else b"\n"
         self._parse = self._parse_binary if wire_format == "binary" else self._parse_ascii

@@ -79,6 +79,7 @@ class SerialTransport:
     def __init__(self, url: str, baudrate: int = DEFAULT_BAUDRATE, read_timeout_s: float = 0.05,
                  port: serial.SerialBase | None = None):
         bounds.declared(self, url=url, baudrate=baudrate, read_timeout_s=read_timeout_s, port=port)
+        bounds.seconds("read_timeout_s", read_timeout_s)
         if not isinstance(baudrate, int) or baudrate <= 0:
             raise SpecError("baudrate", baudrate, "a positive integer (the board uses 250000)")
         self.url, self.baudrate, self.read_timeout_s = url, baudrate, read_timeout_s

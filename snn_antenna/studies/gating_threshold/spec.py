@@ -149,6 +149,7 @@ class CalibrationSettings:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.seed("seed", self.seed)
         check(np.isfinite(self.duration_s) and self.duration_s >= 1.0, "duration_s",
               self.duration_s, "a calibration drive of at least 1 s")
         check(isinstance(self.seed, int), "seed", self.seed, "an integer seed")

@@ -129,6 +129,8 @@ class ReferenceSettings:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.number("atol", self.atol, 0.0)
+        bounds.number("check_atol_factor", self.check_atol_factor, 0.0)
         check(1e-14 <= self.check_rtol < self.rtol <= 1e-6, "check_rtol", self.check_rtol,
               "a tolerance tighter than rtol (both in [1e-14, 1e-6])")
         check(self.check_scene in SCENES, "check_scene", self.check_scene, f"one of {SCENES}")
