@@ -397,6 +397,46 @@ def test_every_hostile_value_of_every_field_is_refused(qualname):
             _refused(cls, case, name, value)
 
 
+# -- each field's own range, past its type: (class, required arguments, field, value) --------
+OUT_OF_RANGE = [
+    ("networks.gate.SpeedGate", {}, "epochs", 10**9),
+    ("networks.resonators.ResonatorArray", {}, "band_hz", [1e-320, 1e-320]),
+    ("bridge.wire.source.SerialSource", {"url": "loop://"}, "queue_size", 0),
+    ("bridge.emulate.emulator.FaultPlan", {}, "drop", -1),
+    ("bridge.emulate.emulator.Emulator", {"counts": np.full((4, 2), 512)}, "seed", -1),
+    ("bridge.wire.protocol.Decoder", {}, "rate_hz", 0.0),
+    ("bridge.online.pipeline.ArrivalClock", {}, "rate_hz", -1.0),
+    ("core.signals.Recording", {"samples": np.zeros(4)}, "rate_hz", "1000"),
+    ("core.truth.Event", {"kind": "contact", "t_s": 1.0}, "duration_s", -1.0),
+    ("data.inputs.Options", {}, "adc_bits", 0),
+    ("data.segment.Segmentation", {}, "duration_s", 0.0),
+    ("engine.devices.Setting", {"dt_ms": 0.1, "target": "numpy"}, "method", "leapfrog"),
+    ("engine.evaluators.NeuronSweep", {}, "k", 0.0),
+    ("evaluation.accuracy.Match", {}, "detection_f1", 1.5),
+    ("networks.cpg.CPG", {}, "target", "fortran"),
+    ("readout.spiking.Band", {}, "coder", "morse"),
+    ("readout.spiking.Band", {}, "filter_order", 0),
+    ("readout.detection.BlindReadOut", None, "rate_hz", 0.0),
+    ("readout.contacts.EpisodeTracker", None, "neuron_hz", [float("nan"), 8.0]),
+    ("readout.spiking_decoders.SpikingPlan", {}, "workers", -1),
+    ("sources.antenna.Material", None, "poisson", 0.7),
+    ("sources.stimuli.Contact", {"t_s": 1.0, "distance_cm": 10.0}, "material", "granite"),
+    ("studies.tuning_sweep.SweepSettings", {}, "chunk_points", 0),
+]
+
+
+@pytest.mark.parametrize("name, required, field_name, value", OUT_OF_RANGE,
+                         ids=[f"{c}.{f}" for c, _, f, _ in OUT_OF_RANGE])
+def test_a_value_out_of_its_fields_range_is_refused_naming_it(name, required, field_name,
+                                                              value):
+    qualname = f"snn_antenna.{name}"
+    case = CONFIGURED[qualname]
+    given_ = case.required() if required is None else required
+    with pytest.raises(SpecError) as caught:
+        case.make(PUBLIC[qualname], {**given_, field_name: value})
+    assert field_name in caught.value.field, caught.value
+
+
 # -- the inputs past the constructors: data handed to a made object, public functions -------
 def test_data_a_made_object_is_handed_is_checked_too():
     from snn_antenna.bridge.emulate.emulator import Emulator

@@ -292,6 +292,9 @@ class Setting:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.choice("method", self.method, neurons.METHODS)
+        bounds.choice("target", self.target, TARGETS)
+        bounds.choice("dtype", self.dtype, DTYPES)
         bounds.dt_ms("dt_ms", self.dt_ms)
         if self.n_neurons is not None:
             bounds.positive_integer("n_neurons", self.n_neurons)

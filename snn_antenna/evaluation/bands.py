@@ -365,6 +365,7 @@ class BandStudy:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.choice("target", self.target, ("numpy", "cython"))
         bounds.number("freq_margin", self.freq_margin, 0.0)
         bounds.number("rate_map_error", self.rate_map_error, 0.0)
         bounds.positive_integer("cost_events", self.cost_events)

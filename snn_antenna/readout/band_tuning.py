@@ -24,6 +24,7 @@ import numpy as np
 
 from ..core import bounds, calibration
 from ..core.errors import SpecError, check, is_number
+from ..networks import neurons
 from ..preprocess import make_coder
 from .spiking import Band, align_events
 
@@ -63,6 +64,7 @@ class Tuning:
 
     def __post_init__(self):
         bounds.declared(self)
+        bounds.choice("method", self.method, neurons.METHODS)
         check(isinstance(self.per_channel, int) and self.per_channel >= 1, "per_channel",
               self.per_channel, "an integer >= 1")
         check(isinstance(self.max_channels, int) and self.max_channels >= 1, "max_channels",
