@@ -32,6 +32,7 @@ class _Causal(TransformerMixin, BaseEstimator):
 
     def fit(self, X, y=None):
         validate_samples(X, "X")
+        bounds.declared(self, **self.get_params())
         self._validate_params_()
         self.reset()
         return self
@@ -50,7 +51,7 @@ class _Causal(TransformerMixin, BaseEstimator):
 
     def partial_transform(self, X):
         self._require_fit()
-        return self._step(np.asarray(validate_samples(X, "X"), dtype=float))
+        return finite_output(self._step(np.asarray(validate_samples(X, "X"), dtype=float)))
 
     def _require_fit(self) -> None:
         if not hasattr(self, "state_"):
@@ -58,6 +59,16 @@ class _Causal(TransformerMixin, BaseEstimator):
 
     def _step(self, X):
         raise NotImplementedError
+
+
+def finite_output(Y: np.ndarray) -> np.ndarray:
+    """``Y``, a stage's output, or a SpecError when input finite in itself (values near the
+    float64 limit) overflowed the stage: never an inf or a NaN handed on."""
+    if not np.all(np.isfinite(Y)):
+        raise SpecError("X", "samples whose processing overflows float64",
+                        f"samples of magnitude well below {np.finfo(float).max:.3g} "
+                        "(real signals are within a few thousand)")
+    return Y
 
 
 class CountsToG(_Causal):

@@ -76,12 +76,13 @@ def test_bad_neuron_grids_are_refused_before_any_work(tmp_path):
     # the stable limit is the foundation's: exactly at the limit passes the check
     k_limit = neurons.MAX_STABLE_K_DT["euler"] / FAST.dt_ms
     FAST.for_grid(Grid({"k": [k_limit]}), (1,))
-    # 10^12 points: far more results than memory
-    huge = Grid({"k": {"start": 0.5, "stop": 1, "num": 10_000},
-                 "b": {"start": 0.2, "stop": 0.3, "num": 10_000},
-                 "input_hz": {"start": 2, "stop": 60, "num": 10_000}})
+    # 10^12 points: far more than memory, refused as the grid is sized (nothing made)
     with pytest.raises(SpecError, match="fit in memory"):
-        run_sweep(huge, FAST, store, NeuronSweep.OUTPUTS, progress=False)
+        Grid({"k": {"start": 0.5, "stop": 1, "num": 10_000},
+              "b": {"start": 0.2, "stop": 0.3, "num": 10_000},
+              "input_hz": {"start": 2, "stop": 60, "num": 10_000}})
+    with pytest.raises(SpecError, match="a grid whose results fit in memory"):
+        check_memory(Grid({"k": [1.0, 2.0]}), NeuronSweep.OUTPUTS, 2, budget=8)
     with pytest.raises(SpecError, match="chunks that fit"):
         check_memory(Grid({"k": [1.0, 2.0]}), NeuronSweep.OUTPUTS, 2, 10**12)
     assert not store.exists()  # nothing was started

@@ -25,6 +25,14 @@ MAX_AMPLITUDE = 1e6          # drives and levels; squares and sums of it stay fa
 # for every seed keeps a seed valid wherever it goes.
 MAX_SEED = 2**32 - 1
 SCENE_BYTES_PER_SAMPLE = 256  # a scene's arrays per sample while it is generated (~30 float64)
+# The widest setting of any constructor in its own unit (rates, durations, currents, lengths
+# are far below it): a setting beyond it is a typo, and products of two such numbers stay
+# far inside float64. A count (iterations, epochs, samples) beyond MAX_COUNT would never finish.
+MAX_MAGNITUDE = 1e9
+MAX_COUNT = 2**32 - 1
+# A nonzero number below the smallest normal float64 (a subnormal, e.g. 1e-320) underflows
+# every product it enters and makes a reciprocal infinite: no setting is that small.
+MIN_NORMAL = 2.2250738585072014e-308
 NAME_MAX = 255               # bytes in one path component (Linux, macOS)
 PATH_MAX = 4096              # bytes in a whole path (Linux)
 
@@ -49,6 +57,9 @@ def number(field: str, value, lo: float | None = None, hi: float | None = None, 
     if not ok:
         raise SpecError(field, value, accepted)
     x = float(value)
+    if 0.0 < abs(x) < MIN_NORMAL:
+        raise SpecError(field, value, f"{accepted} (0 or at least {MIN_NORMAL:.3g} in "
+                                      "magnitude: a subnormal float underflows)")
     if lo is not None and (x < lo or (lo_open and x == lo)):
         raise SpecError(field, value, accepted)
     if hi is not None and (x > hi or (hi_open and x == hi)):
@@ -255,3 +266,182 @@ def memory_budget_bytes() -> int:
     except ImportError:  # psutil comes with distributed; this is a fallback
         available = os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     return int(available) // 4
+
+
+# -- checks read from a class's declaration ------------------------------------------------
+# A constructor's annotations are its declaration: the spec checks read them (``spec.
+# check_type``) and so does ``declared`` below, with one wording (``describe_type``) for what
+# each accepts. ``declared`` is strict where the spec check is lenient: a constructor is
+# handed Python values, not TOML, so a word is not a number there.
+
+def describe_type(tp, none: bool = True) -> str:
+    """What a value of the annotation ``tp`` is, in the words of a refusal (``none``: whether
+    an optional field says it may be none; a TOML spec has no none to give)."""
+    import types
+    import typing
+
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is bool:
+        return "true or false"
+    if tp is int:
+        return "an integer (not true/false)"
+    if tp is float:
+        return "a number (not true/false)"
+    if tp is str:
+        return "a string"
+    if origin is tuple and args and args[-1] is not Ellipsis:
+        if all(a in (int, float) for a in args):
+            return f"a list of {len(args)} numbers, e.g. {list(range(7, 7 + len(args)))}"
+        return f"a list of {len(args)} ({', '.join(describe_type(a, none) for a in args)})"
+    if origin in (tuple, list) or tp in (tuple, list) or _is_sequence(origin or tp):
+        return f"a list of {describe_type(args[0], none) if args else 'values'}"
+    if origin is dict or tp is dict:
+        return "a table"
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join("none" if a is type(None) else describe_type(a, none)
+                           for a in args if none or a is not type(None))
+    return getattr(tp, "__name__", str(tp))
+
+
+def _is_sequence(tp) -> bool:
+    import collections.abc
+
+    return tp is collections.abc.Sequence
+
+
+_DECLARED: dict = {}
+
+
+def declared_types(target) -> dict:
+    """The annotations of a dataclass's fields (those ``__init__`` takes), a class's
+    ``__init__`` or a function's parameters, resolved ({} where they cannot be); cached."""
+    import dataclasses
+    import typing
+
+    if target not in _DECLARED:
+        plain_class = isinstance(target, type) and not dataclasses.is_dataclass(target)
+        try:
+            hints = typing.get_type_hints(target.__init__ if plain_class else target)
+        except Exception:   # annotations that cannot be resolved: no type check, not a crash
+            hints = {}
+        hints.pop("return", None)
+        if dataclasses.is_dataclass(target):
+            init = {f.name for f in dataclasses.fields(target) if f.init}
+            hints = {k: v for k, v in hints.items() if k in init}
+        _DECLARED[target] = hints
+    return dict(_DECLARED[target])
+
+
+def declared(obj, **values) -> None:
+    """Refuse a field of ``obj`` whose value is not of its declared type, or is a number no
+    setting takes (NaN, inf, a subnormal, beyond MAX_MAGNITUDE, a count beyond MAX_COUNT).
+
+    A dataclass is checked on its fields (``declared(self)`` first in ``__post_init__``);
+    another class on the ``values`` its ``__init__`` was given (``declared(self, rate_hz=
+    rate_hz)``). Ranges of one field (a rate > 0, a probability <= 1) are its class's own
+    checks, after this one."""
+    cls = type(obj)
+    checks = _CHECKS.get(cls)
+    if checks is None:                  # each class's checks are made once, from its types
+        checks = {name: (tp, _check_for(tp)) for name, tp in declared_types(cls).items()}
+        checks = _CHECKS[cls] = {k: v for k, v in checks.items() if v[1] is not None}
+    if not values and hasattr(cls, "__dataclass_fields__"):
+        values = {name: getattr(obj, name) for name in checks}
+    for name, value in values.items():
+        if name in checks:
+            tp, check = checks[name]
+            if not check(name, value):
+                raise SpecError(name, value, describe_type(tp))
+
+
+_CHECKS: dict = {}
+
+
+def _check_for(tp):
+    """A check ``(field, value) -> bool`` for the annotation ``tp``: False for a value of
+    another type, a SpecError for one of this type out of every bound, True otherwise; None
+    where the annotation says nothing to check (arrays, protocols, callables)."""
+    import types
+    import typing
+
+    import numpy as np
+
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if tp is typing.Any or tp is object:
+        return None
+    if tp is bool:
+        return lambda field, value: isinstance(value, (bool, np.bool_))
+    if tp is float:
+        def real(field, value) -> bool:
+            if type(value) is float and (MIN_NORMAL <= abs(value) <= MAX_MAGNITUDE
+                                         or value == 0.0):
+                return True             # the common case, at once
+            if not _real(value):
+                return False
+            number(field, value, -MAX_MAGNITUDE, MAX_MAGNITUDE)
+            return True
+        return real
+    if tp is int:
+        def count(field, value) -> bool:
+            if type(value) is int and -MAX_COUNT <= value <= MAX_COUNT:
+                return True
+            if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)):
+                return False
+            integer(field, value, -MAX_COUNT, MAX_COUNT)
+            return True
+        return count
+    if tp is str:
+        return lambda field, value: isinstance(value, str)
+    if origin in (typing.Union, types.UnionType):
+        optional = type(None) in args
+        kinds = [_check_for(a) for a in args if a is not type(None)]
+        if any(k is None for k in kinds):
+            return (lambda field, value: True) if optional else None
+
+        def either(field, value) -> bool:
+            if value is None:
+                return optional
+            errors = []
+            for kind in kinds:              # the first kind the value is of decides
+                try:
+                    if kind(field, value):
+                        return True
+                except SpecError as exc:
+                    errors.append(exc)
+            if errors:
+                raise errors[0]
+            return False
+        return either
+    container = origin or tp
+    if container in (tuple, list) or _is_sequence(container):
+        if origin is tuple and args and args[-1] is not Ellipsis:
+            entries = [_check_for(a) for a in args]
+
+            def fixed(field, value) -> bool:
+                if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) != 1 \
+                        or len(value) != len(entries):
+                    return False
+                return all(check is None or check(f"{field}.{i}", v)
+                           for i, (v, check) in enumerate(zip(value, entries)))
+            return fixed
+        entry = _check_for(args[0]) if args else None
+        entry_text = describe_type(args[0]) if args else ""
+
+        def listed(field, value) -> bool:
+            if not isinstance(value, (list, tuple, np.ndarray)) or np.ndim(value) == 0:
+                return False
+            for i, item in enumerate(value):
+                if entry is not None:
+                    if not entry(f"{field}.{i}", item):
+                        raise SpecError(f"{field}.{i}", item, entry_text)
+                elif _real(item):           # an undeclared entry that is a number is sane
+                    number(f"{field}.{i}", item, -MAX_MAGNITUDE, MAX_MAGNITUDE)
+                elif isinstance(item, complex):
+                    raise SpecError(f"{field}.{i}", item, "a real number, a string or a table")
+            return True
+        return listed
+    if container is dict:
+        return lambda field, value: isinstance(value, dict)
+    if isinstance(tp, type) and tp.__module__.startswith("snn_antenna"):
+        return lambda field, value: isinstance(value, tp)   # one of the package's own
+    return None

@@ -11,6 +11,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from . import bounds
 from .errors import SpecError, check
 from .truth import GroundTruth
 
@@ -30,6 +31,7 @@ class Recording:
     meta: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        bounds.declared(self)
         validate_samples(self.samples, "samples")
         check(isinstance(self.truth, GroundTruth), "truth", type(self.truth).__name__,
               "a truth.GroundTruth (labelled events for scoring)")
@@ -59,8 +61,8 @@ def validate_samples(samples, name: str = "samples") -> np.ndarray:
     if arr.ndim not in (1, 2) or arr.shape[0] == 0:
         raise SpecError(name, f"array of shape {arr.shape}",
                         "a non-empty array of shape (n_samples,) or (n_samples, n_channels)")
-    if not np.issubdtype(arr.dtype, np.number):
-        raise SpecError(name, f"dtype {arr.dtype}", "numeric samples")
+    if not np.issubdtype(arr.dtype, np.number) or np.issubdtype(arr.dtype, np.complexfloating):
+        raise SpecError(name, f"dtype {arr.dtype}", "real numeric samples")
     bad = ~np.isfinite(arr)
     if bad.any():
         first = int(np.argwhere(bad)[0][0])

@@ -22,7 +22,7 @@ from typing import Any
 from collections.abc import Iterable
 
 from . import calibration
-from .bounds import beyond_limits, nested, out_path, parse_value
+from .bounds import beyond_limits, declared_types, describe_type, nested, out_path, parse_value
 from .bounds import seed as checked_seed
 from .errors import NumericalInstabilityError, SpecError, shown
 
@@ -205,40 +205,6 @@ def check_section(spec: dict, section: str, target, exclude: Iterable[str] = (),
     return table
 
 
-def declared_types(target) -> dict[str, Any]:
-    """The annotations of a dataclass's fields or a callable's parameters ({} if unknown)."""
-    try:
-        plain_class = isinstance(target, type) and not dataclasses.is_dataclass(target)
-        hints = typing.get_type_hints(target.__init__ if plain_class else target)
-    except Exception:       # annotations that cannot be resolved: no type check, not a crash
-        return {}
-    hints.pop("return", None)
-    return hints
-
-
-def _describe(tp) -> str:
-    origin, args = typing.get_origin(tp), typing.get_args(tp)
-    if tp is bool:
-        return "true or false"
-    if tp is int:
-        return "an integer (not true/false)"
-    if tp is float:
-        return "a number (not true/false)"
-    if tp is str:
-        return "a string"
-    if origin is tuple and args and args[-1] is not Ellipsis:
-        if all(a in (int, float) for a in args):
-            return f"a list of {len(args)} numbers, e.g. {list(range(7, 7 + len(args)))}"
-        return f"a list of {len(args)} ({', '.join(_describe(a) for a in args)})"
-    if origin in (tuple, list):
-        return f"a list of {_describe(args[0]) if args else 'values'}"
-    if origin is dict or tp is dict:
-        return "a table"
-    if origin in (typing.Union, types.UnionType):
-        return " or ".join(_describe(a) for a in args if a is not type(None))
-    return getattr(tp, "__name__", str(tp))
-
-
 def _matches(value, tp) -> bool:
     """Whether ``value`` is plainly not of type ``tp``. Deliberately lenient: a target may
     accept more than it declares (a word such as "never" for a float field), so only the
@@ -262,7 +228,7 @@ def check_type(field: str, value, tp) -> None:
     """Refuse ``value`` unless it has the declared type ``tp``: TOML ``true`` is not the
     integer 1, a ``[low, high]`` pair has two entries, a number is not a string."""
     if not _matches(value, tp):
-        raise SpecError(field, value, _describe(tp))
+        raise SpecError(field, value, describe_type(tp, none=False))
 
 
 def check_top_level(spec: dict, sections: Iterable[str]) -> None:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from . import bounds
+
 # The labels of a bench data set (sources.bench): coordinates along its ``event`` dimension.
 BENCH_LABELS = ("material", "distance_cm", "position", "repetition")
 
@@ -31,6 +33,13 @@ class Event:
     distance_cm: float | None = None
     material: str | None = None
 
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.number("t_s", self.t_s, 0.0, unit=" s")
+        bounds.number("duration_s", self.duration_s, 0.0, unit=" s")
+        if self.distance_cm is not None:
+            bounds.number("distance_cm", self.distance_cm, 0.0, unit=" cm")
+
     def as_dict(self) -> dict:
         return {k: v for k, v in self.__dict__.items() if v is not None}
 
@@ -41,6 +50,7 @@ class GroundTruth:
     events: tuple[Event, ...] = ()
 
     def __post_init__(self):
+        bounds.declared(self)
         object.__setattr__(self, "events", tuple(self.events))
 
     @property

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import bounds
 from ..bridge.wire.protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, SEQ_MODULUS
 from ..bridge.wire.recorder import (EVENTS_FILE, META_FILE, RAW_FILE, SAMPLES_FILE, SAMPLE_DTYPE,
                                     load_recording)
@@ -51,6 +52,13 @@ class Options:
     adc_bits: int = BOARD_ADC_BITS
     full_scale_g: float = BOARD_FULL_SCALE_G
     topic: str | None = None            # ROS 2 bags: the Imu topic (default: the only one)
+
+    def __post_init__(self):
+        bounds.declared(self)
+        if self.rate_hz is not None:
+            bounds.rate_hz("rate_hz", self.rate_hz)
+        bounds.integer("adc_bits", self.adc_bits, 4, 24)
+        bounds.number("full_scale_g", self.full_scale_g, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
 
 
 @dataclass

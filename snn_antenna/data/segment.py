@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..readout.events import EventProcessor, main_axis_g
 from .inputs import Stream
 from .labels import Label
@@ -41,6 +42,13 @@ class Segmentation:
     match_s: float = 0.1
     pre_trigger_s: float = 0.05
     duration_s: float = 1.0
+
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.number("onset_threshold_g", self.onset_threshold_g, 0.0, lo_open=True, unit=" g")
+        for name in ("quiet_s", "dead_s", "match_s", "pre_trigger_s"):
+            bounds.seconds(name, getattr(self, name))
+        bounds.positive_seconds("duration_s", self.duration_s)
 
     def n_samples(self, rate_hz: float) -> int:
         return int(round((self.pre_trigger_s + self.duration_s) * rate_hz))

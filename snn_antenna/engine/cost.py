@@ -14,10 +14,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.errors import check
 from ..core.store import Output
 from ..core.bounds import memory_budget_bytes
-from .grid import Grid
+from .grid import Grid, fits_in_memory
 
 
 def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
@@ -25,15 +24,11 @@ def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
     """Refuse a grid whose results (loaded for the report) or chunks would not fit."""
     budget = memory_budget_bytes() if budget is None else budget
     per_point = sum(np.dtype(o.dtype).itemsize for o in outputs.values())
-    need = grid.size * per_point
-    check(need <= budget, "axes", grid.describe(),
-          f"a grid whose results fit in memory: {need / 1e9:.3g} GB needed, "
-          f"{budget / 1e9:.3g} GB allowed (a quarter of the memory available); "
-          "shrink an axis or split the sweep")
-    chunk = min(chunk_points, grid.size) * bytes_per_point_in_chunk
-    check(chunk <= budget, "sweep.chunk_points", chunk_points,
-          f"chunks that fit in memory: {chunk / 1e9:.3g} GB per chunk, "
-          f"{budget / 1e9:.3g} GB allowed; lower chunk_points")
+    fits_in_memory("axes", grid.describe(), grid.size * per_point, "a grid whose results fit",
+                   "shrink an axis or split the sweep", budget)
+    fits_in_memory("sweep.chunk_points", chunk_points,
+                   min(chunk_points, grid.size) * bytes_per_point_in_chunk, "chunks that fit",
+                   "lower chunk_points", budget)
 
 
 

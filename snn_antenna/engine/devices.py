@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons, reference
 from ..networks.resonators import ResonatorArray
@@ -219,6 +220,9 @@ class TuningStimuli:
     rate_hz: float = 1000.0
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.positive_seconds("duration_s", self.duration_s)
+        bounds.amplitude("amplitude", self.amplitude)
         check(0 < self.f_min_hz < self.f_max_hz < self.rate_hz / 4, "f_max_hz", self.f_max_hz,
               "0 < f_min_hz < f_max_hz < rate_hz / 4")
         check(isinstance(self.n_freqs, int) and self.n_freqs >= 2, "n_freqs", self.n_freqs,
@@ -285,6 +289,15 @@ class Setting:
     target: str
     dtype: str = "float64"
     n_neurons: int | None = None
+
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.choice("method", self.method, neurons.METHODS)
+        bounds.choice("target", self.target, TARGETS)
+        bounds.choice("dtype", self.dtype, DTYPES)
+        bounds.dt_ms("dt_ms", self.dt_ms)
+        if self.n_neurons is not None:
+            bounds.positive_integer("n_neurons", self.n_neurons)
 
 
 @dataclass

@@ -74,6 +74,11 @@ class NeuronSweep:
                "rate_hz": Output("f8", "Hz", "spike rate after settle_s")}
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.number("k", self.k, 0.0, lo_open=True)
+        bounds.number("input_hz", self.input_hz, 0.0, bounds.MAX_RATE_HZ, unit=" Hz")
+        if self.group_size is not None:
+            bounds.positive_integer("group_size", self.group_size)
         check(self.preset in neurons.PRESETS, "preset", self.preset,
               f"one of {sorted(neurons.PRESETS)}")
         check(self.method in neurons.METHODS, "method", self.method,
@@ -223,6 +228,10 @@ class SceneSweep:
     OUTPUTS = {"spike_count": Output("i4", "1", "spikes counted from count_from_s")}
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.seed("seed", self.seed)
+        bounds.seconds("count_from_s", self.count_from_s)
+        bounds.number("k", self.k, 0.0, lo_open=True)
         check(self.engine in ("cython", "numpy"), "engine", self.engine,
               "'cython' or 'numpy' (scene inputs need a runtime target)")
         NeuronSweep(preset=self.preset, dt_ms=self.dt_ms, method=self.method)  # same checks

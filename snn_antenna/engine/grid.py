@@ -12,29 +12,58 @@ from typing import Any
 
 import numpy as np
 
+from ..core.bounds import memory_budget_bytes
 from ..core.errors import SpecError, check, is_integer
+
+
+# The least any sweep holds per grid point: one float64 (each axis's coordinate, each output).
+BYTES_PER_POINT = 8
+
+
+def fits_in_memory(field: str, value, need_bytes: float, what: str, remedy: str,
+                   budget: int | None = None) -> None:
+    """Refuse ``need_bytes`` beyond the memory budget (a quarter of the memory available) in
+    one line naming ``field``: the cost guard's one wording, before anything is allocated."""
+    budget = memory_budget_bytes() if budget is None else budget
+    check(need_bytes <= budget, field, value,
+          f"{what} in memory: {need_bytes / 1e9:.3g} GB needed, {budget / 1e9:.3g} GB "
+          f"allowed (a quarter of the memory available); {remedy}")
+
+
+def _range(name: str, value: dict) -> tuple[float, float, int, str]:
+    """A range axis's ``start, stop, num, scale``, checked (nothing allocated)."""
+    unknown = set(value) - {"start", "stop", "num", "scale"}
+    check(not unknown and {"start", "stop", "num"} <= set(value), f"axes.{name}", value,
+          "a list of values or a range {start, stop, num, scale = 'linear' | 'log'}")
+    start, stop, num = value["start"], value["stop"], value["num"]
+    scale = value.get("scale", "linear")
+    check(isinstance(num, int) and not isinstance(num, bool) and num >= 1,
+          f"axes.{name}.num", num, "an integer number of values >= 1")
+    check(scale in ("linear", "log"), f"axes.{name}.scale", scale, "'linear' or 'log'")
+    check(all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+              for x in (start, stop)), f"axes.{name}", value, "finite start and stop")
+    if scale == "log":
+        check(start > 0 and stop > 0, f"axes.{name}", value,
+              "start and stop > 0 for a log-spaced axis")
+    fits_in_memory(f"axes.{name}.num", num, num * BYTES_PER_POINT, "axis values that fit",
+                   "lower num")
+    return start, stop, num, scale
+
+
+def axis_length(name: str, value) -> int:
+    """How many values an axis has, without making them."""
+    if isinstance(value, dict):
+        return _range(name, value)[2]
+    return int(np.size(value)) if isinstance(value, (list, tuple, np.ndarray)) else 1
 
 
 def axis_values(name: str, value) -> np.ndarray:
     """Values of one axis: a list of numbers, or ``{start, stop, num, scale}`` (scale
     ``"linear"``, the default, or ``"log"``; stop included)."""
     if isinstance(value, dict):
-        unknown = set(value) - {"start", "stop", "num", "scale"}
-        check(not unknown and {"start", "stop", "num"} <= set(value), f"axes.{name}", value,
-              "a list of values or a range {start, stop, num, scale = 'linear' | 'log'}")
-        start, stop, num = value["start"], value["stop"], value["num"]
-        scale = value.get("scale", "linear")
-        check(isinstance(num, int) and not isinstance(num, bool) and num >= 1,
-              f"axes.{name}.num", num, "an integer number of values >= 1")
-        check(scale in ("linear", "log"), f"axes.{name}.scale", scale, "'linear' or 'log'")
-        check(all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-                  for x in (start, stop)), f"axes.{name}", value, "finite start and stop")
-        if scale == "log":
-            check(start > 0 and stop > 0, f"axes.{name}", value,
-                  "start and stop > 0 for a log-spaced axis")
-            values = np.geomspace(start, stop, num)
-        else:
-            values = np.linspace(start, stop, num)
+        start, stop, num, scale = _range(name, value)
+        space = np.geomspace if scale == "log" else np.linspace
+        values = space(start, stop, num)
     else:
         raw = value if isinstance(value, (list, tuple, np.ndarray)) else [value]
         try:
@@ -54,6 +83,14 @@ class Grid:
     def __init__(self, axes: dict[str, Any], units: dict[str, str] | None = None):
         check(isinstance(axes, dict) and len(axes) >= 1, "axes", axes,
               "a table of at least one named axis")
+        check(units is None or (isinstance(units, dict) and all(
+            isinstance(u, str) for u in units.values())), "units", units,
+            "a table of axis name -> unit text")
+        shape = [axis_length(name, v) for name, v in axes.items()]
+        points = math.prod(shape)
+        fits_in_memory("axes", " × ".join(map(str, shape)) + f" = {points:,} points",
+                       points * BYTES_PER_POINT, "a grid whose points fit",
+                       "shrink an axis or split the sweep")
         self.axes = {str(name): axis_values(name, v) for name, v in axes.items()}
         self.units = dict(units or {})
 

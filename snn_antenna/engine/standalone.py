@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import NumericalInstabilityError
 from ..core.files import atomic_write, cache_root, lock_folder, make_folder
 from ..networks import neurons
@@ -160,6 +161,8 @@ def tick_substeps(sample_ms: float, dt_ms: float, run_ms: float, at_most: int | 
     at most ``at_most``, that divides one input sample's steps, the run's steps and every
     step index in ``boundaries`` (where a tick must start), so the input holds over each
     tick; 1 when a sample does not last a whole number of steps."""
+    for name, value in (("sample_ms", sample_ms), ("dt_ms", dt_ms), ("run_ms", run_ms)):
+        bounds.number(name, value, 0.0, bounds.MAX_SECONDS * 1e3, lo_open=True, unit=" ms")
     per_sample, steps = sample_ms / dt_ms, run_ms / dt_ms
     whole = [round(x) for x in (per_sample, steps)]
     if any(w < 1 or abs(x - w) > 1e-6 * max(1.0, x) for x, w in zip((per_sample, steps), whole)):

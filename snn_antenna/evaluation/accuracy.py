@@ -100,6 +100,12 @@ class Match:
     detection_f1: float = 1.0      # contact windows identical
     rate_map_error: float = 0.05   # for the "rate map within" recommendation
 
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.number("distance_cm", self.distance_cm, 0.0, unit=" cm")
+        bounds.number("detection_f1", self.detection_f1, 0.0, 1.0)
+        bounds.number("rate_map_error", self.rate_map_error, 0.0)
+
 
 @dataclass
 class ArrayReadout:
@@ -344,6 +350,7 @@ class StabilityGrid:
     rate_tolerance: float = 0.05
 
     def __post_init__(self):
+        bounds.declared(self)
         low = bounds.number("k_dt_min", self.k_dt_min, 0.0, lo_open=True)
         bounds.number("k_dt_max", self.k_dt_max, low, lo_open=True)
         bounds.integer("n_k_dt", self.n_k_dt, 2, 1000)

@@ -61,6 +61,7 @@ class BandSetting:
     duration_s: float | None = None
 
     def __post_init__(self):
+        bounds.declared(self)
         check(self.method in neurons.METHODS, "method", self.method,
               f"one of {list(neurons.METHODS)}")
         check(is_number(self.dt_ms) and 0 < self.dt_ms <= 1, "dt_ms", self.dt_ms,
@@ -363,6 +364,11 @@ class BandStudy:
     target: str = "cython"
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.choice("target", self.target, ("numpy", "cython"))
+        bounds.number("freq_margin", self.freq_margin, 0.0)
+        bounds.number("rate_map_error", self.rate_map_error, 0.0)
+        bounds.positive_integer("cost_events", self.cost_events)
         for name in ("bands", "calibrate", "methods", "windows_s"):
             check(isinstance(getattr(self, name), list), name, getattr(self, name), "a list")
         for name in self.bands + self.calibrate:

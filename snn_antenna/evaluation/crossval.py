@@ -30,6 +30,7 @@ import numpy as np
 import xarray as xr
 from sklearn.exceptions import ConvergenceWarning
 
+from ..core import bounds
 from ..core.errors import SpecError, check
 from ..readout.baselines import (
     NMF_DIMENSIONS,
@@ -59,6 +60,7 @@ class Evaluation:
     pipelines: list = field(default_factory=lambda: list(TASKS))
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.seeds, list) and len(self.seeds) >= 1 and
               all(isinstance(s, int) and s >= 0 for s in self.seeds), "seeds", self.seeds,
               "a non-empty list of integer seeds >= 0")

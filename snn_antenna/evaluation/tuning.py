@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..report.figures import legend_outside
 from ..networks import neurons
 
@@ -27,6 +28,10 @@ class ReadPoint:
     b: float = 0.26
     I: float = 0.15
     k: float = 1.0
+
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.number("k", self.k, 0.0, lo_open=True)
 
 
 def derive(rate: xr.DataArray) -> xr.Dataset:

@@ -60,6 +60,7 @@ class ControlLayer:
     dt_ms: float = 0.1
 
     def __post_init__(self):
+        bounds.declared(self)
         for name in ("w_above", "w_band", "w_motor", "tau_syn_ms", "dt_ms"):
             v = getattr(self, name)
             check(is_number(v) and v > 0, name, v, "a finite value > 0")
@@ -152,6 +153,7 @@ class MaterialUnit:
     dt_ms: float = 0.1
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.classes, dict) and len(self.classes) >= 2, "classes",
               self.classes, "a table of at least two classes, name = [materials]")
         seen = set()

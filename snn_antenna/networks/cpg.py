@@ -61,6 +61,8 @@ class CPG:
     target: str = "numpy"
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.choice("target", self.target, ("numpy", "cython"))
         for name in ("period_s", "tau_ms", "token_drive", "trace_ms", "dt_ms"):
             v = getattr(self, name)
             check(np.isfinite(v) and v > 0, name, v, "a finite value > 0")

@@ -56,6 +56,9 @@ def read_trace(objects: dict) -> np.ndarray:
     return readout.variables["r_read"].get_value()[readout.start:readout.stop]
 
 
+MAX_EPOCHS = 10_000
+
+
 @dataclass
 class SpeedGate:
     n_speed_neurons: int = 7
@@ -78,6 +81,7 @@ class SpeedGate:
     seed: int = 0
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.n_speed_neurons, int) and 4 <= self.n_speed_neurons <= 1000,
               "n_speed_neurons", self.n_speed_neurons, "an integer in [4, 1000]")
         bounds.pair("speed_range_cm_s", self.speed_range_cm_s, strict=True, unit=" cm/s")
@@ -88,10 +92,10 @@ class SpeedGate:
         check(np.isfinite(self.speed_offset) and 0 <= self.speed_offset < CLASS1_RHEOBASE,
               "speed_offset", self.speed_offset,
               f"a drive in [0, {CLASS1_RHEOBASE}) (below the class-I rheobase)")
-        check(isinstance(self.epochs, int) and self.epochs >= 1, "epochs", self.epochs,
-              "an integer >= 1")
-        check(isinstance(self.curve_points, int) and self.curve_points >= 1, "curve_points",
-              self.curve_points, "an integer >= 1")
+        # the recall converges within tens of epochs; thousands only repeat it for hours
+        bounds.integer("epochs", self.epochs, 1, MAX_EPOCHS)
+        bounds.integer("curve_points", self.curve_points, 1, MAX_EPOCHS)
+        bounds.dt_ms("dt_ms", self.dt_ms)
         check(self.target in ("numpy", "cython"), "target", self.target, "'numpy' or 'cython'")
         bounds.amplitude("readout_bias", self.readout_bias)
         bounds.seed("seed", self.seed)
@@ -372,6 +376,9 @@ class GateTraining:
     speeds_cm_s: list = (0.0, 30.0)
     th_star_g: list = (0.1, 0.6)
     from_summary: str | None = None     # replaces the lists above
+
+    def __post_init__(self):
+        bounds.declared(self)
 
     def examples(self) -> tuple[np.ndarray, np.ndarray]:
         if self.from_summary is not None:

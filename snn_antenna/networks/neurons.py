@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import NumericalInstabilityError, SpecError, check, is_integer, is_number
 from ..core.signals import validate_samples
 
@@ -38,6 +39,9 @@ class Preset:
     d: float
     quadratic: tuple[float, float, float] = (0.04, 5.0, 140.0)  # p2 v² + p1 v + p0
     description: str = ""
+
+    def __post_init__(self):
+        bounds.declared(self)
 
     def params(self) -> dict:
         return {"a": self.a, "b": self.b, "c": self.c, "d": self.d}
@@ -173,8 +177,16 @@ def k_for_frequency(freq_hz, hz_per_k: float = DRIVEN_HZ_PER_K):
 
 def max_stable_dt_ms(k, method: str = "euler") -> float:
     """Largest dt (ms) the stability limits allow for time scales ``k``."""
-    check(method in MAX_STABLE_K_DT, "method", method, f"one of {sorted(MAX_STABLE_K_DT)}")
-    return MAX_STABLE_K_DT[method] / float(np.max(k))
+    check(isinstance(method, str) and method in MAX_STABLE_K_DT, "method", method,
+          f"one of {sorted(MAX_STABLE_K_DT)}")
+    raw = np.asarray(k) if not isinstance(k, str) else np.asarray([])
+    ok = raw.size >= 1 and raw.dtype.kind in "iuf"
+    values = raw.astype(float) if ok else raw
+    check(ok and bool(np.all(np.isfinite(values) & (values >= bounds.MIN_NORMAL)
+                             & (values <= bounds.MAX_MAGNITUDE))), "k", k,
+          f"a time-scale factor in [{bounds.MIN_NORMAL:.3g}, {bounds.MAX_MAGNITUDE:g}], or one "
+          "per neuron (not empty)")
+    return MAX_STABLE_K_DT[method] / float(np.max(values))
 
 
 @dataclass

@@ -58,6 +58,7 @@ class ResonatorArray:
     force: bool = False
 
     def __post_init__(self):
+        bounds.declared(self)
         check(is_integer(self.n_neurons) and 1 <= self.n_neurons <= 100_000, "n_neurons",
               self.n_neurons, "an integer in [1, 100000]")
         band_ok = (isinstance(self.band_hz, (list, tuple, np.ndarray)) and len(self.band_hz) == 2

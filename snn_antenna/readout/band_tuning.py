@@ -24,6 +24,7 @@ import numpy as np
 
 from ..core import bounds, calibration
 from ..core.errors import SpecError, check, is_number
+from ..networks import neurons
 from ..preprocess import make_coder
 from .spiking import Band, align_events
 
@@ -62,6 +63,8 @@ class Tuning:
     coder_options: dict = field(default_factory=dict)
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.choice("method", self.method, neurons.METHODS)
         check(isinstance(self.per_channel, int) and self.per_channel >= 1, "per_channel",
               self.per_channel, "an integer >= 1")
         check(isinstance(self.max_channels, int) and self.max_channels >= 1, "max_channels",
@@ -147,7 +150,8 @@ def place_channels(freq_hz: np.ndarray, score: np.ndarray, tuning: Tuning
 def coarsest_dt_ms(top_hz: float, hz_per_k: float, max_k_dt: float) -> float:
     """The largest step of ``DT_STEPS_MS`` keeping k·dt of a ``top_hz`` resonator within
     ``max_k_dt``."""
-    k = top_hz / hz_per_k
+    bounds.number("hz_per_k", hz_per_k, 0.0, bounds.MAX_RATE_HZ, lo_open=True)
+    k = bounds.number("top_hz", top_hz, 0.0, bounds.MAX_RATE_HZ, lo_open=True) / hz_per_k
     fits = [dt for dt in DT_STEPS_MS if k * dt <= max_k_dt * (1 + 1e-9)]
     check(bool(fits), "max_k_dt", max_k_dt,
           f"a k·dt allowing {DT_STEPS_MS[-1]:g} ms at {top_hz:g} Hz")

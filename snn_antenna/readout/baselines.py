@@ -75,6 +75,7 @@ class NMFFilterBank(TransformerMixin, BaseEstimator):
         self.random_state = random_state
 
     def fit(self, X, y=None):
+        bounds.declared(self, **self.get_params())
         X = np.asarray(X, dtype=float)
         check(X.ndim == 2 and len(X) >= 1, "X", f"shape {X.shape}",
               "amplitude spectra, one row per event")
@@ -127,6 +128,7 @@ class Mlp:
     early_stopping: bool = False
 
     def __post_init__(self):
+        bounds.declared(self)
         bounds.integer("max_iter", self.max_iter, 1, 1_000_000)
         bounds.integer("batch_size", self.batch_size, 1, 1_000_000)
         bounds.number("learning_rate_init", self.learning_rate_init, 0.0, 10.0, lo_open=True)

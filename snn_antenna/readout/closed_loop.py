@@ -28,6 +28,7 @@ class LoopSettings:
     calibration_s: float = 2.0
 
     def __post_init__(self):
+        bounds.declared(self)
         antenna.self_motion_rms_g(self.speed_cm_s)
         bounds.positive_seconds("duration_s", self.duration_s)
         bounds.number("chunk_ms", self.chunk_ms, 1.0, 1e6, unit=" ms")

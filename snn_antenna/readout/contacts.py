@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..core.errors import SpecError, check, is_integer, is_number
 from ..networks.resonators import SELF_MOTION_BAND_HZ, tuned_above
 from ..sources import antenna
@@ -73,6 +74,7 @@ class ContactDetector:
     max_gap_windows: int = 1
 
     def __post_init__(self):
+        bounds.declared(self)
         band = self.motion_band_hz
         band_ok = (isinstance(band, (list, tuple, np.ndarray)) and len(band) == 2
                    and all(is_number(x) for x in band))
@@ -154,6 +156,17 @@ class ContactDetector:
         return float(window_s)
 
 
+def preferred_hz(field: str, neuron_hz) -> np.ndarray:
+    """``neuron_hz`` as an array of the neurons' preferred frequencies, or a SpecError: one
+    finite frequency > 0 Hz per neuron, at least one."""
+    values = np.asarray(neuron_hz) if not isinstance(neuron_hz, str) else np.asarray([])
+    ok = values.ndim == 1 and values.size >= 1 and values.dtype.kind in "iuf"
+    check(ok and bool(np.all(np.isfinite(values) & (values > 0)
+                             & (values <= bounds.MAX_RATE_HZ))), field, neuron_hz,
+          f"one preferred frequency in (0, {bounds.MAX_RATE_HZ:g}] Hz per neuron")
+    return values.astype(float)
+
+
 class EpisodeTracker:
     """Contact episodes, window by window: the one episode logic, fed offline by
     :meth:`ContactDetector.detect` and live by ``bridge.online``.
@@ -165,8 +178,10 @@ class EpisodeTracker:
     """
 
     def __init__(self, detector: ContactDetector, neuron_hz, window_s: float):
+        bounds.declared(self, detector=detector, neuron_hz=neuron_hz, window_s=window_s)
+        bounds.number("window_s", window_s, 0.0, lo_open=True, unit=" s")
         self.detector, self.window_s = detector, window_s
-        self.neuron_hz = np.asarray(neuron_hz, dtype=float)
+        self.neuron_hz = preferred_hz("neuron_hz", neuron_hz)
         self._above = tuned_above(self.neuron_hz, detector.motion_band_hz)
         self._rates: list[np.ndarray] = []      # the open episode's contact windows
         self._starts: list[float] = []

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray, rate_map
 from .contacts import ContactDetector
@@ -53,6 +54,14 @@ class BlindReadOut:
     rate_hz: float
     settle_s: float = 1.0
     target: str | None = None
+
+    def __post_init__(self):
+        bounds.declared(self)
+        if self.target is not None:
+            bounds.choice("target", self.target, ("numpy", "cython"))
+        bounds.number("window_s", self.window_s, 0.0, lo_open=True, unit=" s")
+        bounds.rate_hz("rate_hz", self.rate_hz)
+        bounds.seconds("settle_s", self.settle_s)
 
     def detect(self, coded: np.ndarray) -> tuple[list, list[xr.DataArray]]:
         """(detections, rate map) of each column of ``coded``."""

@@ -72,6 +72,7 @@ class EventProcessor:
     extreme_min_fraction: float = 0.1
 
     def __post_init__(self):
+        bounds.declared(self)
         check(np.isfinite(self.rate_hz) and self.rate_hz > 0, "rate_hz", self.rate_hz,
               "a sample rate > 0 Hz")
         check(np.isfinite(self.onset_threshold_g) and self.onset_threshold_g > 0,

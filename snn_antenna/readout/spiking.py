@@ -39,14 +39,15 @@ import xarray as xr
 from sklearn.base import BaseEstimator, RegressorMixin
 from sklearn.pipeline import Pipeline
 
+from ..core import bounds
 from ..core import calibration
 from ..core.errors import SpecError, check, is_number
 from ..networks import neurons
 from ..networks.resonators import ResonatorArray
-from ..preprocess import make_chain, make_coder
+from ..preprocess import CODERS, make_chain, make_coder
 from ..sources import antenna
 from ..sources.antenna import ADC
-from .contacts import centroid_hz, dominant_hz
+from .contacts import centroid_hz, dominant_hz, preferred_hz
 
 
 @dataclass
@@ -73,6 +74,22 @@ class Band:
     # the coder's own parameters (``preprocess.CODER_OPTIONS``, e.g. {levels = 6}).
     coder: str = "square"
     coder_options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.choice("spacing", self.spacing, ("log", "linear"))
+        if self.method is not None:
+            bounds.choice("method", self.method, neurons.METHODS)
+        bounds.choice("coder", self.coder, tuple(CODERS))
+        bounds.positive_integer("n_neurons", self.n_neurons)
+        for name in ("coder_amplitude", "lowpass_hz", "hz_per_k"):
+            bounds.number(name, getattr(self, name), 0.0, lo_open=True)
+        bounds.number("threshold_g", self.threshold_g, 0.0, unit=" g")
+        if self.highpass_hz is not None:
+            bounds.number("highpass_hz", self.highpass_hz, 0.0, lo_open=True, unit=" Hz")
+        if self.dt_ms is not None:
+            bounds.dt_ms("dt_ms", self.dt_ms)
+        bounds.integer("filter_order", self.filter_order, 1, 8)
 
     def check_coder(self) -> None:
         """The coder's name and parameters, refused before any work."""
@@ -190,10 +207,16 @@ class SpikingBank:
     bin_edges_s: tuple = (0.1, 0.2, 0.3)
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.bands, dict) and len(self.bands) >= 1, "bands", self.bands,
               "a table of named bands, e.g. {low = {...}, high = {...}}")
-        self.bands = {name: b if isinstance(b, Band) else Band(**b)
-                      for name, b in self.bands.items()}
+        made = {}
+        for name, band in self.bands.items():
+            try:
+                made[name] = band if isinstance(band, Band) else Band(**band)
+            except SpecError as exc:
+                raise SpecError(f"bands.{name}.{exc.field}", exc.value, exc.accepted) from None
+        self.bands = made
         check(self.target in TARGETS, "target", self.target,
               "'standalone' (compiled C++, re-run per chunk), 'cython' or 'numpy'")
         for name, band in self.bands.items():
@@ -321,7 +344,8 @@ class DominantNeuronDistance(RegressorMixin, BaseEstimator):
         self.neuron_hz = neuron_hz
 
     def fit(self, X, y=None):
-        check(self.neuron_hz is not None and np.shape(X)[1] == len(self.neuron_hz), "X",
+        preferred_hz("neuron_hz", self.neuron_hz)
+        check(np.ndim(X) == 2 and np.shape(X)[1] == len(self.neuron_hz), "X",
               f"shape {np.shape(X)}", "one column of spike counts per neuron of neuron_hz")
         self.n_features_in_ = np.shape(X)[1]
         return self

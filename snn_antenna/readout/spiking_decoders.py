@@ -18,6 +18,7 @@ from dataclasses import asdict, dataclass, field, replace
 import numpy as np
 import xarray as xr
 
+from ..core import bounds
 from ..core import spec as specs
 from ..core.errors import check
 from . import baselines as bl
@@ -218,6 +219,9 @@ class Design:
     band: str = "low"
     changes: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        bounds.declared(self)
+
     @classmethod
     def from_table(cls, table: dict, index: int, bank: SpikingBank) -> Design:
         """A ``[[spiking.designs]]`` entry: ``{name, band, ...Band fields}``, checked."""
@@ -259,6 +263,12 @@ class SpikingPlan:
     cost_sample_events: int = 400
     workers: int = 1
     tuned: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        bounds.declared(self)
+        bounds.positive_integer("design_repetitions", self.design_repetitions)
+        bounds.positive_integer("cost_sample_events", self.cost_sample_events)
+        bounds.integer("workers", self.workers, 0)
 
     def build(self, rate_hz: float) -> tuple[SpikingBank, list[Design]]:
         """The bank and its designs, checked (for input sampled at ``rate_hz``)."""
@@ -310,6 +320,8 @@ class TunedPlan:
     cost_repeats: int = 3
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.positive_seconds("duration_s", self.duration_s)
         with specs.section("tuning"):
             self.base = Tuning(**specs.check_section({"tuning": self.tuning}, "tuning", Tuning))
         for name in ("calibration_repetitions", "curve_repetitions"):

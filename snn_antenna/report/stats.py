@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
+from ..core import bounds
 from ..core.errors import check
 
 MIN_N_TO_RESOLVE = 5      # fewest seeds or splits a "resolved" verdict may rest on
@@ -109,6 +110,9 @@ def seeds_needed(differences, margin: float, level: float = 0.95, power: float =
 
 def t_test_power(n: int, effect: float, level: float = 0.95) -> float:
     """Power of a two-sided one-sample (paired) t-test on n values for effect = δ/σ."""
+    bounds.number("n", n, 2.0, bounds.MAX_COUNT)
+    bounds.number("effect", effect, -bounds.MAX_MAGNITUDE, bounds.MAX_MAGNITUDE)
+    bounds.number("level", level, 0.0, 1.0, lo_open=True, hi_open=True)
     df = n - 1
     crit = stats.t.ppf(1 - (1 - level) / 2, df)
     nc = effect * np.sqrt(n)
@@ -117,7 +121,9 @@ def t_test_power(n: int, effect: float, level: float = 0.95) -> float:
 
 def binomial_interval(successes: int, trials: int, level: float = 0.95) -> tuple[float, float]:
     """Wilson interval of a proportion (accuracy over independent events)."""
-    check(trials > 0, "trials", trials, "at least one trial")
+    trials = bounds.number("trials", trials, 1.0, bounds.MAX_COUNT)
+    bounds.number("successes", successes, 0.0, trials, unit=" (at most trials)")
+    bounds.number("level", level, 0.0, 1.0, lo_open=True, hi_open=True)
     ci = stats.binomtest(int(successes), int(trials)).proportion_ci(level, method="wilson")
     return float(ci.low), float(ci.high)
 
@@ -125,6 +131,7 @@ def binomial_interval(successes: int, trials: int, level: float = 0.95) -> tuple
 def poisson_interval(count: int, level: float = 0.95) -> tuple[float, float]:
     """Exact (Garwood) interval of a Poisson count (e.g. false positives in a run), from
     scipy's chi² quantiles."""
-    alpha = 1 - level
+    bounds.number("count", count, 0.0, bounds.MAX_COUNT)
+    alpha = 1 - bounds.number("level", level, 0.0, 1.0, lo_open=True, hi_open=True)
     low = stats.chi2.ppf(alpha / 2, 2 * count) / 2 if count else 0.0
     return float(low), float(stats.chi2.ppf(1 - alpha / 2, 2 * count + 2) / 2)

@@ -76,6 +76,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import SpecError, check
 from .contact_models import DEFAULT as DEFAULT_PHYSICS, ContactPhysics
 
@@ -141,6 +142,14 @@ class Material:
     loss: float
     poisson: float
     contact_gpa: float
+
+    def __post_init__(self):
+        bounds.declared(self)
+        for name in ("density_kg_m3", "youngs_gpa", "contact_gpa"):
+            bounds.number(name, getattr(self, name), 0.0, lo_open=True)
+        bounds.number("loss", self.loss, 0.0)
+        # isotropic elastic solids: -1 < Poisson ratio <= 0.5
+        bounds.number("poisson", self.poisson, -1.0, 0.5, lo_open=True)
 
     @property
     def bar_speed_m_s(self) -> float:
@@ -378,6 +387,11 @@ def mode_filter(freq_hz: float, tau_s: float, rate_hz: float) -> tuple[list, lis
     so unit-variance white noise comes out with unit rms (for ``scipy.signal.lfilter``)."""
     from scipy.signal import lfilter
 
+    bounds.rate_hz("rate_hz", rate_hz)
+    bounds.number("freq_hz", freq_hz, 0.0, bounds.MAX_RATE_HZ, unit=" Hz")
+    # the impulse response is summed over 20 time constants: one that fits in memory
+    bounds.n_samples("tau_s", 20 * bounds.number("tau_s", tau_s, 0.0, lo_open=True, unit=" s"),
+                     rate_hz, bytes_per_sample=8)
     r = np.exp(-1.0 / (tau_s * rate_hz))
     a = [1.0, -2 * r * np.cos(2 * np.pi * freq_hz / rate_hz), r * r]
     # The output variance for unit-variance input is the impulse response's energy.
@@ -423,6 +437,7 @@ class ADC:
     full_scale_g: float = 18.0   # ± range of the sensor (ADXL321: ±18 g)
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.bits, int) and 4 <= self.bits <= 24, "adc_bits", self.bits,
               "an integer number of bits in [4, 24]")
         check(np.isfinite(self.full_scale_g) and self.full_scale_g > 0, "full_scale_g",

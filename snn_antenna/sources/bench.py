@@ -64,6 +64,7 @@ class BenchSpec(Generated):
     cache_dir: str = "out/.cache"
 
     def __post_init__(self):
+        bounds.declared(self)
         self.validate()
 
     def validate(self) -> None:

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core import bounds
 from ..core.errors import SpecError, check
 
 MECHANISMS = ("current", "boundary", "hertz", "friction")
@@ -65,6 +66,7 @@ class ContactPhysics:
     strength: float = 1.0
 
     def __post_init__(self):
+        bounds.declared(self)
         parts = self.mechanism.split("+") if isinstance(self.mechanism, str) else [None]
         check(all(p in MECHANISMS for p in parts) and len(set(parts)) == len(parts),
               "physics", self.mechanism,

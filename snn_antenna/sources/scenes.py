@@ -58,6 +58,7 @@ class SpeedProfile:
     points: list = field(default_factory=list)
 
     def __post_init__(self):
+        bounds.declared(self)
         self.validate()
 
     def validate(self) -> None:
@@ -101,6 +102,7 @@ class Obstacle:
     material: str = "wood"
 
     def __post_init__(self):
+        bounds.declared(self)
         self.validate()
 
     def validate(self, i: int = 0) -> None:
@@ -312,6 +314,7 @@ class CourseLayout:
     first_angle_deg: tuple = (20.0, 60.0)
 
     def __post_init__(self):
+        bounds.declared(self)
         bounds.number("spacing_cm", self.spacing_cm, 0.0, 1e9, lo_open=True, unit=" cm")
         bounds.pair("lateral_cm", self.lateral_cm, lo=-1e9, unit=" cm")
         bounds.pair("first_reach_cm", self.first_reach_cm, unit=" cm")
@@ -399,6 +402,8 @@ class OnlineAntenna:
     """
 
     def __init__(self, scene: CourseScene, seed: int = 0):
+        bounds.declared(self, scene=scene)
+        bounds.seed("seed", seed)
         scene.validate()
         self.scene = scene
         self.rng = np.random.default_rng(seed)

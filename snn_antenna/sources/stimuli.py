@@ -127,6 +127,8 @@ class Contact:
 
     def __post_init__(self):
         """Bounded alone; the scene checks it against its duration and sample rate."""
+        bounds.declared(self)
+        bounds.choice("material", self.material, sorted(antenna.MATERIALS))
         bounds.number("t_s", self.t_s, 0.0, bounds.MAX_SECONDS, unit=" s")
         bounds.number("hold_s", self.hold_s, 0.0, bounds.MAX_SECONDS, lo_open=True, unit=" s")
         bounds.number("distance_cm", self.distance_cm, 0.0, antenna.ROD_LENGTH_CM,
@@ -158,6 +160,7 @@ class RobotScene(Generated):
     full_scale_g: float = 18.0
 
     def __post_init__(self):
+        bounds.declared(self)
         self.validate()
 
     def validate(self) -> None:

@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...core import bounds
 from ...core.errors import SpecError
 from ..wire.protocol import (
     ADC_MAX,
@@ -91,6 +92,10 @@ class FaultPlan:
     stall_s: float = 0.2
     outage_s: float = 0.3
     reset_s: float = 0.1
+
+    def __post_init__(self):
+        bounds.declared(self)
+        self.validate()
 
     @classmethod
     def parse(cls, text: str) -> FaultPlan:
@@ -199,9 +204,20 @@ class Emulator:
     def __init__(self, counts, *, rate_hz: float = BOARD_RATE_HZ,
                  faults: FaultPlan | None = None, seed: int = 0, wire_format: str = "binary",
                  start_seq: int = 0, fault_margin: int = 20, boot_frames: bool = True):
+        bounds.declared(self, counts=counts, rate_hz=rate_hz, faults=faults, seed=seed,
+                        wire_format=wire_format, start_seq=start_seq, fault_margin=fault_margin,
+                        boot_frames=boot_frames)
+        bounds.seed("seed", seed)
+        bounds.integer("start_seq", start_seq, 0, bounds.MAX_COUNT)
+        bounds.integer("fault_margin", fault_margin, 0, bounds.MAX_COUNT)
         counts = np.asarray(counts)
         if counts.ndim != 2 or counts.shape[1] != 2 or counts.shape[0] == 0:
             raise SpecError("counts", f"array of shape {counts.shape}", "shape (n_samples, 2)")
+        if not (np.issubdtype(counts.dtype, np.integer) or (
+                np.issubdtype(counts.dtype, np.floating) and np.all(np.isfinite(counts))
+                and np.all(counts == np.round(counts)))):
+            raise SpecError("counts", f"array of dtype {counts.dtype}",
+                            f"whole ADC counts in 0..{ADC_MAX} (no NaN, no fractions)")
         if counts.min() < 0 or counts.max() > ADC_MAX:
             raise SpecError("counts", f"range [{counts.min()}, {counts.max()}]",
                             f"ADC counts in 0..{ADC_MAX}")

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError
 from ...networks.resonators import ResonatorArray
@@ -201,6 +202,8 @@ class ArrivalClock:
     the later samples that arrive on time."""
 
     def __init__(self, rate_hz: float = BOARD_RATE_HZ):
+        bounds.declared(self, rate_hz=rate_hz)
+        bounds.rate_hz("rate_hz", rate_hz)
         self._chunks: deque[tuple[int, float]] = deque()    # (end index, arrival time)
         self.n = 0
         self.rate_hz = rate_hz

@@ -32,6 +32,7 @@ import struct
 from dataclasses import dataclass
 from typing import NamedTuple
 
+from ...core import bounds
 from ...core.errors import SpecError
 
 # The sensor board: an ADXL321 (±18 g) into a 10-bit ADC, sampled at 1 kHz. Every part of the
@@ -235,6 +236,9 @@ class Decoder:
 
     def __init__(self, wire_format: str = "binary", synced: bool = False,
                  rate_hz: float = BOARD_RATE_HZ, restarts_at: dict[int, str] | None = None):
+        bounds.declared(self, wire_format=wire_format, synced=synced, rate_hz=rate_hz,
+                        restarts_at=restarts_at)
+        bounds.rate_hz("rate_hz", rate_hz)
         self.wire_format = check_wire_format(wire_format)
         self._terminator = DELIMITER if wire_format == "binary" else b"\n"
         self._parse = self._parse_binary if wire_format == "binary" else self._parse_ascii

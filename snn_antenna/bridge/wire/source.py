@@ -22,10 +22,12 @@ from dataclasses import dataclass, field
 
 import serial
 
+from ...core import bounds
 from ...core.errors import DeviceError, SpecError
 from .protocol import Decoder, Sample, Session, check_wire_format
 
 DEFAULT_BAUDRATE = 250000
+MAX_QUEUE_BATCHES = 1_000_000    # batches held for a slow consumer (one per read, ~50 ms each)
 ACCEPTED_PORTS = ("an existing serial device path (e.g. /dev/ttyACM0) or a pyserial URL "
                   "(loop://, socket://HOST:PORT, rfc2217://HOST:PORT)")
 
@@ -76,6 +78,8 @@ class SerialTransport:
 
     def __init__(self, url: str, baudrate: int = DEFAULT_BAUDRATE, read_timeout_s: float = 0.05,
                  port: serial.SerialBase | None = None):
+        bounds.declared(self, url=url, baudrate=baudrate, read_timeout_s=read_timeout_s, port=port)
+        bounds.seconds("read_timeout_s", read_timeout_s)
         if not isinstance(baudrate, int) or baudrate <= 0:
             raise SpecError("baudrate", baudrate, "a positive integer (the board uses 250000)")
         self.url, self.baudrate, self.read_timeout_s = url, baudrate, read_timeout_s
@@ -121,7 +125,12 @@ class SerialSource:
                  port: serial.SerialBase | None = None, queue_size: int = 4096,
                  reconnect_timeout_s: float = 30.0, backoff_initial_s: float = 0.02,
                  backoff_max_s: float = 1.0):
+        bounds.declared(self, url=url, wire_format=wire_format, baudrate=baudrate, port=port,
+                        queue_size=queue_size, reconnect_timeout_s=reconnect_timeout_s,
+                        backoff_initial_s=backoff_initial_s, backoff_max_s=backoff_max_s)
         check_wire_format(wire_format)
+        # 0 would make the queue unbounded: a stalled consumer would then grow it without end
+        bounds.integer("queue_size", queue_size, 1, MAX_QUEUE_BATCHES)
         for name, value in (("reconnect_timeout_s", reconnect_timeout_s),
                             ("backoff_initial_s", backoff_initial_s),
                             ("backoff_max_s", backoff_max_s)):

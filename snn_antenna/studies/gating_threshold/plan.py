@@ -44,6 +44,7 @@ class SweepSettings:
     workers: int = 0          # Dask worker processes (0: one per core; 1: this process)
 
     def __post_init__(self):
+        bounds.declared(self)
         th = self.thresholds_g = np.asarray(self.thresholds_g, dtype=float)
         check(th.ndim == 1 and len(th) >= 2 and np.all(np.isfinite(th)) and np.all(th >= 0)
               and np.all(np.diff(th) > 0), "thresholds_g", th.tolist(),
@@ -80,6 +81,7 @@ class EvaluationSettings:
     held_out_drives: float = 0.5
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.held_out_drives, (int, float)) and
               0 < self.held_out_drives < 1, "held_out_drives", self.held_out_drives,
               "a share in (0, 1) of the recorded drives held out for the evaluation")
@@ -139,6 +141,8 @@ class CalibrationSettings:
     seed: int = 99991
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.seed("seed", self.seed)
         check(np.isfinite(self.duration_s) and self.duration_s >= 1.0, "duration_s",
               self.duration_s, "a calibration drive of at least 1 s")
         check(isinstance(self.seed, int), "seed", self.seed, "an integer seed")

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check, is_number
 from ...engine.cost import bench_seconds, stages_estimate
@@ -26,6 +27,7 @@ class Candidate:
     strengths: list
 
     def __post_init__(self):
+        bounds.declared(self)
         check(isinstance(self.strengths, list) and len(self.strengths) >= 1
               and all(is_number(s) for s in self.strengths), "selection.candidates.strengths",
               self.strengths, "a non-empty list of factors on the mechanism's constant")

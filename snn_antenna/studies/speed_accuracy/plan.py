@@ -42,6 +42,7 @@ class Sweep:
     dtype: str = "float64"
 
     def __post_init__(self):
+        bounds.declared(self)
         _names_from(self.scenes, SCENES, "scenes")
         _names_from(self.methods, neurons.METHODS, "methods")
         check(len(self.dt_ms) >= 1 and all(isinstance(d, (int, float)) and 0 < d <= 1.0
@@ -63,6 +64,7 @@ class Cost:
     n_neurons: list = dataclasses.field(default_factory=lambda: [24, 2400])
 
     def __post_init__(self):
+        bounds.declared(self)
         check(self.scene in ("quickstart", "bench"), "scene", self.scene,
               "'quickstart' or 'bench'")
         _names_from(self.targets, TARGETS, "targets")
@@ -86,6 +88,9 @@ class ReferenceSettings:
     check_atol_factor: float = 1e-3
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.number("atol", self.atol, 0.0)
+        bounds.number("check_atol_factor", self.check_atol_factor, 0.0)
         check(1e-14 <= self.check_rtol < self.rtol <= 1e-6, "check_rtol", self.check_rtol,
               "a tolerance tighter than rtol (both in [1e-14, 1e-6])")
         check(self.check_scene in SCENES, "check_scene", self.check_scene, f"one of {SCENES}")

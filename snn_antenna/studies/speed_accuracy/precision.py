@@ -18,6 +18,7 @@ import time
 
 import numpy as np
 
+from ...core import bounds
 from ...engine.devices import DTYPES
 from ...engine.evaluators import NeuronSweep
 from ...engine.grid import Grid
@@ -36,6 +37,7 @@ class Precision:
     duration_s: float = 1.0
 
     def __post_init__(self):
+        bounds.declared(self)
         check(all(d in DTYPES for d in self.dtypes), "dtypes", self.dtypes,
               f"names from {list(DTYPES)} (none: the stage is left out)")
         check(isinstance(self.n_k, int) and 1 <= self.n_k <= 1000, "n_k", self.n_k,

@@ -7,6 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import check
 from ...engine.cost import check_memory, estimate as sweep_estimate
@@ -25,6 +26,9 @@ class SweepSettings:
     workers: int = 0  # 0: one worker process per CPU core; 1: run in this process
 
     def __post_init__(self):
+        bounds.declared(self)
+        bounds.positive_integer("chunk_points", self.chunk_points)
+        bounds.integer("workers", self.workers, 0)
         check(isinstance(self.workers, int) and self.workers >= 0, "workers", self.workers,
               "an integer >= 0 (0: one per CPU core)")
 
