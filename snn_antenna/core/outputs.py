@@ -274,16 +274,10 @@ def _write_manifest(folder: OutputFolder, entries: dict, status: str) -> None:
 @contextmanager
 def output_folder(path, study: str, *, force: bool = False, fresh: bool = False,
                   new: bool = False) -> Iterator[OutputFolder]:
-    """The one door to an output folder (see the module docstring): entering checks it,
-    ``folder.claim()`` takes it, leaving records what was written however the block ended
-    (a folder never claimed is released as it was)::
-
-        with output_folder(out, "quickstart") as folder:    # check: refused here, or locked
-            if check_only:
-                return                                      # nothing created
-            folder.claim()
-            ...                                             # write into folder.path
-    """
+    """The one door to an output folder (see the module docstring). Entering checks it (a
+    refusal is raised here, before anything is created; a ``--check`` leaves the block now,
+    and the folder is released as it was); ``folder.claim()`` takes it; leaving records what
+    the run wrote, however the block ended."""
     folder = _prepare(path, study, force, fresh, new)
     try:
         yield folder
