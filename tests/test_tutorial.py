@@ -65,13 +65,14 @@ def test_each_command_runs_on_its_own_in_a_checkout_and_prints_what_the_page_sho
         (tmp_path / folder).symlink_to(ROOT / folder)
     bin_dir = str(Path(sys.executable).parent)
     env = {**os.environ, "PATH": bin_dir + os.pathsep + os.environ.get("PATH", ""),
-           "MPLBACKEND": "Agg"}
+           "MPLBACKEND": "Agg", "PYTHONUNBUFFERED": "1"}
     for block in _shell_blocks():
         if "pip install" in block.code:        # the install itself: what .ci/run does
             continue
         done = subprocess.run(["bash", "-c", "set -o pipefail\n" + block.code], cwd=tmp_path,
-                              capture_output=True, text=True, env=env, timeout=1800)
-        shown = done.stdout + done.stderr
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                              env=env, timeout=1800)
+        shown = done.stdout          # as the terminal shows it: both streams, in order
         if block.expected:
             missing = expected_lines_missing(block.expected, shown)
             assert not missing, f"{block.code}\nprinted:\n{shown}\nnot printed: {missing}"

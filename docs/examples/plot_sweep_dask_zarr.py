@@ -12,6 +12,7 @@ cluster of yours; the sweep is the same call.
 
 import tempfile
 
+import brian2  # noqa: F401  (imported in the main thread: Brian2 sets a signal handler then)
 import matplotlib.pyplot as plt
 import xarray as xr
 from distributed import Client, LocalCluster
@@ -29,9 +30,10 @@ with LocalCluster(n_workers=1, threads_per_worker=1, processes=False) as cluster
               chunk_points=7, progress=False)
 
 # %%
-# The store is an ordinary zarr store: xarray opens it with its coordinates and units.
+# The store is an ordinary zarr store (written chunk by chunk, so its metadata is not
+# consolidated): xarray opens it with its coordinates and units.
 
-ds = xr.open_zarr(f"{folder}/results.zarr")
+ds = xr.open_zarr(f"{folder}/results.zarr", consolidated=False)
 print(ds)
 
 # %%
