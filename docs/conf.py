@@ -61,7 +61,6 @@ sphinx_gallery_conf = {
     "filename_pattern": r"/plot_",
     "doc_module": ("snn_antenna",),
     "backreferences_dir": "gallery/backreferences",
-    "reference_url": {"snn_antenna": None},  # names in the examples link to the API pages
     "abort_on_example_error": True,
     "download_all_examples": False,
     "write_computation_times": False,

@@ -17,21 +17,17 @@ _BLOCK = re.compile(r"^```(\w+)\n(.*?)^```\n", re.S | re.M)
 class Block:
     language: str
     code: str
-    expected: str | None     # the ```text block right after it, if any
+    expected: str | None     # the next block, when it is a ```text block: what it prints
 
 
 def blocks(page: Path) -> list[Block]:
-    found = [(m.group(1), m.group(2), m.start(), m.end())
-             for m in _BLOCK.finditer(page.read_text(encoding="utf-8"))]
+    found = [(m.group(1), m.group(2)) for m in _BLOCK.finditer(page.read_text(encoding="utf-8"))]
     out = []
-    for i, (language, code, _, end) in enumerate(found):
+    for i, (language, code) in enumerate(found):
         if language == "text":
             continue
         after = found[i + 1] if i + 1 < len(found) else None
-        text = page.read_text(encoding="utf-8")
-        expected = after[1] if after and after[0] == "text" \
-            and not text[end:after[2]].strip() else None
-        out.append(Block(language, code, expected))
+        out.append(Block(language, code, after[1] if after and after[0] == "text" else None))
     return out
 
 
