@@ -113,7 +113,7 @@ def test_the_calibrated_and_predicted_columns_show_the_fields_they_come_from(tmp
 # A path that starts at one of the repository's top folders, as reports and pages cite them
 # (``snn_antenna/networks/neurons.py``, ``studies/quickstart.toml``, ``docs/reference.md``).
 _TOP = r"(?:snn_antenna|networks|stimuli|studies|tests|benchmarks|firmware|docs|\.ci)"
-_CITED = re.compile(r"(?<![\w./-])(" + _TOP + r"/[A-Za-z0-9_./-]*[A-Za-z0-9_/])")
+_CITED = re.compile(r"(?<![\w./-])(" + _TOP + r"/[A-Za-z0-9_./*-]*[A-Za-z0-9_/*])")
 # what the build or a run writes, never in a checkout
 _WRITTEN = ("docs/_build", "docs/api/generated", "docs/gallery")
 
@@ -130,9 +130,12 @@ def cited_paths(text: str) -> set[str]:
 
 
 def missing(path: str) -> bool:
-    """Neither the path nor, for a study's or a spec's name, its ``.toml``/``.py`` exists."""
+    """Neither the path nor, for a study's or a spec's name, its ``.toml``/``.py`` exists (a
+    pattern, ``docs/examples/plot_*.py``: matches nothing)."""
     if path.startswith(_WRITTEN):
         return False
+    if "*" in path:
+        return next(ROOT.glob(path), None) is None
     return not any((ROOT / (path + suffix)).exists() for suffix in ("", ".toml", ".py"))
 
 
@@ -160,8 +163,11 @@ def test_every_path_a_report_or_page_cites_exists():
 
 def test_the_path_check_catches_a_path_that_does_not_exist():
     text = ("tuned by networks/neurons.py; see snn_antenna/networks/neurons.py, "
-            "networks/NAME.toml, studies/speed_accuracy's bands and docs/_build/html.")
+            "networks/NAME.toml, studies/speed_accuracy's bands, docs/_build/html, "
+            "studies/*.toml and docs/examples/plot_*.c.")
     paths = cited_paths(text)
     assert paths == {"networks/neurons.py", "snn_antenna/networks/neurons.py",
-                     "studies/speed_accuracy", "docs/_build/html"}
-    assert [p for p in sorted(paths) if missing(p)] == ["networks/neurons.py"]
+                     "studies/speed_accuracy", "docs/_build/html", "studies/*.toml",
+                     "docs/examples/plot_*.c"}
+    assert [p for p in sorted(paths) if missing(p)] == ["docs/examples/plot_*.c",
+                                                         "networks/neurons.py"]
