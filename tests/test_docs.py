@@ -111,7 +111,7 @@ def test_the_gallery_runs_every_example_at_build_and_shows_its_figure(site):
         assert "Download Python source code" in page and "Download Jupyter notebook" in page
     # and the API page of a module an example uses lists that example
     neurons = (site / "api" / "generated" / "snn_antenna.networks.neurons.html").read_text()
-    assert "plot_neuron_tuning" in neurons
+    assert "plot_1_neuron_tuning" in neurons
 
 
 # What each block of the Python guide leaves behind, checked in its own interpreter: the
