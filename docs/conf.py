@@ -28,11 +28,12 @@ extensions = [
     "sphinx.ext.napoleon",  # numpy-style docstrings
     "sphinx.ext.mathjax",
     "plain_docstrings",  # docs/_ext: docstrings are plain text, not reST
+    "sphinx_gallery.gen_gallery",  # docs/examples: run at build, with their figures
 ]
 
 source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
 root_doc = "index"
-exclude_patterns = ["_build", "README.md", "results/*.md"]
+exclude_patterns = ["_build", "README.md", "results/*.md", "examples/GALLERY_HEADER.rst"]
 
 myst_enable_extensions = ["colon_fence", "deflist", "dollarmath"]
 myst_heading_anchors = 3  # links such as reference.md#your-files resolve
@@ -49,6 +50,25 @@ napoleon_google_docstring = False
 # Text in docstrings names the toolkit's objects in ``double back-quotes``; cross-references
 # are resolved where they exist and plain text elsewhere (no nitpicky mode).
 default_role = "literal"
+
+# The gallery: every docs/examples/plot_*.py is run when the site is built (an example that
+# fails fails the build), its output and figures are put on its page, and each page can be
+# downloaded as a script or a notebook. Each API page lists the examples that use its module
+# (the minigallery in _templates/autosummary/module.rst reads the backreferences).
+sphinx_gallery_conf = {
+    "examples_dirs": "examples",
+    "gallery_dirs": "gallery",              # generated at build time, never committed
+    "filename_pattern": r"/plot_",
+    "doc_module": ("snn_antenna",),
+    "backreferences_dir": "gallery/backreferences",
+    "abort_on_example_error": True,
+    "download_all_examples": False,
+    "write_computation_times": False,
+    "remove_config_comments": True,
+    "matplotlib_animations": False,
+    "image_scrapers": ("matplotlib",),
+    "within_subsection_order": "FileNameSortKey",
+}
 
 html_theme = "pydata_sphinx_theme"
 html_title = f"snn-antenna {release}"
@@ -70,6 +90,10 @@ html_sidebars = {
     page: []
     for page in [
         "index",
+        "install",
+        "tutorial",
+        "troubleshooting",
+        "developer",
         "results",
         "reference",
         "materials",

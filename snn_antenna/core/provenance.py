@@ -17,6 +17,7 @@ import ast
 import datetime as _dt
 import functools
 import hashlib
+import os
 import platform
 import subprocess
 import sys
@@ -101,6 +102,24 @@ def git_commit() -> str | None:
         return head.stdout.strip() + ("+dirty" if dirty.stdout.strip() else "")
     except (OSError, subprocess.SubprocessError):
         return None
+
+
+@functools.lru_cache(maxsize=1)
+def machine() -> str:
+    """The machine a run ran on, in words a reader of a mailed report can compare: the CPU's
+    model name (``/proc/cpuinfo``, else ``platform.processor()``), its logical cores, and the
+    operating system (``platform.platform()``)."""
+    cpu = ""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
+            cpu = next((line.split(":", 1)[1].strip() for line in info
+                        if line.startswith("model name")), "")
+    except OSError:
+        pass
+    cpu = cpu or platform.processor() or platform.machine() or "unknown CPU"
+    cores = os.cpu_count()
+    return f"{cpu}, {cores} cores, {platform.platform()}" if cores else \
+        f"{cpu}, {platform.platform()}"
 
 
 def code_identity() -> dict:

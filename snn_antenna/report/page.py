@@ -1,13 +1,16 @@
 """Reports: every output folder holds report.html, summary.json and its figures as PNG.
 
 ``summary.json`` holds the numbers and the provenance (spec, seed, versions, Brian2 target)
-so any figure can be regenerated; files are written atomically. Style: ``report_style``.
+so any figure can be regenerated; files are written atomically. The page's header names the
+command, commit, code hash, machine and date, so a copy mailed without its folder can still be
+traced to what made it. Style: ``report.style``.
 """
 from __future__ import annotations
 
 import base64
 import html
 import json
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -15,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..core.files import atomic_write
-from ..core.provenance import provenance
+from ..core.provenance import machine, provenance
 from .style import CSS as _CSS
 
 
@@ -119,13 +122,13 @@ class Report:
     def _provenance_sections(self) -> str:
         parts = []
         if self._calibrated:
-            rows = [{"quantity": c.quantity, "model": c.value, "target": c.target,
-                     "unit": c.unit, "source": c.source, "tuned by": c.how}
+            rows = [{"quantity": c.quantity, "value": c.value, "target": c.target,
+                     "unit": c.unit, "source": c.source, "how": c.how}
                     for c in self._calibrated]
             parts.append("<h2>Calibrated to</h2><p>The generator, a default or a fit to "
                          "the data named in each row's source was set to match these numbers; "
                          "they are inputs, not results.</p>"
-                         + _table_html(rows))
+                         + _table_html(rows, names=_CALIBRATED_NAMES))
         if self._predicted:
             rows = []
             for p in self._predicted:
@@ -135,11 +138,12 @@ class Report:
                     interval = f"{fmt(ci[0])} to {fmt(ci[1])}"
                     if p.n is not None:
                         interval += f" (n = {p.n})"
-                rows.append({"quantity": p.quantity, "model": p.value, "unit": p.unit,
-                             "95 % interval": interval, "n": p.n, "paper": p.paper,
+                rows.append({"quantity": p.quantity, "value": p.value, "unit": p.unit,
+                             "interval": interval, "n": p.n, "paper": p.paper,
                              "source": p.source, "note": p.note})
             parts.append("<h2>Predicted</h2><p>Produced out of sample; only these are "
-                         "compared with the paper.</p>" + _table_html(rows))
+                         "compared with the paper.</p>"
+                         + _table_html(rows, names=_PREDICTED_NAMES))
         return "".join(parts)
 
     def text(self, paragraph) -> None:
@@ -190,7 +194,7 @@ class Report:
 
     def write(self, summary: dict, spec: dict, target: str | None = None) -> dict:
         summary = dict(summary)
-        summary["provenance"] = provenance(spec, target)
+        summary["provenance"] = {**provenance(spec, target), "machine": machine()}
         summary["figures"] = list(self.figures)
         summary["quick"] = bool(self.quick)
         summary["calibrated"] = [asdict(c) for c in self._calibrated]
@@ -206,19 +210,53 @@ class Report:
 <title>{title}</title>
 <style>{_CSS}</style></head><body>
 <h1>{html.escape(self.title)}</h1>
+{_run_identity(prov)}
 {self._banner()}{''.join(self._lead)}{self._provenance_sections()}
 {''.join(self._parts)}
 <h2>Provenance</h2>
 <p>snn-antenna {html.escape(prov['snn_antenna_version'])}, Brian2
 {html.escape(prov['brian2_version'])} (target {html.escape(prov['brian2_target'])}),
 seed {prov['seed']}, Python {html.escape(prov['python'])}, created {prov['created']}.
-Every number on this page is in <code>summary.json</code> beside it, under the key shown
-below each column name.</p>
+<code>summary.json</code> beside this page holds the header's command, commit, code hash
+and machine under <code>provenance</code>, and the calibrated and predicted rows under
+<code>calibrated</code> and <code>predicted</code>, each number under the field shown below its
+column's name. In the other tables a column whose name was made from a key shows that key
+below the name.</p>
 <details><summary>Resolved spec</summary><pre>{spec_html}</pre></details>
 </body></html>
 """
         atomic_write(self.out_dir / "report.html", page)
         return summary
+
+
+# The calibrated and predicted tables' column names, by the summary.json field each shows.
+_CALIBRATED_NAMES = {"value": "model", "how": "tuned by"}
+_PREDICTED_NAMES = {"value": "model", "interval": "95 % interval"}
+
+
+def _run_identity(prov: dict) -> str:
+    """The header a mailed copy is traced by: command, commit, code hash, machine, date."""
+    created = str(prov.get("created", ""))
+    date = created.replace("T", " ").replace("+00:00", " UTC")
+    commit = prov.get("git_commit") or "none (not run from a git checkout)"
+    rows = [("command", f"<code>{html.escape(shown_command(prov.get('command', '')))}</code>"),
+            ("commit", f"<code>{html.escape(commit)}</code>"),
+            ("code hash", f"<code>{html.escape(str(prov.get('code_sha256', '')))}</code> "
+                          f"(snn-antenna {html.escape(str(prov.get('snn_antenna_version')))})"),
+            ("machine", html.escape(str(prov.get("machine") or prov.get("platform", "")))),
+            ("date", html.escape(date))]
+    items = "".join(f"<dt>{name}</dt><dd>{value}</dd>" for name, value in rows)
+    return f'<dl class="run-identity" aria-label="what made this page">{items}</dl>'
+
+
+def shown_command(command: str) -> str:
+    """The command as its user typed it: the program's name without the folder it was
+    installed in (``/home/me/.venv/bin/snn-antenna run ...`` -> ``snn-antenna run ...``)."""
+    program, _, rest = command.strip().partition(" ")
+    name = os.path.basename(program)
+    if name == "__main__.py" and os.path.basename(os.path.dirname(program)) == "snn_antenna":
+        name = "python -m snn_antenna"
+    return f"{name} {rest}".strip()
 
 
 # -- formatting -------------------------------------------------------------------------------
@@ -377,39 +415,41 @@ def _summary_statistic(d: dict, digits: int) -> str | None:
     return None
 
 
-def _table_html(rows: list[dict], caption: str = "") -> str:
+def _table_html(rows: list[dict], caption: str = "", names: dict | None = None) -> str:
     """Rows as a table every cell of which is visible on a 1,000 px page and on A4.
 
     Up to WIDE_COLUMNS columns fit with their text wrapped. A wider table with few rows is
     transposed (one row per quantity); one with many rows too is split into column groups,
-    each repeating the first column so a reader knows which row a number belongs to."""
+    each repeating the first column so a reader knows which row a number belongs to.
+    ``names``: a column's name for a key whose ``label`` is not what the column shows."""
+    names = names or {}
     cols = list(dict.fromkeys(c for r in rows for c in r))
     cap = f"<caption>{html.escape(fmt(caption))}</caption>" if caption else ""
     if len(cols) <= WIDE_COLUMNS:
-        return _plain_table(rows, cols, cap)
+        return _plain_table(rows, cols, cap, names)
     if len(rows) < WIDE_COLUMNS:
-        return _transposed_table(rows, cols, cap)
+        return _transposed_table(rows, cols, cap, names)
     first, rest = cols[0], cols[1:]
     step = WIDE_COLUMNS - 1
     groups = [rest[i:i + step] for i in range(0, len(rest), step)]
-    return "".join(_plain_table(rows, [first] + g, cap if i == 0 else "")
+    return "".join(_plain_table(rows, [first] + g, cap if i == 0 else "", names)
                    for i, g in enumerate(groups))
 
 
-def _plain_table(rows: list[dict], cols: list, cap: str) -> str:
+def _plain_table(rows: list[dict], cols: list, cap: str, names: dict) -> str:
     numeric = {c for c in cols if all(r.get(c) is None or _is_number(r.get(c)) for r in rows)}
-    head = "".join(_header_html(c, c in numeric) for c in cols)
+    head = "".join(_header_html(c, c in numeric, name=names.get(c)) for c in cols)
     body = "".join("<tr>" + "".join(_cell_html(r.get(c)) for c in cols) + "</tr>"
                    for r in rows)
     return (f'<div class="table-scroll"><table>{cap}<thead><tr>{head}</tr></thead>'
             f"<tbody>{body}</tbody></table></div>")
 
 
-def _transposed_table(rows: list[dict], cols: list, cap: str) -> str:
+def _transposed_table(rows: list[dict], cols: list, cap: str, names: dict) -> str:
     head = "<th class=\"text\">quantity</th>" + "".join(
         f'<th class="num">{"row " + str(i + 1) if len(rows) > 1 else "value"}</th>'
         for i in range(len(rows)))
-    body = "".join("<tr>" + _header_html(c, False, row=True)
+    body = "".join("<tr>" + _header_html(c, False, row=True, name=names.get(c))
                    + "".join(_cell_html(r.get(c)) for r in rows) + "</tr>" for c in cols)
     return (f'<div class="table-scroll"><table class="transposed">{cap}<thead><tr>{head}'
             f"</tr></thead><tbody>{body}</tbody></table></div>")
@@ -418,8 +458,8 @@ def _transposed_table(rows: list[dict], cols: list, cap: str) -> str:
 WIDE_COLUMNS = 8
 
 
-def _header_html(key, numeric: bool, row: bool = False) -> str:
-    name = label(key)
+def _header_html(key, numeric: bool, row: bool = False, name: str | None = None) -> str:
+    name = name or label(key)
     key_html = f'<span class="key">{html.escape(str(key))}</span>' if name != str(key) else ""
     scope = ' scope="row"' if row else ""
     return (f'<th class="{"num" if numeric else "text"}"{scope}>'

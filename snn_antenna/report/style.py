@@ -5,7 +5,10 @@
 CSS = """
 body{font-family:system-ui,sans-serif;max-width:1000px;margin:2em auto;padding:0 1em;
 color:#222;line-height:1.4;overflow-wrap:anywhere}
-h1{font-size:1.6em} h2{margin-top:1.6em;border-bottom:1px solid #ddd}
+h1{font-size:1.6em}
+.run-identity{display:grid;grid-template-columns:max-content minmax(0,1fr);gap:.1em .8em;
+margin:0 0 1em;font-size:.85em;color:#444} .run-identity dt{font-weight:600}
+.run-identity dd{margin:0} h2{margin-top:1.6em;border-bottom:1px solid #ddd}
 .quick-banner{background:#fff3cd;border:2px solid #e0a800;border-left-width:.6em;
 border-radius:4px;padding:.7em 1em;margin:1em 0}
 .quick-banner strong{display:block;font-size:1.15em;color:#7a5200;text-transform:uppercase;

@@ -67,7 +67,8 @@ def calibrated_and_predicted(report: Report, s: dict, parts: Parts) -> None:
         # 0.3425, 20.4 Hz per k) is never its target: tuning_sweep sets it beside a prediction
         Calibrated("hertz per unit k of a resonator", neurons.DRIVEN_HZ_PER_K,
                    "centroid of the driven k = 1 tuning curve", "Hz",
-                   "networks/neurons.py (measured; re-measured by studies/tuning_sweep.toml)",
+                   "snn_antenna/networks/neurons.py (measured; re-measured by "
+                   "studies/tuning_sweep.toml)",
                    "neurons.k_for_frequency places each neuron's k with it"),
         Calibrated("coder threshold Th at 12 cm/s", parts.chain.named_steps["coder"].threshold,
                    "above sensor noise (0.01 g), below self-motion (0.25 g rms)", "g",
