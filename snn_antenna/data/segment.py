@@ -86,13 +86,13 @@ def onsets(stream: Stream, seg: Segmentation) -> np.ndarray:
     return np.asarray(chosen, dtype=np.int64)
 
 
-def reconcile(stream: Stream, labels: list[tuple[int, Label]], seg: Segmentation
-              ) -> tuple[list[Contact], list[Exclusion]]:
+def reconcile(stream: Stream, labels: list[tuple[int, Label]], seg: Segmentation,
+              found: np.ndarray | None = None) -> tuple[list[Contact], list[Exclusion]]:
     """Match ``labels`` (their table positions and rows, this recording's) to the onsets
-    found in ``stream``; every label and onset ends up either a contact or an exclusion."""
-    found = onsets(stream, seg)
-    rate = stream.rate_hz
-    t_found = stream.frames[found] / rate
+    found in ``stream`` (``found``, or found here); every label and onset ends up either a
+    contact or an exclusion."""
+    found = onsets(stream, seg) if found is None else found
+    t_found = stream.time_of(stream.frames[found])
     pairs = sorted((abs(t_found[j] - lab.onset_s), k, j) for k, (_, lab) in enumerate(labels)
                    for j in np.flatnonzero(np.abs(t_found - lab.onset_s) <= seg.match_s))
     label_of, onset_of = {}, {}
@@ -115,6 +115,51 @@ def reconcile(stream: Stream, labels: list[tuple[int, Label]], seg: Segmentation
     return contacts, sorted(excluded, key=lambda e: e.t_s)
 
 
+@dataclass(frozen=True)
+class Clock:
+    """How a recording's labels sit on its clock: of ``labels``, ``matched`` lie within
+    ``match_s`` of an onset found; ``lag_s`` is the median time from label to onset of those
+    (a consistent lag is reported, never applied); ``offset_s`` a shift of every label that
+    would match ``offset_matched`` of them, when it explains the labels far better than none
+    (else None)."""
+    recording: str
+    labels: int
+    matched: int
+    lag_s: float | None
+    offset_s: float | None
+    offset_matched: int
+
+    def row(self) -> dict:
+        return {"recording": self.recording, "labels": self.labels, "matched": self.matched,
+                "median_lag_s": None if self.lag_s is None else round(self.lag_s, 6),
+                "offset_s": None if self.offset_s is None else round(self.offset_s, 6),
+                "offset_matched": self.offset_matched}
+
+
+def clock_fit(stream: Stream, label_s: np.ndarray, found: np.ndarray,
+              seg: Segmentation) -> Clock:
+    """How the label times ``label_s`` sit against the onsets ``found`` in ``stream``: the
+    shift matching most labels (a window of 2 ``match_s`` slid over every label-to-onset
+    difference; onsets are ``dead_s`` apart, so a label matches one onset per window)."""
+    t_found = stream.time_of(stream.frames[found])
+    label_s = np.asarray(label_s, dtype=float)
+    if not len(label_s) or not len(t_found):
+        return Clock(stream.name, len(label_s), 0, None, None, 0)
+    diff = (t_found[None, :] - label_s[:, None])
+    near = np.abs(diff) <= seg.match_s
+    matched = int(near.any(axis=1).sum())
+    lag = float(np.median(diff[near])) if matched else None
+    flat = np.sort(diff.ravel())
+    inside = np.searchsorted(flat, flat + 2 * seg.match_s, side="right") - np.arange(len(flat))
+    best = int(np.argmax(inside))
+    shift = float(np.median(flat[best:best + inside[best]]))
+    shifted = int((np.abs(diff - shift) <= seg.match_s).any(axis=1).sum())
+    found_offset = (abs(shift) > seg.match_s and shifted >= 3 and shifted >= 2 * matched
+                    and shifted >= len(label_s) / 2)
+    return Clock(stream.name, len(label_s), matched, lag, shift if found_offset else None,
+                 shifted if found_offset else 0)
+
+
 def window_problem(stream: Stream, i: int, seg: Segmentation) -> str | None:
     """Why the window of the onset at index ``i`` cannot be a contact event, or None."""
     start, n = window_bounds(stream, i, seg)
@@ -133,8 +178,8 @@ def window_problem(stream: Stream, i: int, seg: Segmentation) -> str | None:
 def stretch_problem(stream: Stream, t_s: float, seg: Segmentation) -> str | None:
     """Why the stretch of a drive around a labelled contact at ``t_s`` (from ``pre_trigger_s``
     before to ``duration_s`` after, within the recording) cannot be scored, or None."""
-    start = max(int(round((t_s - seg.pre_trigger_s) * stream.rate_hz)), int(stream.frames[0]))
-    stop = min(int(round((t_s + seg.duration_s) * stream.rate_hz)), int(stream.frames[-1]) + 1)
+    start = max(int(round(stream.frame_at(t_s - seg.pre_trigger_s))), int(stream.frames[0]))
+    stop = min(int(round(stream.frame_at(t_s + seg.duration_s))), int(stream.frames[-1]) + 1)
     lo, hi = np.searchsorted(stream.frames, [start, stop])
     if hi - lo != stop - start:
         return "gap"

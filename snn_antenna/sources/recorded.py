@@ -57,7 +57,7 @@ class RecordedBench:
 
     @property
     def materials(self) -> list[str]:
-        return sorted(set(self.dataset["material"].values.astype(str)))
+        return sorted(set(str(m) for m in self.dataset["material"].values))
 
     @property
     def positions_cm(self) -> list[float]:
