@@ -293,3 +293,41 @@ def test_a_long_real_clock_bag_imports_every_contact(tmp_path, storage):
     assert source.provenance["recordings"][0]["samples"] == len(sess.g)
     assert json.loads((tmp_path / "ds" / "import.json").read_text())["recordings"][0][
         "rate_hz"] == 2000.0
+
+
+# -- promises: the raw folder untouched, a data set read only as imported ----------------------
+def test_an_out_folder_inside_the_recordings_is_refused(tmp_path, sess):
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   2000.0, 0.0)
+    labels = lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
+    for out in (tmp_path / "recs" / "ds", tmp_path / "recs"):
+        code, err = run_cli(tmp_path / "recs", labels, "--out", out)
+        assert code == 2 and "--out" in err and "outside the recordings" in err, err
+    assert sorted(p.name for p in (tmp_path / "recs").iterdir()) == ["r1.csv"]
+
+
+@pytest.mark.parametrize("damage", ["changed", "missing"])
+def test_a_data_set_changed_after_its_import_is_refused_never_read(tmp_path, sess, damage):
+    """A chunk of the store rewritten, or deleted (zarr would read its fill value): the study
+    refuses the data set, so no cache keyed by the import is reused on other data."""
+    import zarr
+
+    from snn_antenna.sources import bench
+
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   2000.0, 0.0)
+    labels = lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
+    source, _ = imported(tmp_path, tmp_path / "recs", labels)
+    assert bench.load(source, log=lambda *a: None).sizes["event"] == len(sess.contacts)
+    store = tmp_path / "ds" / recorded.DATASET
+    if damage == "changed":
+        counts = zarr.open_array(store / "counts", mode="r+")
+        counts[0, 0, 0] = int(counts[0, 0, 0]) + 1
+    else:
+        chunks = sorted(p for p in (store / "counts").rglob("*") if p.is_file()
+                        and p.name != "zarr.json")
+        chunks[-1].unlink()
+    with pytest.raises(SpecError, match="changed after the import"):
+        recorded.open_bench(tmp_path / "ds")

@@ -78,7 +78,7 @@ def cmd_import(args) -> int:
     from .importer import check_out, plan_import, write_import
 
     log = lambda text: print(text, file=sys.stderr, flush=True)    # noqa: E731
-    check_out(args.out, args.force)               # before reading anything
+    check_out(args.out, args.force, args.recordings)     # before reading anything
     options = Options(rate_hz=args.rate, adc_bits=args.adc_bits,
                       full_scale_g=args.full_scale_g, topic=args.topic, units=args.units,
                       signed=args.signed, axes=args.axes, columns=args.columns)

@@ -97,7 +97,7 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
     key = _key(streams, labels_hash["sha256"], settings)
     ds = _dataset(contacts, table, by_name, seg, key)
     meta = {"kind": recorded.KIND, "format_version": recorded.FORMAT_VERSION, "key": key,
-            "data": "bench", "package_version": __version__,
+            "content_sha256": recorded.content_sha256(ds), "data": "bench", "package_version": __version__,
             "labels": {"file": Path(labels_path).name, **labels_hash},
             "recordings": [s.describe() for s in streams], "settings": settings,
             "clocks": [c.row() for c in clocks],
@@ -175,7 +175,9 @@ def _plan_drives(streams, table, labels_path, options, seg: Segmentation, log,
             "labels": {"file": Path(labels_path).name, **labels_hash},
             "recordings": [s.describe() for s in streams], "settings": settings,
             "counts": counts, "exclusions": [e.row() for e in excluded]}
-    return ImportPlan(_drives_dataset(streams, kept, key), excluded, meta)
+    ds = _drives_dataset(streams, kept, key)
+    meta["content_sha256"] = recorded.content_sha256(ds)
+    return ImportPlan(ds, excluded, meta)
 
 
 def _drives_dataset(streams, kept, key: str):
@@ -303,8 +305,16 @@ def write_import(plan: ImportPlan, out, force: bool = False, log=print) -> Path:
     return out
 
 
-def check_out(out, force: bool) -> None:
-    """Refuse an output folder before any reading: the same decision ``write_import`` makes."""
+def check_out(out, force: bool, recordings=None) -> None:
+    """Refuse an output folder before any reading: the same decision ``write_import`` makes,
+    and none inside the recordings folder (the raw recordings are never written to, and the
+    next import of that folder would meet the data set among its recordings)."""
     from ..core import outputs
 
+    if recordings is not None:
+        raw, target = Path(recordings).resolve(), Path(out).resolve()
+        if target == raw or raw in target.parents:
+            raise SpecError("--out", str(out), f"a folder outside the recordings folder {raw} "
+                                               "(an import writes nothing among the raw "
+                                               "recordings)")
     outputs.release(outputs.prepare(out, STUDY, force=force))
