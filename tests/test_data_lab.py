@@ -331,3 +331,66 @@ def test_a_data_set_changed_after_its_import_is_refused_never_read(tmp_path, ses
         chunks[-1].unlink()
     with pytest.raises(SpecError, match="changed after the import"):
         recorded.open_bench(tmp_path / "ds")
+
+
+def big_counts_csv(path: Path, seconds: int, rate: int = 2000) -> list[float]:
+    """A CSV of board counts with its time column, ``seconds`` long, a contact every 7 s
+    (written from a 7 s template, so a 200 MB file takes seconds); the contacts' onsets."""
+    block_s = 7
+    t = np.arange(block_s * rate) / rate
+    ring = np.where(t >= 3.0, 3 * np.exp(-(t - 3.0) / 0.1) * np.sin(2 * np.pi * 30 * (t - 3.0)),
+                    0.0) + np.random.default_rng(0).standard_normal(len(t)) * 0.01
+    x = lab.adc_counts(ring * 0.8, 10, 18.0)
+    y = lab.adc_counts(ring * 0.6, 10, 18.0)
+    seconds_text = ["".join(f"{{s}}.{i * 10 ** 6 // rate:06d},{x[j * rate + i]},"
+                            f"{y[j * rate + i]}\n" for i in range(rate))
+                    for j in range(block_s)]
+    onsets = []
+    with open(path, "w") as f:
+        f.write("t_s,x,y\n")
+        for b in range(seconds // block_s):
+            for j, text in enumerate(seconds_text):
+                f.write(text.replace("{s}", str(b * block_s + j)))
+            onsets.append(b * block_s + 3.0)
+    return onsets
+
+
+@pytest.mark.slow
+def test_importing_a_200_mb_csv_stays_under_1_gb(tmp_path):
+    """Measured as the kernel counts it (``/usr/bin/time -v``: the import's peak resident
+    memory), on a 200 MB CSV of 2 kHz counts with its time column."""
+    import shutil
+    import subprocess
+    import sys
+
+    if not Path("/usr/bin/time").exists():
+        pytest.skip("needs /usr/bin/time (GNU time) to measure the peak memory")
+    (tmp_path / "recs").mkdir()
+    onsets = big_counts_csv(tmp_path / "recs" / "big.csv", 5600)
+    size = (tmp_path / "recs" / "big.csv").stat().st_size
+    assert size > 200e6
+    (tmp_path / "labels.csv").write_text("recording,onset_s,distance_cm,material\n" + "".join(
+        f"big,{t:.3f},{[12, 20, 30][k % 3]},{['wood', 'rubber'][k % 2]}\n"
+        for k, t in enumerate(onsets)))
+    cli = shutil.which("snn-antenna", path=str(Path(sys.executable).parent))
+    done = subprocess.run(["/usr/bin/time", "-v", cli, "data", "import", str(tmp_path / "recs"),
+                           str(tmp_path / "labels.csv"), "--out", str(tmp_path / "ds")],
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    peak_kb = int(next(line.split(":")[1] for line in done.stderr.splitlines()
+                       if "Maximum resident set size" in line))
+    assert peak_kb * 1024 < 1e9, f"{peak_kb / 1024:.0f} MB for a {size / 1e6:.0f} MB CSV"
+    source = recorded.open_bench(tmp_path / "ds")
+    assert source.n_events == len(onsets)
+
+
+def test_a_bad_csv_value_is_named_by_its_file_line_past_blank_lines(tmp_path):
+    (tmp_path / "recs").mkdir()
+    rows = [f"{i / 2000:.6f},512,512" for i in range(70_000)]
+    rows[68_000] = "34.000000,512,5x2"
+    rows.insert(100, "")                        # a blank line: skipped, still counted
+    (tmp_path / "recs" / "r1.csv").write_text("t_s,x,y\n" + "\n".join(rows) + "\n")
+    (tmp_path / "labels.csv").write_text("recording,onset_s,distance_cm,material\n"
+                                         "r1,1.0,10,wood\n")
+    err = refused(tmp_path, tmp_path / "recs", tmp_path / "labels.csv")
+    assert "r1.csv line 68003 y" in err and "5x2" in err, err

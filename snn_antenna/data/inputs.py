@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import itertools
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -249,38 +250,59 @@ def stamp_frames(where: str, ns: np.ndarray) -> tuple[np.ndarray, float, dict]:
     """Frames of samples stamped at ``ns`` (integer nanoseconds from the first stamp): each
     step is a whole number of periods of the median step (a stamp off by less than half a
     period is jitter; several periods are lost samples), and the rate is the least-squares
-    slope of the stamps over those frames. Returns (frames, rate in Hz, clock notes)."""
+    slope of the stamps over those frames. Returns (frames, rate in Hz, clock notes). Worked
+    through in blocks of ``CHUNK_ROWS``: memory beyond the frames is one block's."""
     ns = np.asarray(ns, dtype=np.int64)
-    steps = np.diff(ns)
-    if np.any(steps <= 0):
-        row = int(np.flatnonzero(steps <= 0)[0]) + 1
-        raise SpecError(f"{where} sample {row}", f"{ns[row] - ns[row - 1]} ns after the "
-                                                 "previous one", "increasing stamps")
-    step = float(np.median(steps))
-    periods = np.rint(steps / step).astype(np.int64)
-    if np.any(periods < 1):
-        row = int(np.flatnonzero(periods < 1)[0]) + 1
-        raise SpecError(f"{where} sample {row}", f"{steps[row - 1]} ns after the previous one",
-                        f"a step of about one sample period ({step:g} ns, the median) or "
-                        "whole periods (lost samples): the stamps jitter by more than half a "
-                        "period")
-    frames = np.concatenate([[0], np.cumsum(periods)])
-    f_mean, t_mean = frames.mean(), ns.astype(float).mean()
-    df = frames - f_mean
-    slope = float(np.dot(df, ns - t_mean) / np.dot(df, df))
-    residual = ns - (t_mean + slope * df)
-    jitter = float(np.max(np.abs(residual)))
-    if jitter >= 0.5 * slope:
-        row = int(np.argmax(np.abs(residual)))
-        raise SpecError(f"{where} sample {row}", f"{residual[row] / 1e3:+.1f} µs off the "
-                                                 "recording's steady clock",
+    n = len(ns)
+    blocks = range(0, n, CHUNK_ROWS)
+    step = float(np.median(np.diff(ns)))
+    frames = np.empty(n, dtype=np.int64)
+    frames[0], gaps, lost = 0, 0, 0
+    for lo in blocks:
+        hi = min(n, lo + CHUNK_ROWS + 1)
+        steps = np.diff(ns[lo:hi])
+        bad = np.flatnonzero(steps <= 0)
+        if len(bad):
+            row = lo + int(bad[0]) + 1
+            raise SpecError(f"{where} sample {row}", f"{int(steps[bad[0]])} ns after the "
+                                                     "previous one", "increasing stamps")
+        periods = np.rint(steps / step).astype(np.int64)
+        bad = np.flatnonzero(periods < 1)
+        if len(bad):
+            row = lo + int(bad[0]) + 1
+            raise SpecError(f"{where} sample {row}", f"{int(steps[bad[0]])} ns after the "
+                                                     "previous one",
+                            f"a step of about one sample period ({step:g} ns, the median) or "
+                            "whole periods (lost samples): the stamps jitter by more than "
+                            "half a period")
+        gaps += int(np.sum(periods > 1))
+        lost += int(np.sum(periods[periods > 1] - 1))
+        frames[lo + 1:hi] = frames[lo] + np.cumsum(periods)
+    t_mean = sum(float(ns[lo:lo + CHUNK_ROWS].astype(np.float64).sum()) for lo in blocks) / n
+    f_mean = sum(float(frames[lo:lo + CHUNK_ROWS].sum()) for lo in blocks) / n
+    sxy = sxx = 0.0
+    for lo in blocks:
+        df = frames[lo:lo + CHUNK_ROWS] - f_mean
+        sxy += float(np.dot(df, ns[lo:lo + CHUNK_ROWS] - t_mean))
+        sxx += float(np.dot(df, df))
+    slope = sxy / sxx
+    worst, worst_row, square = 0.0, 0, 0.0
+    for lo in blocks:
+        residual = ns[lo:lo + CHUNK_ROWS] - (t_mean + slope * (frames[lo:lo + CHUNK_ROWS]
+                                                               - f_mean))
+        k = int(np.argmax(np.abs(residual)))
+        if abs(residual[k]) > abs(worst):
+            worst, worst_row = float(residual[k]), lo + k
+        square += float(np.dot(residual, residual))
+    if abs(worst) >= 0.5 * slope:
+        raise SpecError(f"{where} sample {worst_row}", f"{worst / 1e3:+.1f} µs off the "
+                                                       "recording's steady clock",
                         f"stamps within half a period ({slope / 2e3:.1f} µs) of a steady "
                         "clock: the sample clock drifts against the stamps' clock, or the "
                         "stamps jitter too much")
-    gaps = periods > 1
-    notes = {"gaps": int(gaps.sum()), "lost_samples": int(np.sum(periods[gaps] - 1)),
-             "stamp_jitter_us": round(float(np.std(residual)) / 1e3, 3),
-             "stamp_jitter_max_us": round(jitter / 1e3, 3)}
+    notes = {"gaps": gaps, "lost_samples": lost,
+             "stamp_jitter_us": round((square / n) ** 0.5 / 1e3, 3),
+             "stamp_jitter_max_us": round(abs(worst) / 1e3, 3)}
     return frames, 1e9 / slope, notes
 
 
@@ -479,30 +501,23 @@ def _read_csv(path: Path, options: Options) -> Stream:
                                                             "(and optionally t_s)")
             dialect, decimal = _sniff(path, sample)
             f.seek(0)
-            reader = csv.reader(f, dialect)
-            header = next(reader)
+            header = next(csv.reader([f.readline()], dialect))
             index = _column_index(path, header, options)
             wanted = [index[a] for a in options.axes]
             timed = TIME_COLUMN in index
-            parts, times = [], []
+            used = wanted + ([index[TIME_COLUMN]] if timed else [])
+            parts, times, first_line = [], [], 2
             while True:
-                rows, lines = [], []
-                for row in reader:
-                    if row and any(cell.strip() for cell in row):
-                        rows.append(row)
-                        lines.append(reader.line_num)
-                        if len(rows) == CHUNK_ROWS:
-                            break
-                if not rows:
+                lines = list(itertools.islice(f, CHUNK_ROWS))
+                if not lines:
                     break
-                values = _parse_chunk(path, header, rows, lines, wanted, decimal)
-                parts.append(_to_counts(path.name, values, units, adc, options.signed,
-                                        lambda row: f"line {lines[row]}"))
+                values, line = _parse_lines(path, header, lines, first_line, used, dialect,
+                                            decimal)
+                parts.append(_to_counts(path.name, values[:, :2], units, adc, options.signed,
+                                        lambda row, line=line: f"line {line(row)}"))
                 if timed:
-                    times.append(_parse_chunk(path, header, rows, lines, [index[TIME_COLUMN]],
-                                              decimal, "seconds")[:, 0])
-                if len(rows) < CHUNK_ROWS:
-                    break
+                    times.append(values[:, 2].copy())
+                first_line += len(lines)
     except UnicodeDecodeError as exc:
         raise SpecError(path.name, type(exc).__name__, "a UTF-8 text CSV file") from None
     except csv.Error as exc:
@@ -519,9 +534,12 @@ def _read_csv(path: Path, options: Options) -> Stream:
         t = np.concatenate(times)
         del times
         origin = float(t[0])
-        frames, clock_rate, clock = stamp_frames(f"{path.name} t_s", np.rint(
-            (t - origin) * 1e9).astype(np.int64))
+        t -= origin
+        t *= 1e9
+        ns = np.rint(t, out=t).astype(np.int64)
         del t
+        frames, clock_rate, clock = stamp_frames(f"{path.name} t_s", ns)
+        del ns
         stated = _rate_of(clock_rate)
         notes.update(clock)
     rate = _rate(path, stated, options, "t_s column")
@@ -529,13 +547,41 @@ def _read_csv(path: Path, options: Options) -> Stream:
                   _files(path), notes, origin_s=origin)
 
 
-def _parse_chunk(path: Path, header, rows, lines, columns, decimal: str,
+def _parse_lines(path: Path, header, lines: list[str], first_line: int, columns, dialect,
+                 decimal: str):
+    """(rows, len(columns)) floats of the CSV ``lines`` (the first at file line
+    ``first_line``), read by NumPy's parser, and the file line of each row. A chunk NumPy
+    refuses is read again with ``csv`` to name the line, the column and the value."""
+    import warnings
+
+    text = lines if decimal == "." else [s.replace(",", ".") for s in lines]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            values = np.loadtxt(text, delimiter=dialect.delimiter, quotechar=dialect.quotechar,
+                                usecols=columns, ndmin=2, dtype=np.float64, comments=None)
+        blank = [k for k, s in enumerate(lines) if not s.strip()]
+        if np.isfinite(values).all() and len(values) + len(blank) == len(lines):
+            keep = np.delete(np.arange(len(lines)), blank) if blank else None
+            return values, (lambda k: first_line + int(keep[k])) if blank else \
+                (lambda k: first_line + k)
+    except (ValueError, UserWarning):
+        pass
+    numbered = [(first_line + k, row) for k, row in enumerate(csv.reader(lines, dialect))
+                if len(row) > 1 or (row and row[0].strip())]
+    rows = [row for _, row in numbered]
+    return _parse_chunk(path, header, rows, lambda k: numbered[k][0], columns, decimal), \
+        (lambda k: numbered[k][0])
+
+
+def _parse_chunk(path: Path, header, rows, line, columns, decimal: str,
                  what: str = "a number") -> np.ndarray:
-    """(rows, len(columns)) floats of ``rows`` of a CSV; a bad row names its line."""
+    """(rows, len(columns)) floats of ``rows`` of a CSV; a bad row names its file line
+    (``line``: row → line)."""
     n = len(header)
-    if any(len(r) != n for r in rows):
+    if set(map(len, rows)) != {n}:
         k = next(k for k, r in enumerate(rows) if len(r) != n)
-        raise SpecError(f"{path.name} line {lines[k]}", ",".join(rows[k]),
+        raise SpecError(f"{path.name} line {line(k)}", ",".join(rows[k]),
                         f"{n} fields ({','.join(h.strip() for h in header)}): the file is "
                         "truncated or damaged")
     out = np.empty((len(rows), len(columns)))
@@ -550,11 +596,11 @@ def _parse_chunk(path: Path, header, rows, lines, columns, decimal: str,
                 try:
                     float(s)
                 except ValueError:
-                    raise SpecError(f"{path.name} line {lines[k]} {header[c].strip()}",
+                    raise SpecError(f"{path.name} line {line(k)} {header[c].strip()}",
                                     rows[k][c], what) from None
     if not np.isfinite(out).all():
         k, j = divmod(int(np.flatnonzero(~np.isfinite(out).ravel())[0]), len(columns))
-        raise SpecError(f"{path.name} line {lines[k]} {header[columns[j]].strip()}",
+        raise SpecError(f"{path.name} line {line(k)} {header[columns[j]].strip()}",
                         rows[k][columns[j]], f"a finite number ({what})")
     return out
 

@@ -1,8 +1,8 @@
 """Contacts found in a continuous recording by the paper's onset rule, matched to the labels.
 
 The onset rule is the event processing's (``readout.events``): the two axes in g, aligned to
-their main axis (``main_axis_g``: PCA over the recording, its mean removed, so the sensor's
-resting offset is not a contact), and a contact starts where |x| first exceeds
+their main axis (as ``main_axis_g`` aligns them: PCA over the recording, its mean removed, so
+the sensor's resting offset is not a contact), and a contact starts where |x| first exceeds
 ``onset_threshold_g``. In a continuous recording two more conditions make one contact one
 onset: |x| stayed below the threshold for ``quiet_s`` just before (a ringing rod dips below it
 between its swings, never for that long while it is loud), and at least ``dead_s`` passed since
@@ -23,8 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..readout.events import EventProcessor, main_axis_g
-from .inputs import Stream
+from ..readout.events import EventProcessor
+from ..sources.antenna import ADC
+from .inputs import CHUNK_ROWS as BLOCK, Stream
 from .labels import Label
 
 REASONS = ("no_contact", "unlabelled", "gap", "clipped", "beyond_end")
@@ -68,14 +69,11 @@ class Exclusion:
 
 def onsets(stream: Stream, seg: Segmentation) -> np.ndarray:
     """Indexes (into ``stream.counts``) of the contacts' onsets (see the module docstring)."""
-    x = main_axis_g(stream.counts.astype(float), stream.adc_bits, stream.full_scale_g)
-    above = np.abs(x) > seg.onset_threshold_g
+    above = np.flatnonzero(above_threshold(stream, seg.onset_threshold_g))
     quiet = max(1, int(round(seg.quiet_s * stream.rate_hz)))
-    # loud_before[i]: any sample above the threshold among the ``quiet`` samples before i
-    total = np.concatenate([[0], np.cumsum(above)])
-    i = np.arange(len(above))
-    loud_before = total[i] - total[np.maximum(i - quiet, 0)] > 0
-    candidates = np.flatnonzero(above & ~loud_before)
+    # an onset: above the threshold, none of the ``quiet`` samples before it above
+    candidates = above[np.concatenate([[True], np.diff(above) > quiet])] if len(above) \
+        else above
     dead = seg.dead_s * stream.rate_hz
     chosen, last = [], -np.inf
     frames = stream.frames
@@ -84,6 +82,30 @@ def onsets(stream: Stream, seg: Segmentation) -> np.ndarray:
             chosen.append(i)
             last = frames[i]
     return np.asarray(chosen, dtype=np.int64)
+
+
+def above_threshold(stream: Stream, threshold_g: float) -> np.ndarray:
+    """|main axis| > ``threshold_g`` per sample: the two axes in g aligned to their main axis
+    as ``main_axis_g`` aligns them (PCA over the recording, its mean removed), worked through
+    in blocks so that memory follows a block, not the recording."""
+    counts, n = stream.counts, len(stream.counts)
+    blocks = range(0, n, BLOCK)
+    adc = ADC(stream.adc_bits, stream.full_scale_g)
+
+    def g(lo):
+        return adc.to_g(counts[lo:lo + BLOCK])
+
+    mean = sum(g(lo).sum(axis=0) for lo in blocks) / n
+    scatter = np.zeros((2, 2))
+    for lo in blocks:
+        centred = g(lo) - mean
+        scatter += centred.T @ centred
+    _, eigvec = np.linalg.eigh(scatter / max(n - 1, 1))
+    axis = eigvec[:, -1]
+    out = np.empty(n, dtype=bool)
+    for lo in blocks:
+        out[lo:lo + BLOCK] = np.abs((g(lo) - mean) @ axis) > threshold_g
+    return out
 
 
 def reconcile(stream: Stream, labels: list[tuple[int, Label]], seg: Segmentation,
