@@ -3,6 +3,7 @@ own clock (a CSV's first time, a bag's real-clock stamps), its units, axes and c
 declared, and every contact comes out labelled as the lab labelled it. The recordings come
 from ``lab_antenna``: another rod, written without the package's physics."""
 import contextlib
+import csv
 import io
 import json
 from pathlib import Path
@@ -146,6 +147,11 @@ def test_a_narrow_adc_in_a_wide_wav_is_read_at_its_own_bits_and_its_clipping_fou
     assert source.adc_bits == 12 and int(ds["counts"].values.max()) < 4095
     assert ds.sizes["event"] == len(sess.contacts) - 1
     assert source.provenance["counts"]["excluded"]["clipped"] == 1
+    assert source.provenance["counts"]["excluded_by_position"] == {
+        f"{loud.distance_cm:g}": {"clipped": 1}}
+    with open(tmp_path / "ds" / "exclusions.csv") as f:
+        assert [(r["reason"], float(r["distance_cm"])) for r in csv.DictReader(f)] == [
+            ("clipped", loud.distance_cm)]
     assert source.provenance["recordings"][0]["justified"] == "left"
     counts = lab.adc_counts(sess.g[:, :2], 12, 16.0)
     onset = int(round(ds["onset_s"].values[0] * 2000.0))

@@ -84,7 +84,8 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
         contacts += [(s, c) for c in kept]
         excluded += left_out
     counts = {"labels": len(table), "events": len(contacts),
-              "excluded": {r: sum(e.reason == r for e in excluded) for r in REASONS}}
+              "excluded": {r: sum(e.reason == r for e in excluded) for r in REASONS},
+              "excluded_by_position": _by_position(excluded)}
     log(f"data: {len(contacts)} contacts imported; left out: "
         + (", ".join(f"{n} {r}" for r, n in counts["excluded"].items() if n) or "none"))
     if not contacts:
@@ -103,6 +104,17 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
             "clocks": [c.row() for c in clocks],
             "counts": counts, "exclusions": [e.row() for e in excluded]}
     return ImportPlan(ds, excluded, meta)
+
+
+def _by_position(excluded) -> dict[str, dict[str, int]]:
+    """Labelled contacts left out, counted by position (cm) and reason: a position the import
+    lost most of is seen, not only a total."""
+    out = {}
+    for e in excluded:
+        if e.distance_cm is not None:
+            row = out.setdefault(f"{e.distance_cm:g}", {})
+            row[e.reason] = row.get(e.reason, 0) + 1
+    return dict(sorted(out.items(), key=lambda kv: float(kv[0])))
 
 
 def _names(streams) -> dict[str, str]:
@@ -160,11 +172,13 @@ def _plan_drives(streams, table, labels_path, options, seg: Segmentation, log,
         s = by_name[lab.recording]
         reason = segment.stretch_problem(s, lab.onset_s, seg)
         if reason:
-            excluded.append(segment.Exclusion(s.name, lab.onset_s, lab.line, reason))
+            excluded.append(segment.Exclusion(s.name, lab.onset_s, lab.line, reason,
+                                              lab.distance_cm))
         else:
             kept.append(lab)
     counts = {"labels": len(table), "events": len(kept), "drives": len(streams),
-              "excluded": {r: sum(e.reason == r for e in excluded) for r in REASONS}}
+              "excluded": {r: sum(e.reason == r for e in excluded) for r in REASONS},
+              "excluded_by_position": _by_position(excluded)}
     log(f"data: {len(streams)} drive(s), {len(kept)} contacts kept; left out: "
         + (", ".join(f"{n} {r}" for r, n in counts["excluded"].items() if n) or "none"))
     labels_hash = inputs.sha256_of(Path(labels_path))
@@ -280,7 +294,7 @@ def _dataset(contacts, table, by_name, seg: Segmentation, key: str):
 
 def exclusions_csv(exclusions: list[segment.Exclusion]) -> str:
     out = io.StringIO()
-    writer = csv.DictWriter(out, ["recording", "t_s", "label_line", "reason"],
+    writer = csv.DictWriter(out, ["recording", "t_s", "label_line", "reason", "distance_cm"],
                             lineterminator="\n")
     writer.writeheader()
     for e in exclusions:

@@ -61,10 +61,12 @@ class Exclusion:
     t_s: float
     line: int | None        # the label's line, None for an unlabelled onset
     reason: str
+    distance_cm: float | None = None    # the label's position, None for an unlabelled onset
 
     def row(self) -> dict:
         return {"recording": self.recording, "t_s": round(self.t_s, 6),
-                "label_line": "" if self.line is None else self.line, "reason": self.reason}
+                "label_line": "" if self.line is None else self.line, "reason": self.reason,
+                "distance_cm": "" if self.distance_cm is None else self.distance_cm}
 
 
 def onsets(stream: Stream, seg: Segmentation) -> np.ndarray:
@@ -124,12 +126,14 @@ def reconcile(stream: Stream, labels: list[tuple[int, Label]], seg: Segmentation
     contacts, excluded = [], []
     for k, (index, lab) in enumerate(labels):
         if k not in label_of:
-            excluded.append(Exclusion(stream.name, lab.onset_s, lab.line, "no_contact"))
+            excluded.append(Exclusion(stream.name, lab.onset_s, lab.line, "no_contact",
+                                      lab.distance_cm))
             continue
         i = found[label_of[k]]
         reason = window_problem(stream, i, seg)
         if reason:
-            excluded.append(Exclusion(stream.name, t_found[label_of[k]], lab.line, reason))
+            excluded.append(Exclusion(stream.name, float(t_found[label_of[k]]), lab.line, reason,
+                                      lab.distance_cm))
         else:
             contacts.append(Contact(lab, index, int(stream.frames[i])))
     excluded += [Exclusion(stream.name, float(t_found[j]), None, "unlabelled")
