@@ -631,7 +631,12 @@ def _read_wav(path: Path, options: Options) -> Stream:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("error")          # a short data chunk is a truncated file
-            rate, data = wavfile.read(path, mmap=True)
+            try:                                    # mapped, read chunk by chunk below
+                rate, data = wavfile.read(path, mmap=True)
+            except ValueError as exc:
+                if "mmap" not in str(exc):          # 24-bit PCM cannot be mapped: read whole
+                    raise
+                rate, data = wavfile.read(path)
     except Exception as exc:            # scipy's parser: struct, value, EOF errors, warnings
         raise SpecError(path.name, f"{type(exc).__name__}: {exc}",
                         "a whole WAV file: it is truncated or damaged") from None
