@@ -346,7 +346,7 @@ def _axes_of(where: str, n_axes: int, options: Options) -> list[int]:
     return [AXES.index(a) for a in options.axes]
 
 
-def _unit_notes(units: str, adc: ADC, options: Options, extra: dict | None = None) -> dict:
+def _unit_notes(units: str, options: Options, extra: dict | None = None) -> dict:
     return {"units": units, "axes": options.axes, "signed": bool(options.signed),
             **(extra or {})}
 
@@ -422,7 +422,7 @@ def _read_npy(path: Path, options: Options) -> Stream:
                         "a whole NumPy file: it is truncated or damaged") from None
     if array.ndim != 2:
         raise SpecError(f"{path.name} {key}", f"shape {array.shape}",
-                        f"an array of shape (samples, 2 or 3): the axes x, y (, z)")
+                        "an array of shape (samples, 2 or 3): the axes x, y (, z)")
     columns = _axes_of(f"{path.name} {key}", array.shape[1], options)
     if units == "counts" and array.dtype.kind not in "iu":
         raise SpecError(f"{path.name} {key}", f"dtype {array.dtype}",
@@ -439,7 +439,7 @@ def _read_npy(path: Path, options: Options) -> Stream:
     counts = np.concatenate(parts) if parts else np.zeros((0, 2), np.int32)
     rate = _rate(path, stated, options, "rate_hz")
     return Stream(path.name, path.suffix[1:], counts, np.arange(len(counts)), rate, adc.bits,
-                  adc.full_scale_g, _files(path), _unit_notes(units, adc, options),
+                  adc.full_scale_g, _files(path), _unit_notes(units, options),
                   origin_s=start or 0.0)
 
 
@@ -526,9 +526,8 @@ def _read_csv(path: Path, options: Options) -> Stream:
         raise SpecError(path.name, "an empty file", "a CSV with a header") from None
     counts = np.concatenate(parts) if parts else np.zeros((0, 2), np.int32)
     del parts
-    notes = _unit_notes(units, adc, options, {"columns": [h.strip() for h in header],
-                                               "delimiter": dialect.delimiter,
-                                               "decimal": decimal})
+    notes = _unit_notes(units, options, {"columns": [h.strip() for h in header],
+                                         "delimiter": dialect.delimiter, "decimal": decimal})
     frames, origin, stated = np.arange(len(counts)), 0.0, None
     if timed and len(counts) >= 2:
         t = np.concatenate(times)
@@ -652,7 +651,7 @@ def _read_wav(path: Path, options: Options) -> Stream:
             data[lo:lo + CHUNK_ROWS, columns], dtype=np.float64) * adc.full_scale_g, "g", adc,
             False, lambda row, lo=lo: f"sample {lo + row}")
             for lo in range(0, len(data), CHUNK_ROWS)])
-        notes = _unit_notes("full scale (float PCM)", adc, options)
+        notes = _unit_notes("full scale (float PCM)", options)
         return Stream(path.name, "wav", counts, np.arange(len(counts)), rate, adc.bits,
                       adc.full_scale_g, _files(path), notes)
     if data.dtype.kind not in "iu":
@@ -675,7 +674,10 @@ def _read_wav(path: Path, options: Options) -> Stream:
     full = np.concatenate(parts) if parts else np.zeros((0, 2), np.int64)
     if shift and np.any(full & low):
         centred = full - 2 ** (container - 1)
-        if np.all((centred >= -2 ** (bits - 1)) & (centred < 2 ** (bits - 1))):
+        if container == 32 and options.adc_bits is None and not _wav_header(path):
+            justified = "top 24 of 32 bits"        # 32-bit PCM of a 32-bit converter
+            counts = full >> shift
+        elif np.all((centred >= -2 ** (bits - 1)) & (centred < 2 ** (bits - 1))):
             justified = "right"
             counts = centred + 2 ** (bits - 1)
         else:
@@ -688,8 +690,8 @@ def _read_wav(path: Path, options: Options) -> Stream:
     else:
         counts = full >> shift
     adc = _adc(options, bits)
-    notes = _unit_notes("counts", adc, options, {"container_bits": container,
-                                                  "justified": justified})
+    notes = _unit_notes("counts", options, {"container_bits": container,
+                                            "justified": justified})
     return Stream(path.name, "wav", counts.astype(np.int32), np.arange(len(counts)), rate,
                   bits, adc.full_scale_g, _files(path), notes)
 
@@ -735,7 +737,7 @@ def _read_rosbag(path: Path, options: Options) -> Stream:
     adc = _adc(options, ACCELERATION_ADC_BITS)
     counts = _to_counts(path.name, values, options.units or "m/s2", adc, False,
                         lambda row: f"message {int(order[row])}")
-    notes = _unit_notes(options.units or "m/s2", adc, options,
+    notes = _unit_notes(options.units or "m/s2", options,
                         {"topic": wanted, "first_stamp_ns": int(ns[0]), **clock})
     return Stream(path.name, "rosbag", counts, frames, rate, adc.bits, adc.full_scale_g,
                   _files(path), notes, origin_s=int(ns[0]) / 1e9)
