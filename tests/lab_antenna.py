@@ -180,13 +180,11 @@ def imu_bag(path: Path, sess: Session, first_stamp_ns: int, jitter_ns: int = 0,
 
 
 def decay_time_s(g_xy: np.ndarray, rate_hz: float, pre_s: float) -> float:
-    """A one-feature read-out: the time the ringing's envelope takes to fall to 1/e of its
-    first 20 ms peak (the lab's materials differ in nothing else)."""
+    """A one-feature read-out: the time from the onset until the ringing's upper envelope
+    (the largest deflection still to come) falls to 1/e of its peak (the lab's materials
+    differ in nothing else)."""
     r = np.hypot(g_xy[:, 0] - np.median(g_xy[:, 0]), g_xy[:, 1] - np.median(g_xy[:, 1]))
-    start = int(round(pre_s * rate_hz))
-    r = r[start:]
-    peak = r[:int(0.02 * rate_hz) + 1].max()
-    win = max(1, int(0.01 * rate_hz))
-    env = np.maximum.accumulate(np.convolve(r, np.ones(win) / win, "same")[::-1])[::-1]
-    below = np.flatnonzero(env < peak / np.e)
+    r = r[int(round(pre_s * rate_hz)):]
+    envelope = np.maximum.accumulate(r[::-1])[::-1]
+    below = np.flatnonzero(envelope < envelope[0] / np.e)
     return below[0] / rate_hz if len(below) else len(r) / rate_hz

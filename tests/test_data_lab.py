@@ -445,3 +445,24 @@ def test_24_bit_pcm_is_read_as_24_bit_counts(tmp_path):
     onset = int(round(source.dataset["onset_s"].values[0] * 2000.0))
     assert np.array_equal(source.dataset["counts"].values[0],
                           counts[onset - 100:onset - 100 + 2100])
+
+
+def test_the_imported_windows_carry_the_labs_material_difference(tmp_path, sess):
+    """The reference the studies are held to: a one-feature read-out of the decay time on the
+    imported windows (a threshold between neighbouring materials' medians, set on the first
+    repetition, read on the second) reads the lab's materials, which differ in nothing else."""
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   2000.0, origin_s=7.0)
+    labels = lab.labels_csv(tmp_path / "labels.csv", sess, "r1", origin_s=7.0)
+    source, _ = imported(tmp_path, tmp_path / "recs", labels)
+    ds = source.dataset
+    g = (ds["counts"].values.astype(float) - 512) * 36.0 / 1024
+    tau = np.asarray([lab.decay_time_s(ev, 2000.0, source.pre_trigger_s) for ev in g])
+    material = ds["material"].values.astype(str)
+    train = ds["repetition"].values == 0
+    names = sorted(set(material), key=lambda m: np.median(tau[train & (material == m)]))
+    medians = [np.median(tau[train & (material == m)]) for m in names]
+    edges = np.sqrt(np.multiply(medians[1:], medians[:-1]))
+    read = np.asarray(names)[np.searchsorted(edges, tau)]
+    assert np.mean(read[~train] == material[~train]) >= 0.9
