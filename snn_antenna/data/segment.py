@@ -29,6 +29,7 @@ from .inputs import CHUNK_ROWS as BLOCK, Stream
 from .labels import Label
 
 REASONS = ("no_contact", "unlabelled", "gap", "clipped", "beyond_end")
+CLOCK_LABELS = 400      # labels whose differences to every onset are searched for a shift
 
 
 @dataclass(frozen=True)
@@ -165,21 +166,31 @@ class Clock:
 def clock_fit(stream: Stream, label_s: np.ndarray, found: np.ndarray,
               seg: Segmentation) -> Clock:
     """How the label times ``label_s`` sit against the onsets ``found`` in ``stream``: the
-    shift matching most labels (a window of 2 ``match_s`` slid over every label-to-onset
-    difference; onsets are ``dead_s`` apart, so a label matches one onset per window)."""
+    shift matching most labels (a window of 2 ``match_s`` slid over the label-to-onset
+    differences of up to ``CLOCK_LABELS`` labels; onsets are ``dead_s`` apart, so a label
+    matches one onset per window), counted over every label."""
     t_found = stream.time_of(stream.frames[found])
     label_s = np.asarray(label_s, dtype=float)
     if not len(label_s) or not len(t_found):
         return Clock(stream.name, len(label_s), 0, None, None, 0)
-    diff = (t_found[None, :] - label_s[:, None])
-    near = np.abs(diff) <= seg.match_s
-    matched = int(near.any(axis=1).sum())
-    lag = float(np.median(diff[near])) if matched else None
-    flat = np.sort(diff.ravel())
+
+    def nearest(times):           # signed time from each label to its nearest onset
+        j = np.clip(np.searchsorted(t_found, times), 1, len(t_found) - 1)
+        left, right = t_found[j - 1] - times, t_found[j] - times
+        return np.where(np.abs(left) <= np.abs(right), left, right) if len(t_found) > 1 \
+            else t_found[0] - times
+
+    lags = nearest(label_s)
+    near = np.abs(lags) <= seg.match_s
+    matched = int(near.sum())
+    lag = float(np.median(lags[near])) if matched else None
+    sample = label_s[np.linspace(0, len(label_s) - 1, min(len(label_s), CLOCK_LABELS))
+                     .astype(int)]
+    flat = np.sort((t_found[None, :] - sample[:, None]).ravel())
     inside = np.searchsorted(flat, flat + 2 * seg.match_s, side="right") - np.arange(len(flat))
     best = int(np.argmax(inside))
     shift = float(np.median(flat[best:best + inside[best]]))
-    shifted = int((np.abs(diff - shift) <= seg.match_s).any(axis=1).sum())
+    shifted = int((np.abs(nearest(label_s + shift)) <= seg.match_s).sum())
     found_offset = (abs(shift) > seg.match_s and shifted >= 3 and shifted >= 2 * matched
                     and shifted >= len(label_s) / 2)
     return Clock(stream.name, len(label_s), matched, lag, shift if found_offset else None,
