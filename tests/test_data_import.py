@@ -172,7 +172,7 @@ def refused(tmp_path, recs, labels, *extra) -> str:
 @pytest.mark.parametrize("row, named", [
     (("run1", 12.0, 10, "wood", 9), "labels.csv line 8 onset_s"),      # outside the recording
     (("run1", -1.0, 10, "wood", 9), "labels.csv line 8 onset_s"),
-    (("run1", 9.0, 10, "marble", 9), "labels.csv line 8 material"),    # unknown material
+    (("run1", 9.0, 10, "Marble", 9), "labels.csv line 8 material"),    # not a name
     (("run1", 9.0, 60, "wood", 9), "labels.csv line 8 distance_cm"),
     (("run1", 1.0, 10, "wood", 9), "labels.csv line 8 onset_s"),       # duplicated contact
     (("run1", 9.0, 10, "wood", 0), "labels.csv line 8 repetition"),    # duplicated repetition
@@ -221,8 +221,8 @@ def _garbage_cell(rows, header, draw):
     r, c = draw(st.integers(0, len(rows) - 1)), draw(st.integers(1, 4))
     rows[r] = rows[r][:c] + (draw(st.sampled_from(["", "nan", "x", "inf", "-3", "1e999", "½"]))
                              ,) + rows[r][c + 1:]
-    if c == 3:                                   # every material name is refused but ours
-        rows[r] = rows[r][:3] + (draw(st.sampled_from(["", "glass", "Wood", "nan"])),) + \
+    if c == 3:                                   # not a material name
+        rows[r] = rows[r][:3] + (draw(st.sampled_from(["", "3d", "Wood", "nan", "pvc foam"])),) + \
             rows[r][4:]
     if c == 4 and rows[r][4] in ("", "nan", "inf", "1e999"):
         rows[r] = rows[r][:4] + ("-1",)

@@ -196,3 +196,30 @@ def test_nmf_sizes_a_small_split_cannot_fit_are_left_out_and_named():
     assert "nmf_30, nmf_45" in line and "28 training events" in line, line
     everything, none = _fitting_nmf(material_baselines([3, 24]), features, evaluation)
     assert len(everything) == 3 and none is None
+
+
+def test_tuned_channels_placed_at_the_top_of_a_1khz_range_stay_within_the_rate():
+    """Channels placed from a lab's 1 kHz contacts whose material differences sit at the top
+    of the clipped range: every channel the run would build passes the rate check the run
+    makes, for every tuning of the shipped plan (so `--check` passing means the run does)."""
+    from snn_antenna.readout.band_tuning import tune
+    from snn_antenna.readout.spiking import SpikingBank
+    from snn_antenna.readout.spiking_decoders import SpikingPlan
+
+    fitted, _ = fit_to_rate(shipped(), RATE)
+    plan = SpikingPlan(**fitted["spiking"])
+    tuned = plan.tuned_plan()
+    rng = np.random.default_rng(0)
+    t = np.arange(int(0.5 * RATE)) / RATE
+    events, labels = [], []
+    for material, tau in (("rubber", 0.02), ("wood", 0.2)):     # they differ near 240 Hz
+        for _ in range(6):
+            ring = 2 * np.exp(-t / tau) * np.sin(2 * np.pi * rng.uniform(235, 249) * t)
+            ring += 0.01 * rng.standard_normal(len(t))
+            events.append(np.stack([512 + ring * 28, 512 + ring * 20], axis=1).round())
+            labels.append(material)
+    counts = np.asarray(events, dtype=np.int64)
+    for tuning in tuned.tunings().values():
+        bands = tune(counts, np.asarray(labels), RATE, 10, 18.0, tuning)
+        assert max(b.band_hz[1] for b in bands.values()) <= RATE / MIN_SAMPLES_PER_CYCLE
+        SpikingBank(bands=bands, duration_s=0.2, target="numpy").check_rate(RATE)

@@ -3,11 +3,15 @@
 A CSV file with a header. For bench contacts (a stationary antenna struck at known places):
 
 ``recording``    the recording's name in the recordings folder (a ``record`` folder's or a
-                 file's name); may be left out when there is one recording
-``onset_s``      when the contact happened, in seconds on the recording's clock (its first sample
-                 is at its sequence number over the rate for a ``record`` folder, else at 0)
+                 file's name, with or without its extension); may be left out when there is
+                 one recording
+``onset_s``      when the contact happened, in seconds on the recording's own clock (a
+                 ``record`` folder's sample at its sequence number over the rate, a CSV's
+                 ``t_s``, a bag's header stamps in seconds since 1970, an ``.npz``'s
+                 ``start_s``; else its first sample is at 0)
 ``distance_cm``  where along the rod, in cm from its base
-``material``     what was struck (one of ``sources.antenna.MATERIALS``)
+``material``     what was struck: a lowercase name (letters, digits, ``_``); the lab's own
+                 materials are the names its labels use
 ``repetition``   optional: the repetition's number (from 0) at that site; splits are by
                  repetition, so repeated contacts at a site must be numbered apart; without it,
                  contacts at a site are numbered in time order
@@ -30,6 +34,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,7 +54,7 @@ DRIVE_COLUMNS = DRIVE_REQUIRED + DRIVE_OPTIONAL
 def is_drive_table(path) -> bool:
     """A drives table names ``contact_s`` in its header (a bench table ``onset_s``)."""
     try:
-        first = Path(path).read_text(encoding="utf-8").splitlines()[:1]
+        first = Path(path).read_text(encoding="utf-8-sig").splitlines()[:1]
     except (OSError, UnicodeDecodeError):
         return False
     return bool(first) and "contact_s" in [h.strip() for h in first[0].split(",")]
@@ -65,10 +70,15 @@ class Label:
     repetition: int | None
 
 
-def read_labels(path, recordings: dict[str, float]) -> list[Label]:
-    """The rows of the labels table at ``path``, each checked against ``recordings`` (name →
-    duration in s): a refusal names the file, line and column. A drives table's rows carry
-    ``contact_s`` as their ``onset_s`` and no repetition."""
+MATERIAL_NAME = re.compile(r"[a-z][a-z0-9_]*")
+MISSING = ("nan", "none", "null", "na", "n_a")
+
+
+def read_labels(path, recordings: dict[str, str]) -> list[Label]:
+    """The rows of the labels table at ``path``, each checked (``recordings``: every name a row
+    may give → the recording's name): a refusal names the file, line and column. A drives
+    table's rows carry ``contact_s`` as their ``onset_s`` and no repetition. Times are checked
+    against the recordings' clocks by :func:`check_times`."""
     path = Path(path)
     drive = is_drive_table(path)
     required, optional = (DRIVE_REQUIRED, DRIVE_OPTIONAL) if drive else (REQUIRED, OPTIONAL)
@@ -77,7 +87,7 @@ def read_labels(path, recordings: dict[str, float]) -> list[Label]:
     if not path.is_file():
         raise SpecError("labels", str(path), "an existing CSV file of labels")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")
     except (UnicodeDecodeError, OSError) as exc:
         raise SpecError("labels", str(path), f"a UTF-8 text CSV file ({type(exc).__name__})") \
             from None
@@ -100,9 +110,10 @@ def read_labels(path, recordings: dict[str, float]) -> list[Label]:
     if missing:
         raise SpecError(f"{name} line 1", ",".join(header),
                         f"a header naming {', '.join(required)}; {', '.join(missing)} missing")
-    if "recording" not in header and len(recordings) != 1:
+    n_recordings = len(set(recordings.values()))
+    if "recording" not in header and n_recordings != 1:
         raise SpecError(f"{name} line 1", ",".join(header),
-                        f"a 'recording' column naming which of the {len(recordings)} "
+                        f"a 'recording' column naming which of the {n_recordings} "
                         "recordings each row belongs to")
     labels, seen = [], {}
     for line, row in enumerate(rows[1:], start=2):
@@ -130,16 +141,17 @@ def read_labels(path, recordings: dict[str, float]) -> list[Label]:
     return labels
 
 
-def _label(name: str, line: int, cells: dict, recordings: dict[str, float],
+def _label(name: str, line: int, cells: dict, recordings: dict[str, str],
            drive: bool = False) -> Label:
     def field(column):
         return f"{name} line {line} {'contact_s' if drive and column == 'onset_s' else column}"
 
-    recording = cells.get("recording") or (next(iter(recordings)) if len(recordings) == 1
-                                           else "")
-    if recording not in recordings:
-        raise SpecError(field("recording"), recording,
-                        f"the name of a recording in the folder: {sorted(recordings)}")
+    names = sorted(set(recordings.values()))
+    given = cells.get("recording") or (names[0] if len(names) == 1 else "")
+    if given not in recordings:
+        raise SpecError(field("recording"), given,
+                        f"the name of a recording in the folder: {names}")
+    recording = recordings[given]
     numbers = {}
     for column in ("onset_s", "distance_cm"):
         try:
@@ -148,18 +160,16 @@ def _label(name: str, line: int, cells: dict, recordings: dict[str, float],
             raise SpecError(field(column), cells[column], "a number") from None
         if not np.isfinite(numbers[column]):
             raise SpecError(field(column), cells[column], "a finite number")
-    duration = recordings[recording]
-    if not 0 <= numbers["onset_s"] < duration:
-        raise SpecError(field("onset_s"), numbers["onset_s"],
-                        f"a time inside {recording}, which spans [0, {duration:g}) s")
     try:
         antenna.check_distance(numbers["distance_cm"])
     except SpecError as exc:
         raise SpecError(field("distance_cm"), numbers["distance_cm"], exc.accepted) from None
     material = cells.get("material", "")
-    if not (drive and material == "") and material not in antenna.MATERIALS:
+    if not (drive and material == "") and (not MATERIAL_NAME.fullmatch(material)
+                                           or material in MISSING):
         raise SpecError(field("material"), cells["material"],
-                        f"a known material: {', '.join(sorted(antenna.MATERIALS))}")
+                        "a material's name: lowercase letters, digits and _, starting with a "
+                        f"letter (the paper's: {', '.join(sorted(antenna.MATERIALS))})")
     repetition = None
     if cells.get("repetition", "") != "":
         try:
@@ -171,6 +181,17 @@ def _label(name: str, line: int, cells: dict, recordings: dict[str, float],
             raise SpecError(field("repetition"), repetition, "an integer >= 0")
     return Label(line, recording, numbers["onset_s"], numbers["distance_cm"], material,
                  repetition)
+
+
+def check_times(name: str, labels: list[Label], spans: dict[str, tuple[float, float]],
+                drive: bool = False) -> None:
+    """Every label's time inside its recording's span on that recording's clock."""
+    for lab in labels:
+        start, end = spans[lab.recording]
+        if not start <= lab.onset_s < end:
+            raise SpecError(f"{name} line {lab.line} {'contact_s' if drive else 'onset_s'}",
+                            lab.onset_s, f"a time inside {lab.recording}, which spans "
+                                         f"[{start:.9g}, {end:.9g}) s on its own clock")
 
 
 def _check_repetitions(name: str, labels: list[Label]) -> None:

@@ -79,9 +79,10 @@ def signal_statistics(features: xr.Dataset) -> dict:
     out["tau_low_cv_median"] = float(np.median([tau[g].std(ddof=1) / tau[g].mean()
                                                 for g in groups]))
     materials = features["material"].values.astype(str)
+    # a material whose processed contacts sit at one distance has no slope to fit
     out["tau_low_slope_s_per_cm"] = {
         str(m): float(stats.linregress(d[materials == m], tau[materials == m]).slope)
-        for m in np.unique(materials)}
+        for m in np.unique(materials) if len(np.unique(d[materials == m])) > 1}
     out.update(wood_vs_aluminium(features, tau))
     return out
 

@@ -25,6 +25,7 @@ import numpy as np
 from ..core import bounds, calibration
 from ..core.errors import SpecError, check, is_number
 from ..networks import neurons
+from ..networks.resonators import MIN_SAMPLES_PER_CYCLE
 from ..preprocess import make_coder
 from .spiking import Band, align_events
 
@@ -159,11 +160,16 @@ def coarsest_dt_ms(top_hz: float, hz_per_k: float, max_k_dt: float) -> float:
 
 
 def tuned_bands(centres, low, high, tuning: Tuning, rate_hz: float) -> dict[str, Band]:
-    """One ``Band`` per channel, named ``ch00``, ``ch01``… in frequency order."""
+    """One ``Band`` per channel, named ``ch00``, ``ch01``… in frequency order; a channel's
+    resonators stop at the highest frequency the rate carries (``MIN_SAMPLES_PER_CYCLE``
+    samples per cycle), so a channel centred at the top of ``range_hz`` never asks for more."""
     bands = {}
+    top = rate_hz / MIN_SAMPLES_PER_CYCLE
     for j, (c, lo, hi) in enumerate(zip(centres, low, high)):
         per = tuning.resonators_per_channel
-        span = (c * (1 - tuning.spread), c * (1 + tuning.spread)) if per > 1 else (c, c)
+        c = min(float(c), top)
+        span = (c * (1 - tuning.spread), min(c * (1 + tuning.spread), top)) if per > 1 \
+            else (c, c)
         bands[f"ch{j:02d}"] = Band(
             n_neurons=per, band_hz=(float(span[0]), float(span[1])),
             spacing="log", coder_amplitude=tuning.coder_amplitude,

@@ -42,7 +42,7 @@ from ..core.truth import Event, GroundTruth
 DATASET, DRIVES = "bench.zarr", "drives.zarr"
 EXCLUSIONS, IMPORT_FILE = "exclusions.csv", "import.json"
 KIND = "snn-antenna recorded data set"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 CALIBRATION_REPETITIONS = 1   # seed stream of the repetitions held out to calibrate on
 ACCEPTED = ("a folder written by `snn-antenna data import` (import.json, bench.zarr or "
             "drives.zarr, exclusions.csv)")
@@ -104,7 +104,7 @@ class RecordedBench(ImportedSet):
 
     @property
     def materials(self) -> list[str]:
-        return sorted(set(self.dataset["material"].values.astype(str)))
+        return sorted(set(str(m) for m in self.dataset["material"].values))
 
     @property
     def positions_cm(self) -> list[float]:
@@ -286,7 +286,28 @@ def _open(path, kind: str, store: str):
     if ds.attrs.get("key") != meta.get("key") or size != meta["counts"]["events"]:
         raise SpecError("data", str(path), f"{ACCEPTED}; its {store} is not the one its "
                                            f"{IMPORT_FILE} describes: import it again")
+    if content_sha256(ds) != meta.get("content_sha256"):
+        raise SpecError("data", str(path), f"{ACCEPTED}; its {store} changed after the import "
+                                           f"(its content is not the one {IMPORT_FILE} "
+                                           "hashed: a file of it changed or is missing): "
+                                           "import it again")
     return ds, meta
+
+
+def content_sha256(ds) -> str:
+    """The sha256 of a data set's every variable and coordinate (name, type, shape, values):
+    what the import wrote, checked when a study opens it, so a store changed or with a file
+    missing after the import is never read, nor any cache made from it."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for name in sorted(map(str, ds.variables)):
+        values = np.ascontiguousarray(ds[name].values)
+        if values.dtype.kind in "UO":
+            values = np.asarray([str(v) for v in values.ravel()], dtype=str)
+        h.update(f"{name}:{values.dtype.str}:{values.shape}".encode())
+        h.update(values.tobytes())
+    return h.hexdigest()
 
 
 def _excluded_text(excluded: dict) -> str:
