@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.bridge.online.handler import Published, Window
+from snn_antenna.bridge.wire.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online
 from snn_antenna.bridge.wire.protocol import Sample
 from snn_antenna.bridge.view.saved_view import load_view
@@ -43,7 +43,7 @@ def state(url: str) -> dict:
 
 class FakePipeline(threading.Thread):
     """Feeds ``view`` as run_online does, paced at 1 kHz; a Th request from the page is
-    applied at the next window and reported back with ``view.applied``."""
+    applied at the next window and reported back with ``view.changed``."""
 
     def __init__(self, view, parts, counts):
         super().__init__(daemon=True)
@@ -64,7 +64,7 @@ class FakePipeline(threading.Thread):
                                               for i, (x, y) in enumerate(chunk)],
                                    {"frames": n + STEP}))
             signal = np.sin(np.arange(n, n + STEP) / 20.0)
-            self.view._coded(signal[:, None], self.th, np.sign(signal)[:, None] * 0.15)
+            self.view.coded(signal[:, None], self.th, np.sign(signal)[:, None] * 0.15)
             n += STEP
             if n % self.window == 0:
                 self._take_requests(n)
@@ -88,7 +88,7 @@ class FakePipeline(threading.Thread):
         if change.field != "th_g":                  # a window change: asked, that is all here
             return
         was, self.th = self.th, change.value
-        self.view.applied({"sample": n, "t_s": n / 1000, "field": change.field,
+        self.view.changed({"sample": n, "t_s": n / 1000, "field": change.field,
                            "value": change.value, "shown": {"th_g": change.value},
                            "was": was, "by": "page"})
 
