@@ -77,7 +77,7 @@ def test_streaming_needs_a_step_that_divides_the_sample_interval():
 def test_the_stream_calls_out_of_the_network_only_through_its_port():
     """A StreamPort (fill and window) is what the stream takes: a bare iterator of chunks is
     refused, naming what is accepted."""
-    with pytest.raises(SpecError, match="port = list_iterator .*StreamPort"):
+    with pytest.raises(SpecError, match="port = 'list_iterator' .*StreamPort"):
         ResonatorArray(target="numpy").stream(iter([np.zeros(10)]), 1000.0)
     assert isinstance(ChunkFeed([]), StreamPort)
 
