@@ -114,8 +114,9 @@ def test_the_schedule_applies_th_where_the_coder_reaches_its_sample_and_a_person
     assert schedule.coded_until() == 150                    # the gate's Th codes one window
     pieces, events = schedule.code(120)
     assert pieces == [(100, 0.1), (120, 0.3)] and schedule.th_source == "manual"
+    # The gate's Th for that window was applied first, then the page's in its place.
     assert [(e["sample"], e["was"], e["value"], e["by"]) for e in events] == \
-        [(100, 0.1, 0.3, "page")]
+        [(100, 0.2, 0.3, "page")]
     schedule.submit(Change("th_g", 0.5), "gate", 150)       # overridden: dropped
     assert schedule.code(100) == ([(100, 0.3)], []) and schedule.coded_until() is None
     assert schedule.events == events                        # the gate's steps are not events
@@ -418,7 +419,9 @@ def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monk
 
     clock = [1000.0]
     monkeypatch.setattr(view_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
-    live = LiveView(_parts())
+    parts = _parts()
+    live = LiveView(parts)
+    live.stream_started(parts, InputSchedule(parts.th_g, parts.window_s, 1000.0, 1000))
     live.handle(types.SimpleNamespace(counts={"frames": 1}, samples=[(0, 1.0, 2.0)]))
     clock[0] += view_module.FLUSH_S + 1e-6          # a frame of samples goes
     live.idle()
