@@ -81,8 +81,8 @@ def stream_from_emulator(parts, seconds: float, fast: bool, view=None) -> dict:
         try:
             emulator.stdout.readline()              # the pty exists once its path is printed
             source = SerialSource(link).start()
-            report = run_online(source, parts, stop=_stop_when_consumed(source, n_frames),
-                                handlers=[view] if view else [], view=view)
+            report = run_online(source, parts, [view] if view else [],
+                                stop=_stop_when_consumed(source, n_frames))
             source.stop()
         finally:
             emulator.kill()

@@ -409,3 +409,48 @@ def reset(pipeline: Pipeline) -> Pipeline:
     for _, step in pipeline.steps:
         step.reset()
     return pipeline
+
+
+class CalibratedChain:
+    """The preprocessing chain on a stream whose first ``n_calibration`` samples fit it.
+
+    The PCA alignment needs a fit. The first samples are held back until there are
+    ``n_calibration`` of them; the chain is fitted on exactly those (however the stream chunked
+    them, the same data give the same numbers), then they and every later chunk go through it
+    with ``partial_transform``: the same numbers as the offline chain fitted on the same
+    samples.
+    """
+
+    def __init__(self, chain: Pipeline, n_calibration: int):
+        check(isinstance(n_calibration, int) and n_calibration >= 1, "n_calibration",
+              n_calibration, "a number of samples >= 1")
+        self.chain, self.n_calibration = chain, n_calibration
+        self._held: list[np.ndarray] = []
+        self.fitted = False
+
+    def push(self, counts: np.ndarray) -> np.ndarray | None:
+        """ADC counts (n, 2) in, coded samples out (None while calibrating)."""
+        counts = self.take(counts)
+        return None if counts is None else self.code(counts)[1]
+
+    def take(self, counts: np.ndarray) -> np.ndarray | None:
+        """ADC counts (n, 2) in; the counts ready to code out (the held ones first, once the
+        chain is fitted on them), None while calibrating."""
+        if not self.fitted:
+            self._held.append(counts)
+            counts = np.concatenate(self._held)
+            if len(counts) < self.n_calibration:
+                self._held = [counts]
+                return None
+            reset(self.chain.fit(counts[:self.n_calibration]))
+            self._held, self.fitted = [], True
+        return counts
+
+    def code(self, counts: np.ndarray, threshold=None) -> tuple[np.ndarray, np.ndarray]:
+        """Counts that ``take`` made ready through the fitted chain: the coder's input (the
+        conditioned signal its gate compares with Th) and its output, coded with
+        ``threshold`` (None: the coder's own)."""
+        signal = counts
+        for _, step in self.chain.steps[:-1]:
+            signal = step.partial_transform(signal)
+        return signal, self.chain.steps[-1][1].partial_transform(signal, threshold)

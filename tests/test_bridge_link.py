@@ -15,6 +15,7 @@ import serial
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulate.emulator import Emulator, FaultPlan
 from snn_antenna.bridge.emulate.links import PtyLink, SerialLink
+from snn_antenna.bridge.wire.handler import BatchHandler
 from snn_antenna.bridge.wire.protocol import encode_binary
 from snn_antenna.bridge.wire.recorder import COUNT_FIELDS, Recorder
 from snn_antenna.bridge.wire.replay import ReplaySource
@@ -159,12 +160,9 @@ def test_replay_reproduces_samples_and_counts(tmp_path):
     replay = ReplaySource(tmp_path / "rec").start()
     samples = []
 
-    class Collect:
+    class Collect(BatchHandler):
         def handle(self, batch):
             samples.extend(batch.samples)
-
-        def idle(self):
-            pass
 
     result = run_source(replay, [Collect()], no_data_timeout_s=60)
     assert np.array_equal(np.array(samples), np.column_stack([rec.seq, rec.x, rec.y]))

@@ -12,7 +12,8 @@ import xarray as xr
 from snn_antenna.bridge import load_recording
 from snn_antenna.bridge.emulate.emulator import Emulator
 from snn_antenna.bridge.emulate.links import PeerGone, PtyLink
-from snn_antenna.bridge.online.pipeline import CalibratedChain, build_online, run_online
+from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.preprocess import CalibratedChain
 from snn_antenna.bridge.wire.recorder import record_counts
 from snn_antenna.bridge.wire.replay import ReplaySource
 from snn_antenna.core.errors import SpecError

@@ -171,7 +171,8 @@ def test_live_chain_takes_the_coder_from_the_spec(name):
     """The live chain's last stage is the spec's coder, and codes a contact as one."""
     from pathlib import Path
 
-    from snn_antenna.bridge.online.pipeline import CalibratedChain, build_online
+    from snn_antenna.bridge.online.pipeline import build_online
+    from snn_antenna.preprocess import CalibratedChain
     from snn_antenna.sources.stimuli import Contact, RobotScene
 
     network = Path(__file__).resolve().parents[1] / "networks" / "live.toml"
@@ -189,7 +190,8 @@ def test_live_path_runs_each_coder(tmp_path, name):
     the live coded stream equals the chain's offline coding, and contacts come out."""
     from pathlib import Path
 
-    from snn_antenna.bridge.online.pipeline import CalibratedChain, build_online, run_online
+    from snn_antenna.bridge.online.pipeline import build_online, run_online
+    from snn_antenna.preprocess import CalibratedChain
     from snn_antenna.bridge.wire.recorder import record_counts
     from snn_antenna.bridge.wire.replay import ReplaySource
     from snn_antenna.sources.stimuli import Contact, RobotScene

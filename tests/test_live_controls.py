@@ -1,12 +1,11 @@
-"""The live controls (bridge/online/controls.py): the one parser of control requests refuses every
-bad value with a SpecError naming field, value and range; changes are scheduled at window
-boundaries ahead of the coder, journaled in events.jsonl, and a replay that re-applies them
-finds what the live run found; the view's paint reports and its saved views
-(bridge/view/saved_view.py) read back."""
+"""The live controls (bridge/online/controls.py) and the input schedule (bridge/online/schedule.py):
+the one parser of control requests refuses every bad value with a SpecError naming field, value
+and range; changes are scheduled at window boundaries ahead of the coder, journaled in
+events.jsonl, and a replay that re-applies them finds what the live run found; the view's paint
+reports and its saved views (bridge/view/saved_view.py) read back."""
 import concurrent.futures
 import json
 import math
-import queue
 import time
 
 import numpy as np
@@ -17,19 +16,19 @@ from hypothesis import strategies as st
 from snn_antenna.bridge.online.controls import (
     MAX_WINDOWS,
     TH_MAX_G,
-    Change,
-    Controls,
+    RecordedChanges,
     parse_control,
     recorded_events,
 )
-from snn_antenna.bridge.online.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online, run_online
+from snn_antenna.bridge.online.schedule import Change, InputSchedule
+from snn_antenna.bridge.wire.handler import Published, Window, WindowHandler
 from snn_antenna.bridge.view.feed import KINDS
 from snn_antenna.bridge.view.page import build_page
 from snn_antenna.bridge.wire.recorder import EVENTS_FILE, Recorder, record_counts
 from snn_antenna.bridge.wire.replay import ReplaySource
 from snn_antenna.bridge.view.saved_view import load_view, save_view
-from snn_antenna.bridge.view.view import LiveView, _tap_coder
+from snn_antenna.bridge.view.view import LiveView
 from snn_antenna.bridge.view.history import ViewHistory
 from snn_antenna.core.errors import SpecError
 from snn_antenna.sources.stimuli import Contact, RobotScene
@@ -94,28 +93,43 @@ def test_any_body_gives_a_change_or_a_spec_error(body):
     assert isinstance(change, Change) and change.field in ("th_g", "windows")
 
 
-class _Parts:
-    """What Controls needs from the online parts: the coder and the network's window."""
-    class chain:
-        class coder:
-            threshold = 0.04
-        named_steps = {"coder": coder}
-    window_s = BASE
-    robot = None                        # no speed gate or CPG
-
-
 def test_a_request_applies_at_the_next_boundary_ahead_of_the_coder_and_calibration():
-    asked = queue.Queue()
-    controls = Controls(_Parts, requests=asked, rate_hz=1000.0)
-    asked.put(Change("th_g", 0.2))
-    controls.poll(position=500, n_calibration=1000)         # still calibrating: after it
-    asked.put(Change("windows", 3))
-    controls._polled = 0
-    controls.poll(position=1234, n_calibration=1000)
-    assert [(p[0], p[1].value) for p in controls.pending] == [(1000, 0.2), (1250, 3)]
+    schedule = InputSchedule(0.04, BASE, 1000.0, n_calibration=1000)
+    schedule.position = 500
+    schedule.submit(Change("th_g", 0.2), "page")            # still calibrating: after it
+    schedule.position = 1234
+    schedule.submit(Change("windows", 3), "page")
+    assert [(p.at, p.change.value) for p in schedule._pending] == [(1000, 0.2), (1250, 3)]
     # The window change moves the boundaries after it: every 150 samples from 1250.
-    assert controls.next_boundary(1251) == 1400
-    assert controls.due(1000, 1001)[0][1].value == 0.2
+    assert schedule.next_boundary(1251) == 1400
+    with pytest.raises(SpecError, match="sample"):          # the coder is past sample 1000
+        schedule.submit(Change("th_g", 0.3), "replay", 1000)
+
+
+def test_the_schedule_applies_th_where_the_coder_reaches_its_sample_and_a_person_outranks_the_gate():
+    schedule = InputSchedule(0.04, BASE, 1000.0, n_calibration=0)
+    schedule.submit(Change("th_g", 0.1), "gate", 0)
+    schedule.submit(Change("th_g", 0.3), "page", 100)
+    schedule.submit(Change("th_g", 0.2), "gate", 100)       # at the same sample: the page's holds
+    assert schedule.coded_until() == 150                    # the gate's Th codes one window
+    pieces, events = schedule.code(120)
+    assert pieces == [(100, 0.1), (120, 0.3)] and schedule.th_source == "manual"
+    # The gate's Th for that window was applied first, then the page's in its place.
+    assert [(e["sample"], e["was"], e["value"], e["by"]) for e in events] == \
+        [(100, 0.2, 0.3, "page")]
+    schedule.submit(Change("th_g", 0.5), "gate", 150)       # overridden: dropped
+    assert schedule.code(100) == ([(100, 0.3)], []) and schedule.coded_until() is None
+    assert schedule.events == events                        # the gate's steps are not events
+
+
+class ThTap(WindowHandler):
+    """The Th of every sample the coder coded, as the pipeline hands the pieces over."""
+
+    def __init__(self):
+        self.th: list[np.ndarray] = []
+
+    def coded(self, signal_g, th_g, coded) -> None:
+        self.th.append(np.full(len(coded), th_g))
 
 
 @pytest.fixture(scope="module")
@@ -129,14 +143,11 @@ def _parts():
     return build_online(NETWORK, ["preprocess.threshold=0.04"])
 
 
-def _replay(recording, scheduled=(), chunk_bytes=800, view=None, parts=None):
-    """A replay flat out; with ``view``, a LiveView built on ``parts`` (it taps their coder)."""
+def _replay(recording, scheduled=(), chunk_bytes=800, handlers=(), parts=None):
+    """A replay flat out, the changes ``scheduled`` submitted as a recording's."""
     parts = parts or _parts()
-    controls = Controls(parts, scheduled=scheduled, rate_hz=1000.0,
-                        on_applied=view.applied if view else None)
     return run_online(ReplaySource(recording, chunk_bytes=chunk_bytes).start(), parts,
-                      no_data_timeout_s=1e9, controls=controls, view=view,
-                      handlers=[view] if view else [])
+                      [RecordedChanges(parts, scheduled), *handlers], no_data_timeout_s=1e9)
 
 
 def test_a_journaled_th_change_replays_to_the_same_contacts(two_contacts, tmp_path):
@@ -158,21 +169,42 @@ def test_a_journaled_th_change_replays_to_the_same_contacts(two_contacts, tmp_pa
         [(2500, 0.04, "replay")]
     # However the port chunked the bytes, the change lands on the same sample: the coder's
     # Th is the old one up to sample 2499, the new one from 2500, sample by sample.
-    parts = _parts()
-    th_per_sample = []
-    _tap_coder(parts.chain.named_steps["coder"],
-               lambda X, th, coded: th_per_sample.append(np.broadcast_to(th, (len(coded),))))
-    assert _replay(two_contacts, events, chunk_bytes=333, parts=parts)["contacts"] == \
+    tap = ThTap()
+    assert _replay(two_contacts, events, chunk_bytes=333, handlers=[tap])["contacts"] == \
         after["contacts"]
-    th = np.concatenate(th_per_sample)
+    th = np.concatenate(tap.th)
     assert set(th[:2500]) == {0.04} and set(th[2500:]) == {5.0}
+
+
+def test_the_journal_of_a_run_replays_to_the_same_th_steps_at_the_same_samples(two_contacts,
+                                                                               tmp_path):
+    """A run's changes, journaled by the recorder as it handles them, submitted again by a
+    replay (another chunking): the same Th at every sample, the same changes applied."""
+    asked = [{"sample": 1800, "field": "th_g", "value": 0.08},
+             {"sample": 2200, "field": "window_s", "value": 0.2},
+             {"sample": 3050, "field": "th_g", "value": 0.02}]
+    recorder = Recorder(tmp_path / "live", port="test://", wire_format="binary", baudrate=1)
+    live_tap, replay_tap = ThTap(), ThTap()
+    live = _replay(two_contacts, asked, handlers=[recorder, live_tap])
+    recorder.close()
+    journal = recorded_events(tmp_path / "live")
+    assert sorted((e["sample"], e["field"], e["value"]) for e in journal) == \
+        [(1800, "th_g", 0.08), (2200, "window_s", 0.2), (3050, "th_g", 0.02)]
+    replayed = _replay(two_contacts, journal, chunk_bytes=333, handlers=[replay_tap])
+    th_live, th_replayed = np.concatenate(live_tap.th), np.concatenate(replay_tap.th)
+    assert np.array_equal(th_live, th_replayed)
+    assert np.flatnonzero(np.diff(th_live)).tolist() == [1799, 3049]
+    keep = ("sample", "field", "value", "was")
+    assert [{k: e[k] for k in keep} for e in replayed["controls"]] == \
+        [{k: e[k] for k in keep} for e in live["controls"]]
+    assert replayed["contacts"] == live["contacts"]
 
 
 def test_a_saved_view_reads_back_as_the_rate_map_the_read_out_takes(two_contacts, tmp_path):
     parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
     view = LiveView(parts, save_dir=str(tmp_path / "views"))
     events = [{"sample": 2000, "field": "windows", "value": 2}]
-    _replay(two_contacts, events, view=view, parts=parts)
+    _replay(two_contacts, events, handlers=[view], parts=parts)
     view.flush()
     history = ViewHistory(view.config)
     while history.received < view.published:
@@ -387,7 +419,9 @@ def test_a_window_goes_to_the_view_process_at_once_even_right_after_a_frame(monk
 
     clock = [1000.0]
     monkeypatch.setattr(view_module, "time", types.SimpleNamespace(monotonic=lambda: clock[0]))
-    live = LiveView(_parts())
+    parts = _parts()
+    live = LiveView(parts)
+    live.stream_started(parts, InputSchedule(parts.th_g, parts.window_s, 1000.0, 1000))
     live.handle(types.SimpleNamespace(counts={"frames": 1}, samples=[(0, 1.0, 2.0)]))
     clock[0] += view_module.FLUSH_S + 1e-6          # a frame of samples goes
     live.idle()

@@ -10,7 +10,6 @@ the display pauses (while the stream goes on) and resumes, the page reports its 
 "save view" writes a PNG and data that load_view reads back.
 """
 import json
-import queue
 import re
 import threading
 import time
@@ -20,8 +19,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from snn_antenna.bridge.online.handler import Published, Window
+from snn_antenna.bridge.wire.handler import Published, Window
 from snn_antenna.bridge.online.pipeline import build_online
+from snn_antenna.bridge.online.schedule import Change, InputSchedule
 from snn_antenna.bridge.wire.protocol import Sample
 from snn_antenna.bridge.view.saved_view import load_view
 from snn_antenna.bridge.wire.source import Batch
@@ -42,20 +42,22 @@ def state(url: str) -> dict:
 
 
 class FakePipeline(threading.Thread):
-    """Feeds ``view`` as run_online does, paced at 1 kHz; a Th request from the page is
-    applied at the next window and reported back with ``view.applied``."""
+    """Feeds ``view`` as run_online does, paced at 1 kHz, with an input schedule of its own:
+    the view submits what the page asks to it, and each change it applies (a Th at the next
+    window, a window length at the end of one) goes back to the view with ``view.changed``."""
 
     def __init__(self, view, parts, counts):
         super().__init__(daemon=True)
         self.view, self.parts, self.counts = view, parts, counts
-        self.th = float(parts.chain.named_steps["coder"].threshold)
         self.window = int(round(parts.window_s * 1000))
+        self.schedule = InputSchedule(parts.th_g, parts.window_s, 1000.0, n_calibration=0)
         self.stop = threading.Event()
         self.asked: list = []
 
     def run(self) -> None:
         rng = np.random.default_rng(0)
         n, t0 = 0, time.monotonic()
+        self.view.stream_started(self.parts, self.schedule)
         while not self.stop.is_set():            # the scene again and again, until stopped
             start = n % len(self.counts)
             chunk = self.counts[start:start + STEP]
@@ -64,10 +66,15 @@ class FakePipeline(threading.Thread):
                                               for i, (x, y) in enumerate(chunk)],
                                    {"frames": n + STEP}))
             signal = np.sin(np.arange(n, n + STEP) / 20.0)
-            self.view._coded(signal[:, None], self.th, np.sign(signal)[:, None] * 0.15)
+            pieces, events = self.schedule.code(STEP)
+            begin = 0
+            for end, th_g in pieces:
+                piece = signal[begin:end, None]
+                self.view.coded(piece, th_g, np.sign(piece) * 0.15)
+                begin = end
+            self._changed(events)
             n += STEP
             if n % self.window == 0:
-                self._take_requests(n)
                 t_s = (n - self.window) / 1000
                 # The scene's contact, each time the scene comes round (every 6 s).
                 at = round(t_s % SCENE_S, 3)
@@ -76,21 +83,14 @@ class FakePipeline(threading.Thread):
                 rates = rng.uniform(0, 20, len(self.parts.array.neuron_hz))
                 self.view.window(Window(t_s + self.parts.window_s, n, 0.0, Published(
                     t_s, self.parts.window_s, rates, event, now, 1.0, 1.0)))
+                self._changed(self.schedule.window_ended(n, published=True))
             time.sleep(max(0.0, t0 + n / 1000 - time.monotonic()))
         self.view.flush()
 
-    def _take_requests(self, n: int) -> None:
-        try:
-            change = self.view.requests.get_nowait()
-        except queue.Empty:
-            return
-        self.asked.append(change)
-        if change.field != "th_g":                  # a window change: asked, that is all here
-            return
-        was, self.th = self.th, change.value
-        self.view.applied({"sample": n, "t_s": n / 1000, "field": change.field,
-                           "value": change.value, "shown": {"th_g": change.value},
-                           "was": was, "by": "page"})
+    def _changed(self, events) -> None:
+        for event in events:
+            self.asked.append(Change(event["field"], event["value"]))
+            self.view.changed(event)
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from snn_antenna.bridge.cli import _speed
-from snn_antenna.bridge.online.controls import Controls, recorded_events
+from snn_antenna.bridge.online.controls import RecordedChanges, recorded_events
 from snn_antenna.bridge.online.pipeline import build_online
 from snn_antenna.bridge.view.page import panels_html
 from snn_antenna.bridge.wire.recorder import Recorder, record_counts
@@ -52,7 +52,7 @@ def driven(recording, robot_parts, tmp_path_factory):
     """The replay with the page's changes, journaled as a live run journals them."""
     out = tmp_path_factory.mktemp("journal") / "live"
     recorder = Recorder(out, port="test://", wire_format="binary", baudrate=1)
-    result = _replay(recording, robot_parts, CHANGES, journal=recorder.note_event)
+    result = _replay(recording, robot_parts, CHANGES, journal=recorder)
     recorder.close()
     return (*result, out)
 
@@ -169,7 +169,7 @@ def test_a_composed_spec_is_refused_live_only_where_a_part_cannot_run(recording,
         build_online(NETWORK, speed_cm_s=10.0)
     # A recording whose journal changes the speed, replayed on a network without one.
     with pytest.raises(SpecError, match=r"network = .*events.jsonl changes the speed"):
-        Controls(build_online(NETWORK), scheduled=CHANGES[:1], rate_hz=1000.0)
+        RecordedChanges(build_online(NETWORK), CHANGES[:1])
 
 
 @settings(max_examples=200, deadline=None)

@@ -170,7 +170,7 @@ def test_one_window_contact_streams(tmp_path, one_window_counts):
 
 
 # -- a failure inside the network operation ----------------------------------------------------
-def broken_update(self, t_s, rates):
+def broken_update(self, t_s, rates, window_s=None):
     raise ZeroDivisionError("a bug in a read-out stage")
 
 

@@ -235,8 +235,8 @@ def test_a_view_that_is_never_read_drops_view_frames_not_samples(tmp_path, scene
                        no_data_timeout_s=1e9)
     parts = build_online(NETWORK, ["preprocess.threshold=0.05"])
     view = LiveView(parts, inbox_frames=8)       # never started
-    viewed = run_online(ReplaySource(rec, chunk_bytes=800).start(), parts, handlers=[view],
-                        no_data_timeout_s=1e9, view=view)
+    viewed = run_online(ReplaySource(rec, chunk_bytes=800).start(), parts, [view],
+                        no_data_timeout_s=1e9)
     view.flush()
     assert viewed["samples"] == plain["samples"] == 3000
     assert viewed["contacts"] == plain["contacts"] and len(plain["contacts"]) == 1

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.bridge.online.controls import Controls
+from snn_antenna.bridge.online.controls import RecordedChanges
 from snn_antenna.bridge.online.pipeline import build_online, run_online
 from snn_antenna.bridge.view.page import build_page, panels_html
 from snn_antenna.bridge.wire.recorder import record_counts
@@ -37,14 +37,14 @@ def recording(tmp_path_factory):
 def replay_into_view(recording, parts, scheduled=(), chunk_bytes=800, journal=None):
     """A replay read flat out into a LiveView that is never started: every frame it published
     (a 200-frame hand-off holds them all), taken one by one by the view's own history; the
-    controls ``scheduled`` applied as the page's would be. Returns (report, history, what
-    each window decided, view)."""
+    changes ``scheduled`` submitted as a recording's, applied as the page's were (and
+    journaled by the recorder ``journal``). Returns (report, history, what each window
+    decided, view)."""
     parts = copy.deepcopy(parts)
     view = LiveView(parts)
-    controls = Controls(parts, scheduled=scheduled, rate_hz=1000.0, journal=journal,
-                        on_applied=view.applied)
+    handlers = [RecordedChanges(parts, scheduled), view, *([journal] if journal else [])]
     report = run_online(ReplaySource(recording, chunk_bytes=chunk_bytes).start(), parts,
-                        handlers=[view], no_data_timeout_s=1e9, view=view, controls=controls)
+                        handlers, no_data_timeout_s=1e9)
     view.flush()
     history, decided = ViewHistory(view.config), []
     while history.received < view.published:
@@ -155,8 +155,8 @@ def test_new_columns_are_pushed_to_the_open_pages_as_they_arrive(recording):
     then scheduled at once, not at the next periodic pull), and only then."""
     parts = build_online(NETWORK, ["preprocess.threshold=0.04"])
     view = LiveView(parts)
-    run_online(ReplaySource(recording, chunk_bytes=800).start(), parts, handlers=[view],
-               no_data_timeout_s=1e9, view=view)
+    run_online(ReplaySource(recording, chunk_bytes=800).start(), parts, [view],
+               no_data_timeout_s=1e9)
     view.flush()
     history, pushes = ViewHistory(view.config), []
     history.column_listeners.add(lambda: pushes.append(history.windows.total))

@@ -138,8 +138,8 @@ def test_the_view_process_counts_the_frames_it_could_not_take(tmp_path):
     pid = view.process.pid
     os.kill(pid, signal.SIGSTOP)
     try:
-        report = run_online(ReplaySource(rec, realtime=True).start(), parts, handlers=[view],
-                            view=view, no_data_timeout_s=1e9)
+        report = run_online(ReplaySource(rec, realtime=True).start(), parts, [view],
+                            no_data_timeout_s=1e9)
     finally:
         os.kill(pid, signal.SIGCONT)
     assert report["samples"] == 3000 and len(report["contacts"]) == 1

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from snn_antenna.core.errors import SpecError
-from snn_antenna.networks.resonators import ResonatorArray, rate_map
+from snn_antenna.networks.resonators import ChunkFeed, ResonatorArray, StreamPort, rate_map
 from snn_antenna.readout.contacts import ContactDetector, centroid_hz, dominant_hz
 from snn_antenna.core.signals import Recording
 from snn_antenna.sources import stimuli
@@ -27,8 +27,8 @@ def test_streaming_gives_the_same_spikes_as_offline():
     offline = array.run(coded, window_s=0.1).rate_map
     windows = []
     chunks = np.array_split(coded.samples, [7, 333, 1500, 2999])
-    stats = array.stream(iter(chunks), coded.rate_hz, window_s=0.1,
-                         on_window=lambda t, counts: windows.append(counts))
+    stats = array.stream(ChunkFeed(chunks, lambda t, counts: windows.append(counts)),
+                         coded.rate_hz, window_s=0.1)
     streamed = np.stack(windows, axis=1) / 0.1
     assert stats.samples == coded.n_samples and stats.windows == 30
     np.testing.assert_array_equal(streamed, offline.values)
@@ -54,9 +54,9 @@ def test_streaming_gives_the_same_spikes_as_offline_at_the_live_setting():
     cuts = np.sort(rng.choice(np.arange(1, len(x)), 25, replace=False))
     for window_s in (0.001, 0.1):
         offline = array.run(coded, window_s=window_s).rate_map.values * window_s
-        windows = []
-        stats = array.stream(iter(np.split(x, cuts)), 1000.0, window_s=window_s,
-                             on_window=lambda t_s, counts, windows=windows: windows.append(counts))
+        feed = ChunkFeed(np.split(x, cuts))
+        stats = array.stream(feed, 1000.0, window_s=window_s)
+        windows = [counts for _, counts in feed.windows]
         assert stats.samples == len(x) and stats.windows == offline.shape[1]
         np.testing.assert_array_equal(np.stack(windows, axis=1), offline)
     assert offline.sum() > 100 and offline[array.neuron_hz > 12].sum() > 10
@@ -71,7 +71,15 @@ def test_a_spike_on_a_window_edge_counts_in_the_window_it_starts():
 
 def test_streaming_needs_a_step_that_divides_the_sample_interval():
     with pytest.raises(SpecError, match="dt_ms.*divides the sample interval"):
-        ResonatorArray(target="numpy", dt_ms=0.3).stream(iter([np.zeros(10)]), 1000.0)
+        ResonatorArray(target="numpy", dt_ms=0.3).stream(ChunkFeed([np.zeros(10)]), 1000.0)
+
+
+def test_the_stream_calls_out_of_the_network_only_through_its_port():
+    """A StreamPort (fill and window) is what the stream takes: a bare iterator of chunks is
+    refused, naming what is accepted."""
+    with pytest.raises(SpecError, match="port = 'list_iterator' .*StreamPort"):
+        ResonatorArray(target="numpy").stream(iter([np.zeros(10)]), 1000.0)
+    assert isinstance(ChunkFeed([]), StreamPort)
 
 
 def test_rate_map_is_labelled_and_read_out_follows_the_input_frequency():

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from snn_antenna.core.errors import NumericalInstabilityError, SpecError
 from snn_antenna.networks import neurons
-from snn_antenna.networks.resonators import ResonatorArray
+from snn_antenna.networks.resonators import ChunkFeed, ResonatorArray
 from snn_antenna.preprocess import make_chain
 from snn_antenna.core.signals import Recording
 
@@ -174,7 +174,7 @@ def test_one_hour_of_streaming_keeps_memory_bounded_and_values_finite():
             seen["rss"].append(_rss_mb())
 
     array = ResonatorArray(dt_ms=0.5, method="euler", target="cython")
-    stats = array.stream(chunks(), rate_hz, window_s=0.1, on_window=on_window)
+    stats = array.stream(ChunkFeed(chunks(), on_window), rate_hz, window_s=0.1)
     assert stats.simulated_s == pytest.approx(hour_s)
     assert seen["windows"] >= hour_s * 10 - 1
     assert seen["spikes"] > 1000

@@ -16,6 +16,7 @@ from ..core import bounds
 from ..core.commands import LIST, POSITIONAL, SWITCH, Command, Option
 from ..core.errors import PipelineError, SpecError
 from ..core.outputs import output_folder
+from .wire.handler import BatchHandler
 from .emulate.command import cmd_emulate, faults_help
 from .wire.protocol import WIRE_FORMATS
 from .wire.recorder import COUNT_FIELDS, RECORDING, Recorder
@@ -83,7 +84,7 @@ def format_counts(counts: dict) -> str:
     return "  ".join(f"{k}={counts.get(k, 0)}" for k in SHOWN_COUNTS)
 
 
-class Progress:
+class Progress(BatchHandler):
     """A recording's counts on stderr: redrawn twice a second on a terminal, a line every
     10 s in a log; link losses and reconnections get their own line at once."""
 
@@ -190,7 +191,7 @@ def replay_speed(args) -> float | None:
 
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
-    from .online.controls import recorded_events
+    from .online.controls import RecordedChanges, recorded_events
     from .wire.replay import ReplaySource
 
     if args.view and not args.network:
@@ -214,12 +215,12 @@ def cmd_replay(args) -> int:
         if scheduled:
             print(f"replay: applying the recording's {len(scheduled)} control change(s) "
                   "(events.jsonl)", file=sys.stderr)
+        recorded = RecordedChanges(parts, scheduled)
         with live_view(args, parts) as view:        # None without --view
             source = ReplaySource(args.recording, realtime=args.realtime).start()
-            report = run_online(source, parts, no_data_timeout_s=1e9,
-                                display=LiveDisplay(sys.stdout), handlers=[view] if view else [],
-                                view=view, controls=live_controls(parts, view,
-                                                                  scheduled=scheduled))
+            report = run_online(source, parts,
+                                [recorded, *([view] if view else []), LiveDisplay(sys.stdout)],
+                                no_data_timeout_s=1e9)
         if view is not None:            # stopped by now: its process counted what it dropped
             report["view"] = view.summary()
         report["live"] = live
@@ -256,28 +257,15 @@ def cmd_stream(options) -> int:
                 options, folder, {"network": str(options.network), "set": options.set,
                                   "speed_cm_s": options.speed}) as (source, recorder, stop):
             report = run_online(source, parts,
-                                handlers=[recorder, view] if view else [recorder],
+                                [recorder, *([view] if view else []), LiveDisplay(sys.stdout)],
                                 duration_s=options.duration,
-                                no_data_timeout_s=options.no_data_timeout,
-                                stop=stop, display=LiveDisplay(sys.stdout), view=view,
-                                controls=live_controls(parts, view,
-                                                       journal=recorder.note_event))
+                                no_data_timeout_s=options.no_data_timeout, stop=stop)
             recorder.note_outcome(contacts=report.get("contacts"))
     if view is not None:                # stopped by now: its process counted what it dropped
         report["view"] = view.summary()
     print(json.dumps(report, indent=1) if options.json
           else stream_summary(report, options.out))
     return 0
-
-
-def live_controls(parts, view, **kwargs):
-    """Th and the rate-map window under the page's hands (bridge/online/controls.py): requests from
-    the view, changes shown on it; ``journal``/``scheduled`` as the command records or replays."""
-    from .online.controls import Controls
-    from .wire.protocol import BOARD_RATE_HZ
-
-    return Controls(parts, requests=view.requests if view else None,
-                    on_applied=view.applied if view else None, rate_hz=BOARD_RATE_HZ, **kwargs)
 
 
 def stream_summary(report: dict, out) -> str:

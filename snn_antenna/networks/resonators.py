@@ -12,6 +12,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from collections.abc import Callable, Iterable, Iterator
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 import xarray as xr
@@ -169,29 +170,29 @@ class ResonatorArray:
               f"a step that divides the sample interval ({1e3 / rate_hz:g} ms) for streaming")
         return int(round(steps))
 
-    def stream(self, chunks: Iterable[np.ndarray], rate_hz: float, window_s: float = 0.1,
-               on_window: Callable[[float, np.ndarray], None] | None = None,
+    def stream(self, port: StreamPort, rate_hz: float, window_s: float = 0.1,
                max_duration_s: float = 365 * 86400.0,
                block_s: float = STREAM_BLOCK_S,
                companions: Callable[[object], Iterable] | None = None) -> StreamStats:
-        """Run the array live on coded samples as they arrive.
+        """Run the array live on coded samples as they arrive, through ``port`` (a
+        :class:`StreamPort`: the stream's two calls out of the network).
 
-        ``chunks`` yields 1-D arrays of coded samples (any length, blocking until data come;
-        the stream ends when it is exhausted). Every ``window_s`` of input, ``on_window(t_s,
-        counts)`` receives the spike counts per neuron of that window: memory stays bounded
-        however long the stream runs. Runtime mode only (NetworkOperation).
-
-        One Python call per block of samples (at most ``block_s``, dividing the window) writes
-        them into a ring ``TimedArray`` that the group reads at its own steps: the same
-        arithmetic as ``run``'s ``drive(t)``, so the same spikes. A block waits for its last
-        sample before it is integrated; a window is published as soon as its last block is.
+        At each block boundary (at most ``block_s``, dividing the window) the network has
+        integrated every sample before it: when a window of ``window_s`` ends there,
+        ``port.window(t_s, counts)`` receives its spike counts per neuron (memory stays
+        bounded however long the stream runs); then ``port.fill(block)`` writes the next block
+        of coded samples (waiting for them) into the ring ``TimedArray`` the group reads at its
+        own steps, fewer than asked once the stream ends. The same arithmetic as ``run``'s
+        ``drive(t)``, so the same spikes. Runtime mode only (NetworkOperation).
 
         ``companions(group)``, when given, returns further Brian2 objects that run in the same
-        network as the array (the other parts of a composed live network, wired to the
-        array's group: bridge/online/pipeline.py); ``on_window`` may read and steer them.
+        network as the array (the other parts of a composed network, wired to the array's
+        group); ``port.window`` may read and steer them.
         """
         import brian2 as b2
 
+        check(isinstance(port, StreamPort), "port", type(port).__name__,
+              "a StreamPort (fill and window), e.g. ChunkFeed(chunks)")
         check(is_number(rate_hz) and rate_hz > 0, "rate_hz", rate_hz, "a sample rate > 0 Hz")
         check(is_number(window_s) and window_s > 0, "window_s", window_s, "a window > 0 s")
         check(is_number(block_s) and block_s > 0, "block_s", block_s, "a block > 0 s")
@@ -210,8 +211,8 @@ class ResonatorArray:
         # (a third of the run at dt 0.5 ms). The feed runs on the group's clock and returns at
         # once except at block boundaries, where it also calls the instability check.
         check_state = neurons.instability_check(group, "resonator", self.dt_ms, self.method)
-        feeder = _BlockFeeder(_Feed(chunks), ring.values, group, samples_per_window, rate_hz,
-                              on_window, period, check_state)
+        feeder = _BlockFeeder(port, ring.values, group, samples_per_window, rate_hz, period,
+                              check_state)
         feed = b2.NetworkOperation(feeder, clock=group.clock, when="start", name="feed")
         net = b2.Network(group, feed, *(companions(group) if companions else ()))
         feeder.net = net
@@ -231,9 +232,22 @@ class ResonatorArray:
         return stats
 
 
+@runtime_checkable
+class StreamPort(Protocol):
+    """The streaming array's two calls out of the network, each at a block boundary: the
+    window that just ended, then the next block of input."""
+
+    def window(self, t_s: float, counts: np.ndarray) -> None:
+        """A window starting at ``t_s`` ended: ``counts``, spikes per neuron in it (a copy)."""
+
+    def fill(self, block: np.ndarray) -> int:
+        """Write the next coded samples into ``block`` (waiting for them); how many, fewer
+        only when the stream ended."""
+
+
 def _as_project_error(exc: Exception, t_s: float) -> Exception:
     """The project's own errors (bad input, a lost port, instability) pass unchanged; anything
-    else from the source or the window callback becomes a PipelineError naming where it broke."""
+    else from the port becomes a PipelineError naming where it broke."""
     if type(exc).__module__.startswith("snn_antenna") or isinstance(exc, SpecError):
         return exc
     error = PipelineError("the live pipeline", f"{type(exc).__name__} at {t_s:.2f} s of "
@@ -250,16 +264,15 @@ def _block_samples(samples_per_window: int, most: float) -> int:
 
 class _BlockFeeder:
     """The stream's NetworkOperation, called at every step and busy only at block boundaries
-    (every ``period`` steps): it publishes the window that just ended (every step before this
-    one has been integrated), checks the state, then puts the next block of samples into the
-    ring. Errors are kept and re-raised once Brian2 has stopped cleanly."""
+    (every ``period`` steps): it hands the port the window that just ended (every step before
+    this one has been integrated), checks the state, then has the port fill the ring with the
+    next block. Errors are kept and re-raised once Brian2 has stopped cleanly."""
 
-    def __init__(self, feed, ring, group, samples_per_window, rate_hz, on_window, period,
-                 check_state):
-        self.feed, self.ring, self.net = feed, ring, None
+    def __init__(self, port, ring, group, samples_per_window, rate_hz, period, check_state):
+        self.port, self.ring, self.net = port, ring, None
         self.counts = group.variables["spike_count"].get_value()
         self.samples_per_window, self.rate_hz = samples_per_window, rate_hz
-        self.on_window, self.period, self.check_state = on_window, period, check_state
+        self.period, self.check_state = period, check_state
         self.stats = StreamStats()
         self.failed: list[BaseException] = []
         self.tail = 0
@@ -274,12 +287,15 @@ class _BlockFeeder:
         try:
             if stats.samples and stats.samples % self.samples_per_window == 0:
                 stats.windows += 1
-                if self.on_window is not None:
-                    self.on_window(stats.samples / self.rate_hz
-                                   - self.samples_per_window / self.rate_hz, self.counts.copy())
+                self.port.window(stats.samples / self.rate_hz
+                                 - self.samples_per_window / self.rate_hz, self.counts.copy())
                 self.counts[:] = 0
             self.check_state()
-            n = self.feed.take(self.ring)
+            n = self.port.fill(self.ring)
+            if n and not np.all(np.isfinite(self.ring[:n])):
+                raise SpecError("stream sample", "non-finite value",
+                                "finite coded samples (the preprocessing chain never "
+                                "produces NaN; check the source)")
         except Exception as exc:
             self.failed.append(exc)
             n = 0
@@ -289,23 +305,32 @@ class _BlockFeeder:
             self.net.stop()
 
 
-class _Feed:
-    """Blocks of samples from an iterator of chunks."""
+class ChunkFeed:
+    """A :class:`StreamPort` on an iterable of coded chunks (1-D arrays of any length): blocks
+    cut from them in order; the windows' ``(t_s, counts)`` collected in ``windows``, or handed
+    to ``on_window`` when given."""
 
-    def __init__(self, chunks: Iterable[np.ndarray]):
+    def __init__(self, chunks: Iterable[np.ndarray],
+                 on_window: Callable[[float, np.ndarray], None] | None = None):
         self._chunks: Iterator = iter(chunks)
         self._buf = np.empty(0)
         self._pos = 0
+        self.on_window = on_window
+        self.windows: list[tuple[float, np.ndarray]] = []
 
-    def take(self, out: np.ndarray) -> int:
-        """Fill ``out`` with the next samples (waiting for them); how many, fewer only when
-        the stream ended."""
+    def window(self, t_s: float, counts: np.ndarray) -> None:
+        if self.on_window is not None:
+            self.on_window(t_s, counts)
+        else:
+            self.windows.append((t_s, counts))
+
+    def fill(self, block: np.ndarray) -> int:
         n = 0
-        while n < len(out):
+        while n < len(block):
             if self._pos >= len(self._buf) and not self._next_chunk():
                 return n
-            m = min(len(out) - n, len(self._buf) - self._pos)
-            out[n:n + m] = self._buf[self._pos:self._pos + m]
+            m = min(len(block) - n, len(self._buf) - self._pos)
+            block[n:n + m] = self._buf[self._pos:self._pos + m]
             n += m
             self._pos += m
         return n
@@ -316,10 +341,6 @@ class _Feed:
         except StopIteration:
             return False
         self._pos = 0
-        if len(self._buf) and not np.all(np.isfinite(self._buf)):
-            raise SpecError("stream sample", "non-finite value",
-                            "finite coded samples (the preprocessing chain never "
-                            "produces NaN; check the source)")
         return True
 
 

@@ -188,9 +188,13 @@ class EpisodeTracker:
         self._quiet = 0                         # windows since its last contact window
         self.estimates: list[ContactEstimate] = []
 
-    def update(self, t_s: float, rates: np.ndarray) -> tuple[str, object] | None:
-        """Feed one window (its start, a rate per neuron); returns ("onset", t_s),
-        ("contact", ContactEstimate) or None."""
+    def update(self, t_s: float, rates: np.ndarray,
+               window_s: float | None = None) -> tuple[str, object] | None:
+        """Feed one window (its start, a rate per neuron, and its length when the windows
+        change length as they come: an episode's estimate takes its last window's); returns
+        ("onset", t_s), ("contact", ContactEstimate) or None."""
+        if window_s is not None:
+            self.window_s = window_s
         if self.detector.is_contact_window(rates, self._above):
             onset = not self._rates
             self._rates.append(rates)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...readout.contacts import tuned_above
+from ..wire.handler import WindowHandler
 
 # panel → (title, the part it belongs to, a part whose panel replaces it)
 PANELS = {"threshold": ("Gate: input threshold Th", "resonators", "gate"),
@@ -26,13 +27,13 @@ PANELS = {"threshold": ("Gate: input threshold Th", "resonators", "gate"),
           "readout": ("Contact read-out", "resonators", None)}
 
 
-class Decisions:
+class Decisions(WindowHandler):
     """Per window: the Th in force and where it came from, the read-out's decision on the
     window (a contact window or not, the episode it keeps open, the last contact's distance),
     and what a composed network's other parts decided (bridge/online/robot.py)."""
 
     def __init__(self, parts):
-        self.coder = parts.chain.named_steps["coder"]
+        self.schedule = None                # the stream's input schedule: Th and its source
         self.detector = parts.detector
         self.neuron_hz = np.asarray(parts.array.neuron_hz, dtype=float)
         self._above = tuned_above(self.neuron_hz, self.detector.motion_band_hz)
@@ -44,9 +45,9 @@ class Decisions:
         self._last: dict | None = None
         self.latest: dict = {}              # what was decided on the latest window
 
-    # ---- a WindowHandler (bridge/online/handler.py), held by the view ------------------------
-    def stream_started(self, parts) -> None:
-        pass
+    # ---- a WindowHandler (bridge/wire/handler.py), held by the view ---------------------------
+    def stream_started(self, parts, schedule) -> None:
+        self.schedule = schedule
 
     def window(self, window) -> None:
         """What was decided on a published window: ``latest``."""
@@ -64,10 +65,10 @@ class Decisions:
         peak = int(np.argmax(rates))
         decided = dict(self.robot.decided) if self.robot else {}
         if "gate" in decided:           # the Th that coded this window, and its source
-            decided["gate"] = {**decided["gate"], "th_g": float(self.coder.threshold),
-                               "th_source": self.robot.th_source}
+            decided["gate"] = {**decided["gate"], "th_g": self.schedule.th_g,
+                               "th_source": self.schedule.th_source}
         else:
-            decided["threshold"] = {"th_g": float(self.coder.threshold),
+            decided["threshold"] = {"th_g": self.schedule.th_g,
                                     "set_by": "preprocess.threshold (fixed: the network has "
                                               "no speed gate)"}
         return {

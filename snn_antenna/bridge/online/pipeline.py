@@ -2,11 +2,17 @@
 map and contact events, while the recorder keeps everything.
 
 All spiking is Brian2: the array runs in runtime mode through
-:meth:`snn_antenna.networks.resonators.ResonatorArray.stream`, which pulls coded samples from the
-generator built here. What this module adds on top of the foundation's streaming API:
+:meth:`snn_antenna.networks.resonators.ResonatorArray.stream`, whose port (:class:`LiveStream`)
+is built here: the network asks it for each block of coded input and hands it each window, the
+only two calls out of the network. What this module adds on top of the foundation's streaming
+API:
 
 - calibration: the PCA alignment needs a fit, so the first ``calibration_s`` of samples fit the
-  chain, then go through it like every later sample (same numbers as the offline chain);
+  chain (``preprocess.CalibratedChain``), then go through it like every later sample (same
+  numbers as the offline chain);
+- the live inputs: the coder's Th, the rate-map window and the speed command are the input
+  schedule's (bridge/online/schedule.py), which the handlers submit changes to; the pipeline
+  codes each piece with the schedule's Th and announces each change it applied;
 - timing, measured on the host's clocks: each sample's arrival time (when its bytes were read)
   is kept until its window is published, giving the latency from arrival to the rate map; the
   real-time factor is stream seconds processed per wall-clock second actually elapsed (below 1
@@ -34,15 +40,18 @@ import numpy as np
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError
-from ...networks.resonators import ResonatorArray
-from ...preprocess import make_chain, partial_transform, reset
-from ...readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
 from ...engine.spec_rules import check_spec
+from ...networks.assembly import configure
+from ...networks.gate import GateTraining
+from ...networks.resonators import ChunkFeed, ResonatorArray
+from ...preprocess import CalibratedChain, make_chain
+from ...readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
+from ..wire.handler import Published, Window, WindowHandler
 from ..wire.protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
-from .report import OnlineReport
 from ..wire.source import SourceLoop
-from .handler import Published, Window
-from .terminal import LiveDisplay
+from .report import OnlineReport
+from .robot import LiveRobot, check_live_parts, check_speed, speed_range, trained_gate
+from .schedule import InputSchedule
 
 SECTIONS = ("network", "preprocess", "readout")
 
@@ -55,6 +64,28 @@ class OnlineParts:
     window_s: float
     spec: dict
     robot: object = None                # online/robot.py's LiveRobot: a composed spec's parts
+
+    @property
+    def handlers(self) -> tuple:
+        """The network's own window handlers: a composed network's other parts."""
+        return () if self.robot is None else (self.robot,)
+
+    @property
+    def companions(self):
+        """What builds a composed network's other parts beside the array (None: nothing)."""
+        return None if self.robot is None else self.robot.build
+
+    @property
+    def th_g(self) -> float:
+        """The coder's Th as the spec sets it: the stream starts with it."""
+        return float(self.chain.named_steps["coder"].threshold)
+
+    @property
+    def speed_cm_s(self) -> float | None:
+        """The speed command the stream starts at (None: no part of the network reads one)."""
+        if self.robot is None or self.robot.speed_range is None:
+            return None
+        return self.robot.start_speed
 
 
 def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
@@ -107,8 +138,6 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
     detector, window_s = detector_from_spec(spec)
     robot = None
     if composed:
-        from .robot import LiveRobot, trained_gate
-
         if examples is not None:
             configured["gate"] = trained_gate(configured["gate"], *examples)
         robot = LiveRobot(configured, speed_cm_s)
@@ -119,10 +148,6 @@ def _composed(table: dict, training, speed_cm_s) -> tuple[dict, tuple | None]:
     """A composed network's parts, configured and checked for the live stream (nothing
     built, the gate not trained yet), and the gate's examples (speeds, Th*) from
     ``training`` (None without a gate)."""
-    from ...networks.assembly import configure
-    from ...networks.gate import GateTraining
-    from .robot import check_live_parts, check_speed, speed_range
-
     check_live_parts(table.get("parts", []))
     with specs.section("network"):
         configured = configure(table)
@@ -153,45 +178,8 @@ def warm_up(parts: OnlineParts) -> None:
     """Run the array (and a composed network's other parts) on 50 ms of silence, so that
     Brian2 generates and compiles its code (cached on disk afterwards) before a port is opened
     and samples start to queue up."""
-    parts.array.stream(iter([np.zeros(int(0.05 * BOARD_RATE_HZ))]), BOARD_RATE_HZ, window_s=0.05,
-                       companions=parts.robot.build if parts.robot else None)
-
-
-class CalibratedChain:
-    """The preprocessing chain on a stream whose first ``n_calibration`` samples fit it.
-
-    The PCA alignment needs a fit. The first samples are held back until there are
-    ``n_calibration`` of them; the chain is fitted on exactly those (however the port chunked
-    them, the same data give the same numbers), then they and every later chunk are streamed
-    through it with ``partial_transform``.
-    """
-
-    def __init__(self, chain, n_calibration: int):
-        self.chain, self.n_calibration = chain, n_calibration
-        self._held: list[np.ndarray] = []
-        self.fitted = False
-
-    def push(self, counts: np.ndarray) -> np.ndarray | None:
-        """ADC counts (n, 2) in, coded samples out (None while calibrating)."""
-        counts = self.take(counts)
-        return None if counts is None else self.code(counts)
-
-    def take(self, counts: np.ndarray) -> np.ndarray | None:
-        """ADC counts (n, 2) in; the counts ready to code out (the held ones first, once the
-        chain is fitted on them), None while calibrating."""
-        if not self.fitted:
-            self._held.append(counts)
-            counts = np.concatenate(self._held)
-            if len(counts) < self.n_calibration:
-                self._held = [counts]
-                return None
-            reset(self.chain.fit(counts[:self.n_calibration]))
-            self._held, self.fitted = [], True
-        return counts
-
-    def code(self, counts: np.ndarray) -> np.ndarray:
-        """Counts that ``take`` made ready, through the fitted chain (the coder's Th now)."""
-        return partial_transform(self.chain, counts)
+    parts.array.stream(ChunkFeed([np.zeros(int(0.05 * BOARD_RATE_HZ))]), BOARD_RATE_HZ,
+                       window_s=0.05, companions=parts.companions)
 
 
 class ArrivalClock:
@@ -220,131 +208,194 @@ class ArrivalClock:
         return self._chunks[0][1]
 
 
-def run_online(source, parts: OnlineParts, *, handlers=(), duration_s: float | None = None,
-               no_data_timeout_s: float = 5.0, stop=None, display: LiveDisplay | None = None,
-               calibration_s: float = 1.0, view=None, controls=None) -> dict:
+class RateWindow:
+    """The rate-map window being summed: the network's windows since the last one published."""
+
+    def __init__(self):
+        self.start_s = 0.0
+        self.counts: np.ndarray | None = None
+        self.n = 0
+
+    def add(self, t_s: float, counts: np.ndarray) -> None:
+        if self.n == 0:
+            self.start_s, self.counts = t_s, counts.astype(float)
+        else:
+            self.counts = self.counts + counts
+        self.n += 1
+
+    def take(self, base_window_s: float) -> tuple[float, float, np.ndarray]:
+        """(start, length, spikes/s per neuron) of the summed window; the next starts empty."""
+        window_s = self.n * base_window_s
+        self.n = 0
+        return self.start_s, window_s, self.counts / window_s
+
+
+def run_online(source, parts: OnlineParts, handlers=(), *, duration_s: float | None = None,
+               no_data_timeout_s: float = 5.0, stop=None, calibration_s: float = 1.0) -> dict:
     """Stream a started source (serial or replay) through the network; returns the report.
-    ``handlers`` see the source's batches (bridge/wire/source.py's SourceLoop: the recorder,
-    the view). The run report, a composed network's parts, ``controls`` (bridge/online/
-    controls.py: Th, the rate-map window, the speed at window boundaries), ``view``
-    (bridge/view/view.py's LiveView: it only copies) and ``display`` (the terminal's lines)
-    are WindowHandlers (bridge/online/handler.py), in that order; the
-    report's ``controls`` lists what the controls applied."""
+
+    ``handlers`` are :class:`~snn_antenna.bridge.wire.handler.WindowHandler` objects (the
+    recorder, the view, the terminal's lines, a replay's journaled changes), each handed, in
+    order, every batch of the source, the stream's start with its input schedule, each chunk
+    the coder coded, each of the network's windows, each change the schedule applied, and the
+    stream's end. The run's own report sees every window first (the real-time factor the
+    others see counts the window), then the network's own parts (``parts.handlers``: a composed
+    network's other parts read the network before anyone is shown it). The report's
+    ``controls`` lists the changes the schedule applied."""
     if not 0 < calibration_s <= 60:
         raise SpecError("calibration_s", calibration_s, "seconds in (0, 60]")
-    loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
-    clock, report = ArrivalClock(), OnlineReport()
-    robot = parts.robot
-    # The report first: the real-time factor the others see counts the window.
-    followers = [h for h in (robot, controls, view, display) if h is not None]
+    handlers = tuple(handlers)
+    for handler in handlers:
+        if not isinstance(handler, WindowHandler):
+            raise SpecError("handlers", type(handler).__name__,
+                            "WindowHandler instances (bridge/wire/handler.py)")
+    report = OnlineReport()
+    followers = (*parts.handlers, *handlers)
+    loop = SourceLoop(source, (report, *followers), duration_s, no_data_timeout_s, stop)
+    chain = CalibratedChain(parts.chain, int(calibration_s * BOARD_RATE_HZ))
+    schedule = InputSchedule(parts.th_g, parts.window_s, BOARD_RATE_HZ, chain.n_calibration,
+                             parts.speed_cm_s)
     for handler in (report, *followers):
-        handler.stream_started(parts)
-    tracker = EpisodeTracker(parts.detector, parts.array.neuron_hz, parts.window_s)
-    # A replay read flat out delivers seconds of samples at once: arrival-to-rate-map latency
-    # only means something for a live port (or a replay paced in real time).
-    live = getattr(source, "realtime", True)
-    summed = {"t_s": None, "counts": None, "n": 0}      # network windows summed so far
-
-    def on_window(t_s: float, spike_counts: np.ndarray) -> None:
-        # ResonatorArray.stream hands over a window once its last sample has been integrated,
-        # before it asks for the next one. The published window sums ``controls.windows`` of
-        # the network's (one without controls).
-        end_s = t_s + parts.window_s
-        end_index = int(round(end_s * BOARD_RATE_HZ))
-        if summed["n"] == 0:
-            summed["t_s"], summed["counts"] = t_s, spike_counts.astype(float)
-        else:
-            summed["counts"] = summed["counts"] + spike_counts
-        summed["n"] += 1
-        published = None
-        if controls is None or summed["n"] >= controls.windows:
-            start_s, window_s = summed["t_s"], summed["n"] * parts.window_s
-            rates, summed["n"] = summed["counts"] / window_s, 0
-            arrived = clock.arrival(max(end_index - 1, 0)) if live else None
-            if live:
-                report.origin = clock.origin
-            tracker.window_s = window_s
-            published = Published(start_s, window_s, rates, tracker.update(start_s, rates),
-                                  arrived, None if arrived is None
-                                  else (time.time() - arrived) * 1e3, float("nan"))
-        window = Window(end_s, end_index, loop.waiting_s, published)
-        report.window(window)
-        if published is not None:
-            window = replace(window, published=replace(
-                published, realtime_factor=report.realtime_factor))
-        for handler in followers:
-            handler.window(window)
-
+        handler.stream_started(parts, schedule)
+    stream = LiveStream(parts, loop, source, chain, schedule, report, followers)
     t0 = report.started = time.perf_counter()
-    chunks = coded_chunks(loop, source, CalibratedChain(
-        parts.chain, int(calibration_s * BOARD_RATE_HZ)), clock, controls, robot,
-        int(round(parts.window_s * BOARD_RATE_HZ)))
-    stats = parts.array.stream(chunks, BOARD_RATE_HZ, window_s=parts.window_s,
-                               on_window=on_window, companions=robot.build if robot else None)
+    stats = parts.array.stream(stream, BOARD_RATE_HZ, window_s=parts.window_s,
+                               companions=parts.companions)
     report.wall_s = time.perf_counter() - t0
     report.waiting_s = loop.waiting_s
     report.samples, report.windows, report.simulated_s = (stats.samples, stats.windows,
                                                           stats.simulated_s)
-    final = tracker.close()
+    final = stream.tracker.close()
     for handler in (report, *followers):
         handler.stream_ended(final)
-    report.contacts = [e.as_dict() for e in tracker.estimates]
+    report.contacts = [e.as_dict() for e in stream.tracker.estimates]
     result = report.as_dict(parts, source.counts())
-    if controls is not None:
-        result["controls"] = controls.events
+    result["controls"] = schedule.events
     return result
 
 
-def coded_chunks(loop: SourceLoop, source, chain: CalibratedChain, clock: ArrivalClock,
-                 controls=None, robot=None, window_samples: int = 0):
-    """The coded input for the network, chunk by chunk, from the source's batches (noting
-    each sample's arrival on ``clock``); a Th change is applied at its sample index.
+class LiveStream:
+    """The network's port (``networks.resonators.StreamPort``) on a live source: the stream
+    goes down the layers once per block. ``fill`` reads the source's batches (each sample's
+    arrival noted on the clock), calibrates the chain and codes the samples with the input
+    schedule's Th; ``window`` publishes the network's window to the handlers and has the
+    schedule apply the changes due at its end.
 
-    With a composed network (``robot``), each of the network's windows (``window_samples``)
-    is coded with the gate's Th only once the network has integrated the window before it:
-    the pieces are yielded one window at a time, and the stream asks for the next only after
-    publishing that window (``ResonatorArray.stream``), so the same samples get the same Th
-    however the source chunked them (live or replayed)."""
-    coder = chain.chain.named_steps["coder"]
-    waiting: list = []
-    pushed = 0                          # samples handed to the chain so far
-    coded = 0                           # of those, coded (the rest are held for calibration)
-    for batch in loop:
-        if batch.samples:
-            waiting += batch.samples
-            clock.add(len(batch.samples), batch.host_time_s)
-        if controls is not None:
-            controls.poll(pushed, chain.n_calibration)
-        # A live port delivers a frame or two per read; the chain costs the same for one
-        # sample as for a hundred, so take everything already queued in one go.
-        if not waiting or source.pending():
-            continue
-        counts = chain.take(np.asarray(waiting, dtype=float)[:, 1:])
-        pushed += len(waiting)
-        waiting = []
-        if counts is None:
-            continue
-        cuts: dict[int, list] = {}          # offset → the Th changes due there
-        for item in controls.due(coded, coded + len(counts)) if controls else []:
-            cuts.setdefault(item[0] - coded, []).append(item)
-        if robot is not None:               # and every window boundary
-            for at in range(-coded % window_samples, len(counts), window_samples):
-                cuts.setdefault(at, [])
-        pieces, start = [], 0
-        for at in sorted(cuts) + [len(counts)]:
-            if at > start:
-                piece = chain.code(counts[start:at])
-                if robot is None:
-                    pieces.append(piece)
-                else:
-                    yield piece
-            if at < len(counts):
-                if robot is not None and (coded + at) % window_samples == 0 \
-                        and robot.next_th() is not None:
-                    coder.threshold = robot.next_th()
-                for item in cuts[at]:
-                    controls.apply_th(item)
-            start = at
-        coded += len(counts)
-        if pieces:
-            yield np.concatenate(pieces) if len(pieces) > 1 else pieces[0]
+    The schedule says how far the coder may run ahead of the network (with a speed gate, to
+    the end of the window the gate's latest Th codes: the next is recalled once the network
+    has integrated this one); ``ResonatorArray.stream`` hands over a window before it asks for
+    the next block, so the same samples get the same Th however the source chunked them (live
+    or replayed). Gaps in the stream are not filled: the network sees the received samples
+    back to back."""
+
+    def __init__(self, parts: OnlineParts, loop: SourceLoop, source, chain: CalibratedChain,
+                 schedule: InputSchedule, report: OnlineReport, handlers: tuple):
+        self.loop, self.source, self.chain, self.schedule = loop, source, chain, schedule
+        self.report, self.handlers = report, handlers
+        self.base_window_s = parts.window_s
+        self.tracker = EpisodeTracker(parts.detector, parts.array.neuron_hz, parts.window_s)
+        self.clock = ArrivalClock()
+        self.rate_window = RateWindow()
+        # A replay read flat out delivers seconds of samples at once: arrival-to-rate-map
+        # latency only means something for a live port (or a replay paced in real time).
+        self.live = getattr(source, "realtime", True)
+        self._batches = iter(loop)
+        self._waiting: list = []            # samples received, not handed to the chain yet
+        self._ready: deque[np.ndarray] = deque()    # counts the chain may code, in order
+        self._coded: deque[np.ndarray] = deque()    # coded samples the network has not taken
+        self._taken = 0                     # of the first coded piece, samples taken
+        self._ended = False
+
+    # ---- the network's port ----------------------------------------------------------------
+    def fill(self, block: np.ndarray) -> int:
+        n = 0
+        while n < len(block):
+            if not self._coded and not self._code_more():
+                return n
+            piece = self._coded[0]
+            m = min(len(block) - n, len(piece) - self._taken)
+            block[n:n + m] = piece[self._taken:self._taken + m]
+            n += m
+            self._taken += m
+            if self._taken == len(piece):
+                self._coded.popleft()
+                self._taken = 0
+        return n
+
+    def window(self, t_s: float, counts: np.ndarray) -> None:
+        end_s = t_s + self.base_window_s
+        end_index = int(round(end_s * BOARD_RATE_HZ))
+        self.rate_window.add(t_s, counts)
+        published = None
+        if self.rate_window.n >= self.schedule.windows:
+            start_s, window_s, rates = self.rate_window.take(self.base_window_s)
+            arrived = self.clock.arrival(max(end_index - 1, 0)) if self.live else None
+            if self.live:
+                self.report.origin = self.clock.origin
+            published = Published(start_s, window_s, rates,
+                                   self.tracker.update(start_s, rates, window_s), arrived,
+                                   None if arrived is None else (time.time() - arrived) * 1e3,
+                                   float("nan"))
+        window = Window(end_s, end_index, self.loop.waiting_s, published)
+        self.report.window(window)
+        if published is not None:
+            window = replace(window, published=replace(
+                published, realtime_factor=self.report.realtime_factor))
+        for handler in self.handlers:
+            handler.window(window)
+        self._announce(self.schedule.window_ended(end_index, published is not None))
+
+    # ---- coding ----------------------------------------------------------------------------
+    def _code_more(self) -> bool:
+        """Code what may be coded, reading the source until something is; False once the
+        source ended."""
+        while True:
+            self._code_ready()
+            if self._coded:
+                return True
+            if self._ended:
+                return False
+            batch = next(self._batches, None)
+            if batch is None:
+                self._ended = True
+                continue
+            if batch.samples:
+                self._waiting += batch.samples
+                self.clock.add(len(batch.samples), batch.host_time_s)
+            # A live port delivers a frame or two per read; the chain costs the same for one
+            # sample as for a hundred, so take everything already queued in one go.
+            if not self._waiting or self.source.pending():
+                continue
+            counts = self.chain.take(np.asarray(self._waiting, dtype=float)[:, 1:])
+            self._waiting = []
+            if counts is not None:
+                self._ready.append(counts)
+
+    def _code_ready(self) -> None:
+        """Code the ready counts as far as the schedule knows their Th, each piece with its
+        Th, handing every piece to the handlers as the coder coded it."""
+        while self._ready:
+            counts = self._ready[0]
+            until = self.schedule.coded_until()
+            n = len(counts) if until is None else min(len(counts),
+                                                      until - self.schedule.position)
+            if n <= 0:
+                return
+            pieces, events = self.schedule.code(n)
+            start = 0
+            for end, th_g in pieces:
+                signal, coded = self.chain.code(counts[start:end], th_g)
+                for handler in self.handlers:
+                    handler.coded(signal, th_g, coded)
+                self._coded.append(coded)
+                start = end
+            self._announce(events)
+            if n == len(counts):
+                self._ready.popleft()
+            else:
+                self._ready[0] = counts[n:]
+
+    def _announce(self, events: list[dict]) -> None:
+        for event in events:
+            for handler in self.handlers:
+                handler.changed(event)

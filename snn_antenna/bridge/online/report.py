@@ -8,11 +8,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..wire.handler import WindowHandler
+
 CPU_EVERY_WINDOWS = 10
 
 
 @dataclass
-class OnlineReport:
+class OnlineReport(WindowHandler):
     samples: int = 0
     windows: int = 0
     simulated_s: float = 0.0
@@ -72,10 +74,7 @@ class OnlineReport:
         (s0, c0), (s1, c1) = self.cpu_marks[0], self.cpu_marks[-1]
         return (s1 - s0) / max(c1 - c0, 1e-9)
 
-    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
-    def stream_started(self, parts) -> None:
-        pass
-
+    # ---- a WindowHandler (bridge/wire/handler.py) -------------------------------------------
     def window(self, window) -> None:
         """Note a published rate-map window (stream time, its latency, the time spent waiting
         for the port so far, the process's CPU time every CPU_EVERY_WINDOWS)."""
@@ -97,9 +96,6 @@ class OnlineReport:
             # The pipeline had to wait for the port: any start-up backlog is gone.
             self.caught_up_at = len(self.latencies_ms)
         self.last_window = (time.perf_counter(), window.waiting_s, window.end_s)
-
-    def stream_ended(self, final_event) -> None:
-        pass
 
     def as_dict(self, parts, counts: dict) -> dict:
         def summary(values):

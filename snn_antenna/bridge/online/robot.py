@@ -7,13 +7,15 @@ they are steered as the closed exploration loop steers them (``closed_loop.steer
 each of the network's windows, :meth:`LiveRobot.window` reads them:
 
 - the speed command in force is the robot's own: ``--speed`` at the start, then each speed
-  the page sets (bridge/online/controls.py: applied at a window boundary, journaled, replayed);
-  once the control layer's motor unit fires the robot stops (speed 0, the CPG frozen:
-  ``closed_loop.FREEZE_HOLD``) until the next speed command drives it on;
-- the gate's recalled Th (``SpeedGate.decode`` of its read-out trace) codes the next window:
-  the paper's state-dependent modulation of the coder. A Th set from the page is a manual
-  override: from the window boundary it applies at, the gate's Th is shown but no longer used
-  (``th_source`` says which is in force) for the rest of the run;
+  the page sets (the input schedule, bridge/online/schedule.py, applies it at a window boundary
+  and announces it: journaled, replayed); once the control layer's motor unit fires the robot
+  stops (speed 0, the CPG frozen: ``closed_loop.FREEZE_HOLD``) until the next speed command
+  drives it on;
+- the gate's recalled Th (``SpeedGate.decode`` of its read-out trace) codes the next window,
+  submitted to the input schedule at the window's first sample: the paper's state-dependent
+  modulation of the coder. A Th set from the page is a manual override: from the window
+  boundary it applies at, the gate's Th is shown but no longer used (the schedule's
+  ``th_source`` says which is in force) for the rest of the run;
 - the CPG's phase and pan/tilt command (``CPG.phase``, ``CPG.angles`` of its ring's traces),
   the contact and motor units' spikes in the window.
 
@@ -37,6 +39,8 @@ from ...networks.control import CONTROL_UNITS
 from ...networks.gate import read_trace
 from ...readout.closed_loop import steer
 from ...sources.antenna import SPEED_LIMIT_CM_S
+from ..wire.handler import WindowHandler
+from .schedule import GATE, Change
 
 CACHE_DIR = "out/.cache"                # where a trained gate is kept (as the bench sets are)
 
@@ -104,7 +108,7 @@ def trained_gate(gate, speeds_cm_s, th_star_g, cache_dir=CACHE_DIR):
     return gate
 
 
-class LiveRobot:
+class LiveRobot(WindowHandler):
     """The composed network's other parts at run time. ``configured``: the spec's parts (the
     gate fitted); ``speed_cm_s``: the speed command at the start."""
 
@@ -119,6 +123,7 @@ class LiveRobot:
         # The read-out's settled rate at the first speed (its trace starts there, not at 0).
         self._settled_rate = (float(gate.encode(gate.predict([self.start_speed]))[0])
                               if gate is not None else None)
+        self.schedule = None
         self.reset()
 
     def reset(self) -> None:
@@ -126,7 +131,6 @@ class LiveRobot:
         self.commanded = self.start_speed
         self.objects: dict = {}
         self.stopped_since: float | None = None
-        self.th_source = "gate" if "gate" in self.configured else None
         self.recalled_th: float | None = None
         self.decided: dict = {}
         self._counts, self._seen = None, {}
@@ -155,17 +159,14 @@ class LiveRobot:
             return None
         return float(self.configured["gate"].decode(self._r_read[0]))
 
-    def command(self, speed_cm_s: float) -> float:
-        """A new speed command (the page's, at a window boundary): the robot drives at it,
-        even after a stop. Returns the command it replaced."""
-        was, self.commanded = self.commanded, float(speed_cm_s)
-        self.stopped_since = None
-        self.speed = steer(self.objects, self.commanded, moving=True)
-        return was
-
-    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
-    def stream_started(self, parts) -> None:
-        pass
+    # ---- a WindowHandler (bridge/wire/handler.py) -------------------------------------------
+    def stream_started(self, parts, schedule) -> None:
+        """The gate's Th for the first window: its recall of the read-out's settled rate at the
+        first speed (where ``build`` starts the trace)."""
+        self.schedule = schedule
+        if self._settled_rate is not None:
+            first = float(self.configured["gate"].decode(self._settled_rate))
+            schedule.submit(Change("th_g", first), GATE, 0)
 
     def window(self, window) -> None:
         """A window of the network ended: the stop signal, the gate's Th for the next window,
@@ -195,10 +196,13 @@ class LiveRobot:
                                   "motor_unit_spikes": spikes.get("motor", 0),
                                   "stopped_since_s": self.stopped_since}
         self.decided = decided
+        if self.recalled_th is not None:        # it codes the next window
+            self.schedule.submit(Change("th_g", self.recalled_th), GATE, window.end_index)
 
-    def stream_ended(self, final_event) -> None:
-        pass
-
-    def next_th(self) -> float | None:
-        """The Th the coder uses for the next window: the gate's, unless the page overrode it."""
-        return self.recalled_th if self.th_source == "gate" else None
+    def changed(self, event: dict) -> None:
+        """A new speed command (the page's, at a window boundary): the robot drives at it,
+        even after a stop."""
+        if event["field"] == "speed_cm_s":
+            self.commanded = float(event["value"])
+            self.stopped_since = None
+            self.speed = steer(self.objects, self.commanded, moving=True)

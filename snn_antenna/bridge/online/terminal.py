@@ -7,6 +7,8 @@ import sys
 
 import numpy as np
 
+from ..wire.handler import WindowHandler
+
 BARS = " ▁▂▃▄▅▆▇█"
 
 
@@ -15,7 +17,7 @@ def rate_bar(rates_hz: np.ndarray, full_scale_hz: float) -> str:
     return "".join(BARS[int(v)] for v in levels)
 
 
-class LiveDisplay:
+class LiveDisplay(WindowHandler):
     """A compact live rate map: one character per neuron. On a terminal the line is redrawn in
     place every window; elsewhere (logs, pipes) one line per second. Events get their own line."""
 
@@ -27,8 +29,8 @@ class LiveDisplay:
         self._last_plain = -1.0
         self.neuron_hz = None
 
-    # ---- a WindowHandler (bridge/online/handler.py) -----------------------------------------
-    def stream_started(self, parts) -> None:
+    # ---- a WindowHandler (bridge/wire/handler.py) -------------------------------------------
+    def stream_started(self, parts, schedule) -> None:
         self.neuron_hz = parts.array.neuron_hz
         scale = (f"{self.fixed_scale_hz:g} spikes/s" if self.fixed_scale_hz
                  else "the highest rate so far")

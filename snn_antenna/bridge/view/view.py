@@ -17,8 +17,8 @@ behind (or is stopped), the frames it cannot take are dropped and counted by it
 (``view_frames_dropped`` on the page and in the report), never a sample, which the recorder has
 already written. The page itself is ``bridge/view/page.py``; its controls (pause, scrub, Th, the
 rate-map window, save view) are ``bridge/view/page_controls.py``. A change of Th or window travels
-the other way through a second bounded queue (``LiveView.requests``), which the pipeline reads
-without waiting (bridge/online/controls.py).
+the other way through a second bounded queue (``LiveView.requests``), which the view's handler
+reads without waiting and submits to the stream's input schedule (bridge/online/schedule.py).
 """
 from __future__ import annotations
 
@@ -35,6 +35,7 @@ import numpy as np
 
 from ...core.errors import SpecError
 from ..online.live_state import Decisions
+from ..wire.handler import WindowHandler
 from ..wire.protocol import BOARD_RATE_HZ
 from .history import ViewConfig
 from .process import serve
@@ -42,6 +43,7 @@ from .process import serve
 HISTORY_S = 10.0                # what the plots show
 SCRUB_S = 60.0                  # what the view keeps: a paused page scrubs back through it
 REQUESTS = 16                   # control requests from the page not yet taken by the pipeline
+REQUEST_POLL_S = 0.02           # how often the pipeline's thread looks for them
 FLUSH_S = 0.05                  # the pipeline hands a frame of samples over at most this often
 # ... except that a new rate-map column goes at once, whenever the last frame went (the delay
 # from a window's last sample to its column on screen is what a person watching sees), and
@@ -110,26 +112,13 @@ def _hold(url: str, seconds: float | None) -> None:
     done.wait(seconds)
 
 
-def _tap_coder(coder, tap) -> None:
-    """Make the chain's own coder also hand its input (the filtered, centred signal the gate
-    compares with Th), the Th in force and its output to ``tap``. The pipeline exposes only the
-    coded output; the coder's input is the one place the signal before the gate exists."""
-    plain = coder.partial_transform
-
-    def partial_transform(X, threshold=None):
-        coded = plain(X, threshold)
-        tap(X, coder.threshold if threshold is None else threshold, coded)
-        return coded
-
-    coder.partial_transform = partial_transform
-
-
-class LiveView:
-    """Pipeline side of the live view: a :class:`~snn_antenna.bridge.wire.source.SourceLoop`
-    handler (``handle``, ``idle``) and a :class:`~snn_antenna.bridge.online.handler.WindowHandler`
-    (``run_online``'s ``view``); all of them only gather, and every ``FLUSH_S`` (a new
-    rate-map column: ``WINDOW_FLUSH_S``) one frame goes to the view process without waiting.
-    ``start`` spawns that process and returns the URL it is bound to; ``stop`` ends it."""
+class LiveView(WindowHandler):
+    """Pipeline side of the live view: a :class:`~snn_antenna.bridge.wire.handler.WindowHandler`
+    of ``run_online`` that only gathers (the source's batches, the coder's pieces, the windows,
+    the applied changes), and every ``FLUSH_S`` (a new rate-map column: ``WINDOW_FLUSH_S``)
+    hands one frame to the view process without waiting; and that submits the page's requests
+    to the input schedule. ``start`` spawns that process and returns the URL it is bound to;
+    ``stop`` ends it."""
 
     def __init__(self, parts, *, host: str = "127.0.0.1", port: int = 0,
                  history_s: float = HISTORY_S, rate_hz: float = BOARD_RATE_HZ,
@@ -148,7 +137,7 @@ class LiveView:
                                  speed_range_cm_s=parts.robot.speed_range if parts.robot
                                  else None,
                                  speed_cm_s=parts.robot.start_speed if parts.robot else None)
-        _tap_coder(coder, self._coded)
+        self.schedule = None                # the stream's, from its start
         self._context = multiprocessing.get_context("spawn")
         self._inbox = self._context.Queue(inbox_frames)
         # The page's control requests, checked in the view process (bridge/online/controls.py);
@@ -168,27 +157,30 @@ class LiveView:
         self._applied: list = []
         self._n_xy = self._n_in = 0
         self._flushed = self._window_flushed = time.monotonic()
+        self._polled = 0.0
         self.url = self.port = None
         self.process = self._control = None
         self._counts_sent = self._view_count = None
 
-    # ---- gather (the pipeline's thread) ---------------------------------------------------
+    # ---- a WindowHandler (bridge/wire/handler.py): on the pipeline's thread ----------------
     def handle(self, batch) -> None:
         if batch.counts:
             self._counts = batch.counts
         if batch.samples:
             self._xy.append(batch.samples)
+        self._take_requests()
         self._due()
 
     def idle(self) -> None:
+        self._take_requests()
         self._due()
 
-    def _coded(self, signal, th, coded) -> None:
-        self._in.append((signal, th, coded))
+    def stream_started(self, parts, schedule) -> None:
+        self.schedule = schedule
+        self.decisions.stream_started(parts, schedule)
 
-    # ---- a WindowHandler (bridge/online/handler.py) ---------------------------------------
-    def stream_started(self, parts) -> None:
-        self.decisions.stream_started(parts)
+    def coded(self, signal_g, th_g, coded) -> None:
+        self._in.append((signal_g, th_g, coded))
 
     def window(self, window) -> None:
         """A published window goes to the pages with what the network decided on it; its
@@ -210,10 +202,24 @@ class LiveView:
         self._note(final_event)
         self._due()
 
-    def applied(self, event: dict) -> None:
-        """A control change the pipeline applied (bridge/online/controls.py): shown on the page."""
+    def changed(self, event: dict) -> None:
+        """A change the input schedule applied: shown on the page."""
         self._applied.append(event)
         self._due()
+
+    def _take_requests(self) -> None:
+        """What the page asked for (never waiting), submitted to the input schedule: applied
+        at the first boundary of a published window the coder has not reached."""
+        now = time.monotonic()
+        if self.schedule is None or now - self._polled < REQUEST_POLL_S:
+            return
+        self._polled = now
+        while True:
+            try:
+                change = self.requests.get_nowait()
+            except (queue.Empty, OSError, ValueError):  # empty, or the view process is gone
+                return
+            self.schedule.submit(change, "page")
 
     def _note(self, event) -> None:
         if event is not None:

@@ -7,9 +7,10 @@ A recording is a directory:
                  flags u16, host_time_s f64`` (16 bytes); flag bit 0 marks the first sample of a
                  board session (the board restarted before it). Appending whole records means a
                  crash can only tear the last one, which the reader drops.
-``events.jsonl`` the live controls' changes (Th, the rate-map window), a JSON line each with the
-                 sample index it applied at, written and flushed as it happens
-                 (bridge/online/controls.py reads them back; ``replay`` applies them again).
+``events.jsonl`` the changes the live input schedule applied (Th, the rate-map window in seconds,
+                 the speed command), a JSON line each with the sample index it applied at,
+                 written and flushed as it happens (``read_events`` reads them back; ``replay``
+                 submits them to its schedule again).
 ``meta.json``    port, format, link events (opens, losses, reconnects, with their offset in
                  ``raw.bin``), the board sessions (where each began, and why) and the counts;
                  rewritten atomically (tmp + ``os.replace``) so it is never half-written.
@@ -49,21 +50,24 @@ from .protocol import (
     Gap,
     find_gaps,
 )
+from .handler import WindowHandler
 from .source import DEFAULT_BAUDRATE, Batch
 
 SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("flags", "<u2"),
                          ("host_time_s", "<f8")])
 SESSION_START = 1                       # samples.bin flag: a board session begins here
 RAW_FILE, SAMPLES_FILE, META_FILE = "raw.bin", "samples.bin", "meta.json"
-EVENTS_FILE = "events.jsonl"            # bridge/online/controls.py reads it
+EVENTS_FILE = "events.jsonl"            # the input schedule's changes (read_events)
 RECORDING = "recording"                 # what a recording's output folder holds
 FORMAT_VERSION = 1
 COUNT_FIELDS = ("frames", "crc_errors", "framing_errors", "range_errors", "gaps", "lost_samples",
                 "duplicates", "reordered", "late", "seq_restarts", "boot_frames", "reconnects")
 
 
-class Recorder:
-    """Writes :class:`~snn_antenna.bridge.wire.source.Batch` objects into a recording directory."""
+class Recorder(WindowHandler):
+    """Writes :class:`~snn_antenna.bridge.wire.source.Batch` objects into a recording directory,
+    and journals the changes the live input schedule applied (a WindowHandler of the online
+    pipeline, bridge/wire/handler.py)."""
 
     def __init__(self, out, *, port: str, wire_format: str, baudrate: int,
                  rate_hz: float = BOARD_RATE_HZ, flush_interval_s: float = 0.05,
@@ -141,9 +145,15 @@ class Recorder:
             self._write_meta()
             self._last_meta = now
 
+    def changed(self, event: dict) -> None:
+        """A change the input schedule applied, journaled with the value the page showed (the
+        rate-map window in seconds, not in the network's windows)."""
+        (field, value), = event["shown"].items()
+        self.note_event({**event, "field": field, "value": value})
+
     def note_event(self, event: dict) -> None:
-        """A control change applied by the pipeline (bridge/online/controls.py): one JSON line in
-        ``events.jsonl``, flushed at once (it is rare, and replay needs every one)."""
+        """One JSON line in ``events.jsonl``, flushed at once (a change is rare, and replay
+        needs every one)."""
         if self._events is None:
             self._events = open_append(self.dir / EVENTS_FILE)
         self._events.write(json.dumps(event) + "\n")

@@ -24,6 +24,7 @@ import serial
 
 from ...core import bounds
 from ...core.errors import DeviceError, SpecError
+from .handler import BatchHandler
 from .protocol import Decoder, Sample, Session, check_wire_format
 
 DEFAULT_BAUDRATE = 250000
@@ -291,8 +292,9 @@ class RunResult:
 
 @dataclass
 class SourceLoop:
-    """Drives a started source: hands every batch to each handler (``handle(batch)``, and
-    ``idle()`` when nothing came) and yields it, until ``duration_s`` of wall time, ``stop``, or
+    """Drives a started source: hands every batch to each handler (a
+    :class:`~snn_antenna.bridge.wire.handler.BatchHandler`: ``handle(batch)``, and ``idle()``
+    when nothing came) and yields it, until ``duration_s`` of wall time, ``stop``, or
     an error. Iterating is for consumers that do more with the batches (the online pipeline);
     :func:`run_source` just exhausts it.
 
@@ -315,6 +317,11 @@ class SourceLoop:
             raise SpecError("duration", self.duration_s, "a number of seconds > 0")
         if not self.no_data_timeout_s > 0:
             raise SpecError("no_data_timeout", self.no_data_timeout_s, "a number of seconds > 0")
+        self.handlers = tuple(self.handlers)
+        for handler in self.handlers:
+            if not isinstance(handler, BatchHandler):
+                raise SpecError("handlers", type(handler).__name__,
+                                "BatchHandler instances (bridge/wire/handler.py)")
 
     def __iter__(self):
         last_valid = time.monotonic()
@@ -364,7 +371,7 @@ class SourceLoop:
 def run_source(source, handlers, *, duration_s: float | None = None,
                no_data_timeout_s: float = 5.0, stop: threading.Event | None = None) -> RunResult:
     """Run a started source into ``handlers`` (see :class:`SourceLoop`)."""
-    loop = SourceLoop(source, tuple(handlers), duration_s, no_data_timeout_s, stop)
+    loop = SourceLoop(source, handlers, duration_s, no_data_timeout_s, stop)
     t0 = time.monotonic()
     for _ in loop:
         pass
