@@ -478,7 +478,7 @@ def test_a_sweep_axis_too_large_for_memory_is_refused_in_one_line_before_allocat
         Grid({name: {"start": 1, "stop": 2, "num": 10**5} for name in "abc"})
 
 
-def test_the_spec_and_the_constructor_say_the_same_of_one_field(tmp_path):
+def test_the_spec_and_the_constructor_say_the_same_of_one_field():
     """One declaration: a study spec's field and the constructor's argument are refused with
     the same accepted text (the spec adds the section to the field's name)."""
     from snn_antenna.core import spec as specs
