@@ -256,7 +256,9 @@ def _write_spiking(report: Report, summary: dict) -> None:
                  "read-out's share of the bank's resonators.")
     report.table(spiking_distance_rows(summary), "Distance from spiking features (MLP 20-5)")
     report.text(spiking_cost_text(summary))
-    if summary["spiking"].get("tuned"):
+    # a recorded set whose split trains on fewer events than the curve's smallest bank
+    # has no curve (the run logged the sizes it left out)
+    if (summary["spiking"].get("tuned") or {}).get("curve"):
         report.figure(figures.tuned_curve(summary), "tuned_curve",
                       "Left: 8-material accuracy of the tuned spiking bank (every read-out "
                       "code, MLP 51) against its resonators, and NMF-n with as many filters, "
