@@ -85,8 +85,11 @@ class Options:
         bounds.declared(self)
         if self.rate_hz is not None:
             bounds.rate_hz("rate_hz", self.rate_hz)
-        bounds.integer("adc_bits", self.adc_bits, 4, 24)
-        bounds.number("full_scale_g", self.full_scale_g, 0.0, bounds.MAX_AMPLITUDE, lo_open=True)
+        if self.adc_bits is not None:
+            bounds.integer("adc_bits", self.adc_bits, 4, 24)
+        if self.full_scale_g is not None:
+            bounds.number("full_scale_g", self.full_scale_g, 0.0, bounds.MAX_AMPLITUDE,
+                          lo_open=True)
 
 
 @dataclass
