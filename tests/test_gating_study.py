@@ -232,3 +232,15 @@ def test_codings_scored_on_dask_workers_equal_those_scored_here():
     assert there_scores == here_scores
     assert all(a.equals(b) for a, b in zip(there_maps, here_maps))
     assert here_scores[0].fp > 0 and here_scores[2].tp == here_scores[2].fp == 0  # not vacuous
+
+
+def test_the_coder_table_names_the_studys_own_coder_from_its_preprocessing():
+    from snn_antenna.core import spec as specs
+    from snn_antenna.studies.gating_threshold.plan import make_parts
+    from snn_antenna.studies.gating_threshold.report import coder_rows
+
+    spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
+                      ['preprocess.coder="delta"'], quick=True)
+    cell = {"mean": 0.5, "low": 0.4, "high": 0.6, "n": 2}
+    rows = coder_rows({"f1": {"gated": cell}, "coders": {}}, make_parts(spec))
+    assert rows[0]["coder"] == "delta (the study's)"

@@ -272,7 +272,7 @@ def _fig9_section(rep, r: Results, parts: Parts) -> None:
 
 def coder_rows(s: dict, parts: Parts) -> list[dict]:
     """The study's own coder (``[preprocess] coder``) and each of ``evaluation.coders``."""
-    own = parts.preprocess.get("coder", "square")
+    own = parts.preprocess.settings.get("coder", "square")
     rows = [{"coder": f"{own} (the study's)", "F1": table_cell(s["f1"]["gated"]),
              "minus the study's coder": "—"}]
     return rows + [{"coder": f"{label} ({v['coder']})", "F1": table_cell(v["f1"]),
