@@ -108,7 +108,8 @@ def test_the_gallery_runs_every_example_at_build_and_shows_its_figure(site):
         page = (site / "gallery" / f"{script.stem}.html").read_text()
         assert re.search(rf'<img[^>]+src="[^"]*sphx_glr_{script.stem}_\d+\.png"', page), \
             f"{script.name}: no figure on its page"
-        assert "Download Python source code" in page and "Download Jupyter notebook" in page
+        # and it can be downloaded as a script and as a notebook
+        assert "sphx-glr-download-python" in page and "sphx-glr-download-jupyter" in page
     # and the API page of a module an example uses lists that example
     neurons = (site / "api" / "generated" / "snn_antenna.networks.neurons.html").read_text()
     assert "plot_1_neuron_tuning" in neurons
