@@ -11,7 +11,13 @@ from ...core import bounds
 from ...core import spec as specs
 from ...engine.batches import ScoredCodings
 from ...core.errors import SpecError, check
-from ...engine.cost import engine_of, gate_training_runs, max_workers, stages_estimate
+from ...engine.cost import (
+    codings_engine,
+    engine_of,
+    gate_training_runs,
+    max_workers,
+    stages_estimate,
+)
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_chain, make_coder
@@ -66,6 +72,9 @@ class SweepSettings:
               "a time in [0, scene_s) s")
         check(isinstance(self.workers, int) and self.workers >= 0, "workers", self.workers,
               "an integer >= 0 (0: one Dask worker per CPU core; 1: this process)")
+        check(self.target in (None, "numpy", "cython", "standalone"), "target", self.target,
+              "'standalone' (compiled once per worker, re-run per batch of codings), 'cython' "
+              "or 'numpy'")
 
 
 @dataclass
@@ -230,7 +239,7 @@ def estimate(parts: Parts):
     study groups them and shared among its workers."""
     sw, array, ev = parts.sweep, parts.array, parts.evaluation
     workers = sw.workers or max_workers()
-    engine = engine_of(sw.target or array.target)
+    engine = codings_engine(sw.target or array.target)
 
     def codings(n: int, seconds: float = sw.scene_s) -> list:
         runs = [(seconds, array.dt_ms, min(n, sw.codings_per_run) * array.n_neurons,

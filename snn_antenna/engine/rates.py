@@ -1,0 +1,206 @@
+"""The engines' rates that every estimate multiplies by, and where each one comes from.
+
+    table = rates()          # this machine's probe when one is stored for this code, else TABLE
+    table = probe()          # measure now (small Brian2 runs, about a minute) and store
+
+A ``Rate`` is a value with its source. ``TABLE`` holds rates measured once and written down
+(each with the command that measured it); ``probe`` measures the per-step and per-neuron-step
+cost of each Brian2 engine on this machine, now, with small runs of the same kind of group
+the studies run (``neurons.simulate`` for the runtime targets; ``engine.codings``' compiled
+group for ``"codings"``), and stores them in ``cache_root()/rates/KEY.json``, KEY hashing the
+probing code with its imports (``provenance.code_hash``), Brian2's version and the CPU: a
+probe of other code or another machine is never used. A probe measures the machine as it is
+(other processes included), so re-probe when the load changes.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import json
+import os
+import platform
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..core.files import atomic_write, cache_root, make_folder
+
+
+@dataclass(frozen=True)
+class Rate:
+    value: float
+    source: str
+
+
+# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
+# compile excluded), at their low ends so the estimate errs long. numpy: the quick tuning sweep
+# (9.4e6 neuron-steps in 4.3 s on a loaded 2-core machine, `snn-antenna run
+# studies/tuning_sweep.toml --quick`); cython: bench_sweep.py's ratio to numpy; standalone
+# (the fused sweep and event engines, float64): `python benchmarks/bench_sweep.py --sizes
+# 1000000 --runtime-max 0 --naive-sample 1` measured 9.3e8 idle on one core (1.8e9 in
+# float32) and 3.6e8 on 10^5 points under heavy load; a third of the idle rate covers a
+# shared machine and small grids' per-chunk overhead. codings (engine.codings: Brian2's own
+# state updater, threshold, reset and a SpikeMonitor, compiled): taken as a tenth of the
+# fused engine's until probed.
+# Time steps per second of ONE small Brian2 network (tens of neurons, spike monitor) in one
+# process, where the per-step overhead rather than the neurons sets the pace: quickstart
+# --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
+# with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
+# [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
+# estimate errs long. Standalone is taken as cython (its compile is added separately).
+_WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
+TABLE = {
+    "neuron_steps_per_s": {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8,
+                           "codings": 3.0e7},
+    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4, "codings": 4.0e4},
+    "compile_s": {"standalone": 20.0, "codings": 20.0},
+}
+ENGINES = ("numpy", "cython", "standalone", "codings")
+# what the probe measures; the fused engines' rates stay the table's (their probe is
+# benchmarks/bench_sweep.py, minutes of compiling)
+PROBED = {"neuron_steps_per_s": ("numpy", "cython", "codings"),
+          "steps_per_s": ("numpy", "cython", "codings"), "compile_s": ("codings",)}
+
+
+def table() -> dict[str, dict[str, Rate]]:
+    return {kind: {engine: Rate(v, _WRITTEN) for engine, v in values.items()}
+            for kind, values in TABLE.items()}
+
+
+def machine() -> str:
+    """The CPU this machine reports, and its core count."""
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as info:
+            model = next((line.split(":", 1)[1].strip() for line in info
+                          if line.startswith("model name")), model)
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores"
+
+
+def probe_key() -> str:
+    """The probe's cache key: the probing code and its imports, Brian2's version, the CPU."""
+    from importlib.metadata import version
+
+    from ..core.provenance import code_hash
+
+    # Brian2's version from its metadata: a --check imports no Brian2
+    text = json.dumps([code_hash(__name__), version("brian2"), machine()])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _path():
+    return cache_root() / "rates" / f"{probe_key()}.json"
+
+
+def rates() -> dict[str, dict[str, Rate]]:
+    """The rates to estimate with: the table, with every rate this machine's stored probe
+    (for this code) measured in its place."""
+    out = table()
+    try:
+        stored = json.loads(_path().read_text())
+    except (OSError, ValueError):
+        return out
+    for kind, values in stored.get("rates", {}).items():
+        for engine, value in values.items():
+            if kind in out and isinstance(value, (int, float)) and np.isfinite(value) \
+                    and value > 0:
+                out[kind][engine] = Rate(float(value), f"probe of {stored.get('when', '?')} "
+                                                       f"on this machine ({_path()})")
+    return out
+
+
+def sources(table_: dict[str, dict[str, Rate]]) -> str:
+    """One line naming where the rates come from."""
+    found = sorted({r.source for values in table_.values() for r in values.values()})
+    return "rates: " + "; ".join(found)
+
+
+# -- the probe ----------------------------------------------------------------------------
+PROBE_S = 0.5           # simulated per probe run, dt 0.1 ms: 5,000 steps
+PROBE_SIZES = (24, 2400)  # neurons: the step overhead, then the neurons' own cost
+PROBE_CODINGS = 50      # codings (of 24 neurons) in the compiled probe group
+
+
+def _square(n_samples: int, columns: int, rate_hz: float) -> np.ndarray:
+    t = np.arange(n_samples) / rate_hz
+    hz = np.linspace(6.0, 30.0, columns)
+    return 0.15 * np.sign(np.sin(2 * np.pi * t[:, None] * hz[None, :]))
+
+
+def _best_of(run, repeats: int = 2) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _runtime(target: str) -> tuple[float, float]:
+    """(steps/s, neuron-steps/s) of ``neurons.simulate`` on ``target``, from two sizes."""
+    from ..networks import neurons
+
+    rate_hz, n_samples = 1000.0, int(PROBE_S * 1000)
+    steps = PROBE_S * 1000 / 0.1
+    times = []
+    for n in PROBE_SIZES:
+        current = _square(n_samples, n, rate_hz)
+
+        def run(current=current):
+            neurons.simulate("resonator", current, 0.1, k=np.linspace(0.3, 1.5, current.shape[1]),
+                             method="rk2", input_dt_ms=1.0, target=target)
+        run()                               # code generation, compiling
+        times.append(_best_of(run))
+    per_neuron = max((times[1] - times[0]) / (steps * (PROBE_SIZES[1] - PROBE_SIZES[0])),
+                     1e-12)
+    per_step = max(times[0] / steps - PROBE_SIZES[0] * per_neuron, 1e-9)
+    return 1.0 / per_step, 1.0 / per_neuron
+
+
+def _codings() -> tuple[float, float, float]:
+    """(steps/s, neuron-steps/s, build s) of the compiled codings group (``engine.codings``);
+    its whole run time is charged to the neurons (the step overhead is microseconds)."""
+    from ..networks.resonators import ResonatorArray
+    from .codings import compiled_rate_maps
+
+    array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
+    rate_hz = 1000.0
+    coded = _square(int(PROBE_S * 1000), PROBE_CODINGS, rate_hz)
+
+    def run():
+        compiled_rate_maps(array, coded, rate_hz, 0.1, PROBE_CODINGS)
+    t0 = time.perf_counter()
+    run()
+    build = time.perf_counter() - t0
+    wall = _best_of(run)
+    steps = PROBE_S * 1000 / array.dt_ms
+    return steps / wall, steps * array.n_neurons * PROBE_CODINGS / wall, max(build - wall, 0.0)
+
+
+def probe(log=print) -> dict[str, dict[str, Rate]]:
+    """Measure the probed rates on this machine now, store them, and return ``rates()``."""
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}}
+    for target in ("numpy", "cython"):
+        per_step, per_neuron = _runtime(target)
+        measured["steps_per_s"][target] = per_step
+        measured["neuron_steps_per_s"][target] = per_neuron
+        log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s")
+    per_step, per_neuron, build = _codings()
+    measured["steps_per_s"]["codings"] = per_step
+    measured["neuron_steps_per_s"]["codings"] = per_neuron
+    measured["compile_s"]["codings"] = max(build, 1.0)
+    log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s, built in {build:.1f} s")
+    path = _path()
+    make_folder(path.parent)
+    atomic_write(path, json.dumps({
+        "rates": measured, "when": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine(), "load_average": os.getloadavg()[0]}, indent=1) + "\n")
+    return rates()
+
+
+def as_json(table_: dict[str, dict[str, Rate]]) -> dict:
+    return {kind: {engine: asdict(r) for engine, r in values.items()}
+            for kind, values in table_.items()}
