@@ -242,7 +242,9 @@ def estimate(parts: Parts):
     engine = codings_engine(sw.target or array.target)
 
     def codings(n: int, seconds: float = sw.scene_s) -> list:
-        runs = [(seconds, array.dt_ms, min(n, sw.codings_per_run) * array.n_neurons,
+        # the compiled group always holds codings_per_run codings (a short run is padded)
+        size = sw.codings_per_run if engine == "codings" else min(n, sw.codings_per_run)
+        runs = [(seconds, array.dt_ms, size * array.n_neurons,
                  engine)] * -(-n // sw.codings_per_run)
         return runs[:-(-len(runs) // workers)] if workers > 1 else runs
 
