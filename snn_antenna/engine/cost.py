@@ -159,6 +159,20 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
                        sources=rates.sources(used_rates))
 
 
+def study_overhead_s() -> float:
+    """What every study run costs beside its work: the process's start (imports) and its
+    report (``rates.rates()``)."""
+    python = rates.rates()["python_s"]
+    return python["study_start"].value + python["report"].value
+
+
+def readout_seconds(n_maps: float, windows: float, workers: int = 1) -> float:
+    """Python's time for the contact rule over ``n_maps`` rate maps of ``windows`` windows,
+    shared among ``workers`` processes (``rates.rates()``)."""
+    per_window = rates.rates()["python_s"]["readout_window"].value
+    return n_maps * windows * per_window / max(1, workers)
+
+
 def stages_estimate(what: str, stages: list[tuple]) -> JobEstimate:
     """A study of several stages, each ``(key, value, runs)`` or ``(key, value, runs,
     seconds)`` (``seconds``: measured work that is not Brian2, such as making a bench set):

@@ -55,12 +55,13 @@ TABLE = {
                            "codings": 3.0e7},
     "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4, "codings": 4.0e4},
     "compile_s": {"standalone": 20.0, "codings": 20.0},
+    # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
+    # and the package imported) and its report; one window of a rate map through the contact
+    # rule (``ContactDetector.detect``: 91 maps of 80 windows took 63 s of a quick gating
+    # run under a load of 22 on 2 cores, cProfile; a tenth of that taken for an idle core)
+    "python_s": {"study_start": 10.0, "report": 10.0, "readout_window": 1e-3},
 }
-ENGINES = ("numpy", "cython", "standalone", "codings")
-# what the probe measures; the fused engines' rates stay the table's (their probe is
-# benchmarks/bench_sweep.py, minutes of compiling)
-PROBED = {"neuron_steps_per_s": ("numpy", "cython", "codings"),
-          "steps_per_s": ("numpy", "cython", "codings"), "compile_s": ("codings",)}
+ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 
 
 def table() -> dict[str, dict[str, Rate]]:
@@ -180,14 +181,47 @@ def _codings() -> tuple[float, float, float]:
     return steps / wall, steps * array.n_neurons * PROBE_CODINGS / wall, max(build - wall, 0.0)
 
 
+def _start() -> float:
+    """Seconds for a new process to import what a study imports (Python, Brian2, matplotlib,
+    the package's command)."""
+    import subprocess
+    import sys
+
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import brian2, matplotlib.pyplot, snn_antenna.cli"],
+                   check=True, capture_output=True)
+    return time.perf_counter() - t0
+
+
+def _readout_window() -> float:
+    """Seconds per window of ``ContactDetector.detect`` on a 15 s rate map of 24 neurons
+    where every fifth window is a contact episode of its own (an episode's estimate costs
+    most: at Th = 0 the self-motion makes many)."""
+    from ..networks.resonators import ResonatorArray, rate_map
+    from ..readout.contacts import ContactDetector
+
+    array = ResonatorArray()
+    duration_s, window_s = 15.0, 0.1
+    windows = int(duration_s / window_s)
+    starts = np.arange(0, windows, 5) * window_s
+    spike_t = (starts[:, None] + np.array([0.01, 0.03, 0.05])[None, :]).ravel()
+    spike_i = np.full(spike_t.size, array.n_neurons - 1)    # the top neuron: 30 Hz
+    rates = rate_map(spike_i, spike_t, array.neuron_hz, duration_s, window_s)
+    detector = ContactDetector()
+    return _best_of(lambda: detector.detect(rates)) / windows
+
+
 def probe(log=print) -> dict[str, dict[str, Rate]]:
     """Measure the probed rates on this machine now, store them, and return ``rates()``."""
-    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}}
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}, "python_s": {}}
     for target in ("numpy", "cython"):
         per_step, per_neuron = _runtime(target)
         measured["steps_per_s"][target] = per_step
         measured["neuron_steps_per_s"][target] = per_neuron
         log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s")
+    measured["python_s"] = {"study_start": _start(), "readout_window": _readout_window()}
+    log(f"      a study's start: {measured['python_s']['study_start']:.1f} s; the contact "
+        f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
     per_step, per_neuron, build = _codings()
     measured["steps_per_s"]["codings"] = per_step
     measured["neuron_steps_per_s"]["codings"] = per_neuron

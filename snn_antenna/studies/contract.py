@@ -26,6 +26,7 @@ from collections.abc import Callable
 
 from ..core.errors import SpecError
 from ..core.bounds import out_path
+from ..engine.cost import study_overhead_s
 
 # What every study takes: the quick profile, stopping after the checks, running beyond the
 # cost limit, reusing a folder that holds another study's outputs.
@@ -102,7 +103,12 @@ class Plan:
     left_out: list[str] = field(default_factory=list)
 
     def estimate(self):
-        return self.sizes(self.parts) if self.sizes is not None else None
+        """The study's cost (``sizes``), its process's start and its report included."""
+        if self.sizes is None:
+            return None
+        sized = self.sizes(self.parts)
+        sized.seconds += study_overhead_s()
+        return sized
 
     @property
     def seed(self) -> int:

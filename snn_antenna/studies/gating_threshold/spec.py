@@ -16,6 +16,7 @@ from ...engine.cost import (
     engine_of,
     gate_training_runs,
     max_workers,
+    readout_seconds,
     stages_estimate,
 )
 from ...networks.gate import SpeedGate
@@ -265,12 +266,18 @@ def estimate(parts: Parts):
     scenes = ev.max_seeds * profiles
     recall = [(sw.scene_s, parts.gate.dt_ms, (parts.gate.n_speed_neurons + 2) * scenes,
                engine_of(parts.gate.target))]
+    windows = sw.scene_s / parts.readout.window_s   # each coding's rate map, read in Python
+    n_sweep, n_fig9 = n_v * sw.n_scenes * n_th, len(LOW_HIGH_CM_S) * sw.n_scenes * 3
+    n_evaluated = scenes * (n_th + 3)
     return stages_estimate("the threshold sweep, Fig. 9, the gate and the evaluation (at "
                            "its seed budget)", [
-        ("sweep.n_scenes", sw.n_scenes, codings(n_v * sw.n_scenes * n_th)),
-        ("sweep.n_scenes", sw.n_scenes, codings(len(LOW_HIGH_CM_S) * sw.n_scenes * 3)),
+        ("sweep.n_scenes", sw.n_scenes, codings(n_sweep),
+         readout_seconds(n_sweep, windows, workers)),
+        ("sweep.n_scenes", sw.n_scenes, codings(n_fig9),
+         readout_seconds(n_fig9, windows, workers)),
         gate,
-        ("evaluation.max_seeds", ev.max_seeds, codings(scenes * (n_th + 3)) + recall)])
+        ("evaluation.max_seeds", ev.max_seeds, codings(n_evaluated) + recall,
+         readout_seconds(n_evaluated, windows, workers))])
 
 
 def sweep_settings(spec: dict, parts: Parts | None = None) -> dict:
