@@ -153,6 +153,8 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
         neuron_steps += n * size
         seconds += (n / table["steps_per_s"][eng].value
                     + n * size / table["neuron_steps_per_s"][eng].value)
+        if eng in table["run_s"]:       # a compiled run's own start and files
+            seconds += table["run_s"][eng].value
     seconds += sum(table["compile_s"][e].value for e in used if e in table["compile_s"])
     used_rates = {k: {e: r for e, r in v.items() if e in used} for k, v in table.items()}
     return JobEstimate(what, steps, neuron_steps, seconds, engine, key,

@@ -53,8 +53,13 @@ _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
 TABLE = {
     "neuron_steps_per_s": {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8,
                            "codings": 3.0e7},
-    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4, "codings": 4.0e4},
+    # (codings: the compiled loop's own cost per step is about a microsecond; the probe
+    # charges it to the neuron-steps and the run)
+    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4, "codings": 1.0e6},
     "compile_s": {"standalone": 20.0, "codings": 20.0},
+    # a compiled project's run beside its neurons' work: the binary's start, its inputs
+    # written and its results read back
+    "run_s": {"codings": 0.5},
     # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
     # and the package imported) and its report; one window of a rate map through the contact
     # rule (``ContactDetector.detect``: 91 maps of 80 windows took 63 s of a quick gating
@@ -122,7 +127,7 @@ def sources(table_: dict[str, dict[str, Rate]]) -> str:
 # -- the probe ----------------------------------------------------------------------------
 PROBE_S = 0.5           # simulated per probe run, dt 0.1 ms: 5,000 steps
 PROBE_SIZES = (24, 2400)  # neurons: the step overhead, then the neurons' own cost
-PROBE_CODINGS = 50      # codings (of 24 neurons) in the compiled probe group
+PROBE_CODINGS = (10, 100)   # codings (of 24 neurons) in the compiled probe groups
 
 
 def _square(n_samples: int, columns: int, rate_hz: float) -> np.ndarray:
@@ -163,23 +168,29 @@ def _runtime(target: str) -> tuple[float, float]:
 
 
 def _codings() -> tuple[float, float, float]:
-    """(steps/s, neuron-steps/s, build s) of the compiled codings group (``engine.codings``);
-    its whole run time is charged to the neurons (the step overhead is microseconds)."""
+    """(s per run, neuron-steps/s, build s) of the compiled codings group
+    (``engine.codings``), from two group sizes (two projects, each built once on disk)."""
     from ..networks.resonators import ResonatorArray
     from .codings import compiled_rate_maps
 
     array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
     rate_hz = 1000.0
-    coded = _square(int(PROBE_S * 1000), PROBE_CODINGS, rate_hz)
-
-    def run():
-        compiled_rate_maps(array, coded, rate_hz, 0.1, PROBE_CODINGS)
-    t0 = time.perf_counter()
-    run()
-    build = time.perf_counter() - t0
-    wall = _best_of(run)
     steps = PROBE_S * 1000 / array.dt_ms
-    return steps / wall, steps * array.n_neurons * PROBE_CODINGS / wall, max(build - wall, 0.0)
+    walls, builds = [], []
+    for size in PROBE_CODINGS:
+        coded = _square(int(PROBE_S * 1000), size, rate_hz)
+
+        def run(coded=coded, size=size):
+            compiled_rate_maps(array, coded, rate_hz, 0.1, size)
+        t0 = time.perf_counter()
+        run()
+        first = time.perf_counter() - t0
+        walls.append(_best_of(run))
+        builds.append(max(first - walls[-1], 0.0))
+    neuron_steps = [steps * array.n_neurons * size for size in PROBE_CODINGS]
+    per_neuron = max((walls[1] - walls[0]) / (neuron_steps[1] - neuron_steps[0]), 1e-12)
+    per_run = max(walls[0] - neuron_steps[0] * per_neuron, 0.0)
+    return per_run, 1.0 / per_neuron, max(builds)
 
 
 FIGURES_PER_REPORT = 6   # the gating study's report draws 6, the others 2 to 8
@@ -228,7 +239,7 @@ def _readout_window() -> float:
 
 def probe(log=print) -> dict[str, dict[str, Rate]]:
     """Measure the probed rates on this machine now, store them, and return ``rates()``."""
-    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}, "python_s": {}}
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}}
     for target in ("numpy", "cython"):
         per_step, per_neuron = _runtime(target)
         measured["steps_per_s"][target] = per_step
@@ -239,11 +250,12 @@ def probe(log=print) -> dict[str, dict[str, Rate]]:
                             "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
-    per_step, per_neuron, build = _codings()
-    measured["steps_per_s"]["codings"] = per_step
+    per_run, per_neuron, build = _codings()
+    measured["run_s"] = {"codings": per_run}
     measured["neuron_steps_per_s"]["codings"] = per_neuron
     measured["compile_s"]["codings"] = max(build, 1.0)
-    log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s, built in {build:.1f} s")
+    log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s and {per_run:.2f} s per "
+        f"run, built in {build:.1f} s")
     path = _path()
     make_folder(path.parent)
     atomic_write(path, json.dumps({
