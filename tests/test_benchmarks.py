@@ -79,6 +79,15 @@ def stream_ran(out: str, tmp_path: Path) -> None:
         assert line in out, line
 
 
+def studies_ran(out: str, tmp_path: Path) -> None:
+    record = cited(tmp_path / "bench.json", tmp_path)
+    (row,) = record["rows"]
+    assert row["study"] == "quickstart" and row["profile"] == "quick"
+    assert row["estimate_s"] > 0 and row["measured_s"] > 0
+    assert row["measured_over_estimate"] == pytest.approx(row["measured_s"] / row["estimate_s"])
+    assert "rates: " in out and "within x1.5 of the estimate" in out
+
+
 def sweep_ran(out: str, tmp_path: Path) -> None:
     record = cited(tmp_path / "bench.json", tmp_path)
     (grid,) = record["per_grid"].values()
@@ -103,6 +112,7 @@ SMALL_RUNS = {
     "bench_events": (["--cost-only", "--cost-events", "4", "--sizes", "24",
                       "--json", "bench.json"], events_ran),
     "bench_stream": (["--seconds", "1", "--baseline", "none"], stream_ran),
+    "bench_studies": (["--studies", "quickstart", "--json", "bench.json"], studies_ran),
     "bench_sweep": (["--sizes", "40", "--duration-s", "0.05", "--repeat", "1",
                      "--runtime-max", "40", "--naive-sample", "1", "--workers",
                      "--json", "bench.json"], sweep_ran),

@@ -64,11 +64,16 @@ def test_gating_study_labels_its_numbers_and_sizes_its_seeds_from_the_spread(tmp
         assert (out / name).is_file()
 
 
+# These tests check the study's logic: on the numpy target they compile nothing (the
+# compiled codings equal the runtime path's: tests/test_codings.py)
+LOGIC_ONLY = "sweep.target=numpy"
+
+
 def _quick_parts(*overrides):
     from snn_antenna.core import spec as specs
     from snn_antenna.studies.gating_threshold.plan import make_parts
     spec = specs.resolved(specs.load(ROOT / "studies" / "gating_threshold.toml",
-                                     ["sweep.scene_s=6.0", *overrides], quick=True))
+                                     ["sweep.scene_s=6.0", LOGIC_ONLY, *overrides], quick=True))
     return spec, make_parts(spec)
 
 
@@ -185,7 +190,8 @@ def test_the_threshold_sweep_is_a_resumable_store_reused_when_only_the_gate_chan
 
     def sweep(*overrides):
         spec = specs.load(ROOT / "studies" / "gating_threshold.toml",
-                          ["sweep.scene_s=5.0", "sweep.speeds_cm_s=[0.0, 27.0]", *overrides],
+                          ["sweep.scene_s=5.0", "sweep.speeds_cm_s=[0.0, 27.0]", LOGIC_ONLY,
+                           *overrides],
                           quick=True)
         make_parts(spec)
         # scene 4: a course whose shaking at 27 cm/s makes false positives at Th = 0

@@ -92,7 +92,7 @@ def test_a_28_hour_scene_shows_its_estimate_and_needs_yes(tmp_path, capsys):
 
 @pytest.mark.parametrize("spec, setting, field", [
     ("studies/baseline_comparison.toml", "stimulus.repetitions=2000", "stimulus.repetitions"),
-    ("studies/gating_threshold.toml", "sweep.n_scenes=400", "sweep.n_scenes"),
+    ("studies/gating_threshold.toml", "sweep.n_scenes=4000", "sweep.n_scenes"),
     ("studies/exploration.toml", "loop.duration_s=40000", "loop.duration_s"),
 ])
 def test_bench_sets_and_sweeps_of_scenes_need_yes_beyond_an_hour(tmp_path, capsys, spec,

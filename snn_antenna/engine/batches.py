@@ -25,6 +25,7 @@ import numpy as np
 
 from ..evaluation.scoring import score_with
 from ..readout.detection import BlindReadOut
+from .codings import COMPILED, compiled_rate_maps
 
 
 @dataclass
@@ -78,11 +79,21 @@ class Batches:
 @dataclass(frozen=True)
 class DetectColumns:
     """One batch's read-out (``Batches`` work): coded columns → (detections, rate map) each.
-    Only the coded columns travel; the labels stay with ``ScoredCodings``."""
+    Only the coded columns travel; the labels stay with ``ScoredCodings``. A read-out whose
+    target is ``"standalone"`` runs on the compiled engine (``engine.codings``: one project
+    of ``per_run`` codings per process, re-run per batch), the runtime targets through
+    ``BlindReadOut.detect``."""
     readout: BlindReadOut
+    per_run: int = 1
 
     def __call__(self, columns: list) -> list:
-        detections, maps = self.readout.detect(np.stack(columns, axis=1))
+        coded = np.stack(columns, axis=1)
+        if self.readout.target == COMPILED:
+            r = self.readout
+            maps = compiled_rate_maps(r.array, coded, r.rate_hz, r.window_s, self.per_run)
+            detections = [r.detector.detect(rates) for rates in maps]
+        else:
+            detections, maps = self.readout.detect(coded)
         return list(zip(detections, maps))
 
 
@@ -99,7 +110,7 @@ class ScoredCodings:
 
     def __init__(self, readout: BlindReadOut, per_run: int, client=None):
         self.readout = readout
-        self.batches = Batches(DetectColumns(readout), per_run, client)
+        self.batches = Batches(DetectColumns(readout, per_run), per_run, client)
 
     def submit(self, items: list) -> Submitted:
         return Submitted(self.batches.submit([coded for _, coded in items]),

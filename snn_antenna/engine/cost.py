@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core.store import Output
 from ..core.bounds import memory_budget_bytes
+from . import rates
 from .grid import Grid, fits_in_memory
 
 
@@ -32,15 +33,6 @@ def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
 
 
 
-# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
-# compile excluded), at their low ends so the estimate errs long. numpy: the quick tuning sweep
-# (9.4e6 neuron-steps in 4.3 s on a loaded 2-core machine, `snn-antenna run
-# studies/tuning_sweep.toml --quick`); cython: bench_sweep.py's ratio to numpy; standalone
-# (float64): `python benchmarks/bench_sweep.py --sizes 1000000 --runtime-max 0 --naive-sample 1`
-# measured 9.3e8 idle on one core (1.8e9 in float32) and 3.6e8 on 10^5 points under heavy
-# load; a third of the idle rate covers a shared machine and small grids' per-chunk overhead.
-MEASURED_STEPS_PER_S = {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8}
-STANDALONE_COMPILE_S = 20.0        # one-off per worker process and group size (cached on disk)
 WORKER_MEMORY_BYTES = 500 * 2**20  # one worker process with Brian2 and Dask imported
 LONG_SWEEP_S = 3600.0              # beyond this the CLI asks for --yes
 ENGINES = {"cpp_standalone": "standalone"}   # Brian2 target -> the rate table's engine
@@ -50,8 +42,14 @@ def engine_of(target) -> str:
     """The engine of the rate tables for a Brian2 code target (None: Brian2's default)."""
     if target is None:
         return "cython"
-    return ENGINES.get(target, target) if target in (*ENGINES, *MEASURED_STEPS_PER_S) \
-        else "numpy"
+    return ENGINES.get(target, target) if target in (*ENGINES, *rates.ENGINES) else "numpy"
+
+
+def codings_engine(target) -> str:
+    """The engine of a blind read-out's codings (``engine.batches.DetectColumns``):
+    ``"codings"`` (the compiled codings group of ``engine.codings``) for ``"standalone"``,
+    else the runtime target's."""
+    return "codings" if target == "standalone" else engine_of(target)
 
 
 def max_workers() -> int:
@@ -73,13 +71,14 @@ class Estimate:
     result_bytes: int
     chunk_bytes: int
     engine: str
+    rate: rates.Rate = rates.Rate(0.0, "")
 
     def describe(self) -> str:
         return (f"{self.points:,} points, {self.neuron_steps:.3g} neuron-steps on "
                 f"{self.workers} worker(s) ({self.engine}): about {_duration(self.seconds)} at "
-                f"{MEASURED_STEPS_PER_S[self.engine]:.3g} neuron-steps/s per worker, "
+                f"{self.rate.value:.3g} neuron-steps/s per worker, "
                 f"{self.result_bytes / 1e6:.3g} MB of results, "
-                f"{self.chunk_bytes / 1e6:.3g} MB per chunk")
+                f"{self.chunk_bytes / 1e6:.3g} MB per chunk (rate: {self.rate.source})")
 
 
 def _duration(seconds: float) -> str:
@@ -96,22 +95,15 @@ def estimate(grid: Grid, sweep, chunk_points: int, workers: int) -> Estimate:
     workers = min(workers or os.cpu_count() or 1, max_workers())
     steps = int(round(sweep.duration_s * 1000 / sweep.dt_ms))
     neuron_steps = grid.size * steps
-    seconds = neuron_steps / (MEASURED_STEPS_PER_S[sweep.engine] * workers)
-    if sweep.engine == "standalone":
-        seconds += STANDALONE_COMPILE_S
+    table = rates.rates()
+    rate = table["neuron_steps_per_s"][sweep.engine]
+    seconds = neuron_steps / (rate.value * workers)
+    if sweep.engine in table["compile_s"]:
+        seconds += table["compile_s"][sweep.engine].value
     per_point = sum(np.dtype(o.dtype).itemsize for o in sweep.OUTPUTS.values())
     chunk = min(chunk_points, grid.size) * sweep.bytes_per_point
     return Estimate(grid.size, neuron_steps, workers, seconds, grid.size * per_point, chunk,
-                    sweep.engine)
-
-
-# Time steps per second of ONE small Brian2 network (tens of neurons, spike monitor) in one
-# process, where the per-step overhead rather than the neurons sets the pace: quickstart
-# --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
-# with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
-# [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
-# estimate errs long. Standalone is taken as cython (its compile is added separately).
-MEASURED_NETWORK_STEPS_PER_S = {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4}
+                    sweep.engine, rate)
 
 
 @dataclass
@@ -125,21 +117,28 @@ class JobEstimate:
     key: str = ""          # the spec key that sets the job's length, named when it is refused
     value: object = None   # that key's value, as the spec holds it
 
+    sources: str = ""      # where the rates come from (``rates.sources``)
+
     def describe(self) -> str:
         if not self.steps:          # no Brian2 run: measured work alone
             return f"{self.what}: about {_duration(self.seconds)}"
         return (f"{self.what}: {self.steps:.3g} steps, {self.neuron_steps:.3g} neuron-steps "
-                f"({self.engine}): about {_duration(self.seconds)}")
+                f"({self.engine}): about {_duration(self.seconds)} ({self.sources})")
 
 
 def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str = ""
                  ) -> JobEstimate:
     """Wall time of Brian2 runs, each ``(simulated_s, dt_ms, n_neurons, engine)``: the step
-    overhead of a small network plus the neuron-steps of a large one, at the measured rates."""
+    overhead of a small network plus the neuron-steps of a large one, at the rates of
+    ``rates.rates()`` (this machine's probe, else the table), and one build per compiled
+    engine used (``compile_s``: a worker builds its project once, cached on disk)."""
+    table = rates.rates()
     steps = neuron_steps = seconds = 0.0
     engine = runs[0][3] if runs else "numpy"
+    used = set()
     for simulated_s, dt_ms, n_neurons, eng in runs:
-        eng = eng if eng in MEASURED_NETWORK_STEPS_PER_S else "numpy"
+        eng = eng if eng in table["neuron_steps_per_s"] else "numpy"
+        used.add(eng)
         try:
             n = float(simulated_s) * 1000.0 / float(dt_ms)
             size = float(n_neurons)
@@ -147,9 +146,28 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
             n = size = math.inf
         steps += n
         neuron_steps += n * size
-        seconds += (n / MEASURED_NETWORK_STEPS_PER_S[eng]
-                    + n * size / MEASURED_STEPS_PER_S[eng])
-    return JobEstimate(what, steps, neuron_steps, seconds, engine, key)
+        seconds += (n / table["steps_per_s"][eng].value
+                    + n * size / table["neuron_steps_per_s"][eng].value)
+        if eng in table["run_s"]:       # a compiled run's own start and files
+            seconds += table["run_s"][eng].value
+    seconds += sum(table["compile_s"][e].value for e in used if e in table["compile_s"])
+    used_rates = {k: {e: r for e, r in v.items() if e in used} for k, v in table.items()}
+    return JobEstimate(what, steps, neuron_steps, seconds, engine, key,
+                       sources=rates.sources(used_rates))
+
+
+def study_overhead_s() -> float:
+    """What every study run costs beside its work: the process's start (imports) and its
+    report (``rates.rates()``)."""
+    python = rates.rates()["python_s"]
+    return python["study_start"].value + python["report"].value
+
+
+def readout_seconds(n_maps: float, windows: float, workers: int = 1) -> float:
+    """Python's time for the contact rule over ``n_maps`` rate maps of ``windows`` windows,
+    shared among ``workers`` processes (``rates.rates()``)."""
+    per_window = rates.rates()["python_s"]["readout_window"].value
+    return n_maps * windows * per_window / max(1, workers)
 
 
 def stages_estimate(what: str, stages: list[tuple]) -> JobEstimate:

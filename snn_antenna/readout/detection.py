@@ -33,11 +33,21 @@ def run_codings(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
         "resonator", coded, dt_ms=array.dt_ms, k=np.tile(array.k, n_codings), b=array.b,
         method=array.method, input_index=np.repeat(np.arange(n_codings), n),
         input_dt_ms=1000.0 / rate_hz, target=target or array.target, force=array.force)
-    duration_s = coded.shape[0] / rate_hz
-    copy = result.spike_i // n
-    t_s = result.spike_t_ms / 1000.0
-    return [rate_map(result.spike_i[copy == c] - c * n, t_s[copy == c], array.neuron_hz,
-                     duration_s, window_s) for c in range(n_codings)]
+    return copy_rate_maps(array, result.spike_i, result.spike_t_ms / 1000.0, n_codings,
+                          coded.shape[0] / rate_hz, window_s)
+
+
+def copy_rate_maps(array: ResonatorArray, spike_i, spike_t_s, n_codings: int,
+                   duration_s: float, window_s: float) -> list[xr.DataArray]:
+    """The rate map of each of ``n_codings`` copies of ``array`` in one group (copy c holds
+    neurons c·n … c·n + n − 1), from the group's spikes."""
+    n = array.n_neurons
+    spike_i, spike_t_s = np.asarray(spike_i, dtype=int), np.asarray(spike_t_s, dtype=float)
+    order = np.argsort(spike_i // n, kind="stable")
+    spike_i, spike_t_s = spike_i[order], spike_t_s[order]
+    ends = np.searchsorted(spike_i // n, np.arange(n_codings + 1))
+    return [rate_map(spike_i[ends[c]:ends[c + 1]] - c * n, spike_t_s[ends[c]:ends[c + 1]],
+                     array.neuron_hz, duration_s, window_s) for c in range(n_codings)]
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ from ..core.bounds import out_path
 from ..core.commands import SWITCH, Option, options_class
 from ..core.errors import SpecError
 from ..core.outputs import check_writable
+from ..engine.cost import study_overhead_s
 
 # Dask's address schemes (``distributed.comm``): what --scheduler may name
 SCHEDULER_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
@@ -112,7 +113,12 @@ class Plan:
     left_out: list[str] = field(default_factory=list)
 
     def estimate(self):
-        return self.sizes(self.parts) if self.sizes is not None else None
+        """The study's cost (``sizes``), its process's start and its report included."""
+        if self.sizes is None:
+            return None
+        sized = self.sizes(self.parts)
+        sized.seconds += study_overhead_s()
+        return sized
 
     @property
     def seed(self) -> int:

@@ -10,7 +10,14 @@ import numpy as np
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check
-from ...engine.cost import engine_of, gate_training_runs, max_workers, stages_estimate
+from ...engine.cost import (
+    codings_engine,
+    engine_of,
+    gate_training_runs,
+    max_workers,
+    readout_seconds,
+    stages_estimate,
+)
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_coder
@@ -60,6 +67,9 @@ class SweepSettings:
               "a time in [0, scene_s) s")
         check(isinstance(self.workers, int) and self.workers >= 0, "workers", self.workers,
               "an integer >= 0 (0: one Dask worker per CPU core; 1: this process)")
+        check(self.target in (None, "numpy", "cython", "standalone"), "target", self.target,
+              "'standalone' (compiled once per worker, re-run per batch of codings), 'cython' "
+              "or 'numpy'")
 
 
 @dataclass
@@ -226,10 +236,12 @@ def estimate(parts: Parts):
     study groups them and shared among its workers."""
     sw, array, ev = parts.sweep, parts.array, parts.evaluation
     workers = sw.workers or max_workers()
-    engine = engine_of(sw.target or array.target)
+    engine = codings_engine(sw.target or array.target)
 
     def codings(n: int, seconds: float = sw.scene_s) -> list:
-        runs = [(seconds, array.dt_ms, min(n, sw.codings_per_run) * array.n_neurons,
+        # the compiled group always holds codings_per_run codings (a short run is padded)
+        size = sw.codings_per_run if engine == "codings" else min(n, sw.codings_per_run)
+        runs = [(seconds, array.dt_ms, size * array.n_neurons,
                  engine)] * -(-n // sw.codings_per_run)
         return runs[:-(-len(runs) // workers)] if workers > 1 else runs
 
@@ -250,12 +262,18 @@ def estimate(parts: Parts):
     scenes = ev.max_seeds * profiles
     recall = [(sw.scene_s, parts.gate.dt_ms, (parts.gate.n_speed_neurons + 2) * scenes,
                engine_of(parts.gate.target))]
+    windows = sw.scene_s / parts.readout.window_s   # each coding's rate map, read in Python
+    n_sweep, n_fig9 = n_v * sw.n_scenes * n_th, len(LOW_HIGH_CM_S) * sw.n_scenes * 3
+    n_evaluated = scenes * (n_th + 3)
     return stages_estimate("the threshold sweep, Fig. 9, the gate and the evaluation (at "
                            "its seed budget)", [
-        ("sweep.n_scenes", sw.n_scenes, codings(n_v * sw.n_scenes * n_th)),
-        ("sweep.n_scenes", sw.n_scenes, codings(len(LOW_HIGH_CM_S) * sw.n_scenes * 3)),
+        ("sweep.n_scenes", sw.n_scenes, codings(n_sweep),
+         readout_seconds(n_sweep, windows, workers)),
+        ("sweep.n_scenes", sw.n_scenes, codings(n_fig9),
+         readout_seconds(n_fig9, windows, workers)),
         gate,
-        ("evaluation.max_seeds", ev.max_seeds, codings(scenes * (n_th + 3)) + recall)])
+        ("evaluation.max_seeds", ev.max_seeds, codings(n_evaluated) + recall,
+         readout_seconds(n_evaluated, windows, workers))])
 
 
 def sweep_settings(spec: dict, parts: Parts | None = None) -> dict:

@@ -1,0 +1,279 @@
+"""The engines' rates that every estimate multiplies by, and where each one comes from.
+
+    table = rates()          # this machine's probe when one is stored for this code, else TABLE
+    table = probe()          # measure now (small Brian2 runs, about a minute) and store
+
+A ``Rate`` is a value with its source. ``TABLE`` holds rates measured once and written down
+(each with the command that measured it); ``probe`` measures the per-step and per-neuron-step
+cost of each Brian2 engine on this machine, now, with small runs of the same kind of group
+the studies run (``neurons.simulate`` for the runtime targets; ``engine.codings``' compiled
+group for ``"codings"``), and stores them in ``cache_root()/rates/KEY.json``, KEY hashing the
+probing code with its imports (``provenance.code_hash``), Brian2's version and the CPU: a
+probe of other code or another machine is never used. A probe measures the machine as it is
+(other processes included), so re-probe when the load changes.
+"""
+from __future__ import annotations
+
+import datetime as dt
+import hashlib
+import json
+import os
+import platform
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ..core.files import atomic_write, cache_root, make_folder
+
+
+@dataclass(frozen=True)
+class Rate:
+    value: float
+    source: str
+
+
+# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
+# compile excluded), at their low ends so the estimate errs long. numpy: the quick tuning sweep
+# (9.4e6 neuron-steps in 4.3 s on a loaded 2-core machine, `snn-antenna run
+# studies/tuning_sweep.toml --quick`); cython: bench_sweep.py's ratio to numpy; standalone
+# (the fused sweep and event engines, float64): `python benchmarks/bench_sweep.py --sizes
+# 1000000 --runtime-max 0 --naive-sample 1` measured 9.3e8 idle on one core (1.8e9 in
+# float32) and 3.6e8 on 10^5 points under heavy load; a third of the idle rate covers a
+# shared machine and small grids' per-chunk overhead. codings (engine.codings: Brian2's own
+# state updater, threshold, reset and a SpikeMonitor, compiled): taken as a tenth of the
+# fused engine's until probed.
+# Time steps per second of ONE small Brian2 network (tens of neurons, spike monitor) in one
+# process, where the per-step overhead rather than the neurons sets the pace: quickstart
+# --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
+# with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
+# [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
+# estimate errs long. Standalone is taken as cython (its compile is added separately).
+_WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
+TABLE = {
+    "neuron_steps_per_s": {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8,
+                           "codings": 3.0e7},
+    # (codings: the compiled loop's own cost per step is about a microsecond; the probe
+    # charges it to the neuron-steps and the run)
+    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4, "codings": 1.0e6},
+    "compile_s": {"standalone": 20.0, "codings": 20.0},
+    # a compiled project's run beside its neurons' work: the binary's start, its inputs
+    # written and its results read back
+    "run_s": {"codings": 0.5},
+    # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
+    # and the package imported) and its report; one window of a rate map through the contact
+    # rule (``ContactDetector.detect``: 91 maps of 80 windows took 63 s of a quick gating
+    # run under a load of 22 on 2 cores, cProfile; a tenth of that taken for an idle core)
+    "python_s": {"study_start": 10.0, "report": 10.0, "readout_window": 1e-3},
+}
+ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
+
+
+def table() -> dict[str, dict[str, Rate]]:
+    return {kind: {engine: Rate(v, _WRITTEN) for engine, v in values.items()}
+            for kind, values in TABLE.items()}
+
+
+def machine() -> str:
+    """The CPU this machine reports, and its core count."""
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as info:
+            model = next((line.split(":", 1)[1].strip() for line in info
+                          if line.startswith("model name")), model)
+    except OSError:
+        pass
+    return f"{model}, {os.cpu_count()} cores"
+
+
+def probe_key() -> str:
+    """The probe's cache key: the probing code and its imports, Brian2's version, the CPU."""
+    from importlib.metadata import version
+
+    from ..core.provenance import code_hash
+
+    # Brian2's version from its metadata: a --check imports no Brian2
+    text = json.dumps([code_hash(__name__), version("brian2"), machine()])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _path():
+    return cache_root() / "rates" / f"{probe_key()}.json"
+
+
+def rates() -> dict[str, dict[str, Rate]]:
+    """The rates to estimate with: the table, with every rate this machine's stored probe
+    (for this code) measured in its place."""
+    out = table()
+    try:
+        stored = json.loads(_path().read_text())
+    except (OSError, ValueError):
+        return out
+    for kind, values in stored.get("rates", {}).items():
+        for engine, value in values.items():
+            if kind in out and isinstance(value, (int, float)) and np.isfinite(value) \
+                    and value > 0:
+                out[kind][engine] = Rate(float(value), f"probe of {stored.get('when', '?')} "
+                                                       f"on this machine ({_path()})")
+    return out
+
+
+def sources(table_: dict[str, dict[str, Rate]]) -> str:
+    """One line naming where the rates come from."""
+    found = sorted({r.source for values in table_.values() for r in values.values()})
+    return "rates: " + "; ".join(found)
+
+
+# -- the probe ----------------------------------------------------------------------------
+PROBE_S = 0.2           # simulated per probe run, dt 0.1 ms: 2,000 steps
+# neurons: the step overhead, then the neurons' own cost (numpy's per-step overhead of
+# milliseconds under load hides 2,400 neurons' work; 24,000 stand out of it)
+PROBE_SIZES = (24, 24000)
+PROBE_CODINGS = (10, 100)   # codings (of 24 neurons) in the compiled probe groups ...
+CODINGS_PROBE_S = 0.5       # ... each coding this long (5,000 steps)
+
+
+def _square(n_samples: int, columns: int, rate_hz: float) -> np.ndarray:
+    t = np.arange(n_samples) / rate_hz
+    hz = np.linspace(6.0, 30.0, columns)
+    return 0.15 * np.sign(np.sin(2 * np.pi * t[:, None] * hz[None, :]))
+
+
+def _best_of(run, repeats: int = 2) -> float:
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        run()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _runtime(target: str) -> tuple[float, float]:
+    """(steps/s, neuron-steps/s) of ``neurons.simulate`` on ``target``, from two sizes."""
+    from ..networks import neurons
+
+    rate_hz, n_samples = 1000.0, int(PROBE_S * 1000)
+    steps = PROBE_S * 1000 / 0.1
+    # one input of 24 columns for both sizes: its shape is compiled in, the group's size not
+    current = _square(n_samples, PROBE_SIZES[0], rate_hz)
+    times = []
+    for n in PROBE_SIZES:
+        def run(n=n):
+            neurons.simulate("resonator", current, 0.1, k=np.linspace(0.3, 1.5, n),
+                             method="rk2", input_dt_ms=1.0, target=target,
+                             input_index=np.arange(n) % current.shape[1])
+        run()                               # code generation, compiling
+        times.append(_best_of(run))
+    per_neuron = (times[1] - times[0]) / (steps * (PROBE_SIZES[1] - PROBE_SIZES[0]))
+    per_step = times[0] / steps - PROBE_SIZES[0] * per_neuron
+    return _inverse(per_step), _inverse(per_neuron)
+
+
+def _inverse(seconds: float) -> float:
+    """A rate from seconds per unit; 0 (not stored: the table's rate stays) when the
+    difference it came from was lost in the machine's noise."""
+    return 1.0 / seconds if seconds > 0 else 0.0
+
+
+def _codings() -> tuple[float, float, float]:
+    """(s per run, neuron-steps/s, build s) of the compiled codings group
+    (``engine.codings``), from two group sizes (two projects, each built once on disk)."""
+    from ..networks.resonators import ResonatorArray
+    from .codings import compiled_rate_maps
+
+    array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
+    rate_hz = 1000.0
+    steps = CODINGS_PROBE_S * 1000 / array.dt_ms
+    walls, builds = [], []
+    for size in PROBE_CODINGS:
+        coded = _square(int(CODINGS_PROBE_S * 1000), size, rate_hz)
+
+        def run(coded=coded, size=size):
+            compiled_rate_maps(array, coded, rate_hz, 0.1, size)
+        t0 = time.perf_counter()
+        run()
+        first = time.perf_counter() - t0
+        walls.append(_best_of(run))
+        builds.append(max(first - walls[-1], 0.0))
+    neuron_steps = [steps * array.n_neurons * size for size in PROBE_CODINGS]
+    per_neuron = (walls[1] - walls[0]) / (neuron_steps[1] - neuron_steps[0])
+    if per_neuron <= 0:          # lost in the noise: every second charged to the neurons
+        return 0.0, neuron_steps[1] / walls[1], max(builds)
+    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron, max(builds)
+
+
+FIGURES_PER_REPORT = 6   # the gating study's report draws 6, the others 2 to 8
+
+
+def _start() -> tuple[float, float]:
+    """Seconds for a new process to import what a study imports (Python, Brian2, matplotlib,
+    the package's command), and for its report (``FIGURES_PER_REPORT`` rate-map figures
+    drawn and saved as PNG)."""
+    import subprocess
+    import sys
+
+    figure = ("import io, time, numpy as np, matplotlib; matplotlib.use('Agg'); "
+              "import matplotlib.pyplot as plt; t0 = time.perf_counter(); "
+              "fig, ax = plt.subplots(figsize=(8, 3)); "
+              "ax.imshow(np.random.default_rng(0).random((24, 150)), aspect='auto'); "
+              "fig.savefig(io.BytesIO(), format='png', dpi=110); "
+              "print(time.perf_counter() - t0)")
+    t0 = time.perf_counter()
+    done = subprocess.run([sys.executable, "-c",
+                           f"import brian2, snn_antenna.cli; {figure}"],
+                          check=True, capture_output=True, text=True)
+    whole = time.perf_counter() - t0
+    one_figure = float(done.stdout.split()[-1])
+    return whole - one_figure, FIGURES_PER_REPORT * one_figure
+
+
+def _readout_window() -> float:
+    """Seconds per window of ``ContactDetector.detect`` on a 15 s rate map of 24 neurons
+    where every 15th window is a contact episode of its own: an episode's estimate costs
+    most, and the quick gating run's maps average about that (91 maps of 80 windows in 63 s
+    against 24 ms a window with one episode per 5 windows, under the same load)."""
+    from ..networks.resonators import ResonatorArray, rate_map
+    from ..readout.contacts import ContactDetector
+
+    array = ResonatorArray()
+    duration_s, window_s = 15.0, 0.1
+    windows = int(duration_s / window_s)
+    starts = np.arange(0, windows, 15) * window_s
+    spike_t = (starts[:, None] + np.array([0.01, 0.03, 0.05])[None, :]).ravel()
+    spike_i = np.full(spike_t.size, array.n_neurons - 1)    # the top neuron: 30 Hz
+    rates = rate_map(spike_i, spike_t, array.neuron_hz, duration_s, window_s)
+    detector = ContactDetector()
+    return _best_of(lambda: detector.detect(rates)) / windows
+
+
+def probe(log=print) -> dict[str, dict[str, Rate]]:
+    """Measure the probed rates on this machine now, store them, and return ``rates()``."""
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}}
+    for target in ("numpy", "cython"):
+        per_step, per_neuron = _runtime(target)
+        measured["steps_per_s"][target] = per_step
+        measured["neuron_steps_per_s"][target] = per_neuron
+        log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s "
+            "(0: not resolved, the table's stays)")
+    start, report = _start()
+    measured["python_s"] = {"study_start": start, "report": report,
+                            "readout_window": _readout_window()}
+    log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
+        f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
+    per_run, per_neuron, build = _codings()
+    measured["run_s"] = {"codings": per_run}
+    measured["neuron_steps_per_s"]["codings"] = per_neuron
+    measured["compile_s"]["codings"] = max(build, 1.0)
+    log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s and {per_run:.2f} s per "
+        f"run, built in {build:.1f} s")
+    path = _path()
+    make_folder(path.parent)
+    atomic_write(path, json.dumps({
+        "rates": measured, "when": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "machine": machine(), "load_average": os.getloadavg()[0]}, indent=1) + "\n")
+    return rates()
+
+
+def as_json(table_: dict[str, dict[str, Rate]]) -> dict:
+    return {kind: {engine: asdict(r) for engine, r in values.items()}
+            for kind, values in table_.items()}

@@ -1,0 +1,98 @@
+"""Coded scenes on the compiled engine (``engine.codings``), the blind read-out's dispatch to
+it (``engine.batches.DetectColumns``), and the rates every estimate multiplies by
+(``engine.rates``, ``engine.cost``)."""
+import json
+
+import numpy as np
+import pytest
+
+from snn_antenna.core.errors import SpecError
+from snn_antenna.engine import batches, cost, rates
+from snn_antenna.engine.batches import DetectColumns
+from snn_antenna.networks.resonators import ResonatorArray
+from snn_antenna.readout.contacts import ContactDetector
+from snn_antenna.readout.detection import BlindReadOut, run_codings
+
+RATE = 1000.0
+
+
+def coded_columns(n_samples: int, columns: int) -> np.ndarray:
+    t = np.arange(n_samples) / RATE
+    hz = np.linspace(6.0, 28.0, columns)
+    return 0.15 * np.sign(np.sin(2 * np.pi * t[:, None] * hz[None, :]))
+
+
+@pytest.mark.slow
+def test_compiled_codings_give_the_runtime_paths_rate_maps():
+    """Five codings in runs of three (a full run and a padded short one) against the cython
+    runtime path: the same model, so the same spikes up to the compilers' rounding (a spike
+    may move by a step, across a window's edge)."""
+    from snn_antenna.engine.codings import compiled_rate_maps
+
+    array = ResonatorArray(n_neurons=6, method="rk2", dt_ms=0.1)
+    coded = coded_columns(400, 5)
+    runtime = run_codings(array, coded, RATE, 0.1, "cython")
+    compiled = compiled_rate_maps(array, coded, RATE, 0.1, per_run=3)
+    assert len(compiled) == 5
+    totals = [float(m.values.sum()) for m in runtime]
+    assert sum(totals) > 0 and min(totals) < max(totals)   # the codings differ
+    for r, c in zip(runtime, compiled):
+        assert c.dims == r.dims and np.allclose(c.neuron_hz, r.neuron_hz)
+        assert abs(float(c.values.sum()) - float(r.values.sum())) <= 0.02 * float(
+            r.values.sum()) + 10.0
+        assert np.mean(c.values == r.values) >= 0.95
+
+
+def readout(target):
+    return BlindReadOut(ResonatorArray(n_neurons=4), ContactDetector(), 0.1, RATE, 0.0,
+                        target)
+
+
+def test_a_standalone_read_out_runs_on_the_compiled_engine_in_runs_of_its_size(monkeypatch):
+    calls = []
+
+    def compiled(array, coded, rate_hz, window_s, per_run):
+        calls.append((coded.shape, per_run))
+        return [runtime_map] * coded.shape[1]
+
+    runtime_map = run_codings(ResonatorArray(n_neurons=4), coded_columns(300, 1), RATE, 0.1,
+                              "numpy")[0]
+    monkeypatch.setattr(batches, "compiled_rate_maps", compiled)
+    out = DetectColumns(readout("standalone"), per_run=7)(list(coded_columns(300, 2).T))
+    assert calls == [((300, 2), 7)] and len(out) == 2
+    assert out[0][1] is runtime_map                  # (detections, rate map) per column
+    calls.clear()
+    DetectColumns(readout("numpy"), per_run=7)(list(coded_columns(300, 2).T))
+    assert calls == []                               # a runtime target: BlindReadOut.detect
+
+
+def test_the_gating_sweep_refuses_a_target_it_cannot_run():
+    from snn_antenna.studies.gating_threshold.spec import SweepSettings
+
+    with pytest.raises(SpecError, match="target"):
+        SweepSettings(target="cpp_standalone")
+    assert SweepSettings(target="standalone").target == "standalone"
+
+
+def test_estimates_take_the_stored_probe_of_this_code_and_say_so(tmp_path, monkeypatch):
+    monkeypatch.setenv("SNN_ANTENNA_CACHE", str(tmp_path))
+    runs = [(10.0, 0.1, 4800, "codings")]
+    table = cost.job_estimate("codings", runs)
+    assert "engine/rates.py TABLE" in table.describe()
+    path = tmp_path / "rates" / f"{rates.probe_key()}.json"
+    path.parent.mkdir()
+    stored = {"neuron_steps_per_s": {"codings": rates.TABLE["neuron_steps_per_s"]["codings"]
+                                     / 10},
+              "steps_per_s": {"codings": -1.0},         # refused: kept from the table
+              "compile_s": {"codings": float("nan")}}
+    path.write_text(json.dumps({"rates": stored, "when": "2026-01-01 00:00 UTC"}))
+    probed = cost.job_estimate("codings", runs)
+    assert "probe of 2026-01-01" in probed.describe()
+    now = rates.rates()
+    assert now["steps_per_s"]["codings"].value == rates.TABLE["steps_per_s"]["codings"]
+    assert now["compile_s"]["codings"].value == rates.TABLE["compile_s"]["codings"]
+    neurons = 10.0 * 1e4 * 4800 / rates.TABLE["neuron_steps_per_s"]["codings"]
+    assert probed.seconds - table.seconds == pytest.approx(9 * neurons)
+    # a probe stored under another key (other code, another machine) is never read
+    path.rename(path.with_name("0123456789abcdef.json"))
+    assert cost.job_estimate("codings", runs).seconds == pytest.approx(table.seconds)
