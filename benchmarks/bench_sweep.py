@@ -102,6 +102,18 @@ def numba_kernel():
 
 FLOOR_C = Path(__file__).with_name("floor.c")
 FLOOR_FLAGS = ["-O3", "-march=native", "-ffast-math"]
+
+
+def build_for(march: str) -> None:
+    """Compile the floor and Brian2's code (engine and runtime targets, in this process) for
+    gcc's ``-march=MARCH`` in place of ``native``: ``haswell`` gives an AVX2-only build (16
+    vector registers, no AVX-512) on an AVX-512 machine, so one machine measures both."""
+    from brian2 import prefs
+
+    flag = f"-march={march}"
+    FLOOR_FLAGS[:] = [flag if f.startswith("-march=") else f for f in FLOOR_FLAGS]
+    prefs.codegen.cpp.extra_compile_args_gcc = [
+        flag if f.startswith("-march=") else f for f in prefs.codegen.cpp.extra_compile_args_gcc]
 FLOORS = {"floor64": "floor_counts_f64", "floor32": "floor_counts_f32"}
 
 
@@ -213,16 +225,25 @@ def main(argv=None) -> int:
                     help="grids over k, b, I and input_hz (b per point), not k, I and input_hz")
     ap.add_argument("--workers", type=int, nargs="*", default=[1, 2],
                     help="Dask worker counts of the scaling rows (none: no scaling rows)")
+    ap.add_argument("--march", default="native",
+                    help="gcc -march of both the engine and the floor (e.g. haswell: an AVX2 "
+                         "build on an AVX-512 machine); this process only, so no scaling rows")
     ap.add_argument("--json", metavar="PATH",
                     help="also write the measured values and their provenance as JSON "
                          "(for snn-antenna results)")
     args = ap.parse_args(argv)
+    if args.march != "native":
+        if args.workers:
+            ap.error("--march other than native builds in this process only: add --workers "
+                     "with no count (Dask workers would compile for the machine)")
+        build_for(args.march)
 
     base = NeuronSweep(duration_s=args.duration_s, settle_s=min(0.25, args.duration_s / 4))
     steps = int(round(base.duration_s * 1000 / base.dt_ms))
     tmp = Path(tempfile.mkdtemp(prefix="bench_sweep_"))
     print(f"# {os.cpu_count()} CPU cores, load average {load():.1f}; "
-          f"{base.duration_s:g} s per point at dt {base.dt_ms:g} ms = {steps:,} steps")
+          f"{base.duration_s:g} s per point at dt {base.dt_ms:g} ms = {steps:,} steps; "
+          f"engine and floor compiled with -march={args.march}")
     kernel = numba_kernel()
     run_kernel(kernel, base, grid_of(40).points())  # compile outside the timings
     floors = floor_kernels(tmp)

@@ -1,12 +1,21 @@
 """The resonator array: offline and streaming agree; rate maps and read-out."""
 import tomllib
 from pathlib import Path
+from types import SimpleNamespace
 
+import brian2 as b2
 import numpy as np
 import pytest
+from brian2.codegen.runtime.cython_rt import CythonCodeObject
 
 from snn_antenna.core.errors import SpecError
-from snn_antenna.networks.resonators import ChunkFeed, ResonatorArray, StreamPort, rate_map
+from snn_antenna.networks.resonators import (
+    ChunkFeed,
+    ResonatorArray,
+    StreamPort,
+    held_samples,
+    rate_map,
+)
 from snn_antenna.readout.contacts import ContactDetector, centroid_hz, dominant_hz
 from snn_antenna.core.signals import Recording
 from snn_antenna.sources import stimuli
@@ -60,6 +69,26 @@ def test_streaming_gives_the_same_spikes_as_offline_at_the_live_setting():
         assert stats.samples == len(x) and stats.windows == offline.shape[1]
         np.testing.assert_array_equal(np.stack(windows, axis=1), offline)
     assert offline.sum() > 100 and offline[array.neuron_hz > 12].sum() > 10
+
+
+def test_recordings_of_one_power_of_two_share_one_compiled_input():
+    """The offline input is padded to a power of two with its last value: the compiled code
+    that reads it (Brian2 writes the TimedArray's length into it) is the same for 5,000 and
+    8,192 samples, so a new recording length compiles nothing new on a warm machine."""
+    x = np.arange(5_000, dtype=float)
+    held = held_samples(x)
+    assert len(held) == 8_192 and np.array_equal(held[:5_000], x)
+    assert (held[5_000:] == x[-1]).all()
+    assert len(held_samples(x[:4_096])) == 4_096
+    assert len(held_samples(x[:1])) == 1
+
+    reader = SimpleNamespace(clock=SimpleNamespace(dt_=1e-4))   # a group stepping at 0.1 ms
+
+    def reading_code(n):
+        drive = b2.TimedArray(held_samples(np.zeros(n)), dt=b2.ms, name="drive")
+        return drive.implementations[CythonCodeObject].get_code(reader)
+
+    assert reading_code(5_000) == reading_code(8_192) != reading_code(8_193)
 
 
 def test_a_spike_on_a_window_edge_counts_in_the_window_it_starts():

@@ -29,7 +29,7 @@ import numpy as np
 from ..core import bounds
 from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons, reference
-from ..networks.resonators import ResonatorArray
+from ..networks.resonators import ResonatorArray, held_samples
 from ..evaluation import accuracy
 from ..evaluation.accuracy import Match, SpikeTrains
 from ..evaluation.tradeoff import ERRORS, RAISED, check_finite
@@ -91,13 +91,13 @@ def float_precision(dtype: str):
 
 def _offline_group(array: ResonatorArray, coded: Recording):
     """The group and spike monitor ``ResonatorArray.run`` builds for ``coded``, same names:
-    Brian2 compiles the TimedArray's length and step ratio into the code, so only the very
-    same objects share its compiled code."""
+    Brian2 compiles the TimedArray's (padded) length and step ratio into the code, so only the
+    very same objects share its compiled code."""
     import brian2 as b2
 
     b2.start_scope()
-    drive = b2.TimedArray(np.asarray(coded.samples, float), dt=b2.second / coded.rate_hz,
-                          name="drive")
+    drive = b2.TimedArray(held_samples(np.asarray(coded.samples, float)),
+                          dt=b2.second / coded.rate_hz, name="drive")
     group = array.build_group("drive(t)", "", {"drive": drive})
     return group, b2.SpikeMonitor(group, name="spikes")
 

@@ -209,10 +209,15 @@ def project(structure: tuple, build) -> dict:
     disk, so coming back regenerates code but recompiles nothing that did not change).
     ``NeuronSweep`` and ``EventSweep`` share this slot.
     """
+    from brian2 import prefs
     from brian2.devices.device import get_device, reset_device, set_device
 
     from .devices import bounded_make
 
+    # The compiler's flags make the binary as much as the structure does (another -march, the
+    # float32 flags): a project built with other flags is another project, in this process and
+    # on disk.
+    structure = (structure, tuple(prefs.codegen.cpp.extra_compile_args_gcc))
     if _PROJECT.get("structure") == structure and _still_built():
         return _PROJECT
     key = hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
@@ -327,8 +332,6 @@ def _standalone_project(sweep, elements: int):
     structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dtype,
                  sweep.dt_ms, steps, sweep.duration_s, sweep.settle_s, sweep.input_rate_hz,
                  LANES, shared, elements)
-    if _PROJECT.get("structure") == structure and _still_built():
-        return _PROJECT
 
     def build():
         model, names = lane_model(neurons.equations(sweep.preset, "I_held",

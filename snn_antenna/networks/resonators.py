@@ -148,7 +148,7 @@ class ResonatorArray:
                             "one channel (run the preprocessing chain first)")
         self.check_rate(coded.rate_hz)
         b2.start_scope()
-        drive = b2.TimedArray(samples, dt=b2.second / coded.rate_hz, name="drive")
+        drive = b2.TimedArray(held_samples(samples), dt=b2.second / coded.rate_hz, name="drive")
         group = self.build_group("drive(t)", "", {"drive": drive})
         spikes = b2.SpikeMonitor(group, name="spikes")
         guard = neurons.instability_guard(group, "resonator", self.dt_ms, self.method,
@@ -230,6 +230,19 @@ class ResonatorArray:
         if feeder.failed:
             raise _as_project_error(feeder.failed[0], stats.samples / rate_hz)
         return stats
+
+
+def held_samples(samples: np.ndarray) -> np.ndarray:
+    """``samples`` (1-D, at least one) padded with their last value to a power of two.
+
+    Brian2 writes a TimedArray's length into the code that reads it, so every recording length
+    would compile its own state update; padded, all recordings of 4,097 to 8,192 samples (at one
+    rate, dt and method) share one compiled group. The group never reads past the recording
+    (the run lasts its duration), and where rounding puts a read at its end, the padding holds
+    the last value, as Brian2's clamp to the last sample does: the same spikes."""
+    n = len(samples)
+    size = 1 << (n - 1).bit_length()
+    return np.concatenate([samples, np.full(size - n, samples[-1])]) if size > n else samples
 
 
 @runtime_checkable
