@@ -67,7 +67,7 @@ def test_a_standalone_read_out_runs_on_the_compiled_engine_in_runs_of_its_size(m
 
 
 def test_the_gating_sweep_refuses_a_target_it_cannot_run():
-    from snn_antenna.studies.gating_threshold.spec import SweepSettings
+    from snn_antenna.studies.gating_threshold.plan import SweepSettings
 
     with pytest.raises(SpecError, match="target"):
         SweepSettings(target="cpp_standalone")

@@ -4,6 +4,7 @@ window, a speed command (``--speed``, the page's) is applied at a window boundar
 and replayed; the control layer stops the robot on contact; each part has its panel and a
 part the spec lacks has none. Replays read flat out (a few seconds each)."""
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -180,8 +181,9 @@ def test_a_speed_is_accepted_exactly_within_the_networks_range(value, accepted):
     """The one check of a speed command (``--speed``, the page's ``speed_cm_s``, a replayed
     event): accepted exactly within the running network's range, else a one-line SpecError
     naming the field, the value and the range."""
+    # a number as every bound takes one: finite, and 0 or normal (a subnormal underflows)
     number = isinstance(value, (int, float)) and not isinstance(value, bool) \
-        and math.isfinite(value)
+        and math.isfinite(value) and (value == 0 or abs(value) >= sys.float_info.min)
     if number and accepted and accepted[0] <= value <= accepted[1]:
         assert check_speed(value, accepted) == float(value)
     else:

@@ -212,6 +212,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.engine.batches.Submitted",
         "snn_antenna.engine.cost.Estimate",
         "snn_antenna.engine.cost.JobEstimate",
+        "snn_antenna.engine.rates.Rate",
         "snn_antenna.engine.devices.Run",
         "snn_antenna.engine.devices.Reference",
         "snn_antenna.engine.sweep.SweepOutcome",

@@ -68,7 +68,7 @@ class BlindReadOut:
     def __post_init__(self):
         bounds.declared(self)
         if self.target is not None:
-            bounds.choice("target", self.target, ("numpy", "cython"))
+            bounds.choice("target", self.target, ("numpy", "cython", "standalone"))
         bounds.number("window_s", self.window_s, 0.0, lo_open=True, unit=" s")
         bounds.rate_hz("rate_hz", self.rate_hz)
         bounds.seconds("settle_s", self.settle_s)
