@@ -19,4 +19,6 @@ from __future__ import annotations
 from .plan import OPTIONS, SECTIONS, Parts, plan
 from .run import run
 
-__all__ = ["SECTIONS", "OPTIONS", "Parts", "plan", "run"]
+# plan and run are the study contract's doors (studies.contract.Study); the API reference
+# documents them on their modules' pages, which share their names
+__all__ = ["SECTIONS", "OPTIONS", "Parts"]
