@@ -363,6 +363,8 @@ def big_counts_csv(path: Path, seconds: int, rate: int = 2000) -> list[float]:
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not Path("/usr/bin/time").exists(),
+                    reason="needs /usr/bin/time (GNU time) to measure the peak memory")
 def test_importing_a_200_mb_csv_stays_under_1_gb(tmp_path):
     """Measured as the kernel counts it (``/usr/bin/time -v``: the import's peak resident
     memory), on a 200 MB CSV of 2 kHz counts with its time column."""
@@ -370,8 +372,6 @@ def test_importing_a_200_mb_csv_stays_under_1_gb(tmp_path):
     import subprocess
     import sys
 
-    if not Path("/usr/bin/time").exists():
-        pytest.skip("needs /usr/bin/time (GNU time) to measure the peak memory")
     (tmp_path / "recs").mkdir()
     onsets = big_counts_csv(tmp_path / "recs" / "big.csv", 5600)
     size = (tmp_path / "recs" / "big.csv").stat().st_size
