@@ -219,3 +219,39 @@ def test_the_bridge_never_imports_the_studies():
              if src.startswith("snn_antenna.bridge") for dst in targets
              if dst.startswith("snn_antenna.studies")]
     assert not found, "\n".join(found)
+
+
+# -- imports at the top --------------------------------------------------------------------------
+def lazy_imports(source: str) -> list[int]:
+    """The lines of package-internal imports inside a function that give no reason: a comment
+    on the import's line or on the line above it says why it waits (a heavy library that a
+    refusal on the command line should not load, an optional one)."""
+    lines = source.splitlines()
+    found = []
+    for function in ast.walk(ast.parse(source)):
+        if not isinstance(function, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        for node in ast.walk(function):
+            internal = (isinstance(node, ast.ImportFrom)
+                        and (node.level > 0 or (node.module or "").startswith("snn_antenna"))
+                        or isinstance(node, ast.Import)
+                        and any(a.name.startswith("snn_antenna") for a in node.names))
+            above = lines[node.lineno - 2].strip() if internal and node.lineno > 1 else ""
+            if internal and "#" not in lines[node.lineno - 1] and not above.startswith("#"):
+                found.append(node.lineno)
+    return sorted(set(found))
+
+
+def test_package_imports_stand_at_the_module_top():
+    """A module's dependencies are read at its top; one that waits inside a function says why."""
+    found = [f"{path.relative_to(PACKAGE.parent)}:{line}"
+             for path in sorted(PACKAGE.rglob("*.py")) for line in lazy_imports(path.read_text())]
+    assert not found, "package imports inside a function, with no reason given:\n" + \
+        "\n".join(found)
+
+
+def test_the_lazy_import_check_catches_one():
+    planted = "import os\n\ndef f():\n    from .core import files\n    return files\n"
+    assert lazy_imports(planted) == [4]
+    assert lazy_imports(planted.replace("files\n    return", "files  # heavy\n    return")) == []
+    assert lazy_imports("def f():\n    import numpy\n") == []          # not the package's

@@ -22,6 +22,12 @@ from .wire.protocol import WIRE_FORMATS
 from .wire.recorder import COUNT_FIELDS, RECORDING, Recorder
 from .wire.source import DEFAULT_BAUDRATE, PortError, SerialSource, run_source, stop_on_signals
 from .view.view import live_view
+from .wire.recorder import read_meta
+from .online.controls import RecordedChanges, recorded_events
+from .wire.replay import ReplaySource
+from .online.terminal import LiveDisplay
+from .wire.replay import live_comparison
+from ..report.page import fmt
 
 EXIT_MISMATCH = 1                       # a replay whose counts differ from what was recorded
 
@@ -161,8 +167,6 @@ def replay_overrides(args) -> list[str]:
     """The ``--set`` a replay runs with: the ones the recording was streamed with (its
     meta.json), then the explicit ones, which win. Said on stderr, so that a replay that
     reports other contacts than the live run says why."""
-    from .wire.recorder import read_meta
-
     meta = read_meta(args.recording)
     recorded = [str(item) for item in meta.get("set") or []]
     network = meta.get("network")
@@ -178,8 +182,6 @@ def replay_overrides(args) -> list[str]:
 
 def replay_speed(args) -> float | None:
     """The speed command a replay starts at: ``--speed``, else the recording's (meta.json)."""
-    from .wire.recorder import read_meta
-
     if getattr(args, "speed", None) is not None:
         return args.speed
     speed = read_meta(args.recording).get("speed_cm_s")
@@ -191,16 +193,11 @@ def replay_speed(args) -> float | None:
 
 def cmd_replay(args) -> int:
     """Replay a recording; without --network, check that it decodes to what was recorded."""
-    from .online.controls import RecordedChanges, recorded_events
-    from .wire.replay import ReplaySource
-
     if args.view and not args.network:
         raise SpecError("view", True, "--view with --network (the view shows the network)")
     if args.network:
+        # lazy: scikit-learn loads with a network, not with the command line
         from .online.pipeline import build_online, run_online
-        from .online.terminal import LiveDisplay
-        from .wire.recorder import read_meta
-        from .wire.replay import live_comparison
 
         live = live_comparison(read_meta(args.recording), args.network, args.set,
                                getattr(args, "speed", None))
@@ -241,8 +238,8 @@ def cmd_replay(args) -> int:
 
 def cmd_stream(options) -> int:
     """Run the online pipeline on a live port, recording while streaming."""
+    # lazy: scikit-learn loads with a network, not with the command line
     from .online.pipeline import build_online, run_online, warm_up
-    from .online.terminal import LiveDisplay
 
     # A bad spec (or speed) fails before the port opens.
     parts = build_online(options.network, options.set, speed_cm_s=options.speed)
@@ -270,8 +267,6 @@ def cmd_stream(options) -> int:
 
 def stream_summary(report: dict, out) -> str:
     """What a person wants at the end of a live run, in four lines (--json has the rest)."""
-    from ..report.page import fmt
-
     lat = report["latency_ms"]
     contacts = report.get("contacts")
     n_contacts = len(contacts) if isinstance(contacts, (list, tuple)) else contacts

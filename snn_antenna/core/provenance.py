@@ -22,6 +22,7 @@ import platform
 import subprocess
 import sys
 from pathlib import Path
+from .. import __version__
 
 PACKAGE = Path(__file__).resolve().parents[1]
 
@@ -31,8 +32,6 @@ def code_hash(*modules: str) -> str:
     """SHA-256 (16 hex digits) of the package version and of source files by relative path
     and content: with no argument every ``.py`` file of the package, else the
     :func:`import_closure` of ``modules`` (dotted names, e.g. ``"snn_antenna.engine.events"``)."""
-    from .. import __version__
-
     h = hashlib.sha256(__version__.encode())
     files = import_closure(modules) if modules else sorted(PACKAGE.rglob("*.py"))
     for path in files:
@@ -124,8 +123,6 @@ def machine() -> str:
 
 def code_identity() -> dict:
     """What summaries and store attributes record about the code that made them."""
-    from .. import __version__
-
     return {"snn_antenna_version": __version__, "code_sha256": code_hash(),
             "git_commit": git_commit()}
 

@@ -24,6 +24,8 @@ from ..core.errors import SpecError
 from ..sources import recorded
 from . import inputs, labels as label_table, segment
 from .segment import REASONS, Segmentation
+from ..core.files import atomic_write, write_json
+from ..core.store import write_dataset
 
 STUDY = "data import"
 
@@ -305,9 +307,6 @@ def exclusions_csv(exclusions: list[segment.Exclusion]) -> str:
 def write_import(plan: ImportPlan, out, log=print) -> Path:
     """Write the planned data set into ``out``, an output folder its caller has claimed
     (``outputs.output_folder``: the command checks it before reading anything)."""
-    from ..core.files import atomic_write, write_json
-    from ..core.store import write_dataset
-
     out = Path(out)
     store = recorded.DRIVES if plan.meta["data"] == "drives" else recorded.DATASET
     write_dataset(plan.dataset, out.absolute() / store)

@@ -55,6 +55,7 @@ from ..bridge.wire.recorder import (EVENTS_FILE, META_FILE, RAW_FILE, SAMPLES_FI
                                     load_recording)
 from ..core.errors import SpecError
 from ..sources.antenna import ADC
+from ..bridge.online.controls import recorded_events
 
 FILE_KINDS = {".csv": "csv", ".npy": "npy", ".npz": "npz", ".wav": "wav"}
 RATE_TOLERANCE = 1e-3
@@ -395,8 +396,6 @@ def _read_record(path: Path, options: Options) -> Stream:
 def _speed_log(path: Path, meta: dict, frames: np.ndarray) -> list[tuple[int, float]]:
     """The speed command a drive was recorded at: where it started (``meta.json``) and each
     change the live controls applied (``events.jsonl``, at the sample it applied from)."""
-    from ..bridge.online.controls import recorded_events
-
     log = []
     if isinstance(meta.get("speed_cm_s"), (int, float)):
         log.append((int(frames[0]) if len(frames) else 0, float(meta["speed_cm_s"])))

@@ -26,6 +26,7 @@ import numpy as np
 from ..evaluation.scoring import score_with
 from ..readout.detection import BlindReadOut
 from .codings import COMPILED, compiled_rate_maps
+from .sweep import prepare_workers
 
 
 @dataclass
@@ -50,7 +51,6 @@ class Batches:
             raise ValueError(f"per_run must be an integer >= 1, not {per_run!r}")
         self.work, self.per_run, self.client = work, per_run, client
         if client is not None:
-            from .sweep import prepare_workers
             prepare_workers(client)
 
     def submit(self, items: list) -> list[Pending]:

@@ -34,6 +34,10 @@ from ..core.store import Output
 from .devices import DTYPES, float_precision
 from .grid import Grid
 from .standalone import standalone_counts
+from ..sources.stimuli import square
+from ..preprocess import make_chain
+from ..sources.scenes import scene_from_spec
+from ..core.spec import set_field
 
 NEURON_AXES = {"k": "", "a": "", "b": "", "c": "", "d": "", "input_hz": "Hz", "I": ""}
 
@@ -171,8 +175,6 @@ def _parameters(sweep, points: dict[str, np.ndarray], names) -> dict[str, np.nda
 
 def _runtime_counts(sweep: NeuronSweep, p: dict[str, np.ndarray]) -> np.ndarray:
     """All points as one group through ``neurons.simulate`` (2-D input + input_index)."""
-    from ..sources.stimuli import square
-
     pairs = np.stack([p["input_hz"], p["I"]], axis=1)
     unique, inverse = np.unique(pairs, axis=0, return_inverse=True)
     current = np.stack([square(f, sweep.duration_s, sweep.input_rate_hz, amplitude=I).samples
@@ -237,10 +239,6 @@ class SceneSweep:
         NeuronSweep(preset=self.preset, dt_ms=self.dt_ms, method=self.method)  # same checks
 
     def _scene_and_chain(self, values: dict):
-        from ..preprocess import make_chain
-        from ..sources.scenes import scene_from_spec
-        from ..core.spec import set_field
-
         spec = {"stimulus": copy.deepcopy(self.stimulus),
                 "preprocess": copy.deepcopy(self.preprocess)}
         for name, value in values.items():

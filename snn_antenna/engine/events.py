@@ -56,6 +56,8 @@ from .standalone import (
     vectorising_flags,
 )
 from .sweep import run_sweep
+from ..core.files import remove_entry
+from ..sources import bench
 
 CHECK_EVERY_MS = 10.0
 # Model steps per call of the fused update at most. Unrolled substeps of one neuron are one
@@ -385,9 +387,6 @@ def cached_features(data, bank: SpikingBank, bench_spec, log=print, fresh: bool 
     (``bench.cache_key``).
     The run itself goes through a sweep store beside the cache, so an interrupted one
     resumes."""
-    from ..core.files import remove_entry
-    from ..sources import bench
-
     key = bench.cache_key({"bench": bench_spec.key(), "bank": _bank_fields(bank)}, __name__)
     path = Path(bench_spec.cache_dir) / f"spiking-{key}.zarr"
     store = path.with_name(f"spiking-{key}.sweep.zarr")

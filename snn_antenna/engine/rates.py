@@ -25,6 +25,12 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..core.files import atomic_write, cache_root, make_folder
+from ..core.provenance import code_hash
+from ..networks import neurons
+from ..networks.resonators import ResonatorArray
+from .codings import compiled_rate_maps
+from ..networks.resonators import rate_map
+from ..readout.contacts import ContactDetector
 
 
 @dataclass(frozen=True)
@@ -90,8 +96,6 @@ def probe_key() -> str:
     """The probe's cache key: the probing code and its imports, Brian2's version, the CPU."""
     from importlib.metadata import version
 
-    from ..core.provenance import code_hash
-
     # Brian2's version from its metadata: a --check imports no Brian2
     text = json.dumps([code_hash(__name__), version("brian2"), machine()])
     return hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -150,8 +154,6 @@ def _best_of(run, repeats: int = 2) -> float:
 
 def _runtime(target: str) -> tuple[float, float]:
     """(steps/s, neuron-steps/s) of ``neurons.simulate`` on ``target``, from two sizes."""
-    from ..networks import neurons
-
     rate_hz, n_samples = 1000.0, int(PROBE_S * 1000)
     steps = PROBE_S * 1000 / 0.1
     # one input of 24 columns for both sizes: its shape is compiled in, the group's size not
@@ -178,9 +180,6 @@ def _inverse(seconds: float) -> float:
 def _codings() -> tuple[float, float, float]:
     """(s per run, neuron-steps/s, build s) of the compiled codings group
     (``engine.codings``), from two group sizes (two projects, each built once on disk)."""
-    from ..networks.resonators import ResonatorArray
-    from .codings import compiled_rate_maps
-
     array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
     rate_hz = 1000.0
     steps = CODINGS_PROBE_S * 1000 / array.dt_ms
@@ -232,9 +231,6 @@ def _readout_window() -> float:
     where every 15th window is a contact episode of its own: an episode's estimate costs
     most, and the quick gating run's maps average about that (91 maps of 80 windows in 63 s
     against 24 ms a window with one episode per 5 windows, under the same load)."""
-    from ..networks.resonators import ResonatorArray, rate_map
-    from ..readout.contacts import ContactDetector
-
     array = ResonatorArray()
     duration_s, window_s = 15.0, 0.1
     windows = int(duration_s / window_s)

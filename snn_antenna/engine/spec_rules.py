@@ -8,6 +8,9 @@ from __future__ import annotations
 
 from ..core import bounds
 from ..core.errors import SpecError, check, is_number
+from ..core.spec import declared_types
+from ..networks.resonators import MIN_SAMPLES_PER_CYCLE
+from .cost import max_workers
 
 # Where make_chain's arguments come from in a study spec (the rest: ``preprocess.NAME``).
 CHAIN_KEYS = {"adc_bits": "stimulus.adc_bits", "full_scale_g": "stimulus.full_scale_g"}
@@ -58,8 +61,7 @@ def _check_preprocess(spec, stimulus, rate, rate_key) -> None:
     table = spec.get("preprocess")
     if not isinstance(table, dict) or not table:
         return
-    from ..preprocess import make_chain
-    from ..core.spec import declared_types
+    from ..preprocess import make_chain  # lazy: scikit-learn loads with a spec, not the CLI
 
     # The chain's parameters are numbers (None where optional) but for the coder's name.
     for key, tp in declared_types(make_chain).items():
@@ -102,7 +104,6 @@ def _check_network_rate(spec, rate, rate_key, user_keys) -> None:
     band = table["band_hz"]
     if not (isinstance(band, (list, tuple)) and len(band) == 2 and all(map(is_number, band))):
         return                  # the type check names it
-    from ..networks.resonators import MIN_SAMPLES_PER_CYCLE
 
     top = rate / MIN_SAMPLES_PER_CYCLE
     if float(band[1]) <= top:
@@ -124,7 +125,6 @@ def _check_workers(spec) -> None:
     table = spec.get("sweep")
     if not isinstance(table, dict) or "workers" not in table:
         return
-    from .cost import max_workers
 
     workers, limit = table["workers"], max_workers()
     check(isinstance(workers, int) and not isinstance(workers, bool) and 0 <= workers <= limit,

@@ -23,6 +23,8 @@ from ..core import bounds
 from ..core.errors import NumericalInstabilityError
 from ..core.files import atomic_write, cache_root, lock_folder, make_folder
 from ..networks import neurons
+from .devices import bounded_make
+from .devices import float_precision
 
 # One compiled standalone project per process (Brian2's device is process-global); a worker
 # keeps it across chunks, so only its first chunk pays for compiling.
@@ -212,8 +214,6 @@ def project(structure: tuple, build) -> dict:
     from brian2 import prefs
     from brian2.devices.device import get_device, reset_device, set_device
 
-    from .devices import bounded_make
-
     # The compiler's flags make the binary as much as the structure does (another -march, the
     # float32 flags): a project built with other flags is another project, in this process and
     # on disk.
@@ -324,8 +324,6 @@ def _standalone_project(sweep, elements: int):
     loop over elements then streams only what varies (measured at 10^5 points, float64: a,
     b, c, d shared, 0.31 -> 0.25 s per run)."""
     import brian2 as b2
-
-    from .devices import float_precision
 
     steps = substeps(sweep)
     shared = tuple(name for name, swept in POINT_PARAMETERS.items() if swept in sweep.shared)

@@ -34,6 +34,10 @@ from ..networks.resonators import ResonatorArray
 from .accuracy import rate_map_error, spike_count_error, spike_time_error_ms
 from ..readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
 from ..sources import antenna
+from ..sources import bench
+from ..readout.spiking import recording_attrs
+from ..sources.stimuli import square
+from .tuning import derive
 
 # Largest k·dt (model ms per step) up to which every constant drive of the full stability map
 # (``accuracy.StabilityGrid().map``: 25 k·dt over 0.01-50, 20 drives in [-50, 50]) kept its
@@ -150,8 +154,6 @@ class BandEvents:
 def sample_data(materials, positions_cm, repetitions: int = 1, seed: int = 0):
     """A small bench data set (``sources.bench``, the bench study's recording settings):
     every material × position × repetition, generated here, not cached."""
-    from ..sources import bench
-
     spec = bench.BenchSpec(materials=tuple(materials), positions_cm=tuple(positions_cm),
                            repetitions=repetitions, seed=seed)
     return bench.generate(spec, log=lambda *a: None)
@@ -160,8 +162,6 @@ def sample_data(materials, positions_cm, repetitions: int = 1, seed: int = 0):
 def code_events(name: str, band: Band, data, duration_s: float = 0.5) -> BandEvents:
     """The events of a bench data set through ``band``'s chain, ``duration_s`` each, as
     ``SpikingBank.code`` makes them for the bank."""
-    from ..readout.spiking import recording_attrs
-
     bank = SpikingBank(bands={name: band}, duration_s=duration_s)
     rate_hz, bits, full_scale = recording_attrs(data)
     return BandEvents(name, band, bank.code(data["counts"].values, rate_hz, bits, full_scale),
@@ -283,8 +283,6 @@ def driven_tuning(band: Band, setting: BandSetting, rate_hz: float, freqs_hz,
     output is (one group of neurons × frequencies). Dims (``neuron_hz``, ``input_hz``)."""
     import xarray as xr
 
-    from ..sources.stimuli import square
-
     array = array_of(band, setting, target)
     freqs = np.asarray(freqs_hz, dtype=float)
     current = np.column_stack([square(f, duration_s, rate_hz, band.coder_amplitude).samples
@@ -304,8 +302,6 @@ def driven_tuning(band: Band, setting: BandSetting, rate_hz: float, freqs_hz,
 def peak_hz(rates) -> np.ndarray:
     """Each neuron's peak input frequency (``tuning.derive``: the geometric middle of a
     plateau of equal maxima; NaN for a silent neuron)."""
-    from .tuning import derive
-
     return derive(rates.drop_vars("k"))["peak_hz"].values
 
 

@@ -17,6 +17,7 @@ import xarray as xr
 
 from ..readout.events import EventProcessor, process
 from ..core.truth import bench_labels
+from ..sources import bench
 
 
 def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool = False
@@ -24,8 +25,6 @@ def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool 
     """The bench data set of ``bench_spec`` (a ``bench.BenchSpec``) and its event features
     with the events' labels joined; both cached on disk, keyed by their specs and the
     code that computes them (``bench.cache_key``)."""
-    from ..sources import bench
-
     data = bench.load(bench_spec, log, fresh)
     key = bench.cache_key({"bench": bench_spec.key(), "events": asdict(processor)}, __name__)
     path = Path(bench_spec.cache_dir) / f"features-{key}.zarr"

@@ -24,6 +24,7 @@ from .control import ControlLayer, MaterialUnit
 from .cpg import CPG
 from .gate import SpeedGate
 from .resonators import ResonatorArray
+from . import neurons
 
 INPUTS = ("antenna", "speed_command")
 # part → (what it needs: scene inputs or other parts)
@@ -88,8 +89,6 @@ def build(table: dict, fitted: dict | None = None) -> Assembly:
     its learned weights go into the network's plastic synapses).
     """
     import brian2 as b2
-
-    from . import neurons
 
     configured = configure(table)
     for name, part in (fitted or {}).items():

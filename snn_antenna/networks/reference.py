@@ -23,6 +23,7 @@ import numpy as np
 from ..core.errors import NumericalInstabilityError, SpecError, check
 from ..core.signals import Recording, validate_samples
 from . import neurons
+from .resonators import ArrayResult
 
 DEFAULT_RTOL = 1e-10
 DEFAULT_ATOL = 1e-9
@@ -137,8 +138,6 @@ def simulate(preset: str = "resonator", current=None, k=1.0, *, input_dt_ms: flo
 def run_array(array, coded: Recording, window_s: float = 0.1, rtol: float = DEFAULT_RTOL,
               atol: float = DEFAULT_ATOL):
     """The reference of ``ResonatorArray.run``: the same ``ArrayResult`` from exact spikes."""
-    from .resonators import ArrayResult
-
     samples = np.asarray(validate_samples(coded.samples, "coded.samples"), dtype=float)
     if samples.ndim != 1:
         raise SpecError("coded.samples", f"array of shape {samples.shape}", "one channel")

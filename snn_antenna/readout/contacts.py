@@ -16,6 +16,7 @@ from ..core import bounds
 from ..core.errors import SpecError, check, is_integer, is_number
 from ..networks.resonators import SELF_MOTION_BAND_HZ, tuned_above
 from ..sources import antenna
+from ..core import spec as specs
 
 
 def dominant_hz(rates: xr.DataArray, tie: float = 0.9) -> xr.DataArray:
@@ -224,8 +225,6 @@ def detector_from_spec(spec: dict) -> tuple[ContactDetector, float]:
 
     Every study and the live pipeline read the section here, so its keys, defaults and
     errors are the same everywhere (``window_s`` defaults to 0.1 s)."""
-    from ..core import spec as specs
-
     with specs.section("readout"):
         read = dict(specs.check_section(spec, "readout", ContactDetector, extra=["window_s"]))
         window_s = float(read.pop("window_s", 0.1))

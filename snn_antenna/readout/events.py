@@ -41,6 +41,7 @@ import xarray as xr
 from ..core import bounds
 from ..core.errors import check
 from ..core.signals import validate_samples
+from ..core.parallel import parallel_map
 
 PARAMETERS = ("F_low", "A_low", "tau_low", "F_high", "A_high", "tau_high")
 SKIP_REASONS = ("no_onset", "clipped", "no_decay_fit")
@@ -224,6 +225,7 @@ def main_axis_g(counts: np.ndarray, adc_bits: int, full_scale_g: float) -> np.nd
     The axis's sign is arbitrary per event; neither the spectrum nor the rectified decay
     depends on it.
     """
+    # lazy: scikit-learn loads with a chain, not with the command line
     from ..preprocess import CountsToG, PCAAlign
 
     g = CountsToG(adc_bits, full_scale_g).fit(counts).transform(counts)
@@ -260,8 +262,6 @@ def process(ds: xr.Dataset, processor: EventProcessor, n_jobs: int = 1, block: i
             log=print) -> xr.Dataset:
     """Features of every event of a bench data set: ``spectrum`` (event, freq_hz),
     ``params`` (event, parameter) and ``skipped`` (event: '' or the reason)."""
-    from ..core.parallel import parallel_map
-
     check(float(ds.attrs["rate_hz"]) == processor.rate_hz, "processor.rate_hz",
           processor.rate_hz, f"the data set's rate, {ds.attrs['rate_hz']} Hz")
     counts = ds["counts"].values

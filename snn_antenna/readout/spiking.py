@@ -48,6 +48,8 @@ from ..preprocess import CODERS, make_chain, make_coder
 from ..sources import antenna
 from ..sources.antenna import ADC
 from .contacts import centroid_hz, dominant_hz, preferred_hz
+from ..networks.assembly import build, configure
+from ..networks.control import MaterialUnit
 
 
 @dataclass
@@ -381,9 +383,6 @@ def window_features(network: dict, coded: np.ndarray, rate_hz: float) -> np.ndar
     Fitting on these, not on ``spiking.SpikingBank``'s offline runs, keeps training and use
     on the same Brian2 code path and the same feature definition."""
     import brian2 as b2
-
-    from ..networks.assembly import build, configure
-    from ..networks.control import MaterialUnit
 
     # the network's material part (its configured unit, found by type: "material" here is a
     # part of the network, not the bench label a read-out must never look up)

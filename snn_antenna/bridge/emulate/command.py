@@ -11,12 +11,19 @@ from pathlib import Path
 
 from ...core.errors import SpecError
 from ..wire.source import PortError, stop_on_signals
+from .emulator import FAULT_DESCRIPTIONS, FAULT_SECONDS
+from .emulator import Emulator, FaultPlan
+from .links import PeerGone
+from .stimulus import played_events, stimulus_recording
+from ...core.files import write_new
+from .firmware_loop import check_args, emulate_firmware
+from .links import PtyLink, SerialLink
+from ..wire.source import describe_open_error
+from ...core.files import refuse_symlink
 
 
 def faults_help() -> str:
     """``--faults``' help: every fault's name and what it does."""
-    from .emulator import FAULT_DESCRIPTIONS, FAULT_SECONDS
-
     kinds = "; ".join(f"{name}: {text}" for name, text in FAULT_DESCRIPTIONS.items())
     return (f"comma-separated NAME=COUNT, e.g. dup=2,swap=1,reset=1,stall_s=0.5. Faults: {kinds}. "
             f"Seconds: {', '.join(FAULT_SECONDS)}")
@@ -24,10 +31,6 @@ def faults_help() -> str:
 
 def cmd_emulate(args) -> int:
     """Emulate the board: stream a stimulus (labelled in ``--log``) to a pty or a port."""
-    from .emulator import Emulator, FaultPlan
-    from .links import PeerGone
-    from .stimulus import played_events, stimulus_recording
-
     if args.firmware:
         return _emulate_firmware(args)
     # Everything checked before the pty exists or a byte is written.
@@ -65,7 +68,6 @@ def cmd_emulate(args) -> int:
                    "faults": [list(f) for f in log.faults],
                    "events": played_events(stimulus, log.frames_due)}
         if args.log:                    # whoever stopped first, the log says what was sent
-            from ...core.files import write_new
             write_new(args.log, json.dumps(summary, indent=1), force=args.force)
     if ended:
         raise PortError(ended)
@@ -76,14 +78,11 @@ def cmd_emulate(args) -> int:
 
 def _emulate_firmware(args) -> int:
     """``emulate --pty --firmware DIR``: the firmware in simavr streams the stimulus."""
-    from .firmware_loop import check_args, emulate_firmware
-
     check_args(args)
     if args.log:
         _check_output_file("log", args.log, args.force)
     summary = emulate_firmware(args, stop_on_signals(), log=lambda path: print(path, flush=True))
     if args.log:                        # however the run ended
-        from ...core.files import write_new
         write_new(args.log, json.dumps(summary, indent=1), force=args.force)
     if summary["stopped"]:
         raise PortError(f"emulator stopped: {summary['stopped']}")
@@ -94,22 +93,17 @@ def _emulate_firmware(args) -> int:
 
 def _emulator_link(args):
     """The pty the emulator creates (``--pty``), or the port or URL it writes to."""
-    from .links import PtyLink, SerialLink
-
     if args.pty:
         return PtyLink(args.link)
     try:
         return SerialLink(args.port)
     except Exception as exc:       # pyserial's open errors, as for a reader
-        from ..wire.source import describe_open_error
         raise describe_open_error(args.port, exc) from exc
 
 
 def _check_output_file(name: str, path, force: bool = False) -> None:
     """A new file in a writable folder; an existing one only with ``--force``; a symlink
     never (the toolkit does not write through links)."""
-    from ...core.files import refuse_symlink
-
     path = Path(path)
     refuse_symlink(path, "file")
     if path.is_dir() or not path.parent.is_dir() or not os.access(path.parent, os.W_OK):

@@ -30,6 +30,7 @@ import numpy as np
 
 from ...core.errors import PipelineError, SpecError
 from .links import PeerGone, PtyLink, check_link_path
+from .stimulus import played_events, stimulus_recording
 
 MCU = "atmega328p"
 HARNESS = "antenna_sim"
@@ -164,8 +165,6 @@ def emulate_firmware(args, stop: threading.Event, log=print) -> dict:
     checked with :func:`check_args`); the pty path goes to ``log`` first, as ``emulate --pty``
     prints it. The summary's ``stopped`` says why the run ended early (None: every frame sent).
     """
-    from .stimulus import played_events, stimulus_recording
-
     stimulus = stimulus_recording(args.stimulus, args.seed, args.frames)
     n_frames = args.frames or stimulus.n_samples
     with tempfile.TemporaryDirectory(prefix="snn-antenna-firmware-") as tmp:

@@ -30,6 +30,9 @@ from ...core.signals import Recording
 from ...core.truth import Event, GroundTruth
 from ...sources import antenna
 from ..wire.protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
+from ...sources.stimuli import Contact, RobotScene
+from ...sources.scenes import scene_from_spec
+from ...sources import bench
 
 DEFAULT_SCENE_S = 8.0
 EVENTS_PER_CHUNK = 500          # bench events converted at a time (bounds the float copies)
@@ -37,8 +40,6 @@ EVENTS_PER_CHUNK = 500          # bench events converted at a time (bounds the f
 
 def default_scene(seed: int = 0) -> Recording:
     """A robot scene with two contacts (19 cm and 27 cm), as the board sends it."""
-    from ...sources.stimuli import Contact, RobotScene
-
     scene = RobotScene(duration_s=DEFAULT_SCENE_S,
                        contacts=[Contact(2.0, 19.0), Contact(5.0, 27.0)])
     return scene.generate(seed)
@@ -62,7 +63,6 @@ def stimulus_recording(path: str | Path | None, seed: int = 0,
     table = spec.get("stimulus", spec)
     if table.get("kind") == "bench":
         return bench_on_board(table, seed, n_frames)
-    from ...sources.scenes import scene_from_spec
 
     recording = scene_from_spec(table).generate(seed)
     check_board_sampling(recording, str(path))
@@ -89,8 +89,6 @@ def bench_on_board(table: dict, seed: int, n_frames: int | None = None,
     ``seed`` is the bench data set's (as a study's seed) and the playback order's; ``log``
     gets the data set's progress (stderr: the emulator's stdout names the port).
     """
-    from ...sources import bench
-
     spec = bench.spec_from_table(table, seed)
     data = bench.load(spec, log=log)
     n_events = data.sizes["event"]

@@ -41,6 +41,7 @@ from ...readout.closed_loop import steer
 from ...sources.antenna import SPEED_LIMIT_CM_S
 from ..wire.handler import WindowHandler
 from .schedule import GATE, Change
+from ...sources import bench
 
 CACHE_DIR = "out/.cache"                # where a trained gate is kept (as the bench sets are)
 
@@ -89,8 +90,6 @@ def trained_gate(gate, speeds_cm_s, th_star_g, cache_dir=CACHE_DIR):
     learned the same examples before with the same code (``bench.cached``): its weights and Th
     range, all that recall uses. Learning takes ~5 s; every stream and replay starts with it."""
     import xarray as xr
-
-    from ...sources import bench
 
     speeds, th = np.asarray(speeds_cm_s, float), np.asarray(th_star_g, float)
     fields = {"gate": dataclasses.asdict(gate), "speeds_cm_s": speeds.tolist(),

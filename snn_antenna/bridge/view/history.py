@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...core.errors import SpecError
+from ..online.controls import parse_control
 
 DELAYS_KEPT = 2000               # display delays kept for the p95
 DISPLAY_EVERY = 4               # 1 kHz → 250 points/s per line: 8 per period at 30 Hz
@@ -199,8 +200,6 @@ class ViewHistory:
         """A control request from a page or ``POST /control``: checked (SpecError names the
         field, value and accepted range), then handed to the pipeline without waiting; it
         applies at the next window boundary."""
-        from ..online.controls import parse_control
-
         change = parse_control(body, self.base_window_s, self.config.speed_range_cm_s)
         if self.requests is None:
             raise SpecError("control", change.field, "a running pipeline to apply it to")

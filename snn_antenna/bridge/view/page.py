@@ -13,6 +13,11 @@ from __future__ import annotations
 
 import time
 import uuid
+from .feed import PageFeed
+from .page_controls import control_widgets
+from .rate_map import rate_map
+from .lines import line_plot
+from .page_controls import controls_html
 
 
 # Each page pulls new points 5 times a second (a new rate-map column goes to it on arrival:
@@ -44,10 +49,6 @@ def build_page(view, doc) -> None:
     """Lay out one browser page for ``view`` in the Bokeh document ``doc`` and keep it fed."""
     from bokeh.layouts import column, row
     from bokeh.models import ColumnDataSource, Div, Range1d
-
-    from .feed import PageFeed
-    from .page_controls import control_widgets
-    from .rate_map import rate_map
 
     view.sessions += 1
     view.pages_served += 1
@@ -132,8 +133,6 @@ def _text_source(doc, divs):
 
 
 def _antenna_plot(doc, view, contacts, x_range, page: str):
-    from .lines import line_plot
-
     return line_plot(doc, "xy", ["x", "y"], view.shown_points, x_range, contacts, page=page,
                      title="Antenna: the two accelerometer axes", y_label="g",
                      series=[{"column": "x", "colour": "#1f77b4", "label": "x"},
@@ -142,8 +141,6 @@ def _antenna_plot(doc, view, contacts, x_range, page: str):
 
 
 def _coded_plot(doc, view, contacts, x_range, page: str):
-    from .lines import line_plot
-
     amplitude = view.coder_amplitude
     return line_plot(doc, "coded", ["signal", "th", "coded"], view.shown_points, x_range,
                      contacts, page=page,
@@ -166,8 +163,6 @@ def _updater(view, sources: dict, x_range, mode: dict, feed):
     page is paused or its browser behind), ``reload(end_s)``: show the kept history up to
     ``end_s`` (None: the latest, and follow it again), and ``follow()``: move the time axis
     to the stream."""
-    from .page_controls import controls_html
-
     cursor = {"text_at": 0.0}
     shown = {"text": None, "contacts": None, "text_marks": None}
 

@@ -32,6 +32,7 @@ from functools import partial
 from ...core.errors import SpecError
 from .page import build_page
 from .history import ViewConfig, ViewHistory
+from .saved_view import save_view
 
 VIEW_NICENESS = 10              # the view's CPU priority below the pipeline's (os.nice)
 # The thread that takes a frame from the hand-off needs the GIL while the server's loop builds
@@ -64,7 +65,7 @@ def serve(config: ViewConfig, inbox, control, requests=None) -> None:
     from tornado.httpserver import HTTPServer
     from tornado.ioloop import IOLoop
 
-    from .hostguard import HostGuard, allowed_hosts
+    from .hostguard import HostGuard, allowed_hosts  # lazy: tornado loads with a view
 
     # A stalled tab's queued messages are the only thing a slow browser costs; "closed the
     # websocket" is the normal end of one.
@@ -231,8 +232,6 @@ def _handlers() -> dict:
 
     class Save(Base):
         def post(self) -> None:
-            from .saved_view import save_view
-
             try:
                 start = float(self.get_query_argument("start"))
                 end = float(self.get_query_argument("end"))

@@ -52,6 +52,7 @@ from .protocol import (
 )
 from .handler import WindowHandler
 from .source import DEFAULT_BAUDRATE, Batch
+from .protocol import Sample, encode_binary
 
 SAMPLE_DTYPE = np.dtype([("seq", "<u2"), ("x", "<u2"), ("y", "<u2"), ("flags", "<u2"),
                          ("host_time_s", "<f8")])
@@ -444,8 +445,6 @@ def record_counts(path, counts: np.ndarray) -> Path:
     """Write ADC counts (samples × 2, e.g. a simulated scene's ``samples``) as a recording
     that ``snn-antenna replay`` and :func:`load_recording` read, as ``record`` would have
     written them from the board (binary frames, one batch), without a port."""
-    from .protocol import Sample, encode_binary
-
     counts = np.asarray(counts)
     if counts.ndim != 2 or counts.shape[1] != 2:
         raise SpecError("counts", f"shape {counts.shape}", "ADC counts of shape (samples, 2)")
