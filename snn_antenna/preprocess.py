@@ -17,11 +17,15 @@ Never fit on the recording being read out: its contacts would leak into the alig
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass
+
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
 from sklearn.pipeline import Pipeline
 
 from .core import bounds
+from .core import spec as specs
 from .core.errors import SpecError, check, is_number
 from .core.signals import validate_samples
 from .sources.antenna import ADC
@@ -373,6 +377,36 @@ CHAIN_ARGS = {("to_g", "adc_bits"): "adc_bits", ("to_g", "full_scale_g"): "full_
               ("coder", "levels"): "coder_levels", ("coder", "ratio"): "coder_ratio",
               ("coder", "gain"): "coder_gain"}
 
+
+# make_chain's arguments that describe the sensor: each source gives its own
+SENSOR = ("rate_hz", "adc_bits", "full_scale_g")
+
+
+@dataclass(frozen=True)
+class Preprocessing:
+    """``[preprocess]``, checked: ``make_chain``'s settings besides the sensor's."""
+    settings: dict
+
+    def chain(self, sensor):
+        """An unfitted chain for ``sensor``'s samples (anything with ``rate_hz``,
+        ``adc_bits`` and ``full_scale_g``: a scene, a set of recorded drives)."""
+        return make_chain(sensor.rate_hz, sensor.adc_bits, sensor.full_scale_g, **self.settings)
+
+
+def chain_section(spec: dict, sensors: Iterable, gated: bool = False,
+                  extra: tuple = ()) -> tuple[Preprocessing, dict]:
+    """``[preprocess]``, checked by building its chain for each of ``sensors``; ``gated``: the
+    study sets the coder's Th itself, so the section may not. Returns the settings and the
+    study's own ``extra`` keys (those the section holds)."""
+    exclude = [*SENSOR, "threshold"] if gated else list(SENSOR)
+    with specs.section("preprocess"):
+        table = dict(specs.check_section(spec, "preprocess", make_chain, exclude=exclude,
+                                         extra=list(extra)))
+        own = {key: table.pop(key) for key in extra if key in table}
+        pre = Preprocessing(table)
+        for sensor in sensors:
+            pre.chain(sensor)
+    return pre, own
 
 def warmup_samples(samples, rate_hz: float, warmup_s: float) -> np.ndarray:
     """The first ``warmup_s`` of ``samples``: what a robot has recorded before it reads out.

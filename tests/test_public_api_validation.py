@@ -259,7 +259,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.sources.recorded.ImportedSet",
         "snn_antenna.sources.source.Generated",
         "snn_antenna.studies.exploration.plan.Parts",
-        "snn_antenna.studies.sections.Preprocessing",
+        "snn_antenna.preprocess.Preprocessing",
         "snn_antenna.bridge.online.pipeline.OnlineParts",
         "snn_antenna.preprocess.CalibratedChain",
         "snn_antenna.bridge.online.robot.LiveRobot",

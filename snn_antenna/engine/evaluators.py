@@ -35,7 +35,7 @@ from .devices import DTYPES, float_precision
 from .grid import Grid
 from .standalone import standalone_counts
 from ..sources.stimuli import square
-from ..preprocess import make_chain
+from ..preprocess import Preprocessing
 from ..sources.scenes import scene_from_spec
 from ..core.spec import set_field
 
@@ -245,8 +245,7 @@ class SceneSweep:
             set_field(spec, name, value.item() if hasattr(value, "item") else value)
         scene = scene_from_spec(spec["stimulus"])
         scene.validate()
-        chain = make_chain(scene.rate_hz, scene.adc_bits, scene.full_scale_g,
-                           **spec["preprocess"])
+        chain = Preprocessing(spec["preprocess"]).chain(scene)
         return scene, chain
 
     def for_grid(self, grid: Grid, block_shape) -> SceneSweep:

@@ -18,6 +18,7 @@ import numpy as np
 import xarray as xr
 
 from ..core import bounds
+from ..core import spec as specs
 from ..core.errors import PipelineError, SpecError, check, is_integer, is_number
 from ..core.signals import Recording, validate_samples
 from . import neurons
@@ -230,6 +231,26 @@ class ResonatorArray:
         if feeder.failed:
             raise _as_project_error(feeder.failed[0], stats.samples / rate_hz)
         return stats
+
+
+def network_table(spec: dict) -> dict:
+    """``[network]``, checked: the ``ResonatorArray``'s keyword arguments."""
+    with specs.section("network"):
+        return dict(specs.check_section(spec, "network", ResonatorArray))
+
+
+def array_section(spec: dict) -> ResonatorArray:
+    """The resonator array of ``[network]``."""
+    table = network_table(spec)
+    with specs.section("network"):
+        return ResonatorArray(**table)
+
+
+def check_rates(array: ResonatorArray, scenes: Iterable) -> None:
+    """Every scene's sample rate carries the array's band (refused as ``network.rate_hz``)."""
+    with specs.section("network"):
+        for scene in scenes:
+            array.check_rate(scene.rate_hz)
 
 
 def held_samples(samples: np.ndarray) -> np.ndarray:

@@ -5,9 +5,10 @@
   (:func:`source_section`, :func:`scene_section`); from then on the study asks the scene what
   every source answers (``sources.source.Scene``) and never which kind it has;
 - the **chain**: ``[preprocess]``, the settings of ``preprocess.make_chain`` besides the
-  sensor's, which each source gives (:func:`chain_section`, :class:`Preprocessing`);
-- the **array**: ``[network]``, a ``ResonatorArray`` (:func:`network_table`,
-  :func:`array_section`, :func:`check_rates`);
+  sensor's, which each source gives (``preprocess.chain_section``, which the live path
+  shares);
+- the **array**: ``[network]``, a ``ResonatorArray`` (``networks.resonators.array_section``,
+  ``network_table``, ``check_rates``, which the live path shares);
 - the **detector**: ``[readout]``, read by ``readout.contacts.detector_from_spec``, which the
   live path shares;
 - the **bench set** and what reads it: the recorded contacts ``data`` names or the
@@ -19,24 +20,15 @@ Every reader checks its section before anything runs and names the section in it
 """
 from __future__ import annotations
 
-from collections.abc import Iterable
-from dataclasses import dataclass
-
 from ..core import spec as specs
 from ..core.errors import check
 from ..evaluation import crossval as cv
-from ..networks.resonators import ResonatorArray
-from ..preprocess import make_chain
 from ..readout.events import EventProcessor
 from ..sources import bench, recorded
 from ..sources.scenes import CourseScene, scene_from_spec
 from ..sources.source import BenchSet
 from ..sources.stimuli import RobotScene
 from .contract import cache_folder
-
-# make_chain's arguments that describe the sensor: each source gives its own
-SENSOR = ("rate_hz", "adc_bits", "full_scale_g")
-
 
 def scene_section(spec: dict, table: str = "stimulus", course: bool = False):
     """The generated scene of ``[table]``: a ``RobotScene`` (``kind = "robot"``, the
@@ -60,53 +52,6 @@ def source_section(spec: dict, table: str = "stimulus"):
     if spec.get("data") is not None:
         return recorded.open_drives(spec["data"]).scene(0)
     return scene_section(spec, table)
-
-
-@dataclass(frozen=True)
-class Preprocessing:
-    """``[preprocess]``, checked: ``make_chain``'s settings besides the sensor's."""
-    settings: dict
-
-    def chain(self, sensor):
-        """An unfitted chain for ``sensor``'s samples (anything with ``rate_hz``,
-        ``adc_bits`` and ``full_scale_g``: a scene, a set of recorded drives)."""
-        return make_chain(sensor.rate_hz, sensor.adc_bits, sensor.full_scale_g, **self.settings)
-
-
-def chain_section(spec: dict, sensors: Iterable, gated: bool = False,
-                  extra: tuple = ()) -> tuple[Preprocessing, dict]:
-    """``[preprocess]``, checked by building its chain for each of ``sensors``; ``gated``: the
-    study sets the coder's Th itself, so the section may not. Returns the settings and the
-    study's own ``extra`` keys (those the section holds)."""
-    exclude = [*SENSOR, "threshold"] if gated else list(SENSOR)
-    with specs.section("preprocess"):
-        table = dict(specs.check_section(spec, "preprocess", make_chain, exclude=exclude,
-                                         extra=list(extra)))
-        own = {key: table.pop(key) for key in extra if key in table}
-        pre = Preprocessing(table)
-        for sensor in sensors:
-            pre.chain(sensor)
-    return pre, own
-
-
-def network_table(spec: dict) -> dict:
-    """``[network]``, checked: the ``ResonatorArray``'s keyword arguments."""
-    with specs.section("network"):
-        return dict(specs.check_section(spec, "network", ResonatorArray))
-
-
-def array_section(spec: dict) -> ResonatorArray:
-    """The resonator array of ``[network]``."""
-    table = network_table(spec)
-    with specs.section("network"):
-        return ResonatorArray(**table)
-
-
-def check_rates(array: ResonatorArray, scenes: Iterable) -> None:
-    """Every scene's sample rate carries the array's band (refused as ``network.rate_hz``)."""
-    with specs.section("network"):
-        for scene in scenes:
-            array.check_rate(scene.rate_hz)
 
 
 def bench_section(spec: dict) -> BenchSet:
@@ -134,6 +79,5 @@ def evaluation_section(spec: dict) -> cv.Evaluation:
         return cv.Evaluation(**specs.check_section(spec, "evaluation", cv.Evaluation))
 
 
-__all__ = ["SENSOR", "scene_section", "source_section", "Preprocessing", "chain_section",
-           "network_table", "array_section", "check_rates", "bench_section", "events_section",
+__all__ = ["scene_section", "source_section", "bench_section", "events_section",
            "evaluation_section"]

@@ -34,6 +34,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -43,8 +44,8 @@ from ...core.errors import SpecError
 from ...engine.spec_rules import check_spec
 from ...networks.assembly import configure
 from ...networks.gate import GateTraining
-from ...networks.resonators import ChunkFeed, ResonatorArray
-from ...preprocess import CalibratedChain, make_chain
+from ...networks.resonators import ChunkFeed, ResonatorArray, array_section, check_rates
+from ...preprocess import CalibratedChain, chain_section
 from ...readout.contacts import ContactDetector, EpisodeTracker, detector_from_spec
 from ..wire.handler import Published, Window, WindowHandler
 from ..wire.protocol import BOARD_ADC_BITS, BOARD_FULL_SCALE_G, BOARD_RATE_HZ
@@ -127,14 +128,11 @@ def build_online(network_path, overrides=(), rate_hz: float = BOARD_RATE_HZ,
                 raise SpecError(name, value, "none for a network without a speed gate (a "
                                              "composed spec such as networks/live_robot.toml "
                                              "takes one)")
-        with specs.section("network"):
-            array = ResonatorArray(**specs.check_section(spec, "network", ResonatorArray))
-    with specs.section("network"):
-        array.check_rate(rate_hz)
-    with specs.section("preprocess"):
-        pre = specs.check_section(spec, "preprocess", make_chain,
-                                  exclude=["rate_hz", "adc_bits", "full_scale_g"])
-        chain = make_chain(rate_hz, BOARD_ADC_BITS, BOARD_FULL_SCALE_G, **pre)
+        array = array_section(spec)
+    board = SimpleNamespace(rate_hz=rate_hz, adc_bits=BOARD_ADC_BITS,
+                            full_scale_g=BOARD_FULL_SCALE_G)     # the sensor the board reads
+    check_rates(array, [board])
+    chain = chain_section(spec, [board])[0].chain(board)
     detector, window_s = detector_from_spec(spec)
     robot = None
     if composed:

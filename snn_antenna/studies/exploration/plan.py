@@ -16,7 +16,8 @@ from ...readout.contacts import detector_from_spec
 from ...readout.detection import BlindReadOut
 from ...sources.scenes import CourseScene
 from ..contract import COMMON, Plan
-from ..sections import chain_section, scene_section
+from ...preprocess import chain_section
+from ..sections import scene_section
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "gate_training", "loop")
 OPTIONS = COMMON

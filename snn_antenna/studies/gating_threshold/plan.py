@@ -26,7 +26,9 @@ from ...readout.detection import BlindReadOut
 from ...sources import antenna
 from ...sources.scenes import CourseLayout, CourseScene, SpeedProfile, drive, ramp
 from ..contract import COMMON, Plan, data_folder
-from ..sections import Preprocessing, array_section, chain_section, check_rates, scene_section
+from ...networks.resonators import array_section, check_rates
+from ...preprocess import Preprocessing, chain_section
+from ..sections import scene_section
 from .drives import RecordedSplit, split_drives
 
 SECTIONS = ("network", "stimulus", "preprocess", "calibration", "readout", "course", "sweep",

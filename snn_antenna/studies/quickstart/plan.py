@@ -13,7 +13,9 @@ from ...networks.resonators import ResonatorArray
 from ...readout.contacts import ContactDetector, detector_from_spec
 from ...sources.source import Scene
 from ..contract import COMMON, Plan, data_folder
-from ..sections import array_section, chain_section, check_rates, source_section
+from ...networks.resonators import array_section, check_rates
+from ...preprocess import chain_section
+from ..sections import source_section
 
 SECTIONS = ("network", "stimulus", "preprocess", "readout", "data")
 OPTIONS = (*COMMON, "data")

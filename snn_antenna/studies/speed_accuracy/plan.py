@@ -16,8 +16,9 @@ from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import detector_from_spec
 from ..contract import COMMON, Plan, data_folder
-from ..sections import (Preprocessing, array_section, chain_section, check_rates,
-                        network_table, scene_section, source_section)
+from ...networks.resonators import array_section, check_rates, network_table
+from ...preprocess import Preprocessing, chain_section
+from ..sections import scene_section, source_section
 from .precision import Precision
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
