@@ -143,7 +143,8 @@ def test_every_writer_of_an_output_folder_goes_through_its_door():
             if isinstance(node, ast.Call) and getattr(node.func, "id", getattr(
                     node.func, "attr", None)) == "output_folder":
                 doors.add(where)
-    assert doors == {"cli.py", "bridge/cli.py", "bridge/wire/recorder.py", "data/command.py"}
+    assert doors == {"cli.py", "bridge/cli.py", "bridge/wire/recorder.py", "data/command.py",
+                     "report/results.py"}
 
 
 def test_a_recording_folder_is_checked_once(tmp_path, monkeypatch, capsys):

@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 from snn_antenna.cli import main
+from snn_antenna.core import files, outputs
 from snn_antenna.report import results
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,14 +33,75 @@ def test_text_typed_into_a_table_is_caught(tmp_path):
     assert any("measured 3.5 ms" in p for p in problems)
 
 
+def _checkout(tmp_path) -> Path:
+    """A copy of the page, its sources and its folder's manifest, as another checkout has
+    them (other inodes and times, the same content)."""
+    docs = tmp_path / "docs"
+    docs.mkdir()
+    shutil.copytree(SOURCES, docs / "results")
+    shutil.copy(PAGE, docs / "results.md")
+    shutil.copy(ROOT / "docs" / outputs.MANIFEST, docs / outputs.MANIFEST)
+    return docs
+
+
 def test_the_page_is_regenerated_by_its_own_command(tmp_path, monkeypatch):
+    """On a checkout of its own, through the page folder's manifest: the same page, the
+    same manifest."""
     text = PAGE.read_text()
     command = re.search(r"```bash\n(snn-antenna results .*?)\n```", text).group(1)
-    (tmp_path / "docs").mkdir()
-    shutil.copytree(SOURCES, tmp_path / "docs" / "results")
+    docs = _checkout(tmp_path)
+    manifest = (docs / outputs.MANIFEST).read_text()
     monkeypatch.chdir(tmp_path)
     assert main(shlex.split(command)[1:]) == 0
-    assert (tmp_path / "docs" / "results.md").read_text() == text
+    assert (docs / "results.md").read_text() == text
+    assert (docs / outputs.MANIFEST).read_text() == manifest
+
+
+def test_the_kept_manifest_names_the_page_and_its_sources_as_they_are():
+    """What the results command wrote is what is kept: a page or source changed by other
+    means (an edit, a merge) fails here, and the command would refuse to write over it."""
+    manifest = outputs.read_manifest(ROOT / "docs")
+    assert manifest is not None and manifest["study"] == results.STUDY
+    assert sorted(manifest["files"]) == ["results", "results.md"]
+    changed = [name for name, ident in manifest["identity"].items()
+               if not files.matches(ROOT / "docs" / name, ident)]
+    assert not changed, f"changed since the results command wrote them: {changed}"
+
+
+def test_a_page_edited_by_hand_is_refused_and_kept_and_so_are_the_users_files(
+        tmp_path, monkeypatch, capsys):
+    text = PAGE.read_text()
+    command = shlex.split(re.search(r"```bash\n(snn-antenna results .*?)\n```", text).group(1))
+    docs = _checkout(tmp_path)
+    (docs / "notes.md").write_text("mine")
+    (docs / "results.md").write_text(text + "an edit\n")
+    (tmp_path / "run").mkdir()                          # a newer run: a source to copy in
+    summary = json.loads((SOURCES / "quickstart.json").read_text())
+    summary["quick"] = not summary.get("quick")
+    (tmp_path / "run" / "summary.json").write_text(json.dumps(summary))
+    argv = [a.replace("docs/results/quickstart.json", "run") for a in command[1:]]
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "results.md" in err and "changed since" in err
+    assert (docs / "results.md").read_text() == text + "an edit\n"
+    assert (docs / "results" / "quickstart.json").read_text() == \
+        (SOURCES / "quickstart.json").read_text()          # nothing written before the refusal
+    (docs / "results.md").write_text(text)             # restored: the toolkit's again
+    assert main(argv) == 0
+    assert json.loads((docs / "results" / "quickstart.json").read_text()) == summary
+    assert (docs / "notes.md").read_text() == "mine"
+    names = outputs.read_manifest(docs)["files"]
+    assert sorted(names) == ["results", "results.md"]
+    # a source edited by hand is not written over, and stays listed as the command wrote it:
+    # restored, it is the toolkit's again
+    listed = outputs.read_manifest(docs)["identity"]["results"]
+    source = docs / "results" / "tuning_sweep.json"
+    source.write_text(source.read_text() + "\n")
+    assert main(command[1:]) == 0
+    assert outputs.read_manifest(docs)["identity"]["results"] == listed
+    source.write_text(source.read_text()[:-1])
+    assert files.matches(docs / "results", listed)
 
 
 def test_a_changed_source_or_a_changed_number_is_caught(tmp_path):

@@ -18,7 +18,9 @@ Four promises, kept here so that every writer keeps them the same way:
   every entry below it). Removal, replacement and append act only on an entry that is still
   that one (``matches``), never on the journal's word alone: an entry the user replaced or
   edited is the user's. An entry a killed run was still writing carries its device and inode
-  only, and is matched on those.
+  only, and is matched on those. A folder whose outputs are kept under version control (the
+  documentation's results page) identifies them by content instead (``content_identity``),
+  so that its journal still proves them on another checkout.
 - **Staging names are never the user's.** A staging name (``staging_name``: hidden, with the
   process id and a counter) is declared first and created exclusively (``O_EXCL``, ``mkdir``),
   so a file already bearing it is refused, never truncated or removed; a staging entry left by
@@ -72,7 +74,45 @@ def settled_identity(path: str | Path, st: os.stat_result | None = None) -> dict
 def is_settled(ident: dict | None) -> bool:
     """Whether ``ident`` holds the content's fingerprint (the entry was finished), not only
     device and inode (it was being written when its run was killed)."""
-    return bool(ident) and ("size" in ident or "tree" in ident)
+    return bool(ident) and any(key in ident for key in ("size", "tree", "sha256", "content"))
+
+
+def content_identity(path: str | Path) -> dict | None:
+    """What identifies an entry on every copy of it (a checkout, a clone), where device,
+    inode and times differ: its kind and a digest of its content (a file's bytes; a folder's
+    names and its files' bytes, ``content_digest``); ``None`` when it is missing, a link or
+    a special file."""
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        return None
+    ident = identity(st)
+    if ident is None:
+        return None
+    if ident["kind"] == "file":
+        return {"kind": "file", "sha256": _file_digest(path)}
+    return {"kind": "dir", "content": content_digest(path)}
+
+
+def _file_digest(path: str | Path) -> str:
+    fd = os.open(path, os.O_RDONLY | NOFOLLOW | CLOEXEC)
+    h = hashlib.sha256()
+    with os.fdopen(fd, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def content_digest(folder: str | Path) -> str:
+    """A digest of every entry below ``folder`` by name and content, read without following
+    anything: a file added, removed or edited below it changes it, a copy of it does not."""
+    h = hashlib.sha256()
+    for rel, st in sorted(walk(folder), key=lambda item: item[0]):
+        content = ("dir" if stat.S_ISDIR(st.st_mode) else
+                   _file_digest(Path(folder) / rel) if stat.S_ISREG(st.st_mode) else
+                   f"other {stat.S_IFMT(st.st_mode)}")
+        h.update(json.dumps([rel, content]).encode())
+    return h.hexdigest()
 
 
 def tree_digest(folder: str | Path) -> str:
@@ -93,6 +133,8 @@ def matches(path: str | Path, ident: dict | None, writing: bool = False) -> bool
     fingerprint) matches on device and inode only when ``writing`` (to resume it)."""
     if not ident or not (writing or is_settled(ident)):
         return False
+    if "sha256" in ident or "content" in ident:     # identified by content (content_identity)
+        return content_identity(path) == ident
     try:
         st = os.lstat(path)
     except FileNotFoundError:
@@ -208,14 +250,17 @@ class Journal:
     """
 
     def __init__(self, folder: str | Path, on_change: Callable[[dict], None],
-                 owned: dict | None = None, itself: str = "", unfinished=()):
+                 owned: dict | None = None, itself: str = "", unfinished=(),
+                 fingerprint: Callable[[Path], dict | None] = settled_identity, changed=()):
         self.folder = Path(os.path.abspath(folder))
         self.owned: dict[str, dict] = dict(owned or {})
         self.names: dict[str, dict | None] = {}
         self.resumed: set[str] = set()             # left unfinished by a killed run
         self.unfinished = set(unfinished)          # the same, of another study: kept
+        self.changed = set(changed)                # the toolkit's once, edited since: kept
         self.on_change = on_change
         self.itself = itself
+        self.fingerprint = fingerprint             # what identifies a finished entry
 
     def entries(self) -> dict:
         return {**self.owned, **self.names}
@@ -250,12 +295,13 @@ class Journal:
                 raise self._not_ours(name, "it changed since snn-antenna wrote it")
             if not is_settled(ident):
                 self.resumed.add(name)
-            self.names[name] = {k: ident[k] for k in ("kind", "dev", "ino")} \
+            self.names[name] = identity(os.lstat(entry)) \
                 if os.path.lexists(entry) else None      # being written: settled at the end
         elif os.path.lexists(entry):
             raise self._not_ours(name, "a run that was killed left it unfinished, so it may "
                                        "hold what is not snn-antenna's" if name in self.unfinished
-                                 else YOURS)
+                                 else "it changed since snn-antenna wrote it"
+                                 if name in self.changed else YOURS)
         else:
             self.names[name] = None
         self.on_change(self.entries())
@@ -295,7 +341,7 @@ class Journal:
         longer there (or no longer the one it made) is dropped."""
         for name, ident in list(self.names.items()):
             if matches(self.folder / name, ident, writing=True):
-                self.names[name] = settled_identity(self.folder / name)
+                self.names[name] = self.fingerprint(self.folder / name)
             else:
                 del self.names[name]
         self.owned = {n: i for n, i in self.owned.items() if os.path.lexists(self.folder / n)}

@@ -9,7 +9,7 @@ listed; nothing else in the folder, and no listed entry that has since been repl
 is ever taken as the toolkit's.
 
 :func:`output_folder` is the one door to an output folder (a study run's, a recording's, an
-imported data set's), in three phases:
+imported data set's, the results page's), in three phases:
 
 1. **check**, on entering: the folder is decided and, when it exists, locked; everything it
    would refuse is refused here, before anything is created (``--check`` leaves after this
@@ -33,6 +33,13 @@ imported data set's), in three phases:
    folder, write its manifest before anything else and open the write-ahead journal.
 3. **record**, on leaving however the block ended: close the journal, write the manifest
    (what the run wrote) and release the lock.
+
+A **shared** folder is one the toolkit writes a few names into among the user's files (the
+documentation folder, where ``snn-antenna results`` writes ``results.md`` and ``results/``):
+the user's files there are neither refused nor touched, and each name the run writes must
+still be new or the toolkit's by its manifest. Such a folder is kept under version control,
+so its manifest identifies the entries by content (``files.content_identity``), which every
+checkout shares, and holds no time, host or process once the run has ended.
 """
 from __future__ import annotations
 
@@ -60,10 +67,12 @@ class OutputFolder:
     listed: dict = field(default_factory=dict)      # the toolkit's earlier entries: identity
     replace: dict = field(default_factory=dict)     # another study's entries, for --force
     unfinished: set = field(default_factory=set)    # what its killed run left: kept
+    changed: dict = field(default_factory=dict)     # listed, but edited since: kept
     created: bool = False                           # the run made the folder
     lock_fd: int | None = None                      # the folder's flock, held for the run
     journal: files.Journal | None = None
     started: str | None = None
+    shared: bool = False                            # among the user's files (module docstring)
 
     def claim(self) -> None:
         """The second phase: every check has passed, so the run takes the folder (see
@@ -72,6 +81,15 @@ class OutputFolder:
             files.remove_entry(self.path / entry, ident)      # lists, still the toolkit's
         self.replace = {}
         _claim(self)
+
+    def check_writes(self, names) -> None:
+        """Refuse now, before the claim, any of ``names`` (entries at the folder's top the run
+        will write) that is there and not the toolkit's: in a shared folder nothing is
+        written when one of them would be refused."""
+        for name in names:
+            if os.path.lexists(self.path / name) and name not in self.listed:
+                raise files.not_ours(self.path, name, "it changed since snn-antenna wrote it"
+                                     if name in self.changed else files.YOURS)
 
 
 def check_writable(path, field: str = "--out", what: str = "a folder path") -> Path:
@@ -124,21 +142,24 @@ def _entries(path: Path) -> list[str]:
                   if e != MANIFEST and not files.is_staging(e, MANIFEST))
 
 
-def _prepare(path, study: str, force: bool, fresh: bool, new: bool) -> OutputFolder:
+def _prepare(path, study: str, force: bool, fresh: bool, new: bool,
+             shared: bool = False) -> OutputFolder:
     """The first phase: decide the output folder of a ``study`` run (see the module
     docstring) and take its lock when the folder exists; creates nothing."""
     path = check_writable(path)
     lock_fd = lock_folder(path) if path.is_dir() else None
     try:
-        folder = _decide(path, study, force, fresh, new)
+        folder = _decide(path, study, force, fresh, new, shared)
     except BaseException:
         _unlock(lock_fd)
         raise
     folder.lock_fd = lock_fd
+    folder.shared = shared
     return folder
 
 
-def _decide(path: Path, study: str, force: bool, fresh: bool, new: bool) -> OutputFolder:
+def _decide(path: Path, study: str, force: bool, fresh: bool, new: bool,
+            shared: bool = False) -> OutputFolder:
     entries = _entries(path)
     if new and entries:
         shown = ", ".join(entries[:4]) + (", …" if len(entries) > 4 else "")
@@ -152,7 +173,7 @@ def _decide(path: Path, study: str, force: bool, fresh: bool, new: bool) -> Outp
              if isinstance(name, str)} if manifest else {}
     listed = {name: ident for name, ident in known.items()
               if name in entries and files.matches(path / name, ident, writing=True)}
-    foreign = [e for e in entries if e not in listed]
+    foreign = [] if shared else [e for e in entries if e not in listed]   # the user's: kept
     changed = [e for e in foreign if e in known]
     other_study = owner is not None and owner != study
     if (other_study or foreign) and not force:
@@ -181,7 +202,8 @@ def _decide(path: Path, study: str, force: bool, fresh: bool, new: bool) -> Outp
     for entry in replace:                   # before anything is removed
         if (path / entry).is_dir():
             files.check_tree(path / entry, "folder")
-    return OutputFolder(path, study, listed, replace, unfinished)
+    return OutputFolder(path, study, listed, replace, unfinished,
+                        changed={e: known[e] for e in entries if e in known and e not in listed})
 
 
 # -- one writer per folder ----------------------------------------------------------------------
@@ -230,7 +252,9 @@ def _claim(folder: OutputFolder) -> None:
     journal = files.Journal(folder.path,
                             lambda entries: _write_manifest(folder, entries, "running"),
                             owned=folder.listed, itself=MANIFEST,
-                            unfinished=folder.unfinished)
+                            unfinished=folder.unfinished,
+                            fingerprint=files.content_identity if folder.shared
+                            else files.settled_identity, changed=folder.changed)
     folder.journal = journal
     _write_manifest(folder, journal.entries(), "running")
     files.open_journal(journal)
@@ -264,21 +288,25 @@ def _record(folder: OutputFolder) -> None:
 
 
 def _write_manifest(folder: OutputFolder, entries: dict, status: str) -> None:
+    if folder.shared:               # an entry edited by hand stays listed as the toolkit wrote
+        entries = {**folder.changed, **entries}     # it: restored, it is the toolkit's again
     data = {"kind": KIND, "study": folder.study, "files": sorted(entries),
-            "identity": {name: entries[name] for name in sorted(entries)}, "status": status,
-            "pid": os.getpid(), "host": socket.gethostname(),
-            "started": folder.started, "updated_unix_s": time.time()}
+            "identity": {name: entries[name] for name in sorted(entries)}, "status": status}
+    if not (folder.shared and status == "ended"):   # a kept manifest: the same on every run
+        data.update(pid=os.getpid(), host=socket.gethostname(), started=folder.started,
+                    updated_unix_s=time.time())
     files.atomic_write(folder.path / MANIFEST, json.dumps(data, indent=1))
 
 
 @contextmanager
 def output_folder(path, study: str, *, force: bool = False, fresh: bool = False,
-                  new: bool = False) -> Iterator[OutputFolder]:
+                  new: bool = False, shared: bool = False) -> Iterator[OutputFolder]:
     """The one door to an output folder (see the module docstring). Entering checks it (a
     refusal is raised here, before anything is created; a ``--check`` leaves the block now,
     and the folder is released as it was); ``folder.claim()`` takes it; leaving records what
-    the run wrote, however the block ended."""
-    folder = _prepare(path, study, force, fresh, new)
+    the run wrote, however the block ended. ``shared``: the folder holds the user's files
+    too, and its entries are identified by content (the module docstring)."""
+    folder = _prepare(path, study, force, fresh, new, shared)
     try:
         yield folder
     finally:

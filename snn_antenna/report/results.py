@@ -1,9 +1,9 @@
 """The results page: every measured number of the documentation, regenerated from its sources.
 
-    snn-antenna results out/quickstart out/gating ... --bench docs/results/bench_array.json \\
+    snn-antenna results out/quickstart out/gating ... --bench out/bench_array.json \\
         --bench-output out/bench_coders.json "python benchmarks/bench_coders.py" \\
         --out docs/results.md
-    python -m snn_antenna.report.results record-bench docs/results/bench_array.json -- \\
+    python -m snn_antenna.report.results record-bench out/bench_array.json -- \\
         python benchmarks/bench_array.py --seconds 2
 
 The page is built from the ``summary.json`` of the study runs it is given and from the output
@@ -21,7 +21,10 @@ Each source is copied beside the page (``docs/results/NAME.json``, with its prov
 the benchmark script's, or the name its output carries for a mode that stands beside the
 default run, such as ``bench_coders_cost_only``), so the page cites files that stay with it,
 and the page is a pure function of those files: running the command again on them gives the
-same page.
+same page. The page's folder is an output folder like a run's (``outputs.output_folder``), shared
+with the documentation's other pages: its manifest, kept under version control beside the page,
+names the page and ``results/`` by their content, so the command rewrites them on any checkout
+and nothing else; a page or source edited by hand is refused, never overwritten.
 
 Every number on the page is a link to its run's source block (command, commit, machine) whose
 title is the JSON Pointer (RFC 6901) of the value in the cited file, for example
@@ -47,6 +50,7 @@ from ..core.bounds import out_path
 from ..core.commands import LIST, POSITIONALS, Command, Option
 from ..core.errors import SpecError
 from ..core.files import atomic_write
+from ..core.outputs import output_folder
 from ..core.provenance import code_identity
 
 #: the study summaries' own lists of what was calibrated and what is predicted
@@ -484,10 +488,10 @@ def _summary_of(path: Path) -> Path:
     return file
 
 
-def collect(runs: list[Path], store: Path) -> list[Path]:
-    """Each run's summary, copied into ``store`` as ``STUDY.json`` (one run per study)."""
-    store.mkdir(parents=True, exist_ok=True)
-    cited: dict[str, Path] = {}
+def read_runs(runs: list[Path], store: Path) -> list[tuple[Path, Path, dict]]:
+    """Each run's summary file, its summary and where the page cites it (``store/STUDY.json``,
+    one run per study), read and checked before anything is written."""
+    cited: dict[str, tuple[Path, Path, dict]] = {}
     for run in runs:
         file = _summary_of(run)
         summary = json.loads(file.read_text())
@@ -496,12 +500,9 @@ def collect(runs: list[Path], store: Path) -> list[Path]:
             raise SpecError("results", str(run), "a study's summary.json (with its provenance)")
         if study in cited:
             raise SpecError(
-                "results", str(run), f"one run per study ({study} is also {cited[study]})"
+                "results", str(run), f"one run per study ({study} is also {cited[study][1]})"
             )
-        target = store / f"{study}.json"
-        if file.resolve() != target.resolve():
-            atomic_write(target, json.dumps(summary, indent=1, sort_keys=False) + "\n")
-        cited[study] = target
+        cited[study] = (store / f"{study}.json", file, summary)
     return list(cited.values())
 
 
@@ -632,6 +633,11 @@ def _shown(path: Path) -> str:
     return Path(os.path.relpath(path.resolve())).as_posix()
 
 
+#: the results page's output folder is the page's own: the documentation, which it shares
+#: with the pages beside it (``outputs.output_folder``, ``shared``)
+STUDY = "results"
+
+
 def make_page(
     runs: list[Path],
     benches: list[Path],
@@ -639,29 +645,41 @@ def make_page(
     outputs: list[tuple[Path, str]] = (),
 ) -> Path:
     """Copy the runs' summaries and the benchmarks' outputs beside ``out`` (into
-    ``results/``), write the page from those copies, and check every number on it."""
+    ``results/``), write the page from those copies, and check every number on it. The
+    page's folder is an output folder shared with the user's files: every source is read
+    and every name decided before it is claimed, and only ``out`` and ``results/`` are
+    written there, each new or the toolkit's by the folder's manifest."""
+    out = Path(out)
     store = out.parent / "results"
+    summaries = read_runs(runs, store)
     records = [(bench, _bench_record(bench)) for bench in benches]
     records += [(path, adopt_output(path, command)) for path, command in outputs]
-    cited = collect(runs, store)
-    stored_benches = []
+    stored: list[tuple[Path, Path, dict]] = []
     for path, record in records:
         target = store / f"{_bench_name(path, record)}.json"
-        if target in stored_benches:
+        if any(target == other for other, _, _ in stored):
             raise SpecError("--bench", str(path), f"one output per benchmark ({target.stem})")
-        if path.resolve() != target.resolve():
-            atomic_write(target, json.dumps(record, indent=1, default=float) + "\n")
-        stored_benches.append(target)
-    command = " ".join(
-        [
-            "snn-antenna results",
-            *map(_shown, cited),
-            *(f"--bench {_shown(b)}" for b in stored_benches),
-            f"--out {_shown(out)}",
-        ]
-    )
-    text = render(cited, stored_benches, command)
-    atomic_write(out, text)
+        stored.append((target, path, record))
+    copies = [(t, f) for t, f, _ in summaries + stored if f.resolve() != t.resolve()]
+    with output_folder(out.parent, STUDY, shared=True) as folder:
+        folder.check_writes([out.name] + ([store.name] if copies else []))
+        folder.claim()
+        for target, file, summary in summaries:
+            if file.resolve() != target.resolve():
+                atomic_write(target, json.dumps(summary, indent=1, sort_keys=False) + "\n")
+        for target, path, record in stored:
+            if path.resolve() != target.resolve():
+                atomic_write(target, json.dumps(record, indent=1, default=float) + "\n")
+        cited = [target for target, _, _ in summaries]
+        command = " ".join(
+            [
+                "snn-antenna results",
+                *map(_shown, cited),
+                *(f"--bench {_shown(target)}" for target, _, _ in stored),
+                f"--out {_shown(out)}",
+            ]
+        )
+        atomic_write(out, render(cited, [target for target, _, _ in stored], command))
     problems = check_page(out, store)
     if problems:
         raise RuntimeError("the results page does not match its sources: " + problems[0])
