@@ -59,16 +59,24 @@ def settled_identity(path: str | Path, st: os.stat_result | None = None) -> dict
     """``identity`` of ``path`` with its content's fingerprint: a file's size and modification
     time (from ``st`` when given), a folder's ``tree_digest``; ``None`` when it is missing, a
     link or a special file."""
+    found = _entry(path, st)
+    if found is None:
+        return None
+    ident, st = found
+    if ident["kind"] == "file":
+        return {**ident, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
+    return {**ident, "tree": tree_digest(path)}
+
+
+def _entry(path: str | Path, st: os.stat_result | None = None):
+    """``(identity, lstat)`` of the file or folder at ``path`` (``st`` when given); ``None``
+    when it is missing, a link or a special file."""
     try:
         st = st if st is not None else os.lstat(path)
     except FileNotFoundError:
         return None
     ident = identity(st)
-    if ident is None:
-        return None
-    if ident["kind"] == "file":
-        return {**ident, "size": st.st_size, "mtime_ns": st.st_mtime_ns}
-    return {**ident, "tree": tree_digest(path)}
+    return None if ident is None else (ident, st)
 
 
 def is_settled(ident: dict | None) -> bool:
@@ -82,14 +90,10 @@ def content_identity(path: str | Path) -> dict | None:
     inode and times differ: its kind and a digest of its content (a file's bytes; a folder's
     names and its files' bytes, ``content_digest``); ``None`` when it is missing, a link or
     a special file."""
-    try:
-        st = os.lstat(path)
-    except FileNotFoundError:
+    found = _entry(path)
+    if found is None:
         return None
-    ident = identity(st)
-    if ident is None:
-        return None
-    if ident["kind"] == "file":
+    if found[0]["kind"] == "file":
         return {"kind": "file", "sha256": _file_digest(path)}
     return {"kind": "dir", "content": content_digest(path)}
 
