@@ -14,7 +14,7 @@ from snn_antenna.networks import assembly
 from snn_antenna.sources.scenes import OnlineAntenna
 
 ROOT = Path(__file__).resolve().parents[1]
-CPG_GATE_CONTROL = {"cpg", "cpg_ring", "speed_population", "readout", "plastic", "control",
+CPG_GATE_CONTROL = {"cpg", "cpg_ring", "speed_population", "readout", "plastic",
                     "control_contact", "control_motor", "control_sense", "control_act"}
 # The gate learns in SpeedGate.fit: a built network recalls only.
 LEARNING_ONLY = {"teacher", "teaching"}

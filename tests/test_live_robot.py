@@ -148,7 +148,7 @@ def test_the_parts_run_on_one_clock_with_no_monitor(robot_parts):
     assert steps[0.5] == {group.clock}
     assert not [obj for obj in every if isinstance(obj, (b2.SpikeMonitor, b2.StateMonitor))]
     names = {obj.name for obj in objects}
-    assert {"speed_population", "readout", "plastic", "control"} <= names
+    assert {"speed_population", "readout", "plastic", "control_contact"} <= names
     assert not names & {"teacher", "teaching"}
 
 

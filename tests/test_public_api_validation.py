@@ -180,6 +180,8 @@ RECORD = "a result the package fills in and hands back, not a setting"
 HANDLE = "joins objects the package built and checked (or a live resource), not a setting"
 PROTOCOL = "a protocol: declares methods, is not made"
 NOT_CONFIGURED: dict[str, str] = {
+    "snn_antenna.networks.neurons.Class1Rows": "what a part's checked settings make for its "
+                                               "Brian2 group, not a setting",
     **{name: RECORD for name in (
         "snn_antenna.bridge.emulate.emulator.EmulatorLog",
         "snn_antenna.bridge.emulate.firmware_loop.Built",

@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 
 from ..core import spec as specs
 from ..core.errors import SpecError, check
+from . import neurons
 from .control import ControlLayer, MaterialUnit
 from .cpg import CPG
 from .gate import SpeedGate
@@ -119,11 +120,14 @@ def part_objects(configured: dict, resonators=None) -> dict:
     clock costs a Python call per step (the live robot network had ten clocks for two step
     sizes)."""
     clock = _clocks(resonators, configured.get("resonators"))
-    objects = {}
+    objects, units = {}, {}
+    shared = _shared_units(configured, clock)
+    if shared is not None:
+        objects["class1_units"], units = shared
     if "gate" in configured:
         gate = configured["gate"]
         objects.update(gate.objects(weights=getattr(gate, "weights_", None), learning=False,
-                                    clock=clock(gate.dt_ms)))
+                                    clock=clock(gate.dt_ms), units=units or None))
     if "cpg" in configured:
         cpg = configured["cpg"]
         ring, syn = cpg.objects(
@@ -133,10 +137,21 @@ def part_objects(configured: dict, resonators=None) -> dict:
     if "control" in configured:
         control = configured["control"]
         objects.update(control.objects(resonators, configured["resonators"].neuron_hz,
-                                       clock=clock(control.dt_ms)))
+                                       clock=clock(control.dt_ms), units=units or None))
     if "material" in configured:
         objects.update(configured["material"].objects(resonators))
     return objects
+
+
+def _shared_units(configured: dict, clock):
+    """The speed gate's and the control layer's class-I units in one group when they step
+    together (``neurons.class1_units``: one group's Brian2 calls per step, not two groups'):
+    the group and its Subgroups by role; None otherwise."""
+    gate, control = configured.get("gate"), configured.get("control")
+    if gate is None or control is None or float(gate.dt_ms) != float(control.dt_ms):
+        return None
+    return neurons.class1_units({**gate.unit_rows(), **control.unit_rows()},
+                                clock(gate.dt_ms), "class1_units")
 
 
 def _clocks(resonators, array):

@@ -67,21 +67,31 @@ class ControlLayer:
         bounds.pair("motion_band_hz", self.motion_band_hz, unit=" Hz")
         bounds.amplitude("bias", self.bias)
 
-    def objects(self, resonators, neuron_hz: np.ndarray, clock=None) -> dict:
+    def unit_rows(self) -> dict:
+        """The contact and motor units (``neurons.Class1Rows``), in ``CONTROL_UNITS``' order."""
+        return {f"control_{unit}": neurons.Class1Rows(1, self.bias, self.tau_syn_ms,
+                                                      rest_current=self.bias)
+                for unit in CONTROL_UNITS}
+
+    def objects(self, resonators, neuron_hz: np.ndarray, clock=None, units=None) -> dict:
         """Contact and motor units wired to a resonator group (``resonators``). ``clock``: a
         Brian2 clock of step ``dt_ms`` to share (by default one of the layer's own).
 
         Both units are one two-neuron group (``control``; ``control_contact`` and
-        ``control_motor`` are its Subgroups, for wiring and monitors): the same model, and
-        Subgroups share their group's Brian2 code, so two units cost one group's calls per
-        step. Each unit counts its spikes (``spike_count``)."""
+        ``control_motor`` are its Subgroups, for wiring): the same model, and Subgroups share
+        their group's Brian2 code, so two units cost one group's calls per step. ``units``:
+        the Subgroups ``control_contact`` and ``control_motor`` of a class-I group shared with
+        other parts (``neurons.class1_units`` of ``unit_rows``) instead of a group of the
+        layer's own. Each unit counts its spikes (``unit_spike_counts`` reads them)."""
         import brian2 as b2
 
-        if clock is None:
-            clock = b2.Clock(dt=self.dt_ms * b2.ms, name="control_clock*")
-        units = class1_group(len(CONTROL_UNITS), self.bias, self.tau_syn_ms, clock, "control")
-        contact, motor = (b2.Subgroup(units, at, at + 1, name=f"control_{unit}")
-                          for at, unit in enumerate(CONTROL_UNITS))
+        own = {}
+        if units is None:
+            if clock is None:
+                clock = b2.Clock(dt=self.dt_ms * b2.ms, name="control_clock*")
+            own["control"], units = neurons.class1_units(self.unit_rows(), clock, "control")
+        contact, motor = (units[f"control_{unit}"] for unit in CONTROL_UNITS)
+        clock = contact.source.clock
         is_above = tuned_above(neuron_hz, self.motion_band_hz)
         above, band = np.flatnonzero(is_above), np.flatnonzero(~is_above)
         # Its pathway steps with the array, whose spikes it carries (Brian2 runs a pathway
@@ -96,29 +106,17 @@ class ControlLayer:
         act = b2.Synapses(contact, motor, on_pre=f"I_syn_post += {self.w_motor!r}",
                           clock=clock, name="control_act")
         act.connect()
-        return {"control": units, "control_contact": contact, "control_motor": motor,
+        return {**own, "control_contact": contact, "control_motor": motor,
                 "control_sense": sense, "control_act": act}
 
 
-def class1_group(n: int, bias, tau_syn_ms: float, clock, name: str, *,
-                 input_terms: str = "", extra: str = "", namespace: dict | None = None):
-    """``n`` class-I neurons driven by ``bias`` + an exponential synaptic current ``I_syn``
-    (+ ``input_terms``, whose variables ``extra`` declares), stepping on ``clock``; each counts
-    its spikes in ``spike_count`` (a read-out reads them without a monitor's calls)."""
-    import brian2 as b2
-
-    eqs = neurons.equations("class1", "bias + I_syn" + input_terms,
-                            "dI_syn/dt = -I_syn / tau_syn : 1\nbias : 1 (constant)\n"
-                            "spike_count : integer\n" + extra)
-    class1 = neurons.PRESETS["class1"]
-    g = b2.NeuronGroup(n, eqs, threshold=neurons.THRESHOLD,
-                       reset=neurons.reset("spike_count += 1"), method="euler",
-                       namespace={"tau_syn": tau_syn_ms * b2.ms, **(namespace or {})},
-                       clock=clock, name=name)
-    g.k, g.a, g.b, g.c, g.d = 1.0, class1.a, class1.b, class1.c, class1.d
-    g.bias = bias
-    g.v, g.u = neurons.resting_state("class1", current=float(np.min(bias)))
-    return g
+def unit_spike_counts(objects: dict) -> np.ndarray:
+    """The control units' spike counts (in ``CONTROL_UNITS``' order) of the parts'
+    ``objects``, as a live view of the array Brian2 steps: a caller on the network's clock
+    reads them without a monitor. (Brian2 hands out the whole group's array for a Subgroup's
+    variable; the units are adjacent rows of it.)"""
+    first, last = objects["control_contact"], objects["control_motor"]
+    return first.variables["spike_count"].get_value()[first.start:last.stop]
 
 
 METALS = ("stainless_steel", "brass", "copper", "aluminium")
@@ -255,9 +253,11 @@ class MaterialUnit:
               f"{self.n_features(n_res)} ({self.n_features(n_res) // n_res} per resonator): "
               "fit on window_features of this network's array")
         clock = b2.Clock(dt=self.dt_ms * b2.ms, name="material_clock*")
-        unit = class1_group(len(self.classes), self.bias, CLASS1_TAU_SYN_MS, clock, "material",
-                            input_terms=" + drive * p", extra="p : 1",
-                            namespace={"drive": self.drive})
+        unit, _ = neurons.class1_units(
+            {"material_units": neurons.Class1Rows(
+                len(self.classes), self.bias, CLASS1_TAU_SYN_MS, rest_current=self.bias,
+                input_terms=" + drive * p", equations="p : 1",
+                namespace={"drive": self.drive})}, clock, "material")
         listen = b2.SpikeMonitor(resonators, name="material_listen")
         seen = {"n": 0}
 

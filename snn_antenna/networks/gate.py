@@ -138,53 +138,38 @@ class SpeedGate:
     def objects(self, n_copies: int = 1, speed_expr: str = "speed_cm_s",
                 extra: str = "speed_cm_s : 1 (shared)", weights=None,
                 namespace: dict | None = None, teacher_expr: str = "0*Hz",
-                learning_expr: str = "0", learning: bool = True, clock=None):
+                learning_expr: str = "0", learning: bool = True, clock=None, units=None):
         """The gate's Brian2 objects: speed population, read-out, plastic synapses, teacher.
 
         ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
         what it refers to: by default a shared variable the closed loop writes). Returned as
-        a dict of named objects (``speed_population``, ``readout``, ``plastic``, ``teacher``,
-        ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall only, reduced
-        to what recall uses (no teacher, no learning traces, synapses that only transmit; the
-        same recall, with fewer Brian2 calls per step). ``clock``: a Brian2 clock of step
-        ``dt_ms`` to share (by default one of its own for all the gate's objects: Brian2's loop
-        pays for every clock at every step of any).
+        a dict of named objects (``gate``: the group, when it is the gate's own; ``speed_population``, ``readout``, ``plastic``,
+        ``teacher``, ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall
+        only, reduced to what recall uses (no teacher, no learning traces, synapses that only
+        transmit; the same recall, with fewer Brian2 calls per step). ``clock``: a Brian2 clock
+        of step ``dt_ms`` to share (by default one of its own for all the gate's objects:
+        Brian2's loop pays for every clock at every step of any). ``units``: the Subgroups
+        ``speed_population`` and ``readout`` of a class-I group shared with other parts
+        (``neurons.class1_units`` of ``unit_rows``), instead of a group of the gate's own.
         """
         import brian2 as b2
 
         n_in = self.n_speed_neurons
-        ns = {"tau_syn": self.tau_syn_ms * b2.ms, "tau_trace": self.tau_trace_s * b2.second,
-              "tau_read": self.tau_read_s * b2.second, "peak_current": self.peak_current,
-              "speed_offset": self.speed_offset, "sigma": self.sigma_cm_s,
-              **(namespace or {})}
-        if clock is None:
-            clock = b2.Clock(dt=self.dt_ms * b2.ms, name="gate_clock*")
-        # The speed population and the read-outs are one group of class-I neurons (the same
-        # model: the speed neurons' tuned drive and the read-outs' synaptic current are terms
-        # of one input, each zero where it does not apply), with a Subgroup for each: Brian2
-        # then calls one state updater, thresholder and resetter per step, not two.
-        n_speed = n_in * n_copies
-        units = self._units_group(n_speed + n_copies, speed_expr, extra, ns, clock, learning)
-        speed_pop = b2.Subgroup(units, 0, n_speed, name="speed_population")
-        readout = b2.Subgroup(units, n_speed, n_speed + n_copies, name="readout")
-        class1 = neurons.PRESETS["class1"]
-        units.k = 1.0
-        units.a, units.b, units.c, units.d = class1.a, class1.b, class1.c, class1.d
-        speed_pop.tuned = 1.0
-        speed_pop.preferred = np.tile(self.preferred_cm_s, n_copies)
-        speed_pop.copy = np.repeat(np.arange(n_copies), n_in)
-        speed_pop.bias = self.speed_offset
-        readout.copy = np.arange(n_copies)
-        readout.bias = self.readout_bias
-        speed_pop.v, speed_pop.u = neurons.resting_state("class1")
-        readout.v, readout.u = neurons.resting_state("class1", current=self.readout_bias)
+        own = {}
+        if units is None:
+            if clock is None:
+                clock = b2.Clock(dt=self.dt_ms * b2.ms, name="gate_clock*")
+            own["gate"], units = neurons.class1_units(
+                self.unit_rows(n_copies, speed_expr, extra, namespace, learning), clock, "gate")
+        speed_pop, readout = units["speed_population"], units["readout"]
+        clock = speed_pop.source.clock
         learn = (f"\nw = clip(w + {self.eta!r} * ({learning_expr}) * (r_teacher_post - "
                  f"r_out_post), -{self.w_max!r}, {self.w_max!r})") if learning else ""
         plastic = b2.Synapses(speed_pop, readout, model="w : 1", on_pre="I_syn_post += w" + learn,
-                              namespace=ns, clock=clock, name="plastic")
+                              namespace=namespace or {}, clock=clock, name="plastic")
         plastic.connect(i=np.arange(n_in * n_copies), j=np.repeat(np.arange(n_copies), n_in))
         plastic.w = np.tile(np.zeros(n_in) if weights is None else weights, n_copies)
-        recall = {"gate": units, "speed_population": speed_pop, "readout": readout,
+        recall = {**own, "speed_population": speed_pop, "readout": readout,
                   "plastic": plastic}
         if not learning:
             return recall
@@ -192,40 +177,49 @@ class SpeedGate:
         # counting noise of a Poisson train.
         teacher = b2.NeuronGroup(n_copies, f"dphase/dt = {teacher_expr} : 1",
                                  threshold="phase >= 1", reset="phase -= 1", method="euler",
-                                 namespace=ns, clock=clock, name="teacher")
+                                 namespace=namespace or {}, clock=clock, name="teacher")
         teaching = b2.Synapses(teacher, readout,
                                on_pre=f"r_teacher_post += {1 / self.tau_trace_s!r}",
                                clock=clock, name="teaching")
         teaching.connect(j="i")
         return {**recall, "teacher": teacher, "teaching": teaching}
 
-    def _units_group(self, n: int, speed_expr: str, extra: str, namespace: dict, clock,
-                     learning: bool):
-        """The gate's class-I neurons: a speed neuron (``tuned`` = 1, ``bias`` = the speed
-        offset) takes the drive tuned to its preferred speed, a read-out (``tuned`` = 0,
-        silent ``bias``) the synaptic current from the speed neurons; every neuron keeps the
-        rate trace the online Th reads (r_read: the read-outs') and, when the gate learns,
-        those of the learning rule (r_out, r_teacher)."""
+    def unit_rows(self, n_copies: int = 1, speed_expr: str = "speed_cm_s",
+                  extra: str = "speed_cm_s : 1 (shared)", namespace: dict | None = None,
+                  learning: bool = False) -> dict:
+        """The gate's class-I units (``neurons.Class1Rows``): its speed neurons (``tuned`` = 1,
+        ``bias`` = the speed offset), which take the drive tuned to their preferred speed, and
+        its read-outs (silent ``bias``), which take the synaptic current from them; every unit
+        keeps the rate trace the online Th reads (``r_read``: the read-outs') and, when the
+        gate learns, those of the learning rule (``r_out``, ``r_teacher``)."""
         import brian2 as b2
 
-        traces = """
-            dr_out/dt = -r_out / tau_trace : 1
-            dr_teacher/dt = -r_teacher / tau_trace : 1""" if learning else ""
-        tuned_drive = (f"peak_current * exp(-(({speed_expr}) - preferred)**2 / (2*sigma**2))")
-        return b2.NeuronGroup(
-            n,
-            neurons.equations("class1", f"bias + I_syn + tuned * {tuned_drive}", f"""
-            dI_syn/dt = -I_syn / tau_syn : 1{traces}
-            dr_read/dt = -r_read / tau_read : 1
-            bias : 1 (constant)
-            tuned : 1 (constant)
-            preferred : 1 (constant)
-            copy : integer (constant)
-            {extra}"""),
-            threshold=neurons.THRESHOLD,
-            reset=neurons.reset(*([f"r_out += {1 / self.tau_trace_s!r}"] if learning else []),
-                                f"r_read += {1 / self.tau_read_s!r}"),
-            method="euler", namespace=namespace, clock=clock, name="gate")
+        n_speed = self.n_speed_neurons * n_copies
+        traces = ("dr_out/dt = -r_out / tau_trace : 1\n"
+                  "dr_teacher/dt = -r_teacher / tau_trace : 1\n") if learning else ""
+        common = dict(
+            tau_syn_ms=self.tau_syn_ms,
+            equations=f"""{traces}dr_read/dt = -r_read / tau_read : 1
+                tuned : 1 (constant)
+                preferred : 1 (constant)
+                copy : integer (constant)
+                {extra}""",
+            on_spike=(*([f"r_out += {1 / self.tau_trace_s!r}"] if learning else []),
+                      f"r_read += {1 / self.tau_read_s!r}"),
+            namespace={"tau_trace": self.tau_trace_s * b2.second,
+                       "tau_read": self.tau_read_s * b2.second,
+                       "peak_current": self.peak_current, "sigma": self.sigma_cm_s,
+                       **(namespace or {})})
+        tuned_drive = f"peak_current * exp(-(({speed_expr}) - preferred)**2 / (2*sigma**2))"
+        return {
+            "speed_population": neurons.Class1Rows(
+                n_speed, self.speed_offset, input_terms=f" + tuned * {tuned_drive}",
+                values={"tuned": 1.0, "preferred": np.tile(self.preferred_cm_s, n_copies),
+                        "copy": np.repeat(np.arange(n_copies), self.n_speed_neurons)},
+                **common),
+            "readout": neurons.Class1Rows(
+                n_copies, self.readout_bias, rest_current=self.readout_bias,
+                values={"copy": np.arange(n_copies)}, **common)}
 
     def _network(self, speed_cm_s: np.ndarray, teacher_hz: np.ndarray, learning: np.ndarray,
                  step_s: float, weights: np.ndarray, record_read_every_s: float | None = None):

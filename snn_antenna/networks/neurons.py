@@ -64,6 +64,67 @@ def reset(*also: str) -> str:
     """The model's reset (v → c, u → u + d), then ``also`` (Brian2 statements) in order."""
     return "; ".join(("v = c", "u = u + d") + also)
 
+
+@dataclass(frozen=True)
+class Class1Rows:
+    """One role's rows in a group of class-I units (``class1_units``): ``n`` neurons driven by
+    ``bias`` + an exponential synaptic current ``I_syn`` (time constant ``tau_syn_ms``)
+    + ``input_terms``, at rest for the drive ``rest_current`` when a run starts.
+
+    ``input_terms`` are added to every row's input, so they must vanish on other roles' rows
+    (a term weighted by a parameter this role sets in ``values`` does: parameters start at 0);
+    ``equations`` declares what they and ``on_spike`` (statements at every spike of any row)
+    refer to; ``values`` sets this role's parameters on its own rows."""
+    n: int
+    bias: object
+    tau_syn_ms: float
+    rest_current: float = 0.0
+    input_terms: str = ""
+    equations: str = ""
+    on_spike: tuple = ()
+    namespace: dict = field(default_factory=dict)
+    values: dict = field(default_factory=dict)
+
+
+def class1_units(rows: dict, clock, name: str):
+    """One Brian2 group of class-I neurons holding every role of ``rows`` (name →
+    :class:`Class1Rows`), and a Subgroup per role, named by it. Brian2's runtime loop calls
+    a group's state updater, thresholder and resetter at every step, whatever its size: the
+    class-I units of a composed network (the speed gate's, the control layer's) in one group
+    cost one group's calls. Every unit counts its spikes (``spike_count``)."""
+    import brian2 as b2
+
+    lines, statements, namespace = [], ["spike_count += 1"], {}
+    for role in rows.values():
+        lines += [line.strip() for line in role.equations.splitlines()
+                  if line.strip() and line.strip() not in lines]
+        statements += [s for s in role.on_spike if s not in statements]
+        for key, value in role.namespace.items():
+            if key in namespace and namespace[key] is not value and namespace[key] != value:
+                raise ValueError(f"class-I roles disagree on {key!r}: {namespace[key]!r} "
+                                 f"and {value!r}")
+            namespace[key] = value
+    inputs = "".join(role.input_terms for role in rows.values())
+    eqs = equations("class1", "bias + I_syn" + inputs,
+                    "dI_syn/dt = -I_syn / tau_syn : 1\ntau_syn : second (constant)\n"
+                    "bias : 1 (constant)\nspike_count : integer\n" + "\n".join(lines))
+    class1 = PRESETS["class1"]
+    group = b2.NeuronGroup(sum(role.n for role in rows.values()), eqs, threshold=THRESHOLD,
+                           reset=reset(*statements), method="euler", namespace=namespace,
+                           clock=clock, name=name)
+    group.k, group.a, group.b, group.c, group.d = 1.0, class1.a, class1.b, class1.c, class1.d
+    subgroups, start = {}, 0
+    for role_name, role in rows.items():
+        sub = b2.Subgroup(group, start, start + role.n, name=role_name)
+        sub.bias = role.bias
+        sub.tau_syn = role.tau_syn_ms * b2.ms
+        sub.v, sub.u = resting_state("class1", current=role.rest_current)
+        for variable, value in role.values.items():
+            setattr(sub, variable, value)
+        subgroups[role_name] = sub
+        start += role.n
+    return group, subgroups
+
 # Integration methods whose results this project has measured (studies/speed_accuracy.toml):
 # Brian2's own, and "izhikevich", the update order of Izhikevich's published code (v in two
 # half steps, then u from the new v), a Brian2 state updater defined below.

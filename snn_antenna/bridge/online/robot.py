@@ -35,7 +35,7 @@ import numpy as np
 
 from ...core.errors import SpecError
 from ...networks.assembly import part_objects
-from ...networks.control import CONTROL_UNITS
+from ...networks.control import CONTROL_UNITS, unit_spike_counts
 from ...networks.gate import read_trace
 from ...readout.closed_loop import steer
 from ...sources.antenna import SPEED_LIMIT_CM_S
@@ -144,8 +144,7 @@ class LiveRobot(WindowHandler):
             objects["readout"].r_read = self._settled_rate
         self.objects = objects
         # The control units count their own spikes (no monitor: one Python call less per step).
-        self._counts = (objects["control"].variables["spike_count"].get_value()
-                        if "control" in objects else None)
+        self._counts = unit_spike_counts(objects) if "control_contact" in objects else None
         self._seen = dict.fromkeys(CONTROL_UNITS, 0)
         self._r_read = read_trace(objects) if "readout" in objects else None
         self._ring = objects["cpg"].variables["x"].get_value() if "cpg" in objects else None

@@ -26,7 +26,7 @@ from ...core.logfile import CPG_TOKEN_ORDER, logged
 from ...core.truth import Event
 from ...evaluation.scoring import score_run
 from ...networks.assembly import build as build_network
-from ...networks.control import CONTROL_UNITS
+from ...networks.control import CONTROL_UNITS, unit_spike_counts
 from ...networks.cpg import cycle_periods, phase_lag_deg
 from ...networks.gate import read_trace
 from ...networks.resonators import rate_map
@@ -113,7 +113,7 @@ def _loop_operations(parts: Parts, gate, obj: dict, world: OnlineAntenna,
     i_ext = obj["resonators"].variables["I_ext"].get_value()
     r_read = read_trace(obj)
     x_ring = obj["cpg"].variables["x"].get_value()
-    unit_spikes = obj["control"].variables["spike_count"].get_value()   # the units count
+    unit_spikes = unit_spike_counts(obj)          # the units count their own spikes
     motor = CONTROL_UNITS.index("motor")
     state["buffer"] = np.zeros(n_chunk)
 
