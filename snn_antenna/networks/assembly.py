@@ -25,7 +25,6 @@ from .control import ControlLayer, MaterialUnit
 from .cpg import CPG
 from .gate import SpeedGate
 from .resonators import ResonatorArray
-from . import neurons
 
 INPUTS = ("antenna", "speed_command")
 # part → (what it needs: scene inputs or other parts)
