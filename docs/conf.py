@@ -28,6 +28,7 @@ extensions = [
     "sphinx.ext.napoleon",  # numpy-style docstrings
     "sphinx.ext.mathjax",
     "plain_docstrings",  # docs/_ext: docstrings are plain text, not reST
+    "source_comments",  # docs/_ext: a field's or a constant's comment shown on its API page
     "sphinx_gallery.gen_gallery",  # docs/examples: run at build, with their figures
 ]
 

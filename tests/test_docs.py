@@ -92,6 +92,34 @@ def test_the_api_reference_covers_every_public_module(site):
 
 
 @pytest.mark.slow    # a minute of Sphinx: .ci/run builds the site on every submission
+def test_the_api_pages_describe_each_setting_and_the_cited_constants(site):
+    gate = (site / "api" / "generated" / "snn_antenna.networks.gate.html").read_text()
+    assert "in units of the preferred-speed spacing" in gate     # a field's comment
+    neurons = (site / "api" / "generated" / "snn_antenna.networks.neurons.html").read_text()
+    assert "neurons.MAX_STABLE_K_DT" in neurons and "stays finite for every" in neurons
+
+
+def test_a_fields_and_a_constants_comment_become_their_api_description():
+    sys.path.insert(0, str(DOCS / "_ext"))
+    try:
+        import source_comments
+    finally:
+        sys.path.remove(str(DOCS / "_ext"))
+    from snn_antenna.networks import gate, neurons
+
+    section = source_comments.parameters_section(gate.SpeedGate)
+    at = section.index("tuning_width : float, default ``1.0``")
+    assert "preferred-speed spacing" in section[at + 1]
+    # a field without a comment has its type and default and no invented description
+    at = section.index("n_speed_neurons : int, default ``7``")
+    assert not section[at + 1].startswith("    ")
+    constants = source_comments.module_constants(Path(neurons.__file__).read_text())
+    assert constants["MAX_STABLE_K_DT"].startswith("Largest k·dt")
+    assert constants["V_PEAK"] == "spike cut-off, the model's threshold"
+    assert "PRESETS" not in constants          # no comment beside it: nothing to show
+
+
+@pytest.mark.slow    # a minute of Sphinx: .ci/run builds the site on every submission
 def test_every_guide_image_and_page_link_resolves(site):
     for page in site.rglob("*.html"):
         html = page.read_text()
