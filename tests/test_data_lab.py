@@ -254,23 +254,31 @@ def test_a_ros2_bag_on_a_real_clock_imports_with_its_jitter_and_gaps(tmp_path):
     assert "--clock-offset-s 1795000000.12" in err, err
 
 
-def test_a_set_of_the_labs_materials_without_aluminium_is_named_cleanly(tmp_path):
+def test_the_two_material_network_takes_any_two_of_the_labs_materials(tmp_path):
+    """A set without aluminium: the paper's pair is refused by its field, naming the set's
+    materials cleanly; any two the labels name are taken."""
     from snn_antenna.core import spec as specs
     from snn_antenna.studies import baseline_comparison
 
-    sess = lab.session(2000.0, materials=("rubber", "wood"), repetitions=1, seed=8)
+    sess = lab.session(2000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
+                       repetitions=4, seed=8)
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    2000.0, 0.0)
     lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
-    source, _ = imported(tmp_path, tmp_path / "recs", tmp_path / "labels.csv")
-    spec = specs.load(Path(__file__).resolve().parents[1] / "studies" /
-                      "baseline_comparison.toml", ["evaluation.pipelines=[\"two_material\"]",
-                                                   "spiking.tuned={}"], quick=True)
+    imported(tmp_path, tmp_path / "recs", tmp_path / "labels.csv")
+    study = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
+    sets = ["evaluation.pipelines=[\"two_material\"]", "evaluation.seeds=[0]",
+            "spiking.tuned.calibration_repetitions=2"]
+    spec = specs.load(study, sets, quick=True)
     with pytest.raises(SpecError) as refusal:
         baseline_comparison.plan({**spec, "data": str(tmp_path / "ds")})
-    assert refusal.value.field == "data"
+    assert refusal.value.field == "evaluation.two_materials"
     assert "np.str_" not in str(refusal.value) and "'rubber'" in str(refusal.value)
+    spec = specs.load(study, [*sets, "evaluation.two_materials=[\"rubber\", \"wood\"]"],
+                      quick=True)
+    parts = baseline_comparison.plan({**spec, "data": str(tmp_path / "ds")}).parts
+    assert parts.evaluation.two_materials == ["rubber", "wood"]
 
 
 def test_labels_may_name_a_file_with_or_without_its_extension(tmp_path, sess):

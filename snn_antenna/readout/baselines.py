@@ -202,6 +202,14 @@ def material_baselines(nmf_dims=NMF_DIMENSIONS, mlp: Mlp = Mlp(),
     return out
 
 
+def parametric_material_baseline(mlp: Mlp = Mlp()) -> Baseline:
+    """The 51-hidden MLP on both peaks' F, A and τ: the decay the paper's fit reads, for an
+    antenna whose materials differ in their decay."""
+    return Baseline("mlp_parametric_material", "material", "params",
+                    lambda seed: classifier_pipeline(mlp, MATERIAL_HIDDEN, seed),
+                    "MLP with 51 hidden on both peaks' frequency, amplitude and decay time")
+
+
 def two_material_baseline(mlp: Mlp = Mlp()) -> Baseline:
     """The paper's 5-8-2 network: parametric inputs, outputs distance and material."""
     return Baseline(
@@ -222,5 +230,6 @@ def inputs_of(features: xr.Dataset, kind: str) -> np.ndarray:
 
 
 __all__ = ["Baseline", "Mlp", "distance_baselines", "material_baselines",
+           "parametric_material_baseline",
            "two_material_baseline", "regressor_pipeline", "classifier_pipeline", "inputs_of",
            "columns", "NMF_DIMENSIONS", "NMFFilterBank", "TASKS"]
