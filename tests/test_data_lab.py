@@ -412,15 +412,16 @@ def test_a_bad_csv_value_is_named_by_its_file_line_past_blank_lines(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("rate", [1000.0, pytest.param(2000.0, marks=pytest.mark.xfail(
-    strict=True, reason="at 2 kHz on the lab's rod a signal statistic of the comparison comes "
-                        "out infinite and summary.json refuses it, after --check passed"))])
-def test_the_shipped_comparison_checks_and_runs_on_the_labs_recordings(tmp_path, rate):
+@pytest.mark.parametrize("rate", [1000.0, 2000.0])
+def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp_path, rate):
     """`run studies/baseline_comparison.toml --data DIR --quick`, with `--check` first, on
-    the lab's rod at the board's 1 kHz and at 2 kHz: the check passes and so does the run."""
+    the lab's rod (its four materials, four distances, ten repetitions) at the board's 1 kHz
+    and at 2 kHz: the check passes and so does the run, every statistic finite; the material
+    is read within 5 points of the one-feature decay read-out and the distance within 2× the
+    peak-frequency read-out's rmse, on the same splits."""
     from snn_antenna.cli import main as cli
 
-    sess = lab.session(rate, materials=("rubber", "wood", "aluminium"), repetitions=6, seed=9)
+    sess = lab.session(rate, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    rate, origin_s=2.5)
@@ -433,7 +434,188 @@ def test_the_shipped_comparison_checks_and_runs_on_the_labs_recordings(tmp_path,
     assert cli([*args, "--check"]) == 0
     assert cli(args) == 0
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert summary["material_accuracy"]
+    assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * source.n_events
+    scores = against_one_feature(tmp_path / "run", source)
+    best_material = max(scores[k][0] for k in scores if scores[k][2] == "material")
+    assert best_material >= scores["mlp_parametric_material"][1] - 0.05, scores
+    assert scores["mlp_parametric_material"][0] >= scores["mlp_parametric_material"][1] - 0.05
+    assert scores["linear_low_peak"][0] <= 2 * scores["linear_low_peak"][1], scores
+    assert scores["spiking_dominant"][0] <= 4 * scores["spiking_dominant"][1], scores
+    assert_reports_recorded_data(tmp_path / "run")
+
+
+# -- the lab's antenna, fitted from its labels, and the comparison on it ---------------------
+def against_one_feature(run: Path, source) -> dict:
+    """Per read-out of a comparison's ``predictions.json``: (its mean score over the splits,
+    the one-feature read-out's mean score on the same training and test contacts, the task):
+    accuracy against the decay time's, rmse (mm) against the peak frequency's."""
+    ds = source.dataset
+    g = ((ds["counts"].values.astype(float) - 2 ** (source.adc_bits - 1))
+         * 2 * source.full_scale_g / 2 ** source.adc_bits)
+    predictions = json.loads((run / "predictions.json").read_text())
+    events = ds["event"].values
+    cache, out = {}, {}
+    for name, folds in predictions["folds"].items():
+        task = predictions["task"][name]
+        if task not in ("material", "distance"):
+            continue
+        mine, reference = [], []
+        for fold in folds:
+            key = (tuple(fold["train_event"]), tuple(fold["test_event"]))
+            if key not in cache:
+                cache[key] = lab.one_feature_readouts(
+                    g, source.rate_hz, source.pre_trigger_s, ds["material"].values,
+                    ds["distance_cm"].values, np.isin(events, fold["train_event"]),
+                    np.isin(events, fold["test_event"]))
+            true, said = np.asarray(fold["true"]), np.asarray(fold["predicted"])
+            if task == "material":
+                mine.append(np.mean(true == said))
+                reference.append(cache[key][0])
+            else:
+                mine.append(10 * np.sqrt(np.mean((true - said) ** 2)))
+                reference.append(cache[key][1])
+        out[name] = (float(np.mean(mine)), float(np.mean(reference)), task)
+    return out
+
+
+def assert_reports_recorded_data(run: Path):
+    """The page and summary say what the data is: recorded, with what was fitted and every
+    contact left out, never the generator's words."""
+    page = (run / "report.html").read_text()
+    summary = json.loads((run / "summary.json").read_text())
+    for generated in ("generat", "8 × 16", "8 x 16", "in this generator"):
+        assert generated not in page.lower(), generated
+    assert "recorded by a lab" in page and "held out to calibrate" in page
+    assert "low-mode law" in page and summary["data"]["recorded"]["labels"]["sha256"][:16] in page
+    held = summary["data"]["left_out_by_position"]["calibration"]
+    assert sum(held.values()) == summary["data"]["n_events"] - summary["data"]["n_processed"] \
+        - sum(summary["data"]["skipped"].values())
+
+
+def fft_spec(*sets):
+    """The shipped comparison's quick profile without its spiking read-out."""
+    from snn_antenna.core import spec as specs
+
+    study = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
+    spec = specs.load(study, list(sets), quick=True)
+    del spec["spiking"]
+    return spec
+
+
+@pytest.fixture(scope="module")
+def lab_set(tmp_path_factory):
+    """The lab's rod at 1 kHz, its four materials at four distances, six repetitions, on a
+    clock from 12 s: imported."""
+    tmp = tmp_path_factory.mktemp("lab_set")
+    sess = lab.session(1000.0, materials=tuple(lab.DECAY_S), repetitions=6, seed=4)
+    (tmp / "recs").mkdir()
+    lab.counts_csv(tmp / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0), 1000.0,
+                   origin_s=12.0)
+    labels = lab.labels_csv(tmp / "labels.csv", sess, "r1", origin_s=12.0)
+    code, err = run_cli(tmp / "recs", labels, "--out", tmp / "ds")
+    assert code == 0, err
+    return recorded.open_bench(tmp / "ds")
+
+
+def test_the_labs_antenna_is_fitted_from_its_calibration_labels_only(lab_set):
+    """Its falling law, a mode split where no frequency lies between the modes at every
+    distance, and a decay-fit window that fits nearly every contact; the labels of the
+    scored contacts never enter the fit."""
+    from dataclasses import replace
+
+    from snn_antenna.evaluation import antenna_fit
+    from snn_antenna.studies import baseline_comparison
+
+    plan = baseline_comparison.plan({**fft_spec(), "data": str(lab_set.path)})
+    parts, fit = plan.parts, plan.parts.antenna
+    slope = np.log10(lab.FAR_HZ / lab.NEAR_HZ) / (lab.FAR_CM - lab.NEAR_CM)
+    assert fit.low_law[0] == pytest.approx(slope, rel=0.05)
+    assert fit.low_law[1] == pytest.approx(np.log10(lab.NEAR_HZ) - slope * lab.NEAR_CM,
+                                           abs=0.05)
+    assert fit.r2_low > 0.99 and fit.distances_cm == (10.0, 18.0, 26.0, 34.0)
+    assert max(fit.low_hz) > min(fit.high_hz)          # no one frequency between the modes
+    assert 1 < fit.split_ratio < lab.HIGH_RATIO and fit.split_hz > lab.NEAR_HZ
+    assert parts.processor.split_ratio == pytest.approx(fit.split_ratio, rel=1e-4)
+    assert fit.fitted_fraction >= 0.95 and fit.low_identified_fraction == 1.0
+    assert fit.repetitions == tuple(parts.calibration_repetitions)
+    assert any(line.startswith("fitted: events.split_hz") for line in plan.left_out)
+    assert "generat" not in plan.spec["description"]
+    # the scored contacts' labels scrambled: the same fit
+    ds = lab_set.dataset
+    held = np.isin(ds["repetition"].values, parts.calibration_repetitions)
+    scrambled = ds.copy()
+    distance = ds["distance_cm"].values.copy()
+    distance[~held] = np.random.default_rng(0).permutation(distance[~held])
+    scrambled["distance_cm"] = ("event", distance)
+    like = replace(parts.processor, split_hz=55.0, split_ratio=None)
+    assert antenna_fit.fit(scrambled, held, like, "x") == antenna_fit.fit(ds, held, like, "x")
+
+
+def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
+                                                                             tmp_path):
+    """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
+    contact, the parametric MLP reads the material within 5 points of the one-feature decay
+    read-out and the low peak's regression the distance within 2× the peak-frequency
+    read-out's rmse, on the same splits; the page says what the data is."""
+    from snn_antenna.studies import baseline_comparison
+    from snn_antenna.studies.contract import Options
+
+    spec = fft_spec(f"stimulus.cache_dir=\"{tmp_path / 'cache'}\"", "evaluation.nmf_dims=[3]")
+    summary = baseline_comparison.run(baseline_comparison.plan({**spec, "data":
+                                                                str(lab_set.path)}),
+                                      tmp_path / "run", Options(quick=True),
+                                      log=lambda *a: None)
+    assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * lab_set.n_events
+    scores = against_one_feature(tmp_path / "run", lab_set)
+    material, decay, _ = scores["mlp_parametric_material"]
+    assert material >= decay - 0.05, scores
+    distance, peak, _ = scores["linear_low_peak"]
+    assert distance <= 2 * peak, scores
+    assert summary["two_material"] is None or summary["two_material"]["materials"]
+    assert_reports_recorded_data(tmp_path / "run")
+
+
+@pytest.mark.parametrize("rate", [1000.0, 2000.0])
+def test_check_fails_exactly_when_the_run_would(tmp_path, rate):
+    """A material labelled in one repetition only: some split would train or test without
+    it. `--check` refuses it in one line, as the run does, before any work; the same set
+    with every material in every repetition passes both."""
+    from snn_antenna.cli import main as cli
+
+    sess = lab.session(rate, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
+                       repetitions=4, seed=6)
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   rate, 0.0)
+    labels = lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
+    lines = labels.read_text().splitlines()
+    (tmp_path / "few.csv").write_text("\n".join(
+        [lines[0]] + [line for line in lines[1:] if not (",rubber," in line and
+                                                        not line.endswith(",0"))]) + "\n")
+    study = str(Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml")
+    for name, table, code in (("few", tmp_path / "few.csv", 2), ("all", labels, 0)):
+        imported(tmp_path, tmp_path / "recs", table, out=name)
+        args = ["run", study, "--data", str(tmp_path / name), "--quick", "--set",
+                "evaluation.pipelines=[\"material\"]", "--set",
+                "spiking.tuned.calibration_repetitions=2", "--out", str(tmp_path / f"run_{name}")]
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            assert cli([*args, "--check"]) == code
+        if code:
+            assert "evaluation.test_fraction" in err.getvalue() or "data" in err.getvalue()
+            with contextlib.redirect_stderr(io.StringIO()):
+                assert cli(args) == code
+            assert not (tmp_path / f"run_{name}" / "summary.json").exists()
+
+
+def test_a_site_whose_low_peak_never_moves_has_a_finite_spread_ratio():
+    """Every scored contact of a site on one FFT bin (the lab's rod at 2 kHz): the ratio of
+    the peaks' spreads is pooled over the sites, and None when the low peak never moves."""
+    from snn_antenna.evaluation.signal import spread_ratio
+
+    assert spread_ratio([2.0, 4.0], [0.0, 1.0]) == pytest.approx(6.0)
+    assert spread_ratio([2.0, 4.0], [0.0, 0.0]) is None
+    assert spread_ratio([], []) is None
 
 
 def test_24_bit_pcm_is_read_as_24_bit_counts(tmp_path):

@@ -203,11 +203,19 @@ def material_baselines(nmf_dims=NMF_DIMENSIONS, mlp: Mlp = Mlp(),
 
 
 def parametric_material_baseline(mlp: Mlp = Mlp()) -> Baseline:
-    """The 51-hidden MLP on both peaks' F, A and τ: the decay the paper's fit reads, for an
-    antenna whose materials differ in their decay."""
+    """The 51-hidden MLP on log of both peaks' F, A and τ: the decay the paper's fit reads,
+    for an antenna whose materials differ in their decay (a decay time and an amplitude are
+    read on a log scale: a material multiplies them)."""
     return Baseline("mlp_parametric_material", "material", "params",
-                    lambda seed: classifier_pipeline(mlp, MATERIAL_HIDDEN, seed),
-                    "MLP with 51 hidden on both peaks' frequency, amplitude and decay time")
+                    lambda seed: classifier_pipeline(mlp, MATERIAL_HIDDEN, seed,
+                                                     FunctionTransformer(_log_positive)),
+                    "MLP with 51 hidden on log of both peaks' frequency, amplitude and decay "
+                    "time")
+
+
+def _log_positive(X):
+    """log of parametric features (each > 0 where an event was processed)."""
+    return np.log(np.maximum(np.asarray(X, dtype=float), 1e-12))
 
 
 def two_material_baseline(mlp: Mlp = Mlp()) -> Baseline:

@@ -201,8 +201,10 @@ def fit_antenna(spec: dict, bench_spec) -> tuple[dict, list[int], object, list[s
 
 
 def check_splits(parts: Parts) -> None:
-    """Every seed's split by repetition of the contacts left for scoring trains and tests
-    on contacts of every material (so every read-out can be fitted and scored)."""
+    """Every seed's split by repetition of the recorded contacts left for scoring trains and
+    tests on contacts of every material (so every read-out can be fitted and scored), and the
+    designs' and the tuned curve's first repetitions hold two scored ones to split: checked
+    here, so ``--check`` fails where the run would."""
     if not hasattr(parts.bench, "dataset"):        # generated: every split holds every material
         return
     data = parts.bench.dataset
@@ -213,6 +215,18 @@ def check_splits(parts: Parts) -> None:
     check(len(np.unique(repetition)) >= 2, "data", parts.bench.path,
           "a recorded set with two repetitions or more besides the calibration ones "
           f"{parts.calibration_repetitions}")
+    # the designs and the tuned curve split the contacts of the first repetitions only
+    subsets = []
+    if parts.designs:
+        subsets.append(("spiking.design_repetitions", parts.plan.design_repetitions))
+    if parts.plan and parts.plan.tuned_plan():
+        subsets.append(("spiking.tuned.curve_repetitions",
+                        parts.plan.tuned_plan().curve_repetitions))
+    for name, n in subsets:
+        have = sorted(set(repetition[repetition < n].tolist()))
+        check(len(have) >= 2, name, n, f"a number of first repetitions that holds two scored "
+              f"ones or more to split (repetitions below {n} besides the calibration ones "
+              f"{parts.calibration_repetitions}: {have})")
     for seed in parts.evaluation.seeds:
         train, test = cv.split_by_repetition(repetition, parts.evaluation.test_fraction, seed)
         for side, mask in (("training", train), ("test", test)):
