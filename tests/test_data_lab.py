@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lab_antenna as lab
 from snn_antenna.cli import main
@@ -440,7 +442,10 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     assert best_material >= scores["mlp_parametric_material"][1] - 0.05, scores
     assert scores["mlp_parametric_material"][0] >= scores["mlp_parametric_material"][1] - 0.05
     assert scores["linear_low_peak"][0] <= 2 * scores["linear_low_peak"][1], scores
-    assert scores["spiking_dominant"][0] <= 4 * scores["spiking_dominant"][1], scores
+    # the training-free decoder inverts the fitted law: well inside the distances' spread
+    # (the project's own law, rising with distance, puts it beyond that spread)
+    spread_mm = 10 * np.std(source.dataset["distance_cm"].values)
+    assert scores["spiking_dominant"][0] < 0.5 * spread_mm, scores
     assert_reports_recorded_data(tmp_path / "run")
 
 
@@ -658,3 +663,34 @@ def test_the_imported_windows_carry_the_labs_material_difference(tmp_path, sess)
     edges = np.sqrt(np.multiply(medians[1:], medians[:-1]))
     read = np.asarray(names)[np.searchsorted(edges, tau)]
     assert np.mean(read[~train] == material[~train]) >= 0.9
+
+
+@settings(max_examples=40, deadline=None)
+@given(pair=st.one_of(st.none(), st.text(max_size=3), st.lists(st.text(max_size=4), max_size=3),
+                      st.lists(st.integers(), min_size=2, max_size=2)))
+def test_a_two_material_pair_is_two_different_names_or_refused_by_its_field(pair):
+    from snn_antenna.evaluation.crossval import Evaluation
+
+    good = (isinstance(pair, list) and len(pair) == 2 and all(isinstance(m, str) and m
+                                                               for m in pair)
+            and pair[0] != pair[1])
+    if good:
+        assert Evaluation(two_materials=pair).two_materials == pair
+    else:
+        with pytest.raises(SpecError) as refusal:
+            Evaluation(two_materials=pair)
+        assert refusal.value.field.split(".")[0] == "two_materials"
+
+
+@settings(max_examples=40, deadline=None)
+@given(ratio=st.one_of(st.none(), st.floats(max_value=1e6), st.just(float("nan")),
+                      st.just(float("inf"))))
+def test_a_mode_split_ratio_is_above_one_or_refused_by_its_field(ratio):
+    from snn_antenna.readout.events import EventProcessor
+
+    if ratio is None or (np.isfinite(ratio) and ratio > 1):
+        assert EventProcessor(split_ratio=ratio).split_ratio == ratio
+    else:
+        with pytest.raises(SpecError) as refusal:
+            EventProcessor(split_ratio=ratio)
+        assert refusal.value.field == "split_ratio"
