@@ -517,6 +517,8 @@ def lab_set(tmp_path_factory):
     lab.counts_csv(tmp / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0), 1000.0,
                    origin_s=12.0)
     labels = lab.labels_csv(tmp / "labels.csv", sess, "r1", origin_s=12.0)
+    with open(labels, "a") as table:          # a label where nothing rang: left out at import
+        table.write("r1,12.300000,26,wood,9\n")
     code, err = run_cli(tmp / "recs", labels, "--out", tmp / "ds")
     assert code == 0, err
     return recorded.open_bench(tmp / "ds")
@@ -578,6 +580,8 @@ def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab
     assert distance <= 2 * peak, scores
     assert summary["two_material"] is None or summary["two_material"]["materials"]
     assert_reports_recorded_data(tmp_path / "run")
+    page = (tmp_path / "run" / "report.html").read_text()
+    assert "at import: no contact" in page and "26 cm" in page
 
 
 @pytest.mark.parametrize("rate", [1000.0, 2000.0])
