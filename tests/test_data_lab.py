@@ -698,3 +698,28 @@ def test_a_mode_split_ratio_is_above_one_or_refused_by_its_field(ratio):
         with pytest.raises(SpecError) as refusal:
             EventProcessor(split_ratio=ratio)
         assert refusal.value.field == "split_ratio"
+
+
+def test_peaks_that_never_move_give_no_statistic_rather_than_an_infinite_one():
+    """Every contact of each site on one FFT bin and the law through two sites exact: the
+    residual spreads are zero; the ratios and the precision have no finite value (None)."""
+    import xarray as xr
+
+    from snn_antenna.evaluation.signal import signal_statistics
+    from snn_antenna.readout.events import PARAMETERS
+
+    distance = np.repeat([10.0, 30.0], 6)
+    f_low = np.where(distance == 10.0, 60.0, 12.0)
+    f_high = np.where(distance == 10.0, 222.0, 44.0)
+    params = np.column_stack([f_low, np.ones(12), 0.05 + 0.01 * np.arange(12) % 3,
+                              f_high, np.ones(12), np.full(12, 0.02)])
+    features = xr.Dataset(
+        {"params": (("event", "parameter"), params)},
+        coords={"parameter": list(PARAMETERS), "distance_cm": ("event", distance),
+                "position": ("event", (distance == 30.0).astype(int)),
+                "material": ("event", np.tile(["rubber", "wood"], 6))})
+    stats = signal_statistics(features)
+    assert stats["spread_ratio_high_to_low"] is None
+    assert stats["spread_ratio_high_to_low_hz"] is None
+    assert stats["single_contact_precision_mm"] == 0.0
+    json.dumps(stats, allow_nan=False)

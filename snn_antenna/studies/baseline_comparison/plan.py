@@ -200,6 +200,14 @@ def fit_antenna(spec: dict, bench_spec) -> tuple[dict, list[int], object, list[s
     return spec, held, antenna, fitted
 
 
+def first_scored(features, n: int) -> int:
+    """The repetition bound (``repetition < bound``) that takes the first ``n`` repetitions
+    of ``features``: with calibration repetitions held out, the first ``n`` scored ones (the
+    array designs' and the tuned curve's contacts)."""
+    reps = np.unique(features["repetition"].values)
+    return int(reps[min(n, len(reps)) - 1]) + 1
+
+
 def check_splits(parts: Parts) -> None:
     """Every seed's split by repetition of the recorded contacts left for scoring trains and
     tests on contacts of every material (so every read-out can be fitted and scored), and the
@@ -215,18 +223,17 @@ def check_splits(parts: Parts) -> None:
     check(len(np.unique(repetition)) >= 2, "data", parts.bench.path,
           "a recorded set with two repetitions or more besides the calibration ones "
           f"{parts.calibration_repetitions}")
-    # the designs and the tuned curve split the contacts of the first repetitions only
+    # the designs and the tuned curve split the contacts of the first scored repetitions
     subsets = []
     if parts.designs:
         subsets.append(("spiking.design_repetitions", parts.plan.design_repetitions))
     if parts.plan and parts.plan.tuned_plan():
         subsets.append(("spiking.tuned.curve_repetitions",
                         parts.plan.tuned_plan().curve_repetitions))
+    scored = sorted(set(repetition.tolist()))
     for name, n in subsets:
-        have = sorted(set(repetition[repetition < n].tolist()))
-        check(len(have) >= 2, name, n, f"a number of first repetitions that holds two scored "
-              f"ones or more to split (repetitions below {n} besides the calibration ones "
-              f"{parts.calibration_repetitions}: {have})")
+        check(min(n, len(scored)) >= 2, name, n, "a number of first scored repetitions >= 2 "
+              f"(two to split; the recorded set scores repetitions {scored})")
     for seed in parts.evaluation.seeds:
         train, test = cv.split_by_repetition(repetition, parts.evaluation.test_fraction, seed)
         for side, mask in (("training", train), ("test", test)):

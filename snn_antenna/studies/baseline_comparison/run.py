@@ -20,7 +20,7 @@ from ...readout import events
 from ...readout.spiking_decoders import decoder_inputs, neurons_per_input, spiking_baselines
 from ...report.page import Report
 from ..contract import Options, Plan
-from .plan import Parts
+from .plan import Parts, first_scored
 from .report import QUICK_NOTE, RECORDED_QUICK_NOTE, write_report
 from .tuned import tuned_stage
 
@@ -96,8 +96,9 @@ def signal_stage(parts: Parts, stages: int, log, fresh) -> tuple:
     log(f"[2/{stages}] " + ("the signal's statistics" if parts.antenna else
                             "calibration against the paper's signal measurements"))
     signal = bench_signal.signal_statistics(feats)
-    log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
-        f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
+    log(f"      r² low {_shown(signal['r2_low'], '.4f')} (paper 0.995), high "
+        f"{_shown(signal['r2_high'], '.4f')} (0.987); precision "
+        f"{_shown(signal['single_contact_precision_mm'], '.2f')} mm (6.2)")
     n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
     costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
     return data, Comparison(feats, signal, {}, skipped, costs, data={
@@ -107,6 +108,11 @@ def signal_stage(parts: Parts, stages: int, log, fresh) -> tuple:
         **({"antenna": parts.antenna.description(), "fitted": list(parts.fitted),
             "left_out_by_position": left_out_by_position(everything, held)}
            if parts.antenna else {})}), data_s
+
+
+def _shown(value, spec: str) -> str:
+    """A statistic as logged; one with no finite value (``evaluation.signal``) as 'none'."""
+    return "none" if value is None else format(value, spec)
 
 
 def left_out_by_position(everything, held) -> dict:
@@ -135,7 +141,8 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
         if parts.designs:
             cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
                                       run=partial(run_bank, client=client, progress=False),
-                                      repetitions=parts.plan.design_repetitions,
+                                      repetitions=first_scored(
+                                          cmp.features, parts.plan.design_repetitions),
                                       evaluation=parts.evaluation)
         tuned = (tuned_stage(parts, data, cmp, log, fresh, client)
                  if parts.plan.tuned_plan() else [])
