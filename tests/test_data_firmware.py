@@ -103,11 +103,15 @@ def check_the_same_contacts(tmp_path, table, data_dir, log) -> None:
 
 
 def compare_studies(tmp_path, table, data_dir) -> tuple[dict, dict]:
-    on_recordings = baseline_comparison.run(study_spec(tmp_path, data=str(data_dir),
-                                                       stimulus={"cache_dir": table["cache_dir"]}),
-                                            tmp_path / "study_recorded", quick=True)
-    on_generated = baseline_comparison.run(study_spec(tmp_path, stimulus=table),
-                                           tmp_path / "study_generated", quick=True)
+    from snn_antenna.studies.contract import Options
+
+    def run(spec, out):
+        return baseline_comparison.run(baseline_comparison.plan(spec), tmp_path / out,
+                                       Options(quick=True), log=lambda *a: None)
+
+    on_recordings = run(study_spec(tmp_path, data=str(data_dir),
+                                   stimulus={"cache_dir": table["cache_dir"]}), "study_recorded")
+    on_generated = run(study_spec(tmp_path, stimulus=table), "study_generated")
     return on_recordings, on_generated
 
 
