@@ -726,3 +726,20 @@ def test_peaks_that_never_move_give_no_statistic_rather_than_an_infinite_one():
     assert stats["spread_ratio_high_to_low_hz"] is None
     assert stats["single_contact_precision_mm"] == 0.0
     json.dumps(stats, allow_nan=False)
+
+
+def test_a_rod_whose_first_mode_does_not_move_has_no_law_and_is_refused(tmp_path, monkeypatch):
+    """Every distance ringing at one frequency: no law to invert, refused at the plan (so at
+    `--check`) in one line naming the data set."""
+    from snn_antenna.studies import baseline_comparison
+
+    monkeypatch.setattr(lab, "low_hz", lambda distance_cm: 30.0)
+    sess = lab.session(1000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
+                       repetitions=3, seed=5)
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   1000.0, 0.0)
+    imported(tmp_path, tmp_path / "recs", lab.labels_csv(tmp_path / "labels.csv", sess, "r1"))
+    with pytest.raises(SpecError) as refusal:
+        baseline_comparison.plan({**fft_spec(), "data": str(tmp_path / "ds")})
+    assert refusal.value.field == "data" and "moves with distance" in str(refusal.value)

@@ -228,6 +228,10 @@ def fit(data, calibration: np.ndarray, processor: EventProcessor, source: str
         high.append(float(two[1]))
     low, high, d = np.asarray(low), np.asarray(high), np.asarray(sites)
     low_fit, high_fit = stats.linregress(d, np.log10(low)), stats.linregress(d, np.log10(high))
+    if not (np.isfinite(low_fit.slope) and low_fit.slope != 0 and np.all(high > low)):
+        raise SpecError("data", source, f"contacts whose low mode moves with distance, below "
+                                        f"their high mode ({where}: low modes {low.tolist()} "
+                                        f"Hz, high {high.tolist()} Hz at {d.tolist()} cm)")
     ratio = float(np.sqrt(np.min(high / low)))
     split_hz = min(float(low.max()) * ratio, 0.99 * processor.max_hz)
     base = replace(processor, split_hz=split_hz, split_ratio=ratio)
