@@ -259,7 +259,6 @@ def test_a_ros2_bag_on_a_real_clock_imports_with_its_jitter_and_gaps(tmp_path):
 def test_the_two_material_network_takes_any_two_of_the_labs_materials(tmp_path):
     """A set without aluminium: the paper's pair is refused by its field, naming the set's
     materials cleanly; any two the labels name are taken."""
-    from snn_antenna.core import spec as specs
     from snn_antenna.studies import baseline_comparison
 
     sess = lab.session(2000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
@@ -269,16 +268,12 @@ def test_the_two_material_network_takes_any_two_of_the_labs_materials(tmp_path):
                    2000.0, 0.0)
     lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
     imported(tmp_path, tmp_path / "recs", tmp_path / "labels.csv")
-    study = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
-    sets = ["evaluation.pipelines=[\"two_material\"]", "evaluation.seeds=[0]",
-            "spiking.tuned.calibration_repetitions=2"]
-    spec = specs.load(study, sets, quick=True)
+    sets = ["evaluation.pipelines=[\"two_material\"]", "evaluation.seeds=[0]"]
     with pytest.raises(SpecError) as refusal:
-        baseline_comparison.plan({**spec, "data": str(tmp_path / "ds")})
+        baseline_comparison.plan({**fft_spec(*sets), "data": str(tmp_path / "ds")})
     assert refusal.value.field == "evaluation.two_materials"
     assert "np.str_" not in str(refusal.value) and "'rubber'" in str(refusal.value)
-    spec = specs.load(study, [*sets, "evaluation.two_materials=[\"rubber\", \"wood\"]"],
-                      quick=True)
+    spec = fft_spec(*sets, "evaluation.two_materials=[\"rubber\", \"wood\"]")
     parts = baseline_comparison.plan({**spec, "data": str(tmp_path / "ds")}).parts
     assert parts.evaluation.two_materials == ["rubber", "wood"]
 
