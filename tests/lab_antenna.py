@@ -188,3 +188,37 @@ def decay_time_s(g_xy: np.ndarray, rate_hz: float, pre_s: float) -> float:
     envelope = np.maximum.accumulate(r[::-1])[::-1]
     below = np.flatnonzero(envelope < envelope[0] / np.e)
     return below[0] / rate_hz if len(below) else len(r) / rate_hz
+
+
+def peak_hz(g_xy: np.ndarray, rate_hz: float, pre_s: float, min_hz: float = 5.0) -> float:
+    """A one-feature read-out of the first mode: the frequency of the largest bin of the
+    ringing's amplitude spectrum (x and y projected on their main direction), above
+    ``min_hz``, zero-padded to 0.25 Hz bins."""
+    xy = g_xy[int(round(pre_s * rate_hz)):] - np.median(g_xy, axis=0)
+    main = np.linalg.svd(xy - xy.mean(axis=0), full_matrices=False)[2][0]
+    x = (xy - xy.mean(axis=0)) @ main
+    n = max(len(x), int(4 * rate_hz))
+    amplitude = np.abs(np.fft.rfft(x, n))
+    f = np.fft.rfftfreq(n, 1.0 / rate_hz)
+    above = f >= min_hz
+    return float(f[above][np.argmax(amplitude[above])])
+
+
+def one_feature_readouts(g: np.ndarray, rate_hz: float, pre_s: float, material, distance,
+                         train, test) -> tuple[float, float]:
+    """(material accuracy of the decay time, distance rmse in mm of the peak frequency), each
+    set on the ``train`` contacts and read on the ``test`` ones: the material by thresholds
+    between neighbouring materials' median decay times (geometric middles), the distance by a
+    line through log10 of the peak frequency."""
+    tau = np.asarray([decay_time_s(ev, rate_hz, pre_s) for ev in g])
+    material = np.asarray(material).astype(str)
+    names = sorted(set(material[train]), key=lambda m: np.median(tau[train & (material == m)]))
+    medians = [np.median(tau[train & (material == m)]) for m in names]
+    edges = np.sqrt(np.multiply(medians[1:], medians[:-1]))
+    read = np.asarray(names)[np.searchsorted(edges, tau[test])]
+    accuracy = float(np.mean(read == material[test]))
+    logf = np.log10([peak_hz(ev, rate_hz, pre_s) for ev in g])
+    distance = np.asarray(distance, dtype=float)
+    slope, intercept = np.polyfit(logf[train], distance[train], 1)
+    rmse_mm = 10 * float(np.sqrt(np.mean((slope * logf[test] + intercept - distance[test]) ** 2)))
+    return accuracy, rmse_mm

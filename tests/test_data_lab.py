@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import lab_antenna as lab
 from snn_antenna.cli import main
@@ -254,23 +256,26 @@ def test_a_ros2_bag_on_a_real_clock_imports_with_its_jitter_and_gaps(tmp_path):
     assert "--clock-offset-s 1795000000.12" in err, err
 
 
-def test_a_set_of_the_labs_materials_without_aluminium_is_named_cleanly(tmp_path):
-    from snn_antenna.core import spec as specs
+def test_the_two_material_network_takes_any_two_of_the_labs_materials(tmp_path):
+    """A set without aluminium: the paper's pair is refused by its field, naming the set's
+    materials cleanly; any two the labels name are taken."""
     from snn_antenna.studies import baseline_comparison
 
-    sess = lab.session(2000.0, materials=("rubber", "wood"), repetitions=1, seed=8)
+    sess = lab.session(2000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
+                       repetitions=4, seed=8)
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    2000.0, 0.0)
     lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
-    source, _ = imported(tmp_path, tmp_path / "recs", tmp_path / "labels.csv")
-    spec = specs.load(Path(__file__).resolve().parents[1] / "studies" /
-                      "baseline_comparison.toml", ["evaluation.pipelines=[\"two_material\"]",
-                                                   "spiking.tuned={}"], quick=True)
+    imported(tmp_path, tmp_path / "recs", tmp_path / "labels.csv")
+    sets = ["evaluation.pipelines=[\"two_material\"]", "evaluation.seeds=[0]"]
     with pytest.raises(SpecError) as refusal:
-        baseline_comparison.plan({**spec, "data": str(tmp_path / "ds")})
-    assert refusal.value.field == "data"
+        baseline_comparison.plan({**fft_spec(*sets), "data": str(tmp_path / "ds")})
+    assert refusal.value.field == "evaluation.two_materials"
     assert "np.str_" not in str(refusal.value) and "'rubber'" in str(refusal.value)
+    spec = fft_spec(*sets, "evaluation.two_materials=[\"rubber\", \"wood\"]")
+    parts = baseline_comparison.plan({**spec, "data": str(tmp_path / "ds")}).parts
+    assert parts.evaluation.two_materials == ["rubber", "wood"]
 
 
 def test_labels_may_name_a_file_with_or_without_its_extension(tmp_path, sess):
@@ -404,15 +409,18 @@ def test_a_bad_csv_value_is_named_by_its_file_line_past_blank_lines(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("rate", [1000.0, pytest.param(2000.0, marks=pytest.mark.xfail(
-    strict=True, reason="at 2 kHz on the lab's rod a signal statistic of the comparison comes "
-                        "out infinite and summary.json refuses it, after --check passed"))])
-def test_the_shipped_comparison_checks_and_runs_on_the_labs_recordings(tmp_path, rate):
-    """`run studies/baseline_comparison.toml --data DIR --quick`, with `--check` first, on
-    the lab's rod at the board's 1 kHz and at 2 kHz: the check passes and so does the run."""
+@pytest.mark.parametrize("rate, profile", [(1000.0, ["--quick"]), (2000.0, ["--quick"]),
+                                           (2000.0, [])])
+def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp_path, rate,
+                                                                              profile):
+    """`run studies/baseline_comparison.toml --data DIR` (quick at the board's 1 kHz and at
+    2 kHz, full at 2 kHz), with `--check` first, on the lab's rod (its four materials, four
+    distances, ten repetitions): the check passes and so does the run, every statistic
+    finite; the material is read within 5 points of the one-feature decay read-out and the
+    distance within 2× the peak-frequency read-out's rmse, on the same splits."""
     from snn_antenna.cli import main as cli
 
-    sess = lab.session(rate, materials=("rubber", "wood", "aluminium"), repetitions=6, seed=9)
+    sess = lab.session(rate, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    rate, origin_s=2.5)
@@ -420,12 +428,201 @@ def test_the_shipped_comparison_checks_and_runs_on_the_labs_recordings(tmp_path,
     source, _ = imported(tmp_path, tmp_path / "recs", labels)
     assert_labelled_right(source, sess, 2.5)
     study = str(Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml")
-    args = ["run", study, "--data", str(tmp_path / "ds"), "--quick", "--set",
-            f"stimulus.cache_dir=\"{tmp_path / 'cache'}\"", "--out", str(tmp_path / "run")]
+    args = ["run", study, "--data", str(tmp_path / "ds"), *profile, "--set",
+            f"stimulus.cache_dir=\"{tmp_path / 'cache'}\"", "--set", "spiking.workers=1",
+            "--out", str(tmp_path / "run")]
     assert cli([*args, "--check"]) == 0
     assert cli(args) == 0
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-    assert summary["material_accuracy"]
+    assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * source.n_events
+    scores = against_one_feature(tmp_path / "run", source)
+    best_material = max(scores[k][0] for k in scores if scores[k][2] == "material")
+    assert best_material >= scores["mlp_parametric_material"][1] - 0.05, scores
+    assert scores["mlp_parametric_material"][0] >= scores["mlp_parametric_material"][1] - 0.05
+    assert scores["linear_low_peak"][0] <= 2 * scores["linear_low_peak"][1], scores
+    # the training-free decoder inverts the fitted law: well inside the distances' spread
+    # (the project's own law, rising with distance, puts it beyond that spread)
+    spread_mm = 10 * np.std(source.dataset["distance_cm"].values)
+    assert scores["spiking_dominant"][0] < 0.5 * spread_mm, scores
+    assert_reports_recorded_data(tmp_path / "run")
+
+
+# -- the lab's antenna, fitted from its labels, and the comparison on it ---------------------
+def against_one_feature(run: Path, source) -> dict:
+    """Per read-out of a comparison's ``predictions.json``: (its mean score over the splits,
+    the one-feature read-out's mean score on the same training and test contacts, the task):
+    accuracy against the decay time's, rmse (mm) against the peak frequency's."""
+    ds = source.dataset
+    g = ((ds["counts"].values.astype(float) - 2 ** (source.adc_bits - 1))
+         * 2 * source.full_scale_g / 2 ** source.adc_bits)
+    predictions = json.loads((run / "predictions.json").read_text())
+    events = ds["event"].values
+    cache, out = {}, {}
+    for name, folds in predictions["folds"].items():
+        task = predictions["task"][name]
+        if task not in ("material", "distance"):
+            continue
+        mine, reference = [], []
+        for fold in folds:
+            key = (tuple(fold["train_event"]), tuple(fold["test_event"]))
+            if key not in cache:
+                cache[key] = lab.one_feature_readouts(
+                    g, source.rate_hz, source.pre_trigger_s, ds["material"].values,
+                    ds["distance_cm"].values, np.isin(events, fold["train_event"]),
+                    np.isin(events, fold["test_event"]))
+            true, said = np.asarray(fold["true"]), np.asarray(fold["predicted"])
+            if task == "material":
+                mine.append(np.mean(true == said))
+                reference.append(cache[key][0])
+            else:
+                mine.append(10 * np.sqrt(np.mean((true - said) ** 2)))
+                reference.append(cache[key][1])
+        out[name] = (float(np.mean(mine)), float(np.mean(reference)), task)
+    return out
+
+
+def assert_reports_recorded_data(run: Path):
+    """The page and summary say what the data is: recorded, with what was fitted and every
+    contact left out, never the generator's words."""
+    page = (run / "report.html").read_text()
+    summary = json.loads((run / "summary.json").read_text())
+    for generated in ("generat", "8 × 16", "8 x 16", "in this generator"):
+        assert generated not in page.lower(), generated
+    assert "recorded by a lab" in page and "held out to calibrate" in page
+    assert "low-mode law" in page and summary["data"]["recorded"]["labels"]["sha256"][:16] in page
+    held = summary["data"]["left_out_by_position"]["calibration"]
+    assert sum(held.values()) == summary["data"]["n_events"] - summary["data"]["n_processed"] \
+        - sum(summary["data"]["skipped"].values())
+
+
+def fft_spec(*sets):
+    """The shipped comparison's quick profile without its spiking read-out."""
+    from snn_antenna.core import spec as specs
+
+    study = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
+    spec = specs.load(study, list(sets), quick=True)
+    del spec["spiking"]
+    return spec
+
+
+@pytest.fixture(scope="module")
+def lab_set(tmp_path_factory):
+    """The lab's rod at 1 kHz, its four materials at four distances, six repetitions, on a
+    clock from 12 s: imported."""
+    tmp = tmp_path_factory.mktemp("lab_set")
+    sess = lab.session(1000.0, materials=tuple(lab.DECAY_S), repetitions=6, seed=4)
+    (tmp / "recs").mkdir()
+    lab.counts_csv(tmp / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0), 1000.0,
+                   origin_s=12.0)
+    labels = lab.labels_csv(tmp / "labels.csv", sess, "r1", origin_s=12.0)
+    with open(labels, "a") as table:          # a label where nothing rang: left out at import
+        table.write("r1,12.300000,26,wood,9\n")
+    code, err = run_cli(tmp / "recs", labels, "--out", tmp / "ds")
+    assert code == 0, err
+    return recorded.open_bench(tmp / "ds")
+
+
+def test_the_labs_antenna_is_fitted_from_its_calibration_labels_only(lab_set):
+    """Its falling law, a mode split where no frequency lies between the modes at every
+    distance, and a decay-fit window that fits nearly every contact; the labels of the
+    scored contacts never enter the fit."""
+    from dataclasses import replace
+
+    from snn_antenna.evaluation import antenna_fit
+    from snn_antenna.studies import baseline_comparison
+
+    plan = baseline_comparison.plan({**fft_spec(), "data": str(lab_set.path)})
+    parts, fit = plan.parts, plan.parts.antenna
+    slope = np.log10(lab.FAR_HZ / lab.NEAR_HZ) / (lab.FAR_CM - lab.NEAR_CM)
+    assert fit.low_law[0] == pytest.approx(slope, rel=0.05)
+    assert fit.low_law[1] == pytest.approx(np.log10(lab.NEAR_HZ) - slope * lab.NEAR_CM,
+                                           abs=0.05)
+    assert fit.r2_low > 0.99 and fit.distances_cm == (10.0, 18.0, 26.0, 34.0)
+    assert max(fit.low_hz) > min(fit.high_hz)          # no one frequency between the modes
+    assert 1 < fit.split_ratio < lab.HIGH_RATIO and fit.split_hz > lab.NEAR_HZ
+    assert parts.processor.split_ratio == pytest.approx(fit.split_ratio, rel=1e-4)
+    assert fit.fitted_fraction >= 0.95 and fit.low_identified_fraction == 1.0
+    assert fit.repetitions == tuple(parts.calibration_repetitions)
+    assert any(line.startswith("fitted: events.split_hz") for line in plan.left_out)
+    assert "generat" not in plan.spec["description"]
+    # the scored contacts' labels scrambled: the same fit
+    ds = lab_set.dataset
+    held = np.isin(ds["repetition"].values, parts.calibration_repetitions)
+    scrambled = ds.copy()
+    distance = ds["distance_cm"].values.copy()
+    distance[~held] = np.random.default_rng(0).permutation(distance[~held])
+    scrambled["distance_cm"] = ("event", distance)
+    like = replace(parts.processor, split_hz=55.0, split_ratio=None)
+    assert antenna_fit.fit(scrambled, held, like, "x") == antenna_fit.fit(ds, held, like, "x")
+
+
+def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
+                                                                             tmp_path):
+    """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
+    contact, the parametric MLP reads the material within 5 points of the one-feature decay
+    read-out and the low peak's regression the distance within 2× the peak-frequency
+    read-out's rmse, on the same splits; the page says what the data is."""
+    from snn_antenna.studies import baseline_comparison
+    from snn_antenna.studies.contract import Options
+
+    spec = fft_spec(f"stimulus.cache_dir=\"{tmp_path / 'cache'}\"", "evaluation.nmf_dims=[3]")
+    summary = baseline_comparison.run(baseline_comparison.plan({**spec, "data":
+                                                                str(lab_set.path)}),
+                                      tmp_path / "run", Options(quick=True),
+                                      log=lambda *a: None)
+    assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * lab_set.n_events
+    scores = against_one_feature(tmp_path / "run", lab_set)
+    material, decay, _ = scores["mlp_parametric_material"]
+    assert material >= decay - 0.05, scores
+    distance, peak, _ = scores["linear_low_peak"]
+    assert distance <= 2 * peak, scores
+    assert summary["two_material"] is None or summary["two_material"]["materials"]
+    assert_reports_recorded_data(tmp_path / "run")
+    page = (tmp_path / "run" / "report.html").read_text()
+    assert "at import: no contact" in page and "26 cm" in page
+
+
+@pytest.mark.parametrize("rate", [1000.0, 2000.0])
+def test_check_fails_exactly_when_the_run_would(tmp_path, rate):
+    """A material labelled in one repetition only: some split would train or test without
+    it. `--check` refuses it in one line, as the run does, before any work; the same set
+    with every material in every repetition passes both."""
+    from snn_antenna.cli import main as cli
+
+    sess = lab.session(rate, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
+                       repetitions=4, seed=6)
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   rate, 0.0)
+    labels = lab.labels_csv(tmp_path / "labels.csv", sess, "r1")
+    lines = labels.read_text().splitlines()
+    (tmp_path / "few.csv").write_text("\n".join(
+        [lines[0]] + [line for line in lines[1:] if not (",rubber," in line and
+                                                        not line.endswith(",0"))]) + "\n")
+    study = str(Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml")
+    for name, table, code in (("few", tmp_path / "few.csv", 2), ("all", labels, 0)):
+        imported(tmp_path, tmp_path / "recs", table, out=name)
+        args = ["run", study, "--data", str(tmp_path / name), "--quick", "--set",
+                "evaluation.pipelines=[\"material\"]", "--set",
+                "spiking.tuned.calibration_repetitions=2", "--out", str(tmp_path / f"run_{name}")]
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            assert cli([*args, "--check"]) == code
+        if code:
+            assert "evaluation.test_fraction" in err.getvalue() or "data" in err.getvalue()
+            with contextlib.redirect_stderr(io.StringIO()):
+                assert cli(args) == code
+            assert not (tmp_path / f"run_{name}" / "summary.json").exists()
+
+
+def test_a_site_whose_low_peak_never_moves_has_a_finite_spread_ratio():
+    """Every scored contact of a site on one FFT bin (the lab's rod at 2 kHz): the ratio of
+    the peaks' spreads is pooled over the sites, and None when the low peak never moves."""
+    from snn_antenna.evaluation.signal import spread_ratio
+
+    assert spread_ratio([2.0, 4.0], [0.0, 1.0]) == pytest.approx(6.0)
+    assert spread_ratio([2.0, 4.0], [0.0, 0.0]) is None
+    assert spread_ratio([], []) is None
 
 
 def test_24_bit_pcm_is_read_as_24_bit_counts(tmp_path):
@@ -468,3 +665,76 @@ def test_the_imported_windows_carry_the_labs_material_difference(tmp_path, sess)
     edges = np.sqrt(np.multiply(medians[1:], medians[:-1]))
     read = np.asarray(names)[np.searchsorted(edges, tau)]
     assert np.mean(read[~train] == material[~train]) >= 0.9
+
+
+@settings(max_examples=40, deadline=None)
+@given(pair=st.one_of(st.none(), st.text(max_size=3), st.lists(st.text(max_size=4), max_size=3),
+                      st.lists(st.integers(), min_size=2, max_size=2)))
+def test_a_two_material_pair_is_two_different_names_or_refused_by_its_field(pair):
+    from snn_antenna.evaluation.crossval import Evaluation
+
+    good = (isinstance(pair, list) and len(pair) == 2 and all(isinstance(m, str) and m
+                                                               for m in pair)
+            and pair[0] != pair[1])
+    if good:
+        assert Evaluation(two_materials=pair).two_materials == pair
+    else:
+        with pytest.raises(SpecError) as refusal:
+            Evaluation(two_materials=pair)
+        assert refusal.value.field.split(".")[0] == "two_materials"
+
+
+@settings(max_examples=40, deadline=None)
+@given(ratio=st.one_of(st.none(), st.floats(max_value=1e6), st.just(float("nan")),
+                      st.just(float("inf"))))
+def test_a_mode_split_ratio_is_above_one_or_refused_by_its_field(ratio):
+    from snn_antenna.readout.events import EventProcessor
+
+    if ratio is None or (np.isfinite(ratio) and ratio > 1):
+        assert EventProcessor(split_ratio=ratio).split_ratio == ratio
+    else:
+        with pytest.raises(SpecError) as refusal:
+            EventProcessor(split_ratio=ratio)
+        assert refusal.value.field == "split_ratio"
+
+
+def test_peaks_that_never_move_give_no_statistic_rather_than_an_infinite_one():
+    """Every contact of each site on one FFT bin and the law through two sites exact: the
+    residual spreads are zero; the ratios and the precision have no finite value (None)."""
+    import xarray as xr
+
+    from snn_antenna.evaluation.signal import signal_statistics
+    from snn_antenna.readout.events import PARAMETERS
+
+    distance = np.repeat([10.0, 30.0], 6)
+    f_low = np.where(distance == 10.0, 60.0, 12.0)
+    f_high = np.where(distance == 10.0, 222.0, 44.0)
+    params = np.column_stack([f_low, np.ones(12), 0.05 + 0.01 * np.arange(12) % 3,
+                              f_high, np.ones(12), np.full(12, 0.02)])
+    features = xr.Dataset(
+        {"params": (("event", "parameter"), params)},
+        coords={"parameter": list(PARAMETERS), "distance_cm": ("event", distance),
+                "position": ("event", (distance == 30.0).astype(int)),
+                "material": ("event", np.tile(["rubber", "wood"], 6))})
+    stats = signal_statistics(features)
+    assert stats["spread_ratio_high_to_low"] is None
+    assert stats["spread_ratio_high_to_low_hz"] is None
+    assert stats["single_contact_precision_mm"] == 0.0
+    json.dumps(stats, allow_nan=False)
+
+
+def test_a_rod_whose_first_mode_does_not_move_has_no_law_and_is_refused(tmp_path, monkeypatch):
+    """Every distance ringing at one frequency: no law to invert, refused at the plan (so at
+    `--check`) in one line naming the data set."""
+    from snn_antenna.studies import baseline_comparison
+
+    monkeypatch.setattr(lab, "low_hz", lambda distance_cm: 30.0)
+    sess = lab.session(1000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
+                       repetitions=3, seed=5)
+    (tmp_path / "recs").mkdir()
+    lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                   1000.0, 0.0)
+    imported(tmp_path, tmp_path / "recs", lab.labels_csv(tmp_path / "labels.csv", sess, "r1"))
+    with pytest.raises(SpecError) as refusal:
+        baseline_comparison.plan({**fft_spec(), "data": str(tmp_path / "ds")})
+    assert refusal.value.field == "data" and "moves with distance" in str(refusal.value)

@@ -79,7 +79,10 @@ def test_the_shipped_comparison_plans_on_a_1khz_board_recording(board_set):
     plan = baseline_comparison.plan({**shipped(), "data": str(board_set)})
     parts = plan.parts
     assert isinstance(parts.bench, RecordedBench) and parts.bench.rate_hz == RATE
-    assert len(plan.left_out) == 6
+    cut = [line for line in plan.left_out if not line.startswith("fitted:")]
+    assert cut and all(line.startswith(("left out", "clipped")) for line in cut)
+    fitted = [line for line in plan.left_out if line.startswith("fitted:")]
+    assert fitted == parts.fitted and any("events.split_hz" in line for line in fitted)
     tuned = parts.plan.tuned_plan()
     assert len(parts.calibration_repetitions) == tuned.calibration_repetitions
     assert set(parts.calibration_repetitions) <= set(range(5))

@@ -223,6 +223,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.evaluation.accuracy.TuningReadout",
         "snn_antenna.evaluation.bands.BandEvents",
         "snn_antenna.evaluation.bands.Spikes",
+        "snn_antenna.evaluation.antenna_fit.FittedAntenna",
         "snn_antenna.evaluation.comparison.Comparison",
         "snn_antenna.evaluation.confusion.ErrorRate",
         "snn_antenna.evaluation.crossval.Fold",

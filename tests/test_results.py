@@ -229,6 +229,7 @@ EXPLAINING = ["reference.md", "materials.md", "live.md", "index.md", "contributi
         "python",
         "cluster",
         "files",
+        "own_antenna",
     )
 ]
 
@@ -314,6 +315,17 @@ DECLARED: dict[str, list[tuple[set[str], str]]] = {
     "guide/quickstart.md": [({"2s"}, "the declared calibration span")],
     "guide/baseline_comparison.md": [
         ({"10%", "95%"}, "the paper's event end rule and the declared confidence level"),
+    ],
+    "guide/own_antenna.md": [
+        (
+            {"100ms", "0.1%", "0.1s", "2ms"},
+            "declared settings and tolerances: the recorder's flush period, the rate's agreement, "
+            "the labels' match window, the firmware test's onset tolerance",
+        ),
+        (
+            {"3s", "3.000000s", "3.000s", "40ms", "1000s"},
+            "the clock offsets and lag the guide's examples (and the tests) are written with",
+        ),
     ],
     "guide/speed_accuracy.md": [
         ({"0.005–1ms", "0.1ms", "0.5ms"}, "the study's declared grid and the shipped settings"),

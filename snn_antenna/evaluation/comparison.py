@@ -32,6 +32,7 @@ LABELS = {
     "mlp_spectrum_sub10": "MLP, every 10th bin",
     "mlp_low_half": "MLP, lower half of spectrum",
     "mlp_spectrum_material": "MLP 51, full spectrum",
+    "mlp_parametric_material": "MLP 51 on 2 peaks (F, A, τ)",
     "mlp_5_8_2": "5-8-2 MLP, wood/aluminium",
     "spiking_dominant": "dominant resonator",
     "spiking_centroid": "rate centroid",
@@ -254,7 +255,8 @@ def result_rows(summary: dict) -> list[dict]:
                          "ours": f"{100 * v['mean']:.1f} ± {100 * v['sd']:.1f}"})
     two = summary["two_material"]
     if two:
-        rows.append({"pipeline": label("mlp_5_8_2"), "task": "distance (mm), material (%)",
+        pair = "/".join(two.get("materials", ["wood", "aluminium"]))
+        rows.append({"pipeline": f"5-8-2 MLP, {pair}", "task": "distance (mm), material (%)",
                      "ours": f"{two['rmse_mm']:.2f}, {100 * two['accuracy']:.1f}"})
     return rows
 

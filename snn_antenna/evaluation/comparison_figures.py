@@ -23,8 +23,9 @@ def _plt():
     return plt
 
 
-def frequency_laws(feats, cal):
-    """Peak frequency vs distance, both modes, our fit and the paper's law (Fig. 2C)."""
+def frequency_laws(feats, cal, reference=PAPER_SIGNAL):
+    """Peak frequency vs distance, both modes, our fit and ``reference``'s laws (dashed: the
+    paper's, or the laws fitted on a lab's calibration contacts) (Fig. 2C)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     d = feats["distance_cm"].values
@@ -35,7 +36,7 @@ def frequency_laws(feats, cal):
         ax.scatter(d + jitter, f, s=2, alpha=0.25, color=colour, label=f"{mode} peak")
         s, i = cal[f"{mode}_law"]
         ax.plot(dd, 10 ** (s * dd + i), color=colour)
-        ps, pi = PAPER_SIGNAL[f"{mode}_law"]
+        ps, pi = reference[f"{mode}_law"]
         ax.plot(dd, 10 ** (ps * dd + pi), color="k", ls="--", lw=0.8)
     ax.set_yscale("log")
     ax.set_xlabel("contact distance (cm)")
@@ -44,14 +45,17 @@ def frequency_laws(feats, cal):
     return fig
 
 
-def decay_times(feats):
-    """τ_low vs distance for wood and aluminium, mean ± sd per site (Fig. 5D)."""
+def decay_times(feats, materials=("wood", "aluminium")):
+    """τ_low vs distance for ``materials`` (the paper's wood and aluminium), mean ± sd per
+    site (Fig. 5D)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.5, 3.8))
     m = feats["material"].values.astype(str)
     tau = feats["params"].sel(parameter="tau_low").values
     d = feats["distance_cm"].values
-    for name, colour in (("wood", "tab:brown"), ("aluminium", "tab:gray")):
+    colours = {"wood": "tab:brown", "aluminium": "tab:gray"}
+    for name in materials:
+        colour = colours.get(name)
         sel = m == name
         if not sel.any():
             continue
@@ -147,7 +151,7 @@ def nmf_accuracy(summary):
     if spiking:
         ax.scatter([], [], color="tab:red", label="spiking (x: resonators)")
     ax.set_xlabel("filters: NMF dimension, or resonators (spiking)")
-    ax.set_ylabel("8-material accuracy (%)")
+    ax.set_ylabel(f"{len(summary['materials'])}-material accuracy (%)")
     legend_outside(ax)
     return fig
 
@@ -163,7 +167,7 @@ def pareto(summary):
                          if k != "nmf_curve"} | {f"nmf_{r['n']}": {"mean": r["accuracy"]}
                                                  for r in summary["material_accuracy"]
                                                  ["nmf_curve"]},
-               "8-material accuracy", True))
+               f"{len(summary['materials'])}-material accuracy", True))
     for ax, table, ylabel, higher in panels:
         pts = sorted((cost[k], v["mean"], k) for k, v in table.items()
                      if k in cost and k not in TRAINING_FREE)
@@ -196,7 +200,7 @@ def pareto(summary):
 
 
 def tuned_curve(summary):
-    """The tuned spiking bank's 8-material accuracy against its number of resonators, beside
+    """The tuned spiking bank's material accuracy against its number of resonators, beside
     NMF with as many filters, on the same events and split; the full-spectrum MLP and the
     target bar (0.9 of it) dashed. Below: the bank's neuron-steps per event (what its cost
     grows with; wall times of the curve's runs include compiling) and the budget of 5 × the
@@ -211,7 +215,7 @@ def tuned_curve(summary):
     fft = 100 * curve[0]["fft_mlp"]
     ax.axhline(fft, color="k", ls="--", label="full-spectrum MLP")
     ax.axhline(0.9 * fft, color="0.5", ls=":", label="0.9 × full spectrum")
-    ax.set_ylabel("8-material accuracy (%)")
+    ax.set_ylabel(f"{len(summary['materials'])}-material accuracy (%)")
     cost.plot(n, [r["neuron_steps_per_event"] / 1e6 for r in curve], "o-", color="tab:red",
               label="tuned bank")
     measured = summary["feature_costs"].get("spiking_tuned") or {}

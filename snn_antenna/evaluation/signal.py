@@ -65,15 +65,18 @@ def signal_statistics(features: xr.Dataset) -> dict:
         fit = stats.linregress(d, logf)
         res = logf - (fit.slope * d + fit.intercept)
         out[f"{mode}_law"] = [float(fit.slope), float(fit.intercept)]
-        out[f"r2_{mode}"] = float(fit.rvalue ** 2)
+        out[f"r2_{mode}"] = _finite(fit.rvalue ** 2)    # None: the peak never moved
         residual_sd[mode] = float(res.std(ddof=2))
     out["residual_sd_dex"] = residual_sd
-    out["spread_ratio_high_to_low"] = residual_sd["high"] / residual_sd["low"]
+    out["spread_ratio_high_to_low"] = spread_ratio([residual_sd["high"]], [residual_sd["low"]])
     f_low, f_high = (p.sel(parameter=n).values for n in ("F_low", "F_high"))
     groups = [g for g in _site_groups(features) if len(g) > 1]
-    out["spread_ratio_high_to_low_hz"] = float(np.mean(
-        [f_high[g].std(ddof=1) / f_low[g].std(ddof=1) for g in groups]))
-    out["single_contact_precision_mm"] = 10 * residual_sd["low"] / out["low_law"][0]
+    out["spread_ratio_high_to_low_hz"] = spread_ratio(
+        [f_high[g].std(ddof=1) for g in groups], [f_low[g].std(ddof=1) for g in groups])
+    # the law may fall with distance (another antenna's): the precision is a length either way
+    slope = abs(out["low_law"][0])
+    out["single_contact_precision_mm"] = (10 * residual_sd["low"] / slope if slope > 0
+                                          else None)    # a peak that never moves with distance
     tau = p.sel(parameter="tau_low").values
     out["tau_low_cv_median"] = float(np.median([tau[g].std(ddof=1) / tau[g].mean()
                                                 for g in groups]))
@@ -84,6 +87,19 @@ def signal_statistics(features: xr.Dataset) -> dict:
         for m in np.unique(materials) if len(np.unique(d[materials == m])) > 1}
     out.update(wood_vs_aluminium(features, tau))
     return out
+
+
+def _finite(value) -> float | None:
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
+def spread_ratio(high_sd, low_sd) -> float | None:
+    """The high peak's spread over the low one's within a site, pooled over the sites (mean
+    sd over mean sd); None where the low peak never moves within a site (every contact on one
+    FFT bin: the ratio has no finite value, and a per-site ratio would divide by zero)."""
+    low = float(np.mean(low_sd)) if len(low_sd) else 0.0
+    return float(np.mean(high_sd)) / low if low > 0 else None
 
 
 def _site_groups(features: xr.Dataset) -> list[np.ndarray]:

@@ -202,6 +202,22 @@ def material_baselines(nmf_dims=NMF_DIMENSIONS, mlp: Mlp = Mlp(),
     return out
 
 
+def parametric_material_baseline(mlp: Mlp = Mlp()) -> Baseline:
+    """The 51-hidden MLP on log of both peaks' F, A and τ: the decay the paper's fit reads,
+    for an antenna whose materials differ in their decay (a decay time and an amplitude are
+    read on a log scale: a material multiplies them)."""
+    return Baseline("mlp_parametric_material", "material", "params",
+                    lambda seed: classifier_pipeline(mlp, MATERIAL_HIDDEN, seed,
+                                                     FunctionTransformer(_log_positive)),
+                    "MLP with 51 hidden on log of both peaks' frequency, amplitude and decay "
+                    "time")
+
+
+def _log_positive(X):
+    """log of parametric features (each > 0 where an event was processed)."""
+    return np.log(np.maximum(np.asarray(X, dtype=float), 1e-12))
+
+
 def two_material_baseline(mlp: Mlp = Mlp()) -> Baseline:
     """The paper's 5-8-2 network: parametric inputs, outputs distance and material."""
     return Baseline(
@@ -222,5 +238,6 @@ def inputs_of(features: xr.Dataset, kind: str) -> np.ndarray:
 
 
 __all__ = ["Baseline", "Mlp", "distance_baselines", "material_baselines",
+           "parametric_material_baseline",
            "two_material_baseline", "regressor_pipeline", "classifier_pipeline", "inputs_of",
            "columns", "NMF_DIMENSIONS", "NMFFilterBank", "TASKS"]

@@ -65,12 +65,20 @@ class EventProcessor:
     max_hz: float = 508.0
     min_hz: float = 2.0                # below: drift, not ringing
     split_hz: float = 55.0
+    # the high mode searched above split_ratio × the low peak (None: above split_hz): an
+    # antenna whose modes' ranges overlap over its distances (a lab's rod, fitted from its
+    # labels: evaluation.antenna_fit) has no one frequency between them
+    split_ratio: float | None = None
     band_fraction_low: float = 0.3     # Gaussian weight around the peak: σ / its frequency
     band_fraction_high: float = 0.15
     edge_sigmas: float = 2.0           # extreme points this many σ_t from the window's ends
                                        # are left out of the decay fit (see the docstring)
     extreme_min_interval_ms: float = 3.0
     extreme_min_fraction: float = 0.1
+    # a mode too short-lived for three extreme points (a low-Q ring: under a period above
+    # the floor) fitted on its envelope instead (the analytic signal's magnitude, from its
+    # largest on while above the floor); off: skipped as no_decay_fit
+    envelope_fallback: bool = False
 
     def __post_init__(self):
         bounds.declared(self)
@@ -82,6 +90,12 @@ class EventProcessor:
         check(0 < self.min_hz < self.split_hz < self.max_hz <= self.rate_hz / 2, "split_hz",
               (self.min_hz, self.split_hz, self.max_hz),
               f"0 < min_hz < split_hz < max_hz <= {self.rate_hz / 2:g} Hz (Nyquist)")
+        check(self.split_ratio is None or (np.isfinite(self.split_ratio)
+                                           and self.split_ratio > 1), "split_ratio",
+              self.split_ratio, "a ratio > 1 of the high mode's lowest to the low peak, or "
+              "None")
+        check(isinstance(self.envelope_fallback, bool), "envelope_fallback",
+              self.envelope_fallback, "true or false")
         check(self.n_fft is None or (isinstance(self.n_fft, int) and self.n_fft >= 16),
               "n_fft", self.n_fft, "an integer number of FFT points >= 16, or None")
         for name in ("band_fraction_low", "band_fraction_high"):
@@ -130,7 +144,8 @@ class EventProcessor:
         return spec[:len(self.freq_hz)]
 
     def parametric(self, segment: np.ndarray) -> dict[str, float]:
-        """F, A, τ of the low (< split_hz) and high (>= split_hz) mode of a segment."""
+        """F, A, τ of the low (< split_hz) and high (>= split_hz, or >= split_ratio × the
+        low peak) mode of a segment."""
         n = len(segment)
         window_amplitude = np.abs(np.fft.rfft(segment))
         window_f = np.fft.rfftfreq(n, 1.0 / self.rate_hz)
@@ -144,6 +159,8 @@ class EventProcessor:
         for name, lo, hi, fraction in (
                 ("low", self.min_hz, self.split_hz, self.band_fraction_low),
                 ("high", self.split_hz, self.max_hz, self.band_fraction_high)):
+            if name == "high" and self.split_ratio is not None:
+                lo = self.split_ratio * out["F_low"]
             f_peak = _peak_frequency(window_amplitude, window_f, lo, hi)
             sigma_hz = fraction * f_peak
             weight = np.exp(-0.5 * ((freqs - f_peak) / sigma_hz) ** 2)
@@ -169,6 +186,8 @@ class EventProcessor:
         inner = self._decay_run(rect, peaks[(peaks >= edge) & (peaks < n - edge)])
         peaks = inner if len(inner) >= 3 else self._decay_run(rect, peaks)
         if len(peaks) < 3:
+            if self.envelope_fallback:
+                return self._envelope_fit(component)
             raise SkippedEvent("no_decay_fit")
         # Each extreme's height and time from a parabola through it and its neighbours.
         before, at, after = rect[peaks - 1], rect[peaks], rect[np.minimum(peaks + 1, n - 1)]
@@ -179,6 +198,23 @@ class EventProcessor:
         height = at - 0.25 * (before - after) * shift
         t = (peaks + shift) / self.rate_hz
         slope, intercept = np.polyfit(t, np.log(height), 1)
+        if not slope < 0:
+            raise SkippedEvent("no_decay_fit")
+        return float(np.exp(intercept)), float(-1.0 / slope)
+
+    def _envelope_fit(self, component: np.ndarray) -> tuple[float, float]:
+        """(A, τ) from a line through log of the component's envelope, from its largest on
+        while above ``extreme_min_fraction`` of it (at least 3 samples)."""
+        from scipy.signal import hilbert
+
+        envelope = np.abs(hilbert(component))
+        envelope = envelope[int(np.argmax(envelope)):]
+        below = np.flatnonzero(envelope < self.extreme_min_fraction * envelope[0])
+        envelope = envelope[:below[0]] if len(below) else envelope
+        if len(envelope) < 3 or not envelope[0] > 0:
+            raise SkippedEvent("no_decay_fit")
+        slope, intercept = np.polyfit(np.arange(len(envelope)) / self.rate_hz,
+                                      np.log(envelope), 1)
         if not slope < 0:
             raise SkippedEvent("no_decay_fit")
         return float(np.exp(intercept)), float(-1.0 / slope)

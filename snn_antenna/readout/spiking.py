@@ -340,20 +340,27 @@ class DominantNeuronDistance(RegressorMixin, BaseEstimator):
     """The paper's decoder (Fig. 10E) as an estimator: the dominant neuron's preferred
     frequency (``contacts.dominant_hz``) → distance through the inverse low-mode law. Nothing
     is learnt; ``fit`` only checks the input width. X holds spike counts of neurons tuned to
-    ``neuron_hz``; an event where all stayed silent gets the middle of the calibrated range."""
+    ``neuron_hz``; an event where all stayed silent gets the middle of the calibrated range.
+    ``law``: (slope per cm, intercept, distance for a silent event) of a law
+    ``log10 F = slope d + intercept`` fitted for another antenna (a lab's, from its labels:
+    ``evaluation.antenna_fit``); None: this project's antenna's."""
 
-    def __init__(self, neuron_hz=None):
+    def __init__(self, neuron_hz=None, law=None):
         self.neuron_hz = neuron_hz
+        self.law = law
 
     def fit(self, X, y=None):
         preferred_hz("neuron_hz", self.neuron_hz)
+        check(self.law is None or (len(self.law) == 3 and all(is_number(v) for v in self.law)
+                                   and self.law[0] != 0), "law", self.law,
+              "None or (slope per cm ≠ 0, intercept, distance in cm for a silent event)")
         check(np.ndim(X) == 2 and np.shape(X)[1] == len(self.neuron_hz), "X",
               f"shape {np.shape(X)}", "one column of spike counts per neuron of neuron_hz")
         self.n_features_in_ = np.shape(X)[1]
         return self
 
     def predict(self, X):
-        return _distance_from_hz(dominant_of_counts(X, self.neuron_hz))
+        return _distance_from_hz(dominant_of_counts(X, self.neuron_hz), self.law)
 
 
 class CentroidDistance(DominantNeuronDistance):
@@ -366,11 +373,17 @@ class CentroidDistance(DominantNeuronDistance):
     def predict(self, X):
         rates = xr.DataArray(np.asarray(X, dtype=float), dims=("event", "neuron_hz"),
                              coords={"neuron_hz": np.asarray(self.neuron_hz, dtype=float)})
-        return _distance_from_hz(centroid_hz(rates).values)
+        return _distance_from_hz(centroid_hz(rates).values, self.law)
 
 
-def _distance_from_hz(f: np.ndarray) -> np.ndarray:
-    """Inverse low-mode law; 0 Hz (silent) → the middle of the calibrated range."""
+def _distance_from_hz(f: np.ndarray, law=None) -> np.ndarray:
+    """Inverse low-mode law (``law``: see ``DominantNeuronDistance``); 0 Hz (silent) → the
+    middle of the calibrated range."""
+    if law is not None:
+        slope, intercept, silent_cm = law
+        out = np.full(len(f), float(silent_cm))
+        out[f > 0] = (np.log10(f[f > 0]) - intercept) / slope
+        return out
     out = np.full(len(f), float(np.mean(antenna.CALIBRATED_RANGE_CM)))
     out[f > 0] = antenna.distance_from_low_hz(f[f > 0])
     return out

@@ -176,19 +176,20 @@ def neurons_per_input(spikes: xr.Dataset) -> dict:
             for name, (wanted, _) in _available(spikes).items()}
 
 
-def spiking_baselines(spikes: xr.Dataset, evaluation) -> list[bl.Baseline]:
+def spiking_baselines(spikes: xr.Dataset, evaluation, law=None) -> list[bl.Baseline]:
     """Every spiking decoder the bank's bands allow (``evaluation``: the MLP settings of an
-    ``evaluation.crossval.Evaluation``)."""
+    ``evaluation.crossval.Evaluation``; ``law``: the low-mode law the training-free decoders
+    invert, see ``spiking.DominantNeuronDistance``; None: this project's antenna's)."""
     out = []
     bands = spikes["band"].values.astype(str)
     if "low" in set(bands):
         low_hz = spikes["neuron_hz"].values[bands == "low"]
         out.append(bl.Baseline("spiking_dominant", "distance", "spiking_low_counts",
-                               lambda seed: DominantNeuronDistance(low_hz),
+                               lambda seed: DominantNeuronDistance(low_hz, law),
                                "dominant low-band resonator → inverse low-mode law "
                                "(Fig. 10E), no training"))
         out.append(bl.Baseline("spiking_centroid", "distance", "spiking_low_counts",
-                               lambda seed: CentroidDistance(low_hz),
+                               lambda seed: CentroidDistance(low_hz, law),
                                "rate-weighted centroid of the low band → inverse low-mode "
                                "law, no training"))
     available = _available(spikes)

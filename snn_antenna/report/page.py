@@ -125,7 +125,7 @@ class Report:
             rows = [{"quantity": c.quantity, "value": c.value, "target": c.target,
                      "unit": c.unit, "source": c.source, "how": c.how}
                     for c in self._calibrated]
-            parts.append("<h2>Calibrated to</h2><p>The generator, a default or a fit to "
+            parts.append("<h2>Calibrated to</h2><p>A model, a default or a fit to "
                          "the data named in each row's source was set to match these numbers; "
                          "they are inputs, not results.</p>"
                          + _table_html(rows, names=_CALIBRATED_NAMES))

@@ -6,10 +6,13 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from ...core import bounds
 from ...core import spec as specs
-from ...core.errors import SpecError
+from ...core.errors import SpecError, check
 from ...engine.cost import bench_seconds, engine_of, max_workers, stages_estimate
+from ...evaluation import antenna_fit
 from ...evaluation import crossval as cv
 from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
 from ...readout import events
@@ -19,6 +22,8 @@ from ...sources.source import BenchSet
 from ..contract import COMMON, Plan, data_folder
 from ..sections import bench_section, evaluation_section, events_section
 
+# recorded repetitions that fit the lab's antenna when the spec names none (no tuned bank)
+RECORDED_CALIBRATION_REPETITIONS = 1
 SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
 OPTIONS = (*COMMON, "fresh", "scheduler", "data")
 
@@ -32,8 +37,11 @@ class Parts:
     plan: SpikingPlan | None = None
     bank: SpikingBank | None = None
     designs: list[Design] = field(default_factory=list)
-    # recorded repetitions that place the tuned bank's channels, out of every split
+    # recorded repetitions that fit the lab's antenna and place the tuned bank's channels,
+    # out of every split
     calibration_repetitions: list[int] = field(default_factory=list)
+    antenna: antenna_fit.FittedAntenna | None = None    # recorded data: fitted from its labels
+    fitted: list[str] = field(default_factory=list)     # one line per spec value it replaced
 
 
 def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
@@ -131,24 +139,108 @@ def _spiking_part(spec: dict, rate_hz: float) -> tuple:
 
 
 def plan(spec: dict) -> Plan:
-    """Check the whole spec before any long work; build its parts."""
+    """Check the whole spec before any long work; build its parts. On recorded data the
+    lab's antenna is fitted first, on the labels of the calibration repetitions
+    (``fit_antenna``), and every check below sees the fitted spec."""
     specs.check_top_level(spec, SECTIONS)
     data_folder(spec)
     bench_spec = bench_section(spec)
+    recorded = spec.get("data") is not None
+    held, antenna, fitted = [], None, []
+    if recorded:
+        spec, held, antenna, fitted = fit_antenna(spec, bench_spec)
     spec, left_out = fit_to_rate(spec, bench_spec.rate_hz)
     processor = events_section(spec, bench_spec.rate_hz)
     evaluation = evaluation_section(spec)
     if "two_material" in evaluation.pipelines and \
-            not {"wood", "aluminium"} <= set(bench_spec.materials):
-        raise SpecError("data" if spec.get("data") is not None else "stimulus.materials",
-                        list(bench_spec.materials),
-                        "a list that holds wood and aluminium for the two-material network")
-    parts = Parts(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz))
+            not set(evaluation.two_materials) <= set(bench_spec.materials):
+        raise SpecError("evaluation.two_materials", list(evaluation.two_materials),
+                        f"two of the {'recorded' if recorded else 'generated'} set's materials "
+                        f"{list(bench_spec.materials)} for the two-material network")
+    parts = Parts(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz),
+                  calibration_repetitions=held, antenna=antenna, fitted=fitted)
+    check_splits(parts)
+    # the fitted values first: --check prints them with what the rate leaves out
+    return Plan("baseline_comparison", spec, parts, estimate, fitted + left_out)
+
+
+def calibration_count(spec: dict) -> tuple[int, str]:
+    """How many recorded repetitions calibrate, and the field that says so."""
+    field = "spiking.tuned.calibration_repetitions"
+    tuned = (spec.get("spiking") or {}).get("tuned") if isinstance(spec.get("spiking"),
+                                                                     dict) else None
+    if isinstance(tuned, dict) and "calibration_repetitions" in tuned:
+        return bounds.integer(field, tuned["calibration_repetitions"], 1), field
+    return RECORDED_CALIBRATION_REPETITIONS, "data"
+
+
+def fit_antenna(spec: dict, bench_spec) -> tuple[dict, list[int], object, list[str]]:
+    """(the spec with the fitted values, the calibration repetitions, the fitted antenna,
+    one line per value fitted): the law, mode split, decay-fit window and bands of a recorded
+    set's antenna from the labels of its calibration repetitions (``antenna_fit``)."""
+    n, field = calibration_count(spec)
+    have = len(set(bench_spec.dataset["repetition"].values.tolist()))
+    if field == "data" and have < n + 2:
+        raise SpecError("data", str(bench_spec.path),
+                        f"a recorded set of {n + 2} repetitions or more ({n} to fit the lab's "
+                        f"antenna on, two to split by); this one holds {have}")
+    held = bench_spec.calibration_repetitions(n, field)
+    typed, _ = fit_to_rate(spec, bench_spec.rate_hz)
+    like = events_section(typed, bench_spec.rate_hz)
+    data = bench_spec.dataset
+    antenna = antenna_fit.fit(data, np.isin(data["repetition"].values, held), like,
+                              str(bench_spec.path))
+    spec, fitted = antenna.applied(spec)
+    spec["description"] = (
+        "The paper's read-outs (linear regression on the low peak, MLPs on parametric features "
+        "and on the FFT amplitude spectrum, NMF band-pass filters) and the spiking read-outs "
+        f"on contacts a lab recorded with its own antenna ({bench_spec.path}): its frequency "
+        "law, mode split, decay-fit window and bands fitted on the labels of its calibration "
+        f"repetitions {held}, held out of every split; splits by repetition of the rest.")
+    return spec, held, antenna, fitted
+
+
+def first_scored(features, n: int) -> int:
+    """The repetition bound (``repetition < bound``) that takes the first ``n`` repetitions
+    of ``features``: with calibration repetitions held out, the first ``n`` scored ones (the
+    array designs' and the tuned curve's contacts)."""
+    reps = np.unique(features["repetition"].values)
+    return int(reps[min(n, len(reps)) - 1]) + 1
+
+
+def check_splits(parts: Parts) -> None:
+    """Every seed's split by repetition of the recorded contacts left for scoring trains and
+    tests on contacts of every material (so every read-out can be fitted and scored), and the
+    designs' and the tuned curve's first repetitions hold two scored ones to split: checked
+    here, so ``--check`` fails where the run would."""
+    if not hasattr(parts.bench, "dataset"):        # generated: every split holds every material
+        return
+    data = parts.bench.dataset
+    keep = ~np.isin(data["repetition"].values, parts.calibration_repetitions)
+    repetition = data["repetition"].values[keep]
+    material = data["material"].values.astype(str)[keep]
+    field = "evaluation.test_fraction"
+    check(len(np.unique(repetition)) >= 2, "data", parts.bench.path,
+          "a recorded set with two repetitions or more besides the calibration ones "
+          f"{parts.calibration_repetitions}")
+    # the designs and the tuned curve split the contacts of the first scored repetitions
+    subsets = []
+    if parts.designs:
+        subsets.append(("spiking.design_repetitions", parts.plan.design_repetitions))
     if parts.plan and parts.plan.tuned_plan():
-        parts.calibration_repetitions = bench_spec.calibration_repetitions(
-            parts.plan.tuned_plan().calibration_repetitions,
-            "spiking.tuned.calibration_repetitions")
-    return Plan("baseline_comparison", spec, parts, estimate, left_out)
+        subsets.append(("spiking.tuned.curve_repetitions",
+                        parts.plan.tuned_plan().curve_repetitions))
+    scored = sorted(set(repetition.tolist()))
+    for name, n in subsets:
+        check(min(n, len(scored)) >= 2, name, n, "a number of first scored repetitions >= 2 "
+              f"(two to split; the recorded set scores repetitions {scored})")
+    for seed in parts.evaluation.seeds:
+        train, test = cv.split_by_repetition(repetition, parts.evaluation.test_fraction, seed)
+        for side, mask in (("training", train), ("test", test)):
+            missing = sorted(set(material) - set(material[mask]))
+            check(not missing, field, parts.evaluation.test_fraction,
+                  f"a fraction whose split of seed {seed} leaves contacts of every material "
+                  f"on its {side} side (none of {missing} there)")
 
 
 def estimate(parts: Parts):

@@ -5,6 +5,7 @@ import numpy as np
 
 from ...evaluation import comparison_figures as figures
 from ...evaluation import signal as bench_signal
+from ...evaluation.antenna_fit import FittedAntenna
 from ...evaluation.comparison import (
     Comparison,
     coder_rows,
@@ -19,12 +20,20 @@ from ...evaluation.comparison import (
     tuned_curve_rows,
     tuned_text,
 )
-from ...evaluation.confusion import confusion, confusion_sentence, error_rates
+from ...evaluation.confusion import (
+    confusion,
+    confusion_sentence,
+    error_rates,
+    most_confused_pair,
+)
 from ...readout.spiking_decoders import TRAINING_FREE
 from ...report import stats
 from ...report.page import Calibrated, Predicted, Report
 
 SOURCE = "paper (docs/reference.md)"
+RECORDED_QUICK_NOTE = ("Quick profile on recorded contacts: every imported contact, 2 seeds, "
+                       "fewer NMF sizes, designs and epochs; accuracies, rmse and the confusion "
+                       "matrix are too small to compare with the paper or the full run.")
 QUICK_NOTE = ("Quick profile: 10 contacts per material and site, 2 seeds. The signal statistics "
               "(r², precision, CV of τ_low, wood/aluminium sites: ten contacts each, as the "
               "paper's test) are comparable with the full run; every classifier and regressor "
@@ -59,7 +68,7 @@ def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
             "LOW_SCATTER_DEX (the same statistic as the precision above, on test contacts)"))
     if "mlp_spectrum_material" in cmp.results:
         rows.append(Calibrated(
-            "8 materials, full-spectrum MLP accuracy",
+            f"{len(cmp.materials)} materials, full-spectrum MLP accuracy",
             100 * summary["material_accuracy"]["mlp_spectrum_material"]["mean"], 94.2, "%",
             SOURCE, "ROD_COUPLING: how much of the rod's own mode reaches the tip"))
     report.calibrated(*rows)
@@ -85,25 +94,29 @@ def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:
     pred = [Predicted("spread of the high / low peak (residual, dex)",
                       cmp.signal["spread_ratio_high_to_low"], "", "≈ 3", SOURCE,
                       note="lowered by the high-mode scatter that r² = 0.987 needs")]
+    pred = [r for r in pred if r.value is not None]
     papers = {"mlp_parametric": 2.93, "mlp_spectrum": 1.71,
               "mlp_spectrum_sub10": "≈ full spectrum", "mlp_low_half": "≈ 2 peaks"}
     pred += [_measured(f"distance rmse, {label(name)}", results[name].values("rmse_mm"), "mm",
                        paper) for name, paper in papers.items() if name in results]
     if "nmf_30" in results:
-        pred.append(_measured("8 materials, NMF-30 → MLP accuracy",
+        pred.append(_measured(f"{len(cmp.materials)} materials, NMF-30 → MLP accuracy",
                               results["nmf_30"].values("accuracy"), "%", "≥ 86", 100))
     if "mlp_5_8_2" in results:
         two = results["mlp_5_8_2"]
-        pred += [_measured("5-8-2 wood/aluminium network, rmse", two.values("rmse_mm"), "mm",
+        pair = "/".join((summary.get("two_material") or {}).get("materials",
+                                                                 ["wood", "aluminium"]))
+        pred += [_measured(f"5-8-2 {pair} network, rmse", two.values("rmse_mm"), "mm",
                            "±4"),
-                 _measured("5-8-2 wood/aluminium network, accuracy",
+                 _measured(f"5-8-2 {pair} network, accuracy",
                            100 * two.values("accuracy"), "%", 87)]
     if "mlp_spectrum_material" in results:
         cm = confusion(results["mlp_spectrum_material"], len(cmp.materials))
         pred += [Predicted(r.quantity, r.value, r.unit, r.paper, SOURCE, r.interval, r.n,
                            r.note) for r in error_rates(cm, cmp.materials)]
     for name, row in (summary.get("spiking") or {}).get("against_fft", {}).items():
-        pred.append(_measured(f"8 materials, {label(name)}", results[name].values("accuracy"),
+        pred.append(_measured(f"{len(cmp.materials)} materials, {label(name)}",
+                              results[name].values("accuracy"),
                               "%", None, 100, source="this run (no spiking material result in "
                               "the paper)", note=f"{100 * row['fraction_of_fft_mlp']:.0f} % of "
                               "the full-spectrum MLP"))
@@ -111,7 +124,7 @@ def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:
 
 
 CODER_CAPTION = (
-    "Coders side by side, on the same channels, contacts and splits: 8-material accuracy "
+    "Coders side by side, on the same channels, contacts and splits: {n}-material accuracy "
     "(mean [95 % interval] over the splits, n), its share of the full-spectrum MLP per "
     "split, the ceiling of the coded input (an MLP 51 on each channel's half-cycles, mean "
     "|current| and changes of value per time bin, no neurons), what coding loses (FFT-MLP − "
@@ -122,16 +135,20 @@ CODER_CAPTION = (
 
 def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> None:
     recorded = summary["data"].get("recorded")
+    antenna = summary["data"].get("antenna")
     if recorded:
+        if antenna:
+            _fitted(report, summary, recorded)
         report.predicted(*_recorded_results(cmp, summary))
     else:
         _calibrated(report, cmp, summary)
     _predicted(report, cmp, summary)
     results, feats = cmp.results, cmp.features
-    report.text(spec.get("description", ""))
-    if summary.get("left_out"):
-        report.table([{"what the data's rate cannot carry": line}
-                      for line in summary["left_out"]],
+    report.text(recorded_description(summary, recorded) if recorded
+                else spec.get("description", ""))
+    cut = [line for line in summary.get("left_out", []) if not line.startswith("fitted:")]
+    if cut:
+        report.table([{"what the data's rate cannot carry": line} for line in cut],
                      f"Left out or clipped at the data's {summary['data']['rate_hz']:g} Hz")
     if recorded:
         _write_recorded(report, cmp, recorded)
@@ -144,11 +161,22 @@ def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> 
                     "above were set; the predicted ones were not, and only those stand beside "
                     "the paper's results.")
     report.heading("The signal")
-    report.figure(figures.frequency_laws(feats, cmp.signal), "fig2c_frequency_laws",
-                  "Peak frequency vs contact distance, low and high mode (paper's Fig. 2C); "
-                  "lines: our fit (solid) and the paper's law (dashed).")
-    report.figure(figures.decay_times(feats), "fig5d_decay_times",
-                  "Decay time of the low mode vs distance for wood and aluminium (Fig. 5D).")
+    if antenna:
+        report.figure(figures.frequency_laws(feats, cmp.signal, antenna),
+                      "fig2c_frequency_laws",
+                      "Peak frequency vs contact distance, low and high mode of the scored "
+                      "contacts; lines: their fit (solid) and the laws fitted on the "
+                      "calibration contacts (dashed).")
+        report.figure(figures.decay_times(feats, cmp.materials), "fig5d_decay_times",
+                      "Decay time of the low mode vs distance per material, mean ± sd per "
+                      "distance, scored contacts.")
+    else:
+        report.figure(figures.frequency_laws(feats, cmp.signal), "fig2c_frequency_laws",
+                      "Peak frequency vs contact distance, low and high mode (paper's Fig. "
+                      "2C); lines: our fit (solid) and the paper's law (dashed).")
+        report.figure(figures.decay_times(feats), "fig5d_decay_times",
+                      "Decay time of the low mode vs distance for wood and aluminium (Fig. "
+                      "5D).")
     report.heading("Distance and material read-outs")
     report.table(result_rows(summary), "Mean ± sd over seeds, test contacts only; the "
                                        "calibrated and predicted tables above carry the "
@@ -159,7 +187,13 @@ def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> 
         report.figure(figures.predicted_distance(results, dist), "fig4b_predicted_distance",
                       "Predicted vs true distance per pipeline, first seed (Fig. 4B).")
     free = [k for k in TRAINING_FREE if k in results]
-    if free:
+    if free and antenna:
+        report.table([{"decoder": label(k), "distance rmse (mm)":
+                       f"{summary['distance_rmse_mm'][k]['mean']:.2f}"} for k in free],
+                     "Training-free decoders: each inverts the low-mode law fitted on the "
+                     "calibration contacts (never scored) and learns nothing from the "
+                     "training split; test contacts of every split.")
+    elif free:
         report.table([{"decoder": label(k), "distance rmse (mm)":
                        f"{summary['distance_rmse_mm'][k]['mean']:.2f}"} for k in free],
                      "Self-consistency, not a result: these decoders learn nothing and invert "
@@ -188,6 +222,8 @@ def _recorded_results(cmp: Comparison, summary: dict) -> list[Predicted]:
                       "mm", 6.2, source),
             Predicted("CV of τ_low within a site (median)", 100 * s["tau_low_cv_median"], "%",
                       "< 1", source)]
+    # a statistic with no finite value on these contacts (a peak that never moved) is not shown
+    rows = [r for r in rows if r.value is not None]
     if "linear_low_peak" in cmp.results:
         rows.append(_measured("distance rmse, linear regression on the low peak",
                               cmp.results["linear_low_peak"].values("rmse_mm"), "mm", 6.2))
@@ -195,18 +231,77 @@ def _recorded_results(cmp: Comparison, summary: dict) -> list[Predicted]:
         rows.append(_measured("materials, full-spectrum MLP accuracy",
                               cmp.results["mlp_spectrum_material"].values("accuracy"), "%",
                               94.2, 100))
+    if "mlp_parametric_material" in cmp.results:
+        rows.append(_measured("materials, MLP on both peaks' F, A and τ",
+                              cmp.results["mlp_parametric_material"].values("accuracy"), "%",
+                              None, 100))
     return rows
 
 
+def recorded_description(summary: dict, recorded: dict) -> str:
+    """What the data is: recorded contacts, their materials, distances and repetitions."""
+    ds = summary["data"]
+    antenna = ds.get("antenna") or {}
+    distances = ", ".join(f"{d:g}" for d in antenna.get("distances_cm", []))
+    return (f"The paper's read-outs (linear regression on the low peak, MLPs on parametric "
+            f"features and on the FFT amplitude spectrum, NMF band-pass filters) and the "
+            f"spiking read-outs on {recorded['counts']['events']} contacts recorded by a lab "
+            f"and imported from {recorded['path']} at {ds['rate_hz']:g} Hz: "
+            f"{len(summary['materials'])} materials named by its labels "
+            f"({', '.join(summary['materials'])})"
+            + (f", contacts at {distances} cm" if distances else "")
+            + ". Splits are by repetition, after the calibration repetitions are held out; "
+            "every number is the mean over splits on test contacts with its 95 % interval.")
+
+
+def _fitted(report: Report, summary: dict, recorded: dict) -> None:
+    """What was fitted on the calibration contacts' labels: each value and its source."""
+    antenna = summary["data"]["antenna"]
+    labels = recorded["labels"]
+    source = (f"labels {labels['file']} (sha256 {labels['sha256'][:16]}…), repetitions "
+              f"{antenna['repetitions']}")
+    target = f"the labels of {antenna['n_contacts']} calibration contacts"
+    report.calibrated(*[Calibrated(quantity, value, target, unit, source, how)
+                        for quantity, value, unit, how in FittedAntenna.rows_of(antenna)])
+
+
 def _write_recorded(report: Report, cmp: Comparison, recorded: dict) -> None:
-    """Where the contacts came from: the import's folder, hashes and counts."""
+    """Where the contacts came from: the import's folder, hashes and counts; every contact
+    left out, by reason and distance."""
     counts = recorded["counts"]
     left_out = ", ".join(f"{n} {r.replace('_', ' ')}" for r, n in counts["excluded"].items()
                          if n) or "none"
+    data = cmp.data
+    fitted = ("; what was fitted on the held-out calibration contacts' labels is listed as "
+              "calibrated above, the rest is predicted" if data.get("antenna") else
+              "; nothing above is calibrated")
     report.text(f"Data: {counts['events']} recorded contacts imported "
                 f"from {recorded['path']} ({counts['labels']} labelled; left out at import: "
-                f"{left_out}); no generator constant was used, so nothing above is "
-                f"calibrated. Skipped by the event processing: {cmp.skipped}.")
+                f"{left_out}){fitted}.")
+    by_position = counts.get("excluded_by_position") or {}
+    rows = []
+    for reason, n in counts["excluded"].items():
+        by_d = {d: row[reason] for d, row in by_position.items() if row.get(reason)}
+        if n:                  # a contact found without a label has no distance
+            rows.append({"left out": f"at import: {reason.replace('_', ' ')}", **by_d,
+                         **({"no label": n - sum(by_d.values())}
+                            if n > sum(by_d.values()) else {})})
+    rows += [{"left out": ("held out to calibrate" if reason == "calibration" else
+                           f"event processing: {reason.replace('_', ' ')}"), **by_d}
+             for reason, by_d in data.get("left_out_by_position", {}).items()]
+    if rows:
+        columns = sorted({k for r in rows for k in r if k not in ("left out", "no label")},
+                         key=float)
+        extra = ["no label"] if any("no label" in r for r in rows) else []
+        report.table([{"left out": r["left out"],
+                       **{f"{d} cm": r.get(d, 0) for d in columns},
+                       **{k: r.get(k, 0) for k in extra},
+                       "total": sum(r.get(d, 0) for d in [*columns, *extra])} for r in rows],
+                     "Every contact left out of the scoring, by reason and distance (the "
+                     "import's exclusions are listed one by one in its exclusions.csv)")
+    if data.get("fitted"):
+        report.table([{"spec value replaced by the fit": line} for line in data["fitted"]],
+                     "The study's typed values the lab's antenna replaced")
     report.table([{"file": f"{r['name']}/{f['file']}" if r["kind"] in ("record", "rosbag")
                    else f["file"], "bytes": f["bytes"], "sha256": f["sha256"]}
                   for r in recorded["recordings"] for f in r["files"]]
@@ -231,10 +326,16 @@ def _write_materials(report: Report, summary: dict, cmp: Comparison) -> None:
     results = cmp.results
     if "mlp_spectrum_material" in results:
         report.figure(figures.confusion_matrix(results["mlp_spectrum_material"], cmp.materials),
-                      "fig6d_confusion", "8-material confusion matrix of the full-spectrum "
+                      "fig6d_confusion", f"{len(cmp.materials)}-material confusion matrix "
+                      "of the full-spectrum "
                       "MLP, all seeds' test contacts, rows normalised (Fig. 6D).")
-        report.text(confusion_sentence(confusion(results["mlp_spectrum_material"],
-                                                 len(cmp.materials)), cmp.materials))
+        cm = confusion(results["mlp_spectrum_material"], len(cmp.materials))
+        if summary["data"].get("recorded"):
+            (a, b), rate = most_confused_pair(cm, cmp.materials)
+            report.text(f"The most confused pair: {a} ↔ {b} ({100 * rate:.1f} % of their "
+                        "contacts taken for each other).")
+        else:
+            report.text(confusion_sentence(cm, cmp.materials))
     nmf_names = [k for k in results if k.startswith("nmf_")]
     if nmf_names:
         shown = "nmf_9" if "nmf_9" in results else nmf_names[0]
@@ -250,7 +351,8 @@ def _write_materials(report: Report, summary: dict, cmp: Comparison) -> None:
 def _write_spiking(report: Report, summary: dict) -> None:
     report.heading("Spiking read-out beside the FFT")
     report.table(spiking_rows(summary),
-                 "8-material accuracy on the same contacts and splits; fraction of the "
+                 f"{len(summary['materials'])}-material accuracy on the same contacts and "
+                 "splits; fraction of the "
                  "full-spectrum MLP per seed (95 % interval); NMF with as many filters "
                  "as resonators, paired by seed. Cost: coding + Brian2, charged by the "
                  "read-out's share of the bank's resonators.")
@@ -260,7 +362,8 @@ def _write_spiking(report: Report, summary: dict) -> None:
     # has no curve (the run logged the sizes it left out)
     if (summary["spiking"].get("tuned") or {}).get("curve"):
         report.figure(figures.tuned_curve(summary), "tuned_curve",
-                      "Left: 8-material accuracy of the tuned spiking bank (every read-out "
+                      f"Left: {len(summary['materials'])}-material accuracy of the tuned "
+                      "spiking bank (every read-out "
                       "code, MLP 51) against its resonators, and NMF-n with as many filters, "
                       "on the same events and split; dashed: the full-spectrum MLP and 0.9 of "
                       "it. Below: the bank's neuron-steps per event and the budget of 5 × the "
@@ -269,7 +372,7 @@ def _write_spiking(report: Report, summary: dict) -> None:
                      "of the first repetitions): the curve above")
         report.text(_tuned_text(summary))
     if summary["spiking"].get("coders"):
-        report.table(coder_rows(summary), CODER_CAPTION)
+        report.table(coder_rows(summary), CODER_CAPTION.format(n=len(summary["materials"])))
     if summary["spiking"].get("designs"):
         report.table(design_rows(summary["spiking"]["designs"]), "Array designs (one band "
                      "changed at a time, first split, events of the first repetitions only)")

@@ -20,8 +20,8 @@ from ...readout import events
 from ...readout.spiking_decoders import decoder_inputs, neurons_per_input, spiking_baselines
 from ...report.page import Report
 from ..contract import Options, Plan
-from .plan import Parts
-from .report import QUICK_NOTE, write_report
+from .plan import Parts, first_scored
+from .report import QUICK_NOTE, RECORDED_QUICK_NOTE, write_report
 from .tuned import tuned_stage
 
 # Events timed for the FFT's cost per event when the spec has no [spiking] section.
@@ -62,10 +62,12 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
     summary["left_out"] = list(plan.left_out) + ([too_large] if too_large else [])
+    if summary["two_material"]:
+        summary["two_material"]["materials"] = list(parts.evaluation.two_materials)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_json(out_dir / "predictions.json", cmp.predictions(), indent=None)
     report = Report(out_dir, "Baseline comparison: FFT, parametric, NMF and spiking read-outs",
-                    quick=quick, quick_note=QUICK_NOTE)
+                    quick=quick, quick_note=RECORDED_QUICK_NOTE if parts.antenna else QUICK_NOTE)
     write_report(report, spec, summary, cmp)
     summary = report.write(summary, spec, parts.bank.target if parts.bank
                            else "none (no spiking part)")
@@ -83,23 +85,44 @@ def signal_stage(parts: Parts, stages: int, log, fresh) -> tuple:
     data_s = time.perf_counter() - t0
     skipped = events.skip_counts(everything)
     evaluated = everything["skipped"].values == ""
-    if parts.calibration_repetitions:      # they place the tuned channels: out of every split
-        held = np.isin(everything["repetition"].values, parts.calibration_repetitions)
+    held = np.isin(everything["repetition"].values, parts.calibration_repetitions)
+    if parts.calibration_repetitions:      # they calibrate: out of every split
         log(f"      {int(held.sum())} contacts of repetitions {parts.calibration_repetitions} "
-            "held out to place the tuned bank's channels, out of every split")
+            "held out to " + ("fit the antenna and " if parts.antenna else "")
+            + "place the tuned bank's channels, out of every split")
         evaluated &= ~held
     feats = everything.isel(event=np.flatnonzero(evaluated))
     log(f"      {feats.sizes['event']} events processed, skipped: {skipped}")
-    log(f"[2/{stages}] calibration against the paper's signal measurements")
+    log(f"[2/{stages}] " + ("the signal's statistics" if parts.antenna else
+                            "calibration against the paper's signal measurements"))
     signal = bench_signal.signal_statistics(feats)
-    log(f"      r² low {signal['r2_low']:.4f} (paper 0.995), high {signal['r2_high']:.4f} "
-        f"(0.987); precision {signal['single_contact_precision_mm']:.2f} mm (6.2)")
+    log(f"      r² low {_shown(signal['r2_low'], '.4f')} (paper 0.995), high "
+        f"{_shown(signal['r2_high'], '.4f')} (0.987); precision "
+        f"{_shown(signal['single_contact_precision_mm'], '.2f')} mm (6.2)")
     n_cost = parts.plan.cost_sample_events if parts.plan else COST_SAMPLE_EVENTS
     costs = {"fft": events.extraction_cost(data, parts.processor, feats["event"].values[:n_cost])}
     return data, Comparison(feats, signal, {}, skipped, costs, data={
         "n_events": int(parts.bench.n_events), "rate_hz": parts.bench.rate_hz,
         "bench_key": parts.bench.key(),
-        **({"recorded": origin} if (origin := parts.bench.summary_entry()) else {})}), data_s
+        **({"recorded": origin} if (origin := parts.bench.summary_entry()) else {}),
+        **({"antenna": parts.antenna.description(), "fitted": list(parts.fitted),
+            "left_out_by_position": left_out_by_position(everything, held)}
+           if parts.antenna else {})}), data_s
+
+
+def _shown(value, spec: str) -> str:
+    """A statistic as logged; one with no finite value (``evaluation.signal``) as 'none'."""
+    return "none" if value is None else format(value, spec)
+
+
+def left_out_by_position(everything, held) -> dict:
+    """Every contact the scoring leaves out, by reason and distance (cm): skipped by the
+    event processing (``events.SKIP_REASONS``) or held out to calibrate."""
+    distance = everything["distance_cm"].values.astype(float)
+    reasons = np.where(held, "calibration", everything["skipped"].values.astype(str))
+    return {reason: {f"{d:g}": int(np.sum((reasons == reason) & (distance == d)))
+                     for d in sorted(set(distance))}
+            for reason in ("calibration", *events.SKIP_REASONS) if np.any(reasons == reason)}
 
 
 def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
@@ -118,7 +141,8 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
         if parts.designs:
             cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
                                       run=partial(run_bank, client=client, progress=False),
-                                      repetitions=parts.plan.design_repetitions,
+                                      repetitions=first_scored(
+                                          cmp.features, parts.plan.design_repetitions),
                                       evaluation=parts.evaluation)
         tuned = (tuned_stage(parts, data, cmp, log, fresh, client)
                  if parts.plan.tuned_plan() else [])
@@ -126,4 +150,5 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
     neurons = neurons_per_input(spikes)
     neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
     cmp.spiking = {**bank.description(), "neurons": neurons}
-    return spiking_baselines(spikes, parts.evaluation) + tuned
+    law = parts.antenna and (*parts.antenna.low_law, float(np.mean(parts.antenna.range_cm)))
+    return spiking_baselines(spikes, parts.evaluation, law or None) + tuned

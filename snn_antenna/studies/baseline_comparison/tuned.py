@@ -34,6 +34,8 @@ from ...readout.spiking_decoders import (
 )
 from ...sources import bench
 from ...core.truth import bench_labels
+from .plan import first_scored
+
 
 def calibration_bands(parts, data, plan: TunedPlan, log, fresh: bool) -> dict:
     """The channels of every tuning of ``plan`` (by number of resonators), placed from the
@@ -154,13 +156,13 @@ def best_costs(data, parts, event_ids, banks: dict, repeats: int, log) -> dict:
 
 def run_curve(data, features, plan: TunedPlan, bands: dict, parts, log, client) -> list[dict]:
     """Per number of resonators: the tuned bank's accuracy (every read-out code, MLP 51)
-    and NMF-n's, on the events of the first ``curve_repetitions`` repetitions, first seed's
-    split; the full-spectrum MLP on the same split as the reference."""
+    and NMF-n's, on the events of the first ``curve_repetitions`` scored repetitions, first
+    seed's split; the full-spectrum MLP on the same split as the reference."""
     from threadpoolctl import threadpool_limits
 
     evaluation = parts.evaluation
-    sub = features.isel(event=np.flatnonzero(features["repetition"].values
-                                             < plan.curve_repetitions))
+    bound = first_scored(features, plan.curve_repetitions)
+    sub = features.isel(event=np.flatnonzero(features["repetition"].values < bound))
     seed = evaluation.seeds[0]
     train, test = cv.split_by_repetition(sub["repetition"].values, evaluation.test_fraction,
                                          seed)
@@ -168,7 +170,7 @@ def run_curve(data, features, plan: TunedPlan, bands: dict, parts, log, client) 
     spectrum = bl.inputs_of(sub, "spectrum")
     ids = sub["event"].values
     log(f"      accuracy vs resonators on {len(ids)} events (repetitions < "
-        f"{plan.curve_repetitions}), split of seed {seed}")
+        f"{bound}), split of seed {seed}")
     fft = bl.material_baselines([], evaluation.material_mlp, evaluation.nmf_max_iter)[0]
     # NMF-n needs n <= its training events: a small recorded set leaves the larger sizes out
     n_train = int(np.sum(train))

@@ -1,0 +1,281 @@
+"""A lab's own antenna, fitted from the labels of its calibration contacts.
+
+A recorded data set comes from an antenna that is not this project's: its first mode may fall
+with distance where the paper's rises, its modes' ranges may overlap, and its materials may
+differ in nothing but decay. Nothing of the generator's antenna is assumed; what the read-outs
+need is fitted on the contacts of the calibration repetitions (held out of every split), with
+their labels, and reported as calibrated with that source:
+
+- the frequency law: per labelled distance, the two most prominent peaks of the median
+  (peak-scaled) spectrum of its calibration windows are its low and high mode; a line through
+  log10 of the low one against distance is the law (``log10 F = slope d + intercept``), which
+  the training-free decoders invert;
+- the mode split: the low mode is searched below ``split_hz`` (the highest low mode × the
+  square root of the smallest high / low ratio), the high mode above ``split_ratio`` × the
+  low peak (that square root): the geometric middle between the modes at every distance,
+  where one fixed frequency between them may not exist;
+- the decay-fit window: among a few settings of the window's end, the edges and the floor of
+  the extreme points and an envelope fit for a mode under three of them (``WINDOW_KEYS``),
+  the one that fits a decay to the most calibration contacts, then with the least spread of
+  τ_low within a material and distance;
+- the bands of the hand-set bank (low: the low mode's range; high: the high mode's; rod:
+  both) and the tuned bank's range: the modes' ranges widened by ``MARGIN``.
+
+Only the labels of the calibration contacts are read; every scored contact is read as a robot
+has it (its counts), and its labels serve the scoring alone.
+"""
+from __future__ import annotations
+
+import copy
+import itertools
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+from scipy import stats
+from scipy.signal import find_peaks
+
+from ..core.errors import SpecError
+from ..readout.events import EventProcessor, SkippedEvent, main_axis_g
+
+MARGIN = 1.25                 # a fitted band reaches this factor beyond the modes' range
+# the decay-fit windows tried (``readout.events.EventProcessor``'s fields of the same names)
+EDGE_SIGMAS = (0.0, 2.0)
+EXTREME_MIN_FRACTIONS = (0.05, 0.1)
+END_FRACTIONS = (0.1, 0.03)
+ENVELOPE_FALLBACK = (False, True)
+WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_fraction")
+
+
+@dataclass(frozen=True)
+class FittedAntenna:
+    """What the calibration contacts' labels gave (see the module's docstring)."""
+    low_law: tuple[float, float]           # log10 F_low = slope * d + intercept (d in cm)
+    high_law: tuple[float, float]
+    r2_low: float
+    distances_cm: tuple[float, ...]
+    low_hz: tuple[float, ...]              # per distance: the low mode's peak
+    high_hz: tuple[float, ...]
+    split_hz: float
+    split_ratio: float
+    edge_sigmas: float
+    extreme_min_fraction: float
+    envelope_fallback: bool
+    end_fraction: float
+    fitted_fraction: float                 # calibration contacts with a decay fit
+    low_identified_fraction: float         # whose low peak lies nearest its distance's
+    n_contacts: int
+    repetitions: tuple[int, ...]
+    source: str
+
+    @property
+    def low_range_hz(self) -> tuple[float, float]:
+        return min(self.low_hz), max(self.low_hz)
+
+    @property
+    def high_range_hz(self) -> tuple[float, float]:
+        return min(self.high_hz), max(self.high_hz)
+
+    @property
+    def range_cm(self) -> tuple[float, float]:
+        return min(self.distances_cm), max(self.distances_cm)
+
+    def distance_cm(self, low_hz) -> np.ndarray:
+        """The law inverted: the distance whose low mode rings at ``low_hz``."""
+        return (np.log10(np.asarray(low_hz, dtype=float)) - self.low_law[1]) / self.low_law[0]
+
+    def processor(self, like: EventProcessor) -> EventProcessor:
+        """``like`` with the fitted mode split and decay-fit window."""
+        return replace(like, split_hz=self.split_hz, split_ratio=self.split_ratio,
+                       **{k: getattr(self, k) for k in WINDOW_KEYS})
+
+    def applied(self, spec: dict) -> tuple[dict, list[str]]:
+        """The study spec with the fitted values in place of the typed ones, and one line per
+        value replaced (what it was, what it is)."""
+        spec, notes = copy.deepcopy(spec), []
+        ev = spec.setdefault("events", {})
+        for key in ("split_hz", "split_ratio", *WINDOW_KEYS):
+            value = getattr(self, key)
+            value = value if isinstance(value, bool) else round(float(value), 6)
+            notes.append(f"fitted: events.{key} {ev.get(key, '(default)')} → "
+                         + (str(value).lower() if isinstance(value, bool) else f"{value:g}"))
+            ev[key] = value
+        lo_low, hi_low = self.low_range_hz
+        lo_high, hi_high = self.high_range_hz
+        spans = {"low": (lo_low, hi_low), "high": (lo_high, hi_high),
+                 "rod": (min(lo_low, lo_high), max(hi_low, hi_high))}
+        spiking = spec.get("spiking") if isinstance(spec.get("spiking"), dict) else {}
+        bands = (spiking.get("bank") or {}).get("bands") or {}
+        for name, band in bands.items():
+            if name in spans and isinstance(band, dict):
+                notes.append(_fit_band(band, f"spiking.bank.bands.{name}", *spans[name]))
+        tuning = (spiking.get("tuned") or {}).get("tuning")
+        if isinstance(tuning, dict):
+            lo, hi = _widened(*spans["rod"])
+            notes.append(f"fitted: spiking.tuned.tuning.range_hz {tuning.get('range_hz')} → "
+                         f"[{lo:g}, {hi:g}] (both modes' range)")
+            tuning["range_hz"] = [lo, hi]
+        return spec, notes
+
+    def description(self) -> dict:
+        """What ``summary.json`` keeps (every fitted value with its source)."""
+        out = asdict(self)
+        out["law"] = "log10 F_low = slope * distance_cm + intercept"
+        return out
+
+    @classmethod
+    def rows_of(cls, description: dict) -> list[tuple[str, str, str, str]]:
+        """``rows`` of a fit kept in a summary (``description``)."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: tuple(v) if isinstance(v, list) else v
+                      for k, v in description.items() if k in names}).rows()
+
+    def rows(self) -> list[tuple[str, str, str, str]]:
+        """(quantity, fitted value, unit, how) of every fitted value, for a report."""
+        lo_low, hi_low = self.low_range_hz
+        lo_high, hi_high = self.high_range_hz
+        return [
+            ("low-mode law (slope per cm, intercept)",
+             f"{self.low_law[0]:.4f}, {self.low_law[1]:.3f}", "",
+             f"log10 F_low against distance at {len(self.distances_cm)} distances, "
+             f"r² {self.r2_low:.4f}"),
+            ("high-mode law (slope per cm, intercept)",
+             f"{self.high_law[0]:.4f}, {self.high_law[1]:.3f}", "", "as the low mode's"),
+            ("low mode over the distances", f"{lo_low:.0f}–{hi_low:.0f}", "Hz",
+             "the most prominent lower peak of each distance's median spectrum"),
+            ("high mode over the distances", f"{lo_high:.0f}–{hi_high:.0f}", "Hz",
+             "the most prominent higher peak"),
+            ("mode split: low mode below", f"{self.split_hz:.1f}", "Hz",
+             "the highest low mode × √(smallest high / low ratio)"),
+            ("mode split: high mode above, × the low peak", f"{self.split_ratio:.3f}", "",
+             "√(smallest high / low ratio)"),
+            ("decay-fit window: edges left out (σ_t)", f"{self.edge_sigmas:g}", "",
+             f"of {list(EDGE_SIGMAS)}: the most contacts fitted, then the least spread of "
+             "τ_low within a material and distance"),
+            ("decay-fit window: floor of the extreme points", f"{self.extreme_min_fraction:g}",
+             "of the largest", f"of {list(EXTREME_MIN_FRACTIONS)}, as above"),
+            ("decay-fit window: a mode under 3 extreme points fitted on its envelope",
+             "yes" if self.envelope_fallback else "no", "", "of no, yes, as above"),
+            ("window's end: local maxima below this fraction of the largest",
+             f"{self.end_fraction:g}", "", f"of {list(END_FRACTIONS)}, as above"),
+            ("calibration contacts with a decay fit", f"{100 * self.fitted_fraction:.1f}", "%",
+             "with the fitted split and window"),
+            ("calibration contacts whose low peak is their distance's",
+             f"{100 * self.low_identified_fraction:.1f}", "%",
+             "nearest (in log frequency) to the low mode of their own distance")]
+
+
+def _widened(lo: float, hi: float) -> tuple[float, float]:
+    return round(lo / MARGIN, 1), round(hi * MARGIN, 1)
+
+
+def _fit_band(band: dict, label: str, lo: float, hi: float) -> str:
+    """The band table over [lo, hi] widened, its filters' cut-offs moved with its edges in
+    the same proportion as the typed band's; the line saying so."""
+    new_lo, new_hi = _widened(lo, hi)
+    old = band.get("band_hz")
+    if isinstance(old, (list, tuple)) and len(old) == 2 and all(
+            isinstance(v, (int, float)) and v > 0 for v in old):
+        for cut, edge, new_edge in (("lowpass_hz", old[1], new_hi),
+                                    ("highpass_hz", old[0], new_lo)):
+            if isinstance(band.get(cut), (int, float)) and band[cut] > 0:
+                band[cut] = round(band[cut] * new_edge / edge, 1)
+    band["band_hz"] = [new_lo, new_hi]
+    return f"fitted: {label}.band_hz {old} → [{new_lo:g}, {new_hi:g}] Hz"
+
+
+def fit(data, calibration: np.ndarray, processor: EventProcessor, source: str
+        ) -> FittedAntenna:
+    """The antenna's law, mode split and decay-fit window from the contacts of ``data`` (a
+    bench data set) selected by the mask ``calibration``, read with ``processor``'s window
+    (``source``: where they came from, for the report)."""
+    data = data.isel(event=np.flatnonzero(calibration))
+    bits, full_scale = int(data.attrs["adc_bits"]), float(data.attrs["full_scale_g"])
+    distance = data["distance_cm"].values.astype(float)
+    material = data["material"].values.astype(str)
+    reps = tuple(sorted(set(int(r) for r in data["repetition"].values)))
+    where = f"the calibration contacts (repetitions {list(reps)} of {source})"
+    signals, segments, kept = [], [], []
+    for i, counts in enumerate(data["counts"].values):
+        if np.any(counts <= 0) or np.any(counts >= 2 ** bits - 1):
+            continue                       # clipped: its spectrum is the clip's
+        x = main_axis_g(counts, bits, full_scale)
+        try:
+            onset, end = processor.window(x)
+        except SkippedEvent:
+            continue
+        signals.append(x)
+        segments.append(x[onset:end] - x[onset:end].mean())
+        kept.append(i)
+    kept = np.asarray(kept, dtype=int)
+    sites = sorted(set(distance[kept]))
+    if len(sites) < 2:
+        raise SpecError("data", source, f"calibration contacts at two distances or more, "
+                                        f"each with an onset ({where} hold {len(sites)})")
+    freqs = processor.freq_hz
+    spectra = np.asarray([processor.spectrum(s) for s in segments])
+    spectra /= np.maximum(spectra.max(axis=1, keepdims=True), 1e-30)
+    low, high = [], []
+    for d in sites:
+        median = np.median(spectra[distance[kept] == d], axis=0)
+        peaks, props = find_peaks(median, prominence=0.05)
+        peaks, prom = peaks[freqs[peaks] >= processor.min_hz], props["prominences"][
+            freqs[peaks] >= processor.min_hz]
+        if len(peaks) < 2:
+            raise SpecError("data", source, f"contacts ringing in two modes at every distance "
+                                            f"({where}: {len(peaks)} peak at {d:g} cm)")
+        two = sorted(freqs[peaks[np.argsort(prom)[-2:]]])
+        low.append(float(two[0]))
+        high.append(float(two[1]))
+    low, high, d = np.asarray(low), np.asarray(high), np.asarray(sites)
+    low_fit, high_fit = stats.linregress(d, np.log10(low)), stats.linregress(d, np.log10(high))
+    if not (np.isfinite(low_fit.slope) and low_fit.slope != 0 and np.all(high > low)):
+        raise SpecError("data", source, f"contacts whose low mode moves with distance, below "
+                                        f"their high mode ({where}: low modes {low.tolist()} "
+                                        f"Hz, high {high.tolist()} Hz at {d.tolist()} cm)")
+    ratio = float(np.sqrt(np.min(high / low)))
+    split_hz = min(float(low.max()) * ratio, 0.99 * processor.max_hz)
+    base = replace(processor, split_hz=split_hz, split_ratio=ratio)
+    window, fitted, identified = _decay_window(base, signals, distance[kept], material[kept],
+                                               d, low, len(data["event"]))
+    return FittedAntenna(
+        low_law=(float(low_fit.slope), float(low_fit.intercept)),
+        high_law=(float(high_fit.slope), float(high_fit.intercept)),
+        r2_low=float(low_fit.rvalue ** 2), distances_cm=tuple(map(float, d)),
+        low_hz=tuple(map(float, low)), high_hz=tuple(map(float, high)), split_hz=split_hz,
+        split_ratio=ratio, **dict(zip(WINDOW_KEYS, window)), fitted_fraction=fitted,
+        low_identified_fraction=identified,
+        n_contacts=int(data.sizes["event"]), repetitions=reps, source=where)
+
+
+def _decay_window(base: EventProcessor, signals, distance, material, sites, low_hz,
+                  n_contacts: int) -> tuple[tuple, float, float]:
+    """The values of ``WINDOW_KEYS`` that fit a decay to the most calibration
+    segments, then with the least median spread (CV) of τ_low within a material and distance;
+    with the fraction fitted and the fraction whose low peak is their own distance's."""
+    best = None
+    for window in itertools.product(EDGE_SIGMAS, EXTREME_MIN_FRACTIONS, ENVELOPE_FALLBACK,
+                                    END_FRACTIONS):
+        p = replace(base, **dict(zip(WINDOW_KEYS, window)))
+        tau, f_low = np.full(len(signals), np.nan), np.full(len(signals), np.nan)
+        for i, x in enumerate(signals):
+            try:
+                onset, end = p.window(x)
+                par = p.parametric(x[onset:end] - x[onset:end].mean())
+            except SkippedEvent:
+                continue
+            tau[i], f_low[i] = par["tau_low"], par["F_low"]
+        ok = np.isfinite(tau)
+        cvs = [np.std(tau[g], ddof=1) / np.mean(tau[g])
+               for g in (ok & (material == m) & (distance == d)
+                         for m in set(material) for d in set(distance)) if g.sum() >= 2]
+        score = (int(ok.sum()), -float(np.median(cvs)) if cvs else 0.0)
+        if best is None or score > best[0]:
+            nearest = sites[np.argmin(np.abs(np.log10(f_low[ok])[:, None]
+                                             - np.log10(low_hz)[None, :]), axis=1)]
+            best = (score, window, float(np.mean(nearest == distance[ok]))
+                    if ok.any() else 0.0)
+    (n_fitted, _), window, identified = best
+    return window, n_fitted / n_contacts, identified
+
+
+__all__ = ["FittedAntenna", "fit", "MARGIN"]
