@@ -137,7 +137,8 @@ def plan(spec: dict) -> Plan:
 
 
 def estimate(parts: Parts):
-    """The main sweep (every scene at every method and dt), the cost sweep (its settings at
+    """The main sweep (every scene at every method and dt in one compiled run, and a timed
+    sample per scene and method on its target), the cost sweep (its settings at
     every target, float type and array size), the stability map, the bench bands (their
     sample events at every method and step, and the tuning that recalibrates them) and the
     sweep engine's precision grid (per float type)."""
@@ -146,8 +147,15 @@ def estimate(parts: Parts):
                **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
     size = {"tuning": array.n_neurons * parts.tuning.n_freqs}
     sweep, cost = parts.sweep, parts.cost
-    main = [(seconds[s], float(dt), size.get(s, array.n_neurons), engine_of(sweep.target))
-            for s in sweep.scenes for dt in sweep.dt_ms] * len(sweep.methods)
+    # the main sweep: one compiled run, a group per method and dt holding every scene's
+    # neurons for the longest scene (engine.settings_runs); then per scene and method one
+    # timed run on the sweep's target, at its coarsest step (main_sweep)
+    longest = max(seconds[s] for s in sweep.scenes)
+    neurons_all = sum(size.get(s, array.n_neurons) for s in sweep.scenes)
+    main = [(longest, float(dt), neurons_all, "codings") for dt in sweep.dt_ms
+            ] * len(sweep.methods)
+    main += [(seconds[s], float(max(sweep.dt_ms)), size.get(s, array.n_neurons),
+              engine_of(sweep.target)) for s in sweep.scenes] * len(sweep.methods)
     # the recommendation is the fastest setting that matches: sized as the spec's settings
     settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
     costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
