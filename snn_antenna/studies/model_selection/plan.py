@@ -18,7 +18,7 @@ from ..sections import bench_section, evaluation_section, events_section
 from .protocol import PAPER_PAIR
 
 SECTIONS = ("stimulus", "events", "evaluation", "selection")
-OPTIONS = (*COMMON, "fresh")
+OPTIONS = (*COMMON, "fresh", "scheduler")
 
 
 @dataclass
