@@ -129,6 +129,7 @@ PROBE_S = 0.2           # simulated per probe run, dt 0.1 ms: 2,000 steps
 # neurons: the step overhead, then the neurons' own cost (numpy's per-step overhead of
 # milliseconds under load hides 2,400 neurons' work; 24,000 stand out of it)
 PROBE_SIZES = (24, 24000)
+PROBE_LONGER = 5        # the small size's second run: this many times PROBE_S
 PROBE_CODINGS = (10, 100)   # codings (of 24 neurons) in the compiled probe groups ...
 CODINGS_PROBE_S = 0.5       # ... each coding this long (5,000 steps)
 
@@ -148,25 +149,33 @@ def _best_of(run, repeats: int = 2) -> float:
     return best
 
 
-def _runtime(target: str) -> tuple[float, float]:
-    """(steps/s, neuron-steps/s) of ``neurons.simulate`` on ``target``, from two sizes."""
+def _runtime(target: str) -> tuple[float, float, float]:
+    """(steps/s, neuron-steps/s, s per run) of ``neurons.simulate`` on ``target``: two sizes
+    over ``PROBE_S``, and the small size over ``PROBE_LONGER`` times as long. A run's own
+    cost (building the network, preparing its code objects) is not a step's: a short run
+    alone would charge it to every step and make a long run look many times slower."""
     from ..networks import neurons
 
-    rate_hz, n_samples = 1000.0, int(PROBE_S * 1000)
+    rate_hz, n_samples = 1000.0, int(PROBE_S * PROBE_LONGER * 1000)
     steps = PROBE_S * 1000 / 0.1
-    # one input of 24 columns for both sizes: its shape is compiled in, the group's size not
+    # one input of 24 columns for every run: its shape is compiled in, the group's size
+    # and the run's length (run_ms) not
     current = _square(n_samples, PROBE_SIZES[0], rate_hz)
-    times = []
-    for n in PROBE_SIZES:
-        def run(n=n):
+    times = {}
+    for n, longer in ((PROBE_SIZES[0], 1), (PROBE_SIZES[0], PROBE_LONGER), (PROBE_SIZES[1], 1)):
+        def run(n=n, longer=longer):
             neurons.simulate("resonator", current, 0.1, k=np.linspace(0.3, 1.5, n),
                              method="rk2", input_dt_ms=1.0, target=target,
-                             input_index=np.arange(n) % current.shape[1])
+                             input_index=np.arange(n) % current.shape[1],
+                             run_ms=PROBE_S * longer * 1000)
         run()                               # code generation, compiling
-        times.append(_best_of(run))
-    per_neuron = (times[1] - times[0]) / (steps * (PROBE_SIZES[1] - PROBE_SIZES[0]))
-    per_step = times[0] / steps - PROBE_SIZES[0] * per_neuron
-    return _inverse(per_step), _inverse(per_neuron)
+        times[n, longer] = _best_of(run)
+    small, big = PROBE_SIZES
+    per_neuron = (times[big, 1] - times[small, 1]) / (steps * (big - small))
+    per_step = ((times[small, PROBE_LONGER] - times[small, 1]) / ((PROBE_LONGER - 1) * steps)
+                - small * per_neuron)
+    per_run = times[small, 1] - steps * (max(per_step, 0.0) + small * max(per_neuron, 0.0))
+    return _inverse(per_step), _inverse(per_neuron), max(per_run, 0.0)
 
 
 def _inverse(seconds: float) -> float:
@@ -248,20 +257,21 @@ def _readout_window() -> float:
 
 def probe(log=print) -> dict[str, dict[str, Rate]]:
     """Measure the probed rates on this machine now, store them, and return ``rates()``."""
-    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}}
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}, "run_s": {}}
     for target in ("numpy", "cython"):
-        per_step, per_neuron = _runtime(target)
+        per_step, per_neuron, per_run = _runtime(target)
         measured["steps_per_s"][target] = per_step
         measured["neuron_steps_per_s"][target] = per_neuron
-        log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s "
-            "(0: not resolved, the table's stays)")
+        measured["run_s"][target] = per_run
+        log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s, "
+            f"{per_run:.2f} s per run (0: not resolved, the table's stays)")
     start, report = _start()
     measured["python_s"] = {"study_start": start, "report": report,
                             "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
     per_run, per_neuron, build = _codings()
-    measured["run_s"] = {"codings": per_run}
+    measured["run_s"]["codings"] = per_run
     measured["neuron_steps_per_s"]["codings"] = per_neuron
     measured["compile_s"]["codings"] = max(build, 1.0)
     log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s and {per_run:.2f} s per "

@@ -6,7 +6,7 @@ Accuracy: one compiled run steps every (scene, method, dt) of the grid
 to the compiler's rounding), each scored against its scene's reference as a runtime run is.
 
 Cost: what a user's choice costs is a run on the sweep's target (numpy or cython), so that is
-timed, on a sample: per scene and method, the coarsest step whose compiled run stayed finite
+timed, on a sample: per scene and method, the finest step whose compiled run stayed finite
 within the method's stable limit, warmed up (compiling is not timed), then timed in full and
 over its first ``devices.WARM_UP_MS``. The two give the run's fixed cost (building the
 network) and its cost per step, and every other step of that scene and method is costed as
@@ -48,9 +48,12 @@ def score(workload, ref, setting: Setting, result) -> dict:
 
 
 def _sample_dt(rows: list[dict]) -> float | None:
-    """The coarsest step of one scene and method that finished within its stable limit."""
+    """The finest step of one scene and method that finished within its stable limit: the
+    longest run, so its per-step cost is measured over the most steps and every other step
+    is costed by fewer steps than it (the noise of a short run, multiplied up to a long one,
+    reordered settings whose costs lie within 20 % of each other)."""
     ok = [r["dt_ms"] for r in rows if r["status"] == "ok" and not r["beyond_stable_limit"]]
-    return max(ok) if ok else None
+    return min(ok) if ok else None
 
 
 def _short_run(workload, setting: Setting):
@@ -123,7 +126,7 @@ def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, d
                              "(engine.settings_runs)",
                  "settings": len(keys), "compiled_run_s": compiled_s,
                  "cost": f"{sweep.target}, timed on a sample (per scene and method, the "
-                         "coarsest finished step) and costed by steps for the others",
+                         "finest finished step) and costed by steps for the others",
                  "timed_samples": len(samples),
                  "samples_agree": sum(bool(t.get("agrees")) for t in samples),
                  "samples": [{k: t.get(k) for k in ("scene", "method", "dt_ms", "target",
