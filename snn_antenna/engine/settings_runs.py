@@ -107,15 +107,15 @@ def check_interval_ms(drives) -> float:
     raise ValueError(f"scene lengths {ends_ms} ms are not whole multiples of 0.1 ms")
 
 
-def _structure(drives, methods, dts, dtype: str, check_ms: float) -> tuple:
+def _structure(drives, settings, dtype: str, check_ms: float) -> tuple:
     """What the compiled project depends on; inputs, tuning and states are run arguments."""
-    return ("settings", neurons.PRESETS["resonator"].quadratic, tuple(methods), dtype,
-            tuple(float(dt) for dt in dts), max(d.n_samples for d in drives),
+    return ("settings", neurons.PRESETS["resonator"].quadratic, tuple(settings), dtype,
+            max(d.n_samples for d in drives),
             float(drives[0].rate_hz), tuple(d.n_neurons for d in drives),
             sum(int(np.shape(d.current)[1]) for d in drives), check_ms)
 
 
-def _build(drives, methods, dts, check_ms: float) -> dict:
+def _build(drives, settings, check_ms: float) -> dict:
     import brian2 as b2
 
     n = sum(d.n_neurons for d in drives)
@@ -127,7 +127,7 @@ def _build(drives, methods, dts, check_ms: float) -> dict:
     guard = (f"unstable = unstable or (t <= stop_t and not (abs(v) < "
              f"{neurons.RUNAWAY_LIMIT!r} and abs(u) < {neurons.RUNAWAY_LIMIT!r}))")
     net, groups, monitors = b2.Network(), [], []
-    for g, (method, dt_ms) in enumerate((m, dt) for m in methods for dt in dts):
+    for g, (method, dt_ms) in enumerate(settings):
         group = b2.NeuronGroup(
             n, neurons.equations("resonator", "drive(t, input_index)",
                                  "input_index : integer (constant)\nunstable : boolean\n"
@@ -156,22 +156,23 @@ def _inputs(drives) -> np.ndarray:
     return np.ascontiguousarray(np.concatenate(parts, axis=1))
 
 
-def settings_spikes(drives: list[SceneDrive], methods, dts, dtype: str = "float64"
-                    ) -> dict:
+def settings_spikes(drives: list[SceneDrive], methods, dts, dtype: str = "float64",
+                    pairs=None) -> dict:
     """{(scene name, method, dt): Run or NumericalInstabilityError} for every scene of
-    ``drives`` with every method of ``methods`` at every step of ``dts``: one run of a
-    compiled project. Each Run's cost is the whole run's, shared out over its (scene,
-    method, dt) triples by neuron-steps."""
+    ``drives`` with every method of ``methods`` at every step of ``dts`` (or at each
+    (method, dt) of ``pairs`` instead): one run of a compiled project. Each Run's cost is
+    the whole run's, shared out over its (scene, method, dt) triples by neuron-steps."""
     check(len(drives) >= 1 and len({d.rate_hz for d in drives}) == 1, "drives",
           [d.rate_hz for d in drives], "scenes at one input rate")
-    dts, methods = [float(dt) for dt in dts], list(methods)
-    settings = [(m, dt) for m in methods for dt in dts]
+    settings = list(dict.fromkeys(
+        (m, float(dt)) for m, dt in (pairs if pairs is not None else
+                                     [(m, dt) for m in methods for dt in dts])))
     from brian2 import second
 
     check_ms = check_interval_ms(drives)
     with float_precision(dtype), vectorising_flags("float64"):
-        proj = project(_structure(drives, methods, dts, dtype, check_ms),
-                       lambda: _build(drives, methods, dts, check_ms))
+        proj = project(_structure(drives, settings, dtype, check_ms),
+                       lambda: _build(drives, settings, check_ms))
     starts = np.cumsum([0] + [d.n_neurons for d in drives])
     col_starts = np.cumsum([0] + [int(np.shape(d.current)[1]) for d in drives])
     per = {name: np.concatenate([np.asarray(getattr(d, name), float) for d in drives])

@@ -17,11 +17,14 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from ...core.errors import NumericalInstabilityError
 from ...engine.batches import Batches
 from ...engine.devices import WARM_UP_MS, Setting, float_precision, measure
 from ...engine.runlog import RunLog
-from ...engine.settings_runs import SettingsRuns, scene_drive
+from ...evaluation.bands import Spikes, array_of
+from ...engine.settings_runs import SceneDrive, SettingsRuns, scene_drive, settings_spikes
 from ...evaluation.tradeoff import ERRORS, RAISED, check_finite, describe
 from ...networks import neurons
 
@@ -158,3 +161,36 @@ def _cost(rows: list[dict], timed: dict, dt_sample: float) -> None:
 
 def _steps(row: dict, dt_ms: float) -> float:
     return row["scene_duration_s"] * 1000.0 / dt_ms
+
+
+def band_spikes(events, settings) -> dict:
+    """``evaluation.bands``' compiled runs: every setting of ``settings`` (``BandSetting``)
+    over the band's sample ``events`` (``BandEvents``) in one compiled run
+    (``engine.settings_runs``), each neuron (event e, resonator j at index e·n + j) starting
+    at rest for its event's first sample, as ``neurons.simulate`` starts it; {setting:
+    ``Spikes`` or the ``NumericalInstabilityError`` met}. Settings with a window of their
+    own are left to the runtime target."""
+    whole = [s for s in settings if s.duration_s is None]
+    drives, pairs = {}, []
+    m = events.n_events
+    for s in whole:
+        array = array_of(events.band, s)
+        key = f"hz_per_k {s.hz_per_k}"
+        if key not in drives:
+            first = np.repeat(np.asarray(events.coded[0], float), array.n_neurons)
+            rest = np.array([neurons.resting_state("resonator", array.b, float(i0))
+                             for i0 in first])
+            drives[key] = SceneDrive(key, np.asarray(events.coded, float), float(events.rate_hz),
+                                     np.tile(np.asarray(array.k, float), m),
+                                     np.repeat(np.arange(m), array.n_neurons), rest[:, 0],
+                                     rest[:, 1], float(array.b))
+        pairs.append((s.method, float(s.dt_ms)))
+    if not whole:
+        return {}
+    runs = settings_spikes(list(drives.values()), (), (), pairs=pairs)
+    out = {}
+    for s in whole:
+        run = runs[(f"hz_per_k {s.hz_per_k}", s.method, float(s.dt_ms))]
+        out[s] = run if isinstance(run, NumericalInstabilityError) else Spikes(
+            run.spike_i, run.spike_t_ms)
+    return out
