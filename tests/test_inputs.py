@@ -227,7 +227,7 @@ def bounds_root():
     ("exploration", ["network.gate.epochs=10000"], "network.gate"),
     ("speed_accuracy", ["cost.n_neurons=[24, 100000]", 'cost.settings=[["euler", 0.01]]'],
      "cost.n_neurons"),
-    ("model_selection", ["stimulus.repetitions=2000"], "stimulus.repetitions"),
+    ("model_selection", ["stimulus.repetitions=20000"], "stimulus.repetitions"),
 ])
 def test_every_knob_that_makes_a_run_long_needs_yes(tmp_path, capsys, monkeypatch, spec,
                                                    settings, field):

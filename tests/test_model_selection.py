@@ -199,3 +199,14 @@ def test_quick_profile_runs_end_to_end(tmp_path):
                      log=lambda *a: None)
     assert summary["candidates"]["friction"]["unreadable"] == [1.0]
     assert summary["selection"]["chosen"] in (*summary["candidates"], None)
+
+
+@pytest.mark.slow
+def test_grid_points_on_dask_workers_give_the_grid_measured_here(tmp_path):
+    here = ms.run(ms.plan(_trimmed_quick(tmp_path)), tmp_path / "here", Options(quick=True),
+                  log=lambda *a: None)
+    spec = _trimmed_quick(tmp_path)
+    spec["stimulus"]["n_jobs"] = 2      # two local Dask workers, a grid point each
+    there = ms.run(ms.plan(spec), tmp_path / "there", Options(quick=True), log=lambda *a: None)
+    assert there["grid"] == here["grid"]
+    assert there["selection"] == here["selection"]

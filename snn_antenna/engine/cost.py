@@ -156,6 +156,11 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
                        sources=rates.sources(used_rates))
 
 
+def compile_seconds(engine: str) -> float:
+    """One build of a compiled ``engine``'s project (0 for a runtime engine)."""
+    return rates.rates()["compile_s"].get(engine, rates.Rate(0.0, "")).value
+
+
 def study_overhead_s() -> float:
     """What every study run costs beside its work: the process's start (imports) and its
     report (``rates.rates()``)."""
@@ -196,17 +201,27 @@ def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list
              engine_of(gate.target))]
 
 
-# Bench contact events generated, processed and read out by the paper's pipelines per second,
-# and the fixed cost of one bench set (loading, fitting, the report's statistics): from the
-# model-selection study's documented times on 2 shared cores (`snn-antenna run
-# studies/model_selection.toml`: 21 sets of 12,800 events in about 50 min; `--quick`: 7 sets of
-# 128 events in about a minute), rounded so the estimate errs long.
-MEASURED_BENCH_EVENTS_PER_S = 90.0
-BENCH_SET_S = 8.0
+# A bench set's cost: generating its contact events and extracting their features, per event
+# on one process; then the read-outs' fits, per event, per split (seed) and per training
+# iteration summed over the read-outs (``Evaluation``'s mlp, NMF and material iterations).
+# Measured with `snn-antenna run studies/model_selection.toml --quick --set
+# 'selection.candidates=[{physics="current", strengths=[1.0]}]'` at stimulus.repetitions 4 and
+# 40 (128 and 1,280 events, 2.2 and 7.6 s), and at 40 with the full profile's evaluation
+# (3 seeds, 760 iterations: 12.3 s), AMD EPYC 2 cores, load average 3.5; the first set of a
+# process also pays its imports (BENCH_FIRST_SET_S).
+BENCH_EVENT_S = 4.4e-3
+FIT_EVENT_ITERATION_S = 1.8e-6
+BENCH_FIRST_SET_S = 1.5
 
 
 def bench_seconds(n_events: int, n_jobs: int = 1) -> float:
-    """Time to make, process and read out a bench set of ``n_events`` on ``n_jobs``
-    processes."""
+    """Time to make a bench set of ``n_events`` and extract its events' features on
+    ``n_jobs`` processes."""
     jobs = max(1, min(n_jobs, os.cpu_count() or 1))
-    return BENCH_SET_S + n_events / (MEASURED_BENCH_EVENTS_PER_S * jobs)
+    return n_events * BENCH_EVENT_S / jobs
+
+
+def fit_seconds(n_events: int, seeds: int, iterations: int) -> float:
+    """Time to fit read-outs of ``iterations`` training iterations in all on ``n_events``
+    events, once per split of ``seeds``."""
+    return n_events * seeds * iterations * FIT_EVENT_ITERATION_S

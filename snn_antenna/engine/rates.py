@@ -27,10 +27,9 @@ import numpy as np
 from ..core.files import atomic_write, cache_root, make_folder
 from ..core.provenance import code_hash
 from ..networks import neurons
-from ..networks.resonators import ResonatorArray
-from .codings import compiled_rate_maps
-from ..networks.resonators import rate_map
+from ..networks.resonators import ResonatorArray, rate_map
 from ..readout.contacts import ContactDetector
+from .codings import compiled_rate_maps
 
 
 @dataclass(frozen=True)
@@ -54,18 +53,20 @@ class Rate:
 # --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
 # with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
 # [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
-# estimate errs long. Standalone is taken as cython (its compile is added separately).
+# estimate errs long. (Standalone: below.)
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
 TABLE = {
     "neuron_steps_per_s": {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8,
                            "codings": 3.0e7},
     # (codings: the compiled loop's own cost per step is about a microsecond; the probe
     # charges it to the neuron-steps and the run)
-    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 4.0e4, "codings": 1.0e6},
+    # (standalone: the compiled loop's per-step cost, about a microsecond as the codings
+    # probe measures it; the run's own cost is its binary's start, in run_s)
+    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 1.0e6, "codings": 1.0e6},
     "compile_s": {"standalone": 20.0, "codings": 20.0},
     # a compiled project's run beside its neurons' work: the binary's start, its inputs
     # written and its results read back
-    "run_s": {"codings": 0.5},
+    "run_s": {"codings": 0.5, "standalone": 0.5},
     # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
     # and the package imported) and its report; one window of a rate map through the contact
     # rule (``ContactDetector.detect``: 91 maps of 80 windows took 63 s of a quick gating
@@ -133,6 +134,7 @@ PROBE_S = 0.2           # simulated per probe run, dt 0.1 ms: 2,000 steps
 # neurons: the step overhead, then the neurons' own cost (numpy's per-step overhead of
 # milliseconds under load hides 2,400 neurons' work; 24,000 stand out of it)
 PROBE_SIZES = (24, 24000)
+PROBE_LONGER = 5        # the small size's second run: this many times PROBE_S
 PROBE_CODINGS = (10, 100)   # codings (of 24 neurons) in the compiled probe groups ...
 CODINGS_PROBE_S = 0.5       # ... each coding this long (5,000 steps)
 
@@ -152,23 +154,31 @@ def _best_of(run, repeats: int = 2) -> float:
     return best
 
 
-def _runtime(target: str) -> tuple[float, float]:
-    """(steps/s, neuron-steps/s) of ``neurons.simulate`` on ``target``, from two sizes."""
-    rate_hz, n_samples = 1000.0, int(PROBE_S * 1000)
+def _runtime(target: str) -> tuple[float, float, float]:
+    """(steps/s, neuron-steps/s, s per run) of ``neurons.simulate`` on ``target``: two sizes
+    over ``PROBE_S``, and the small size over ``PROBE_LONGER`` times as long. A run's own
+    cost (building the network, preparing its code objects) is not a step's: a short run
+    alone would charge it to every step and make a long run look many times slower."""
+    rate_hz, n_samples = 1000.0, int(PROBE_S * PROBE_LONGER * 1000)
     steps = PROBE_S * 1000 / 0.1
-    # one input of 24 columns for both sizes: its shape is compiled in, the group's size not
+    # one input of 24 columns for every run: its shape is compiled in, the group's size
+    # and the run's length (run_ms) not
     current = _square(n_samples, PROBE_SIZES[0], rate_hz)
-    times = []
-    for n in PROBE_SIZES:
-        def run(n=n):
+    times = {}
+    for n, longer in ((PROBE_SIZES[0], 1), (PROBE_SIZES[0], PROBE_LONGER), (PROBE_SIZES[1], 1)):
+        def run(n=n, longer=longer):
             neurons.simulate("resonator", current, 0.1, k=np.linspace(0.3, 1.5, n),
                              method="rk2", input_dt_ms=1.0, target=target,
-                             input_index=np.arange(n) % current.shape[1])
+                             input_index=np.arange(n) % current.shape[1],
+                             run_ms=PROBE_S * longer * 1000)
         run()                               # code generation, compiling
-        times.append(_best_of(run))
-    per_neuron = (times[1] - times[0]) / (steps * (PROBE_SIZES[1] - PROBE_SIZES[0]))
-    per_step = times[0] / steps - PROBE_SIZES[0] * per_neuron
-    return _inverse(per_step), _inverse(per_neuron)
+        times[n, longer] = _best_of(run)
+    small, big = PROBE_SIZES
+    per_neuron = (times[big, 1] - times[small, 1]) / (steps * (big - small))
+    per_step = ((times[small, PROBE_LONGER] - times[small, 1]) / ((PROBE_LONGER - 1) * steps)
+                - small * per_neuron)
+    per_run = times[small, 1] - steps * (max(per_step, 0.0) + small * max(per_neuron, 0.0))
+    return _inverse(per_step), _inverse(per_neuron), max(per_run, 0.0)
 
 
 def _inverse(seconds: float) -> float:
@@ -206,8 +216,8 @@ FIGURES_PER_REPORT = 6   # the gating study's report draws 6, the others 2 to 8
 
 def _start() -> tuple[float, float]:
     """Seconds for a new process to import what a study imports (Python, Brian2, matplotlib,
-    the package's command), and for its report (``FIGURES_PER_REPORT`` rate-map figures
-    drawn and saved as PNG)."""
+    the package's command and the studies' stages), and for its report
+    (``FIGURES_PER_REPORT`` rate-map figures drawn and saved as PNG)."""
     import subprocess
     import sys
 
@@ -217,13 +227,20 @@ def _start() -> tuple[float, float]:
               "ax.imshow(np.random.default_rng(0).random((24, 150)), aspect='auto'); "
               "fig.savefig(io.BytesIO(), format='png', dpi=110); "
               "print(time.perf_counter() - t0)")
-    t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-c",
-                           f"import brian2, snn_antenna.cli; {figure}"],
-                          check=True, capture_output=True, text=True)
-    whole = time.perf_counter() - t0
-    one_figure = float(done.stdout.split()[-1])
-    return whole - one_figure, FIGURES_PER_REPORT * one_figure
+    # every study's stages imported, as a study's run imports its own (scikit-learn, Dask,
+    # xarray, zarr); the best of two: the first start may read the files from disk
+    imports = ("import brian2, importlib, snn_antenna.cli; "
+               "from snn_antenna.studies import STUDIES; "
+               "[importlib.import_module(f'snn_antenna.studies.{s}.run') for s in STUDIES]")
+    best = (np.inf, 0.0)
+    for _ in range(2):
+        t0 = time.perf_counter()
+        done = subprocess.run([sys.executable, "-c", f"{imports}; {figure}"],
+                              check=True, capture_output=True, text=True)
+        whole = time.perf_counter() - t0
+        one_figure = float(done.stdout.split()[-1])
+        best = min(best, (whole - one_figure, one_figure))
+    return best[0], FIGURES_PER_REPORT * best[1]
 
 
 def _readout_window() -> float:
@@ -244,20 +261,21 @@ def _readout_window() -> float:
 
 def probe(log=print) -> dict[str, dict[str, Rate]]:
     """Measure the probed rates on this machine now, store them, and return ``rates()``."""
-    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}}
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}, "run_s": {}}
     for target in ("numpy", "cython"):
-        per_step, per_neuron = _runtime(target)
+        per_step, per_neuron, per_run = _runtime(target)
         measured["steps_per_s"][target] = per_step
         measured["neuron_steps_per_s"][target] = per_neuron
-        log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s "
-            "(0: not resolved, the table's stays)")
+        measured["run_s"][target] = per_run
+        log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s, "
+            f"{per_run:.2f} s per run (0: not resolved, the table's stays)")
     start, report = _start()
     measured["python_s"] = {"study_start": start, "report": report,
                             "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
     per_run, per_neuron, build = _codings()
-    measured["run_s"] = {"codings": per_run}
+    measured["run_s"]["codings"] = per_run
     measured["neuron_steps_per_s"]["codings"] = per_neuron
     measured["compile_s"]["codings"] = max(build, 1.0)
     log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s and {per_run:.2f} s per "

@@ -218,6 +218,24 @@ def brian_spikes(events: BandEvents, setting: BandSetting, target: str = "cython
 
 
 WARM_UP_MS = 5.0          # compiles what the timed run runs; its spikes are unused
+COST_SAMPLE_SHARE = 0.2   # the share of a window a compiled setting's cost is timed on
+
+
+def sampled_cost(events: BandEvents, setting: BandSetting, target: str, repeat: int,
+                 spikes: Spikes) -> Spikes:
+    """``spikes`` (a compiled run's) with the cost of the setting on ``target``: timed over
+    the first ``WARM_UP_MS`` and the first ``COST_SAMPLE_SHARE`` of the window (compiled
+    first), the run's own cost and its cost per step from the two, and the whole window's
+    steps costed by them."""
+    window_s = min(setting.duration_s or events.duration_s, events.duration_s)
+    short, sample = WARM_UP_MS / 1000.0, max(window_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000)
+    first = brian_spikes(events, replace(setting, duration_s=short), target, repeat)
+    part = brian_spikes(events, replace(setting, duration_s=sample), target, repeat)
+    costs = []
+    for a, b in ((first.cpu_s, part.cpu_s), (first.wall_s, part.wall_s)):
+        per_s = max(b - a, 0.0) / (sample - short)
+        costs.append(max(a - short * per_s, 0.0) + per_s * window_s)
+    return Spikes(spikes.spike_i, spikes.spike_t_ms, *costs)
 RATE_WINDOW_S = 0.05      # the rate map's window: the bank's time bins are 0.1 s and coarser
 
 
@@ -241,21 +259,31 @@ def band_errors(run: Spikes, ref: Spikes, n: int, duration_s: float,
 
 
 def measure(events: BandEvents, setting: BandSetting, ref: Spikes, target: str = "cython",
-            cost_events: int = 1) -> dict:
+            cost_events: int = 1, compiled=None) -> dict:
     """One band at one setting: where its k·dt lies, its errors against ``ref`` (the
     reference at the same Hz per unit k) and its cost per event, timed on a group of at
-    least ``cost_events`` events (the sample's, repeated)."""
+    least ``cost_events`` events (the sample's, repeated). ``compiled``: the setting's
+    spikes from a compiled run of the same model (``Spikes``, or the
+    ``NumericalInstabilityError`` it met): its errors are scored from them, and its cost is
+    timed on ``target`` over the first ``COST_SAMPLE_SHARE`` of the window
+    (``sampled_cost``)."""
     lo, hi = k_dt_range(events.band, setting)
     row = {"band": events.name, "setting": setting.label(), **asdict(setting),
            "hz_per_k": setting.tuned(events.band).hz_per_k, "k_dt_min": lo, "k_dt_max": hi,
            "accurate_k_dt": ACCURATE_K_DT[setting.method],
            "inside_accurate_range": hi <= ACCURATE_K_DT[setting.method],
            "n_events": events.n_events, "target": target}
+    repeat = max(1, -(-cost_events // events.n_events))
+    if isinstance(compiled, NumericalInstabilityError):
+        return dict(row, status=f"non-finite: {compiled}", errors_from="compiled")
     try:
-        repeat = max(1, -(-cost_events // events.n_events))
-        run = brian_spikes(events, setting, target, repeat)
+        run = (brian_spikes(events, setting, target, repeat) if compiled is None else
+               sampled_cost(events, setting, target, repeat, compiled))
     except NumericalInstabilityError as exc:
         return dict(row, status=f"non-finite: {exc}")
+    if compiled is not None:
+        row.update(errors_from="compiled", cost_from=f"{target}, timed on the first "
+                   f"{COST_SAMPLE_SHARE:.0%} of the window and costed by steps")
     n = events.n_events * events.band.n_neurons
     window_ms = 1000.0 * (setting.duration_s or events.duration_s)
     window_ms = min(window_ms, 1000.0 * events.duration_s)
@@ -410,7 +438,7 @@ def recalibrate(study: BandStudy, band: Band, rate_hz: float, log=print) -> tupl
                       "freqs_hz": [float(f) for f in freqs]}
 
 
-def study_band(study: BandStudy, name: str, data, log=print) -> dict:
+def study_band(study: BandStudy, name: str, data, log=print, compiled=None) -> dict:
     """A band's error and cost at ``SMALL_SIGNAL_EULER``, each method at ``candidate_steps`` (the
     recalibrated Hz per unit k), the cheapest of those within the rate-map tolerance, and the
     tuning at the chosen setting."""
@@ -418,23 +446,26 @@ def study_band(study: BandStudy, name: str, data, log=print) -> dict:
     events = code_events(name, band, data, study.duration_s)
     n = events.n_events * band.n_neurons
     ref = reference_spikes(events)
-    rows = [dict(measure(events, SMALL_SIGNAL_EULER, ref, study.target, study.cost_events),
-                 role="before")]
     out = {"reference_cpu_s": ref.cpu_s,
            "truncation": [{"window_s": w, "rate_map_error": truncation_error(
                ref, n, events.duration_s, w)} for w in study.windows_s]}
     hz_per_k = band.hz_per_k
+    before_ref = ref
     if name in study.calibrate:
         hz_per_k, out["tuning"] = recalibrate(study, band, events.rate_hz, log)
         ref = reference_spikes(events, hz_per_k)
         out["reference_cpu_s"] += ref.cpu_s
-    for method in study.methods:
-        for dt_ms in candidate_steps(band, method, hz_per_k, study.coarser_steps):
-            setting = BandSetting(method, dt_ms, hz_per_k)
-            rows.append(dict(measure(events, setting, ref, study.target, study.cost_events),
-                             role="candidate"))
-            log(f"    {name}: {setting.label()}: rate-map error "
-                f"{rows[-1].get('rate_map_error')}")
+    candidates = [BandSetting(method, dt_ms, hz_per_k) for method in study.methods
+                  for dt_ms in candidate_steps(band, method, hz_per_k, study.coarser_steps)]
+    # every setting's spikes from one compiled run when the caller has the engine for it
+    runs = compiled(events, [SMALL_SIGNAL_EULER] + candidates) if compiled else {}
+    rows = [dict(measure(events, SMALL_SIGNAL_EULER, before_ref, study.target,
+                         study.cost_events, runs.get(SMALL_SIGNAL_EULER)), role="before")]
+    for setting in candidates:
+        rows.append(dict(measure(events, setting, ref, study.target, study.cost_events,
+                                 runs.get(setting)), role="candidate"))
+        log(f"    {name}: {setting.label()}: rate-map error "
+            f"{rows[-1].get('rate_map_error')}")
     chosen = choose(rows, study.rate_map_error)
     if chosen is not None:
         chosen["role"] = "chosen"
@@ -464,12 +495,15 @@ def apply_line(name: str, chosen: dict | None) -> str:
             f"{chosen['hz_per_k']:.4g} Hz per unit k")
 
 
-def run_study(study: BandStudy, seed: int = 0, log=print) -> dict:
-    """Every band of ``study`` on one set of sample events."""
+def run_study(study: BandStudy, seed: int = 0, log=print, compiled=None) -> dict:
+    """Every band of ``study`` on one set of sample events. ``compiled(events, settings)``:
+    each setting's spikes (``Spikes``, or the ``NumericalInstabilityError`` met) from one
+    compiled run of the same model, for ``measure`` (None: every setting runs on the
+    study's target)."""
     data = sample_data(study.materials, study.positions_cm, study.repetitions, seed)
     out = {"accurate_k_dt": dict(ACCURATE_K_DT), "n_events": int(data.sizes["event"]),
            "bands": {}}
     for name in study.bands:
         log(f"  band {name}")
-        out["bands"][name] = study_band(study, name, data, log)
+        out["bands"][name] = study_band(study, name, data, log, compiled)
     return out

@@ -11,7 +11,8 @@ import numpy as np
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check
-from ...engine.cost import bench_seconds, engine_of, max_workers, stages_estimate
+from ...engine.cost import (bench_seconds, compile_seconds, engine_of, fit_seconds, max_workers,
+                             stages_estimate)
 from ...evaluation import antenna_fit
 from ...evaluation import crossval as cv
 from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
@@ -246,8 +247,14 @@ def check_splits(parts: Parts) -> None:
 def estimate(parts: Parts):
     """The bench set (made once, then cached) and the spiking read-out of its events: every
     band's bank over every event, ``batch_events`` events per Brian2 run, runs shared among
-    the workers."""
+    the workers; each array design, the tuned bank, its coders and its accuracy curve, each
+    a compiled project of its own over its events; every bank's cost sample; and the
+    read-outs' fits on every split."""
     events = parts.bench.n_events
+    per_repetition = events // max(1, parts.bench.repetitions)
+    ev = parts.evaluation
+    n_bins = int(parts.processor.max_hz) + 1
+    fits = len(ev.baselines(n_bins))
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],
                bench_seconds(events, parts.bench.n_jobs))]
     bank = parts.bank
@@ -260,4 +267,65 @@ def estimate(parts: Parts):
                       band.n_neurons * min(events, bank.batch_events),
                       engine_of(bank.target))] * -(-chunks // workers)
         stages.append(("stimulus.repetitions", parts.bench.repetitions, runs))
+        stages += _more_banks(parts, events, per_repetition)
+        # the spiking read-outs: one per band and one of all, each on its inputs
+        fits += len(bank.bands) + 1
+    # every read-out fits on every split; a fit's iterations as the model selection's
+    # read-outs' (fit_seconds is per their summed iterations: material MLP, NMF, MLP)
+    per_fit = (ev.material_max_iter + ev.nmf_max_iter + ev.mlp_max_iter) / FITS_PER_SUM
+    stages.append(("evaluation.seeds", list(ev.seeds), [],
+                   fit_seconds(events, len(ev.seeds), fits * per_fit)))
     return stages_estimate("the bench set and its spiking read-out", stages)
+
+
+# the read-outs fit_seconds' constant was measured on (the model selection's per point)
+FITS_PER_SUM = 5
+
+
+def _more_banks(parts: Parts, events: int, per_repetition: int) -> list:
+    """The stages beside the main bank: each design over ``design_repetitions``, the tuned
+    bank, its coders at each size and its curve, and each bank's cost sample (a warm-up and
+    ``cost_repeats`` runs of ``cost_sample_events`` in one chunk). Every bank is a project
+    of its own: one compile each (``compile_s``, in the job estimate once per engine, added
+    here for the others)."""
+    plan, bank = parts.plan, parts.bank
+    engine = engine_of(bank.target)
+    compiles = len(parts.designs)
+    stages = []
+    design_events = min(events, plan.design_repetitions * per_repetition)
+    design_runs = []
+    for design in parts.designs:
+        band = design.band_of(bank)
+        design_runs.append((bank.duration_s, band.dt_ms or bank.dt_ms,
+                            band.n_neurons * design_events, engine))
+    if design_runs:
+        stages.append(("spiking.design_repetitions", plan.design_repetitions, design_runs))
+    tuned = plan.tuned_plan()
+    if tuned is not None:
+        base = tuned.base
+        # the tuned channels' step: the largest k·dt the template allows at the top of range
+        dt_ms = base.max_k_dt * base.hz_per_k / base.range_hz[1]
+        calibration = tuned.calibration_repetitions * per_repetition
+        sizes = [base.n_resonators] + [n for _ in tuned.coders for n in tuned.coder_sizes]
+        curve_events = min(events, tuned.curve_repetitions * per_repetition)
+        every_event = [(tuned.duration_s, dt_ms, n * events, engine) for n in sizes]
+        runs = [(tuned.duration_s, dt_ms, n * curve_events, engine) for n in tuned.curve]
+        # a bank's project is its size's (the channels' tuning is a run argument): one build
+        # per distinct size, the cost samples' (one chunk of the sample) apart
+        compiles += 2 * len(set(sizes) | set(tuned.curve)) - len(set(tuned.curve) - set(sizes))
+        # each tuned bank's cost: the best of cost_repeats runs of the sample
+        cost_runs = [(tuned.duration_s, dt_ms, n * plan.cost_sample_events, engine)
+                     for n in sizes] * tuned.cost_repeats
+        curve_fits = fit_seconds(curve_events, 1, 2 * len(tuned.curve)
+                                 * parts.evaluation.mlp_max_iter / FITS_PER_SUM)
+        stages.append(("stimulus.repetitions", parts.bench.repetitions, every_event,
+                       bench_seconds(calibration, parts.bench.n_jobs)))
+        stages.append(("spiking.tuned.curve", tuned.curve, runs, curve_fits))
+    # the main bank's cost: one run of the sample (after a warm-up on two events)
+    sample = [(bank.duration_s, band.dt_ms or bank.dt_ms,
+               band.n_neurons * plan.cost_sample_events, engine)
+              for band in bank.bands.values()] + (cost_runs if tuned is not None else [])
+    compiles += 1          # the main bank's cost sample
+    stages.append(("spiking.cost_sample_events", plan.cost_sample_events, sample,
+                   compiles * compile_seconds(engine)))
+    return stages

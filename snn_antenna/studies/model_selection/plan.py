@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check, is_number
-from ...engine.cost import bench_seconds, stages_estimate
+from ...engine.cost import BENCH_FIRST_SET_S, bench_seconds, fit_seconds, stages_estimate
 from ...evaluation import crossval as cv
 from ...readout import events
 from ...sources.bench import BenchSpec
@@ -18,7 +18,7 @@ from ..sections import bench_section, evaluation_section, events_section
 from .protocol import PAPER_PAIR
 
 SECTIONS = ("stimulus", "events", "evaluation", "selection")
-OPTIONS = (*COMMON, "fresh")
+OPTIONS = (*COMMON, "fresh", "scheduler")
 
 
 @dataclass
@@ -83,6 +83,12 @@ def estimate(parts: Parts):
     """A bench set per grid point (every candidate's strengths), its events processed and
     read out (no Brian2)."""
     points = sum(len(c.strengths) for c in parts.selection.candidates)
+    ev, events = parts.evaluation, parts.bench.n_events
+    # each point fits the material MLP, NMF-30 and its classifier, and the distance MLPs
+    iterations = ev.material_max_iter + ev.nmf_max_iter + ev.mlp_max_iter
+    per_point = (bench_seconds(events, parts.bench.n_jobs)
+                 + fit_seconds(events, len(ev.seeds), iterations))
+    workers = max(1, min(parts.bench.n_jobs, points))
     return stages_estimate("the candidates' bench sets and read-outs", [
         ("stimulus.repetitions", parts.bench.repetitions, [],
-         points * bench_seconds(parts.bench.n_events, parts.bench.n_jobs))])
+         BENCH_FIRST_SET_S + points * per_point / workers)])

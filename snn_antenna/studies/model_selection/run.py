@@ -4,12 +4,15 @@ calibration targets, the candidates compared on their predictions; the summary a
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
 from ...core.logfile import logged
+from ...engine.batches import Batches
+from ...engine.executor import executor
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...evaluation.confusion import confusion
@@ -38,10 +41,17 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     spec, parts, quick, fresh = plan.spec, plan.parts, options.quick, options.fresh
     out_dir, t0 = Path(out_dir), time.perf_counter()
     grid = [(c.physics, float(s)) for c in parts.selection.candidates for s in c.strengths]
-    points = []
-    for i, (physics, strength) in enumerate(grid, 1):
-        log(f"[{i}/{len(grid)}] {physics} × {strength:g}")
-        points.append(measure(parts, physics, strength, log, fresh))
+    # every grid point is independent (its own bench set, seeded by the spec): one Batches
+    # item each, on the Dask workers of --scheduler or stimulus.n_jobs local ones, else here
+    workers = max(1, min(parts.bench.n_jobs, len(grid)))
+    with executor(workers, options.scheduler, log) as client:
+        work = MeasurePoints(parts, fresh, log if client is None else print)
+        batches = Batches(work, per_run=1, client=client)
+        pending = batches.submit(grid)
+        points = []
+        for i, ((physics, strength), run) in enumerate(zip(grid, pending), 1):
+            log(f"[{i}/{len(grid)}] {physics} × {strength:g}")
+            points += batches.collect([run])
     candidates = {c.physics: choose(c.physics, [p for p in points if p["physics"] == c.physics])
                   for c in parts.selection.candidates}
     decision = select(candidates)
@@ -63,6 +73,18 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     log(f"chosen: {decision['chosen']} ({decision['reason']})")
     log(f"report in {out_dir}/report.html ({summary['timing']['total_s']:.0f} s)")
     return summary
+
+
+@dataclass(frozen=True)
+class MeasurePoints:
+    """``engine.batches.Batches`` work: grid points (mechanism, strength) → ``measure``."""
+    parts: Parts
+    fresh: bool = False
+    log: Callable = print
+
+    def __call__(self, points: list) -> list:
+        return [measure(self.parts, physics, strength, self.log, self.fresh)
+                for physics, strength in points]
 
 
 def measure(parts: Parts, physics: str, strength: float, log=print, fresh=False) -> dict:

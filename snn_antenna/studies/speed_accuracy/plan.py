@@ -11,7 +11,7 @@ from ...core.errors import check
 from ...engine.cost import engine_of, stages_estimate
 from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
 from ...evaluation.accuracy import Match, StabilityGrid
-from ...evaluation.bands import BENCH_BANDS, BandStudy
+from ...evaluation.bands import BENCH_BANDS, SMALL_SIGNAL_EULER, BandStudy, candidate_steps
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import detector_from_spec
@@ -138,7 +138,8 @@ def plan(spec: dict) -> Plan:
 
 
 def estimate(parts: Parts):
-    """The main sweep (every scene at every method and dt), the cost sweep (its settings at
+    """The main sweep (every scene at every method and dt in one compiled run, and a timed
+    sample per scene and method on its target), the cost sweep (its settings at
     every target, float type and array size), the stability map, the bench bands (their
     sample events at every method and step, and the tuning that recalibrates them) and the
     sweep engine's precision grid (per float type)."""
@@ -147,8 +148,15 @@ def estimate(parts: Parts):
                **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
     size = {"tuning": array.n_neurons * parts.tuning.n_freqs}
     sweep, cost = parts.sweep, parts.cost
-    main = [(seconds[s], float(dt), size.get(s, array.n_neurons), engine_of(sweep.target))
-            for s in sweep.scenes for dt in sweep.dt_ms] * len(sweep.methods)
+    # the main sweep: one compiled run, a group per method and dt holding every scene's
+    # neurons for the longest scene (engine.settings_runs); then per scene and method one
+    # timed run on the sweep's target, at its finest step (main_sweep)
+    longest = max(seconds[s] for s in sweep.scenes)
+    neurons_all = sum(size.get(s, array.n_neurons) for s in sweep.scenes)
+    main = [(longest, float(dt), neurons_all, "codings") for dt in sweep.dt_ms
+            ] * len(sweep.methods)
+    main += [(seconds[s], float(min(sweep.dt_ms)), size.get(s, array.n_neurons),
+              engine_of(sweep.target)) for s in sweep.scenes] * len(sweep.methods)
     # the recommendation is the fastest setting that matches: sized as the spec's settings
     settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
     costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
@@ -162,8 +170,15 @@ def estimate(parts: Parts):
     for name in bands.bands:
         band = BENCH_BANDS[name]
         dt = band.dt_ms or min(sweep.dt_ms)
-        band_runs += [(bands.duration_s, dt, band.n_neurons * events, engine_of(bands.target))
-                      ] * (len(bands.methods) * (bands.coarser_steps + 2))
+        # each run as evaluation.bands runs it: the small-signal setting, then every method
+        # at its candidate steps (at the band's own Hz per k: a recalibration moves them
+        # little), each over a group of at least cost_events events
+        group = band.n_neurons * max(events, bands.cost_events)
+        settings = [(SMALL_SIGNAL_EULER.dt_ms, group)] + [
+            (step, group) for method in bands.methods
+            for step in candidate_steps(band, method, None, bands.coarser_steps)]
+        band_runs += [(bands.duration_s, step, size, engine_of(bands.target))
+                      for step, size in settings]
         if name in bands.calibrate:
             band_runs.append((bands.tuning_duration_s, dt, band.n_neurons * bands.n_freqs,
                               engine_of(bands.target)))

@@ -22,6 +22,7 @@ from ...evaluation.bands import run_study as run_band_study
 from ...networks.resonators import ResonatorArray
 from ...report.page import Report
 from ..contract import Options, Plan
+from . import main_sweep
 from . import precision as engine_precision
 from .plan import Parts
 from .report import human_summary, quick_note, write_report
@@ -124,11 +125,11 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         log(f"[2/7] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
         refs, ref_rows, convergence = solve_references(plan, workloads, log)
         runs = Measurements(workloads, refs, runlog, log)
-        main = [(name, Setting(m, dt, sweep.target, sweep.dtype)) for name in sweep.scenes
-                for m in sweep.methods for dt in sorted(sweep.dt_ms)]
-        log(f"[3/7] main sweep: {len(main)} runs ({sweep.target}, {sweep.dtype})")
+        n_main = len(sweep.scenes) * len(sweep.methods) * len(sweep.dt_ms)
+        log(f"[3/7] main sweep: {n_main} settings in one compiled run ({sweep.dtype}); "
+            f"their cost on {sweep.target}, timed on a sample")
         with log.expected(UNSTABLE_ON_PURPOSE):   # coarse steps are forced past their limits
-            rows = runs.sweep("main", main)
+            rows, main_sweep_done = main_sweep.run(plan, workloads, refs, runlog, log)
         recommendations = tradeoff.recommend(rows, plan.match)
         cost = cost_pairs(plan, recommendations, workloads[plan.cost.scene].n_neurons)
         log(f"[4/7] cost sweep on {plan.cost.scene}: {len(cost)} runs "
@@ -141,12 +142,13 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
             smap = stab.map(sweep.methods, b=plan.net.get("b", ResonatorArray.b))
         write_dataset(smap, out_dir / "stability_map.zarr")
         log(f"[6/7] bench bands ({', '.join(plan.bands.bands)}) against the reference")
-        bands = run_band_study(plan.bands, seed, log)
+        bands = run_band_study(plan.bands, seed, log, compiled=main_sweep.band_spikes)
         # last: the compiled sweep engine holds Brian2's one standalone device from here on
         log(f"[7/7] sweep engine precision ({', '.join(plan.precision.dtypes) or 'none'}) "
             "against float64; report")
         precision = engine_precision.run(plan.precision, plan.match.rate_map_error, log)
         summary = summarise(plan, rows, (ref_rows, convergence), recommendations, smap)
+        summary["main_sweep"] = main_sweep_done
         summary["bands"] = bands
         summary["precision"] = precision
         summary["total_wall_s"] = time.perf_counter() - t_start

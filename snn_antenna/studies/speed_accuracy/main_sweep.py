@@ -1,0 +1,196 @@
+"""The main sweep: every method × dt on every scene, scored on the compiled engine, its cost
+on the sweep's runtime target timed on a sample.
+
+Accuracy: one compiled run steps every (scene, method, dt) of the grid
+(``engine.settings_runs``: the runtime path's model, so the spikes are the runtime run's up
+to the compiler's rounding), each scored against its scene's reference as a runtime run is.
+
+Cost: what a user's choice costs is a run on the sweep's target (numpy or cython), so that is
+timed, on a sample: per scene and method, the finest step whose compiled run stayed finite
+within the method's stable limit, warmed up (compiling is not timed), then timed in full and
+over its first ``devices.WARM_UP_MS``. The two give the run's fixed cost (building the
+network) and its cost per step, and every other step of that scene and method is costed as
+fixed + per step × its steps (the row's ``cost_from`` says which rows were timed). A timed
+sample's own spike count beside the compiled run's is kept as a check (``agrees``).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ...core.errors import NumericalInstabilityError
+from ...engine.batches import Batches
+from ...engine.devices import WARM_UP_MS, Setting, float_precision, measure
+from ...engine.runlog import RunLog
+from ...evaluation.bands import Spikes, array_of
+from ...engine.settings_runs import SceneDrive, SettingsRuns, scene_drive, settings_spikes
+from ...evaluation.tradeoff import ERRORS, RAISED, check_finite, describe
+from ...networks import neurons
+
+TIMED = "timed"
+
+
+def score(workload, ref, setting: Setting, result) -> dict:
+    """One grid point's row from its compiled run, as ``devices.measure`` makes a runtime
+    run's (its cost filled in later, from the timed sample)."""
+    row = {"sweep": "main", "scene": workload.name, "method": setting.method,
+           "dt_ms": float(setting.dt_ms), "target": setting.target, "dtype": setting.dtype,
+           "n_neurons": workload.n_neurons, "k_dt": workload.k_max * setting.dt_ms,
+           "accuracy_from": "standalone", "scene_duration_s": scene_drive(workload).duration_s}
+    row["beyond_stable_limit"] = row["k_dt"] > neurons.MAX_STABLE_K_DT[setting.method]
+    if isinstance(result, NumericalInstabilityError):
+        row.update(status=RAISED, wall_s=None, cpu_s=None, compile_s=0.0, error=str(result),
+                   readout_matches=False, **{e: None for e in ERRORS}, distance_cm=None,
+                   n_spikes=None)
+        return row
+    row.update(status="ok", compile_s=0.0, n_spikes=int(len(result.spike_i)),
+               engine_cpu_s=result.cpu_s)
+    row.update(workload.errors(result, ref.run, ref.readout))
+    return check_finite(row, result)
+
+
+def _sample_dt(rows: list[dict]) -> float | None:
+    """The finest step of one scene and method that finished within its stable limit: the
+    longest run, so its per-step cost is measured over the most steps and every other step
+    is costed by fewer steps than it (the noise of a short run, multiplied up to a long one,
+    reordered settings whose costs lie within 20 % of each other)."""
+    ok = [r["dt_ms"] for r in rows if r["status"] == "ok" and not r["beyond_stable_limit"]]
+    return min(ok) if ok else None
+
+
+def _short_run(workload, setting: Setting):
+    """The sample's first ``WARM_UP_MS``, timed (compiled already: the network's own cost)."""
+    with float_precision(setting.dtype):
+        return workload.run(setting, warm_up=True)
+
+
+def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, dict]:
+    """The main sweep's rows and what it did (``summary["main_sweep"]``)."""
+    sweep = plan.sweep
+    dts, methods = sorted(float(d) for d in sweep.dt_ms), list(sweep.methods)
+    keys = [(s, m, dt) for s in sweep.scenes for m in methods for dt in dts]
+
+    def logged(s, m, dt):
+        return runlog.get(sweep="main", scene=s, method=m, dt_ms=dt, target=sweep.target,
+                          dtype=sweep.dtype, n_neurons=workloads[s].n_neurons)
+    rows = {key: logged(*key) for key in keys}
+    t0 = time.perf_counter()
+    if any(r is None for r in rows.values()):
+        drives = tuple(scene_drive(workloads[s]) for s in sweep.scenes)
+        # one compiled run of every method (the methods are Batches items: a client would
+        # spread them over its workers)
+        work = SettingsRuns(drives, tuple(dts), sweep.dtype)
+        results = {}
+        for part in Batches(work, per_run=len(methods)).run(methods):
+            results.update(part)
+        for key in keys:
+            if rows[key] is None:
+                s, m, dt = key
+                rows[key] = score(workloads[s], refs[s],
+                                  Setting(m, dt, sweep.target, sweep.dtype), results[key])
+                rows[key]["cost_from"] = None
+    compiled_s = time.perf_counter() - t0
+    log(f"  compiled run of {len(keys)} settings: {compiled_s:.1f} s (compiling included)")
+
+    samples, warmed = [], set()
+    for s in sweep.scenes:
+        for m in methods:
+            mine = [rows[(s, m, dt)] for dt in dts]
+            dt = _sample_dt(mine)
+            if dt is None:
+                continue
+            setting = Setting(m, dt, sweep.target, sweep.dtype)
+            timed = runlog.get(sweep="main_timing", scene=s, method=m, dt_ms=dt,
+                               target=sweep.target, dtype=sweep.dtype,
+                               n_neurons=workloads[s].n_neurons)
+            if timed is None:
+                timed = measure(workloads[s], refs[s], setting, warmed)
+                short = _short_run(workloads[s], setting)
+                timed.update(sweep="main_timing", short_cpu_s=short.cpu_s,
+                             short_wall_s=short.wall_s, short_ms=WARM_UP_MS)
+                runlog.add(timed)
+            log(f"  timed sample: {describe(timed)}")
+            samples.append(timed)
+            compiled = rows[(s, m, dt)]
+            agrees = timed["status"] == "ok" and timed["n_spikes"] == compiled["n_spikes"]
+            _cost(mine, timed, dt)
+            timed["agrees"] = bool(agrees)
+    for key in keys:
+        if rows[key]["status"] == "ok" and rows[key]["cpu_s"] is None:
+            rows[key]["cost_from"] = "no finished sample to cost it from"
+    for key in keys:
+        if logged(*key) is None:
+            runlog.add(rows[key])
+    out = [rows[key] for key in keys]
+    for r in out:
+        log(f"  {describe(r) if r['cpu_s'] is not None or r['status'] != 'ok' else r['scene']}")
+    return out, {"accuracy": "compiled cpp_standalone, every setting in one run "
+                             "(engine.settings_runs)",
+                 "settings": len(keys), "compiled_run_s": compiled_s,
+                 "cost": f"{sweep.target}, timed on a sample (per scene and method, the "
+                         "finest finished step) and costed by steps for the others",
+                 "timed_samples": len(samples),
+                 "samples_agree": sum(bool(t.get("agrees")) for t in samples),
+                 "samples": [{k: t.get(k) for k in ("scene", "method", "dt_ms", "target",
+                                                    "cpu_s", "wall_s", "short_cpu_s",
+                                                    "n_spikes", "agrees", "status")}
+                             for t in samples]}
+
+
+def _cost(rows: list[dict], timed: dict, dt_sample: float) -> None:
+    """Each finished row's cost from the timed sample at ``dt_sample``: the fixed part (the
+    short run less its steps) plus the per-step part times the row's steps."""
+    if timed["status"] != "ok":
+        return
+    for field in ("cpu_s", "wall_s"):
+        full, short = timed[field], timed[f"short_{field}"]
+        timed_steps = _steps(rows[0], dt_sample)
+        short_steps = WARM_UP_MS / dt_sample
+        per_step = max(full - short, 0.0) / max(timed_steps - short_steps, 1.0)
+        fixed = max(short - short_steps * per_step, 0.0)
+        for r in rows:
+            if r["status"] != "ok":
+                continue
+            if abs(r["dt_ms"] - dt_sample) < 1e-12:
+                r[field], r["cost_from"] = timed[field], TIMED
+            else:
+                r[field] = fixed + per_step * _steps(r, r["dt_ms"])
+                r["cost_from"] = f"timed at dt {dt_sample:g} ms, costed by steps"
+
+
+def _steps(row: dict, dt_ms: float) -> float:
+    return row["scene_duration_s"] * 1000.0 / dt_ms
+
+
+def band_spikes(events, settings) -> dict:
+    """``evaluation.bands``' compiled runs: every setting of ``settings`` (``BandSetting``)
+    over the band's sample ``events`` (``BandEvents``) in one compiled run
+    (``engine.settings_runs``), each neuron (event e, resonator j at index e·n + j) starting
+    at rest for its event's first sample, as ``neurons.simulate`` starts it; {setting:
+    ``Spikes`` or the ``NumericalInstabilityError`` met}. Settings with a window of their
+    own are left to the runtime target."""
+    whole = [s for s in settings if s.duration_s is None]
+    drives, pairs = {}, []
+    m = events.n_events
+    for s in whole:
+        array = array_of(events.band, s)
+        key = f"hz_per_k {s.hz_per_k}"
+        if key not in drives:
+            first = np.repeat(np.asarray(events.coded[0], float), array.n_neurons)
+            rest = np.array([neurons.resting_state("resonator", array.b, float(i0))
+                             for i0 in first])
+            drives[key] = SceneDrive(key, np.asarray(events.coded, float), float(events.rate_hz),
+                                     np.tile(np.asarray(array.k, float), m),
+                                     np.repeat(np.arange(m), array.n_neurons), rest[:, 0],
+                                     rest[:, 1], float(array.b))
+        pairs.append((s.method, float(s.dt_ms)))
+    if not whole:
+        return {}
+    runs = settings_spikes(list(drives.values()), (), (), pairs=pairs)
+    out = {}
+    for s in whole:
+        run = runs[(f"hz_per_k {s.hz_per_k}", s.method, float(s.dt_ms))]
+        out[s] = run if isinstance(run, NumericalInstabilityError) else Spikes(
+            run.spike_i, run.spike_t_ms)
+    return out
