@@ -100,9 +100,9 @@ def main(argv=None) -> dict:
     rows, fft = ceilings(cmp.features, F, parts.evaluation)
     out = {"events": int(len(ids)), "repetitions": args.repetitions,
            "seeds": parts.evaluation.seeds, **where,
-           "bank": {"resonators": bank.n_neurons, "channels": {
-               k: [round(b.highpass_hz, 1), round(b.lowpass_hz, 1)]
-               for k, b in bank.bands.items()},
+           "bank": {"resonators": bank.n_neurons,
+                    "channel_low_hz": [round(b.highpass_hz, 1) for b in bank.bands.values()],
+                    "channel_high_hz": [round(b.lowpass_hz, 1) for b in bank.bands.values()],
                "coder": plan.base.coder, "coder_amplitude": plan.base.coder_amplitude,
                "threshold_g": plan.base.threshold_g,
                "coder_options": dict(plan.base.coder_options),
