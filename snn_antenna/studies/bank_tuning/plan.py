@@ -83,7 +83,7 @@ class SearchPlan:
     test_fraction: float = 0.3
     cost_budget: float = 1.0
     front_limit: int = 2
-    space: dict = field(default_factory=dict)
+    space: dict = field(default_factory=lambda: {"channels": [6, 16], "b": [0.2, 0.32]})
 
     def __post_init__(self):
         bounds.declared(self)
