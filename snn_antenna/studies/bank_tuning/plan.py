@@ -159,12 +159,13 @@ def plan(spec: dict) -> Plan:
 
 def estimate(parts: Parts):
     """The bench set, the tuning contacts, a bank run per trial and per front bank (on the
-    bench set); ~25 ms per contact (measured on the tuned
-    24-resonator bank, 512 contacts, loaded 2-core machine: 12.6 s), ~60 s of compiling each."""
+    bench set). Measured on this project's 2-core machine under a load of ~8: a trial ~30 ms
+    per tuning contact with its inner MLPs (12 trials on 512 contacts: 4 min, compiles
+    included), a front bank ~6 ms per evaluated contact (400 contacts per 2.2 s chunk) and
+    ~30 s of compiling and MLPs."""
     n, tuning = parts.bench.n_events, parts.tuning_bench().n_events
-    per_event_s = 0.025       # the 24-resonator bank under load, whole window, per contact
-    search_s = parts.search.trials * (tuning * per_event_s + 60.0)   # + a compile each
-    front_s = parts.search.front_limit * (n * per_event_s + 60.0)
+    search_s = parts.search.trials * (tuning * 0.03 + 5.0)
+    front_s = parts.search.front_limit * (n * 0.006 + 30.0) + 60.0 * len(parts.evaluation.seeds)
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],
                bench_seconds(n, parts.bench.n_jobs) + search_s + front_s)]
     return stages_estimate("the bench set, the search and its front", stages)
