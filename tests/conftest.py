@@ -47,6 +47,7 @@ STORES = {
     "speed_accuracy": "runs.jsonl",
     "baseline_comparison": "out/.cache",   # relative to the run's working directory
     "model_selection": "out/.cache",
+    "bank_tuning": "trials.journal",
 }
 RUN_TIMEOUT_S = 900
 

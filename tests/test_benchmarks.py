@@ -56,6 +56,16 @@ def bands_ran(out: str, tmp_path: Path) -> None:
     assert "high band" in out
 
 
+def stage_ceilings_ran(out: str, tmp_path: Path) -> None:
+    record = cited(tmp_path / "bench.json", tmp_path)
+    assert [r["stage"] for r in record["stages"]] == ["band_pass", "coded"]
+    for row in record["stages"]:
+        assert 0 < row["accuracy_pct"]["mean"] <= 100 and row["accuracy_pct"]["n"] == 1
+        assert row["features"] == 2 * len(record["bank"]["channel_low_hz"]) * (
+            1 + len(record["bank"]["bin_edges_s"]))   # power and sign changes per bin
+    assert "band_pass |" in out and "coded |" in out
+
+
 def coders_ran(out: str, tmp_path: Path) -> None:
     record = cited(tmp_path / "bench.json", tmp_path)
     assert record["name"] == "bench_coders_cost_only"     # a section beside the full run's
@@ -111,6 +121,10 @@ SMALL_RUNS = {
                       "--set", "spiking.cost_sample_events=8"], coders_ran),
     "bench_events": (["--cost-only", "--cost-events", "4", "--sizes", "24",
                       "--json", "bench.json"], events_ran),
+    "bench_stage_ceilings": (["--repetitions", "2", "--stages", "band_pass", "coded",
+                              "--set", "evaluation.seeds=[0]",
+                              "--set", "spiking.tuned.calibration_repetitions=2",
+                              "--out", "bench.json"], stage_ceilings_ran),
     "bench_stream": (["--seconds", "1", "--baseline", "none"], stream_ran),
     "bench_studies": (["--studies", "quickstart", "--json", "bench.json"], studies_ran),
     "bench_sweep": (["--sizes", "40", "--duration-s", "0.05", "--repeat", "1",

@@ -41,6 +41,7 @@ STUDIES = [
     pytest.param("gating_threshold", marks=pytest.mark.slow),
     pytest.param("baseline_comparison", marks=pytest.mark.slow),
     pytest.param("model_selection", marks=pytest.mark.slow),
+    pytest.param("bank_tuning", marks=pytest.mark.slow),
 ]
 
 

@@ -27,6 +27,7 @@ STUDIES = {
     "speed_accuracy": "snn_antenna.studies.speed_accuracy",
     "baseline_comparison": "snn_antenna.studies.baseline_comparison",
     "model_selection": "snn_antenna.studies.model_selection",
+    "bank_tuning": "snn_antenna.studies.bank_tuning",
 }
 
 

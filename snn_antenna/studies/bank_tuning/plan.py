@@ -1,0 +1,171 @@
+"""The bank-tuning study's plan: the bench set, the event processor and the splits (the
+FFT-MLP's), the starting bank (``[bank]``) and the search (``[search]``, its space), all
+checked before any long work; its cost."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+from ...core import bounds
+from ...core import spec as specs
+from ...core.errors import SpecError, check, is_number
+from ...engine.cost import bench_seconds, stages_estimate
+from ...evaluation import crossval as cv
+from ...readout import events
+from ...readout.band_tuning import Tuning
+from ...readout.spiking import TARGETS
+from ...readout.spiking_decoders import TUNED_READOUTS
+from ...sources.source import BenchSet
+from ..contract import COMMON, Plan
+from ..sections import bench_section, evaluation_section, events_section
+
+SECTIONS = ("stimulus", "events", "evaluation", "bank", "search")
+OPTIONS = (*COMMON, "fresh", "scheduler")
+
+# The search space's keys: (kind, what a value is). "int" and "float" take [low, high]
+# (a "float" range whose low is > 0 may be searched in log: "log" kind); "choice" a list.
+SPACE_KEYS = {
+    "channels": ("int", "channels of the bank (narrow band-passes)"),
+    "per_channel": ("int", "resonators reading each channel"),
+    "range_low_hz": ("float", "lowest channel edge (Hz)"),
+    "range_high_hz": ("float", "highest channel edge (Hz)"),
+    "quantile": ("float", "Fisher-ratio quantile above which a bin is the material's"),
+    "spread": ("float", "a channel's resonators span centre × (1 ± spread)"),
+    "b": ("float", "the resonators' b"),
+    "gain": ("log", "the analog coder's current per g"),
+    "coder_amplitude": ("float", "the coder's saturation"),
+    "threshold_g": ("float", "the coder's dead zone (g)"),
+    "readout": ("choice", f"read-outs of the bank, out of {sorted(TUNED_READOUTS)}"),
+}
+
+
+@dataclass
+class BankPlan:
+    """``[bank]``: the bank the search starts from (``tuning``: ``band_tuning.Tuning``
+    fields; ``b``; ``readout``, a key of ``TUNED_READOUTS``) and how every bank runs."""
+    tuning: dict = field(default_factory=dict)
+    b: float = 0.26
+    readout: str = "spiking_tuned_bins"
+    duration_s: float = 0.5
+    bin_edges_s: tuple = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
+    target: str = "standalone"
+    batch_events: int = 400
+    workers: int = 1             # Dask worker processes (0: one per core; 1: this process)
+    cost_sample_events: int = 200
+    cost_repeats: int = 3
+
+    def __post_init__(self):
+        bounds.declared(self)
+        with specs.section("tuning"):
+            self.base = Tuning(**specs.check_section({"tuning": self.tuning}, "tuning", Tuning))
+        bounds.number("b", self.b, 0.0, 2.0, lo_open=True)
+        bounds.choice("readout", self.readout, tuple(TUNED_READOUTS))
+        bounds.positive_seconds("duration_s", self.duration_s)
+        bounds.choice("target", self.target, TARGETS)
+        for name, lo in (("batch_events", 1), ("workers", 0), ("cost_sample_events", 2),
+                         ("cost_repeats", 1)):
+            value = getattr(self, name)
+            check(isinstance(value, int) and not isinstance(value, bool) and value >= lo,
+                  name, value, f"an integer >= {lo}")
+
+
+@dataclass
+class SearchPlan:
+    """``[search]``: ``trials`` trials of Optuna's seeded multi-objective TPE over ``space``
+    (``SPACE_KEYS``), each bank scored on tuning contacts (``repetitions`` per material and
+    site, generated with the study's seed + ``seed_offset``: never evaluated) by the mean
+    accuracy over the splits by repetition of ``inner_seeds``; the front's ``front_limit``
+    most accurate banks within ``cost_budget`` × the starting bank's neuron-steps per contact
+    are then scored on the bench set."""
+    trials: int = 24
+    repetitions: int = 4
+    seed_offset: int = 1000
+    inner_seeds: list = field(default_factory=lambda: [0, 1])
+    test_fraction: float = 0.3
+    cost_budget: float = 1.0
+    front_limit: int = 2
+    space: dict = field(default_factory=lambda: {"channels": [6, 16], "b": [0.2, 0.32]})
+
+    def __post_init__(self):
+        bounds.declared(self)
+        for name, lo in (("trials", 1), ("repetitions", 2), ("seed_offset", 1),
+                         ("front_limit", 1)):
+            value = getattr(self, name)
+            check(isinstance(value, int) and not isinstance(value, bool) and value >= lo,
+                  name, value, f"an integer >= {lo}")
+        check(isinstance(self.inner_seeds, list) and len(self.inner_seeds) >= 1 and all(
+            isinstance(s, int) and s >= 0 for s in self.inner_seeds), "inner_seeds",
+            self.inner_seeds, "a non-empty list of integer seeds >= 0")
+        check(is_number(self.test_fraction) and 0 < self.test_fraction < 1, "test_fraction",
+              self.test_fraction, "a fraction in (0, 1)")
+        bounds.number("cost_budget", self.cost_budget, 0.0, 100.0, lo_open=True)
+        check(isinstance(self.space, dict) and len(self.space) >= 1, "space", self.space,
+              f"a table of searched keys out of {sorted(SPACE_KEYS)}")
+        for key, value in self.space.items():
+            check_space_entry(key, value)
+
+
+def check_space_entry(key: str, value) -> None:
+    """One key of ``[search.space]``: known, and a [low, high] range or a list of choices."""
+    if key not in SPACE_KEYS:
+        raise SpecError(f"space.{key}", value, f"a key out of {sorted(SPACE_KEYS)}")
+    kind, what = SPACE_KEYS[key]
+    if kind == "choice":
+        check(isinstance(value, list) and len(value) >= 1 and all(
+            v in TUNED_READOUTS for v in value), f"space.{key}", value,
+            f"a list of {what}")
+        return
+    ok = (isinstance(value, list) and len(value) == 2 and all(is_number(v) for v in value)
+          and value[0] <= value[1] and value[0] >= 0)
+    if kind == "int":
+        ok = ok and all(isinstance(v, int) and v >= 1 for v in value)
+    if kind == "log":
+        ok = ok and value[0] > 0
+    check(ok, f"space.{key}", value, f"[low, high] of {what}" +
+          (", integers >= 1" if kind == "int" else ", low > 0" if kind == "log" else
+           ", 0 <= low <= high"))
+
+
+@dataclass
+class Parts:
+    """The whole spec, every part built and checked before any long work."""
+    bench: BenchSet
+    processor: events.EventProcessor
+    evaluation: cv.Evaluation
+    bank: BankPlan
+    search: SearchPlan
+
+    def tuning_bench(self):
+        """The tuning contacts' source: the bench set's spec with another seed and
+        ``search.repetitions`` repetitions (never evaluated)."""
+        return replace(self.bench, seed=self.bench.seed + self.search.seed_offset,
+                       repetitions=self.search.repetitions)
+
+
+def plan(spec: dict) -> Plan:
+    """Check the whole spec before any long work; build its parts."""
+    specs.check_top_level(spec, SECTIONS)
+    bench_spec = bench_section(spec)
+    check(spec.get("data") is None, "data", spec.get("data"),
+          "none: the search's tuning contacts are generated with another seed")
+    processor = events_section(spec, bench_spec.rate_hz)
+    evaluation = evaluation_section(spec)
+    with specs.section("bank"):
+        bank = BankPlan(**specs.check_section(spec, "bank", BankPlan))
+    with specs.section("search"):
+        search = SearchPlan(**specs.check_section(spec, "search", SearchPlan))
+    return Plan("bank_tuning", spec, Parts(bench_spec, processor, evaluation, bank, search),
+                estimate)
+
+
+def estimate(parts: Parts):
+    """The bench set, the tuning contacts, a bank run per trial and per front bank (on the
+    bench set). Measured on this project's 2-core machine under a load of ~8: a trial ~30 ms
+    per tuning contact with its inner MLPs (12 trials on 512 contacts: 4 min, compiles
+    included), a front bank ~6 ms per evaluated contact (400 contacts per 2.2 s chunk) and
+    ~30 s of compiling and MLPs."""
+    n, tuning = parts.bench.n_events, parts.tuning_bench().n_events
+    search_s = parts.search.trials * (tuning * 0.03 + 5.0)
+    front_s = parts.search.front_limit * (n * 0.006 + 30.0) + 60.0 * len(parts.evaluation.seeds)
+    stages = [("stimulus.repetitions", parts.bench.repetitions, [],
+               bench_seconds(n, parts.bench.n_jobs) + search_s + front_s)]
+    return stages_estimate("the bench set, the search and its front", stages)

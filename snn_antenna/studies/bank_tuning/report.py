@@ -1,0 +1,111 @@
+"""The bank-tuning study's page: the search's trials and front, the front scored on the
+bench set beside the FFT-MLP, the chosen bank and where its resonators sit on the spectra."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...readout.band_tuning import log_spectra
+from ...readout.spiking import recording_attrs
+from ...report.page import Predicted, Report
+
+QUICK_NOTE = ("Quick profile: a few trials on a few hundred tuning contacts, the front scored "
+              "on 2 repetitions per material and site and 2 splits: it checks the pipeline; "
+              "its accuracies, ratios and costs are too small to compare.")
+SOURCE = "this run (bench set, splits by repetition)"
+
+
+def _pct(iv: dict) -> tuple:
+    return (None if iv["low"] is None else (100 * iv["low"], 100 * iv["high"]))
+
+
+def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> None:
+    chosen = summary["chosen"]
+    first = summary["front"][0]
+    report.text(
+        f"{summary['trials']} trials of a seeded multi-objective TPE (Optuna) scored banks "
+        f"on {summary['tuning_events']} tuning contacts (seed {summary['tuning_seed']}, "
+        f"never evaluated), by the material MLP's accuracy over splits by repetition of "
+        f"them and by resonator-steps per contact. The front's banks within "
+        f"{summary['budget_neuron_steps_per_event']:.0f} resonator-steps per contact "
+        f"(the starting bank's {summary['start_neuron_steps_per_event']:.0f} × the budget) "
+        f"were then scored on {summary['events']} evaluated contacts, beside the "
+        "full-spectrum FFT-MLP on the same splits.")
+    ratio = first["accuracy_to_fft_mlp"]
+    report.predicted(
+        Predicted("8 materials, chosen bank's accuracy", 100 * first["accuracy"]["mean"], "%",
+                  None, SOURCE, _pct(first["accuracy"]), first["accuracy"]["n"]),
+        Predicted("8 materials, FFT-MLP accuracy (same splits)",
+                  100 * summary["fft_mlp_accuracy"]["mean"], "%", 94.2, SOURCE,
+                  _pct(summary["fft_mlp_accuracy"]), summary["fft_mlp_accuracy"]["n"]),
+        Predicted("chosen bank's accuracy ÷ FFT-MLP's", ratio["mean"], "", None, SOURCE,
+                  None if ratio["low"] is None else (ratio["low"], ratio["high"]),
+                  ratio["n"], chosen["verdict"]),
+        Predicted("distance rmse, MLP on the chosen bank", chosen["distance_rmse_mm"]["mean"],
+                  "mm", None, SOURCE, None if chosen["distance_rmse_mm"]["low"] is None else
+                  (chosen["distance_rmse_mm"]["low"], chosen["distance_rmse_mm"]["high"]),
+                  chosen["distance_rmse_mm"]["n"]),
+        Predicted("distance rmse, full-spectrum MLP (same splits)",
+                  chosen["fft_mlp_distance_rmse_mm"]["mean"], "mm", 1.71, SOURCE,
+                  None if chosen["fft_mlp_distance_rmse_mm"]["low"] is None else
+                  (chosen["fft_mlp_distance_rmse_mm"]["low"],
+                   chosen["fft_mlp_distance_rmse_mm"]["high"]),
+                  chosen["fft_mlp_distance_rmse_mm"]["n"]),
+        Predicted("cost per contact, chosen bank ÷ FFT pipeline", summary["cost_ratio_to_fft"],
+                  "", None, "this run, best of "
+                  f"{summary['costs']['fft']['best_of']} runs each, taken in turn", None, None,
+                  "wall time on this machine under its load at the time"))
+    report.table([{"trial": r["trial"], "resonators": r["resonators"],
+                   "channels": r["channels"], "resonator-steps per contact":
+                   r["neuron_steps_per_event"], "search accuracy %": 100 * r["search_accuracy"],
+                   "accuracy %": 100 * r["accuracy"]["mean"],
+                   "95 % interval": _pct(r["accuracy"]),
+                   "÷ FFT-MLP": r["accuracy_to_fft_mlp"]["mean"],
+                   "n": r["accuracy"]["n"], **r["params"]} for r in summary["front"]],
+                 "The front within the budget, scored on the evaluated contacts")
+    report.figure(_front_figure(study, summary), "pareto_front",
+                  "Every trial: accuracy on the tuning contacts' splits against resonator-"
+                  "steps per contact; the Pareto front in colour, the starting bank ringed.")
+    report.figure(_spectra_figure(tuning, bank, parts), "resonators_on_spectra",
+                  "Mean log amplitude spectrum of the tuning contacts per material (the "
+                  "window each bank reads); shaded: the chosen bank's channels; ticks: its "
+                  "resonators' preferred frequencies.")
+
+
+def _front_figure(study, summary):
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    done = [t for t in study.trials if t.state.name == "COMPLETE"]
+    front = {t.number for t in study.best_trials}
+    for t in done:
+        on = t.number in front
+        ax.plot(t.values[1], 100 * t.values[0], "o", color="C1" if on else "0.7",
+                mfc="C1" if on else "none")
+        if t.number == 0:
+            ax.plot(t.values[1], 100 * t.values[0], "o", ms=12, mfc="none", color="k")
+    ax.axvline(summary["budget_neuron_steps_per_event"], color="k", ls=":", lw=1)
+    ax.set_xlabel("resonator-steps per contact")
+    ax.set_ylabel("accuracy on tuning contacts (%)")
+    return fig
+
+
+def _spectra_figure(tuning, bank, parts):
+    import matplotlib.pyplot as plt
+
+    attrs = recording_attrs(tuning)
+    n = int(round(bank.duration_s * attrs[0]))
+    freq, spectra = log_spectra(tuning["counts"].values[:, :n], *attrs)
+    labels = tuning["material"].values.astype(str)
+    fig, ax = plt.subplots(figsize=(8, 4))
+    keep = freq <= parts.processor.max_hz
+    for i, m in enumerate(sorted(set(labels))):
+        ax.plot(freq[keep], spectra[labels == m][:, keep].mean(axis=0), lw=0.8,
+                color=f"C{i}", label=m)
+    for b in bank.bands.values():
+        ax.axvspan(b.highpass_hz, b.lowpass_hz, color="0.85", zorder=0)
+    lo = ax.get_ylim()[0]
+    ax.plot(bank.neuron_hz, np.full(len(bank.neuron_hz), lo), "|", color="k", ms=14)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("log amplitude")
+    ax.legend(fontsize=7, ncol=4)
+    return fig

@@ -1,0 +1,213 @@
+"""The bank-tuning study's stages: the bench set and its FFT features, the tuning contacts,
+the search on them, its front scored on the bench set's splits beside the FFT-MLP, the
+chosen bank's distance rmse and cost; results in ``results.zarr``, the search's trials in
+``trials.journal`` (Optuna's own storage), the page."""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+from ...core.files import remove_entry
+from ...core.logfile import logged
+from ...engine.events import cached_features, run_cost
+from ...engine.executor import executor
+from ...evaluation import crossval as cv
+from ...evaluation import signal as bench_signal
+from ...readout import baselines as bl
+from ...readout.events import extraction_cost
+from ...readout.spiking import recording_attrs
+from ...readout.spiking_decoders import TUNED_READOUTS, decay_code, mlp_baseline
+from ...report import stats
+from ...report.page import Report
+from ...sources import bench
+from ..contract import Options, Plan
+from .plan import Parts
+from .report import QUICK_NOTE, write_report
+from .search import (
+    Scored,
+    bank_of,
+    check_unseen,
+    neuron_steps_per_event,
+    run_search,
+    start_params,
+)
+
+STORAGE = "trials.journal"
+SCORED = "scored_contacts.json"
+RESULTS = "results.zarr"
+
+
+def spikes_matrix(spikes: xr.Dataset, ids, readout: str) -> np.ndarray:
+    """A read-out's input rows (``TUNED_READOUTS``' codes) from a bank's stored spikes."""
+    sp = spikes.sel(event=ids)
+    n = sp.sizes["event"]
+    parts = {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
+             "span_s": sp["span_s"].values,
+             "binned_counts": sp["binned_counts"].values.reshape(n, -1),
+             "decay": decay_code(sp["binned_counts"].values)}
+    return np.hstack([parts[c] for c in TUNED_READOUTS[readout][0]]).astype(np.float32)
+
+
+def interval(values, bounds=(0.0, np.inf)) -> dict:
+    """Mean, 95 % interval and n of per-split values (no interval below 2 values)."""
+    x = np.asarray(values, dtype=float)
+    if len(x) < 2:
+        return {"mean": float(x.mean()), "low": None, "high": None, "n": int(len(x))}
+    iv = stats.mean_interval(x, bounds=bounds)
+    out = {"mean": iv.mean, "low": iv.low, "high": iv.high, "n": iv.n}
+    if iv.n < stats.MIN_N_TO_RESOLVE:
+        out["verdict"] = iv.verdict
+    return out
+
+
+def front_of(study, budget_steps: float, limit: int) -> list:
+    """The Pareto front's trials within the cost budget, most accurate first, at most
+    ``limit``; the starting bank (trial 0) when none is within it."""
+    done = [t for t in study.trials if t.state.name == "COMPLETE"]
+    front = sorted((t for t in study.best_trials if t.values[1] <= budget_steps),
+                   key=lambda t: (-t.values[0], t.values[1], t.number))
+    return front[:limit] or done[:1]
+
+
+def trials_dataset(study, space: dict) -> xr.Dataset:
+    """Every trial: its state, parameters and objectives (NaN where it has none)."""
+    trials = study.trials
+    keys = sorted(space)
+    def value(t, i):
+        return float(t.values[i]) if t.values is not None else np.nan
+    states = ["COMPLETE", "PRUNED", "FAIL", "RUNNING", "WAITING"]
+    data = {"state": ("trial", [states.index(t.state.name) for t in trials],
+                      {"legend": ", ".join(f"{i}: {s}" for i, s in enumerate(states))}),
+            "accuracy": ("trial", [value(t, 0) for t in trials]),
+            "neuron_steps_per_event": ("trial", [value(t, 1) for t in trials]),
+            "on_front": ("trial", [t.number in {b.number for b in study.best_trials}
+                                   for t in trials])}
+    for k in keys:     # a choice as its index into the space's list (zarr keeps numbers)
+        vals = [t.params.get(k) for t in trials]
+        choices = space[k] if all(isinstance(v, str) or v is None for v in vals) else None
+        if choices is not None:
+            data[k] = ("trial", [choices.index(v) if v in choices else -1 for v in vals],
+                       {"legend": ", ".join(f"{i}: {c}" for i, c in enumerate(choices))})
+        else:
+            data[k] = ("trial", [np.nan if v is None else float(v) for v in vals])
+    return xr.Dataset(data, coords={"trial": [t.number for t in trials]})
+
+
+@logged
+def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
+    parts: Parts = plan.parts
+    out_dir, t_start = Path(out_dir), time.perf_counter()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if options.fresh:
+        for name in (STORAGE, SCORED):
+            remove_entry(out_dir / name)
+    log(f"[1/5] {parts.bench.describe()}")
+    data, everything = bench_signal.load_features(parts.bench, parts.processor, log,
+                                                  options.fresh)
+    feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
+    ids = feats["event"].values
+    tuning_spec = parts.tuning_bench()
+    log(f"[2/5] tuning contacts: {tuning_spec.n_events} events (seed {tuning_spec.seed}), "
+        "never evaluated")
+    tuning = bench.load(tuning_spec, log, options.fresh)
+    scored = Scored(out_dir / SCORED)
+    log(f"[3/5] search: {parts.search.trials} trials over {sorted(parts.search.space)}")
+    with executor(parts.bank.workers, options.scheduler, log) as client:
+        study = run_search(parts, tuning, out_dir / STORAGE, scored, client, log)
+        check_unseen(scored, data["counts"].values[ids])
+        attrs = recording_attrs(tuning)
+        counts = tuning["counts"].values
+        labels = np.asarray(tuning["material"].values.astype(str))
+        start = start_params(parts.bank)
+        start_bank = bank_of(start, parts.bank, counts, labels, attrs)
+        budget = parts.search.cost_budget * neuron_steps_per_event(start_bank, attrs[0])
+        front = front_of(study, budget, parts.search.front_limit)
+        log(f"[4/5] the front's {len(front)} bank(s) within {budget:.0f} resonator-steps "
+            f"per contact, on {len(ids)} evaluated contacts, "
+            f"{len(parts.evaluation.seeds)} split(s) by repetition")
+        banks, chosen = {}, []
+        for t in front:
+            params = {**start, **t.params}
+            b = bank_of(params, parts.bank, counts, labels, attrs)
+            name = f"trial_{t.number}"
+            banks[name] = b
+            spikes = cached_features(data, b, parts.bench, log, options.fresh, client)
+            X = spikes_matrix(spikes, ids, params["readout"])
+            feats[name] = (("event", f"{name}_feature"), X)
+            chosen.append(mlp_baseline(name, "material", name, parts.evaluation,
+                                       f"MLP 51 on trial {t.number}'s bank"))
+        best = f"trial_{front[0].number}"
+        chosen.append(mlp_baseline(f"{best}_distance", "distance", best, parts.evaluation,
+                                   "MLP 20-5 on the chosen bank"))
+    fft = bl.material_baselines([], parts.evaluation.material_mlp,
+                                parts.evaluation.nmf_max_iter)[0]
+    fft_distance = next(b for b in bl.distance_baselines(feats.sizes["freq_hz"],
+                                                         parts.evaluation.mlp)
+                        if b.name == "mlp_spectrum")
+    results = cv.evaluate(feats, [fft, fft_distance, *chosen], parts.evaluation, log)
+    log("[5/5] cost per contact and report")
+    costs = best_costs(data, parts, ids, {"chosen": banks[best]}, log)
+    reference = results[fft.name].values("accuracy")
+    rows = []
+    for t in front:
+        name = f"trial_{t.number}"
+        acc = results[name].values("accuracy")
+        rows.append({"trial": t.number, "resonators": banks[name].n_neurons,
+                     "channels": len(banks[name].bands),
+                     "neuron_steps_per_event": float(t.values[1]),
+                     "search_accuracy": float(t.values[0]),
+                     "accuracy": interval(acc, (0.0, 1.0)),
+                     "accuracy_to_fft_mlp": interval(acc / reference),
+                     "params": {k: (v if isinstance(v, str) else float(v))
+                                for k, v in t.params.items()}})
+    rmse = results[f"{best}_distance"].values("rmse_mm")
+    fft_rmse = results[fft_distance.name].values("rmse_mm")
+    ratio = rows[0]["accuracy_to_fft_mlp"]
+    verdict = ("not resolved" if ratio["low"] is None or ratio["low"] <= 1 <= ratio["high"]
+               else "above the FFT-MLP" if ratio["low"] > 1 else "below the FFT-MLP")
+    chosen_bank = banks[best]
+    summary = {
+        "events": int(len(ids)), "tuning_events": int(tuning_spec.n_events),
+        "tuning_seed": int(tuning_spec.seed), "seeds": list(parts.evaluation.seeds),
+        "trials": len(study.trials), "budget_neuron_steps_per_event": budget,
+        "start_neuron_steps_per_event": neuron_steps_per_event(start_bank, attrs[0]),
+        "fft_mlp_accuracy": interval(reference, (0.0, 1.0)),
+        "front": rows, "chosen": {
+            "trial": front[0].number, "verdict": verdict,
+            "distance_rmse_mm": interval(rmse), "fft_mlp_distance_rmse_mm": interval(fft_rmse),
+            "distance_rmse_minus_fft": interval(rmse - fft_rmse, None),
+            "neuron_hz": [float(f) for f in chosen_bank.neuron_hz],
+            "channel_edges_hz": [[float(b.highpass_hz), float(b.lowpass_hz)]
+                                 for b in chosen_bank.bands.values()]},
+        "costs": costs,
+        "cost_ratio_to_fft": costs["chosen"]["features_us_per_event"]
+        / costs["fft"]["features_us_per_event"],
+        "load_average": list(os.getloadavg()), "total_s": time.perf_counter() - t_start}
+    trials_dataset(study, parts.search.space).to_zarr(out_dir / RESULTS, mode="w",
+                                                      consolidated=False)
+    report = Report(out_dir, "Bank tuning: a resonator bank searched for the material",
+                    quick=options.quick, quick_note=QUICK_NOTE)
+    write_report(report, summary, study, tuning, chosen_bank, parts)
+    summary = report.write(summary, plan.spec, parts.bank.target)
+    log(f"report in {out_dir}/report.html")
+    return summary
+
+
+def best_costs(data, parts: Parts, ids, banks: dict, log) -> dict:
+    """Wall time per contact of the FFT pipeline's features and of each bank, on the same
+    ``cost_sample_events`` contacts, taken in turn ``cost_repeats`` times: each the best."""
+    sample = np.asarray(ids)[:parts.bank.cost_sample_events]
+    best: dict = {}
+    for _ in range(parts.bank.cost_repeats):
+        runs = {"fft": extraction_cost(data, parts.processor, sample)}
+        runs.update({k: run_cost(data, b, len(sample)) for k, b in banks.items()})
+        for k, c in runs.items():
+            if k not in best or c["features_us_per_event"] < best[k]["features_us_per_event"]:
+                best[k] = {**c, "best_of": parts.bank.cost_repeats}
+    log("      cost per contact (best of " + f"{parts.bank.cost_repeats}): " + ", ".join(
+        f"{k} {c['features_us_per_event']:.0f} µs" for k, c in best.items()))
+    return best

@@ -1,0 +1,154 @@
+"""The bank-tuning study: its search never scores an evaluated contact (a planted search
+that peeks is refused), its space is checked before any work, and the stage ceilings read
+each step of the bank's own chain."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from snn_antenna.core import spec as specs
+from snn_antenna.core.errors import SpecError
+from snn_antenna.evaluation import crossval as cv
+from snn_antenna.evaluation import stage_ceilings as sc
+from snn_antenna.readout.spiking import Band, SpikingBank
+from snn_antenna.studies.bank_tuning.plan import SPACE_KEYS, SearchPlan, check_space_entry
+from snn_antenna.studies.bank_tuning.search import Scored, check_unseen
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _contacts(n: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 2 ** 16, (n, 50, 2), dtype=np.uint16)
+
+
+def test_a_search_scored_on_tuning_contacts_passes_and_one_that_peeks_is_refused():
+    evaluated = _contacts(40, 0)
+    repetition = np.repeat(np.arange(10), 4)
+    _, test = cv.split_by_repetition(repetition, 0.3, seed=0)
+    honest = Scored()
+    honest.add(_contacts(30, 1))              # another seed's contacts
+    check_unseen(honest, evaluated)
+    peeking = Scored()
+    peeking.add(_contacts(30, 1))
+    peeking.add(evaluated[test][:1])          # one held-out contact is enough
+    with pytest.raises(SpecError) as refused:
+        check_unseen(peeking, evaluated)
+    assert refused.value.field == "search" and "1 evaluated contact" in str(refused.value)
+
+
+def test_the_scored_contacts_survive_a_resumed_search(tmp_path):
+    first = Scored(tmp_path / "scored.json")
+    first.add(_contacts(5, 3))
+    again = Scored(tmp_path / "scored.json")
+    assert again.digests == first.digests and len(again.digests) == 5
+
+
+@settings(max_examples=40, deadline=None)
+@given(key=st.text(min_size=1, max_size=12).filter(lambda k: k not in SPACE_KEYS))
+def test_an_unknown_key_of_the_space_is_refused_naming_it(key):
+    with pytest.raises(SpecError) as refused:
+        SearchPlan(space={key: [1, 2]})
+    assert refused.value.field == f"space.{key}"
+
+
+@settings(max_examples=60, deadline=None)
+@given(key=st.sampled_from(sorted(SPACE_KEYS)),
+       value=st.one_of(st.floats(allow_nan=True), st.lists(st.floats(), max_size=3),
+                       st.lists(st.integers(-3, 30), min_size=2, max_size=2)))
+def test_a_space_entry_is_a_range_or_choices_of_its_kind(key, value):
+    kind = SPACE_KEYS[key][0]
+    try:
+        check_space_entry(key, value)
+    except SpecError as exc:
+        assert exc.field == f"space.{key}"
+        return
+    assert isinstance(value, list)          # accepted: a [low, high] of its kind
+    if kind != "choice":
+        assert len(value) == 2 and 0 <= value[0] <= value[1]
+    if kind == "int":
+        assert all(isinstance(v, int) and v >= 1 for v in value)
+
+
+def test_the_study_spec_and_its_quick_profile_plan():
+    from snn_antenna.studies import runner
+
+    for quick in (False, True):
+        spec = specs.load(ROOT / "studies" / "bank_tuning.toml", [], quick=quick)
+        parts = runner("bank_tuning").plan(spec).parts
+        assert parts.tuning_bench().seed != parts.bench.seed     # never the evaluated contacts
+        assert parts.search.trials >= 1
+
+
+def _bank() -> SpikingBank:
+    channel = dict(n_neurons=1, band_hz=(150.0, 150.0), threshold_g=0.001, lowpass_hz=170.0,
+                   highpass_hz=130.0, filter_order=8, coder="analog",
+                   coder_amplitude=1.0, coder_options={"gain": 150.0}, dt_ms=0.01)
+    return SpikingBank(bands={"a": Band(**channel),
+                              "b": Band(**{**channel, "band_hz": (300.0, 300.0),
+                                           "lowpass_hz": 320.0, "highpass_hz": 280.0})},
+                       bin_edges_s=(0.1, 0.2), batch_events=3)
+
+
+def _tones(hz: float, n: int = 4, rate: float = 2000.0) -> np.ndarray:
+    t = np.arange(1100) / rate
+    g = 0.05 * np.sin(2 * np.pi * hz * t) * np.exp(-t / 0.2)
+    counts = np.stack([g, 0.5 * g], axis=1) / 10.0 * 2 ** 15 + 2 ** 15
+    return np.repeat(counts[None].astype(np.uint16), n, axis=0)
+
+
+def test_the_stages_read_the_banks_own_chain_and_see_which_channel_rings():
+    bank = _bank()
+    counts = _tones(150.0)
+    feats = sc.stage_features(bank, counts, 2000.0, 16, 10.0)
+    assert set(feats) == set(sc.STAGES)
+    assert all(np.all(np.isfinite(x)) for x in feats.values())
+    # per channel, 3 bins, (log power, sign changes): channel a's power above channel b's
+    ideal = feats["ideal_main_axis"].reshape(len(counts), 2, 3, 2)
+    assert np.all(ideal[:, 0, :, 0] > ideal[:, 1, :, 0] + 3)
+    assert feats["ideal_2_axes"].shape[1] == 2 * feats["ideal_main_axis"].shape[1]
+    # the coded stage is the bank's own coded input (SpikingBank.code), read the same way
+    n = int(round(bank.duration_s * 2000.0))
+    coded = bank.code(counts, 2000.0, 16, 10.0).reshape(n, len(counts), 2)
+    cuts = sc.bin_cuts(bank, 2000.0, n)
+    assert np.allclose(feats["coded"], sc.channel_features(coded, cuts), atol=1e-5)
+    # a 300 Hz tone rings channel b instead
+    other = sc.stage_features(bank, _tones(300.0), 2000.0, 16, 10.0, stages=["band_pass"])
+    bp = other["band_pass"].reshape(4, 2, 3, 2)
+    assert np.all(bp[:, 1, 0, 0] > bp[:, 0, 0, 0])
+
+
+def test_an_unknown_stage_is_refused():
+    with pytest.raises(SpecError) as refused:
+        sc.stage_features(_bank(), _tones(150.0), 2000.0, 16, 10.0, stages=["raw"])
+    assert refused.value.field == "stages"
+
+
+@pytest.mark.slow
+def test_the_study_refuses_a_planted_search_that_peeks(tmp_path, monkeypatch):
+    """The quick profile, with the search's tuning contacts swapped for the evaluated ones
+    (a search that peeks at every split): the run stops before reporting any number."""
+    from snn_antenna.sources import bench
+    from snn_antenna.studies import runner
+    from snn_antenna.studies.contract import Options
+
+    study = runner("bank_tuning")
+    spec = specs.load(ROOT / "studies" / "bank_tuning.toml", [], quick=True)
+    monkeypatch.chdir(tmp_path)
+    plan = study.plan(spec)
+    evaluated_spec = plan.parts.bench
+    load = bench.load
+
+    def peeking(source, *args, **kwargs):
+        if getattr(source, "seed", None) != evaluated_spec.seed:
+            source = evaluated_spec
+        return load(source, *args, **kwargs)
+
+    monkeypatch.setattr(bench, "load", peeking)
+    with pytest.raises(SpecError) as refused:
+        study.run(plan, tmp_path / "out", Options(quick=True), log=lambda *a: None)
+    assert refused.value.field == "search"
+    assert not (tmp_path / "out" / "report.html").exists()
