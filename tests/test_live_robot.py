@@ -32,6 +32,17 @@ CHANGES = [{"sample": 1500, "field": "speed_cm_s", "value": 24.0},
            {"sample": 5000, "field": "th_g", "value": 0.3}]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _brian_target_restored():
+    """The parts set Brian2's global code target as they build; the worker's later tests get
+    back the one they had."""
+    import brian2 as b2
+
+    before = b2.prefs.codegen.target
+    yield
+    b2.prefs.codegen.target = before
+
+
 @pytest.fixture(scope="module")
 def robot_parts():
     """Built once (the gate learns Th*(speed) for ~5 s); each run takes a deep copy. On Brian2's
