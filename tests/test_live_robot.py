@@ -25,15 +25,30 @@ ROBOT = NETWORK.parent / "live_robot.toml"
 SPEED = 12.0
 # The page's changes, as events.jsonl journals them: a faster speed at 1.5 s, the robot driven
 # on at 4.0 s after the contact (2.5 s) stopped it, and Th set by hand at 5.0 s.
+# The live spec's parts on Brian2's numpy target (the spec's cython target is what a user runs).
+NUMPY = ['network.resonators.target="numpy"', 'network.gate.target="numpy"']
 CHANGES = [{"sample": 1500, "field": "speed_cm_s", "value": 24.0},
            {"sample": 4000, "field": "speed_cm_s", "value": 6.0},
            {"sample": 5000, "field": "th_g", "value": 0.3}]
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _brian_target_restored():
+    """The parts set Brian2's global code target as they build; the worker's later tests get
+    back the one they had."""
+    import brian2 as b2
+
+    before = b2.prefs.codegen.target
+    yield
+    b2.prefs.codegen.target = before
+
+
 @pytest.fixture(scope="module")
 def robot_parts():
-    """Built once (the gate learns Th*(speed) for ~5 s); each run takes a deep copy."""
-    return build_online(ROBOT, speed_cm_s=SPEED)
+    """Built once (the gate learns Th*(speed) for ~5 s); each run takes a deep copy. On Brian2's
+    numpy target: these tests check what the parts decide and in what order, and the cython
+    target would compile the robot network's few dozen code objects for them alone."""
+    return build_online(ROBOT, NUMPY, speed_cm_s=SPEED)
 
 
 @pytest.fixture(scope="module")
