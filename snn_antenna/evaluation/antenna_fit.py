@@ -89,9 +89,12 @@ class FittedAntenna:
                        **{k: getattr(self, k) for k in WINDOW_KEYS})
 
     def applied(self, spec: dict) -> tuple[dict, list[str]]:
-        """The study spec with the fitted values in place of the typed ones, and one line per
-        value replaced (what it was, what it is)."""
-        spec, notes = copy.deepcopy(spec), []
+        """The study spec with the fitted values in place of the typed ones, and one line for
+        the law and one per value replaced (what it was, what it is)."""
+        spec = copy.deepcopy(spec)
+        notes = [f"fitted: the low-mode law log10 F = {self.low_law[0]:.4f} d + "
+                 f"{self.low_law[1]:.3f} (d in cm, r² {self.r2_low:.4f}), on the labels of "
+                 f"{self.n_contacts} contacts of repetitions {list(self.repetitions)}"]
         ev = spec.setdefault("events", {})
         for key in ("split_hz", "split_ratio", *WINDOW_KEYS):
             value = getattr(self, key)

@@ -300,8 +300,8 @@ def _write_recorded(report: Report, cmp: Comparison, recorded: dict) -> None:
                      "Every contact left out of the scoring, by reason and distance (the "
                      "import's exclusions are listed one by one in its exclusions.csv)")
     if data.get("fitted"):
-        report.table([{"spec value replaced by the fit": line} for line in data["fitted"]],
-                     "The study's typed values the lab's antenna replaced")
+        report.table([{"fitted on the calibration labels": line} for line in data["fitted"]],
+                     "The lab's antenna as fitted, and the study's typed values it replaced")
     report.table([{"file": f"{r['name']}/{f['file']}" if r["kind"] in ("record", "rosbag")
                    else f["file"], "bytes": f["bytes"], "sha256": f["sha256"]}
                   for r in recorded["recordings"] for f in r["files"]]
