@@ -1,6 +1,6 @@
 """Where the tuned bank's input chain loses the material: a neuron-free ceiling per step.
 
-    python benchmarks/bench_stage_ceilings.py [--repetitions 100] [--out out/bench_stage_ceilings.json]
+    python benchmarks/bench_stage_ceilings.py [--repetitions 100] [--out PATH.json]
     ... [--stages coded centred] [--set spiking.tuned.tuning.coder_options={gain=60.0}]
 
 The baseline study's tuned bank (``studies/baseline_comparison.toml``'s ``[spiking.tuned]``: its

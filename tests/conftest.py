@@ -47,7 +47,7 @@ STORES = {
     "speed_accuracy": "runs.jsonl",
     "baseline_comparison": "out/.cache",   # relative to the run's working directory
     "model_selection": "out/.cache",
-    "bank_tuning": "trials.journal",
+    "bank_tuning": "scored_contacts.json",   # written after each trial: killed mid-search
 }
 RUN_TIMEOUT_S = 900
 

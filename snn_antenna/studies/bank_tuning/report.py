@@ -49,11 +49,14 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                   None if chosen["fft_mlp_distance_rmse_mm"]["low"] is None else
                   (chosen["fft_mlp_distance_rmse_mm"]["low"],
                    chosen["fft_mlp_distance_rmse_mm"]["high"]),
-                  chosen["fft_mlp_distance_rmse_mm"]["n"]),
-        Predicted("cost per contact, chosen bank ÷ FFT pipeline", summary["cost_ratio_to_fft"],
-                  "", None, "this run, best of "
-                  f"{summary['costs']['fft']['best_of']} runs each, taken in turn", None, None,
-                  "wall time on this machine under its load at the time"))
+                  chosen["fft_mlp_distance_rmse_mm"]["n"]))
+    costs = summary["costs"]
+    report.table([{"read-out": k, "µs per contact": costs[k]["features_us_per_event"],
+                   "best of": costs[k]["best_of"]} for k in ("fft", "chosen")] +
+                 [{"read-out": "chosen ÷ FFT", "µs per contact": costs["ratio_chosen_to_fft"],
+                   "best of": costs["fft"]["best_of"]}],
+                 "Wall time per contact on this machine, taken in turn (load average "
+                 f"{costs['load_average'][0]:.1f}): a measurement of this run, not a result")
     report.table([{"trial": r["trial"], "resonators": r["resonators"],
                    "channels": r["channels"], "resonator-steps per contact":
                    r["neuron_steps_per_event"], "search accuracy %": 100 * r["search_accuracy"],

@@ -20,13 +20,17 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import optuna
+from optuna.storages import JournalStorage
+from optuna.storages.journal import JournalFileBackend
+from threadpoolctl import threadpool_limits
 
 from ...core.errors import NumericalInstabilityError, SpecError
 from ...core.files import write_json
 from ...engine.events import run_bank
 from ...evaluation import crossval as cv
 from ...readout.band_tuning import tune
-from ...readout.spiking import SpikingBank
+from ...readout.spiking import SpikingBank, recording_attrs
 from ...readout.spiking_decoders import TUNED_READOUTS, decay_code, mlp_baseline
 from .plan import SPACE_KEYS, BankPlan, Parts
 
@@ -143,13 +147,6 @@ def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client,
     """The Optuna study of ``parts.search`` on ``tuning`` (the tuning contacts' data set),
     stored in ``storage_path`` (a journal file: an interrupted search resumes, a finished
     one is reused); trials that did not finish are left out and run again."""
-    import optuna
-    from optuna.storages import JournalStorage
-    from optuna.storages.journal import JournalFileBackend
-    from threadpoolctl import threadpool_limits
-
-    from ...readout.spiking import recording_attrs
-
     optuna.logging.set_verbosity(optuna.logging.WARNING)
     search, bank = parts.search, parts.bank
     storage = JournalStorage(JournalFileBackend(str(storage_path)))
