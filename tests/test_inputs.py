@@ -225,7 +225,7 @@ def bounds_root():
     ("gating_threshold", ["gate.present_s=3000"], "gate"),
     ("exploration", ["network.gate.present_s=600"], "network.gate"),
     ("exploration", ["network.gate.epochs=10000"], "network.gate"),
-    ("speed_accuracy", ["cost.n_neurons=[24, 100000]", 'cost.settings=[["euler", 0.01]]'],
+    ("speed_accuracy", ["cost.n_neurons=[24, 100000]", 'cost.settings=[["euler", 0.001]]'],
      "cost.n_neurons"),
     ("model_selection", ["stimulus.repetitions=20000"], "stimulus.repetitions"),
 ])

@@ -123,6 +123,27 @@ def rates() -> dict[str, dict[str, Rate]]:
     return out
 
 
+def slowdown(load: float) -> float:
+    """How much slower a new process runs at ``load`` (the 1-minute load average) than on
+    an idle machine: each of the ``load`` + 1 runnable processes gets an equal share of the
+    cores, none more than one core."""
+    return max(1.0, (float(load) + 1.0) / (os.cpu_count() or 1))
+
+
+def load_factor() -> tuple[float, str]:
+    """The factor from the stored probe's load to the machine's load now, and a line saying
+    so (1 and no line without a probe: the table's rates name no load)."""
+    try:
+        stored = json.loads(_path().read_text())
+        then = float(stored["load_average"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 1.0, ""
+    now = os.getloadavg()[0]
+    factor = slowdown(now) / slowdown(then)
+    return factor, (f"at load {now:.1f} (probe at {then:.1f}, {os.cpu_count()} cores): "
+                    f"×{factor:.2f}")
+
+
 def sources(table_: dict[str, dict[str, Rate]]) -> str:
     """One line naming where the rates come from."""
     found = sorted({r.source for values in table_.values() for r in values.values()})

@@ -29,6 +29,7 @@ from ..core.bounds import out_path
 from ..core.commands import SWITCH, Option, options_class
 from ..core.errors import SpecError
 from ..core.outputs import check_writable
+from ..engine import rates
 from ..engine.cost import study_overhead_s
 
 # Dask's address schemes (``distributed.comm``): what --scheduler may name
@@ -118,6 +119,13 @@ class Plan:
             return None
         sized = self.sizes(self.parts)
         sized.seconds += study_overhead_s()
+        # the rates were probed at one load; the run shares the machine as it is now
+        factor, note = rates.load_factor()
+        sized.seconds *= factor
+        if note and hasattr(sized, "sources"):
+            sized.sources = f"{sized.sources}; {note}"
+        elif note:
+            sized.rate = dataclasses.replace(sized.rate, source=f"{sized.rate.source}; {note}")
         return sized
 
     @property

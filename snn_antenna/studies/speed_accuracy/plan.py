@@ -11,7 +11,8 @@ from ...core.errors import check
 from ...engine.cost import engine_of, stages_estimate
 from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
 from ...evaluation.accuracy import Match, StabilityGrid
-from ...evaluation.bands import BENCH_BANDS, SMALL_SIGNAL_EULER, BandStudy, candidate_steps
+from ...evaluation.bands import (BENCH_BANDS, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER, WARM_UP_MS,
+                                 BandStudy, candidate_steps)
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import detector_from_spec
@@ -170,15 +171,20 @@ def estimate(parts: Parts):
     for name in bands.bands:
         band = BENCH_BANDS[name]
         dt = band.dt_ms or min(sweep.dt_ms)
-        # each run as evaluation.bands runs it: the small-signal setting, then every method
-        # at its candidate steps (at the band's own Hz per k: a recalibration moves them
-        # little), each over a group of at least cost_events events
+        # the small-signal setting, then every method at its candidate steps (at the band's
+        # own Hz per k: a recalibration moves them little): one compiled run of them all
+        # over the sample events (at two Hz per k), then each timed on the target over a
+        # share of its window (a warm-up, a short and a sample run), on a group of at
+        # least cost_events events (main_sweep.band_spikes, evaluation.bands.sampled_cost)
         group = band.n_neurons * max(events, bands.cost_events)
-        settings = [(SMALL_SIGNAL_EULER.dt_ms, group)] + [
-            (step, group) for method in bands.methods
+        steps = [SMALL_SIGNAL_EULER.dt_ms] + [
+            step for method in bands.methods
             for step in candidate_steps(band, method, None, bands.coarser_steps)]
-        band_runs += [(bands.duration_s, step, size, engine_of(bands.target))
-                      for step, size in settings]
+        band_runs += [(bands.duration_s, step, 2 * band.n_neurons * events, "codings")
+                      for step in steps]
+        sample = max(bands.duration_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000)
+        band_runs += [(window, step, group, engine_of(bands.target)) for step in steps
+                      for window in (sample, WARM_UP_MS / 1000, sample, WARM_UP_MS / 1000)]
         if name in bands.calibrate:
             band_runs.append((bands.tuning_duration_s, dt, band.n_neurons * bands.n_freqs,
                               engine_of(bands.target)))
