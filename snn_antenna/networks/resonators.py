@@ -156,7 +156,8 @@ class ResonatorArray:
                                           check_every_ms)
         net = b2.Network(group, spikes, guard)
         t0 = time.perf_counter()
-        net.run(coded.duration_s * b2.second, namespace={})
+        with neurons.compiling_side_by_side():
+            net.run(coded.duration_s * b2.second, namespace={})
         wall = time.perf_counter() - t0
         guard.function()
         return ArrayResult(self.neuron_hz, np.asarray(spikes.i[:], dtype=int),
