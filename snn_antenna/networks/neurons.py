@@ -22,9 +22,6 @@ from __future__ import annotations
 
 import logging
 import math
-import os
-import threading
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -223,74 +220,6 @@ def raise_on_ctrl_c() -> None:
     import brian2 as b2
 
     b2.prefs.core.stop_on_keyboard_interrupt = False
-
-
-@contextmanager
-def compiling_side_by_side(most: int | None = None):
-    """Brian2's cython target compiles a network's code objects one after another as the run
-    starts (a few seconds each on a fresh machine). Inside this block each one compiles in a
-    forked child instead, up to ``most`` at once (default: the CPUs this process may use),
-    into Brian2's own disk cache under its own lock; a code object waits for its child when it
-    first runs, then loads the module from that cache as Brian2 always does. The same code
-    with the same flags, so the same module: only the order of the work changes. A child that
-    fails leaves the compile to Brian2 in this process, which reports the error as usual.
-
-    Only in a process with one thread (a fork copies none of the others, and a lock another
-    thread holds would stay locked in the child); elsewhere the block compiles as Brian2 does.
-    """
-    from brian2.codegen.runtime.cython_rt import cython_rt
-
-    manager = cython_rt.cython_extension_manager
-    if (os.name != "posix" or threading.active_count() > 1
-            or "create_extension" in vars(manager)):
-        yield
-        return
-    most = most or len(os.sched_getaffinity(0))
-    compile_here = manager.create_extension
-    children: list[_CompileChild] = []
-
-    def create_extension(code, **options):
-        running = [c for c in children if c.pid is not None]
-        if len(running) >= most:
-            running[0].wait()
-        child = _CompileChild(compile_here, code, options)
-        children.append(child)
-        return child
-
-    manager.create_extension = create_extension
-    try:
-        yield
-    finally:
-        del manager.create_extension
-        for child in children:
-            child.wait()
-
-
-class _CompileChild:
-    """A cython module compiling in a forked child; the module itself once first used."""
-
-    def __init__(self, compile_here, code, options):
-        self._compile_here, self._code, self._options = compile_here, code, options
-        self._module = None
-        self.pid = os.fork()
-        if self.pid == 0:           # the child: compile into the disk cache, then leave
-            status = 1
-            try:
-                compile_here(code, **options)
-                status = 0
-            finally:
-                os._exit(status)
-
-    def wait(self) -> None:
-        if self.pid is not None:
-            os.waitpid(self.pid, 0)
-            self.pid = None
-
-    def __getattr__(self, name):
-        if self._module is None:
-            self.wait()
-            self._module = self._compile_here(self._code, **self._options)  # from the cache
-        return getattr(self._module, name)
 
 
 def k_for_frequency(freq_hz, hz_per_k: float = DRIVEN_HZ_PER_K):

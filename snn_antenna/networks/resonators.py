@@ -156,8 +156,7 @@ class ResonatorArray:
                                           check_every_ms)
         net = b2.Network(group, spikes, guard)
         t0 = time.perf_counter()
-        with neurons.compiling_side_by_side():
-            net.run(coded.duration_s * b2.second, namespace={})
+        net.run(coded.duration_s * b2.second, namespace={})
         wall = time.perf_counter() - t0
         guard.function()
         return ArrayResult(self.neuron_hz, np.asarray(spikes.i[:], dtype=int),
