@@ -98,6 +98,13 @@ def estimate(grid: Grid, sweep, chunk_points: int, workers: int) -> Estimate:
     table = rates.rates()
     rate = table["neuron_steps_per_s"][sweep.engine]
     seconds = neuron_steps / (rate.value * workers)
+    # every chunk is a run of its own: its steps' cost beside its neurons' (a runtime
+    # engine's per-step overhead) and the run's own
+    chunks = -(-grid.size // max(1, min(chunk_points, grid.size)))
+    per_chunk = steps / table["steps_per_s"][sweep.engine].value
+    if sweep.engine in table["run_s"]:
+        per_chunk += table["run_s"][sweep.engine].value
+    seconds += per_chunk * -(-chunks // workers)
     if sweep.engine in table["compile_s"]:
         seconds += table["compile_s"][sweep.engine].value
     per_point = sum(np.dtype(o.dtype).itemsize for o in sweep.OUTPUTS.values())
@@ -207,11 +214,9 @@ def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list
 # Measured with `snn-antenna run studies/model_selection.toml --quick --set
 # 'selection.candidates=[{physics="current", strengths=[1.0]}]'` at stimulus.repetitions 4 and
 # 40 (128 and 1,280 events, 2.2 and 7.6 s), and at 40 with the full profile's evaluation
-# (3 seeds, 760 iterations: 12.3 s), AMD EPYC 2 cores, load average 3.5; the first set of a
-# process also pays its imports (BENCH_FIRST_SET_S).
+# (3 seeds, 760 iterations: 12.3 s), AMD EPYC 2 cores, load average 3.5.
 BENCH_EVENT_S = 4.4e-3
 FIT_EVENT_ITERATION_S = 1.8e-6
-BENCH_FIRST_SET_S = 1.5
 
 
 def bench_seconds(n_events: int, n_jobs: int = 1) -> float:

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check, is_number
-from ...engine.cost import BENCH_FIRST_SET_S, bench_seconds, fit_seconds, stages_estimate
+from ...engine.cost import bench_seconds, fit_seconds, stages_estimate
 from ...evaluation import crossval as cv
 from ...readout import events
 from ...sources.bench import BenchSpec
@@ -91,4 +91,4 @@ def estimate(parts: Parts):
     workers = max(1, min(parts.bench.n_jobs, points))
     return stages_estimate("the candidates' bench sets and read-outs", [
         ("stimulus.repetitions", parts.bench.repetitions, [],
-         BENCH_FIRST_SET_S + points * per_point / workers)])
+         points * per_point / workers)])
