@@ -92,7 +92,7 @@ def test_a_28_hour_scene_shows_its_estimate_and_needs_yes(tmp_path, capsys):
 
 @pytest.mark.parametrize("spec, setting, field", [
     ("studies/baseline_comparison.toml", "stimulus.repetitions=2000", "stimulus.repetitions"),
-    ("studies/gating_threshold.toml", "sweep.n_scenes=4000", "sweep.n_scenes"),
+    ("studies/gating_threshold.toml", "sweep.n_scenes=40000", "sweep.n_scenes"),
     ("studies/exploration.toml", "loop.duration_s=40000", "loop.duration_s"),
 ])
 def test_bench_sets_and_sweeps_of_scenes_need_yes_beyond_an_hour(tmp_path, capsys, spec,
@@ -222,10 +222,10 @@ def bounds_root():
 
 
 @pytest.mark.parametrize("spec, settings, field", [
-    ("gating_threshold", ["gate.present_s=3000"], "gate"),
-    ("exploration", ["network.gate.present_s=600"], "network.gate"),
-    ("exploration", ["network.gate.epochs=10000"], "network.gate"),
-    ("speed_accuracy", ["cost.n_neurons=[24, 100000]", 'cost.settings=[["euler", 0.001]]'],
+    ("gating_threshold", ["gate.present_s=30000"], "gate"),
+    ("exploration", ["network.gate.present_s=6000"], "network.gate"),
+    ("exploration", ["network.gate.epochs=10000", "network.gate.present_s=10"], "network.gate"),
+    ("speed_accuracy", ["cost.n_neurons=[24, 100000]", 'cost.settings=[["euler", 0.0001]]'],
      "cost.n_neurons"),
     ("model_selection", ["stimulus.repetitions=20000"], "stimulus.repetitions"),
 ])
