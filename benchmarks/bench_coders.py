@@ -41,6 +41,18 @@ from snn_antenna.studies.baseline_comparison.tuned import (  # noqa: E402
 STUDY = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
 
 
+def bench_set(repetitions: int, overrides: list[str]):
+    """The baseline study's parts and tuned plan on the bench set of ``repetitions``, its signal
+    stage (data and FFT comparison) and the bands calibrated on it, with where they came from:
+    what this benchmark and bench_stage_ceilings.py read their banks from."""
+    spec = specs.load(STUDY, [f"stimulus.repetitions={repetitions}", *overrides])
+    parts = study.plan(spec).parts
+    plan = parts.plan.tuned_plan()
+    data, cmp, _ = signal_stage(parts, 3, print, False)
+    bands, where = calibration_bands(parts, data, plan, print, False)
+    return parts, plan, data, cmp, bands, where
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repetitions", type=int, default=100,
@@ -51,12 +63,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--set", action="append", default=[], dest="overrides",
                     help="a study spec override, e.g. spiking.tuned.coder_sizes=[24]")
     args = ap.parse_args(argv)
-    spec = specs.load(STUDY, [f"stimulus.repetitions={args.repetitions}", *args.overrides])
-    parts = study.plan(spec).parts
-    plan = parts.plan.tuned_plan()
     t0 = time.perf_counter()
-    data, cmp, _ = signal_stage(parts, 3, print, False)
-    bands, where = calibration_bands(parts, data, plan, print, False)
+    parts, plan, data, cmp, bands, where = bench_set(args.repetitions, args.overrides)
     if args.cost_only:
         costs = best_costs(data, parts, cmp.features["event"].values,
                            coder_banks(plan, bands, parts.bank), plan.cost_repeats, print)

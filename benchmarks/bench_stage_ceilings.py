@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # the bench set bench_coders reads
 
-from snn_antenna.core import spec as specs  # noqa: E402
 from snn_antenna.evaluation import crossval as cv  # noqa: E402
 from snn_antenna.evaluation import stage_ceilings as sc  # noqa: E402
 from snn_antenna.readout import baselines as bl  # noqa: E402
@@ -33,11 +33,8 @@ from snn_antenna.readout.spiking import recording_attrs  # noqa: E402
 from snn_antenna.readout.spiking_decoders import mlp_baseline  # noqa: E402
 from snn_antenna.report import stats  # noqa: E402
 from snn_antenna.report.results import write_benchmark_json  # noqa: E402
-from snn_antenna.studies import baseline_comparison as study  # noqa: E402
-from snn_antenna.studies.baseline_comparison.run import signal_stage  # noqa: E402
-from snn_antenna.studies.baseline_comparison.tuned import calibration_bands  # noqa: E402
 
-STUDY = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
+from bench_coders import bench_set  # noqa: E402
 
 
 def interval_row(values, scale: float = 1.0, bounds=(0.0, np.inf)) -> dict:
@@ -86,12 +83,8 @@ def main(argv=None) -> dict:
     ap.add_argument("--set", action="append", default=[], dest="overrides",
                     help="a study spec override, e.g. evaluation.seeds=[0,1]")
     args = ap.parse_args(argv)
-    spec = specs.load(STUDY, [f"stimulus.repetitions={args.repetitions}", *args.overrides])
-    parts = study.plan(spec).parts
-    plan = parts.plan.tuned_plan()
     t0 = time.perf_counter()
-    data, cmp, _ = signal_stage(parts, 3, print, False)
-    bands, where = calibration_bands(parts, data, plan, print, False)
+    parts, plan, data, cmp, bands, where = bench_set(args.repetitions, args.overrides)
     bank = plan.bank(bands[plan.base.n_resonators], parts.bank)
     ids = cmp.features["event"].values
     F = sc.stage_features(bank, data["counts"].values[ids], *recording_attrs(data),
