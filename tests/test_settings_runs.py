@@ -28,6 +28,10 @@ def test_every_setting_of_one_compiled_run_spikes_as_its_runtime_run():
         np.testing.assert_allclose(run.spike_t_ms, runtime.spike_t_ms, atol=1e-9)
         counts.add(len(run.spike_i))
     assert len(counts) > 1          # the settings differ, so each run is its own
+    # the process's one cpp_standalone device has built and run that project; a standalone
+    # run of the cost sweep after it builds its own
+    standalone = bench.run(Setting(methods[0], dts[0], "cpp_standalone"))
+    assert len(standalone.spike_i) > 0
 
 
 @pytest.mark.slow

@@ -140,6 +140,11 @@ def run_standalone(array: ResonatorArray, coded: Recording) -> Run:
     directory = tempfile.mkdtemp(prefix="snn_standalone_")
     bounded_make()
     b2.set_device("cpp_standalone", directory=directory, build_on_run=False)
+    # Brian2 keeps one cpp_standalone device per process, and a compiled project of this
+    # process (``engine.standalone.project``: the settings runs, the sweeps) may have built and
+    # run on it: start it afresh (that project is rebuilt from its folder when next asked for)
+    b2.device.reinit()
+    b2.device.activate(directory=directory, build_on_run=False)
     try:
         group, spikes = _offline_group(array, coded)
         b2.Network(group, spikes).run(coded.duration_s * b2.second, namespace={})
