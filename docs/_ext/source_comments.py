@@ -21,6 +21,8 @@ import sys
 import tokenize
 from functools import lru_cache
 
+from plain_docstrings import _escape  # the same escaping as every docstring's text
+
 _CONSTANT = re.compile(r"^_?[A-Z][A-Z0-9_]*$")
 
 
@@ -96,13 +98,6 @@ def parameters_section(cls) -> list[str]:
         head = f"{field.name} : {annotation + ', ' if annotation else ''}{_default(field)}"
         out += [head, *([f"    {_escape(comment)}"] if comment else [])]
     return ["", "Parameters", "----------", *out] if out else []
-
-
-def _escape(text: str) -> str:
-    parts = re.split(r"(``.+?``)", text)
-    for i in range(0, len(parts), 2):
-        parts[i] = parts[i].replace("\\", "\\\\").replace("|", "\\|").replace("*", "\\*")
-    return "".join(parts)
 
 
 def _process(app, what, name, obj, options, lines: list[str]) -> None:
