@@ -13,13 +13,12 @@ frequency, one group). ``measure`` runs one ``Setting`` of a workload, warmed up
 scored against the reference.
 
 The sweep engine's standalone project (``engine.sweep``) is compiled once and re-run per
-chunk with new parameters; here each configuration is built, compiled and run once, since the
-build settings themselves are what is measured.
+chunk with new parameters; here each configuration is a project of its own, since the build
+settings themselves are what is measured, kept on disk so it compiles once.
 """
 from __future__ import annotations
 
 import os
-import tempfile
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -102,14 +101,16 @@ def _offline_group(array: ResonatorArray, coded: Recording):
     return group, b2.SpikeMonitor(group, name="spikes")
 
 
-def warm_up_array(array: ResonatorArray, coded: Recording) -> Run:
-    """Compile what ``array.run(coded)`` will run, on its first ``WARM_UP_MS``."""
+def warm_up_array(array: ResonatorArray, coded: Recording, run_ms: float = WARM_UP_MS) -> Run:
+    """Compile what ``array.run(coded)`` will run, on its first ``run_ms`` (the same network
+    and code as the whole run, stopped early: also a timed sample of it)."""
     import brian2 as b2
 
     with Timer() as timer:
         group, spikes = _offline_group(array, coded)
         guard = neurons.instability_guard(group, "resonator", array.dt_ms, array.method)
-        b2.Network(group, spikes, guard).run(WARM_UP_MS * b2.ms, namespace={})
+        b2.Network(group, spikes, guard).run(run_ms * b2.ms, namespace={})
+        guard.function()
     return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0)
 
 
@@ -132,33 +133,42 @@ def bounded_make() -> None:
 def run_standalone(array: ResonatorArray, coded: Recording) -> Run:
     """The array in Brian2's cpp_standalone mode: compile, then time the run alone.
 
-    A NetworkOperation cannot run in standalone, so instability is checked on the final
-    state (NaN is absorbing in this model: a NaN v never reaches threshold to be reset).
+    The project is kept on disk by what it compiles (``engine.standalone.project``: the
+    array's size, method, step, float type, the input's length and rate, the compiler's
+    flags); the input, tuning and resting state are run arguments, so another run of the
+    same configuration (another seed, the next run of a study) runs the binary without
+    compiling. ``compile_s`` is what this call spent building it (near zero when kept). A
+    NetworkOperation cannot run in standalone, so instability is checked on the final state
+    (NaN is absorbing in this model: a NaN v never reaches threshold to be reset).
     """
     import brian2 as b2
 
-    directory = tempfile.mkdtemp(prefix="snn_standalone_")
-    bounded_make()
-    b2.set_device("cpp_standalone", directory=directory, build_on_run=False)
-    # Brian2 keeps one cpp_standalone device per process, and a compiled project of this
-    # process (``engine.standalone.project``: the settings runs, the sweeps) may have built and
-    # run on it: start it afresh (that project is rebuilt from its folder when next asked for)
-    b2.device.reinit()
-    b2.device.activate(directory=directory, build_on_run=False)
-    try:
+    from .standalone import project, run_project
+
+    held = held_samples(np.asarray(coded.samples, float))
+    structure = ("array", neurons.PRESETS["resonator"].quadratic, array.method,
+                 float(array.dt_ms), array.n_neurons, len(held), float(coded.rate_hz),
+                 str(np.dtype(b2.prefs.core.default_float_dtype)))
+
+    def build():
         group, spikes = _offline_group(array, coded)
         b2.Network(group, spikes).run(coded.duration_s * b2.second, namespace={})
-        t0 = time.perf_counter()
-        b2.device.build(directory=directory, run=False)
-        compile_s = time.perf_counter() - t0
-        with Timer() as timer:
-            b2.device.run()
-        _check_final_state(array, group, coded.duration_s)
-        return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0, compile_s)
-    finally:
-        b2.device.reinit()
-        b2.device.activate()
-        b2.set_device("runtime")
+        return {"group": group, "spikes": spikes, "drive": group.namespace["drive"]}
+
+    t0 = time.perf_counter()
+    proj = project(structure, build)
+    compile_s = time.perf_counter() - t0
+    group = proj["group"]
+    v0, u0 = neurons.resting_state("resonator", array.b)
+    n = array.n_neurons
+    run_args = {proj["drive"]: held, group.k: np.asarray(array.k, float),
+                group.b: np.full(n, float(array.b)), group.v: np.full(n, v0),
+                group.u: np.full(n, u0), group.spike_count: np.zeros(n, np.int32)}
+    with Timer() as timer:
+        run_project(proj, run_args)
+    _check_final_state(array, group, coded.duration_s)
+    spikes = proj["spikes"]
+    return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0, compile_s)
 
 
 def _check_final_state(array: ResonatorArray, group, duration_s: float) -> None:
@@ -192,10 +202,12 @@ class ArrayWorkload:
             net["n_neurons"] = n_neurons
         return ResonatorArray(**net)
 
-    def run(self, setting: Setting, warm_up: bool = False) -> Run:
+    def run(self, setting: Setting, warm_up: bool = False, run_ms: float | None = None) -> Run:
+        """The whole run, or (``warm_up``) its first ``WARM_UP_MS``, or its first ``run_ms``
+        (runtime targets): the same compiled code each time."""
         array = self.array(setting.method, setting.dt_ms, setting.target, setting.n_neurons)
-        if warm_up:
-            return warm_up_array(array, self.coded)
+        if warm_up or run_ms is not None:
+            return warm_up_array(array, self.coded, WARM_UP_MS if run_ms is None else run_ms)
         if setting.target == "cpp_standalone":
             return run_standalone(array, self.coded)
         return run_array(array, self.coded, self.window_s)
@@ -259,14 +271,16 @@ class TuningWorkload:
         self.input_of = np.tile(np.arange(len(self.freqs)), len(self.k))
         self.b = net.get("b", ResonatorArray.b)
 
-    def run(self, setting: Setting, warm_up: bool = False) -> Run:
+    def run(self, setting: Setting, warm_up: bool = False, run_ms: float | None = None) -> Run:
         check(setting.target in RUNTIME_TARGETS, "target", setting.target,
               "a runtime target for the tuning workload")
+        if warm_up:
+            run_ms = WARM_UP_MS
         with Timer() as timer:
             res = neurons.simulate("resonator", self.current, setting.dt_ms, self.k_of,
                                    setting.method, input_dt_ms=1000.0 / self.stimuli.rate_hz,
                                    input_index=self.input_of, target=setting.target,
-                                   force=True, b=self.b, run_ms=WARM_UP_MS if warm_up else None)
+                                   force=True, b=self.b, run_ms=run_ms)
         return timer.run(res.spike_i, res.spike_t_ms)
 
     def reference(self, rtol: float, atol: float) -> Run:

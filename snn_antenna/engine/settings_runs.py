@@ -239,3 +239,70 @@ def neuron_steps(drives, n_methods: int, dts) -> float:
     longest = max(x.duration_s for x in drives)
     return n_methods * sum(d.n_neurons * math.ceil(longest * 1000.0 / dt)
                            for d in drives for dt in dts)
+
+
+# -- the stability map's constant drives ----------------------------------------------------
+def _build_drives(methods, n: int, n_drives: int, steps: int, preset: str) -> dict:
+    """``accuracy.run_drives``' group once per method, in one network: the same equations,
+    threshold, reset, state updater and runaway latch (after every step)."""
+    import brian2 as b2
+
+    p = neurons.PRESETS[preset]
+    drive = b2.TimedArray(np.zeros((1, n_drives)), dt=steps * b2.ms, name="drive")
+    limit = neurons.RUNAWAY_LIMIT
+    net, groups, monitors = b2.Network(), [], []
+    for g, method in enumerate(methods):
+        group = b2.NeuronGroup(
+            n, neurons.equations(p, "drive(t, input_index)",
+                                 "input_index : integer (constant)\nblown : boolean"),
+            threshold=neurons.THRESHOLD, reset=neurons.reset(),
+            method=neurons.brian_method(method), namespace={"drive": drive},
+            dt=1 * b2.ms, name=f"method_{g}")
+        group.a, group.c, group.d = p.a, p.c, p.d
+        group.run_regularly(f"blown = blown or not (abs(v) < {limit!r} and abs(u) < {limit!r})",
+                            when="after_groups", name=f"latch_{g}")
+        spikes = b2.SpikeMonitor(group, name=f"spikes_{g}")
+        net.add(group, spikes)
+        groups.append(group)
+        monitors.append(spikes)
+    net.run(steps * b2.ms, namespace={})
+    return {"groups": groups, "spikes": monitors, "drive": drive}
+
+
+def drives_runs(methods, k_dt, drives, steps: int, *, preset: str = "resonator",
+                b: float | None = None) -> dict:
+    """``accuracy.run_drives`` for every method of ``methods`` in one run of a compiled
+    project: {method: (runaway, spike_i, spike_t_ms, k_of, drive_of)}, each method's group
+    every (k·dt, drive) pair as one neuron, ``steps`` steps of 1 ms from the reset point.
+    The grid's values are run arguments, so another grid of the same size reuses the
+    binary."""
+    k_dt, drives = np.asarray(k_dt, float), np.asarray(drives, float)
+    check(np.all(k_dt > 0) and np.all(np.isfinite(k_dt)), "k_dt", k_dt, "values > 0")
+    check(np.all(np.isfinite(drives)), "drives", drives, "finite currents")
+    check(isinstance(steps, int) and steps >= 1, "steps", steps, "an integer >= 1")
+    methods = list(methods)
+    check(len(methods) >= 1 and all(m in neurons.METHODS for m in methods), "methods",
+          methods, f"names from {list(neurons.METHODS)}")
+    p = neurons.PRESETS[preset]
+    b = p.b if b is None else b
+    kk, ii = np.meshgrid(k_dt, np.arange(len(drives)), indexing="ij")
+    kk, ii = kk.ravel(), ii.ravel()
+    structure = ("drives", preset, p.quadratic, (p.a, p.c, p.d), tuple(methods), kk.size,
+                 len(drives), steps)
+    with float_precision("float64"), vectorising_flags("float64"):
+        proj = project(structure, lambda: _build_drives(methods, kk.size, len(drives), steps,
+                                                        preset))
+    run_args = {proj["drive"]: drives[None, :]}
+    for group in proj["groups"]:
+        run_args.update({group.k: kk, group.b: np.full(kk.size, float(b)),
+                         group.v: np.full(kk.size, float(p.c)),
+                         group.u: np.full(kk.size, float(b) * p.c),
+                         group.input_index: ii.astype(np.int32),
+                         group.blown: np.zeros(kk.size, bool)})
+    with np.errstate(all="ignore"):
+        run_project(proj, run_args)
+    out = {}
+    for method, group, spikes in zip(methods, proj["groups"], proj["spikes"]):
+        out[method] = (np.asarray(group.blown[:], bool), np.asarray(spikes.i[:], int),
+                       np.asarray(spikes.t_[:], float) * 1000.0, kk, drives[ii])
+    return out

@@ -252,7 +252,7 @@ def run_drives(method: str, k_dt, drives, steps: int, *, preset: str = "resonato
 def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
                   preset: str = "resonator", b: float | None = None,
                   model_ms: float = 400.0, rate_tolerance: float = 0.05,
-                  target: str = "numpy", progress=None) -> xr.Dataset:
+                  target: str = "numpy", progress=None, compiled=None) -> xr.Dataset:
     """Classify each (method, k·dt, constant drive I) run from the reset point.
 
     Every neuron runs ``model_ms / min(k_dt)`` steps (so the finest k·dt covers ``model_ms``
@@ -263,6 +263,10 @@ def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
     ``reference_rate_hz`` over (integrator, k_dt, I), and per method the measured
     ``max_stable_k_dt`` (largest k·dt up to which no drive went non-finite) and
     ``max_accurate_k_dt`` (up to which every drive was accurate).
+
+    ``compiled(methods, k_dt, drives, steps, preset=, b=)``: every method's ``run_drives``
+    result ({method: tuple}) from one run of a compiled project of the same model
+    (``engine.settings_runs.drives_runs``); None: each method runs on ``target``.
     """
     k_dt = np.geomspace(0.01, 50, 25) if k_dt is None else np.asarray(k_dt, float)
     drives = np.linspace(-50, 50, 21) if drives is None else np.asarray(drives, float)
@@ -281,12 +285,14 @@ def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
     status = np.empty((len(methods), len(k_dt), len(drives)), dtype=np.int8)
     rates = np.empty(status.shape)
     ref_r = np.tile(ref_rate, len(k_dt))
+    runs = compiled(list(methods), k_dt, drives, steps, preset=preset, b=b) if compiled \
+        else {}
     for m_idx, method in enumerate(methods):
-        if progress:
+        if progress and not compiled:
             progress(f"stability map: {method} ({k_dt.size * drives.size} neurons, "
                      f"{steps} steps)")
-        blown, spike_i, spike_t, kk, _ = run_drives(method, k_dt, drives, steps,
-                                                    preset=preset, b=b, target=target)
+        blown, spike_i, spike_t, kk, _ = runs[method] if compiled else run_drives(
+            method, k_dt, drives, steps, preset=preset, b=b, target=target)
         r = _steady_rates(spike_i, spike_t, kk, steps, kk.size)
         one_spike = 1000.0 / (kk * steps / 2)   # one spike in the window, per second
         ok = np.abs(r - ref_r) <= rate_tolerance * ref_r + one_spike
@@ -304,7 +310,9 @@ def stability_map(methods=neurons.METHODS, k_dt=None, drives=None, *,
                 "k_dt": ("k_dt", k_dt, {"units": "model ms per step"}),
                 "I": ("I", drives, {"long_name": "constant drive"})},
         attrs={"preset": preset, "b": b, "model_ms": model_ms, "steps": steps,
-               "rate_tolerance": rate_tolerance})
+               "rate_tolerance": rate_tolerance,
+               "engine": "cpp_standalone, every method in one compiled run" if compiled
+               else f"{target}, one run per method"})
     ds["max_stable_k_dt"] = ("integrator", [_largest_passing(k_dt, status[m] != NON_FINITE)
                                             for m in range(len(methods))])
     ds["max_accurate_k_dt"] = ("integrator", [_largest_accurate(k_dt, status[m])
@@ -361,10 +369,10 @@ class StabilityGrid:
         bounds.number("model_ms", self.model_ms, 0.0, lo_open=True, unit=" ms")
         bounds.number("rate_tolerance", self.rate_tolerance, 0.0, 1.0, lo_open=True)
 
-    def map(self, methods, b: float | None = None) -> xr.Dataset:
+    def map(self, methods, b: float | None = None, compiled=None) -> xr.Dataset:
         return stability_map(methods, np.geomspace(self.k_dt_min, self.k_dt_max, self.n_k_dt),
                              np.asarray(self.drives, float), b=b, model_ms=self.model_ms,
-                             rate_tolerance=self.rate_tolerance)
+                             rate_tolerance=self.rate_tolerance, compiled=compiled)
 
 
 def stability_limits(smap: xr.Dataset, k_max: float) -> dict:

@@ -6,12 +6,13 @@ Accuracy: one compiled run steps every (scene, method, dt) of the grid
 to the compiler's rounding), each scored against its scene's reference as a runtime run is.
 
 Cost: what a user's choice costs is a run on the sweep's target (numpy or cython), so that is
-timed, on a sample: per scene and method, the finest step whose compiled run stayed finite
-within the method's stable limit, warmed up (compiling is not timed), then timed in full and
-over its first ``devices.WARM_UP_MS``. The two give the run's fixed cost (building the
-network) and its cost per step, and every other step of that scene and method is costed as
-fixed + per step × its steps (the row's ``cost_from`` says which rows were timed). A timed
-sample's own spike count beside the compiled run's is kept as a check (``agrees``).
+timed, on a sample (``timing``): per scene and method, the finest step whose compiled run
+stayed finite within the method's stable limit, compiled first, then timed over its first
+``devices.WARM_UP_MS`` and its first ``timing.SAMPLE_S`` seconds. The two give the run's
+fixed cost (building the network) and its cost per step, and every step of that scene and
+method is costed as fixed + per step × its steps (the row's ``cost_from`` says so). The
+sample's spike count beside the compiled run's over the same window is kept as a check
+(``agrees``).
 """
 from __future__ import annotations
 
@@ -21,14 +22,13 @@ import numpy as np
 
 from ...core.errors import NumericalInstabilityError
 from ...engine.batches import Batches
-from ...engine.devices import WARM_UP_MS, Setting, float_precision, measure
+from ...engine.devices import Setting
 from ...engine.runlog import RunLog
 from ...evaluation.bands import Spikes, array_of
 from ...engine.settings_runs import SceneDrive, SettingsRuns, scene_drive, settings_spikes
 from ...evaluation.tradeoff import ERRORS, RAISED, check_finite, describe
 from ...networks import neurons
-
-TIMED = "timed"
+from . import timing
 
 
 def score(workload, ref, setting: Setting, result) -> dict:
@@ -52,17 +52,11 @@ def score(workload, ref, setting: Setting, result) -> dict:
 
 def _sample_dt(rows: list[dict]) -> float | None:
     """The finest step of one scene and method that finished within its stable limit: the
-    longest run, so its per-step cost is measured over the most steps and every other step
-    is costed by fewer steps than it (the noise of a short run, multiplied up to a long one,
-    reordered settings whose costs lie within 20 % of each other)."""
+    most steps in its sample, so its per-step cost is measured over the most steps and every
+    other step is costed by fewer steps than it (the noise of a short run, multiplied up to a
+    long one, reordered settings whose costs lie within 20 % of each other)."""
     ok = [r["dt_ms"] for r in rows if r["status"] == "ok" and not r["beyond_stable_limit"]]
     return min(ok) if ok else None
-
-
-def _short_run(workload, setting: Setting):
-    """The sample's first ``WARM_UP_MS``, timed (compiled already: the network's own cost)."""
-    with float_precision(setting.dtype):
-        return workload.run(setting, warm_up=True)
 
 
 def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, dict]:
@@ -76,12 +70,12 @@ def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, d
                           dtype=sweep.dtype, n_neurons=workloads[s].n_neurons)
     rows = {key: logged(*key) for key in keys}
     t0 = time.perf_counter()
+    results = {}
     if any(r is None for r in rows.values()):
         drives = tuple(scene_drive(workloads[s]) for s in sweep.scenes)
         # one compiled run of every method (the methods are Batches items: a client would
         # spread them over its workers)
         work = SettingsRuns(drives, tuple(dts), sweep.dtype)
-        results = {}
         for part in Batches(work, per_run=len(methods)).run(methods):
             results.update(part)
         for key in keys:
@@ -93,7 +87,7 @@ def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, d
     compiled_s = time.perf_counter() - t0
     log(f"  compiled run of {len(keys)} settings: {compiled_s:.1f} s (compiling included)")
 
-    samples, warmed = [], set()
+    samples = []
     for s in sweep.scenes:
         for m in methods:
             mine = [rows[(s, m, dt)] for dt in dts]
@@ -101,21 +95,22 @@ def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, d
             if dt is None:
                 continue
             setting = Setting(m, dt, sweep.target, sweep.dtype)
-            timed = runlog.get(sweep="main_timing", scene=s, method=m, dt_ms=dt,
-                               target=sweep.target, dtype=sweep.dtype,
-                               n_neurons=workloads[s].n_neurons)
+            identity = dict(scene=s, method=m, dt_ms=dt, target=sweep.target,
+                            dtype=sweep.dtype, n_neurons=workloads[s].n_neurons)
+            timed = runlog.get(sweep="main_timing", **identity)
             if timed is None:
-                timed = measure(workloads[s], refs[s], setting, warmed)
-                short = _short_run(workloads[s], setting)
-                timed.update(sweep="main_timing", short_cpu_s=short.cpu_s,
-                             short_wall_s=short.wall_s, short_ms=WARM_UP_MS)
+                sample = timing.timed_sample(workloads[s], setting, mine[0]["scene_duration_s"])
+                compiled = results.get((s, m, dt)) if results else None
+                timed = dict(identity, sweep="main_timing",
+                             **{k: v for k, v in sample.items() if not k.startswith("_")})
+                timed["agrees"] = compiled is not None and timing.agrees(sample, compiled, dt)
                 runlog.add(timed)
-            log(f"  timed sample: {describe(timed)}")
+            log(f"  timed sample: {s} {m} dt={dt:g} {sweep.target}: "
+                f"{timed.get('sample_cpu_s', float('nan')):.2f} s CPU over "
+                f"{timed['sample_s']:g} s, whole scene costed "
+                f"{timed.get('cpu_s', float('nan')):.2f} s")
             samples.append(timed)
-            compiled = rows[(s, m, dt)]
-            agrees = timed["status"] == "ok" and timed["n_spikes"] == compiled["n_spikes"]
-            _cost(mine, timed, dt)
-            timed["agrees"] = bool(agrees)
+            _cost(mine, timed)
     for key in keys:
         if rows[key]["status"] == "ok" and rows[key]["cpu_s"] is None:
             rows[key]["cost_from"] = "no finished sample to cost it from"
@@ -129,38 +124,30 @@ def run(plan, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[list, d
                              "(engine.settings_runs)",
                  "settings": len(keys), "compiled_run_s": compiled_s,
                  "cost": f"{sweep.target}, timed on a sample (per scene and method, the "
-                         "finest finished step) and costed by steps for the others",
+                         f"finest finished step over its first {timing.SAMPLE_S:g} s, or the "
+                         "whole scene when shorter) and costed by steps",
                  "timed_samples": len(samples),
                  "samples_agree": sum(bool(t.get("agrees")) for t in samples),
                  "samples": [{k: t.get(k) for k in ("scene", "method", "dt_ms", "target",
-                                                    "cpu_s", "wall_s", "short_cpu_s",
-                                                    "n_spikes", "agrees", "status")}
+                                                    "sample_s", "sample_cpu_s", "short_cpu_s",
+                                                    "cpu_s", "wall_s", "sample_spikes",
+                                                    "agrees", "status")}
                              for t in samples]}
 
 
-def _cost(rows: list[dict], timed: dict, dt_sample: float) -> None:
-    """Each finished row's cost from the timed sample at ``dt_sample``: the fixed part (the
-    short run less its steps) plus the per-step part times the row's steps."""
+def _cost(rows: list[dict], timed: dict) -> None:
+    """Each finished row's cost from the timed sample (``timing.timed_sample``): its fixed
+    part plus its per-step part times the row's steps."""
     if timed["status"] != "ok":
         return
-    for field in ("cpu_s", "wall_s"):
-        full, short = timed[field], timed[f"short_{field}"]
-        timed_steps = _steps(rows[0], dt_sample)
-        short_steps = WARM_UP_MS / dt_sample
-        per_step = max(full - short, 0.0) / max(timed_steps - short_steps, 1.0)
-        fixed = max(short - short_steps * per_step, 0.0)
-        for r in rows:
-            if r["status"] != "ok":
-                continue
-            if abs(r["dt_ms"] - dt_sample) < 1e-12:
-                r[field], r["cost_from"] = timed[field], TIMED
-            else:
-                r[field] = fixed + per_step * _steps(r, r["dt_ms"])
-                r["cost_from"] = f"timed at dt {dt_sample:g} ms, costed by steps"
-
-
-def _steps(row: dict, dt_ms: float) -> float:
-    return row["scene_duration_s"] * 1000.0 / dt_ms
+    how = (f"{timed['target']}, timed at dt {timed['dt_ms']:g} ms "
+           f"({timing.describe(timed)})")
+    for r in rows:
+        if r["status"] != "ok":
+            continue
+        for field in ("cpu_s", "wall_s"):
+            r[field] = timing.costed(timed, field, r["dt_ms"], r["scene_duration_s"])
+        r["cost_from"] = how
 
 
 def band_spikes(events, settings) -> dict:

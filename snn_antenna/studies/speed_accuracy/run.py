@@ -16,13 +16,14 @@ from ...engine.devices import (
     reference_convergence,
     solve_reference,
 )
-from ...engine.runlog import Measurements, RunLog
+from ...engine.runlog import RunLog
+from ...engine.settings_runs import drives_runs
 from ...evaluation import accuracy, tradeoff
 from ...evaluation.bands import run_study as run_band_study
 from ...networks.resonators import ResonatorArray
 from ...report.page import Report
 from ..contract import Options, Plan
-from . import main_sweep
+from . import cost_sweep, main_sweep
 from . import precision as engine_precision
 from .plan import Parts
 from .report import human_summary, quick_note, write_report
@@ -124,7 +125,6 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         workloads = prepare_workloads(plan, seed, log)
         log(f"[2/7] reference solutions (solve_ivp, rtol {plan.reference.rtol:g})")
         refs, ref_rows, convergence = solve_references(plan, workloads, log)
-        runs = Measurements(workloads, refs, runlog, log)
         n_main = len(sweep.scenes) * len(sweep.methods) * len(sweep.dt_ms)
         log(f"[3/7] main sweep: {n_main} settings in one compiled run ({sweep.dtype}); "
             f"their cost on {sweep.target}, timed on a sample")
@@ -133,13 +133,15 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         recommendations = tradeoff.recommend(rows, plan.match)
         cost = cost_pairs(plan, recommendations, workloads[plan.cost.scene].n_neurons)
         log(f"[4/7] cost sweep on {plan.cost.scene}: {len(cost)} runs "
-            f"(targets × dtypes × sizes)")
-        with log.expected(FLOAT32_CHECK):
-            rows += runs.sweep("cost", cost)
+            f"(targets × dtypes × sizes; runtime targets timed on a sample)")
+        with log.expected(FLOAT32_CHECK, UNSTABLE_ON_PURPOSE):
+            cost_rows, cost_done = cost_sweep.run(cost, workloads, refs, runlog, log)
+        rows += cost_rows
         log(f"[5/7] stability map ({len(sweep.methods)} methods × {stab.n_k_dt} k·dt × "
-            f"{len(stab.drives)} drives)")
+            f"{len(stab.drives)} drives, one compiled run)")
         with log.expected(UNSTABLE_ON_PURPOSE):
-            smap = stab.map(sweep.methods, b=plan.net.get("b", ResonatorArray.b))
+            smap = stab.map(sweep.methods, b=plan.net.get("b", ResonatorArray.b),
+                            compiled=drives_runs)
         write_dataset(smap, out_dir / "stability_map.zarr")
         log(f"[6/7] bench bands ({', '.join(plan.bands.bands)}) against the reference")
         bands = run_band_study(plan.bands, seed, log, compiled=main_sweep.band_spikes)
@@ -149,6 +151,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         precision = engine_precision.run(plan.precision, plan.match.rate_map_error, log)
         summary = summarise(plan, rows, (ref_rows, convergence), recommendations, smap)
         summary["main_sweep"] = main_sweep_done
+        summary["cost_sweep"] = cost_done
         summary["bands"] = bands
         summary["precision"] = precision
         summary["total_wall_s"] = time.perf_counter() - t_start
