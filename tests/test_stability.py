@@ -41,6 +41,34 @@ def test_stability_map_marks_fine_steps_accurate_and_reports_limits():
     assert set(smap.status.dims) == {"integrator", "k_dt", "I"}
 
 
+def test_the_compiled_map_runs_every_cell_as_its_runtime_run():
+    # the speed/accuracy default-suite run's map grid (its methods, 4 k·dt from 0.5 to 50 and
+    # its drives, 100 model-ms at the finest): the compiled project it builds is shared
+    from snn_antenna.engine.settings_runs import drives_runs
+
+    methods, k_dt, drives = ["euler", "rk2"], np.geomspace(0.5, 50.0, 4), [-20.0, 0.0, 0.5, 20.0]
+    steps = 200
+    compiled = drives_runs(methods, k_dt, drives, steps)
+    assert list(compiled) == methods
+    for method in methods:
+        runaway, spike_i, spike_t, kk, drive = accuracy.run_drives(method, k_dt, drives, steps)
+        c_runaway, c_i, c_t, c_kk, c_drive = compiled[method]
+        assert np.array_equal(c_kk, kk) and np.array_equal(c_drive, drive)
+        assert np.array_equal(c_runaway, runaway), method
+        assert runaway.any() and not runaway.all()     # both kinds of cell are compared
+        # finite cells up to k·dt 5 spike at the steps of their runtime runs (coarser finite
+        # cells are chaotic: rounding moves their spikes, the map reads only their rates)
+        calm = np.flatnonzero(~runaway & (kk <= 5.0))
+        assert len(calm) >= 4
+        for j in calm:     # dt is 1 ms: a spike's time is its step
+            assert np.array_equal(np.sort(np.rint(c_t[c_i == j])),
+                                  np.sort(np.rint(spike_t[spike_i == j]))), (method, j)
+    smap = accuracy.stability_map(methods, k_dt, drives, model_ms=100.0, compiled=drives_runs)
+    runtime = accuracy.stability_map(methods, k_dt, drives, model_ms=100.0)
+    assert np.array_equal(smap.status.values, runtime.status.values)
+    assert "compiled" in smap.attrs["engine"] and "numpy" in runtime.attrs["engine"]
+
+
 @pytest.mark.parametrize("method", neurons.METHODS)
 def test_blow_up_raises_during_the_run_with_a_safe_dt(method):
     k = 4.0

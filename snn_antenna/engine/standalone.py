@@ -13,6 +13,7 @@ import hashlib
 import math
 import os
 import re
+import sys
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -216,8 +217,10 @@ def project(structure: tuple, build) -> dict:
 
     # The compiler's flags make the binary as much as the structure does (another -march, the
     # float32 flags): a project built with other flags is another project, in this process and
-    # on disk.
-    structure = (structure, tuple(prefs.codegen.cpp.extra_compile_args_gcc))
+    # on disk. So does the Python environment: Brian2 writes its include folder into the
+    # project's makefile, on which every object file depends, so two environments sharing
+    # one folder would each recompile the whole project after the other had built it.
+    structure = (structure, tuple(prefs.codegen.cpp.extra_compile_args_gcc), sys.prefix)
     if _PROJECT.get("structure") == structure and _still_built():
         return _PROJECT
     key = hashlib.sha1(repr(structure).encode()).hexdigest()[:12]

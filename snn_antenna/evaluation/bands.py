@@ -223,19 +223,32 @@ COST_SAMPLE_SHARE = 0.2   # the share of a window a compiled setting's cost is t
 
 def sampled_cost(events: BandEvents, setting: BandSetting, target: str, repeat: int,
                  spikes: Spikes) -> Spikes:
-    """``spikes`` (a compiled run's) with the cost of the setting on ``target``: timed over
-    the first ``WARM_UP_MS`` and the first ``COST_SAMPLE_SHARE`` of the window (compiled
-    first), the run's own cost and its cost per step from the two, and the whole window's
-    steps costed by them."""
+    """``spikes`` (a compiled run's) with the cost of the setting on ``target``: the window's
+    run (``repeat`` copies of the events in one group) compiled on its first ``WARM_UP_MS``,
+    then timed over its first ``WARM_UP_MS`` and its first ``COST_SAMPLE_SHARE`` (the same
+    code each time: the run stopped early), the run's own cost and its cost per step from
+    the two, and the whole window's steps costed by them."""
     window_s = min(setting.duration_s or events.duration_s, events.duration_s)
-    short, sample = WARM_UP_MS / 1000.0, max(window_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000)
-    first = brian_spikes(events, replace(setting, duration_s=short), target, repeat)
-    part = brian_spikes(events, replace(setting, duration_s=sample), target, repeat)
+    short = WARM_UP_MS / 1000.0
+    sample = min(max(window_s * COST_SAMPLE_SHARE, 2 * short), window_s)
+    array = array_of(events.band, setting, target)
+    n_samples = min(events.coded.shape[0], int(round(window_s * events.rate_hz)))
+    coded = np.tile(events.coded[:n_samples], (1, repeat))
+    kwargs = dict(_inputs(BandEvents(events.name, events.band, coded, events.rate_hz), array),
+                  method=setting.method, target=target, force=True)
+    neurons.simulate("resonator", coded, setting.dt_ms, run_ms=WARM_UP_MS, **kwargs)
+    timed = []
+    for seconds in (short, sample):
+        t0, w0 = time.process_time(), time.perf_counter()
+        neurons.simulate("resonator", coded, setting.dt_ms, run_ms=seconds * 1000.0, **kwargs)
+        timed.append((time.process_time() - t0, time.perf_counter() - w0))
     costs = []
-    for a, b in ((first.cpu_s, part.cpu_s), (first.wall_s, part.wall_s)):
-        per_s = max(b - a, 0.0) / (sample - short)
+    for a, b in zip(*timed):
+        per_s = max(b - a, 0.0) / max(sample - short, 1e-9)
         costs.append(max(a - short * per_s, 0.0) + per_s * window_s)
     return Spikes(spikes.spike_i, spikes.spike_t_ms, *costs)
+
+
 RATE_WINDOW_S = 0.05      # the rate map's window: the bank's time bins are 0.1 s and coarser
 
 
@@ -305,26 +318,33 @@ def truncation_error(ref: Spikes, n: int, duration_s: float, window_s: float) ->
 
 # -- driven tuning: where each neuron's peak lands -----------------------------------------
 def driven_tuning(band: Band, setting: BandSetting, rate_hz: float, freqs_hz,
-                  duration_s: float = 0.5, target: str = "cython"):
+                  duration_s: float = 0.5, target: str = "cython", compiled=None):
     """Spike rate of every neuron of ``band`` at ``setting`` driven by square waves of the
     band's coder amplitude at each of ``freqs_hz``, sampled at ``rate_hz`` as the coder's
-    output is (one group of neurons × frequencies). Dims (``neuron_hz``, ``input_hz``)."""
+    output is (one group of neurons × frequencies). Dims (``neuron_hz``, ``input_hz``).
+    ``compiled(current, rate_hz, k, input_index, b, method, dt_ms)``: the spike indices of
+    the same run from a compiled project of the same model (None: ``target``)."""
     import xarray as xr
 
     array = array_of(band, setting, target)
     freqs = np.asarray(freqs_hz, dtype=float)
     current = np.column_stack([square(f, duration_s, rate_hz, band.coder_amplitude).samples
                                for f in freqs])
-    res = neurons.simulate("resonator", current, setting.dt_ms, np.repeat(array.k, len(freqs)),
-                           setting.method, input_dt_ms=1000.0 / rate_hz,
-                           input_index=np.tile(np.arange(len(freqs)), array.n_neurons),
-                           target=target, force=True, b=array.b)
-    counts = np.bincount(res.spike_i, minlength=array.n_neurons * len(freqs))
+    k = np.repeat(array.k, len(freqs))
+    index = np.tile(np.arange(len(freqs)), array.n_neurons)
+    if compiled is not None:
+        spike_i = compiled(current, rate_hz, k, index, array.b, setting.method, setting.dt_ms)
+    else:
+        spike_i = neurons.simulate("resonator", current, setting.dt_ms, k, setting.method,
+                                   input_dt_ms=1000.0 / rate_hz, input_index=index,
+                                   target=target, force=True, b=array.b).spike_i
+    counts = np.bincount(spike_i, minlength=array.n_neurons * len(freqs))
     return xr.DataArray(counts.reshape(array.n_neurons, len(freqs)) / duration_s,
                         dims=("neuron_hz", "input_hz"),
                         coords={"neuron_hz": array.neuron_hz, "input_hz": freqs,
                                 "k": ("neuron_hz", array.k)},
-                        name="rate", attrs={"units": "Hz", "setting": setting.label()})
+                        name="rate", attrs={"units": "Hz", "setting": setting.label(),
+                                            "engine": "compiled" if compiled else target})
 
 
 def peak_hz(rates) -> np.ndarray:
@@ -423,14 +443,17 @@ class BandStudy:
         return np.geomspace(lo, hi, self.n_freqs)
 
 
-def recalibrate(study: BandStudy, band: Band, rate_hz: float, log=print) -> tuple[float, dict]:
-    """Tuning at ``SMALL_SIGNAL_EULER`` and at the most accurate method's accurate step; the
+def recalibrate(study: BandStudy, band: Band, rate_hz: float, log=print,
+                compiled=None) -> tuple[float, dict]:
+    """Tuning at ``SMALL_SIGNAL_EULER`` and at the most accurate method's accurate step (on
+    ``compiled``, ``driven_tuning``'s, when given: its fine step is the costly run); the
     Hz per unit k that puts the latter's peaks on target."""
     freqs = study.freqs_hz(band, rate_hz)
     before = tuning_summary(driven_tuning(band, SMALL_SIGNAL_EULER, rate_hz, freqs,
                                           study.tuning_duration_s, study.target))
     fine = BandSetting("rk4", accurate_dt_ms(band, "rk4"))
-    rates = driven_tuning(band, fine, rate_hz, freqs, study.tuning_duration_s, study.target)
+    rates = driven_tuning(band, fine, rate_hz, freqs, study.tuning_duration_s, study.target,
+                          compiled)
     hz_per_k = peak_hz_per_k(rates)
     log(f"    tuning: {before['mean_abs_offset_channels']:.2f} channels off at "
         f"{SMALL_SIGNAL_EULER.label()}; peaks at {hz_per_k:.4g} Hz per k at {fine.label()}")
@@ -438,7 +461,8 @@ def recalibrate(study: BandStudy, band: Band, rate_hz: float, log=print) -> tupl
                       "freqs_hz": [float(f) for f in freqs]}
 
 
-def study_band(study: BandStudy, name: str, data, log=print, compiled=None) -> dict:
+def study_band(study: BandStudy, name: str, data, log=print, compiled=None,
+               compiled_tuning=None) -> dict:
     """A band's error and cost at ``SMALL_SIGNAL_EULER``, each method at ``candidate_steps`` (the
     recalibrated Hz per unit k), the cheapest of those within the rate-map tolerance, and the
     tuning at the chosen setting."""
@@ -452,7 +476,8 @@ def study_band(study: BandStudy, name: str, data, log=print, compiled=None) -> d
     hz_per_k = band.hz_per_k
     before_ref = ref
     if name in study.calibrate:
-        hz_per_k, out["tuning"] = recalibrate(study, band, events.rate_hz, log)
+        hz_per_k, out["tuning"] = recalibrate(study, band, events.rate_hz, log,
+                                              compiled_tuning)
         ref = reference_spikes(events, hz_per_k)
         out["reference_cpu_s"] += ref.cpu_s
     candidates = [BandSetting(method, dt_ms, hz_per_k) for method in study.methods
@@ -473,7 +498,7 @@ def study_band(study: BandStudy, name: str, data, log=print, compiled=None) -> d
             after = BandSetting(chosen["method"], chosen["dt_ms"], hz_per_k)
             out["tuning"]["after"] = tuning_summary(driven_tuning(
                 band, after, events.rate_hz, study.freqs_hz(band, events.rate_hz),
-                study.tuning_duration_s, study.target))
+                study.tuning_duration_s, study.target, compiled_tuning))
     return dict(out, band=name, rows=rows, n_events=events.n_events, chosen=chosen,
                 apply=apply_line(name, chosen))
 
@@ -495,15 +520,17 @@ def apply_line(name: str, chosen: dict | None) -> str:
             f"{chosen['hz_per_k']:.4g} Hz per unit k")
 
 
-def run_study(study: BandStudy, seed: int = 0, log=print, compiled=None) -> dict:
+def run_study(study: BandStudy, seed: int = 0, log=print, compiled=None,
+              compiled_tuning=None) -> dict:
     """Every band of ``study`` on one set of sample events. ``compiled(events, settings)``:
     each setting's spikes (``Spikes``, or the ``NumericalInstabilityError`` met) from one
-    compiled run of the same model, for ``measure`` (None: every setting runs on the
-    study's target)."""
+    compiled run of the same model, for ``measure``; ``compiled_tuning``: the driven
+    tunings' at the fine and the chosen step (``driven_tuning``). None: every run on the
+    study's target."""
     data = sample_data(study.materials, study.positions_cm, study.repetitions, seed)
     out = {"accurate_k_dt": dict(ACCURATE_K_DT), "n_events": int(data.sizes["event"]),
            "bands": {}}
     for name in study.bands:
         log(f"  band {name}")
-        out["bands"][name] = study_band(study, name, data, log, compiled)
+        out["bands"][name] = study_band(study, name, data, log, compiled, compiled_tuning)
     return out

@@ -181,3 +181,22 @@ def band_spikes(events, settings) -> dict:
         out[s] = run if isinstance(run, NumericalInstabilityError) else Spikes(
             run.spike_i, run.spike_t_ms)
     return out
+
+
+def tuning_spikes(current, rate_hz: float, k, input_index, b: float, method: str,
+                  dt_ms: float) -> np.ndarray:
+    """``evaluation.bands.driven_tuning``'s compiled run: every neuron (its ``k``, reading
+    column ``input_index`` of ``current``) at ``method`` and ``dt_ms`` in one compiled run
+    (``engine.settings_runs``), each starting at rest for its column's first sample, as
+    ``neurons.simulate`` starts it; the spikes' neuron indices. A blow-up raises the
+    ``NumericalInstabilityError`` the runtime run would have raised."""
+    current = np.asarray(current, float)
+    first = current[0][np.asarray(input_index)]
+    rest = np.array([neurons.resting_state("resonator", float(b), float(i0)) for i0 in first])
+    drive = SceneDrive("tuning", current, float(rate_hz), np.asarray(k, float),
+                       np.asarray(input_index), rest[:, 0], rest[:, 1], float(b))
+    run = settings_spikes([drive], (), (), pairs=[(method, float(dt_ms))])[
+        ("tuning", method, float(dt_ms))]
+    if isinstance(run, NumericalInstabilityError):
+        raise run
+    return np.asarray(run.spike_i, dtype=np.int64)

@@ -10,6 +10,7 @@ from ...core import spec as specs
 from ...core.errors import check
 from ...engine.cost import engine_of, stages_estimate
 from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
+from ...engine.devices import WARM_UP_MS as DEVICE_WARM_UP_MS
 from ...evaluation.accuracy import Match, StabilityGrid
 from ...evaluation.bands import (BENCH_BANDS, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER, WARM_UP_MS,
                                  BandStudy, candidate_steps)
@@ -20,6 +21,7 @@ from ..contract import COMMON, Plan, data_folder
 from ...networks.resonators import array_section, check_rates, network_table
 from ...preprocess import Preprocessing, chain_section
 from ..sections import scene_section, source_section
+from . import timing
 from .precision import Precision
 
 SECTIONS = ("network", "stimulus", "bench", "preprocess", "readout", "tuning", "sweep", "cost",
@@ -138,33 +140,67 @@ def plan(spec: dict) -> Plan:
                 Parts(net, robot_scenes, pre, detector, window_s, **parts), estimate)
 
 
+# CPU seconds of the exact reference (solve_ivp, rtol 1e-10, ``networks.reference``) per
+# neuron and simulated second: 16.2 s for the tuning scene (288 neurons x 2 s), 9.1 s for
+# the quickstart scene (24 x 16 s), 0.8 s for the bench (24 x 2 s) in the full profile's
+# log, AMD EPYC 2 cores (load 4-8); the tightest of the three, so the estimate errs long.
+REFERENCE_S_PER_NEURON_S = 0.03
+
+
+def _sampled(seconds: float, dt_ms: float, n: int, engine: str) -> list:
+    """A runtime setting timed on a sample (``timing.timed_sample``): a warm-up, its first
+    ``WARM_UP_MS`` and its first ``timing.SAMPLE_S`` (at most the scene)."""
+    sample = timing.sample_seconds(seconds)
+    return [(DEVICE_WARM_UP_MS / 1000, dt_ms, n, engine)] * 2 + [(sample, dt_ms, n, engine)]
+
+
 def estimate(parts: Parts):
-    """The main sweep (every scene at every method and dt in one compiled run, and a timed
-    sample per scene and method on its target), the cost sweep (its settings at
-    every target, float type and array size), the stability map, the bench bands (their
-    sample events at every method and step, and the tuning that recalibrates them) and the
-    sweep engine's precision grid (per float type)."""
+    """The references (solve_ivp), the main sweep (every scene at every method and dt in one
+    compiled run, and a timed sample per scene and method on its target), the cost sweep
+    (its settings at every target, float type and array size: runtime targets on a timed
+    sample, standalone whole, own-size errors from one compiled run per float type), the
+    stability map (one compiled run), the bench bands (their sample events at every method
+    and step, and the tuning that recalibrates them) and the sweep engine's precision grid
+    (per float type)."""
     array = ResonatorArray(**dict(parts.net, force=True))
     seconds = {"tuning": parts.tuning.duration_s,
                **{name: scene.duration_s for name, scene in parts.robot_scenes.items()}}
     size = {"tuning": array.n_neurons * parts.tuning.n_freqs}
     sweep, cost = parts.sweep, parts.cost
+    scenes = list(dict.fromkeys(sweep.scenes + [cost.scene]))
+    neuron_s = sum(size.get(s, array.n_neurons) * seconds[s] for s in scenes)
+    check_scene = parts.reference.check_scene
+    check_scene = check_scene if check_scene in scenes else scenes[0]
+    # the convergence check: the check scene again, tighter (about twice the work)
+    neuron_s += 2 * size.get(check_scene, array.n_neurons) * seconds[check_scene]
+    references = neuron_s * REFERENCE_S_PER_NEURON_S
     # the main sweep: one compiled run, a group per method and dt holding every scene's
     # neurons for the longest scene (engine.settings_runs); then per scene and method one
-    # timed run on the sweep's target, at its finest step (main_sweep)
+    # timed sample on the sweep's target, at its finest step (main_sweep)
     longest = max(seconds[s] for s in sweep.scenes)
     neurons_all = sum(size.get(s, array.n_neurons) for s in sweep.scenes)
     main = [(longest, float(dt), neurons_all, "codings") for dt in sweep.dt_ms
             ] * len(sweep.methods)
-    main += [(seconds[s], float(min(sweep.dt_ms)), size.get(s, array.n_neurons),
-              engine_of(sweep.target)) for s in sweep.scenes] * len(sweep.methods)
+    for s in sweep.scenes:
+        main += _sampled(seconds[s], float(min(sweep.dt_ms)), size.get(s, array.n_neurons),
+                         engine_of(sweep.target)) * len(sweep.methods)
     # the recommendation is the fastest setting that matches: sized as the spec's settings
     settings = [tuple(s) for s in cost.settings] * (2 if cost.include_recommended else 1)
-    costs = [(seconds[cost.scene], float(dt), n, engine_of(t)) for _, dt in settings
-             for t in cost.targets for n in cost.n_neurons] * len(cost.dtypes)
+    costs = []
+    for _, dt in settings:
+        for t in cost.targets:
+            for n in cost.n_neurons:
+                if t == "cpp_standalone":   # the whole scene, its binary kept on disk
+                    costs.append((seconds[cost.scene], float(dt), n, "standalone"))
+                else:
+                    costs += _sampled(seconds[cost.scene], float(dt), n, engine_of(t))
+    costs *= len(cost.dtypes)
+    if set(cost.targets) - {"cpp_standalone"}:   # own-size errors: a compiled run per dtype
+        costs += [(seconds[cost.scene], float(dt), array.n_neurons, "codings")
+                  for _, dt in settings] * len(cost.dtypes)
     stab = parts.stability          # every neuron runs model_ms at the finest k·dt
-    stability = [(stab.model_ms / stab.k_dt_min / 1000.0, 1.0, stab.n_k_dt * len(stab.drives),
-                  "numpy")] * len(sweep.methods)
+    stability = [(stab.model_ms / stab.k_dt_min / 1000.0, 1.0,
+                  stab.n_k_dt * len(stab.drives) * len(sweep.methods), "codings")]
     bands = parts.bands
     events = len(bands.materials) * len(bands.positions_cm) * bands.repetitions
     band_runs = []
@@ -190,8 +226,9 @@ def estimate(parts: Parts):
                               engine_of(bands.target)))
     precision = parts.precision
     points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
-    return stages_estimate("the method x dt sweep, the cost sweep, the stability map, the "
-                           "bench bands and the precision grid", [
+    return stages_estimate("the references, the method x dt sweep, the cost sweep, the "
+                           "stability map, the bench bands and the precision grid", [
+        ("reference.rtol", parts.reference.rtol, [], references),
         ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs),
         ("stability.model_ms", stab.model_ms, stability),
         ("bands.repetitions", bands.repetitions, band_runs),

@@ -144,7 +144,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
                             compiled=drives_runs)
         write_dataset(smap, out_dir / "stability_map.zarr")
         log(f"[6/7] bench bands ({', '.join(plan.bands.bands)}) against the reference")
-        bands = run_band_study(plan.bands, seed, log, compiled=main_sweep.band_spikes)
+        bands = run_band_study(plan.bands, seed, log, compiled=main_sweep.band_spikes,
+                               compiled_tuning=main_sweep.tuning_spikes)
         # last: the compiled sweep engine holds Brian2's one standalone device from here on
         log(f"[7/7] sweep engine precision ({', '.join(plan.precision.dtypes) or 'none'}) "
             "against float64; report")
