@@ -63,6 +63,17 @@ def test_quick_study_writes_rows_fronts_recommendations_and_the_stability_map(tm
     cost = [r for r in rows if r["sweep"] == "cost"]
     assert {r["n_neurons"] for r in cost} == set(spec["cost"]["n_neurons"])
     assert {r["dtype"] for r in cost} == set(spec["cost"]["dtypes"])   # float32 is an axis
+    # runtime costs are timed on a sample of the run, and the sample fires as the compiled
+    # run that scored the setting did over the same window
+    for r in cost + main:
+        if r["status"] == "ok" and r["target"] != "cpp_standalone":
+            assert "timed" in r["cost_from"] and r["cpu_s"] > 0, r
+    done = stored["main_sweep"]
+    assert done["timed_samples"] > 0 and done["samples_agree"] == done["timed_samples"]
+    own = {r["n_neurons"] for r in main if r["scene"] == spec["cost"]["scene"]}
+    for r in cost:     # only the array's own size has a reference to score against
+        scored = r["n_neurons"] in own and r["status"] == "ok"
+        assert (r["rate_map_error"] is not None) == scored, r
     assert summary["rows"] == rows
     precision = stored["precision"]
     if not spec["precision"]["dtypes"]:

@@ -99,8 +99,9 @@ def run(pairs: list, workloads: dict, refs: dict, runlog: RunLog, log) -> tuple[
         if setting.target == "cpp_standalone":
             row = _standalone_row(workload, ref, setting)
         else:
+            own = setting.n_neurons is None   # a larger array has no reference
             row = _runtime_row(workload, ref, setting, compiled.get(
-                (scene, setting.dtype, setting.method, float(setting.dt_ms))))
+                (scene, setting.dtype, setting.method, float(setting.dt_ms))) if own else None)
         row.update(_identity(scene, setting, workload.n_neurons))
         runlog.add(row)
         rows[j] = row

@@ -13,7 +13,7 @@ from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
 from ...engine.devices import WARM_UP_MS as DEVICE_WARM_UP_MS
 from ...evaluation.accuracy import Match, StabilityGrid
 from ...evaluation.bands import (BENCH_BANDS, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER, WARM_UP_MS,
-                                 BandStudy, candidate_steps)
+                                 BandStudy, accurate_dt_ms, candidate_steps)
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import detector_from_spec
@@ -203,27 +203,36 @@ def estimate(parts: Parts):
                   stab.n_k_dt * len(stab.drives) * len(sweep.methods), "codings")]
     bands = parts.bands
     events = len(bands.materials) * len(bands.positions_cm) * bands.repetitions
-    band_runs = []
+    band_runs, band_references = [], 0.0
     for name in bands.bands:
         band = BENCH_BANDS[name]
-        dt = band.dt_ms or min(sweep.dt_ms)
+        calibrated = name in bands.calibrate
+        # the exact reference of the sample events (again at the recalibrated Hz per k)
+        band_references += ((2 if calibrated else 1) * events * band.n_neurons
+                            * bands.duration_s * REFERENCE_S_PER_NEURON_S)
         # the small-signal setting, then every method at its candidate steps (at the band's
         # own Hz per k: a recalibration moves them little): one compiled run of them all
-        # over the sample events (at two Hz per k), then each timed on the target over a
-        # share of its window (a warm-up, a short and a sample run), on a group of at
-        # least cost_events events (main_sweep.band_spikes, evaluation.bands.sampled_cost)
+        # over the sample events (at two Hz per k), then each timed on the target (a
+        # warm-up, its first WARM_UP_MS and its first share of the window) on a group of
+        # at least cost_events events (main_sweep.band_spikes, evaluation.bands.sampled_cost)
         group = band.n_neurons * max(events, bands.cost_events)
         steps = [SMALL_SIGNAL_EULER.dt_ms] + [
             step for method in bands.methods
             for step in candidate_steps(band, method, None, bands.coarser_steps)]
         band_runs += [(bands.duration_s, step, 2 * band.n_neurons * events, "codings")
                       for step in steps]
-        sample = max(bands.duration_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000)
+        sample = min(max(bands.duration_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000),
+                     bands.duration_s)
         band_runs += [(window, step, group, engine_of(bands.target)) for step in steps
-                      for window in (sample, WARM_UP_MS / 1000, sample, WARM_UP_MS / 1000)]
-        if name in bands.calibrate:
-            band_runs.append((bands.tuning_duration_s, dt, band.n_neurons * bands.n_freqs,
-                              engine_of(bands.target)))
+                      for window in (WARM_UP_MS / 1000, WARM_UP_MS / 1000, sample)]
+        if calibrated:
+            # the driven tuning at the small-signal setting on the target, then at rk4's
+            # accurate step and at the chosen one (no finer than it) compiled
+            tuned = band.n_neurons * bands.n_freqs
+            fine = accurate_dt_ms(band, "rk4")
+            band_runs += [(bands.tuning_duration_s, SMALL_SIGNAL_EULER.dt_ms, tuned,
+                           engine_of(bands.target))]
+            band_runs += [(bands.tuning_duration_s, fine, tuned, "codings")] * 2
     precision = parts.precision
     points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
     return stages_estimate("the references, the method x dt sweep, the cost sweep, the "
@@ -231,6 +240,6 @@ def estimate(parts: Parts):
         ("reference.rtol", parts.reference.rtol, [], references),
         ("sweep.dt_ms", sweep.dt_ms, main), ("cost.n_neurons", cost.n_neurons, costs),
         ("stability.model_ms", stab.model_ms, stability),
-        ("bands.repetitions", bands.repetitions, band_runs),
+        ("bands.repetitions", bands.repetitions, band_runs, band_references),
         ("precision.n_k", precision.n_k,
          [(precision.duration_s, 0.1, points, "standalone")] * len(precision.dtypes))])

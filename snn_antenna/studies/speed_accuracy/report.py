@@ -101,10 +101,10 @@ def main_sweep_section(report: Report, done: dict | None) -> None:
         f"Errors: all {done['settings']} settings (scene × method × dt) ran as one compiled "
         f"Brian2 project ({done['accuracy']}): the runtime path's equations, threshold, reset "
         f"and state updater, so the same spikes up to the compiler's rounding. Cost: "
-        f"{done['cost']}. {done['timed_samples']} runtime run(s) were timed; in "
-        f"{done['samples_agree']} of them the runtime run's spike count equals the compiled "
-        f"run's. The row's cost_from says which costs were timed and which were costed by "
-        f"steps from the timed one.")
+        f"{done['cost']}. {done['timed_samples']} runtime sample(s) were timed; in "
+        f"{done['samples_agree']} of them the runtime run's spike count over the sample "
+        f"equals the compiled run's over the same window. Every cost is the sample's fixed "
+        f"part plus its per-step part times the row's steps (cost_from names the sample).")
     report.table(done["samples"], "The timed sample (runtime target)")
 
 
@@ -124,8 +124,21 @@ def write_report(report: Report, summary: dict, smap) -> None:
                   "raised NumericalInstabilityError are not drawn. CPU time, not wall time, "
                   "ranks runs: the machine is shared.")
     report.heading("Cost: targets, precision, array size")
+    done = summary.get("cost_sweep")
+    if done:
+        report.text(
+            f"Each runtime setting (numpy, cython) was timed on a sample of its run: "
+            f"compiled first, then timed over its first {fmt(done['sample_s'])} s of model "
+            f"time (the whole scene when shorter) and over its first few milliseconds, and "
+            f"the whole scene costed by steps from the two ({done['runtime_sampled']} of "
+            f"{done['runs']} runs; cost_from names the source of each row). cpp_standalone "
+            f"runs the whole scene. Errors of the array's own size: a runtime row's from the "
+            f"compiled run of the same model at its float type "
+            f"({done['scored_from_compiled']} rows), checked against the timed sample's "
+            f"spikes over its window ({done['samples_agree']} of {done['runtime_sampled']} "
+            f"samples agree).")
     cost_cols = ("method", "dt_ms", "target", "dtype", "n_neurons", "cpu_s", "wall_s",
-                 "compile_s", "rate_map_error", "readout_matches", "status")
+                 "compile_s", "rate_map_error", "readout_matches", "cost_from", "status")
     report.table([{c: r.get(c) for c in cost_cols} for r in rows if r["sweep"] == "cost"],
                  "Cost sweep (errors only where a reference of the same size exists)")
     report.heading("Stability map")
