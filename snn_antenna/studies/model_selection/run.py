@@ -21,7 +21,7 @@ from ...readout import events
 from ...readout.baselines import distance_baselines, material_baselines, two_material_baseline
 from ...report.page import Report
 from ..contract import Options, Plan
-from .plan import Parts
+from .plan import Parts, point_workers
 from .protocol import (
     CALIBRATION_TARGETS,
     PAPER_PAIR,
@@ -90,12 +90,6 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     log(f"chosen: {decision['chosen']} ({decision['reason']})")
     log(f"report in {out_dir}/report.html ({summary['timing']['total_s']:.0f} s)")
     return summary
-
-
-def point_workers(parts: Parts, points: int) -> int:
-    """Processes the grid points run on: ``stimulus.n_jobs``, no more than there are points
-    (1: this process)."""
-    return max(1, min(parts.bench.n_jobs, points))
 
 
 @dataclass(frozen=True)
