@@ -2,21 +2,28 @@
 way its physics says, and the study keeps its calibrations apart from its predictions."""
 from __future__ import annotations
 
+import importlib
 import json
+import os
 
 import numpy as np
 import pytest
 
 from snn_antenna.core import spec as specs
 from snn_antenna.core.errors import SpecError
+from snn_antenna.engine import rates
 from snn_antenna.sources import antenna, bench
 from snn_antenna.sources.contact_models import ContactPhysics
 from snn_antenna.studies import model_selection as ms
+from snn_antenna.studies.model_selection import cost as ms_cost
 from snn_antenna.studies.model_selection import protocol
 from snn_antenna.studies.contract import Options
 
 RATE = 2000.0
 SPEC = "studies/model_selection.toml"
+# the per-point path: every read-out at one grid point (the package exports the study's run
+# under the module's name)
+MEASURE = importlib.import_module("snn_antenna.studies.model_selection.run").measure
 
 
 def ringing(material, physics, distance_cm=30.0, n=2000):
@@ -145,6 +152,7 @@ def test_a_combination_keeps_the_rod_line_at_its_reference():
 def _trimmed_quick(tmp_path):
     spec = specs.load(SPEC, quick=True)
     spec["stimulus"]["cache_dir"] = str(tmp_path / "cache")
+    spec["stimulus"]["n_jobs"] = 1          # here, not on Dask workers
     spec["stimulus"]["positions_cm"] = [8.0, 20.0, 37.5]
     spec["evaluation"]["seeds"] = [0, 1]
     spec["selection"]["candidates"] = [{"physics": "current", "strengths": [1.0]},
@@ -152,10 +160,21 @@ def _trimmed_quick(tmp_path):
     return spec
 
 
-def test_quick_study_keeps_calibrated_apart_from_predicted(tmp_path):
+@pytest.fixture(scope="module")
+def trimmed_run(tmp_path_factory):
+    """The trimmed quick study, run once here: (its plan, its summary, its folder). The
+    boundary candidate has two grid values, so one point is not its calibrated one."""
+    tmp_path = tmp_path_factory.mktemp("trimmed")
+    spec = _trimmed_quick(tmp_path)
+    spec["selection"]["candidates"] = [{"physics": "current", "strengths": [1.0]},
+                                       {"physics": "boundary", "strengths": [1.0, 3.0]}]
+    plan = ms.plan(spec)
     out = tmp_path / "out"
-    summary = ms.run(ms.plan(_trimmed_quick(tmp_path)), out, Options(quick=True),
-                     log=lambda *a: None)
+    return plan, ms.run(plan, out, Options(quick=True), log=lambda *a: None), out
+
+
+def test_quick_study_keeps_calibrated_apart_from_predicted(trimmed_run):
+    _, summary, out = trimmed_run
     saved = json.loads((out / "summary.json").read_text())
     assert (out / "report.html").exists() and (out / "model_selection.png").exists()
     calibrated = {c["quantity"] for c in saved["calibrated"]}
@@ -210,3 +229,61 @@ def test_grid_points_on_dask_workers_give_the_grid_measured_here(tmp_path):
     there = ms.run(ms.plan(spec), tmp_path / "there", Options(quick=True), log=lambda *a: None)
     assert there["grid"] == here["grid"]
     assert there["selection"] == here["selection"]
+
+
+def _plain(x):
+    """A summary's JSON form (numpy scalars as Python numbers)."""
+    return json.loads(json.dumps(x, default=lambda o: o.item()))
+
+
+def test_predictions_at_calibrated_points_are_those_of_measuring_every_point(trimmed_run):
+    """The run reads the predicted read-outs at each candidate's calibrated point only: there
+    they are what measuring every read-out at every point gives, the other points hold the
+    same calibration quantities without them, and the choice is the one all numbers make."""
+    plan, summary, _ = trimmed_run
+    summary = _plain(summary)
+    everything = [_plain(MEASURE(plan.parts, p["physics"], p["strength"],
+                                        lambda *a: None)) for p in summary["grid"]]
+    chosen = {(c["physics"], c["strength"]) for c in summary["candidates"].values()}
+    assert len(chosen) == 2 and len(summary["grid"]) == 3
+    for point, full in zip(summary["grid"], everything):
+        if (point["physics"], point["strength"]) in chosen:
+            assert point == full
+        else:
+            assert set(point["per_seed"]) == {"material_accuracy_spectrum"}
+            assert set(full["per_seed"]) == set(protocol.SCORES)
+            assert point == {**full, "per_seed": {k: full["per_seed"][k]
+                                                  for k in point["per_seed"]}}
+    candidates = {name: protocol.choose(name, [p for p in everything if p["physics"] == name])
+                  for name in ("current", "boundary")}
+    assert _plain(candidates) == summary["candidates"]
+    assert _plain(protocol.select(candidates)) == summary["selection"]
+
+
+def test_the_estimate_is_the_sum_of_the_plans_parts(monkeypatch):
+    """Every grid point's bench set and calibration, each candidate's predictions, shared by
+    the workers; the workers' start once; the parts named in the line --check prints."""
+    monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    monkeypatch.setattr(rates, "load_factor", lambda: (1.0, ""))
+    parts = ms.plan(specs.load(SPEC)).parts
+    points = sum(len(c.strengths) for c in parts.selection.candidates)
+    candidates = len(parts.selection.candidates)
+    cost = ms_cost.point_cost(parts)
+    start = rates.rates()["python_s"]["study_start"].value
+    work = points * (cost.bench + cost.calibration) + candidates * cost.predictions
+    assert ms_cost.estimate(parts, 1).seconds == pytest.approx(work)
+    two = ms_cost.estimate(parts, 2)
+    assert two.seconds == pytest.approx(work / 2 + start)
+    for part in ("21 grid points of 12,800 events on 2 worker(s)", "bench sets and features",
+                 "calibration read-outs", "predicted read-outs at 7 calibrated points",
+                 "workers' start"):
+        assert part in two.describe()
+    # the bench set's cost per event, the calibration's per training event and epoch
+    more = ms.plan(specs.load(SPEC, ["stimulus.repetitions=200"])).parts
+    assert ms_cost.point_cost(more).bench - ms_cost.POINT_S == \
+        pytest.approx(2 * (cost.bench - ms_cost.POINT_S))
+    assert ms_cost.point_cost(more).calibration == pytest.approx(2 * cost.calibration)
+    # at a load of 3, each worker is one of 3 + 2 processes sharing the cores
+    monkeypatch.setattr(os, "getloadavg", lambda: (3.0, 3.0, 3.0))
+    assert ms_cost.estimate(parts, 2).seconds - start == pytest.approx(
+        (work / 2) * rates.slowdown(4.0))

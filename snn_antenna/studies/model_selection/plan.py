@@ -8,13 +8,13 @@ from dataclasses import dataclass, field
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check, is_number
-from ...engine.cost import bench_seconds, fit_seconds, stages_estimate
 from ...evaluation import crossval as cv
 from ...readout import events
 from ...sources.bench import BenchSpec
 from ...sources.contact_models import ContactPhysics
 from ..contract import COMMON, Plan
 from ..sections import bench_section, evaluation_section, events_section
+from . import cost
 from .protocol import PAPER_PAIR
 
 SECTIONS = ("stimulus", "events", "evaluation", "selection")
@@ -79,16 +79,14 @@ def plan(spec: dict) -> Plan:
                 Parts(bench_spec, processor, evaluation, selection), estimate)
 
 
+def point_workers(parts: Parts, points: int) -> int:
+    """Processes the grid points run on: ``stimulus.n_jobs``, no more than there are points
+    (1: the study's own process)."""
+    return max(1, min(parts.bench.n_jobs, points))
+
+
 def estimate(parts: Parts):
-    """A bench set per grid point (every candidate's strengths), its events processed and
-    read out (no Brian2)."""
+    """Every grid point's bench set, features and calibration read-out, each candidate's
+    predicted read-outs, on the points' workers (``cost``)."""
     points = sum(len(c.strengths) for c in parts.selection.candidates)
-    ev, events = parts.evaluation, parts.bench.n_events
-    # each point fits the material MLP, NMF-30 and its classifier, and the distance MLPs
-    iterations = ev.material_max_iter + ev.nmf_max_iter + ev.mlp_max_iter
-    per_point = (bench_seconds(events, parts.bench.n_jobs)
-                 + fit_seconds(events, len(ev.seeds), iterations))
-    workers = max(1, min(parts.bench.n_jobs, points))
-    return stages_estimate("the candidates' bench sets and read-outs", [
-        ("stimulus.repetitions", parts.bench.repetitions, [],
-         points * per_point / workers)])
+    return cost.estimate(parts, point_workers(parts, points))

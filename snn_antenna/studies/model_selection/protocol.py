@@ -48,6 +48,11 @@ def value(point: dict, name: str) -> float:
     return float(point[name])
 
 
+def measured(point: dict, name: str) -> bool:
+    """Whether the point holds ``name`` (the predictions are read at calibrated points)."""
+    return name in point["per_seed"] or name in point
+
+
 def residual(point: dict, targets) -> float:
     """Sum of the normalised calibration residuals over ``targets``."""
     return float(sum(abs(value(point, t) - CALIBRATION_TARGETS[t][0])
@@ -61,16 +66,27 @@ def meets_calibration(point: dict) -> bool:
                for t, (paper, tol, _) in CALIBRATION_TARGETS.items())
 
 
+def calibrated_point(points: list[dict]) -> dict | None:
+    """The readable grid point that meets all calibration targets best (None: no point is
+    readable). It reads the calibration targets alone: the predictions are measured there,
+    and only there, once it is chosen."""
+    readable = [p for p in points if "unreadable" not in p]
+    if not readable:
+        return None
+    return min(readable, key=lambda p: residual(p, list(CALIBRATION_TARGETS)))
+
+
 def choose(physics: str, points: list[dict]) -> dict:
-    """The candidate's calibration (all targets) and its leave-one-target-out checks."""
+    """The candidate's calibration (all targets) and its leave-one-target-out checks; the
+    predictions are read at the calibrated point (``calibrated_point``)."""
     targets = list(CALIBRATION_TARGETS)
     unreadable = [p["strength"] for p in points if "unreadable" in p]
+    best = calibrated_point(points)
     points = [p for p in points if "unreadable" not in p]
-    if not points:
+    if best is None:
         return {"physics": physics, "strength": None, "grid": unreadable,
                 "unreadable": unreadable, "residual": None, "point": None, "loto": {},
                 "calibrated": False, "criteria_met": {}, "n_met": 0, "shortfall": None}
-    best = min(points, key=lambda p: residual(p, targets))
     loto = {}
     for left_out in targets:
         others = [t for t in targets if t != left_out]

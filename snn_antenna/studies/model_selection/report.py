@@ -5,7 +5,7 @@ import numpy as np
 
 from ...report import stats
 from ...report.page import Calibrated, Predicted, Report
-from .protocol import CALIBRATION_TARGETS, PREDICTIONS, value
+from .protocol import CALIBRATION_TARGETS, PREDICTIONS, measured, value
 
 SOURCE = "paper (docs/reference.md)"
 QUICK_NOTE = ("Quick profile: a handful of contacts per material and site, two seeds, short "
@@ -137,9 +137,12 @@ def write_report(report: Report, summary: dict) -> None:
     report.heading("Every grid point")
     report.table([{"candidate": g["physics"], "strength": g["strength"],
                    **({"unreadable": g["unreadable"]} if "unreadable" in g else
-                      {**{k: value(g, k) * _scale(k)
+                      {**{k: value(g, k) * _scale(k) if measured(g, k) else None
                           for k in (*CALIBRATION_TARGETS, *PREDICTIONS)},
-                       "r² low law": g["r2_low"]})} for g in summary["grid"]])
+                       "r² low law": g["r2_low"]})} for g in summary["grid"]],
+                 "The calibration targets at every grid value; the predicted read-outs are "
+                 "measured at each candidate's calibrated constant only (blank elsewhere): "
+                 "the choice of the constant never sees them.")
     report.figure(_figure(candidates), "model_selection",
                   "Each candidate's predictions at its calibrated constant (mean over seeds, "
                   "bars the seeds' range) against the paper (dashed) and the acceptance bound "

@@ -1,6 +1,7 @@
-"""The model selection's stage: every candidate's grid point measured (its bench set, signal
-statistics and the paper's read-outs per seed), each candidate's constant chosen on the
-calibration targets, the candidates compared on their predictions; the summary and report."""
+"""The model selection's stage: every candidate's grid point measured for its calibration
+(its bench set, signal statistics and the calibration targets' read-out per seed), each
+candidate's constant chosen on the calibration targets, the predicted read-outs measured at
+that constant, the candidates compared on their predictions; the summary and report."""
 from __future__ import annotations
 
 import time
@@ -20,12 +21,13 @@ from ...readout import events
 from ...readout.baselines import distance_baselines, material_baselines, two_material_baseline
 from ...report.page import Report
 from ..contract import Options, Plan
-from .plan import Parts
+from .plan import Parts, point_workers
 from .protocol import (
     CALIBRATION_TARGETS,
     PAPER_PAIR,
     PREDICTIONS,
     SCORES,
+    calibrated_point,
     choose,
     confused_pairs,
     select,
@@ -43,15 +45,30 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     grid = [(c.physics, float(s)) for c in parts.selection.candidates for s in c.strengths]
     # every grid point is independent (its own bench set, seeded by the spec): one Batches
     # item each, on the Dask workers of --scheduler or stimulus.n_jobs local ones, else here
-    workers = max(1, min(parts.bench.n_jobs, len(grid)))
+    workers = point_workers(parts, len(grid))
     with executor(workers, options.scheduler, log) as client:
-        work = MeasurePoints(parts, fresh, log if client is None else print)
-        batches = Batches(work, per_run=1, client=client)
-        pending = batches.submit(grid)
-        points = []
+        # on workers the points share the cores: each makes its bench set on one process
+        # (n_jobs is not part of a bench set's key: the same data either way)
+        if client is not None:
+            parts = replace(parts, bench=replace(parts.bench, n_jobs=1))
+        quiet = log if client is None else print
+        # first every point's calibration quantities; a candidate's predictions are then
+        # read at its calibrated point alone (the choice never sees them), submitted as soon
+        # as the candidate's last point is in so that the workers stay busy
+        calibrate = Batches(CalibratePoints(parts, fresh, quiet), per_run=1, client=client)
+        predict = Batches(PredictPoints(parts, fresh, quiet), per_run=1, client=client)
+        pending = calibrate.submit(grid)
+        points, predicting = [], []
         for i, ((physics, strength), run) in enumerate(zip(grid, pending), 1):
             log(f"[{i}/{len(grid)}] {physics} × {strength:g}")
-            points += batches.collect([run])
+            points += calibrate.collect([run])
+            if i == len(grid) or grid[i][0] != physics:
+                best = calibrated_point([p for p in points if p["physics"] == physics])
+                if best is not None:
+                    predicting.append((best, predict.submit([(physics, best["strength"])])))
+        for best, run in predicting:
+            log(f"predictions at {best['physics']} × {best['strength']:g}")
+            best["per_seed"].update(predict.collect(run)[0])
     candidates = {c.physics: choose(c.physics, [p for p in points if p["physics"] == c.physics])
                   for c in parts.selection.candidates}
     decision = select(candidates)
@@ -76,25 +93,54 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
 
 
 @dataclass(frozen=True)
-class MeasurePoints:
-    """``engine.batches.Batches`` work: grid points (mechanism, strength) → ``measure``."""
+class CalibratePoints:
+    """``engine.batches.Batches`` work: grid points (mechanism, strength) → ``calibration``."""
     parts: Parts
     fresh: bool = False
     log: Callable = print
 
     def __call__(self, points: list) -> list:
-        return [measure(self.parts, physics, strength, self.log, self.fresh)
+        return [calibration(self.parts, physics, strength, self.log, self.fresh)
+                for physics, strength in points]
+
+
+@dataclass(frozen=True)
+class PredictPoints:
+    """``engine.batches.Batches`` work: calibrated points (mechanism, strength) →
+    ``predictions``."""
+    parts: Parts
+    fresh: bool = False
+    log: Callable = print
+
+    def __call__(self, points: list) -> list:
+        return [predictions(self.parts, physics, strength, self.log, self.fresh)
                 for physics, strength in points]
 
 
 def measure(parts: Parts, physics: str, strength: float, log=print, fresh=False) -> dict:
-    """One grid point: the bench set of this mechanism and strength, its signal statistics
-    and the paper's read-outs, per seed."""
+    """One grid point with everything measured: its calibration quantities and, when it is
+    readable, the predicted read-outs too (``run`` reads these at calibrated points only)."""
+    point = calibration(parts, physics, strength, log, fresh)
+    if "unreadable" not in point:
+        point["per_seed"].update(predictions(parts, physics, strength, log, fresh))
+    return point
+
+
+def _features(parts: Parts, physics: str, strength: float, log, fresh):
+    """The bench set of this mechanism and strength (cached on disk), its processed events
+    and the share of them the paper's processing skipped."""
     spec = replace(parts.bench, physics=physics, physics_strength=strength)
     _, everything = bench_signal.load_features(spec, parts.processor, log, fresh)
     feats = everything.isel(event=np.flatnonzero(everything["skipped"].values == ""))
-    skipped = events.skip_counts(everything)
-    share = 1 - feats.sizes["event"] / everything.sizes["event"]
+    return feats, events.skip_counts(everything), \
+        1 - feats.sizes["event"] / everything.sizes["event"]
+
+
+def calibration(parts: Parts, physics: str, strength: float, log=print, fresh=False) -> dict:
+    """One grid point: the bench set of this mechanism and strength, its signal statistics
+    and the calibration targets' read-out (the full-spectrum material MLP, whose confusions
+    also give the paper's pair's rank), per seed."""
+    feats, skipped, share = _features(parts, physics, strength, log, fresh)
     if share > MAX_SKIPPED:
         # The paper's processing read its contacts (an exponential decay, a clean onset): a
         # mechanism whose signal it cannot read is refuted by that, not scored.
@@ -104,11 +150,8 @@ def measure(parts: Parts, physics: str, strength: float, log=print, fresh=False)
                               f"({', '.join(f'{k} {v}' for k, v in skipped.items() if v)})"}
     signal = bench_signal.signal_statistics(feats)
     ev = parts.evaluation
-    n_bins = feats.sizes["freq_hz"]
-    chosen = [b for b in material_baselines([30], ev.material_mlp, ev.nmf_max_iter)] + \
-        [b for b in distance_baselines(n_bins, ev.mlp)
-         if b.name in ("mlp_spectrum", "mlp_parametric")] + [two_material_baseline(ev.mlp)]
-    results = cv.evaluate(feats, chosen, ev, log)
+    material = material_baselines([], ev.material_mlp, ev.nmf_max_iter)
+    results = cv.evaluate(feats, material, ev, log)
     materials = sorted(set(feats["material"].values.astype(str)))
     cm = confusion(results["mlp_spectrum_material"], len(materials))
     pairs = confused_pairs(cm, materials)
@@ -116,8 +159,7 @@ def measure(parts: Parts, physics: str, strength: float, log=print, fresh=False)
     return {
         "physics": physics, "strength": strength, "events": int(feats.sizes["event"]),
         "skipped": skipped,
-        "per_seed": {name: results[b].values(key).tolist()
-                     for name, (b, key) in SCORES.items()},
+        "per_seed": _per_seed(results),
         "wood_aluminium_sites": float(signal.get("wood_aluminium_sites_differing", 0)),
         "wood_aluminium_sites_of": int(signal.get("wood_aluminium_sites", 0)),
         "brass_wood_rank": rank,
@@ -125,3 +167,21 @@ def measure(parts: Parts, physics: str, strength: float, log=print, fresh=False)
         "r2_low": signal["r2_low"], "r2_high": signal["r2_high"],
         "tau_low_cv_median": signal["tau_low_cv_median"],
     }
+
+
+def predictions(parts: Parts, physics: str, strength: float, log=print, fresh=False) -> dict:
+    """The predicted read-outs of a (readable) point, per seed: NMF-30, both distance MLPs
+    and the 5-8-2 network, on the same bench set and splits as its calibration."""
+    feats, _, _ = _features(parts, physics, strength, log, fresh)
+    ev = parts.evaluation
+    chosen = [b for b in material_baselines([30], ev.material_mlp, ev.nmf_max_iter)
+              if b.name == "nmf_30"] + \
+        [b for b in distance_baselines(feats.sizes["freq_hz"], ev.mlp)
+         if b.name in ("mlp_spectrum", "mlp_parametric")] + [two_material_baseline(ev.mlp)]
+    return _per_seed(cv.evaluate(feats, chosen, ev, log))
+
+
+def _per_seed(results: dict) -> dict:
+    """The study's per-seed numbers among ``results`` (``SCORES``)."""
+    return {name: results[b].values(key).tolist()
+            for name, (b, key) in SCORES.items() if b in results}
