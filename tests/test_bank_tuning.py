@@ -71,6 +71,33 @@ def test_a_space_entry_is_a_range_or_choices_of_its_kind(key, value):
         assert len(value) == 2 and 0 <= value[0] <= value[1]
     if kind == "int":
         assert all(isinstance(v, int) and v >= 1 for v in value)
+    if kind == "count":
+        assert all(isinstance(v, int) and v >= 0 for v in value)
+
+
+def test_the_low_mode_band_joins_the_channels_only_when_asked_and_steps_coarser():
+    from snn_antenna.studies.bank_tuning.plan import BankPlan
+    from snn_antenna.studies.bank_tuning.search import bank_of, start_params
+
+    plan = BankPlan(tuning={"n_resonators": 4, "per_channel": 1, "max_channels": 4,
+                            "coder": "analog", "coder_amplitude": 1.0,
+                            "coder_options": {"gain": 150.0}},
+                    low_resonators=6, low_band_hz=(7.0, 56.0))
+    rng = np.random.default_rng(0)
+    counts = np.concatenate([_tones(150.0, 4), _tones(300.0, 4)]).astype(float)
+    counts = (counts + rng.normal(0, 20, counts.shape)).astype(np.uint16)
+    labels = np.array(["a"] * 4 + ["b"] * 4)
+    params = start_params(plan)
+    with_low = bank_of(params, plan, counts, labels, (2000.0, 16, 10.0))
+    low = with_low.bands["low"]
+    assert low.n_neurons == 6 and low.band_hz == (7.0, 56.0) and low.highpass_hz is None
+    assert low.lowpass_hz == plan.low_lowpass_hz
+    channels = [b for k, b in with_low.bands.items() if k != "low"]
+    assert all(low.dt_ms > b.dt_ms for b in channels)
+    assert all(b.highpass_hz > 56.0 for b in channels)
+    without = bank_of({**params, "low_resonators": 0}, plan, counts, labels,
+                      (2000.0, 16, 10.0))
+    assert "low" not in without.bands and without.n_neurons == with_low.n_neurons - 6
 
 
 def test_the_study_spec_and_its_quick_profile_plan():

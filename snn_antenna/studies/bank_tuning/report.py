@@ -105,7 +105,7 @@ def _spectra_figure(tuning, bank, parts):
         ax.plot(freq[keep], spectra[labels == m][:, keep].mean(axis=0), lw=0.8,
                 color=f"C{i}", label=m)
     for b in bank.bands.values():
-        ax.axvspan(b.highpass_hz, b.lowpass_hz, color="0.85", zorder=0)
+        ax.axvspan(b.highpass_hz or 0.0, b.lowpass_hz, color="0.85", zorder=0)
     lo = ax.get_ylim()[0]
     ax.plot(bank.neuron_hz, np.full(len(bank.neuron_hz), lo), "|", color="k", ms=14)
     ax.set_xlabel("frequency (Hz)")

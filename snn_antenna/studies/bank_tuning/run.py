@@ -189,7 +189,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
             "distance_rmse_mm": interval(rmse), "fft_mlp_distance_rmse_mm": interval(fft_rmse),
             "distance_rmse_minus_fft": interval(rmse - fft_rmse, None),
             "neuron_hz": [float(f) for f in chosen_bank.neuron_hz],
-            "channel_edges_hz": [[float(b.highpass_hz), float(b.lowpass_hz)]
+            "channel_edges_hz": [[float(b.highpass_hz or 0.0), float(b.lowpass_hz)]
                                  for b in chosen_bank.bands.values()]},
         # wall times: this machine under its load at the time (the load average beside them)
         "costs": {**costs, "ratio_chosen_to_fft": costs["chosen"]["features_us_per_event"]
