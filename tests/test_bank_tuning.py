@@ -179,3 +179,21 @@ def test_the_study_refuses_a_planted_search_that_peeks(tmp_path, monkeypatch):
         study.run(plan, tmp_path / "out", Options(quick=True), log=lambda *a: None)
     assert refused.value.field == "search"
     assert not (tmp_path / "out" / "report.html").exists()
+
+
+def test_the_marks_hold_only_when_every_bound_is_met():
+    from snn_antenna.studies.bank_tuning.run import marks
+
+    at = {"mean": 1.004, "low": 0.995, "high": 1.01, "n": 5}
+    closer = {"mean": -0.4, "low": -0.9, "high": 0.1, "n": 5}
+    held = marks(at, 2.4, closer)
+    assert all(m["holds"] for m in held.values())
+    assert not marks({**at, "low": 0.985}, 2.4, closer)["accuracy_ratio_low"]["holds"]
+    assert not marks({**at, "mean": 0.999}, 2.4, closer)["accuracy_ratio"]["holds"]
+    assert not marks(at, 2.6, closer)["cost_ratio"]["holds"]
+    assert not marks(at, 2.4, {**closer, "low": 0.2})["distance_rmse_not_worse"]["holds"]
+    assert not marks({**at, "low": None, "high": None, "n": 1}, 2.4,
+                     closer)["accuracy_ratio_low"]["holds"]
+    few = marks({**at, "n": 2}, 2.4, {**closer, "n": 2})      # too few splits to hold
+    assert not few["accuracy_ratio_low"]["holds"]
+    assert not few["distance_rmse_not_worse"]["holds"]

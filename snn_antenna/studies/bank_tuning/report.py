@@ -50,6 +50,14 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                   (chosen["fft_mlp_distance_rmse_mm"]["low"],
                    chosen["fft_mlp_distance_rmse_mm"]["high"]),
                   chosen["fft_mlp_distance_rmse_mm"]["n"]))
+    lead = first["accuracy_minus_fft_mlp"]
+    report.text(
+        f"The chosen bank's accuracy minus the FFT-MLP's, paired by split (Student t, "
+        f"n = {lead['n']}): {lead.get('verdict', 'no interval')}.")
+    report.table([{"mark": k, "measured": m["value"], "bound": m["bound"],
+                   "holds": "yes" if m["holds"] else "no"}
+                  for k, m in chosen["marks"].items()],
+                 "The chosen bank against the FFT-MLP, on the same splits and in the same run")
     costs = summary["costs"]
     report.table([{"read-out": k, "µs per contact": costs[k]["features_us_per_event"],
                    "best of": costs[k]["best_of"]} for k in ("fft", "chosen")] +
