@@ -2,7 +2,9 @@
 read-out; every trial's bank run on the event engine over tuning contacts only.
 
 A trial's bank: ``band_tuning.tune`` places its channels from the tuning contacts' spectra
-and labels, with the trial's ``Tuning`` fields; its resonators take the trial's b; it runs on
+and labels, with the trial's ``Tuning`` fields, and ``low_band`` adds the trial's
+``low_resonators`` on the antenna's low mode (distance); its resonators take the trial's b;
+it runs on
 the event engine (``engine.events.run_bank``, on Dask workers when given a client) and is read
 by the trial's read-out (``TUNED_READOUTS``). Objectives: the mean accuracy of the material
 MLP (51 hidden) over splits by repetition of the tuning contacts (``inner_seeds``), and the
