@@ -19,6 +19,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from sklearn.base import BaseEstimator, TransformerMixin
@@ -120,11 +121,23 @@ class PCAAlign(_Causal):
         return (X - self.mean_) @ self.axis_
 
 
+@lru_cache(maxsize=512)
+def butter_sos(order: int, cutoff_hz: float, rate_hz: float, btype: str) -> np.ndarray:
+    """A Butterworth filter's second-order sections, designed once per (order, cut-off,
+    rate, type): a bank's channels fit their chains again on every batch of events, and an
+    order-8 design costs more than filtering a batch with it. Callers take a copy (scipy's
+    filters want a writable array; a shared one must not change)."""
+    from scipy.signal import butter
+
+    return butter(order, cutoff_hz, btype=btype, fs=rate_hz, output="sos")
+
+
 class LowPass(_Causal):
     """Butterworth low-pass (default 30 Hz, order 4) with the filter state carried across calls.
 
     The state starts at the steady state of the first sample, so a DC offset does not ring.
     """
+    btype = "lowpass"
 
     def __init__(self, rate_hz: float = 1000.0, cutoff_hz: float = 30.0, order: int = 4):
         self.rate_hz = rate_hz
@@ -132,15 +145,14 @@ class LowPass(_Causal):
         self.order = order
 
     def _validate_params_(self):
-        from scipy.signal import butter
-
         bounds.rate_hz("rate_hz", self.rate_hz)
         # a cut-off below a millionth of the rate underflows the filter design (and no
         # antenna signal lives there)
         bounds.number("cutoff_hz", self.cutoff_hz, self.rate_hz * 1e-6, self.rate_hz / 2,
                       hi_open=True, unit=f" Hz (below Nyquist at rate_hz = {self.rate_hz:g})")
         bounds.integer("order", self.order, 1, 8)
-        self.sos_ = butter(self.order, self.cutoff_hz, fs=self.rate_hz, output="sos")
+        self.sos_ = butter_sos(int(self.order), float(self.cutoff_hz), float(self.rate_hz),
+                               self.btype).copy()
 
     def _step(self, X):
         from scipy.signal import sosfilt, sosfilt_zi
@@ -157,13 +169,7 @@ class HighPass(LowPass):
     """Butterworth high-pass with the filter state carried across calls (e.g. to keep only a
     resonator band's own mode). The state starts at rest, so a first-sample offset passes
     as a step and decays within a few periods of the cut-off."""
-
-    def _validate_params_(self):
-        from scipy.signal import butter
-
-        super()._validate_params_()
-        self.sos_ = butter(self.order, self.cutoff_hz, btype="highpass", fs=self.rate_hz,
-                           output="sos")
+    btype = "highpass"
 
     def _step(self, X):
         from scipy.signal import sosfilt

@@ -71,6 +71,33 @@ def test_a_space_entry_is_a_range_or_choices_of_its_kind(key, value):
         assert len(value) == 2 and 0 <= value[0] <= value[1]
     if kind == "int":
         assert all(isinstance(v, int) and v >= 1 for v in value)
+    if kind == "count":
+        assert all(isinstance(v, int) and v >= 0 for v in value)
+
+
+def test_the_low_mode_band_joins_the_channels_only_when_asked_and_steps_coarser():
+    from snn_antenna.studies.bank_tuning.plan import BankPlan
+    from snn_antenna.studies.bank_tuning.search import bank_of, start_params
+
+    plan = BankPlan(tuning={"n_resonators": 4, "per_channel": 1, "max_channels": 4,
+                            "coder": "analog", "coder_amplitude": 1.0,
+                            "coder_options": {"gain": 150.0}},
+                    low_resonators=6, low_band_hz=(7.0, 56.0))
+    rng = np.random.default_rng(0)
+    counts = np.concatenate([_tones(150.0, 4), _tones(300.0, 4)]).astype(float)
+    counts = (counts + rng.normal(0, 20, counts.shape)).astype(np.uint16)
+    labels = np.array(["a"] * 4 + ["b"] * 4)
+    params = start_params(plan)
+    with_low = bank_of(params, plan, counts, labels, (2000.0, 16, 10.0))
+    low = with_low.bands["low"]
+    assert low.n_neurons == 6 and low.band_hz == (7.0, 56.0) and low.highpass_hz is None
+    assert low.lowpass_hz == plan.low_lowpass_hz
+    channels = [b for k, b in with_low.bands.items() if k != "low"]
+    assert all(low.dt_ms > b.dt_ms for b in channels)
+    assert all(b.highpass_hz > 56.0 for b in channels)
+    without = bank_of({**params, "low_resonators": 0}, plan, counts, labels,
+                      (2000.0, 16, 10.0))
+    assert "low" not in without.bands and without.n_neurons == with_low.n_neurons - 6
 
 
 def test_the_study_spec_and_its_quick_profile_plan():
@@ -152,3 +179,21 @@ def test_the_study_refuses_a_planted_search_that_peeks(tmp_path, monkeypatch):
         study.run(plan, tmp_path / "out", Options(quick=True), log=lambda *a: None)
     assert refused.value.field == "search"
     assert not (tmp_path / "out" / "report.html").exists()
+
+
+def test_the_marks_hold_only_when_every_bound_is_met():
+    from snn_antenna.studies.bank_tuning.run import marks
+
+    at = {"mean": 1.004, "low": 0.995, "high": 1.01, "n": 5}
+    closer = {"mean": -0.4, "low": -0.9, "high": 0.1, "n": 5}
+    held = marks(at, 2.4, closer)
+    assert all(m["holds"] for m in held.values())
+    assert not marks({**at, "low": 0.985}, 2.4, closer)["accuracy_ratio_low"]["holds"]
+    assert not marks({**at, "mean": 0.999}, 2.4, closer)["accuracy_ratio"]["holds"]
+    assert not marks(at, 2.6, closer)["cost_ratio"]["holds"]
+    assert not marks(at, 2.4, {**closer, "low": 0.2})["distance_rmse_not_worse"]["holds"]
+    assert not marks({**at, "low": None, "high": None, "n": 1}, 2.4,
+                     closer)["accuracy_ratio_low"]["holds"]
+    few = marks({**at, "n": 2}, 2.4, {**closer, "n": 2})      # too few splits to hold
+    assert not few["accuracy_ratio_low"]["holds"]
+    assert not few["distance_rmse_not_worse"]["holds"]

@@ -62,6 +62,24 @@ def test_lowpass_keeps_the_band_and_removes_high_frequencies():
     assert fast[1000:].std() < 0.01
 
 
+def test_a_filter_is_designed_once_per_setting_and_passes_its_own_band():
+    from scipy.signal import butter
+
+    t = np.arange(4000) / 1000
+    hp = pp.HighPass(1000.0, 100.0, order=8).fit(t)
+    designed = pp.butter_sos.cache_info().misses
+    again = pp.HighPass(1000.0, 100.0, order=8).fit(t)
+    assert pp.butter_sos.cache_info().misses == designed                # not designed again
+    again.sos_[0, 0] = 7.0                                              # each its own copy
+    assert hp.sos_[0, 0] != 7.0
+    assert np.array_equal(hp.sos_, butter(8, 100.0, btype="highpass", fs=1000.0,
+                                          output="sos"))
+    assert not np.array_equal(pp.LowPass(1000.0, 100.0, order=8).fit(t).sos_, hp.sos_)
+    slow = hp.transform(np.sin(2 * np.pi * 20 * t))
+    fast = hp.transform(np.sin(2 * np.pi * 300 * t))
+    assert slow[1000:].std() < 0.01 and fast[1000:].std() == pytest.approx(np.sqrt(0.5), rel=0.05)
+
+
 def test_centre_removes_offsets_without_a_start_transient():
     x = np.full(3000, 4.0) + np.sin(np.linspace(0, 100, 3000))
     y = pp.Centre(1000.0, 1.0).fit(x).transform(x)

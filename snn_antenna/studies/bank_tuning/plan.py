@@ -21,8 +21,9 @@ from ..sections import bench_section, evaluation_section, events_section
 SECTIONS = ("stimulus", "events", "evaluation", "bank", "search")
 OPTIONS = (*COMMON, "fresh", "scheduler")
 
-# The search space's keys: (kind, what a value is). "int" and "float" take [low, high]
-# (a "float" range whose low is > 0 may be searched in log: "log" kind); "choice" a list.
+# The search space's keys: (kind, what a value is). "int", "count" (an int that may be 0)
+# and "float" take [low, high] (a "float" range whose low is > 0 may be searched in log:
+# "log" kind); "choice" a list.
 SPACE_KEYS = {
     "channels": ("int", "channels of the bank (narrow band-passes)"),
     "per_channel": ("int", "resonators reading each channel"),
@@ -34,6 +35,7 @@ SPACE_KEYS = {
     "gain": ("log", "the analog coder's current per g"),
     "coder_amplitude": ("float", "the coder's saturation"),
     "threshold_g": ("float", "the coder's dead zone (g)"),
+    "low_resonators": ("count", "resonators of the low-mode band (0: none)"),
     "readout": ("choice", f"read-outs of the bank, out of {sorted(TUNED_READOUTS)}"),
 }
 
@@ -41,10 +43,18 @@ SPACE_KEYS = {
 @dataclass
 class BankPlan:
     """``[bank]``: the bank the search starts from (``tuning``: ``band_tuning.Tuning``
-    fields; ``b``; ``readout``, a key of ``TUNED_READOUTS``) and how every bank runs."""
+    fields; ``b``; ``readout``, a key of ``TUNED_READOUTS``) and how every bank runs.
+
+    ``low_resonators`` resonators (0: none) read the antenna's low mode in a band of their
+    own, spread in log over ``low_band_hz`` behind a ``low_lowpass_hz`` low-pass: the
+    channels are placed where the *material* separates and never reach the low mode, whose
+    frequency is where the contact's distance lives."""
     tuning: dict = field(default_factory=dict)
     b: float = 0.26
     readout: str = "spiking_tuned_bins"
+    low_resonators: int = 0
+    low_band_hz: tuple = (7.0, 56.0)
+    low_lowpass_hz: float = 60.0
     duration_s: float = 0.5
     bin_edges_s: tuple = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
     target: str = "standalone"
@@ -60,9 +70,13 @@ class BankPlan:
         bounds.number("b", self.b, 0.0, 2.0, lo_open=True)
         bounds.choice("readout", self.readout, tuple(TUNED_READOUTS))
         bounds.positive_seconds("duration_s", self.duration_s)
+        lo, hi = bounds.pair("low_band_hz", self.low_band_hz, strict=True, unit=" in Hz")
+        check(lo > 0, "low_band_hz", self.low_band_hz, "[low, high] in Hz, 0 < low < high")
+        bounds.number("low_lowpass_hz", self.low_lowpass_hz, hi, bounds.MAX_RATE_HZ,
+                      unit=" Hz")
         bounds.choice("target", self.target, TARGETS)
         for name, lo in (("batch_events", 1), ("workers", 0), ("cost_sample_events", 2),
-                         ("cost_repeats", 1)):
+                         ("cost_repeats", 1), ("low_resonators", 0)):
             value = getattr(self, name)
             check(isinstance(value, int) and not isinstance(value, bool) and value >= lo,
                   name, value, f"an integer >= {lo}")
@@ -116,13 +130,13 @@ def check_space_entry(key: str, value) -> None:
         return
     ok = (isinstance(value, list) and len(value) == 2 and all(is_number(v) for v in value)
           and value[0] <= value[1] and value[0] >= 0)
-    if kind == "int":
-        ok = ok and all(isinstance(v, int) and v >= 1 for v in value)
+    if kind in ("int", "count"):
+        ok = ok and all(isinstance(v, int) and v >= (kind == "int") for v in value)
     if kind == "log":
         ok = ok and value[0] > 0
     check(ok, f"space.{key}", value, f"[low, high] of {what}" +
-          (", integers >= 1" if kind == "int" else ", low > 0" if kind == "log" else
-           ", 0 <= low <= high"))
+          (", integers >= 1" if kind == "int" else ", integers >= 0" if kind == "count"
+           else ", low > 0" if kind == "log" else ", 0 <= low <= high"))
 
 
 @dataclass

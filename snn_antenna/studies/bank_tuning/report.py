@@ -50,6 +50,14 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                   (chosen["fft_mlp_distance_rmse_mm"]["low"],
                    chosen["fft_mlp_distance_rmse_mm"]["high"]),
                   chosen["fft_mlp_distance_rmse_mm"]["n"]))
+    lead = first["accuracy_minus_fft_mlp"]
+    report.text(
+        f"The chosen bank's accuracy minus the FFT-MLP's, paired by split (Student t, "
+        f"n = {lead['n']}): {lead.get('verdict', 'no interval')}.")
+    report.table([{"mark": k, "measured": m["value"], "bound": m["bound"],
+                   "holds": "yes" if m["holds"] else "no"}
+                  for k, m in chosen["marks"].items()],
+                 "The chosen bank against the FFT-MLP, on the same splits and in the same run")
     costs = summary["costs"]
     report.table([{"read-out": k, "µs per contact": costs[k]["features_us_per_event"],
                    "best of": costs[k]["best_of"]} for k in ("fft", "chosen")] +
@@ -105,7 +113,7 @@ def _spectra_figure(tuning, bank, parts):
         ax.plot(freq[keep], spectra[labels == m][:, keep].mean(axis=0), lw=0.8,
                 color=f"C{i}", label=m)
     for b in bank.bands.values():
-        ax.axvspan(b.highpass_hz, b.lowpass_hz, color="0.85", zorder=0)
+        ax.axvspan(b.highpass_hz or 0.0, b.lowpass_hz, color="0.85", zorder=0)
     lo = ax.get_ylim()[0]
     ax.plot(bank.neuron_hz, np.full(len(bank.neuron_hz), lo), "|", color="k", ms=14)
     ax.set_xlabel("frequency (Hz)")

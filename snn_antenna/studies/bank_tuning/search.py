@@ -2,7 +2,9 @@
 read-out; every trial's bank run on the event engine over tuning contacts only.
 
 A trial's bank: ``band_tuning.tune`` places its channels from the tuning contacts' spectra
-and labels, with the trial's ``Tuning`` fields; its resonators take the trial's b; it runs on
+and labels, with the trial's ``Tuning`` fields, and ``low_band`` adds the trial's
+``low_resonators`` on the antenna's low mode (distance); its resonators take the trial's b;
+it runs on
 the event engine (``engine.events.run_bank``, on Dask workers when given a client) and is read
 by the trial's read-out (``TUNED_READOUTS``). Objectives: the mean accuracy of the material
 MLP (51 hidden) over splits by repetition of the tuning contacts (``inner_seeds``), and the
@@ -29,8 +31,8 @@ from ...core.errors import NumericalInstabilityError, SpecError
 from ...core.files import write_json
 from ...engine.events import run_bank
 from ...evaluation import crossval as cv
-from ...readout.band_tuning import tune
-from ...readout.spiking import SpikingBank, recording_attrs
+from ...readout.band_tuning import coarsest_dt_ms, tune
+from ...readout.spiking import LOW_BAND, Band, SpikingBank, recording_attrs
 from ...readout.spiking_decoders import TUNED_READOUTS, decay_code, mlp_baseline
 from .plan import SPACE_KEYS, BankPlan, Parts
 
@@ -77,7 +79,7 @@ def start_params(bank: BankPlan) -> dict:
             "quantile": float(t.quantile), "spread": float(t.spread), "b": float(bank.b),
             "gain": float(t.coder_options.get("gain", 150.0)),
             "coder_amplitude": float(t.coder_amplitude), "threshold_g": float(t.threshold_g),
-            "readout": bank.readout}
+            "low_resonators": int(bank.low_resonators), "readout": bank.readout}
 
 
 def suggest(trial, space: dict) -> dict:
@@ -87,7 +89,7 @@ def suggest(trial, space: dict) -> dict:
         kind = SPACE_KEYS[key][0]
         if kind == "choice":
             params[key] = trial.suggest_categorical(key, list(value))
-        elif kind == "int":
+        elif kind in ("int", "count"):
             params[key] = trial.suggest_int(key, int(value[0]), int(value[1]))
         else:
             params[key] = trial.suggest_float(key, float(value[0]), float(value[1]),
@@ -112,9 +114,25 @@ def bank_of(params: dict, bank: BankPlan, counts, labels, attrs) -> SpikingBank:
                      threshold_g=params["threshold_g"], coder_options=options)
     n_samples = int(round(bank.duration_s * attrs[0]))
     bands = tune(counts[:, :n_samples], labels, *attrs, tuning)
+    if params.get("low_resonators", 0) > 0:
+        bands["low"] = low_band(int(params["low_resonators"]), bank, tuning)
     bands = {k: replace(b, b=float(params["b"])) for k, b in bands.items()}
     return SpikingBank(bands=bands, duration_s=bank.duration_s, target=bank.target,
                        batch_events=bank.batch_events, bin_edges_s=bank.bin_edges_s)
+
+
+def low_band(n: int, bank: BankPlan, tuning) -> Band:
+    """``n`` resonators in log over ``bank.low_band_hz`` behind a low-pass (the antenna's
+    low mode, whose frequency carries the contact's distance), coded like the channels, at
+    the coarsest step their k·dt allows (``LOW_BAND``'s driven Hz per unit k)."""
+    lo, hi = (float(f) for f in bank.low_band_hz)
+    return Band(n_neurons=n, band_hz=(lo, hi), spacing="log",
+                coder_amplitude=tuning.coder_amplitude, threshold_g=tuning.threshold_g,
+                lowpass_hz=float(bank.low_lowpass_hz), highpass_hz=None,
+                hz_per_k=LOW_BAND.hz_per_k, method=tuning.method,
+                dt_ms=coarsest_dt_ms(hi, LOW_BAND.hz_per_k, tuning.max_k_dt),
+                filter_order=LOW_BAND.filter_order, coder=tuning.coder,
+                coder_options=dict(tuning.coder_options))
 
 
 def neuron_steps_per_event(bank: SpikingBank, rate_hz: float) -> float:
