@@ -61,6 +61,8 @@ def test_the_site_builds_with_warnings_as_errors(site):
         "guide/tuning_sweep",
         "guide/gating_threshold",
         "guide/baseline_comparison",
+        "guide/model_selection",
+        "guide/bank_tuning",
         "guide/speed_accuracy",
         "guide/bridge",
         "guide/exploration",

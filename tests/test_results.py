@@ -224,6 +224,9 @@ EXPLAINING = ["reference.md", "materials.md", "live.md", "index.md", "contributi
         "quickstart",
         "tuning_sweep",
         "baseline_comparison",
+        "model_selection",
+        "bank_tuning",
+        "gating_threshold",
         "speed_accuracy",
         "exploration",
         "python",
@@ -327,6 +330,12 @@ DECLARED: dict[str, list[tuple[set[str], str]]] = {
             "the clock offsets and lag the guide's examples (and the tests) are written with",
         ),
     ],
+    "guide/gating_threshold.md": [
+        ({"95%"}, "the declared confidence level"),
+        ({"15s"}, "the full profile's declared scene length (studies/gating_threshold.toml)"),
+        ({"5×"}, "the paper's ratio of self-motion amplitudes, a calibration target"),
+    ],
+    "guide/bank_tuning.md": [({"95%"}, "the declared confidence level")],
     "guide/speed_accuracy.md": [
         ({"0.005–1ms", "0.1ms", "0.5ms"}, "the study's declared grid and the shipped settings"),
     ],
