@@ -518,8 +518,8 @@ def test_regenerate_runs_each_step_then_writes_the_page_from_them(tmp_path, monk
     monkeypatch.chdir(root)
     out = root / "docs" / "results.md"
     assert regenerate.regenerate(out, runs, lambda r, b, o: pages.append((r, b, o)) or o,
-                                 None, check=True, log=lambda line: None) is None
-    assert ran == [] and pages == []                     # --check runs and writes nothing
+                                 None, plan_only=True, log=lambda line: None) is None
+    assert ran == [] and pages == []                     # --plan runs and writes nothing
     regenerate.regenerate(out, runs, lambda r, b, o: pages.append((r, b, o)) or o, None,
                           log=lambda line: None)
     assert len(ran) == 1 and ran[0][-3:] == ["--yes", "--out", str(runs / "quickstart")]

@@ -3,7 +3,7 @@
 Run from the repository's checkout. For each study of ``studies/*.toml`` it takes, in this
 order, a run whose ``summary.json`` was made by this checkout's code (its provenance's
 ``code_sha256`` is :func:`~snn_antenna.core.provenance.code_hash`) with the profile asked
-for (the full one; ``--quick`` for a check):
+for (the full one; ``--quick-check`` for the quick profiles):
 
 1. the run in ``RUNS/STUDY`` (``--runs``, default ``out/results-runs``), from an earlier
    regeneration, or one the user made there;
@@ -19,7 +19,7 @@ provenance's command, with this interpreter, and its ``--json``/``--out`` file i
 whatever code made it: its section still names its own commit and code hash.
 
 Then it writes the page from those runs and outputs (``results.make_page``): the page, its
-sources, the guides' figures and run times. ``--check`` prints what it would reuse and run,
+sources, the guides' figures and run times. ``--plan`` prints what it would reuse and run,
 and stops.
 """
 from __future__ import annotations
@@ -169,16 +169,16 @@ def _run(step: Step, record_benchmark, log) -> None:
 
 
 def regenerate(out: Path, runs: Path, make_page, record_benchmark, quick: bool = False,
-               keep: set[str] = frozenset(), check: bool = False, log=print) -> Path | None:
+               keep: set[str] = frozenset(), plan_only: bool = False, log=print) -> Path | None:
     """Run or reuse every study and benchmark, then write the page with ``make_page(runs,
     benchmarks, out)`` (``results.make_page``; a benchmark recorded from what it printed is
-    recorded by ``record_benchmark(out, command)``); with ``check`` only print the plan."""
+    recorded by ``record_benchmark(out, command)``); with ``plan_only`` only print the plan."""
     studies, benches = plan(out, runs, quick, set(keep))
     for step in studies + benches:
         log(f"{step.name}: {step.why}" + (f" ({step.output})" if not step.command else ""))
-        if step.command and check:
+        if step.command and plan_only:
             log(f"    {shlex.join(step.command)}")
-    if check:
+    if plan_only:
         return None
     for step in studies + benches:
         if step.command:

@@ -451,7 +451,7 @@ def render(summaries: list[Path], benches: list[Path], command: str) -> str:
         "Run every study's full profile and every benchmark again, reusing each stored run "
         "and benchmark whose code hash is this checkout's, then write this page, its "
         "sources, the guides' figures and run times (see `snn_antenna.report.regenerate`; "
-        "`--check` prints what it would run):",
+        "`--plan` prints what it would run):",
         "",
         "```bash",
         REGENERATE,
@@ -770,12 +770,12 @@ def _results(options) -> int:
                             "--bench-output", "no runs or benchmarks of your own: it runs or "
                             "reuses every study and benchmark itself")
         out = regenerate(Path(options.out), Path(options.runs_dir), make_page,
-                         record_benchmark, options.quick, set(options.keep), options.check)
+                         record_benchmark, options.quick_check, set(options.keep), options.plan)
         if out is not None:
             print(f"{out}: written from every study and benchmark")
         return 0
-    if options.keep or options.quick or options.check:
-        raise SpecError("--keep/--quick/--check", "given", "only with --regenerate")
+    if options.keep or options.quick_check or options.plan:
+        raise SpecError("--keep/--quick-check/--plan", "given", "only with --regenerate")
     outputs = [(Path(f), c) for f, c in options.bench_output]
     out = make_page(
         [Path(p) for p in options.runs], [Path(p) for p in options.bench], Path(options.out),
@@ -838,9 +838,10 @@ COMMANDS = (
                 kind=LIST,
                 metavar="NAME",
             ),
-            Option("quick", "with --regenerate: the quick profiles, a check of the whole "
-                            "chain (the page marks each as a check)", kind=SWITCH),
-            Option("check", "with --regenerate: print what would be reused and run, and stop",
+            Option("quick_check", "with --regenerate: the studies' quick profiles, a check of "
+                                  "the whole chain (the page marks each as a check)",
+                   kind=SWITCH),
+            Option("plan", "with --regenerate: print what would be reused and run, and stop",
                    kind=SWITCH),
             Option(
                 "out",
