@@ -3,6 +3,7 @@ during the build, each drawing its figure), covers every public module in its AP
 and the examples of "Bring the pieces into Python" run as printed, each on its own."""
 
 import re
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -61,6 +62,8 @@ def test_the_site_builds_with_warnings_as_errors(site):
         "guide/tuning_sweep",
         "guide/gating_threshold",
         "guide/baseline_comparison",
+        "guide/model_selection",
+        "guide/bank_tuning",
         "guide/speed_accuracy",
         "guide/bridge",
         "guide/exploration",
@@ -117,6 +120,9 @@ def test_a_fields_and_a_constants_comment_become_their_api_description():
     assert constants["MAX_STABLE_K_DT"].startswith("Largest k·dt")
     assert constants["V_PEAK"] == "spike cut-off, the model's threshold"
     assert "PRESETS" not in constants          # no comment beside it: nothing to show
+    # a section's title above a constant (``# -- write-ahead journals ----``) is not its text
+    from snn_antenna.core import files
+    assert "YOURS" not in source_comments.module_constants(Path(files.__file__).read_text())
 
 
 @pytest.mark.slow    # a minute of Sphinx: .ci/run builds the site on every submission
@@ -160,3 +166,110 @@ def test_each_python_example_runs_on_its_own_from_any_folder(index, tmp_path):
     done = run_python(code[index] + "\n" + PYTHON_GUIDE_CHECKS[index], tmp_path)
     assert done.returncode == 0, done.stderr[-3000:]
     assert list(tmp_path.iterdir()) == []          # nothing written where it ran
+
+
+# -- every page at a desktop's and a phone's width ------------------------------------------------
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+
+#: the widths a page must read cleanly at: a desktop's and a phone's (CSS pixels)
+WIDTHS = {"desktop": {"width": 1400, "height": 900}, "phone": {"width": 390, "height": 844}}
+
+# What a reader cannot read in the article: a table, code block, figure or formula wider
+# than the article unless a box between them scrolls sideways (a scroll bar), one cut by a box
+# that hides what overflows, an image that did not load, and a page that scrolls sideways.
+OVERFLOW_JS = """() => {
+  const problems = [];
+  const root = document.querySelector('article.bd-article') || document.querySelector('main')
+    || document.body;
+  const doc = document.documentElement;
+  if (doc.scrollWidth > doc.clientWidth + 1)
+    problems.push(`the page scrolls sideways (${doc.scrollWidth} px in ${doc.clientWidth} px)`);
+  const overflowX = el => getComputedStyle(el).overflowX;
+  const bounds = root.getBoundingClientRect();
+  const name = el => el.tagName.toLowerCase() + (el.className && typeof el.className === 'string'
+    ? '.' + el.className.trim().split(/\\s+/).join('.') : '') + ' "'
+    + (el.textContent || el.getAttribute('src') || '').trim().slice(0, 50) + '"';
+  for (const el of root.querySelectorAll(
+      'table, pre, img, figure, svg, mjx-container, .math, iframe, video, canvas, code, dl')) {
+    const r = el.getBoundingClientRect();
+    if (r.width === 0 && r.height === 0) continue;
+    if (el.tagName === 'IMG' && !(el.complete && el.naturalWidth > 0)) {
+      problems.push(`an image that is not shown: ${name(el)}`);
+      continue;
+    }
+    const spills = el.scrollWidth > el.clientWidth + 1;
+    if (['hidden', 'clip'].includes(overflowX(el)) && spills)
+      problems.push(`cut without a scroll bar: ${name(el)}`);
+    if (['auto', 'scroll'].includes(overflowX(el))) continue;      // it scrolls itself
+    // what it shows reaches as far as its content when that spills out of its box
+    const right = spills && overflowX(el) === 'visible'
+      ? Math.max(r.right, r.left + el.scrollWidth) : r.right;
+    let box = el.parentElement, verdict = null;
+    while (box && box !== root) {
+      const style = overflowX(box), b = box.getBoundingClientRect();
+      if (style === 'auto' || style === 'scroll') { verdict = 'scrolls'; break; }
+      if ((style === 'hidden' || style === 'clip') && (right > b.right + 1 || r.left < b.left - 1)) {
+        verdict = 'cut'; break;
+      }
+      box = box.parentElement;
+    }
+    if (verdict === 'cut') problems.push(`cut without a scroll bar: ${name(el)}`);
+    else if (verdict === null && (right > bounds.right + 1 || r.left < bounds.left - 1))
+      problems.push(`wider than the page (${Math.round(right - r.left)} px in `
+                    + `${Math.round(bounds.width)} px): ${name(el)}`);
+  }
+  return problems;
+}"""
+
+
+def overflow_problems(site: Path, pages: list[Path]) -> dict[str, list[str]]:
+    """Each page's overflow problems at each of :data:`WIDTHS`, by ``page @ width``."""
+    playwright = pytest.importorskip("playwright.sync_api")
+    found = {}
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True,
+                                    args=["--no-sandbox"])
+        try:
+            for width, viewport in WIDTHS.items():
+                tab = browser.new_page(viewport=viewport)
+                tab.route("http*://**", lambda route: route.abort())   # offline, as built
+                for page in pages:
+                    tab.goto(page.as_uri(), wait_until="load")
+                    problems = tab.evaluate(OVERFLOW_JS)
+                    if problems:
+                        found[f"{page.relative_to(site)} @ {width}"] = problems
+                tab.close()
+        finally:
+            browser.close()
+    return found
+
+
+@pytest.mark.slow    # the site's build, then every page twice in Chromium
+@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+def test_every_page_reads_cleanly_at_a_desktops_and_a_phones_width(site):
+    pages = sorted(p for p in site.rglob("*.html")
+                   if not p.relative_to(site).parts[0].startswith(("_", "genindex", "search")))
+    assert len(pages) > 30
+    found = overflow_problems(site, pages)
+    assert not found, "pages that do not read cleanly:\n" + "\n".join(
+        f"{page}: {'; '.join(problems[:3])}" for page, problems in sorted(found.items())[:20])
+
+
+@pytest.mark.slow    # Chromium: seconds, beside the site's own check
+@pytest.mark.skipif(CHROMIUM is None, reason="no system Chromium (Debian package `chromium`)")
+def test_the_width_check_finds_a_cut_table_and_a_wide_code_block(tmp_path):
+    """A wide table in a box that hides its overflow, and a code block that neither wraps nor
+    scrolls, are caught at a phone's width; the same in a scrolling box is not."""
+    row = "<tr>" + "<td>a_long_cell_value</td>" * 12 + "</tr>"
+    page = tmp_path / "page.html"
+    page.write_text(
+        "<!doctype html><meta name='viewport' content='width=device-width'>"
+        "<article class='bd-article'>"
+        f"<div style='overflow-x:hidden'><table>{row}</table></div>"
+        "<pre style='overflow:visible;white-space:pre'>" + "x" * 200 + "</pre>"
+        f"<div style='overflow-x:auto'><table>{row}</table></div></article>")
+    found = overflow_problems(tmp_path, [page])
+    phone = found["page.html @ phone"]
+    assert any("cut without a scroll bar: table" in p for p in phone)
+    assert any("wider than the page" in p and p.endswith('"' + "x" * 50 + '"') for p in phone)
+    assert sum("table" in p for p in phone) == 1          # the scrolling one is fine

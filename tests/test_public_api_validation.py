@@ -245,6 +245,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.report.page.Calibrated",
         "snn_antenna.report.page.Predicted",
         "snn_antenna.report.stats.Interval",
+        "snn_antenna.report.regenerate.Step",
         "snn_antenna.studies.gating_threshold.report.Fig9Row",
         "snn_antenna.studies.gating_threshold.report.SeedPlan",
         "snn_antenna.studies.gating_threshold.report.Results",

@@ -171,3 +171,20 @@ def test_the_path_check_catches_a_path_that_does_not_exist():
                      "docs/examples/plot_*.c"}
     assert [p for p in sorted(paths) if missing(p)] == ["docs/examples/plot_*.c",
                                                          "networks/neurons.py"]
+
+
+def test_every_study_writes_its_report_through_the_one_page_that_carries_the_header():
+    """The header is written by ``Report.write`` alone: every study's package makes its page
+    with ``Report``, and nothing else in the package writes a ``report.html``."""
+    from snn_antenna.studies import STUDIES
+
+    package = ROOT / "snn_antenna"
+    for study, module in STUDIES.items():
+        folder = package.joinpath(*module.split(".")[1:])
+        text = "".join(p.read_text() for p in folder.rglob("*.py"))
+        assert re.search(r"\bReport\(", text), f"{study} makes no Report"
+    writers = [f"{p.relative_to(ROOT)}: {line.strip()}" for p in package.rglob("*.py")
+               for line in p.read_text().splitlines()
+               if "report.html" in line and re.search(r"write|open\(", line)]
+    assert writers == ['snn_antenna/report/page.py: atomic_write(self.out_dir / "report.html", '
+                       'page)'], f"report.html written outside report/page.py: {writers}"

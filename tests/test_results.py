@@ -5,11 +5,14 @@ import json
 import re
 import shlex
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 from snn_antenna.cli import main
-from snn_antenna.core import files, outputs
-from snn_antenna.report import results
+from snn_antenna.core import files, outputs, provenance
+from snn_antenna.core.errors import SpecError
+from snn_antenna.report import guides, labels, regenerate, results
 
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "docs" / "results.md"
@@ -224,6 +227,9 @@ EXPLAINING = ["reference.md", "materials.md", "live.md", "index.md", "contributi
         "quickstart",
         "tuning_sweep",
         "baseline_comparison",
+        "model_selection",
+        "bank_tuning",
+        "gating_threshold",
         "speed_accuracy",
         "exploration",
         "python",
@@ -313,6 +319,7 @@ DECLARED: dict[str, list[tuple[set[str], str]]] = {
         ),
     ],
     "guide/quickstart.md": [({"2s"}, "the declared calibration span")],
+    "index.md": [({"2s"}, "the quickstart's declared calibration span")],
     "guide/baseline_comparison.md": [
         ({"10%", "95%"}, "the paper's event end rule and the declared confidence level"),
     ],
@@ -327,10 +334,25 @@ DECLARED: dict[str, list[tuple[set[str], str]]] = {
             "the clock offsets and lag the guide's examples (and the tests) are written with",
         ),
     ],
+    "guide/gating_threshold.md": [
+        ({"95%"}, "the declared confidence level"),
+        ({"15s"}, "the full profile's declared scene length (studies/gating_threshold.toml)"),
+        ({"5×"}, "the paper's ratio of self-motion amplitudes, a calibration target"),
+    ],
+    "guide/bank_tuning.md": [({"95%"}, "the declared confidence level")],
     "guide/speed_accuracy.md": [
         ({"0.005–1ms", "0.1ms", "0.5ms"}, "the study's declared grid and the shipped settings"),
     ],
 }
+
+
+def _caption_only(block: re.Match) -> str:
+    """A fenced block as prose: a figure's or an image's caption (its option lines left
+    out), else nothing (commands and code)."""
+    text = block.group(0)
+    if not re.match(r"```\{(figure|image)\}", text):
+        return ""
+    return "\n".join(line for line in text.splitlines()[1:-1] if not line.startswith(":"))
 
 
 def test_the_explaining_pages_type_no_measured_number():
@@ -340,7 +362,7 @@ def test_the_explaining_pages_type_no_measured_number():
     found = []
     for name in EXPLAINING:
         text = (ROOT / "docs" / name).read_text()
-        text = re.sub(r"```.*?```", "", text, flags=re.S)  # commands and code, not prose
+        text = re.sub(r"```.*?```", _caption_only, text, flags=re.S)  # code is not prose
         allowed = set().union(*(values for values, _ in DECLARED.get(name, [])))
         for line in text.splitlines():
             if line.startswith("    "):  # an indented command
@@ -371,3 +393,159 @@ def test_every_section_the_pages_cite_is_on_the_results_page():
     assert cited and cited <= labels, f"cited but not on the page: {sorted(cited - labels)}"
     studies = {p.stem for p in (ROOT / "studies").glob("*.toml")}
     assert studies <= labels, f"studies without a run on the page: {sorted(studies - labels)}"
+
+
+# -- the guides' fragments, readable rows, and the one command that regenerates everything -------
+
+def _stored_studies() -> list[tuple[str, dict]]:
+    cited = re.search(r"```bash\n(snn-antenna results .*?)\n```", PAGE.read_text()).group(1)
+    paths = [w for w in shlex.split(cited)[2:] if w.endswith(".json") and "/bench_" not in w]
+    stems = [Path(p).stem for p in paths if not p.startswith("--")]
+    return [(s, json.loads((SOURCES / f"{s}.json").read_text())) for s in stems]
+
+
+def test_each_guide_fragment_is_its_stored_run_and_every_study_has_a_guide_that_includes_it():
+    """The run time and figures a guide shows are what the results command makes of the
+    stored sources: made again here from them, byte for byte."""
+    stored = [(s, summary, guides.stored_figures(s, summary, SOURCES))
+              for s, summary in _stored_studies()]
+    made = guides.fragments(SOURCES, stored)
+    assert len(made) == len(stored) + 1
+    for path, text in made.items():
+        assert path.read_text() == text, f"{path.name} is not what its sources make"
+    for study, summary, _ in stored:
+        guide = ROOT / "docs" / "guide" / f"{study}.md"
+        assert f"```{{include}} ../results/guide_{study}.md" in guide.read_text(), guide.name
+        assert guides.run_time(summary), f"{study}: its summary records no run time"
+    index = (ROOT / "docs" / "index.md").read_text()
+    assert "```{include} results/run_times.md" in index
+
+
+def test_a_fragment_says_quick_or_full_and_shows_the_runs_figures(tmp_path):
+    summary = {"quick": False, "total_s": 754.2, "seeds": [0, 1, 2], "trials": 24,
+               "events": 12799, "figures": ["pareto_front.png", "other.png"],
+               "figure_captions": {"pareto_front.png": "Every trial. Second sentence."},
+               "provenance": {"machine": "AMD EPYC, 2 cores", "created": "2026-11-29T01:02:03",
+                              "git_commit": "abc", "code_sha256": "0123456789abcdef"}}
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "pareto_front.png").write_bytes(b"png")
+    (run / "other.png").write_bytes(b"png")
+    store = tmp_path / "results"
+    names = guides.run_figures("bank_tuning", summary, run)
+    assert names == ["pareto_front.png"]                 # only the figures the guide reads
+    guides.copy_figures("bank_tuning", names, run, store)
+    (store / "figures" / "bank_tuning" / "stale.png").write_bytes(b"old")
+    guides.copy_figures("bank_tuning", names, run, store)
+    assert sorted(p.name for p in (store / "figures" / "bank_tuning").iterdir()) == \
+        ["pareto_front.png"]
+    text = guides.guide_fragment("bank_tuning", summary, names)
+    assert "The full profile" in text and "ran in 13 min" in text
+    assert "3 seeds, 24 trials, 12799 bench contacts" in text
+    assert "/results/figures/bank_tuning/pareto_front.png" in text and "other.png" not in text
+    assert "Every trial. Second sentence. n: 3 seeds" in text
+    quick = guides.guide_fragment("bank_tuning", {**summary, "quick": True}, names)
+    assert "Only a quick check" in quick and "a check, not a result" in quick
+    assert "The full profile (" not in quick
+
+
+def test_the_page_names_rows_in_words_not_code_keys():
+    text = PAGE.read_text()
+    assert "coder_square_24_bins |" not in text and "| mlp_spectrum |" not in text
+    assert labels.readout_label("coder_square_24_bins") == \
+        "square coder, 24 resonators: rate in time bins"
+    assert labels.readout_label("ceiling_delta_48").startswith("delta coder, 48 channels")
+    assert labels.readout_label("distance_rmse_mm") == "distance RMSE (mm)"
+    # a label is text the check accepts only as the label of a key its source holds
+    page, store = Path(PAGE), SOURCES
+    assert results.check_page(page, store) == []
+
+
+def _fake_checkout(tmp_path, studies=("quickstart", "gating_threshold")) -> Path:
+    root = tmp_path / "repo"
+    (root / "studies").mkdir(parents=True)
+    for study in studies:
+        (root / "studies" / f"{study}.toml").write_text(f'study = "{study}"\n')
+    (root / "docs" / "results").mkdir(parents=True)
+    return root
+
+
+def _summary(code_sha256: str, quick=False) -> dict:
+    return {"quick": quick, "total_wall_s": 3.0, "figures": [],
+            "provenance": {"code_sha256": code_sha256, "command": "snn-antenna run x"}}
+
+
+def test_regenerate_reuses_what_this_code_made_and_runs_the_rest(tmp_path, monkeypatch):
+    root = _fake_checkout(tmp_path)
+    store, runs = root / "docs" / "results", tmp_path / "runs"
+    here = provenance.code_hash()
+    (store / "quickstart.json").write_text(json.dumps(_summary(here)))
+    (store / "gating_threshold.json").write_text(json.dumps(_summary("0" * 16)))
+    (runs / "gating_threshold").mkdir(parents=True)         # a quick run: not the full profile
+    (runs / "gating_threshold" / "summary.json").write_text(json.dumps(_summary(here, True)))
+    bench = {"us": 1.0, "provenance": {"code_sha256": "0" * 16,
+                                       "command": "python benchmarks/bench_x.py --json /tmp/a.json"}}
+    (store / "bench_x.json").write_text(json.dumps(bench))
+    printed = {"stdout": "t\n", "command": ".venv/bin/python benchmarks/bench_y.py",
+               "provenance": {"code_sha256": here, "command": ".venv/bin/python benchmarks/bench_y.py"}}
+    (store / "bench_y.json").write_text(json.dumps(printed))
+    studies, benches = regenerate.plan(root / "docs" / "results.md", runs, False, set(), root)
+    assert [(s.name, s.command is None) for s in studies] == \
+        [("quickstart", True), ("gating_threshold", False)]
+    assert studies[0].output == store / "quickstart.json"
+    run = studies[1].command
+    assert run[-4:] == ["studies/gating_threshold.toml", "--yes", "--out",
+                        str(runs / "gating_threshold")] and "--quick" not in run
+    x, y = benches
+    assert x.command[0] == sys.executable and x.command[1:] == \
+        ["benchmarks/bench_x.py", "--json", str(runs / "bench" / "bench_x.json")]
+    assert y.command is None and y.output == store / "bench_y.json"      # this code's: reused
+    # --keep takes a stored one as it is; a name that is not there is refused in one line
+    studies, _ = regenerate.plan(root / "docs" / "results.md", runs, False,
+                                 {"gating_threshold"}, root)
+    assert studies[1].command is None and studies[1].output == store / "gating_threshold.json"
+    try:
+        regenerate.plan(root / "docs" / "results.md", runs, False, {"gating"}, root)
+    except SpecError as exc:
+        assert "gating" in str(exc) and "gating_threshold" in str(exc)
+    else:
+        raise AssertionError("an unknown --keep was taken")
+    # with --quick the quick run of this code in RUNS is the one reused
+    studies, _ = regenerate.plan(root / "docs" / "results.md", runs, True, set(), root)
+    assert studies[1].command is None and studies[1].output == runs / "gating_threshold"
+
+
+def test_regenerate_runs_each_step_then_writes_the_page_from_them(tmp_path, monkeypatch):
+    root = _fake_checkout(tmp_path, ("quickstart",))
+    runs = tmp_path / "runs"
+    ran, pages = [], []
+
+    def fake_run(command, check=False):
+        ran.append(command)
+        return subprocess.CompletedProcess(command, 0)
+
+    monkeypatch.setattr(regenerate.subprocess, "run", fake_run)
+    monkeypatch.chdir(root)
+    out = root / "docs" / "results.md"
+    assert regenerate.regenerate(out, runs, lambda r, b, o: pages.append((r, b, o)) or o,
+                                 None, plan_only=True, log=lambda line: None) is None
+    assert ran == [] and pages == []                     # --plan runs and writes nothing
+    regenerate.regenerate(out, runs, lambda r, b, o: pages.append((r, b, o)) or o, None,
+                          log=lambda line: None)
+    assert len(ran) == 1 and ran[0][-3:] == ["--yes", "--out", str(runs / "quickstart")]
+    assert pages == [([runs / "quickstart"], [], out)]
+    monkeypatch.setattr(regenerate.subprocess, "run",
+                        lambda c, check=False: subprocess.CompletedProcess(c, 3))
+    try:
+        regenerate.regenerate(out, runs, lambda *a: None, None, log=lambda line: None)
+    except SpecError as exc:
+        assert "exited 3" in str(exc)
+    else:
+        raise AssertionError("a failed run wrote the page")
+
+
+def test_the_regenerate_options_are_refused_without_it_and_runs_with_it(tmp_path, capsys):
+    assert main(["results", "--keep", "quickstart", "--out", str(tmp_path / "p.md")]) == 2
+    assert "only with --regenerate" in capsys.readouterr().err
+    assert main(["results", "--regenerate", str(tmp_path), "--out", str(tmp_path / "p.md")]) == 2
+    assert "--regenerate" in capsys.readouterr().err

@@ -41,12 +41,18 @@ def _source(module_name: str) -> tuple[str, dict[int, str]] | None:
     return text, comments
 
 
+#: a comment that divides a module into sections (``# -- figures -----``)
+_DIVIDER = re.compile(r"-+ .*-{3,}$|-{3,}$")
+
+
 def _comment(comments: dict[int, str], lines: list[str], node: ast.stmt) -> str:
     """The comment on a statement's first line, else the comment lines just above it."""
     if node.lineno in comments and lines[node.lineno - 1].lstrip()[:1] != "#":
         return comments[node.lineno]
     above, at = [], node.lineno - 1
     while at >= 1 and lines[at - 1].lstrip().startswith("#"):
+        if _DIVIDER.match(comments.get(at, "")):   # a section's title in the source: not
+            break                                  # the statement's description
         above.insert(0, comments.get(at, ""))
         at -= 1
     return " ".join(above)

@@ -14,6 +14,7 @@ import numpy as np
 import xarray as xr
 
 from ..report import stats
+from ..report.labels import READOUTS
 from .crossval import BaselineResult
 from .signal import PAPER_SIGNAL
 from ..readout.spiking_decoders import (
@@ -25,28 +26,7 @@ from ..readout.spiking_decoders import (
     input_of,
 )
 
-LABELS = {
-    "linear_low_peak": "linear regression, low peak",
-    "mlp_parametric": "MLP on 2 peaks (F, A)",
-    "mlp_spectrum": "MLP, full spectrum",
-    "mlp_spectrum_sub10": "MLP, every 10th bin",
-    "mlp_low_half": "MLP, lower half of spectrum",
-    "mlp_spectrum_material": "MLP 51, full spectrum",
-    "mlp_parametric_material": "MLP 51 on 2 peaks (F, A, τ)",
-    "mlp_5_8_2": "5-8-2 MLP, wood/aluminium",
-    "spiking_dominant": "dominant resonator",
-    "spiking_centroid": "rate centroid",
-    "spiking_mlp_distance_low": "spiking MLP, low band",
-    "spiking_mlp_distance": "spiking MLP, low + high",
-    "spiking_mlp_material_high": "spiking MLP, high band",
-    "spiking_mlp_material": "spiking MLP, low + high",
-    "spiking_mlp_material_rod": "spiking MLP, + rod band, time bins",
-    "spiking_tuned_rate": "tuned bank: rate",
-    "spiking_tuned_timing": "tuned bank: latency + span",
-    "spiking_tuned_bins": "tuned bank: rate in time bins",
-    "spiking_tuned_decay": "tuned bank: rate + decay",
-    "spiking_tuned_all": "tuned bank: rate, latency, span, bins",
-}
+LABELS = READOUTS      # the read-outs' names, shared with the results page
 FULL_SPECTRUM = "mlp_spectrum_material"    # the material read-out the others are held to
 
 

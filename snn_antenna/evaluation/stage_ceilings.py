@@ -31,24 +31,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.errors import check
+from ..report import labels
 from ..readout.spiking import SpikingBank, align_events, coded_features
 from ..sources.antenna import ADC
 
 STAGES = ("spectrum_2_axes", "spectrum_main_axis", "ideal_2_axes", "ideal_main_axis",
           "band_pass", "centred", "coded", "coded_statistics", "centred_2_axes",
           "coded_2_axes")
-STAGE_TEXT = {
-    "spectrum_2_axes": "window spectrum, both axes (no channels)",
-    "spectrum_main_axis": "window spectrum, principal axis (after PCA 2→1)",
-    "ideal_2_axes": "channels by ideal band-pass, both axes",
-    "ideal_main_axis": "channels by ideal band-pass, principal axis",
-    "band_pass": "after the chain's band-pass (Butterworth)",
-    "centred": "after the centring",
-    "coded": "after the coder",
-    "coded_statistics": "after the coder, read as the coder table's ceiling",
-    "centred_2_axes": "after the centring, both axes (a bank per axis)",
-    "coded_2_axes": "after the coder, both axes (a bank per axis)",
-}
+STAGE_TEXT = labels.STAGE_TEXT    # each stage in words, shared with the results page
 # A power floor (g², or the coded current's unit squared): the log of a silent channel
 # stays finite and far below any signal the sensor's noise (10 mg) leaves.
 POWER_FLOOR = 1e-12

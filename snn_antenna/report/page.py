@@ -101,6 +101,7 @@ class Report:
         self._parts: list[str] = []
         self._lead: list[str] = []
         self.figures: list[str] = []
+        self.figure_captions: dict[str, str] = {}     # file name -> caption, as the page shows it
         self._calibrated: list[Calibrated] = []
         self._predicted: list[Predicted] = []
 
@@ -177,6 +178,7 @@ class Report:
                            f'src="data:image/png;base64,{data}"/>'
                            f"<figcaption>{html.escape(fmt(caption))}</figcaption></figure>")
         self.figures.append(path.name)
+        self.figure_captions[path.name] = fmt(caption)
         return path
 
     def _banner(self) -> str:
@@ -196,6 +198,7 @@ class Report:
         summary = dict(summary)
         summary["provenance"] = {**provenance(spec, target), "machine": machine()}
         summary["figures"] = list(self.figures)
+        summary["figure_captions"] = dict(self.figure_captions)   # the results page's captions
         summary["quick"] = bool(self.quick)
         summary["calibrated"] = [asdict(c) for c in self._calibrated]
         summary["predicted"] = [asdict(p) for p in self._predicted]
@@ -269,7 +272,7 @@ _UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per 
 _WORDS = {"f1": "F1", "rmse": "RMSE", "mae": "MAE", "cpu": "CPU", "snn": "SNN", "svm": "SVM",
           "nmf": "NMF", "fwhm": "FWHM", "ci": "CI", "adc": "ADC", "id": "ID", "dt": "dt",
           "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP",
-          "pom": "POM", "pvc": "PVC"}   # materials: one spelling everywhere
+          "pom": "POM", "pvc": "PVC", "fft": "FFT", "mlp": "MLP"}   # materials: one spelling everywhere
 _NAMES = {"cpu_s": "CPU time (s)", "wall_s": "wall time (s)", "compile_s": "compile time (s)",
           "k_dt": "k·dt", "n": "n", "p_value": "p value"}
 

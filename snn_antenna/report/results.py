@@ -47,11 +47,14 @@ from pathlib import Path
 from typing import Any
 
 from ..core.bounds import out_path
-from ..core.commands import LIST, POSITIONALS, Command, Option
+from ..core.commands import LIST, POSITIONALS, SWITCH, Command, Option
 from ..core.errors import SpecError
 from ..core.files import atomic_write
 from ..core.outputs import output_folder
 from ..core.provenance import code_identity
+from . import guides
+from .regenerate import regenerate
+from .labels import readout_label
 
 #: the study summaries' own lists of what was calibrated and what is predicted
 ROW_LISTS = ("calibrated", "predicted")
@@ -180,6 +183,27 @@ def _text(value: Any) -> str:
     return str(value).replace("|", "\\|").replace("\n", " ")
 
 
+def _label(key) -> str:
+    """A row's or a column's key as a reader names it (``labels.readout_label``:
+    ``coder_square_24_bins`` -> "square coder, 24 resonators: rate in time bins")."""
+    return _text(readout_label(key))
+
+
+def _labels_of(document: Any) -> set[str]:
+    """Every key of ``document`` (at any depth) as the page labels it: the text a table's
+    row and column names may show."""
+    found: set[str] = set()
+    todo = [document]
+    while todo:
+        value = todo.pop()
+        if isinstance(value, dict):
+            found |= {_label(k).replace("\\|", "|").strip(" ,:;()[]–") for k in value}
+            todo += list(value.values())
+        elif isinstance(value, list):
+            todo += value
+    return found
+
+
 def _table(header: tuple[str, ...], rows: list[list[str]]) -> list[str]:
     return [
         "| " + " | ".join(header) + " |",
@@ -256,11 +280,26 @@ def study_section(summary: dict, run: str, file: str) -> list[str]:
     lines = [f"## {study.replace('_', ' ').capitalize()}", ""]
     if summary.get("quick"):
         lines += [
-            "A quick-profile run (`--quick`): its numbers check that the pipeline works; "
-            "its report says what it is too small for.",
+            "**A check, not a result**: this run is the study's quick profile (`--quick`); "
+            "its numbers show that the pipeline works, and its report says what it is too "
+            "small for. The full profile's run replaces it here when it is regenerated.",
             "",
         ]
-    lines += _source(run, file, prov)
+    else:
+        lines += [
+            f"The study's full profile (`studies/{study}.toml` without `--quick`).",
+            "",
+        ]
+    source = _source(run, file, prov)
+    timed = guides.run_time(summary)
+    if timed:
+        ptr, seconds = timed
+        source.insert(
+            -1,
+            f"- run time: {_cell(seconds, run, ptr)} s of wall time, measured by the run "
+            f"({guides.duration(seconds)})",
+        )
+    lines += source
     for key in ROW_LISTS:
         lines += _row_list(summary, run, key)
     lines += _extra_tables(summary, run, study)
@@ -335,12 +374,12 @@ def _rows_table(
         for c in columns
     }
     if named and len(columns) > TURN_COLUMNS and len(items) <= TURN_ROWS:
-        header = ("", *(_text(name) for name, _ in items))
-        body = [[_text(c)] + [cells[name, c] for name, _ in items] for c in columns]
+        header = ("", *(_label(name) for name, _ in items))
+        body = [[_label(c)] + [cells[name, c] for name, _ in items] for c in columns]
     else:
-        header = (("",) if named else ()) + tuple(_text(c) for c in columns)
+        header = (("",) if named else ()) + tuple(_label(c) for c in columns)
         body = [
-            ([_text(name)] if named else []) + [cells[name, c] for c in columns]
+            ([_label(name)] if named else []) + [cells[name, c] for c in columns]
             for name, _ in items
         ]
     return [*lines, *_table(header, body)]
@@ -364,7 +403,7 @@ def bench_values(values: dict, run: str, root: str = "") -> list[str]:
         ):
             lines += _rows_table(title, value, run, ptr)
         else:
-            single.append([_text(key), _value_cell(value, run, ptr)])
+            single.append([_label(key), _value_cell(value, run, ptr)])
     if single:
         lines = [*_table(("", "value"), single), *lines]
     return lines
@@ -398,10 +437,24 @@ def render(summaries: list[Path], benches: list[Path], command: str) -> str:
         "Benchmarks ran on a shared machine: read their ratios, measured side by side in "
         "one run, rather than their times.",
         "",
-        "Regenerate this page (see `snn_antenna.report.results`):",
+        "Each study's section is the run of its full profile, unless its first line says "
+        "it is a quick check: a quick profile's numbers show that the pipeline works and "
+        "are not results.",
+        "",
+        "Regenerate this page from the sources stored beside it (see "
+        "`snn_antenna.report.results`):",
         "",
         "```bash",
         command,
+        "```",
+        "",
+        "Run every study's full profile and every benchmark again, reusing each stored run "
+        "and benchmark whose code hash is this checkout's, then write this page, its "
+        "sources, the guides' figures and run times (see `snn_antenna.report.regenerate`; "
+        "`--plan` prints what it would run):",
+        "",
+        "```bash",
+        REGENERATE,
         "```",
         "",
     ]
@@ -440,6 +493,7 @@ def check_page(page: Path, sources: Path) -> list[str]:
         if not _is_number(value) or fmt(value) != shown:
             problems.append(f"{shown!r} cites {ptr} in {file}, which holds {value!r}")
     run, printed = None, None
+    labels: dict[str, set[str]] = {}        # a source's keys as the page labels them
     for line in text.splitlines():  # text in the tables and printed output: the cited file's
         label = re.fullmatch(r"\(run-([\w.-]+)\)=", line)
         if label:
@@ -463,12 +517,15 @@ def check_page(page: Path, sources: Path) -> list[str]:
         if run is None or not line.startswith("| ") or set(line) <= set("|- "):
             continue
         source = json.dumps(cache.get(run), ensure_ascii=False)
+        if run not in labels:
+            labels[run] = _labels_of(cache.get(run))
         for cell in line.strip("|").split(" | "):
             for chunk in _LINK.split(cell)[::4]:
                 words = chunk.replace("\\|", "|").strip(" ,:;()[]–")
                 if (
                     re.search(r"\d", words)
                     and json.dumps(words, ensure_ascii=False)[1:-1] not in source
+                    and words not in labels[run]
                 ):
                     problems.append(f"{words!r} (run {run}) is not in the file it cites")
     return problems
@@ -633,6 +690,10 @@ def _shown(path: Path) -> str:
     return Path(os.path.relpath(path.resolve())).as_posix()
 
 
+#: the one command that runs every study's full profile and every benchmark again (or reuses
+#: what matches this checkout's code) and writes the page (``report.regenerate``)
+REGENERATE = "snn-antenna results --regenerate"
+
 #: the results page's output folder is the page's own: the documentation, which it shares
 #: with the pages beside it (``outputs.output_folder``, ``shared``)
 STUDY = "results"
@@ -661,8 +722,19 @@ def make_page(
             raise SpecError("--bench", str(path), f"one output per benchmark ({target.stem})")
         stored.append((target, path, record))
     copies = [(t, f) for t, f, _ in summaries + stored if f.resolve() != t.resolve()]
+    runs_figures = {  # a run's folder gives its figures; a stored source keeps those stored
+        target.stem: guides.run_figures(target.stem, summary, file.parent)
+        if file.resolve() != target.resolve()
+        else guides.stored_figures(target.stem, summary, store)
+        for target, file, summary in summaries
+    }
+    fragments = guides.fragments(
+        store, [(t.stem, summary, runs_figures[t.stem]) for t, _, summary in summaries]
+    )
+    pending = {path: text for path, text in fragments.items()
+               if not path.is_file() or path.read_text() != text}
     with output_folder(out.parent, STUDY, shared=True) as folder:
-        folder.check_writes([out.name] + ([store.name] if copies else []))
+        folder.check_writes([out.name] + ([store.name] if copies or pending else []))
         folder.claim()
         for target, file, summary in summaries:
             if file.resolve() != target.resolve():
@@ -670,6 +742,11 @@ def make_page(
         for target, path, record in stored:
             if path.resolve() != target.resolve():
                 atomic_write(target, json.dumps(record, indent=1, default=float) + "\n")
+        for target, file, summary in summaries:
+            if file.resolve() != target.resolve():
+                guides.copy_figures(target.stem, runs_figures[target.stem], file.parent, store)
+        for path, text in pending.items():
+            atomic_write(path, text)
         cited = [target for target, _, _ in summaries]
         command = " ".join(
             [
@@ -687,6 +764,18 @@ def make_page(
 
 
 def _results(options) -> int:
+    if options.regenerate:
+        if options.runs or options.bench or options.bench_output:
+            raise SpecError("--regenerate", " ".join(options.runs + options.bench) or
+                            "--bench-output", "no runs or benchmarks of your own: it runs or "
+                            "reuses every study and benchmark itself")
+        out = regenerate(Path(options.out), Path(options.runs_dir), make_page,
+                         record_benchmark, options.quick_check, set(options.keep), options.plan)
+        if out is not None:
+            print(f"{out}: written from every study and benchmark")
+        return 0
+    if options.keep or options.quick_check or options.plan:
+        raise SpecError("--keep/--quick-check/--plan", "given", "only with --regenerate")
     outputs = [(Path(f), c) for f, c in options.bench_output]
     out = make_page(
         [Path(p) for p in options.runs], [Path(p) for p in options.bench], Path(options.out),
@@ -726,6 +815,34 @@ COMMANDS = (
                 nargs=2,
                 metavar=("FILE", "COMMAND"),
             ),
+            Option(
+                "regenerate",
+                "run every study's full profile and every benchmark stored beside the page "
+                "again, reusing each whose code hash is this checkout's, then write the page "
+                "(run from the repository's checkout)",
+                kind=SWITCH,
+            ),
+            Option(
+                "runs_dir",
+                "with --regenerate: where the study runs and benchmark outputs are made and "
+                "found (default out/results-runs)",
+                check=out_path,
+                text=True,
+                default="out/results-runs",
+                metavar="DIR",
+            ),
+            Option(
+                "keep",
+                "with --regenerate: keep this stored study or benchmark as it is, whatever "
+                "code made it (its section names its own commit)",
+                kind=LIST,
+                metavar="NAME",
+            ),
+            Option("quick_check", "with --regenerate: the studies' quick profiles, a check of "
+                                  "the whole chain (the page marks each as a check)",
+                   kind=SWITCH),
+            Option("plan", "with --regenerate: print what would be reused and run, and stop",
+                   kind=SWITCH),
             Option(
                 "out",
                 "the page (default docs/results.md)",

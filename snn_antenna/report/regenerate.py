@@ -1,0 +1,186 @@
+"""Every full result again, in one command: ``snn-antenna results --regenerate``.
+
+Run from the repository's checkout. For each study of ``studies/*.toml`` it takes, in this
+order, a run whose ``summary.json`` was made by this checkout's code (its provenance's
+``code_sha256`` is :func:`~snn_antenna.core.provenance.code_hash`) with the profile asked
+for (the full one; ``--quick-check`` for the quick profiles):
+
+1. the run in ``RUNS/STUDY`` (``--runs``, default ``out/results-runs``), from an earlier
+   regeneration, or one the user made there;
+2. the source stored beside the results page (``docs/results/STUDY.json``);
+3. otherwise a new run: ``snn-antenna run studies/STUDY.toml --yes --out RUNS/STUDY``, in a
+   process of its own, one study at a time (a killed run resumes in its folder).
+
+For each benchmark stored beside the page (``docs/results/bench_*.json``) it reuses the stored
+output when this code made it, and otherwise runs the command that output records again (its
+provenance's command, with this interpreter, and its ``--json``/``--out`` file in
+``RUNS/bench``; a benchmark recorded from what it printed is recorded again,
+``results.record_benchmark``). ``--keep NAME`` keeps a stored study or benchmark as it is
+whatever code made it: its section still names its own commit and code hash.
+
+Then it writes the page from those runs and outputs (``results.make_page``): the page, its
+sources, the guides' figures and run times. ``--plan`` prints what it would reuse and run,
+and stops.
+"""
+from __future__ import annotations
+
+import json
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..core.errors import SpecError
+from ..core.provenance import code_hash
+
+#: the studies in the order the page shows them (from a first look to the deepest study);
+#: a study not listed follows them, by name
+PAGE_ORDER = ("quickstart", "tuning_sweep", "gating_threshold", "baseline_comparison",
+              "model_selection", "speed_accuracy", "exploration", "bank_tuning")
+
+#: a benchmark's option naming the JSON file it writes
+OUTPUT_OPTIONS = ("--json", "--out")
+
+
+@dataclass
+class Step:
+    """One study or benchmark of the page: what it is, where its output will be, and why."""
+    name: str
+    output: Path                 # a run folder, a summary or a benchmark's JSON
+    command: list[str] | None    # None: reused as it is
+    why: str
+    record: bool = False         # a benchmark recorded from what it printed
+
+
+def _summary(path: Path) -> dict | None:
+    try:
+        data = json.loads(path.read_text()) if path.is_file() else None
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def _made_here(data: dict | None, quick: bool | None = None) -> bool:
+    """Made by this checkout's code (and, for a study, with the profile asked for)."""
+    if not data:
+        return False
+    if quick is not None and bool(data.get("quick")) != quick:
+        return False
+    return data.get("provenance", {}).get("code_sha256") == code_hash()
+
+
+def _program() -> list[str]:
+    """``snn-antenna`` as installed beside this interpreter, so a run's provenance records
+    the command a user types; the module otherwise."""
+    script = Path(sys.executable).parent / "snn-antenna"
+    return [str(script)] if script.is_file() else [sys.executable, "-m", "snn_antenna.cli"]
+
+
+def study_steps(root: Path, store: Path, runs: Path, quick: bool, keep: set[str]) -> list[Step]:
+    """What to do for each study of ``root/studies``."""
+    specs = sorted((root / "studies").glob("*.toml"), key=lambda p: (
+        PAGE_ORDER.index(p.stem) if p.stem in PAGE_ORDER else len(PAGE_ORDER), p.stem))
+    if not specs:
+        raise SpecError("--regenerate", str(root),
+                        "the repository's checkout (its studies/*.toml): run it from there")
+    profile = "quick" if quick else "full"
+    steps = []
+    for spec in specs:
+        study = spec.stem
+        fresh, stored = runs / study / "summary.json", store / f"{study}.json"
+        if study in keep and stored.is_file():
+            steps.append(Step(study, stored, None, "kept as stored (--keep)"))
+        elif _made_here(_summary(fresh), quick):
+            steps.append(Step(study, runs / study, None, f"this code's {profile} run in {runs}"))
+        elif _made_here(_summary(stored), quick):
+            steps.append(Step(study, stored, None, f"this code's {profile} run, stored"))
+        else:
+            command = [*_program(), "run", f"studies/{study}.toml", "--yes",
+                       "--out", str(runs / study)] + (["--quick"] if quick else [])
+            steps.append(Step(study, runs / study, command,
+                              f"no {profile} run of this code: running it"))
+    return steps
+
+
+def rerun_command(record: dict, output: Path) -> tuple[list[str], bool]:
+    """The command a stored benchmark output records, made to run again here: with this
+    interpreter, writing ``output``; and whether it is recorded from what it prints."""
+    text = record.get("provenance", {}).get("command") or record.get("command") or ""
+    argv = shlex.split(text)
+    if not argv:
+        raise SpecError("--regenerate", json.dumps(text), "a benchmark output that records "
+                                                          "its command")
+    if Path(argv[0]).name.startswith("python"):
+        argv[0] = sys.executable
+    for option in OUTPUT_OPTIONS:
+        if option in argv[:-1]:
+            argv[argv.index(option) + 1] = str(output)
+            return argv, False
+    if "stdout" in record:
+        return argv, True
+    raise SpecError("--regenerate", text, "a benchmark command with --json or --out, or one "
+                                          "recorded from what it printed")
+
+
+def bench_steps(store: Path, runs: Path, keep: set[str]) -> list[Step]:
+    """What to do for each benchmark stored beside the page."""
+    steps = []
+    for stored in sorted(store.glob("bench_*.json")):
+        name, record = stored.stem, _summary(stored) or {}
+        if name in keep:
+            steps.append(Step(name, stored, None, "kept as stored (--keep)"))
+        elif _made_here(record):
+            steps.append(Step(name, stored, None, "made by this code, stored"))
+        else:
+            output = runs / "bench" / f"{name}.json"
+            command, printed = rerun_command(record, output)
+            steps.append(Step(name, output, command, "made by other code: running it again",
+                              record=printed))
+    return steps
+
+
+def plan(out: Path, runs: Path, quick: bool, keep: set[str],
+         root: Path | None = None) -> tuple[list[Step], list[Step]]:
+    """The studies' and the benchmarks' steps, checked before anything runs."""
+    root = Path.cwd() if root is None else root
+    store = out.parent / "results"
+    studies = study_steps(root, store, runs, quick, keep)
+    benches = bench_steps(store, runs, keep)
+    known = {s.name for s in studies + benches}
+    unknown = sorted(keep - known)
+    if unknown:
+        raise SpecError("--keep", ", ".join(unknown),
+                        f"a study or benchmark stored beside the page ({', '.join(sorted(known))})")
+    return studies, benches
+
+
+def _run(step: Step, record_benchmark, log) -> None:
+    log(f"{step.name}: {shlex.join(step.command)}")
+    if step.record:
+        record_benchmark(step.output, step.command)
+        return
+    step.output.parent.mkdir(parents=True, exist_ok=True)
+    done = subprocess.run(step.command, check=False)
+    if done.returncode != 0:
+        raise SpecError("--regenerate", shlex.join(step.command),
+                        f"a run that ends well (it exited {done.returncode}; its output is "
+                        f"in {step.output}, and running the command again resumes it)")
+
+
+def regenerate(out: Path, runs: Path, make_page, record_benchmark, quick: bool = False,
+               keep: set[str] = frozenset(), plan_only: bool = False, log=print) -> Path | None:
+    """Run or reuse every study and benchmark, then write the page with ``make_page(runs,
+    benchmarks, out)`` (``results.make_page``; a benchmark recorded from what it printed is
+    recorded by ``record_benchmark(out, command)``); with ``plan_only`` only print the plan."""
+    studies, benches = plan(out, runs, quick, set(keep))
+    for step in studies + benches:
+        log(f"{step.name}: {step.why}" + (f" ({step.output})" if not step.command else ""))
+        if step.command and plan_only:
+            log(f"    {shlex.join(step.command)}")
+    if plan_only:
+        return None
+    for step in studies + benches:
+        if step.command:
+            _run(step, record_benchmark, log)
+    return make_page([s.output for s in studies], [s.output for s in benches], out)
