@@ -512,6 +512,10 @@ def test_the_labs_antenna_is_fitted_from_its_calibration_labels_only(lab_set):
     assert fit.repetitions == tuple(parts.calibration_repetitions)
     assert any(line.startswith("fitted: events.split_hz") for line in plan.left_out)
     assert "generat" not in plan.spec["description"]
+    # a silent low band reads where the calibration contacts it stayed silent for were struck
+    labels = np.array([10.0, 34.0, 34.0, 26.0])
+    assert fit.silent_cm(np.array([False, True, True, False]), labels)[0] == 34.0
+    assert fit.silent_cm(np.zeros(4, bool), labels)[0] == np.mean(fit.range_cm)
     # the scored contacts' labels scrambled: the same fit
     ds = lab_set.dataset
     held = np.isin(ds["repetition"].values, parts.calibration_repetitions)
