@@ -9,6 +9,7 @@ plane at ``PLANE_RAD`` between the x and y axes; z carries gravity.
 """
 from __future__ import annotations
 
+import json
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -222,3 +223,36 @@ def one_feature_readouts(g: np.ndarray, rate_hz: float, pre_s: float, material, 
     slope, intercept = np.polyfit(logf[train], distance[train], 1)
     rmse_mm = 10 * float(np.sqrt(np.mean((slope * logf[test] + intercept - distance[test]) ** 2)))
     return accuracy, rmse_mm
+
+
+def against_one_feature(run: Path, source) -> dict:
+    """Per read-out of a comparison's ``predictions.json``: (its mean score over the splits,
+    the one-feature read-out's mean score on the same training and test contacts, the task):
+    accuracy against the decay time's, rmse (mm) against the peak frequency's."""
+    ds = source.dataset
+    g = ((ds["counts"].values.astype(float) - 2 ** (source.adc_bits - 1))
+         * 2 * source.full_scale_g / 2 ** source.adc_bits)
+    predictions = json.loads((run / "predictions.json").read_text())
+    events = ds["event"].values
+    cache, out = {}, {}
+    for name, folds in predictions["folds"].items():
+        task = predictions["task"][name]
+        if task not in ("material", "distance"):
+            continue
+        mine, reference = [], []
+        for fold in folds:
+            key = (tuple(fold["train_event"]), tuple(fold["test_event"]))
+            if key not in cache:
+                cache[key] = one_feature_readouts(
+                    g, source.rate_hz, source.pre_trigger_s, ds["material"].values,
+                    ds["distance_cm"].values, np.isin(events, fold["train_event"]),
+                    np.isin(events, fold["test_event"]))
+            true, said = np.asarray(fold["true"]), np.asarray(fold["predicted"])
+            if task == "material":
+                mine.append(np.mean(true == said))
+                reference.append(cache[key][0])
+            else:
+                mine.append(10 * np.sqrt(np.mean((true - said) ** 2)))
+                reference.append(cache[key][1])
+        out[name] = (float(np.mean(mine)), float(np.mean(reference)), task)
+    return out

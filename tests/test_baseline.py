@@ -82,3 +82,35 @@ def test_a_material_not_in_the_table_is_refused():
                                "distance_cm": ("event", [10.0, 12.0])})
     with pytest.raises(SpecError, match="granite"):
         cv.targets_of(feats, "material", ["wood", "aluminium"])
+
+
+def test_the_full_spectrum_mlp_reads_the_spectrum_s_shape_not_its_loudness():
+    """A spectrum scaled by any factor reads the same material."""
+    rng = np.random.default_rng(2)
+    f = np.arange(80)
+    width = rng.choice([1.0, 3.0], 120)                      # the material: a peak's width
+    at = rng.uniform(15, 60, 120)                            # the peak moves (distance)
+    X = np.exp(-0.5 * ((f[None] - at[:, None]) / width[:, None]) ** 2)
+    (spectrum_mlp,) = [b for b in bl.material_baselines([]) if b.inputs == "spectrum"]
+    model = spectrum_mlp.build(0).fit(X, width)
+    assert np.array_equal(model.predict(X), model.predict(X * rng.uniform(0.2, 5.0, (120, 1))))
+
+
+def test_an_epoch_of_a_small_training_set_holds_several_batches():
+    """~80 training contacts: 64-row batches would make an epoch two updates; the batches
+    shrink so it holds at least MIN_BATCHES_PER_EPOCH, and a large set keeps its own."""
+    def batch(model):
+        return [v for k, v in model.get_params(deep=True).items()
+                if k.endswith("batch_size")]
+    small = bl.with_batches_for(bl.classifier_pipeline(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), 80)
+    assert batch(small) == [max(bl.MIN_BATCH, 80 // bl.MIN_BATCHES_PER_EPOCH)]
+    assert -(-80 // batch(small)[0]) >= bl.MIN_BATCHES_PER_EPOCH
+    tiny = bl.with_batches_for(bl.regressor_pipeline(bl.Mlp(), bl.DISTANCE_HIDDEN, 0), 20)
+    assert batch(tiny) == [bl.MIN_BATCH]
+    large = bl.with_batches_for(bl.classifier_pipeline(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), 640)
+    assert batch(large) == [64]
+    X = np.random.default_rng(0).normal(size=(80, 3))
+    fold = cv.fit_fold(bl.Baseline("m", "material", "x", lambda seed: bl.classifier_pipeline(
+        bl.Mlp(max_iter=2), bl.MATERIAL_HIDDEN, seed)), X, (X[:, 0] > 0).astype(int),
+        np.arange(80) < 60, np.arange(80) >= 60, 0)
+    assert batch(fold.estimator) == [bl.MIN_BATCH]

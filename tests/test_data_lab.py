@@ -435,7 +435,7 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     assert cli(args) == 0
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * source.n_events
-    scores = against_one_feature(tmp_path / "run", source)
+    scores = lab.against_one_feature(tmp_path / "run", source)
     best_material = max(scores[k][0] for k in scores if scores[k][2] == "material")
     assert best_material >= scores["mlp_parametric_material"][1] - 0.05, scores
     assert scores["mlp_parametric_material"][0] >= scores["mlp_parametric_material"][1] - 0.05
@@ -448,39 +448,6 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
 
 
 # -- the lab's antenna, fitted from its labels, and the comparison on it ---------------------
-def against_one_feature(run: Path, source) -> dict:
-    """Per read-out of a comparison's ``predictions.json``: (its mean score over the splits,
-    the one-feature read-out's mean score on the same training and test contacts, the task):
-    accuracy against the decay time's, rmse (mm) against the peak frequency's."""
-    ds = source.dataset
-    g = ((ds["counts"].values.astype(float) - 2 ** (source.adc_bits - 1))
-         * 2 * source.full_scale_g / 2 ** source.adc_bits)
-    predictions = json.loads((run / "predictions.json").read_text())
-    events = ds["event"].values
-    cache, out = {}, {}
-    for name, folds in predictions["folds"].items():
-        task = predictions["task"][name]
-        if task not in ("material", "distance"):
-            continue
-        mine, reference = [], []
-        for fold in folds:
-            key = (tuple(fold["train_event"]), tuple(fold["test_event"]))
-            if key not in cache:
-                cache[key] = lab.one_feature_readouts(
-                    g, source.rate_hz, source.pre_trigger_s, ds["material"].values,
-                    ds["distance_cm"].values, np.isin(events, fold["train_event"]),
-                    np.isin(events, fold["test_event"]))
-            true, said = np.asarray(fold["true"]), np.asarray(fold["predicted"])
-            if task == "material":
-                mine.append(np.mean(true == said))
-                reference.append(cache[key][0])
-            else:
-                mine.append(10 * np.sqrt(np.mean((true - said) ** 2)))
-                reference.append(cache[key][1])
-        out[name] = (float(np.mean(mine)), float(np.mean(reference)), task)
-    return out
-
-
 def assert_reports_recorded_data(run: Path):
     """The page and summary say what the data is: recorded, with what was fitted and every
     contact left out, never the generator's words."""
@@ -545,6 +512,10 @@ def test_the_labs_antenna_is_fitted_from_its_calibration_labels_only(lab_set):
     assert fit.repetitions == tuple(parts.calibration_repetitions)
     assert any(line.startswith("fitted: events.split_hz") for line in plan.left_out)
     assert "generat" not in plan.spec["description"]
+    # a silent low band reads where the calibration contacts it stayed silent for were struck
+    labels = np.array([10.0, 34.0, 34.0, 26.0])
+    assert fit.silent_cm(np.array([False, True, True, False]), labels)[0] == 34.0
+    assert fit.silent_cm(np.zeros(4, bool), labels)[0] == np.mean(fit.range_cm)
     # the scored contacts' labels scrambled: the same fit
     ds = lab_set.dataset
     held = np.isin(ds["repetition"].values, parts.calibration_repetitions)
@@ -559,8 +530,8 @@ def test_the_labs_antenna_is_fitted_from_its_calibration_labels_only(lab_set):
 def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
                                                                              tmp_path):
     """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
-    contact, the parametric MLP reads the material within 5 points of the one-feature decay
-    read-out and the low peak's regression the distance within 2× the peak-frequency
+    contact, the parametric and the full-spectrum MLP read the material within 5 points of
+    the one-feature decay read-out and the low peak's regression the distance within 2× the peak-frequency
     read-out's rmse, on the same splits; the page says what the data is."""
     from snn_antenna.studies import baseline_comparison
     from snn_antenna.studies.contract import Options
@@ -571,8 +542,11 @@ def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab
                                       tmp_path / "run", Options(quick=True),
                                       log=lambda *a: None)
     assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * lab_set.n_events
-    scores = against_one_feature(tmp_path / "run", lab_set)
+    scores = lab.against_one_feature(tmp_path / "run", lab_set)
     material, decay, _ = scores["mlp_parametric_material"]
+    assert material >= decay - 0.05, scores
+    # the full spectrum, each scaled to its peak: its shape carries the decay time
+    material, decay, _ = scores["mlp_spectrum_material"]
     assert material >= decay - 0.05, scores
     distance, peak, _ = scores["linear_low_peak"]
     assert distance <= 2 * peak, scores

@@ -83,6 +83,23 @@ class FittedAntenna:
         """The law inverted: the distance whose low mode rings at ``low_hz``."""
         return (np.log10(np.asarray(low_hz, dtype=float)) - self.low_law[1]) / self.low_law[0]
 
+    def silent_cm(self, silent: np.ndarray, distance_cm: np.ndarray) -> tuple[float, str]:
+        """Where a contact that leaves the low band silent was struck, read from the
+        calibration contacts (``silent``: which of them left it silent, ``distance_cm``: their
+        labels): their mean distance, or the middle of the fitted range when none was silent;
+        and the line saying so. A short decay at a low mode rings less than a resonator's
+        period, so silence marks the far, slow end of a rod whose mode falls with distance;
+        the middle of the range would put those contacts half the rod away."""
+        silent = np.asarray(silent, dtype=bool)
+        if not silent.any():
+            middle = float(np.mean(self.range_cm))
+            return middle, (f"fitted: a silent low band reads {middle:g} cm (the middle of "
+                            f"the range: none of {len(silent)} calibration contacts silent)")
+        at = float(np.mean(np.asarray(distance_cm, dtype=float)[silent]))
+        return at, (f"fitted: a silent low band reads {at:g} cm (the mean distance of the "
+                    f"{int(silent.sum())} of {len(silent)} calibration contacts it stayed "
+                    "silent for)")
+
     def processor(self, like: EventProcessor) -> EventProcessor:
         """``like`` with the fitted mode split and decay-fit window."""
         return replace(like, split_hz=self.split_hz, split_ratio=self.split_ratio,

@@ -150,5 +150,20 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
     neurons = neurons_per_input(spikes)
     neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
     cmp.spiking = {**bank.description(), "neurons": neurons}
-    law = parts.antenna and (*parts.antenna.low_law, float(np.mean(parts.antenna.range_cm)))
-    return spiking_baselines(spikes, parts.evaluation, law or None) + tuned
+    return spiking_baselines(spikes, parts.evaluation, _law(parts, data, spikes, log)) + tuned
+
+
+def _law(parts: Parts, data, spikes, log) -> tuple | None:
+    """The fitted low-mode law the training-free decoders invert, with the distance a silent
+    low band reads, both from the calibration contacts (None: this project's antenna)."""
+    if not parts.antenna:
+        return None
+    events = spikes["event"].values
+    held = spikes.sel(event=events[np.isin(data["repetition"].sel(event=events).values,
+                                           parts.calibration_repetitions)])
+    low = held["band"].values.astype(str) == "low"
+    silent = held["counts"].values[:, low].sum(axis=1) == 0
+    distance = data["distance_cm"].sel(event=held["event"].values).values
+    silent_cm, line = parts.antenna.silent_cm(silent, distance)
+    log(f"      {line}")
+    return (*parts.antenna.low_law, silent_cm)

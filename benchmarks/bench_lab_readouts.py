@@ -1,0 +1,95 @@
+"""Every read-out of the baseline comparison on a lab's rod, beside the one-feature references.
+
+    python benchmarks/bench_lab_readouts.py [--rate 2000] [--full] 
+    ... [--work DIR] [--set KEY=VALUE ...]
+
+The lab's rod of ``tests/lab_antenna.py`` (another antenna, written without the package's
+physics: its first mode falls with distance, its materials differ only in decay time), four
+materials at four distances, ten repetitions, recorded as ADC counts on a clock from 2.5 s,
+imported with ``snn-antenna data import`` and read out by ``studies/baseline_comparison.toml``
+(quick unless ``--full``). Each row: a read-out's mean score over the comparison's splits and
+the one-feature read-out's on the same training and test contacts (material: accuracy against
+the decay time's; distance: rmse in mm against the low peak frequency's), and whether it meets
+the mark (within 5 points; within 2x). ``--work`` keeps the import and the run to re-read.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))        # the lab's rod lives with the tests
+
+import lab_antenna as lab  # noqa: E402
+
+from snn_antenna.cli import main as cli  # noqa: E402
+from snn_antenna.sources import recorded  # noqa: E402
+
+ORIGIN_S = 2.5
+
+
+def imported(work: Path, rate_hz: float):
+    """The lab's session written and imported once per ``work`` folder."""
+    ds = work / "ds"
+    if not ds.exists():
+        sess = lab.session(rate_hz, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
+        (work / "recs").mkdir(parents=True, exist_ok=True)
+        lab.counts_csv(work / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+                       rate_hz, origin_s=ORIGIN_S)
+        labels = lab.labels_csv(work / "labels.csv", sess, "r1", origin_s=ORIGIN_S)
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            code = cli(["data", "import", str(work / "recs"), str(labels), "--out", str(ds)])
+        if code:
+            sys.exit(err.getvalue())
+    return recorded.open_bench(ds)
+
+
+def table(scores: dict) -> list[str]:
+    rows = [f"{'read-out':34s} {'task':8s} {'score':>8s} {'one-feature':>11s}  mark"]
+    for name, (mine, reference, task) in sorted(scores.items(), key=lambda kv: (kv[1][2],
+                                                                                 kv[0])):
+        if task == "material":
+            meets = mine >= reference - 0.05
+            rows.append(f"{name:34s} {task:8s} {mine:8.3f} {reference:11.3f}  "
+                        f"{'meets' if meets else 'MISSES'}")
+        else:
+            meets = mine <= 2 * reference
+            rows.append(f"{name:34s} {task:8s} {mine:6.1f}mm {reference:9.1f}mm  "
+                        f"{'meets' if meets else 'MISSES'}")
+    return rows
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--rate", type=float, default=2000.0)
+    p.add_argument("--full", action="store_true", help="the full profile (default: quick)")
+    p.add_argument("--work", type=Path, default=None, help="folder for the import and run")
+    p.add_argument("--set", action="append", default=[], dest="sets")
+    args = p.parse_args(argv)
+    work = args.work or Path(f"/tmp/lab_readouts_{int(args.rate)}")
+    source = imported(work, args.rate)
+    run = work / ("run_full" if args.full else "run_quick")
+    sets = [f"stimulus.cache_dir=\"{work / 'cache'}\"", "spiking.workers=1", *args.sets]
+    command = ["run", str(ROOT / "studies" / "baseline_comparison.toml"), "--data",
+               str(work / "ds"), *([] if args.full else ["--quick"]), "--out", str(run),
+               "--yes", "--force"]
+    for s in sets:
+        command += ["--set", s]
+    started = time.perf_counter()
+    code = cli(command)
+    if code:
+        return code
+    print(f"# {args.rate:g} Hz, {'full' if args.full else 'quick'}, "
+          f"{time.perf_counter() - started:.0f} s")
+    print("\n".join(table(lab.against_one_feature(run, source))))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
