@@ -19,6 +19,7 @@ import hashlib
 import json
 import os
 import platform
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 
@@ -63,7 +64,9 @@ TABLE = {
     # (standalone: the compiled loop's per-step cost, about a microsecond as the codings
     # probe measures it; the run's own cost is its binary's start, in run_s)
     "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 1.0e6, "codings": 1.0e6},
-    "compile_s": {"standalone": 20.0, "codings": 20.0},
+    "compile_s": {"standalone": 20.0, "codings": 20.0, "cython": 10.0},
+    # a compiled project found on disk: its code generated again, nothing recompiled
+    "rebuild_s": {"standalone": 2.0, "codings": 2.0},
     # a compiled project's run beside its neurons' work: the binary's start, its inputs
     # written and its results read back
     "run_s": {"codings": 0.5, "standalone": 0.5},
@@ -208,28 +211,49 @@ def _inverse(seconds: float) -> float:
     return 1.0 / seconds if seconds > 0 else 0.0
 
 
-def _codings() -> tuple[float, float, float]:
-    """(s per run, neuron-steps/s, build s) of the compiled codings group
-    (``engine.codings``), from two group sizes (two projects, each built once on disk)."""
+def _first(run) -> float:
+    t0 = time.perf_counter()
+    run()
+    return time.perf_counter() - t0
+
+
+def _codings() -> tuple[float, float, float, float]:
+    """(s per run, neuron-steps/s, compile s, code generation s) of the compiled codings
+    group (``engine.codings``), from two group sizes (two projects, each kept on disk); the
+    small one's project asked for again once it is on disk (its code generated, nothing
+    recompiled) and once in an empty cache (compiled from scratch)."""
     array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
     rate_hz = 1000.0
     steps = CODINGS_PROBE_S * 1000 / array.dt_ms
-    walls, builds = [], []
+    runs = []
     for size in PROBE_CODINGS:
         coded = _square(int(CODINGS_PROBE_S * 1000), size, rate_hz)
 
         def run(coded=coded, size=size):
             compiled_rate_maps(array, coded, rate_hz, 0.1, size)
-        t0 = time.perf_counter()
-        run()
-        first = time.perf_counter() - t0
+        runs.append(run)
+    walls = []
+    for run in runs:
+        run()                               # built, or found built on disk
         walls.append(_best_of(run))
-        builds.append(max(first - walls[-1], 0.0))
+    rebuild = max(_first(runs[0]) - walls[0], 0.0)
+    runs[1]()                               # the process's project: the big one again
+    with tempfile.TemporaryDirectory(prefix="snn_antenna_probe_") as empty:
+        before = os.environ.get("SNN_ANTENNA_CACHE")
+        os.environ["SNN_ANTENNA_CACHE"] = empty
+        try:
+            cold = max(_first(runs[0]) - walls[0], 0.0)
+        finally:
+            if before is None:
+                del os.environ["SNN_ANTENNA_CACHE"]
+            else:
+                os.environ["SNN_ANTENNA_CACHE"] = before
+            runs[1]()                       # the process's project back in the cache
     neuron_steps = [steps * array.n_neurons * size for size in PROBE_CODINGS]
     per_neuron = (walls[1] - walls[0]) / (neuron_steps[1] - neuron_steps[0])
     if per_neuron <= 0:          # lost in the noise: every second charged to the neurons
-        return 0.0, neuron_steps[1] / walls[1], max(builds)
-    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron, max(builds)
+        return 0.0, neuron_steps[1] / walls[1], cold, rebuild
+    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron, cold, rebuild
 
 
 FIGURES_PER_REPORT = 6   # the gating study's report draws 6, the others 2 to 8
@@ -280,9 +304,46 @@ def _readout_window() -> float:
     return _best_of(lambda: detector.detect(rates)) / windows
 
 
+# a new process runs the offline array on a short recording, its cython cache empty or as
+# it is; the difference is the network's compile (``networks.runtime_cache``)
+_CYTHON_RUN = """
+import sys, time
+from brian2 import prefs
+if sys.argv[1]:
+    prefs.codegen.runtime.cython.cache_dir = sys.argv[1]
+import numpy as np
+from snn_antenna.core.signals import Recording
+from snn_antenna.networks.resonators import ResonatorArray
+array = ResonatorArray(n_neurons=24, target="cython")
+coded = Recording(0.15 * np.sign(np.sin(np.arange(500) / 1000 * 2 * np.pi * 10)), 1000.0)
+t0 = time.perf_counter()
+array.run(coded)
+print(time.perf_counter() - t0)
+"""
+
+
+def _cython_compile() -> float:
+    """Seconds to compile the offline array's network on the cython target: its run in an
+    empty cython cache less its run with the network compiled (the best of two each)."""
+    import subprocess
+    import sys
+
+    def run(cache: str) -> float:
+        done = subprocess.run([sys.executable, "-c", _CYTHON_RUN, cache], check=True,
+                              capture_output=True, text=True)
+        return float(done.stdout.split()[-1])
+
+    warm = min(run("") for _ in range(2))
+    colds = []
+    for _ in range(2):
+        with tempfile.TemporaryDirectory(prefix="snn_antenna_probe_cython_") as empty:
+            colds.append(run(empty))
+    return max(min(colds) - warm, 0.0)
+
+
 def probe(log=print) -> dict[str, dict[str, Rate]]:
     """Measure the probed rates on this machine now, store them, and return ``rates()``."""
-    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}, "run_s": {}}
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "run_s": {}}
     for target in ("numpy", "cython"):
         per_step, per_neuron, per_run = _runtime(target)
         measured["steps_per_s"][target] = per_step
@@ -295,12 +356,16 @@ def probe(log=print) -> dict[str, dict[str, Rate]]:
                             "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
-    per_run, per_neuron, build = _codings()
+    per_run, per_neuron, build, rebuild = _codings()
     measured["run_s"]["codings"] = per_run
     measured["neuron_steps_per_s"]["codings"] = per_neuron
-    measured["compile_s"]["codings"] = max(build, 1.0)
+    # a compiled engine's project: the same build steps for the codings and the sweep
+    measured["compile_s"] = {"codings": build, "standalone": build}
+    measured["rebuild_s"] = {"codings": rebuild, "standalone": rebuild}
     log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s and {per_run:.2f} s per "
-        f"run, built in {build:.1f} s")
+        f"run; a project compiled in {build:.1f} s, found compiled in {rebuild:.1f} s")
+    measured["compile_s"]["cython"] = _cython_compile()
+    log(f"      cython: a network compiled in {measured['compile_s']['cython']:.1f} s")
     path = _path()
     make_folder(path.parent)
     atomic_write(path, json.dumps({
