@@ -211,49 +211,67 @@ def _inverse(seconds: float) -> float:
     return 1.0 / seconds if seconds > 0 else 0.0
 
 
-def _first(run) -> float:
-    t0 = time.perf_counter()
-    run()
-    return time.perf_counter() - t0
-
-
-def _codings() -> tuple[float, float, float, float]:
-    """(s per run, neuron-steps/s, compile s, code generation s) of the compiled codings
-    group (``engine.codings``), from two group sizes (two projects, each kept on disk); the
-    small one's project asked for again once it is on disk (its code generated, nothing
-    recompiled) and once in an empty cache (compiled from scratch)."""
+def _codings() -> tuple[float, float]:
+    """(s per run, neuron-steps/s) of the compiled codings group (``engine.codings``), from
+    two group sizes (two projects, each built once on disk)."""
     array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
     rate_hz = 1000.0
     steps = CODINGS_PROBE_S * 1000 / array.dt_ms
-    runs = []
+    walls = []
     for size in PROBE_CODINGS:
         coded = _square(int(CODINGS_PROBE_S * 1000), size, rate_hz)
 
         def run(coded=coded, size=size):
             compiled_rate_maps(array, coded, rate_hz, 0.1, size)
-        runs.append(run)
-    walls = []
-    for run in runs:
         run()                               # built, or found built on disk
         walls.append(_best_of(run))
-    rebuild = max(_first(runs[0]) - walls[0], 0.0)
-    runs[1]()                               # the process's project: the big one again
-    with tempfile.TemporaryDirectory(prefix="snn_antenna_probe_") as empty:
-        before = os.environ.get("SNN_ANTENNA_CACHE")
-        os.environ["SNN_ANTENNA_CACHE"] = empty
-        try:
-            cold = max(_first(runs[0]) - walls[0], 0.0)
-        finally:
-            if before is None:
-                del os.environ["SNN_ANTENNA_CACHE"]
-            else:
-                os.environ["SNN_ANTENNA_CACHE"] = before
-            runs[1]()                       # the process's project back in the cache
     neuron_steps = [steps * array.n_neurons * size for size in PROBE_CODINGS]
     per_neuron = (walls[1] - walls[0]) / (neuron_steps[1] - neuron_steps[0])
     if per_neuron <= 0:          # lost in the noise: every second charged to the neurons
-        return 0.0, neuron_steps[1] / walls[1], cold, rebuild
-    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron, cold, rebuild
+        return 0.0, neuron_steps[1] / walls[1]
+    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron
+
+
+# A new process builds (or finds) the small codings project and runs it twice: the first
+# run's time less the second's is the build. Brian2 names a process's code objects in the
+# order it creates them, so a project is found compiled by a process that creates its
+# objects in the same order, as a study's run does each time: a second process finds the
+# first one's project and regenerates its code and its main file alone.
+_CODINGS_BUILD = f"""
+import time
+from snn_antenna.engine.codings import compiled_rate_maps
+from snn_antenna.engine.rates import _square
+from snn_antenna.networks.resonators import ResonatorArray
+array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
+coded = _square({int(CODINGS_PROBE_S * 1000)}, {PROBE_CODINGS[0]}, 1000.0)
+times = []
+for _ in range(2):
+    t0 = time.perf_counter()
+    compiled_rate_maps(array, coded, 1000.0, 0.1, {PROBE_CODINGS[0]})
+    times.append(time.perf_counter() - t0)
+print(times[0] - times[1])
+"""
+
+
+def _in_process(code: str, *args: str, env: dict | None = None) -> float:
+    """The last number a new Python process running ``code`` prints."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", code, *args], check=True,
+                          capture_output=True, text=True,
+                          env=None if env is None else {**os.environ, **env})
+    return float(done.stdout.split()[-1])
+
+
+def _builds() -> tuple[float, float]:
+    """(compile s, found-compiled s) of a codings project: built in an empty cache, and
+    found on disk by a second process."""
+    with tempfile.TemporaryDirectory(prefix="snn_antenna_probe_") as empty:
+        cold = _in_process(_CODINGS_BUILD, env={"SNN_ANTENNA_CACHE": empty})
+    _in_process(_CODINGS_BUILD)             # the project on disk, named as a process names it
+    warm = _in_process(_CODINGS_BUILD)
+    return max(cold, 0.0), max(warm, 0.0)
 
 
 FIGURES_PER_REPORT = 6   # the gating study's report draws 6, the others 2 to 8
@@ -325,13 +343,8 @@ print(time.perf_counter() - t0)
 def _cython_compile() -> float:
     """Seconds to compile the offline array's network on the cython target: its run in an
     empty cython cache less its run with the network compiled (the best of two each)."""
-    import subprocess
-    import sys
-
     def run(cache: str) -> float:
-        done = subprocess.run([sys.executable, "-c", _CYTHON_RUN, cache], check=True,
-                              capture_output=True, text=True)
-        return float(done.stdout.split()[-1])
+        return _in_process(_CYTHON_RUN, cache)
 
     warm = min(run("") for _ in range(2))
     colds = []
@@ -356,7 +369,8 @@ def probe(log=print) -> dict[str, dict[str, Rate]]:
                             "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
-    per_run, per_neuron, build, rebuild = _codings()
+    per_run, per_neuron = _codings()
+    build, rebuild = _builds()
     measured["run_s"]["codings"] = per_run
     measured["neuron_steps_per_s"]["codings"] = per_neuron
     # a compiled engine's project: the same build steps for the codings and the sweep
