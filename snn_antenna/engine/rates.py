@@ -39,42 +39,39 @@ class Rate:
     source: str
 
 
-# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
-# compile excluded), at their low ends so the estimate errs long. numpy: the quick tuning sweep
-# (9.4e6 neuron-steps in 4.3 s on a loaded 2-core machine, `snn-antenna run
-# studies/tuning_sweep.toml --quick`); cython: bench_sweep.py's ratio to numpy; standalone
-# (the fused sweep and event engines, float64): `python benchmarks/bench_sweep.py --sizes
-# 1000000 --runtime-max 0 --naive-sample 1` measured 9.3e8 idle on one core (1.8e9 in
-# float32) and 3.6e8 on 10^5 points under heavy load; a third of the idle rate covers a
-# shared machine and small grids' per-chunk overhead. codings (engine.codings: Brian2's own
-# state updater, threshold, reset and a SpikeMonitor, compiled): taken as a tenth of the
-# fused engine's until probed.
-# Time steps per second of ONE small Brian2 network (tens of neurons, spike monitor) in one
-# process, where the per-step overhead rather than the neurons sets the pace: quickstart
-# --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
-# with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
-# [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
-# estimate errs long. (Standalone: below.)
+# The rates of this machine class as its probe (``probe``, below) measured them, for a
+# machine without a probe of its own: AMD EPYC (Zen 5, AVX-512), 2 cores, shared, at a load
+# average of 12.9 (``TABLE_LOAD``; every estimate scales them to the load it runs at), probed
+# `python benchmarks/bench_studies.py --probe --profile quick` on 2026-11-29. Where a probe
+# of the same machine at load 15.1 measured otherwise, the value named in a comment.
+# neuron_steps_per_s: per ONE worker process (points x steps / wall time, compile excluded);
+# steps_per_s: time steps per second of ONE small network (tens of neurons, spike monitor),
+# where the per-step overhead rather than the neurons sets the pace.
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
 TABLE = {
-    "neuron_steps_per_s": {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8,
-                           "codings": 3.0e7},
-    # (codings: the compiled loop's own cost per step is about a microsecond; the probe
-    # charges it to the neuron-steps and the run)
-    # (standalone: the compiled loop's per-step cost, about a microsecond as the codings
-    # probe measures it; the run's own cost is its binary's start, in run_s)
-    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 1.0e6, "codings": 1.0e6},
-    "compile_s": {"standalone": 20.0, "codings": 20.0, "cython": 10.0},
-    # a compiled project found on disk: its code generated again, nothing recompiled
-    "rebuild_s": {"standalone": 2.0, "codings": 2.0},
-    # a compiled project's run beside its neurons' work: the binary's start, its inputs
-    # written and its results read back
-    "run_s": {"codings": 0.5, "standalone": 0.5},
+    # standalone (the fused sweep and event engines, float64), not probed: `python
+    # benchmarks/bench_sweep.py --sizes 1000000 --runtime-max 0 --naive-sample 1` measured
+    # 9.3e8 idle on one core and 3.6e8 on 10^5 points under heavy load; a third of the idle
+    # rate. codings: 2.9e8 in the probe at load 15.1 (2.3e7 at 12.9 was a noisy difference,
+    # 1.9e8 at load 0.75): taken between.
+    "neuron_steps_per_s": {"numpy": 2.8e7, "cython": 5.0e7, "standalone": 3.0e8,
+                           "codings": 1.0e8},
+    # (codings, standalone: the compiled loop's own cost per step, about a microsecond; a
+    # run's own cost is its binary's start, in run_s)
+    "steps_per_s": {"numpy": 8.0e3, "cython": 4.6e4, "standalone": 1.0e6, "codings": 1.0e6},
+    # a project compiled from scratch (the probe's codings project, in an empty cache: 24 s
+    # at load 12.9, 21 s at 15.1) and the offline array's network on cython (48 s, 44 s)
+    "compile_s": {"standalone": 22.0, "codings": 22.0, "cython": 46.0},
+    # a compiled project found on disk by a new process: its code generated again and its
+    # main file recompiled (18.5 s at load 15.1)
+    "rebuild_s": {"standalone": 17.0, "codings": 17.0},
+    # a run's own cost beside its steps: building the network and its code objects (runtime
+    # targets); the binary's start, its inputs written and its results read (compiled)
+    "run_s": {"numpy": 0.26, "cython": 0.30, "codings": 0.2, "standalone": 0.5},
     # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
     # and the package imported) and its report; one window of a rate map through the contact
-    # rule (``ContactDetector.detect``: 91 maps of 80 windows took 63 s of a quick gating
-    # run under a load of 22 on 2 cores, cProfile; a tenth of that taken for an idle core)
-    "python_s": {"study_start": 10.0, "report": 10.0, "readout_window": 1e-3},
+    # rule (``ContactDetector.detect``)
+    "python_s": {"study_start": 10.2, "report": 0.6, "readout_window": 3.2e-4},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 # the load average the table was measured at (its rates are scaled from it, ``load_factor``)
