@@ -97,7 +97,33 @@ def test_the_tuning_sweep_estimate_is_lower_with_its_project_compiled(empty_cach
     cold = plan.estimate()
     chunk = plan.parts.settings.chunk_points
     neuron = plan.parts.neuron.for_grid(plan.parts.grid, plan.parts.grid.block_shape(chunk))
-    fake_build(empty_cache, sweep_structure(neuron, sweep_elements(
-        neuron, min(chunk, plan.parts.grid.size))))
+    fake_build(empty_cache, sweep_structure(neuron, sweep_elements(neuron,
+                                                                    neuron.group_size)))
     warm = runner("tuning_sweep").plan(spec).estimate()
     assert warm.seconds < cold.seconds and "compiled before" in warm.describe()
+
+
+def test_the_tuning_estimate_asks_for_the_project_its_chunks_compile(monkeypatch):
+    """The structure the estimate looks for is the one a chunk of the run builds."""
+    import numpy as np
+
+    from snn_antenna.engine import standalone
+
+    compiled = []
+
+    def project(structure_, build):
+        compiled.append(structure_)
+        raise RuntimeError("built nothing")
+    monkeypatch.setattr(standalone, "project", project)
+    plan = runner("tuning_sweep").plan(specs.load("studies/tuning_sweep.toml", [],
+                                                  quick=False))
+    chunk = plan.parts.settings.chunk_points
+    neuron = plan.parts.neuron.for_grid(plan.parts.grid, plan.parts.grid.block_shape(chunk))
+    points = {name: np.full(neuron.group_size, 1.0)
+              for name in ("k", "a", "b", "c", "d", "input_hz", "I")}
+    with pytest.raises(RuntimeError, match="built nothing"):
+        standalone.standalone_counts(neuron, points)
+    asked = []
+    monkeypatch.setattr(cost, "is_built", lambda s: asked.append(s) or False)
+    plan.estimate()
+    assert compiled and compiled[0] in asked
