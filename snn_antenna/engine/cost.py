@@ -281,7 +281,7 @@ def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list
     speed (its learning curve)."""
     presented = (gate.epochs * n_train + (gate.curve_points + 1) * n_test) * gate.present_s
     return [(presented, gate.dt_ms, (gate.n_speed_neurons + 2) * copies,
-             engine_of(gate.target))]
+             engine_of(gate.target), Build("speed gate", gate.compiled()))]
 
 
 # A bench set's cost: generating its contact events and extracting their features, per event
