@@ -177,10 +177,12 @@ class JobEstimate:
 
 @dataclass(frozen=True)
 class Build:
-    """A compiled network a run needs: its name (runs of one name share one build) and
-    whether it is compiled already (Brian2's caches on disk)."""
+    """A compiled network a run needs: its name (runs of one name share one build),
+    whether it is compiled already (Brian2's caches on disk) and its size in compiles of
+    the probe's network (``rates.probe``: the offline array's, or one codings project)."""
     name: str
     built: bool
+    compiles: float = 1.0
 
 
 def standalone_build(structure: tuple) -> Build:
@@ -195,9 +197,10 @@ def build_seconds(engine: str, build: Build | None = None, table=None) -> float:
     table = rates.rates() if table is None else table
     if engine not in table["compile_s"]:
         return 0.0
+    size = build.compiles if build is not None else 1.0
     if build is not None and build.built:
-        return table["rebuild_s"].get(engine, rates.Rate(0.0, "")).value
-    return table["compile_s"][engine].value
+        return size * table["rebuild_s"].get(engine, rates.Rate(0.0, "")).value
+    return size * table["compile_s"][engine].value
 
 
 def job_estimate(what: str, runs: list[tuple], key: str = "") -> JobEstimate:

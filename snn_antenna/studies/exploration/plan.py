@@ -81,7 +81,8 @@ def estimate(parts: Parts):
 
     def part_build(name: str) -> Build:
         return Build(loop_network(name), not cython
-                     or runtime_cache.compiled(loop_network(name), LOOP_MODULE))
+                     or runtime_cache.compiled(loop_network(name), LOOP_MODULE),
+                     LOOP_PART_COMPILES)
     loop_runs = [(float(loop.duration_s), resonators.dt_ms, resonators.n_neurons, engine,
                   part_build(name)) for name in cfg]
     return stages_estimate("the gate's training and the closed loop", [
@@ -92,6 +93,11 @@ def estimate(parts: Parts):
 
 # the closed loop's parts as ``networks.runtime_cache`` names them: built by the assembly
 LOOP_MODULE = "snn_antenna.networks.assembly"
+# A part of the loop on cython costs this many compiles of the offline array's network (its
+# synapses, monitors and operations are code objects too): the full profile in a new
+# environment took 722 s at load 15 to 19.5 (2 cores, niced), about 620 s of it compiling
+# its four parts, 11.5 of the probe's compiles at the table's load.
+LOOP_PART_COMPILES = 3.0
 
 
 def loop_network(part: str) -> str:
