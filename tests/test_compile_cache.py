@@ -127,3 +127,19 @@ def test_the_tuning_estimate_asks_for_the_project_its_chunks_compile(monkeypatch
     monkeypatch.setattr(cost, "is_built", lambda s: asked.append(s) or False)
     plan.estimate()
     assert compiled and compiled[0] in asked
+
+
+def test_the_exploration_estimate_is_lower_once_its_loop_ran_on_cython(empty_cache):
+    from snn_antenna.studies.exploration.plan import LOOP_MODULE, loop_network, loop_target
+
+    spec = specs.load("studies/exploration.toml", [], quick=False)
+    plan = runner("exploration").plan(spec)
+    assert loop_target(plan.parts.configured) == "cython"
+    cold = plan.estimate().seconds
+    for name in plan.parts.configured:
+        runtime_cache.note(loop_network(name), LOOP_MODULE, "cython")
+    warm = runner("exploration").plan(spec).estimate().seconds
+    from snn_antenna.studies.exploration.plan import LOOP_PART_COMPILES
+
+    assert cold - warm == pytest.approx(len(plan.parts.configured) * LOOP_PART_COMPILES
+                                        * rates.rates()["compile_s"]["cython"].value)
