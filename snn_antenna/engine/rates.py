@@ -71,7 +71,11 @@ TABLE = {
     # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
     # and the package imported) and its report; one window of a rate map through the contact
     # rule (``ContactDetector.detect``)
-    "python_s": {"study_start": 10.2, "report": 0.6, "readout_window": 3.2e-4},
+    # closed_loop_chunk: the exploration loop's Python per chunk of 10 ms (moving the robot,
+    # coding its samples, feeding them): the loop ran 6.5 s (numpy) and 12 s (cython) in 68 s
+    # and 67 s at load 21, about 3 s per simulated second beside Brian2's steps at load 12.9
+    "python_s": {"study_start": 10.2, "report": 0.6, "readout_window": 3.2e-4,
+                 "closed_loop_chunk": 0.03},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 # the load average the table was measured at (its rates are scaled from it, ``load_factor``)

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError
+from ...engine import rates
 from ...engine.cost import Build, engine_of, gate_training_runs, stages_estimate
 from ...networks import runtime_cache
 from ...networks.assembly import configure
@@ -88,7 +89,9 @@ def estimate(parts: Parts):
     return stages_estimate("the gate's training and the closed loop", [
         ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
          gate_training_runs(gate, len(speeds), len(speeds))),
-        ("loop.duration_s", loop.duration_s, loop_runs)])
+        ("loop.duration_s", loop.duration_s, loop_runs,
+         float(loop.duration_s) * 1000.0 / float(loop.chunk_ms)
+         * rates.rates()["python_s"]["closed_loop_chunk"].value)])
 
 
 # the closed loop's parts as ``networks.runtime_cache`` names them: built by the assembly
