@@ -101,15 +101,19 @@ def test_estimates_take_the_stored_probe_of_this_code_and_say_so(tmp_path, monke
 def test_an_estimate_follows_the_load_from_its_probes_to_now(tmp_path, monkeypatch):
     monkeypatch.setenv("SNN_ANTENNA_CACHE", str(tmp_path))
     monkeypatch.setattr(rates.os, "cpu_count", lambda: 2)
-    assert rates.load_factor() == (1.0, "")           # no probe: the table names no load
-    assert rates.slowdown(0.5) == 1.0 and rates.slowdown(5.0) == 3.0
+    power = rates.SLOWDOWN_POWER
+    assert rates.slowdown(0.5) == 1.0 and rates.slowdown(5.0) == pytest.approx(3.0 ** power)
+    # no probe: from the load the table was measured at
+    monkeypatch.setattr(rates.os, "getloadavg", lambda: (rates.TABLE_LOAD, 0.0, 0.0))
+    factor, note = rates.load_factor()
+    assert factor == pytest.approx(1.0) and f"table at {rates.TABLE_LOAD:.1f}" in note
     path = tmp_path / "rates" / f"{rates.probe_key()}.json"
     path.parent.mkdir()
     path.write_text(json.dumps({"rates": {}, "when": "2026-01-01 00:00 UTC",
                                 "load_average": 3.0}))
     monkeypatch.setattr(rates.os, "getloadavg", lambda: (7.0, 0.0, 0.0))
     factor, note = rates.load_factor()
-    assert factor == pytest.approx(4.0 / 2.0) and "probe at 3.0" in note
+    assert factor == pytest.approx((4.0 / 2.0) ** power) and "probe at 3.0" in note
     from snn_antenna.core import spec as specs
     from snn_antenna.studies import runner
 
@@ -117,5 +121,5 @@ def test_an_estimate_follows_the_load_from_its_probes_to_now(tmp_path, monkeypat
     busy = runner("tuning_sweep").plan(spec).estimate()
     monkeypatch.setattr(rates.os, "getloadavg", lambda: (3.0, 0.0, 0.0))
     calm = runner("tuning_sweep").plan(spec).estimate()
-    assert busy.seconds == pytest.approx(2 * calm.seconds)
-    assert "×2.00" in busy.rate.source
+    assert busy.seconds == pytest.approx(2 ** power * calm.seconds)
+    assert f"×{2 ** power:.2f}" in busy.rate.source

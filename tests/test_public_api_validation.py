@@ -214,6 +214,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.data.segment.Exclusion",
         "snn_antenna.engine.batches.Pending",
         "snn_antenna.engine.batches.Submitted",
+        "snn_antenna.engine.cost.Build",
         "snn_antenna.engine.cost.Estimate",
         "snn_antenna.engine.cost.JobEstimate",
         "snn_antenna.engine.rates.Rate",

@@ -49,8 +49,9 @@ def compiled_rate_maps(array: ResonatorArray, coded: np.ndarray, rate_hz: float,
     return maps
 
 
-def _structure(array: ResonatorArray, n_samples: int, rate_hz: float, per_run: int) -> tuple:
-    """What the compiled project depends on; the inputs, k, b and the start are run args."""
+def structure(array: ResonatorArray, n_samples: int, rate_hz: float, per_run: int) -> tuple:
+    """What the compiled project depends on; the inputs, k, b and the start are run args.
+    An estimate asks ``engine.standalone.is_built`` about it."""
     return ("codings", neurons.PRESETS["resonator"].quadratic, array.n_neurons,
             float(array.dt_ms), array.method, n_samples, float(rate_hz), per_run,
             CHECK_EVERY_MS)
@@ -81,7 +82,7 @@ def _one_run(array: ResonatorArray, coded: np.ndarray, rate_hz: float, window_s:
              per_run: int) -> list:
     n_samples, m = coded.shape
     with vectorising_flags("float64"):
-        proj = project(_structure(array, n_samples, rate_hz, per_run),
+        proj = project(structure(array, n_samples, rate_hz, per_run),
                        lambda: _build(array, n_samples, rate_hz, per_run))
     if m < per_run:   # a short batch: padded with copies of its first column
         coded = np.concatenate([coded, np.repeat(coded[:, :1], per_run - m, axis=1)], axis=1)

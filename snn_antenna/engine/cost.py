@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -18,6 +18,7 @@ from ..core.store import Output
 from ..core.bounds import memory_budget_bytes
 from . import rates
 from .grid import Grid, fits_in_memory
+from .standalone import is_built, structure_key, sweep_elements, sweep_structure
 
 
 def check_memory(grid: Grid, outputs: dict[str, Output], chunk_points: int,
@@ -72,10 +73,16 @@ class Estimate:
     chunk_bytes: int
     engine: str
     rate: rates.Rate = rates.Rate(0.0, "")
+    parts: dict = field(default_factory=dict)   # its seconds by what they pay for
+
+    def scale(self, factor: float) -> None:
+        self.seconds *= factor
+        self.parts = {name: s * factor for name, s in self.parts.items()}
 
     def describe(self) -> str:
         return (f"{self.points:,} points, {self.neuron_steps:.3g} neuron-steps on "
-                f"{self.workers} worker(s) ({self.engine}): about {_duration(self.seconds)} at "
+                f"{self.workers} worker(s) ({self.engine}): about {_duration(self.seconds)} "
+                f"[{describe_parts(self.parts)}] at "
                 f"{self.rate.value:.3g} neuron-steps/s per worker, "
                 f"{self.result_bytes / 1e6:.3g} MB of results, "
                 f"{self.chunk_bytes / 1e6:.3g} MB per chunk (rate: {self.rate.source})")
@@ -105,17 +112,46 @@ def estimate(grid: Grid, sweep, chunk_points: int, workers: int) -> Estimate:
     if sweep.engine in table["run_s"]:
         per_chunk += table["run_s"][sweep.engine].value
     seconds += per_chunk * -(-chunks // workers)
-    if sweep.engine in table["compile_s"]:
-        seconds += table["compile_s"][sweep.engine].value
+    # the sweep's Dask workers start together, each a new process importing what a study's
+    # process imports (measured: 14 s from the cluster's start to its first chunk's work
+    # beside the compile, tuning sweep at load 15)
+    parts = {"neurons": neuron_steps / (rate.value * workers),
+             "chunks' steps and starts": per_chunk * -(-chunks // workers),
+             "the workers' start": table["python_s"]["study_start"].value}
+    seconds += parts["the workers' start"]
+    build = None
+    if sweep.engine == "standalone":
+        # a chunk holds the grid's block (``group_size``, set by ``for_grid``) at most
+        build = standalone_build(sweep_structure(sweep, sweep_elements(
+            sweep, sweep.group_size or min(chunk_points, grid.size))))
+    compiling = build_seconds(sweep.engine, build, table)
+    if compiling:
+        parts["code generation (compiled before)" if build and build.built
+              else "compiling"] = compiling
+    seconds += compiling
     per_point = sum(np.dtype(o.dtype).itemsize for o in sweep.OUTPUTS.values())
     chunk = min(chunk_points, grid.size) * sweep.bytes_per_point
     return Estimate(grid.size, neuron_steps, workers, seconds, grid.size * per_point, chunk,
-                    sweep.engine, rate)
+                    sweep.engine, rate, parts)
+
+
+def describe_parts(parts: dict[str, float]) -> str:
+    """``parts`` (what costs what, seconds each) as one clause, the costliest first; parts
+    under half a second are left out."""
+    shown = [f"{name} {_duration(s)}" for name, s in
+             sorted(parts.items(), key=lambda p: -p[1]) if s >= 0.5]
+    return "; ".join(shown) if shown else "nothing above a second"
+
+
+def add_parts(parts: dict[str, float], more: dict[str, float], factor: float = 1.0) -> None:
+    for name, s in more.items():
+        parts[name] = parts.get(name, 0.0) + factor * s
 
 
 @dataclass
 class JobEstimate:
-    """A study's simulated work (scenes, bench sets, streams) and its expected wall time."""
+    """A study's simulated work (scenes, bench sets, streams) and its expected wall time,
+    with ``parts``: its seconds by what they pay for (they sum to ``seconds``)."""
     what: str
     steps: float
     neuron_steps: float
@@ -125,25 +161,61 @@ class JobEstimate:
     value: object = None   # that key's value, as the spec holds it
 
     sources: str = ""      # where the rates come from (``rates.sources``)
+    parts: dict = field(default_factory=dict)
+
+    def scale(self, factor: float) -> None:
+        self.seconds *= factor
+        self.parts = {name: s * factor for name, s in self.parts.items()}
 
     def describe(self) -> str:
+        parts = f" [{describe_parts(self.parts)}]" if self.parts else ""
         if not self.steps:          # no Brian2 run: measured work alone
-            return f"{self.what}: about {_duration(self.seconds)}"
+            return f"{self.what}: about {_duration(self.seconds)}{parts}"
         return (f"{self.what}: {self.steps:.3g} steps, {self.neuron_steps:.3g} neuron-steps "
-                f"({self.engine}): about {_duration(self.seconds)} ({self.sources})")
+                f"({self.engine}): about {_duration(self.seconds)}{parts} ({self.sources})")
 
 
-def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str = ""
-                 ) -> JobEstimate:
-    """Wall time of Brian2 runs, each ``(simulated_s, dt_ms, n_neurons, engine)``: the step
-    overhead of a small network plus the neuron-steps of a large one, at the rates of
-    ``rates.rates()`` (this machine's probe, else the table), and one build per compiled
-    engine used (``compile_s``: a worker builds its project once, cached on disk)."""
+@dataclass(frozen=True)
+class Build:
+    """A compiled network a run needs: its name (runs of one name share one build),
+    whether it is compiled already (Brian2's caches on disk) and its size in compiles of
+    the probe's network (``rates.probe``: the offline array's, or one codings project)."""
+    name: str
+    built: bool
+    compiles: float = 1.0
+
+
+def standalone_build(structure: tuple) -> Build:
+    """The build of an ``engine.standalone.project`` of ``structure``."""
+    return Build(f"project {structure_key(structure)}", is_built(structure))
+
+
+def build_seconds(engine: str, build: Build | None = None, table=None) -> float:
+    """One build of ``engine``'s network: a compiled network costs its code generation
+    alone (``rebuild_s``), a new or unknown one (``build`` None) a whole compile
+    (``compile_s``); numpy compiles nothing."""
+    table = rates.rates() if table is None else table
+    if engine not in table["compile_s"]:
+        return 0.0
+    size = build.compiles if build is not None else 1.0
+    if build is not None and build.built:
+        return size * table["rebuild_s"].get(engine, rates.Rate(0.0, "")).value
+    return size * table["compile_s"][engine].value
+
+
+def job_estimate(what: str, runs: list[tuple], key: str = "") -> JobEstimate:
+    """Wall time of Brian2 runs, each ``(simulated_s, dt_ms, n_neurons, engine[, build])``:
+    the step overhead of a small network plus the neuron-steps of a large one, at the rates
+    of ``rates.rates()`` (this machine's probe, else the table), and each network's build
+    once (``build_seconds``: a worker builds its project once, cached on disk; the runs of
+    an engine that name no ``Build`` share one whole compile)."""
     table = rates.rates()
-    steps = neuron_steps = seconds = 0.0
+    steps = neuron_steps = 0.0
     engine = runs[0][3] if runs else "numpy"
     used = set()
-    for simulated_s, dt_ms, n_neurons, eng in runs:
+    builds: dict[tuple, Build | None] = {}
+    parts = {"stepping": 0.0, "neurons": 0.0, "runs' starts": 0.0}
+    for simulated_s, dt_ms, n_neurons, eng, *build in runs:
         eng = eng if eng in table["neuron_steps_per_s"] else "numpy"
         used.add(eng)
         try:
@@ -153,19 +225,23 @@ def job_estimate(what: str, runs: list[tuple[float, float, int, str]], key: str 
             n = size = math.inf
         steps += n
         neuron_steps += n * size
-        seconds += (n / table["steps_per_s"][eng].value
-                    + n * size / table["neuron_steps_per_s"][eng].value)
+        parts["stepping"] += n / table["steps_per_s"][eng].value
+        parts["neurons"] += n * size / table["neuron_steps_per_s"][eng].value
         if eng in table["run_s"]:       # a compiled run's own start and files
-            seconds += table["run_s"][eng].value
-    seconds += sum(table["compile_s"][e].value for e in used if e in table["compile_s"])
+            parts["runs' starts"] += table["run_s"][eng].value
+        one = build[0] if build else None
+        builds[eng, one.name if one else None] = one
+    for (eng, _), one in builds.items():
+        name = "code generation (compiled before)" if one and one.built else "compiling"
+        parts[name] = parts.get(name, 0.0) + build_seconds(eng, one, table)
     used_rates = {k: {e: r for e, r in v.items() if e in used} for k, v in table.items()}
-    return JobEstimate(what, steps, neuron_steps, seconds, engine, key,
-                       sources=rates.sources(used_rates))
+    return JobEstimate(what, steps, neuron_steps, sum(parts.values()), engine, key,
+                       sources=rates.sources(used_rates), parts=parts)
 
 
-def compile_seconds(engine: str) -> float:
-    """One build of a compiled ``engine``'s project (0 for a runtime engine)."""
-    return rates.rates()["compile_s"].get(engine, rates.Rate(0.0, "")).value
+def compile_seconds(engine: str, build: Build | None = None) -> float:
+    """One build of ``engine``'s network (``build_seconds``)."""
+    return build_seconds(engine, build)
 
 
 def study_overhead_s() -> float:
@@ -188,12 +264,15 @@ def stages_estimate(what: str, stages: list[tuple]) -> JobEstimate:
     the time of all of them, and the key (with its value) of the stage that costs most,
     which a refusal names."""
     sized = []
+    whole = job_estimate(what, [r for _, _, runs, *_ in stages for r in runs])
     for key, value, runs, *other in stages:
         one = job_estimate(what, runs, key)
         one.seconds += sum(other)
+        if sum(other):
+            add_parts(whole.parts, {f"{key}: work beside Brian2": sum(other)})
         sized.append((one, value))
-    whole = job_estimate(what, [r for _, _, runs, *_ in stages for r in runs])
-    whole.seconds = sum(one.seconds for one, _ in sized)
+    # a network the stages share is built once (``whole``, from all their runs)
+    whole.seconds = sum(whole.parts.values())
     longest, whole.value = max(sized, key=lambda s: s[0].seconds)
     whole.key = longest.key
     return whole
@@ -204,8 +283,16 @@ def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list
     training speed for ``present_s``, and ``curve_points + 1`` recall blocks present each test
     speed (its learning curve)."""
     presented = (gate.epochs * n_train + (gate.curve_points + 1) * n_test) * gate.present_s
-    return [(presented, gate.dt_ms, (gate.n_speed_neurons + 2) * copies,
-             engine_of(gate.target))]
+    run = (presented, gate.dt_ms, (gate.n_speed_neurons + 2) * copies, engine_of(gate.target),
+           Build("speed gate", gate.compiled()))
+    return [run] * GATE_GROUPS
+
+
+# The gate's network steps its groups, synapses and monitors each, every one at a small
+# network's per-step cost: the exploration study's training (43,200 and 64,800 steps at dt
+# 1 ms, numpy) took 34 s and 121 s at load 21 on 2 cores, 4 and 11 times one small
+# network's steps.
+GATE_GROUPS = 6
 
 
 # A bench set's cost: generating its contact events and extracting their features, per event

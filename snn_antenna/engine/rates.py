@@ -19,6 +19,7 @@ import hashlib
 import json
 import os
 import platform
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 
@@ -38,42 +39,47 @@ class Rate:
     source: str
 
 
-# Neuron-steps per second of ONE worker process per engine (points x steps / wall time,
-# compile excluded), at their low ends so the estimate errs long. numpy: the quick tuning sweep
-# (9.4e6 neuron-steps in 4.3 s on a loaded 2-core machine, `snn-antenna run
-# studies/tuning_sweep.toml --quick`); cython: bench_sweep.py's ratio to numpy; standalone
-# (the fused sweep and event engines, float64): `python benchmarks/bench_sweep.py --sizes
-# 1000000 --runtime-max 0 --naive-sample 1` measured 9.3e8 idle on one core (1.8e9 in
-# float32) and 3.6e8 on 10^5 points under heavy load; a third of the idle rate covers a
-# shared machine and small grids' per-chunk overhead. codings (engine.codings: Brian2's own
-# state updater, threshold, reset and a SpikeMonitor, compiled): taken as a tenth of the
-# fused engine's until probed.
-# Time steps per second of ONE small Brian2 network (tens of neurons, spike monitor) in one
-# process, where the per-step overhead rather than the neurons sets the pace: quickstart
-# --quick (70,000 steps of 24 neurons at dt 0.1 ms) simulated in 1.47 s with cython and 7.6 s
-# with numpy on a loaded 2-core machine (`snn-antenna run studies/quickstart.toml --quick
-# [--set network.target=numpy]`, summary.json "simulation_wall_s"); rounded down so the
-# estimate errs long. (Standalone: below.)
+# The rates of this machine class as its probe (``probe``, below) measured them, for a
+# machine without a probe of its own: AMD EPYC (Zen 5, AVX-512), 2 cores, shared, at a load
+# average of 12.9 (``TABLE_LOAD``; every estimate scales them to the load it runs at), probed
+# `python benchmarks/bench_studies.py --probe --profile quick` on 2026-11-29. Where a probe
+# of the same machine at load 15.1 measured otherwise, the value named in a comment.
+# neuron_steps_per_s: per ONE worker process (points x steps / wall time, compile excluded);
+# steps_per_s: time steps per second of ONE small network (tens of neurons, spike monitor),
+# where the per-step overhead rather than the neurons sets the pace.
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
 TABLE = {
-    "neuron_steps_per_s": {"numpy": 2.2e6, "cython": 5.0e6, "standalone": 3.0e8,
-                           "codings": 3.0e7},
-    # (codings: the compiled loop's own cost per step is about a microsecond; the probe
-    # charges it to the neuron-steps and the run)
-    # (standalone: the compiled loop's per-step cost, about a microsecond as the codings
-    # probe measures it; the run's own cost is its binary's start, in run_s)
-    "steps_per_s": {"numpy": 8.0e3, "cython": 4.0e4, "standalone": 1.0e6, "codings": 1.0e6},
-    "compile_s": {"standalone": 20.0, "codings": 20.0},
-    # a compiled project's run beside its neurons' work: the binary's start, its inputs
-    # written and its results read back
-    "run_s": {"codings": 0.5, "standalone": 0.5},
+    # standalone (the fused sweep and event engines, float64), not probed: `python
+    # benchmarks/bench_sweep.py --sizes 1000000 --runtime-max 0 --naive-sample 1` measured
+    # 9.3e8 idle on one core and 3.6e8 on 10^5 points under heavy load; a third of the idle
+    # rate. codings: 2.9e8 in the probe at load 15.1 (2.3e7 at 12.9 was a noisy difference,
+    # 1.9e8 at load 0.75): taken between.
+    "neuron_steps_per_s": {"numpy": 2.8e7, "cython": 5.0e7, "standalone": 3.0e8,
+                           "codings": 1.0e8},
+    # (codings, standalone: the compiled loop's own cost per step, about a microsecond; a
+    # run's own cost is its binary's start, in run_s)
+    "steps_per_s": {"numpy": 8.0e3, "cython": 4.6e4, "standalone": 1.0e6, "codings": 1.0e6},
+    # a project compiled from scratch (the probe's codings project, in an empty cache: 24 s
+    # at load 12.9, 21 s at 15.1) and the offline array's network on cython (48 s, 44 s)
+    "compile_s": {"standalone": 22.0, "codings": 22.0, "cython": 46.0},
+    # a compiled project found on disk by a new process: its code generated again and its
+    # main file recompiled (18.5 s at load 15.1)
+    "rebuild_s": {"standalone": 17.0, "codings": 17.0},
+    # a run's own cost beside its steps: building the network and its code objects (runtime
+    # targets); the binary's start, its inputs written and its results read (compiled)
+    "run_s": {"numpy": 0.26, "cython": 0.30, "codings": 0.2, "standalone": 0.5},
     # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
     # and the package imported) and its report; one window of a rate map through the contact
-    # rule (``ContactDetector.detect``: 91 maps of 80 windows took 63 s of a quick gating
-    # run under a load of 22 on 2 cores, cProfile; a tenth of that taken for an idle core)
-    "python_s": {"study_start": 10.0, "report": 10.0, "readout_window": 1e-3},
+    # rule (``ContactDetector.detect``)
+    # closed_loop_chunk: the exploration loop's Python per chunk of 10 ms (moving the robot,
+    # coding its samples, feeding them): the loop ran 6.5 s (numpy) and 12 s (cython) in 68 s
+    # and 67 s at load 21, about 3 s per simulated second beside Brian2's steps at load 12.9
+    "python_s": {"study_start": 10.2, "report": 0.6, "readout_window": 3.2e-4,
+                 "closed_loop_chunk": 0.03},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
+# the load average the table was measured at (its rates are scaled from it, ``load_factor``)
+TABLE_LOAD = 12.9
 
 
 def table() -> dict[str, dict[str, Rate]]:
@@ -123,24 +129,31 @@ def rates() -> dict[str, dict[str, Rate]]:
     return out
 
 
+# Two probes of this machine (2 cores), at load averages 0.75 and 12.9, found numpy's,
+# cython's and the contact rule's rates 2.9 to 3.5 times slower at 12.9 (a study's start 4.4
+# times), where an equal share of the cores among the load's processes predicts 7: the others
+# are partly niced and partly waiting. This power of the equal share fits both.
+SLOWDOWN_POWER = 0.6
+
+
 def slowdown(load: float) -> float:
     """How much slower a new process runs at ``load`` (the 1-minute load average) than on
-    an idle machine: each of the ``load`` + 1 runnable processes gets an equal share of the
-    cores, none more than one core."""
-    return max(1.0, (float(load) + 1.0) / (os.cpu_count() or 1))
+    an idle machine: the share of the cores each of the ``load`` + 1 runnable processes
+    would get, none more than one core, to the power ``SLOWDOWN_POWER`` (measured)."""
+    return max(1.0, (float(load) + 1.0) / (os.cpu_count() or 1)) ** SLOWDOWN_POWER
 
 
 def load_factor() -> tuple[float, str]:
-    """The factor from the stored probe's load to the machine's load now, and a line saying
-    so (1 and no line without a probe: the table's rates name no load)."""
+    """The factor from the load the rates were measured at (the stored probe's, else the
+    table's ``TABLE_LOAD``) to the machine's load now, and a line saying so."""
     try:
         stored = json.loads(_path().read_text())
-        then = float(stored["load_average"])
+        then, what = float(stored["load_average"]), "probe"
     except (OSError, ValueError, KeyError, TypeError):
-        return 1.0, ""
+        then, what = TABLE_LOAD, "table"
     now = os.getloadavg()[0]
     factor = slowdown(now) / slowdown(then)
-    return factor, (f"at load {now:.1f} (probe at {then:.1f}, {os.cpu_count()} cores): "
+    return factor, (f"at load {now:.1f} ({what} at {then:.1f}, {os.cpu_count()} cores): "
                     f"×{factor:.2f}")
 
 
@@ -208,28 +221,67 @@ def _inverse(seconds: float) -> float:
     return 1.0 / seconds if seconds > 0 else 0.0
 
 
-def _codings() -> tuple[float, float, float]:
-    """(s per run, neuron-steps/s, build s) of the compiled codings group
-    (``engine.codings``), from two group sizes (two projects, each built once on disk)."""
+def _codings() -> tuple[float, float]:
+    """(s per run, neuron-steps/s) of the compiled codings group (``engine.codings``), from
+    two group sizes (two projects, each built once on disk)."""
     array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
     rate_hz = 1000.0
     steps = CODINGS_PROBE_S * 1000 / array.dt_ms
-    walls, builds = [], []
+    walls = []
     for size in PROBE_CODINGS:
         coded = _square(int(CODINGS_PROBE_S * 1000), size, rate_hz)
 
         def run(coded=coded, size=size):
             compiled_rate_maps(array, coded, rate_hz, 0.1, size)
-        t0 = time.perf_counter()
-        run()
-        first = time.perf_counter() - t0
+        run()                               # built, or found built on disk
         walls.append(_best_of(run))
-        builds.append(max(first - walls[-1], 0.0))
     neuron_steps = [steps * array.n_neurons * size for size in PROBE_CODINGS]
     per_neuron = (walls[1] - walls[0]) / (neuron_steps[1] - neuron_steps[0])
     if per_neuron <= 0:          # lost in the noise: every second charged to the neurons
-        return 0.0, neuron_steps[1] / walls[1], max(builds)
-    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron, max(builds)
+        return 0.0, neuron_steps[1] / walls[1]
+    return walls[0] - neuron_steps[0] * per_neuron, 1.0 / per_neuron
+
+
+# A new process builds (or finds) the small codings project and runs it twice: the first
+# run's time less the second's is the build. Brian2 names a process's code objects in the
+# order it creates them, so a project is found compiled by a process that creates its
+# objects in the same order, as a study's run does each time: a second process finds the
+# first one's project and regenerates its code and its main file alone.
+_CODINGS_BUILD = f"""
+import time
+from snn_antenna.engine.codings import compiled_rate_maps
+from snn_antenna.engine.rates import _square
+from snn_antenna.networks.resonators import ResonatorArray
+array = ResonatorArray(n_neurons=24, method="rk2", dt_ms=0.1)
+coded = _square({int(CODINGS_PROBE_S * 1000)}, {PROBE_CODINGS[0]}, 1000.0)
+times = []
+for _ in range(2):
+    t0 = time.perf_counter()
+    compiled_rate_maps(array, coded, 1000.0, 0.1, {PROBE_CODINGS[0]})
+    times.append(time.perf_counter() - t0)
+print(times[0] - times[1])
+"""
+
+
+def _in_process(code: str, *args: str, env: dict | None = None) -> float:
+    """The last number a new Python process running ``code`` prints."""
+    import subprocess
+    import sys
+
+    done = subprocess.run([sys.executable, "-c", code, *args], check=True,
+                          capture_output=True, text=True,
+                          env=None if env is None else {**os.environ, **env})
+    return float(done.stdout.split()[-1])
+
+
+def _builds() -> tuple[float, float]:
+    """(compile s, found-compiled s) of a codings project: built in an empty cache, and
+    found on disk by a second process."""
+    with tempfile.TemporaryDirectory(prefix="snn_antenna_probe_") as empty:
+        cold = _in_process(_CODINGS_BUILD, env={"SNN_ANTENNA_CACHE": empty})
+    _in_process(_CODINGS_BUILD)             # the project on disk, named as a process names it
+    warm = _in_process(_CODINGS_BUILD)
+    return max(cold, 0.0), max(warm, 0.0)
 
 
 FIGURES_PER_REPORT = 6   # the gating study's report draws 6, the others 2 to 8
@@ -280,9 +332,41 @@ def _readout_window() -> float:
     return _best_of(lambda: detector.detect(rates)) / windows
 
 
+# a new process runs the offline array on a short recording, its cython cache empty or as
+# it is; the difference is the network's compile (``networks.runtime_cache``)
+_CYTHON_RUN = """
+import sys, time
+from brian2 import prefs
+if sys.argv[1]:
+    prefs.codegen.runtime.cython.cache_dir = sys.argv[1]
+import numpy as np
+from snn_antenna.core.signals import Recording
+from snn_antenna.networks.resonators import ResonatorArray
+array = ResonatorArray(n_neurons=24, target="cython")
+coded = Recording(0.15 * np.sign(np.sin(np.arange(500) / 1000 * 2 * np.pi * 10)), 1000.0)
+t0 = time.perf_counter()
+array.run(coded)
+print(time.perf_counter() - t0)
+"""
+
+
+def _cython_compile() -> float:
+    """Seconds to compile the offline array's network on the cython target: its run in an
+    empty cython cache less its run with the network compiled (the best of two each)."""
+    def run(cache: str) -> float:
+        return _in_process(_CYTHON_RUN, cache)
+
+    warm = min(run("") for _ in range(2))
+    colds = []
+    for _ in range(2):
+        with tempfile.TemporaryDirectory(prefix="snn_antenna_probe_cython_") as empty:
+            colds.append(run(empty))
+    return max(min(colds) - warm, 0.0)
+
+
 def probe(log=print) -> dict[str, dict[str, Rate]]:
     """Measure the probed rates on this machine now, store them, and return ``rates()``."""
-    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "compile_s": {}, "run_s": {}}
+    measured = {"neuron_steps_per_s": {}, "steps_per_s": {}, "run_s": {}}
     for target in ("numpy", "cython"):
         per_step, per_neuron, per_run = _runtime(target)
         measured["steps_per_s"][target] = per_step
@@ -295,12 +379,17 @@ def probe(log=print) -> dict[str, dict[str, Rate]]:
                             "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
-    per_run, per_neuron, build = _codings()
+    per_run, per_neuron = _codings()
+    build, rebuild = _builds()
     measured["run_s"]["codings"] = per_run
     measured["neuron_steps_per_s"]["codings"] = per_neuron
-    measured["compile_s"]["codings"] = max(build, 1.0)
+    # a compiled engine's project: the same build steps for the codings and the sweep
+    measured["compile_s"] = {"codings": build, "standalone": build}
+    measured["rebuild_s"] = {"codings": rebuild, "standalone": rebuild}
     log(f"      codings (compiled): {per_neuron:.3g} neuron-steps/s and {per_run:.2f} s per "
-        f"run, built in {build:.1f} s")
+        f"run; a project compiled in {build:.1f} s, found compiled in {rebuild:.1f} s")
+    measured["compile_s"]["cython"] = _cython_compile()
+    log(f"      cython: a network compiled in {measured['compile_s']['cython']:.1f} s")
     path = _path()
     make_folder(path.parent)
     atomic_write(path, json.dumps({

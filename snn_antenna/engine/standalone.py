@@ -220,6 +220,7 @@ def project(structure: tuple, build) -> dict:
     # on disk. So does the Python environment: Brian2 writes its include folder into the
     # project's makefile, on which every object file depends, so two environments sharing
     # one folder would each recompile the whole project after the other had built it.
+    built_marker = BUILT_MARKER.format(structure_key(structure))
     structure = (structure, tuple(prefs.codegen.cpp.extra_compile_args_gcc), sys.prefix)
     if _PROJECT.get("structure") == structure and _still_built():
         return _PROJECT
@@ -241,6 +242,9 @@ def project(structure: tuple, build) -> dict:
             atomic_write(source, ALIGNED_ARRAYS_SOURCE)   # unchanged: make keeps its object
         device.build(run=False, directory=str(directory), with_output=False,
                      additional_source_files=[ALIGNED_ARRAYS])
+        marker = directory / built_marker
+        if not marker.is_file():
+            atomic_write(marker, repr(structure) + "\n")
     except BaseException:
         device.reinit()
         os.close(lock)
@@ -250,6 +254,26 @@ def project(structure: tuple, build) -> dict:
     _PROJECT.update(objects, structure=structure, device=device, lock=lock,
                     directory=str(directory))
     return _PROJECT
+
+
+# A built project's directory holds this file (named by ``structure_key``), so an estimate
+# can tell a compiled structure from a new one without Brian2 (``is_built``).
+BUILT_MARKER = "built-{}"
+
+
+def structure_key(structure: tuple) -> str:
+    """A project structure's name on disk, without the compiler's flags (which Brian2's
+    preferences hold: an estimate does not import Brian2)."""
+    return hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
+
+
+def is_built(structure: tuple) -> bool:
+    """Whether a project of ``structure`` is compiled on disk: a directory whose build
+    finished (``project`` leaves ``BUILT_MARKER`` there) and whose binary is still there.
+    A process that asks for it regenerates the code and recompiles nothing."""
+    base = cache_root() / "brian2_standalone"
+    marker = BUILT_MARKER.format(structure_key(structure))
+    return any((found.parent / "main").is_file() for found in base.glob(f"*/{marker}"))
 
 
 def _still_built() -> bool:
@@ -321,6 +345,20 @@ POINT_PARAMETERS = {"k": "k", "a": "a", "b": "b", "c": "c", "d": "d", "f_in": "i
                     "I_amp": "I"}
 
 
+def sweep_structure(sweep, elements: int) -> tuple:
+    """What the sweep's compiled project of ``elements`` elements depends on (an estimate
+    asks ``is_built`` about it)."""
+    shared = tuple(name for name, swept in POINT_PARAMETERS.items() if swept in sweep.shared)
+    return (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dtype, sweep.dt_ms,
+            substeps(sweep), sweep.duration_s, sweep.settle_s, sweep.input_rate_hz, LANES,
+            shared, elements)
+
+
+def sweep_elements(sweep, points: int) -> int:
+    """Elements of the compiled group a chunk of ``points`` runs in."""
+    return -(-max(points, sweep.group_size or points) // LANES)
+
+
 def _standalone_project(sweep, elements: int):
     """The compiled group of ``elements`` elements of ``LANES`` points each. Parameters the
     grid does not sweep (``sweep.shared``) are one shared value, not an array per lane: the
@@ -330,9 +368,7 @@ def _standalone_project(sweep, elements: int):
 
     steps = substeps(sweep)
     shared = tuple(name for name, swept in POINT_PARAMETERS.items() if swept in sweep.shared)
-    structure = (neurons.PRESETS[sweep.preset].quadratic, sweep.method, sweep.dtype,
-                 sweep.dt_ms, steps, sweep.duration_s, sweep.settle_s, sweep.input_rate_hz,
-                 LANES, shared, elements)
+    structure = sweep_structure(sweep, elements)
 
     def build():
         model, names = lane_model(neurons.equations(sweep.preset, "I_held",
@@ -391,8 +427,7 @@ def standalone_counts(sweep, p: dict[str, np.ndarray]) -> np.ndarray:
         if not np.all(p[name] == p[name][0]):
             raise ValueError(f"{name} is declared shared (one value for every point) but "
                              f"varies: {np.unique(p[name])[:5]}")
-    size = max(n, sweep.group_size or n)
-    elements = -(-size // LANES)
+    elements = sweep_elements(sweep, n)
     group = _standalone_project(sweep, elements)["group"]
     v0, u0 = sweep.initial_state(p)
     # a short last chunk repeats its first point instead of recompiling (lane_points)

@@ -42,7 +42,7 @@ import xarray as xr
 
 from ..core import bounds
 from ..core.errors import SpecError, check
-from . import neurons
+from . import neurons, runtime_cache
 
 CLASS1_RHEOBASE = 22.56  # class1 preset (5v + 140, b = -0.1): the fixed point vanishes above
 
@@ -58,6 +58,9 @@ def read_trace(objects: dict) -> np.ndarray:
 
 MAX_EPOCHS = 10_000
 
+
+# the gate's network (training and recall), as ``runtime_cache`` names it
+NETWORK = "speed gate"
 
 @dataclass
 class SpeedGate:
@@ -255,11 +258,17 @@ class SpeedGate:
             objects.append(trace)
         net = b2.Network(*objects)
         net.run(n_steps * step, namespace={})
+        runtime_cache.note(NETWORK, __name__, self.target)
         w = np.asarray(parts["plastic"].w[:], float).reshape(n_copies, -1)[0]
         read = np.asarray(trace.r_read[:], float).T if trace is not None else None
         return (np.asarray(spikes.i[:], int), np.asarray(spikes.t_[:], float), w, read)
 
     # -- learning ---------------------------------------------------------------------------
+    def compiled(self) -> bool:
+        """Whether the gate's network is compiled for this interpreter (cython; numpy
+        compiles nothing): an estimate charges its compile otherwise."""
+        return self.target != "cython" or runtime_cache.compiled(NETWORK, __name__)
+
     def fit(self, speeds, th_star, test_speeds=None) -> SpeedGate:
         """Learn Th*(speed) from examples; record recall on ``test_speeds`` while learning."""
         speeds = self.check_speeds(speeds, "speeds")

@@ -21,12 +21,14 @@ from ..core import bounds
 from ..core import spec as specs
 from ..core.errors import PipelineError, SpecError, check, is_integer, is_number
 from ..core.signals import Recording, validate_samples
-from . import neurons
+from . import neurons, runtime_cache
 
 MIN_SAMPLES_PER_CYCLE = 4  # the square-wave coder needs both half-cycles sampled twice
 # Streaming hands Brian2 this much input per Python call (25 samples at 1 kHz): a window is
 # published at most one block's computing time after its last sample came.
 STREAM_BLOCK_S = 0.025
+# the network ``ResonatorArray.run`` builds, as ``runtime_cache`` names it
+OFFLINE_NETWORK = "resonator array, offline"
 
 # The band of preferred frequencies that a driving robot's self-motion keeps busy: the probe's
 # free self-oscillation (``antenna.NATURAL_HZ``) and the neighbours that its tuning plateau
@@ -129,6 +131,11 @@ class ResonatorArray:
         return group
 
     # -- offline ----------------------------------------------------------------------------
+    def compiled(self) -> bool:
+        """Whether ``run``'s network is compiled for this interpreter already (cython; numpy
+        compiles nothing): an estimate charges its compile otherwise."""
+        return self.target != "cython" or runtime_cache.compiled(OFFLINE_NETWORK, __name__)
+
     def run(self, coded: Recording, window_s: float = 0.1,
             check_every_ms: float = 10.0) -> ArrayResult:
         """Drive the array with a coded recording (one channel); spikes and a rate map."""
@@ -158,6 +165,7 @@ class ResonatorArray:
         t0 = time.perf_counter()
         net.run(coded.duration_s * b2.second, namespace={})
         wall = time.perf_counter() - t0
+        runtime_cache.note(OFFLINE_NETWORK, __name__, self.target)
         guard.function()
         return ArrayResult(self.neuron_hz, np.asarray(spikes.i[:], dtype=int),
                            np.asarray(spikes.t_[:], dtype=float), coded.duration_s,

@@ -119,9 +119,10 @@ class Plan:
             return None
         sized = self.sizes(self.parts)
         sized.seconds += study_overhead_s()
-        # the rates were probed at one load; the run shares the machine as it is now
+        sized.parts["the process's start and its report"] = study_overhead_s()
+        # the rates were measured at one load; the run shares the machine as it is now
         factor, note = rates.load_factor()
-        sized.seconds *= factor
+        sized.scale(factor)
         if note and hasattr(sized, "sources"):
             sized.sources = f"{sized.sources}; {note}"
         elif note:

@@ -171,15 +171,20 @@ def plan(spec: dict) -> Plan:
                 estimate)
 
 
+FIT_S_PER_CONTACT = 60.0 / 12800   # the read-outs' fits, per evaluated contact and split
+
+
 def estimate(parts: Parts):
     """The bench set, the tuning contacts, a bank run per trial and per front bank (on the
     bench set). Measured on this project's 2-core machine under a load of ~8: a trial ~30 ms
     per tuning contact with its inner MLPs (12 trials on 512 contacts: 4 min, compiles
     included), a front bank ~6 ms per evaluated contact (400 contacts per 2.2 s chunk) and
-    ~30 s of compiling and MLPs."""
+    ~30 s of compiling and MLPs, and the read-outs' fits per split 60 s on 12,800 contacts
+    (2 s for 2 splits of 256 contacts in the quick profile, load 14)."""
     n, tuning = parts.bench.n_events, parts.tuning_bench().n_events
     search_s = parts.search.trials * (tuning * 0.03 + 5.0)
-    front_s = parts.search.front_limit * (n * 0.006 + 30.0) + 60.0 * len(parts.evaluation.seeds)
+    front_s = parts.search.front_limit * (n * 0.006 + 30.0) + (
+        FIT_S_PER_CONTACT * n * len(parts.evaluation.seeds))
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],
                bench_seconds(n, parts.bench.n_jobs) + search_s + front_s)]
     return stages_estimate("the bench set, the search and its front", stages)

@@ -8,7 +8,9 @@ from dataclasses import dataclass
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError
-from ...engine.cost import engine_of, gate_training_runs, stages_estimate
+from ...engine import rates
+from ...engine.cost import Build, engine_of, gate_training_runs, stages_estimate
+from ...networks import runtime_cache
 from ...networks.assembly import configure
 from ...networks.gate import GateTraining
 from ...readout.closed_loop import LoopSettings
@@ -73,11 +75,41 @@ def estimate(parts: Parts):
     gate, loop, cfg = parts.configured["gate"], parts.loop, parts.configured
     speeds = parts.gate_training[0]
     resonators = cfg["resonators"]
-    loop_run = (float(loop.duration_s), resonators.dt_ms, resonators.n_neurons,
-                engine_of(resonators.target))
+    engine = engine_of(resonators.target)
+
+    # one Brian2 network: a part on cython makes every part's code objects cython ones
+    cython = loop_target(cfg) == "cython"
+
+    def part_build(name: str) -> Build:
+        return Build(loop_network(name), not cython
+                     or runtime_cache.compiled(loop_network(name), LOOP_MODULE),
+                     LOOP_PART_COMPILES)
+    loop_runs = [(float(loop.duration_s), resonators.dt_ms, resonators.n_neurons, engine,
+                  part_build(name)) for name in cfg]
     return stages_estimate("the gate's training and the closed loop", [
         ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
          gate_training_runs(gate, len(speeds), len(speeds))),
-        ("loop.duration_s", loop.duration_s, [loop_run] * len(cfg))])
+        ("loop.duration_s", loop.duration_s, loop_runs,
+         float(loop.duration_s) * 1000.0 / float(loop.chunk_ms)
+         * rates.rates()["python_s"]["closed_loop_chunk"].value)])
+
+
+# the closed loop's parts as ``networks.runtime_cache`` names them: built by the assembly
+LOOP_MODULE = "snn_antenna.networks.assembly"
+# A part of the loop on cython costs this many compiles of the offline array's network (its
+# synapses, monitors and operations are code objects too): the full profile in a new
+# environment took 722 s at load 15 to 19.5 (2 cores, niced), about 620 s of it compiling
+# its four parts, 11.5 of the probe's compiles at the table's load.
+LOOP_PART_COMPILES = 3.0
+
+
+def loop_network(part: str) -> str:
+    return f"closed loop: {part}"
+
+
+def loop_target(configured: dict) -> str:
+    """The closed loop's code target: cython when any part runs on it."""
+    targets = {getattr(part, "target", None) for part in configured.values()}
+    return "cython" if "cython" in targets else "numpy"
 
 

@@ -29,11 +29,12 @@ from ...networks.assembly import build as build_network
 from ...networks.control import CONTROL_UNITS, unit_spike_counts
 from ...networks.cpg import cycle_periods, phase_lag_deg
 from ...networks.gate import read_trace
+from ...networks import runtime_cache
 from ...networks.resonators import rate_map
 from ...readout.closed_loop import RobotRecord, steer
 from ...sources.scenes import OnlineAntenna
 from ..contract import Options, Plan
-from .plan import Parts
+from .plan import LOOP_MODULE, Parts, loop_network, loop_target
 from .report import human_summary, write_report
 
 CALIBRATION_STREAM = 0    # spawn key of the calibration recording's seed
@@ -90,6 +91,8 @@ def run_loop(parts: Parts, seed: int, log=print) -> tuple[RobotRecord, OnlineAnt
     t0 = time.perf_counter()
     asm.network.run(float(loop.duration_s) * b2.second, namespace={})
     wall = time.perf_counter() - t0
+    for name in cfg:                    # what an estimate finds compiled next time
+        runtime_cache.note(loop_network(name), LOOP_MODULE, loop_target(cfg))
     log(f"      {loop.duration_s:g} s simulated in {wall:.1f} s")
     log("[4/5] reading out from the robot's own record")
     t, speed, pan, tilt, th, x_cm = (np.array(c) for c in zip(*state["log"]))

@@ -11,13 +11,16 @@ from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check
 from ...engine.cost import (
+    Build,
     codings_engine,
     engine_of,
     gate_training_runs,
     max_workers,
     readout_seconds,
     stages_estimate,
+    standalone_build,
 )
+from ...engine.codings import structure as compiled_structure
 from ...networks.gate import SpeedGate
 from ...networks.resonators import ResonatorArray
 from ...preprocess import make_coder
@@ -241,10 +244,15 @@ def estimate(parts: Parts):
     engine = codings_engine(sw.target or array.target)
 
     def codings(n: int, seconds: float = sw.scene_s) -> list:
-        # the compiled group always holds codings_per_run codings (a short run is padded)
+        # the compiled group always holds codings_per_run codings (a short run is padded);
+        # its project is one per scene length (compiled once, or found compiled on disk)
         size = sw.codings_per_run if engine == "codings" else min(n, sw.codings_per_run)
-        runs = [(seconds, array.dt_ms, size * array.n_neurons,
-                 engine)] * -(-n // sw.codings_per_run)
+        build = standalone_build(compiled_structure(
+            array, round(seconds * parts.scene.rate_hz), parts.scene.rate_hz,
+            sw.codings_per_run)) if engine == "codings" else Build("offline array",
+                                                                   array.compiled())
+        runs = [(seconds, array.dt_ms, size * array.n_neurons, engine,
+                 build)] * -(-n // sw.codings_per_run)
         return runs[:-(-len(runs) // workers)] if workers > 1 else runs
 
     n_th, n_v = len(sw.thresholds_g), len(sw.speeds_cm_s)

@@ -8,7 +8,7 @@ import numpy as np
 
 from ...core import spec as specs
 from ...core.errors import check
-from ...engine.cost import engine_of, job_estimate
+from ...engine.cost import Build, engine_of, job_estimate
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import ContactDetector, detector_from_spec
 from ...sources.source import Scene
@@ -54,6 +54,8 @@ def estimate(parts: Parts):
     """The scene's one Brian2 run."""
     array = parts.array
     return job_estimate("the scene", [(parts.scene.duration_s, array.dt_ms, array.n_neurons,
-                                       engine_of(array.target))], "stimulus.duration_s")
+                                       engine_of(array.target),
+                                       Build("offline array", array.compiled()))],
+                        "stimulus.duration_s")
 
 

@@ -65,7 +65,9 @@ def plan(spec: dict) -> Plan:
 
 def estimate(parts: Parts):
     """The sweep's points, neuron-steps, time and memory, from the grid's shape alone."""
-    return sweep_estimate(parts.grid, parts.neuron, parts.settings.chunk_points,
-                          parts.settings.workers)
+    chunk = parts.settings.chunk_points
+    # the sweep as the run sizes its compiled group (``for_grid``)
+    neuron = parts.neuron.for_grid(parts.grid, parts.grid.block_shape(chunk))
+    return sweep_estimate(parts.grid, neuron, chunk, parts.settings.workers)
 
 
