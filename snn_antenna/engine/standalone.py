@@ -263,8 +263,9 @@ BUILT_MARKER = "built-{}"
 
 def structure_key(structure: tuple) -> str:
     """A project structure's name on disk, without the compiler's flags (which Brian2's
-    preferences hold: an estimate does not import Brian2)."""
-    return hashlib.sha1(repr(structure).encode()).hexdigest()[:12]
+    preferences hold: an estimate does not import Brian2), with the Python environment that
+    builds it (a project built by another environment is rebuilt by this one)."""
+    return hashlib.sha1(repr((structure, sys.prefix)).encode()).hexdigest()[:12]
 
 
 def is_built(structure: tuple) -> bool:
