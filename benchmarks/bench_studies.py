@@ -8,10 +8,11 @@ number ``snn-antenna run studies/NAME.toml --check`` prints, from the plan's par
 engines' rates, ``engine.rates``), then the study itself run as a user runs it (``snn-antenna
 run studies/NAME.toml [--quick] --yes --out TMP``, a fresh process and output folder, the
 toolkit's compile cache as it is), timed from start to exit. The table gives both, their
-ratio and the machine's load average before and after each run; the line above it says where
-the rates came from. ``--probe`` measures the rates on this machine first
-(``engine.rates.probe``, stored for the estimates that follow). ``--set STUDY:KEY=VALUE``
-passes ``--set KEY=VALUE`` to that study's estimate and run alike.
+ratio and the machine's load average before and after each run, and under each row what the
+estimate's seconds pay for; the line above it says where the rates came from. ``--probe``
+measures the rates on this machine first (``engine.rates.probe``, stored for the estimates
+that follow). ``--set STUDY:KEY=VALUE`` passes ``--set KEY=VALUE`` to that study's estimate
+and run alike.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from snn_antenna.core import spec as specs  # noqa: E402
-from snn_antenna.engine import rates  # noqa: E402
+from snn_antenna.engine import cost, rates  # noqa: E402
 from snn_antenna.report.results import write_benchmark_json  # noqa: E402
 from snn_antenna.studies import STUDIES, runner  # noqa: E402
 
@@ -91,9 +92,12 @@ def main(argv=None) -> int:
             rows.append({"study": study, "profile": args.profile, "estimate_s": seconds,
                          "measured_s": wall, "measured_over_estimate": ratio,
                          "load_before": load_before, "load_after": load_after,
-                         "settings": settings[study]})
+                         "settings": settings[study],
+                         "estimate_parts_s": dict(getattr(guess, "parts", {}) or {})})
             print(f"{study:22} {args.profile:7} {seconds:8.0f}s {wall:8.0f}s {ratio:5.2f}x  "
                   f"{load_before:.1f} -> {load_after:.1f}", flush=True)
+            if guess is not None and getattr(guess, "parts", None):
+                print(f"    estimate: {cost.describe_parts(guess.parts)}", flush=True)
     within = [r for r in rows if 1 / 1.5 <= r["measured_over_estimate"] <= 1.5]
     print(f"within x1.5 of the estimate: {len(within)} of {len(rows)}")
     if args.json:

@@ -96,6 +96,9 @@ def studies_ran(out: str, tmp_path: Path) -> None:
     assert row["estimate_s"] > 0 and row["measured_s"] > 0
     assert row["measured_over_estimate"] == pytest.approx(row["measured_s"] / row["estimate_s"])
     assert "rates: " in out and "within x1.5 of the estimate" in out
+    # what the estimate's seconds pay for, summing to it
+    assert sum(row["estimate_parts_s"].values()) == pytest.approx(row["estimate_s"])
+    assert "the process's start and its report" in row["estimate_parts_s"]
 
 
 def sweep_ran(out: str, tmp_path: Path) -> None:

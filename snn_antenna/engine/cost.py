@@ -291,8 +291,8 @@ def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list
 # The gate's network steps its groups, synapses and monitors each, every one at a small
 # network's per-step cost: the exploration study's training (43,200 and 64,800 steps at dt
 # 1 ms, numpy) took 34 s and 121 s at load 21 on 2 cores, 4 and 11 times one small
-# network's steps.
-GATE_GROUPS = 6
+# network's steps; 6 made the whole full profile's estimate 1.5 times its run at load 16.
+GATE_GROUPS = 4
 
 
 # A bench set's cost: generating its contact events and extracting their features, per event

@@ -73,9 +73,12 @@ TABLE = {
     # rule (``ContactDetector.detect``)
     # closed_loop_chunk: the exploration loop's Python per chunk of 10 ms (moving the robot,
     # coding its samples, feeding them): the loop ran 6.5 s (numpy) and 12 s (cython) in 68 s
-    # and 67 s at load 21, about 3 s per simulated second beside Brian2's steps at load 12.9
-    "python_s": {"study_start": 10.2, "report": 0.6, "readout_window": 3.2e-4,
-                 "closed_loop_chunk": 0.03},
+    # and 67 s at load 21, about 3 s per simulated second beside Brian2's steps at load 12.9,
+    # 2 s by the whole full profile's run at load 16. report: the probe's six figures took
+    # 0.6 s, a study's whole report (its figures, pages, summary and stores) 6 to 11 s (the
+    # full tuning sweep's: 11 s at load 15)
+    "python_s": {"study_start": 10.2, "report": 6.0, "readout_window": 3.2e-4,
+                 "closed_loop_chunk": 0.02},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 # the load average the table was measured at (its rates are scaled from it, ``load_factor``)
@@ -375,8 +378,8 @@ def probe(log=print) -> dict[str, dict[str, Rate]]:
         log(f"      {target}: {per_step:.3g} steps/s, {per_neuron:.3g} neuron-steps/s, "
             f"{per_run:.2f} s per run (0: not resolved, the table's stays)")
     start, report = _start()
-    measured["python_s"] = {"study_start": start, "report": report,
-                            "readout_window": _readout_window()}
+    # (the report's figures alone: a study's whole report takes longer, the table's stays)
+    measured["python_s"] = {"study_start": start, "readout_window": _readout_window()}
     log(f"      a study's start: {start:.1f} s, its report {report:.1f} s; the contact "
         f"rule: {1e3 * measured['python_s']['readout_window']:.2f} ms per window")
     per_run, per_neuron = _codings()
