@@ -417,8 +417,8 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     2 kHz, full at 2 kHz), with `--check` first, on the lab's rod (its four materials, four
     distances, ten repetitions): the check passes and so does the run, every statistic
     finite; the material is read within 5 points of the one-feature decay read-out (by the
-    parametric, the full-spectrum and, quick, the two-band spiking MLPs) and the distance within 2×
-    the peak-frequency read-out's rmse (by the low peak's regression and the training-free
+    parametric, the full-spectrum and, quick, the two-band spiking MLPs) and the distance
+    within 2× the peak-frequency read-out's rmse (by the low peak's regression and the training-free
     dominant resonator), on the same splits. ``benchmarks/bench_lab_readouts.py`` prints
     every read-out beside them."""
     from snn_antenna.cli import main as cli
@@ -539,8 +539,8 @@ def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab
                                                                              tmp_path):
     """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
     contact, the parametric and the full-spectrum MLP read the material within 5 points of
-    the one-feature decay read-out and the low peak's regression the distance within 2× the peak-frequency
-    read-out's rmse, on the same splits; the page says what the data is."""
+    the one-feature decay read-out and the low peak's regression the distance within 2× the
+    peak-frequency read-out's rmse, on the same splits; the page says what the data is."""
     from snn_antenna.studies import baseline_comparison
     from snn_antenna.studies.contract import Options
 
