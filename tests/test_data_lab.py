@@ -418,9 +418,9 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     distances, ten repetitions): the check passes and so does the run, every statistic
     finite; the material is read within 5 points of the one-feature decay read-out (by the
     parametric, the full-spectrum and, quick, the two-band spiking MLPs) and the distance
-    within 2× the peak-frequency read-out's rmse (by the low peak's regression and the training-free
-    dominant resonator), on the same splits. ``benchmarks/bench_lab_readouts.py`` prints
-    every read-out beside them."""
+    within 2× the peak-frequency read-out's rmse (by the low peak's regression and the
+    training-free dominant resonator), on the same splits. ``benchmarks/bench_lab_readouts.py``
+    prints every read-out beside them."""
     from snn_antenna.cli import main as cli
 
     sess = lab.session(rate, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
