@@ -453,6 +453,8 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     # calibration contacts it stayed silent for were struck
     assert scores["spiking_dominant"][0] <= 2 * scores["spiking_dominant"][1], scores
     assert_reports_recorded_data(tmp_path / "run")
+    assert any(line.startswith("fitted: a silent low band reads")
+               for line in summary["data"]["fitted"]), summary["data"]["fitted"]
 
 
 # -- the lab's antenna, fitted from its labels, and the comparison on it ---------------------
