@@ -150,14 +150,16 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
     neurons = neurons_per_input(spikes)
     neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
     cmp.spiking = {**bank.description(), "neurons": neurons}
-    return spiking_baselines(spikes, parts.evaluation, _law(parts, data, spikes, log)) + tuned
+    law = None
+    if parts.antenna:
+        law, line = _law(parts, data, spikes, log)
+        cmp.data["fitted"].append(line)          # the report's and summary's fitted values
+    return spiking_baselines(spikes, parts.evaluation, law) + tuned
 
 
-def _law(parts: Parts, data, spikes, log) -> tuple | None:
+def _law(parts: Parts, data, spikes, log) -> tuple[tuple, str]:
     """The fitted low-mode law the training-free decoders invert, with the distance a silent
-    low band reads, both from the calibration contacts (None: this project's antenna)."""
-    if not parts.antenna:
-        return None
+    low band reads, both from the calibration contacts, and the line saying so."""
     events = spikes["event"].values
     held = spikes.sel(event=events[np.isin(data["repetition"].sel(event=events).values,
                                            parts.calibration_repetitions)])
@@ -166,4 +168,4 @@ def _law(parts: Parts, data, spikes, log) -> tuple | None:
     distance = data["distance_cm"].sel(event=held["event"].values).values
     silent_cm, line = parts.antenna.silent_cm(silent, distance)
     log(f"      {line}")
-    return (*parts.antenna.low_law, silent_cm)
+    return (*parts.antenna.low_law, silent_cm), line
