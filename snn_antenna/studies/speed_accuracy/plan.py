@@ -12,8 +12,8 @@ from ...engine.cost import engine_of, stages_estimate
 from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
 from ...engine.devices import WARM_UP_MS as DEVICE_WARM_UP_MS
 from ...evaluation.accuracy import Match, StabilityGrid
-from ...evaluation.bands import (BENCH_BANDS, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER, WARM_UP_MS,
-                                 BandStudy, accurate_dt_ms, candidate_steps)
+from ...evaluation.bands import (BENCH_BANDS, CHOSEN, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER,
+                                 WARM_UP_MS, BandStudy, accurate_dt_ms, candidate_steps)
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import detector_from_spec
@@ -226,13 +226,15 @@ def estimate(parts: Parts):
         band_runs += [(window, step, group, engine_of(bands.target)) for step in steps
                       for window in (WARM_UP_MS / 1000, WARM_UP_MS / 1000, sample)]
         if calibrated:
-            # the driven tuning at the small-signal setting on the target, then at rk4's
-            # accurate step and at the chosen one (no finer than it) compiled
+            # the driven tuning at the small-signal setting on the target, then compiled at
+            # rk4's accurate step and at the chosen one (sized as the shipped choice)
             tuned = band.n_neurons * bands.n_freqs
             fine = accurate_dt_ms(band, "rk4")
+            chosen = CHOSEN[name].dt_ms if name in CHOSEN else fine
             band_runs += [(bands.tuning_duration_s, SMALL_SIGNAL_EULER.dt_ms, tuned,
-                           engine_of(bands.target))]
-            band_runs += [(bands.tuning_duration_s, fine, tuned, "codings")] * 2
+                           engine_of(bands.target)),
+                          (bands.tuning_duration_s, fine, tuned, "codings"),
+                          (bands.tuning_duration_s, chosen, tuned, "codings")]
     precision = parts.precision
     points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
     return stages_estimate("the references, the method x dt sweep, the cost sweep, the "
