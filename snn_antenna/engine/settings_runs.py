@@ -35,6 +35,7 @@ import numpy as np
 
 from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons
+from ..networks.resonators import held_samples
 from .devices import ArrayWorkload, Run, Timer, TuningWorkload, float_precision
 from .standalone import project, run_project, vectorising_flags
 
@@ -326,3 +327,48 @@ def drives_runs(methods, k_dt, drives, steps: int, *, preset: str = "resonator",
         out[method] = (np.asarray(group.blown[:], bool), np.asarray(spikes.i[:], int),
                        np.asarray(spikes.t_[:], float) * 1000.0, kk, drives[ii])
     return out
+
+
+# -- the array on cpp_standalone, its build kept ----------------------------------------------
+def array_standalone(array, coded) -> Run:
+    """``devices.run_standalone`` with its project kept on disk by what it compiles
+    (``standalone.project``: the array's size, method, step, float type, the input's length
+    and rate, the compiler's flags): the input, tuning and resting state are run arguments,
+    so another run of the same configuration (the next run of a study) runs the binary
+    without compiling. The binary's run is timed; ``compile_s`` is what this call spent
+    building (near zero when kept). Instability is checked on the final state (NaN is
+    absorbing in this model)."""
+    import brian2 as b2
+
+    held = held_samples(np.asarray(coded.samples, float))
+    structure = ("array", neurons.PRESETS["resonator"].quadratic, array.method,
+                 float(array.dt_ms), array.n_neurons, len(held), float(coded.rate_hz),
+                 str(np.dtype(b2.prefs.core.default_float_dtype)))
+
+    def build():
+        b2.start_scope()
+        drive = b2.TimedArray(held, dt=b2.second / coded.rate_hz, name="drive")
+        group = array.build_group("drive(t)", "", {"drive": drive})
+        spikes = b2.SpikeMonitor(group, name="spikes")
+        b2.Network(group, spikes).run(coded.duration_s * b2.second, namespace={})
+        return {"group": group, "spikes": spikes, "drive": drive}
+
+    with Timer() as build_timer:
+        proj = project(structure, build)
+    group, n = proj["group"], array.n_neurons
+    v0, u0 = neurons.resting_state("resonator", array.b)
+    run_args = {proj["drive"]: held, group.k: np.asarray(array.k, float),
+                group.b: np.full(n, float(array.b)), group.v: np.full(n, v0),
+                group.u: np.full(n, u0), group.spike_count: np.zeros(n, np.int32)}
+    with Timer() as timer:
+        run_project(proj, run_args)
+    v, u = np.asarray(group.v[:]), np.asarray(group.u[:])
+    bad = ~(np.isfinite(v) & np.isfinite(u))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise NumericalInstabilityError(
+            neuron=i, params={"k": float(array.k[i]), "b": float(array.b)}, dt_ms=array.dt_ms,
+            method=array.method, t_ms=coded.duration_s * 1000.0,
+            safe_dt_ms=neurons.max_stable_dt_ms(array.k, array.method))
+    spikes = proj["spikes"]
+    return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0, build_timer.wall_s)
