@@ -212,18 +212,21 @@ def estimate(parts: Parts):
                             * bands.duration_s * REFERENCE_S_PER_NEURON_S)
         # the small-signal setting, then every method at its candidate steps (at the band's
         # own Hz per k: a recalibration moves them little): one compiled run of them all
-        # over the sample events (at two Hz per k), then each timed on the target (a
-        # warm-up, its first WARM_UP_MS and its first share of the window) on a group of
-        # at least cost_events events (main_sweep.band_spikes, evaluation.bands.sampled_cost)
+        # over the sample events (at two Hz per k); then the small-signal setting and each
+        # method at its finest candidate timed on the target (a warm-up, its first
+        # WARM_UP_MS and its first share of the window) on a group of at least cost_events
+        # events, the coarser steps costed by steps (main_sweep.band_spikes,
+        # evaluation.bands.sampled_cost)
         group = band.n_neurons * max(events, bands.cost_events)
-        steps = [SMALL_SIGNAL_EULER.dt_ms] + [
-            step for method in bands.methods
-            for step in candidate_steps(band, method, None, bands.coarser_steps)]
+        per_method = [candidate_steps(band, method, None, bands.coarser_steps)
+                      for method in bands.methods]
+        steps = [SMALL_SIGNAL_EULER.dt_ms] + [step for mine in per_method for step in mine]
         band_runs += [(bands.duration_s, step, 2 * band.n_neurons * events, "codings")
                       for step in steps]
         sample = min(max(bands.duration_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000),
                      bands.duration_s)
-        band_runs += [(window, step, group, engine_of(bands.target)) for step in steps
+        timed = [SMALL_SIGNAL_EULER.dt_ms] + [mine[0] for mine in per_method]
+        band_runs += [(window, step, group, engine_of(bands.target)) for step in timed
                       for window in (WARM_UP_MS / 1000, WARM_UP_MS / 1000, sample)]
         if calibrated:
             # the driven tuning at the small-signal setting on the target, then compiled at
