@@ -13,12 +13,14 @@ frequency, one group). ``measure`` runs one ``Setting`` of a workload, warmed up
 scored against the reference.
 
 The sweep engine's standalone project (``engine.sweep``) is compiled once and re-run per
-chunk with new parameters; here each configuration is a project of its own, since the build
-settings themselves are what is measured, kept on disk so it compiles once.
+chunk with new parameters; here each configuration is built, compiled and run once, since the
+build settings themselves are what is measured (``engine.settings_runs.array_standalone``
+keeps such a build on disk instead).
 """
 from __future__ import annotations
 
 import os
+import tempfile
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -133,42 +135,33 @@ def bounded_make() -> None:
 def run_standalone(array: ResonatorArray, coded: Recording) -> Run:
     """The array in Brian2's cpp_standalone mode: compile, then time the run alone.
 
-    The project is kept on disk by what it compiles (``engine.standalone.project``: the
-    array's size, method, step, float type, the input's length and rate, the compiler's
-    flags); the input, tuning and resting state are run arguments, so another run of the
-    same configuration (another seed, the next run of a study) runs the binary without
-    compiling. ``compile_s`` is what this call spent building it (near zero when kept). A
-    NetworkOperation cannot run in standalone, so instability is checked on the final state
-    (NaN is absorbing in this model: a NaN v never reaches threshold to be reset).
+    A NetworkOperation cannot run in standalone, so instability is checked on the final
+    state (NaN is absorbing in this model: a NaN v never reaches threshold to be reset).
     """
     import brian2 as b2
 
-    from .standalone import project, run_project
-
-    held = held_samples(np.asarray(coded.samples, float))
-    structure = ("array", neurons.PRESETS["resonator"].quadratic, array.method,
-                 float(array.dt_ms), array.n_neurons, len(held), float(coded.rate_hz),
-                 str(np.dtype(b2.prefs.core.default_float_dtype)))
-
-    def build():
+    directory = tempfile.mkdtemp(prefix="snn_standalone_")
+    bounded_make()
+    b2.set_device("cpp_standalone", directory=directory, build_on_run=False)
+    # Brian2 keeps one cpp_standalone device per process, and a compiled project of this
+    # process (``engine.standalone.project``: the settings runs, the sweeps) may have built and
+    # run on it: start it afresh (that project is rebuilt from its folder when next asked for)
+    b2.device.reinit()
+    b2.device.activate(directory=directory, build_on_run=False)
+    try:
         group, spikes = _offline_group(array, coded)
         b2.Network(group, spikes).run(coded.duration_s * b2.second, namespace={})
-        return {"group": group, "spikes": spikes, "drive": group.namespace["drive"]}
-
-    t0 = time.perf_counter()
-    proj = project(structure, build)
-    compile_s = time.perf_counter() - t0
-    group = proj["group"]
-    v0, u0 = neurons.resting_state("resonator", array.b)
-    n = array.n_neurons
-    run_args = {proj["drive"]: held, group.k: np.asarray(array.k, float),
-                group.b: np.full(n, float(array.b)), group.v: np.full(n, v0),
-                group.u: np.full(n, u0), group.spike_count: np.zeros(n, np.int32)}
-    with Timer() as timer:
-        run_project(proj, run_args)
-    _check_final_state(array, group, coded.duration_s)
-    spikes = proj["spikes"]
-    return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0, compile_s)
+        t0 = time.perf_counter()
+        b2.device.build(directory=directory, run=False)
+        compile_s = time.perf_counter() - t0
+        with Timer() as timer:
+            b2.device.run()
+        _check_final_state(array, group, coded.duration_s)
+        return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0, compile_s)
+    finally:
+        b2.device.reinit()
+        b2.device.activate()
+        b2.set_device("runtime")
 
 
 def _check_final_state(array: ResonatorArray, group, duration_s: float) -> None:

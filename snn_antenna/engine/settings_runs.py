@@ -28,12 +28,14 @@ projects run on the Dask workers side by side.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons
+from ..networks.resonators import held_samples
 from .devices import ArrayWorkload, Run, Timer, TuningWorkload, float_precision
 from .standalone import project, run_project, vectorising_flags
 
@@ -242,6 +244,25 @@ def neuron_steps(drives, n_methods: int, dts) -> float:
 
 
 # -- the stability map's constant drives ----------------------------------------------------
+@contextmanager
+def ieee_flags():
+    """Brian2's compiler flags without ``-ffast-math``, for projects built inside: the
+    arithmetic in the order the equations give it, as the runtime targets compute it. The
+    stability map's near-threshold cells are decided by the last bits of a 40,000-step run:
+    with fast-math's reordering, 3 of the full map's 2,000 cells changed class against the
+    numpy runs and two methods' accurate limits moved by a grid point; without it, one
+    cell beyond rk2's stable limit differs and every limit is the numpy map's."""
+    from brian2 import prefs
+
+    before = list(prefs.codegen.cpp.extra_compile_args_gcc)
+    prefs.codegen.cpp.extra_compile_args_gcc = [
+        f for f in before if f not in ("-ffast-math", "-fno-finite-math-only")]
+    try:
+        yield
+    finally:
+        prefs.codegen.cpp.extra_compile_args_gcc = before
+
+
 def _build_drives(methods, n: int, n_drives: int, steps: int, preset: str) -> dict:
     """``accuracy.run_drives``' group once per method, in one network: the same equations,
     threshold, reset, state updater and runaway latch (after every step)."""
@@ -289,7 +310,7 @@ def drives_runs(methods, k_dt, drives, steps: int, *, preset: str = "resonator",
     kk, ii = kk.ravel(), ii.ravel()
     structure = ("drives", preset, p.quadratic, (p.a, p.c, p.d), tuple(methods), kk.size,
                  len(drives), steps)
-    with float_precision("float64"), vectorising_flags("float64"):
+    with float_precision("float64"), ieee_flags():
         proj = project(structure, lambda: _build_drives(methods, kk.size, len(drives), steps,
                                                         preset))
     run_args = {proj["drive"]: drives[None, :]}
@@ -306,3 +327,48 @@ def drives_runs(methods, k_dt, drives, steps: int, *, preset: str = "resonator",
         out[method] = (np.asarray(group.blown[:], bool), np.asarray(spikes.i[:], int),
                        np.asarray(spikes.t_[:], float) * 1000.0, kk, drives[ii])
     return out
+
+
+# -- the array on cpp_standalone, its build kept ----------------------------------------------
+def array_standalone(array, coded) -> Run:
+    """``devices.run_standalone`` with its project kept on disk by what it compiles
+    (``standalone.project``: the array's size, method, step, float type, the input's length
+    and rate, the compiler's flags): the input, tuning and resting state are run arguments,
+    so another run of the same configuration (the next run of a study) runs the binary
+    without compiling. The binary's run is timed; ``compile_s`` is what this call spent
+    building (near zero when kept). Instability is checked on the final state (NaN is
+    absorbing in this model)."""
+    import brian2 as b2
+
+    held = held_samples(np.asarray(coded.samples, float))
+    structure = ("array", neurons.PRESETS["resonator"].quadratic, array.method,
+                 float(array.dt_ms), array.n_neurons, len(held), float(coded.rate_hz),
+                 str(np.dtype(b2.prefs.core.default_float_dtype)))
+
+    def build():
+        b2.start_scope()
+        drive = b2.TimedArray(held, dt=b2.second / coded.rate_hz, name="drive")
+        group = array.build_group("drive(t)", "", {"drive": drive})
+        spikes = b2.SpikeMonitor(group, name="spikes")
+        b2.Network(group, spikes).run(coded.duration_s * b2.second, namespace={})
+        return {"group": group, "spikes": spikes, "drive": drive}
+
+    with Timer() as build_timer:
+        proj = project(structure, build)
+    group, n = proj["group"], array.n_neurons
+    v0, u0 = neurons.resting_state("resonator", array.b)
+    run_args = {proj["drive"]: held, group.k: np.asarray(array.k, float),
+                group.b: np.full(n, float(array.b)), group.v: np.full(n, v0),
+                group.u: np.full(n, u0), group.spike_count: np.zeros(n, np.int32)}
+    with Timer() as timer:
+        run_project(proj, run_args)
+    v, u = np.asarray(group.v[:]), np.asarray(group.u[:])
+    bad = ~(np.isfinite(v) & np.isfinite(u))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise NumericalInstabilityError(
+            neuron=i, params={"k": float(array.k[i]), "b": float(array.b)}, dt_ms=array.dt_ms,
+            method=array.method, t_ms=coded.duration_s * 1000.0,
+            safe_dt_ms=neurons.max_stable_dt_ms(array.k, array.method))
+    spikes = proj["spikes"]
+    return timer.run(spikes.i[:], np.asarray(spikes.t_[:]) * 1000.0, build_timer.wall_s)

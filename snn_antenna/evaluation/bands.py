@@ -222,13 +222,22 @@ COST_SAMPLE_SHARE = 0.2   # the share of a window a compiled setting's cost is t
 
 
 def sampled_cost(events: BandEvents, setting: BandSetting, target: str, repeat: int,
-                 spikes: Spikes) -> Spikes:
+                 spikes: Spikes, timings: dict | None = None) -> Spikes:
     """``spikes`` (a compiled run's) with the cost of the setting on ``target``: the window's
     run (``repeat`` copies of the events in one group) compiled on its first ``WARM_UP_MS``,
     then timed over its first ``WARM_UP_MS`` and its first ``COST_SAMPLE_SHARE`` (the same
     code each time: the run stopped early), the run's own cost and its cost per step from
-    the two, and the whole window's steps costed by them."""
+    the two, and the whole window's steps costed by them.
+
+    ``timings``: the run's own cost and cost per step of each method timed so far in this
+    group (filled in here); a setting whose method is in it is costed by its steps without
+    running: the step's code is the method's, whatever the step."""
     window_s = min(setting.duration_s or events.duration_s, events.duration_s)
+    key = (setting.method, window_s, repeat)
+    if timings is not None and key in timings:
+        steps = window_s * 1000.0 / setting.dt_ms
+        return Spikes(spikes.spike_i, spikes.spike_t_ms,
+                      *(fixed + per_step * steps for fixed, per_step in timings[key]))
     short = WARM_UP_MS / 1000.0
     sample = min(max(window_s * COST_SAMPLE_SHARE, 2 * short), window_s)
     array = array_of(events.band, setting, target)
@@ -242,11 +251,15 @@ def sampled_cost(events: BandEvents, setting: BandSetting, target: str, repeat: 
         t0, w0 = time.process_time(), time.perf_counter()
         neurons.simulate("resonator", coded, setting.dt_ms, run_ms=seconds * 1000.0, **kwargs)
         timed.append((time.process_time() - t0, time.perf_counter() - w0))
-    costs = []
+    parts = []
     for a, b in zip(*timed):
         per_s = max(b - a, 0.0) / max(sample - short, 1e-9)
-        costs.append(max(a - short * per_s, 0.0) + per_s * window_s)
-    return Spikes(spikes.spike_i, spikes.spike_t_ms, *costs)
+        parts.append((max(a - short * per_s, 0.0), per_s * setting.dt_ms / 1000.0))
+    if timings is not None:
+        timings[key] = parts
+    steps = window_s * 1000.0 / setting.dt_ms
+    return Spikes(spikes.spike_i, spikes.spike_t_ms,
+                  *(fixed + per_step * steps for fixed, per_step in parts))
 
 
 RATE_WINDOW_S = 0.05      # the rate map's window: the bank's time bins are 0.1 s and coarser
@@ -272,7 +285,7 @@ def band_errors(run: Spikes, ref: Spikes, n: int, duration_s: float,
 
 
 def measure(events: BandEvents, setting: BandSetting, ref: Spikes, target: str = "cython",
-            cost_events: int = 1, compiled=None) -> dict:
+            cost_events: int = 1, compiled=None, timings: dict | None = None) -> dict:
     """One band at one setting: where its k·dt lies, its errors against ``ref`` (the
     reference at the same Hz per unit k) and its cost per event, timed on a group of at
     least ``cost_events`` events (the sample's, repeated). ``compiled``: the setting's
@@ -291,12 +304,13 @@ def measure(events: BandEvents, setting: BandSetting, ref: Spikes, target: str =
         return dict(row, status=f"non-finite: {compiled}", errors_from="compiled")
     try:
         run = (brian_spikes(events, setting, target, repeat) if compiled is None else
-               sampled_cost(events, setting, target, repeat, compiled))
+               sampled_cost(events, setting, target, repeat, compiled, timings))
     except NumericalInstabilityError as exc:
         return dict(row, status=f"non-finite: {exc}")
     if compiled is not None:
-        row.update(errors_from="compiled", cost_from=f"{target}, timed on the first "
-                   f"{COST_SAMPLE_SHARE:.0%} of the window and costed by steps")
+        row.update(errors_from="compiled", cost_from=f"{target}, {setting.method} timed once "
+                   f"(its finest step that ran) on the first {COST_SAMPLE_SHARE:.0%} of the "
+                   "window and costed by steps")
     n = events.n_events * events.band.n_neurons
     window_ms = 1000.0 * (setting.duration_s or events.duration_s)
     window_ms = min(window_ms, 1000.0 * events.duration_s)
@@ -486,9 +500,12 @@ def study_band(study: BandStudy, name: str, data, log=print, compiled=None,
     runs = compiled(events, [SMALL_SIGNAL_EULER] + candidates) if compiled else {}
     rows = [dict(measure(events, SMALL_SIGNAL_EULER, before_ref, study.target,
                          study.cost_events, runs.get(SMALL_SIGNAL_EULER)), role="before")]
+    # each method timed once, at its finest candidate step (the first: the most steps in
+    # its sample), the coarser ones costed by their steps from it
+    timings = {}
     for setting in candidates:
         rows.append(dict(measure(events, setting, ref, study.target, study.cost_events,
-                                 runs.get(setting)), role="candidate"))
+                                 runs.get(setting), timings), role="candidate"))
         log(f"    {name}: {setting.label()}: rate-map error "
             f"{rows[-1].get('rate_map_error')}")
     chosen = choose(rows, study.rate_map_error)

@@ -5,7 +5,7 @@ Cost: what a user's choice costs is measured on the choice itself. A runtime tar
 cython) is timed on a sample of its run (``timing.timed_sample``: its first
 ``timing.SAMPLE_S`` seconds and its first ``WARM_UP_MS``, costed by steps for the whole
 scene); cpp_standalone runs its whole scene in a binary kept on disk per configuration
-(``devices.run_standalone``: compiled once, timed without compiling).
+(``settings_runs.array_standalone``: compiled once, timed without compiling).
 
 Errors, where a reference of the same size exists (the array's own size): a runtime row's
 from one compiled run per float type of every setting (``engine.settings_runs``, the
@@ -17,7 +17,7 @@ from __future__ import annotations
 from ...core.errors import NumericalInstabilityError
 from ...engine.devices import Setting, float_precision
 from ...engine.runlog import RunLog
-from ...engine.settings_runs import scene_drive, settings_spikes
+from ...engine.settings_runs import array_standalone, scene_drive, settings_spikes
 from ...evaluation.tradeoff import ERRORS, RAISED, check_finite, describe
 from ...networks import neurons
 from . import timing
@@ -34,9 +34,10 @@ def _standalone_row(workload, ref, setting: Setting) -> dict:
     """The whole scene on cpp_standalone: its binary's run timed, scored when own size."""
     row = {"k_dt": workload.k_max * setting.dt_ms, "accuracy_from": "its own run"}
     row["beyond_stable_limit"] = row["k_dt"] > neurons.MAX_STABLE_K_DT[setting.method]
+    array = workload.array(setting.method, setting.dt_ms, setting.target, setting.n_neurons)
     try:
         with float_precision(setting.dtype):
-            run = workload.run(setting)
+            run = array_standalone(array, workload.coded)
     except NumericalInstabilityError as exc:
         return dict(row, status=RAISED, wall_s=None, cpu_s=None, compile_s=0.0,
                     error=str(exc), readout_matches=False, **{e: None for e in ERRORS},

@@ -12,8 +12,8 @@ from ...engine.cost import engine_of, stages_estimate
 from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
 from ...engine.devices import WARM_UP_MS as DEVICE_WARM_UP_MS
 from ...evaluation.accuracy import Match, StabilityGrid
-from ...evaluation.bands import (BENCH_BANDS, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER, WARM_UP_MS,
-                                 BandStudy, accurate_dt_ms, candidate_steps)
+from ...evaluation.bands import (BENCH_BANDS, CHOSEN, COST_SAMPLE_SHARE, SMALL_SIGNAL_EULER,
+                                 WARM_UP_MS, BandStudy, accurate_dt_ms, candidate_steps)
 from ...networks import neurons, reference
 from ...networks.resonators import ResonatorArray
 from ...readout.contacts import detector_from_spec
@@ -212,27 +212,32 @@ def estimate(parts: Parts):
                             * bands.duration_s * REFERENCE_S_PER_NEURON_S)
         # the small-signal setting, then every method at its candidate steps (at the band's
         # own Hz per k: a recalibration moves them little): one compiled run of them all
-        # over the sample events (at two Hz per k), then each timed on the target (a
-        # warm-up, its first WARM_UP_MS and its first share of the window) on a group of
-        # at least cost_events events (main_sweep.band_spikes, evaluation.bands.sampled_cost)
+        # over the sample events (at two Hz per k); then the small-signal setting and each
+        # method at its finest candidate timed on the target (a warm-up, its first
+        # WARM_UP_MS and its first share of the window) on a group of at least cost_events
+        # events, the coarser steps costed by steps (main_sweep.band_spikes,
+        # evaluation.bands.sampled_cost)
         group = band.n_neurons * max(events, bands.cost_events)
-        steps = [SMALL_SIGNAL_EULER.dt_ms] + [
-            step for method in bands.methods
-            for step in candidate_steps(band, method, None, bands.coarser_steps)]
+        per_method = [candidate_steps(band, method, None, bands.coarser_steps)
+                      for method in bands.methods]
+        steps = [SMALL_SIGNAL_EULER.dt_ms] + [step for mine in per_method for step in mine]
         band_runs += [(bands.duration_s, step, 2 * band.n_neurons * events, "codings")
                       for step in steps]
         sample = min(max(bands.duration_s * COST_SAMPLE_SHARE, 2 * WARM_UP_MS / 1000),
                      bands.duration_s)
-        band_runs += [(window, step, group, engine_of(bands.target)) for step in steps
+        timed = [SMALL_SIGNAL_EULER.dt_ms] + [mine[0] for mine in per_method]
+        band_runs += [(window, step, group, engine_of(bands.target)) for step in timed
                       for window in (WARM_UP_MS / 1000, WARM_UP_MS / 1000, sample)]
         if calibrated:
-            # the driven tuning at the small-signal setting on the target, then at rk4's
-            # accurate step and at the chosen one (no finer than it) compiled
+            # the driven tuning at the small-signal setting on the target, then compiled at
+            # rk4's accurate step and at the chosen one (sized as the shipped choice)
             tuned = band.n_neurons * bands.n_freqs
             fine = accurate_dt_ms(band, "rk4")
+            chosen = CHOSEN[name].dt_ms if name in CHOSEN else fine
             band_runs += [(bands.tuning_duration_s, SMALL_SIGNAL_EULER.dt_ms, tuned,
-                           engine_of(bands.target))]
-            band_runs += [(bands.tuning_duration_s, fine, tuned, "codings")] * 2
+                           engine_of(bands.target)),
+                          (bands.tuning_duration_s, fine, tuned, "codings"),
+                          (bands.tuning_duration_s, chosen, tuned, "codings")]
     precision = parts.precision
     points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
     return stages_estimate("the references, the method x dt sweep, the cost sweep, the "
