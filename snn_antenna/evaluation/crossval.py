@@ -253,10 +253,12 @@ def _prepared(b: Baseline, features: xr.Dataset, materials: list[str], evaluatio
     if pair:
         materials = list(evaluation.two_materials)
     if (b.inputs, pair) not in shared:
-        keep = np.ones(features.sizes["event"], dtype=bool)
+        # the one input and the labels, not every matrix of the features, are copied
+        labels = [v for v in ("material", "distance_cm", "repetition") if v in features.data_vars]
+        sub = features[[b.inputs, *labels]] if b.inputs in features.data_vars else features
         if pair:
             keep = np.isin(features["material"].values.astype(str), materials)
-        sub = features.isel(event=np.flatnonzero(keep))
+            sub = sub.isel(event=np.flatnonzero(keep))
         shared[b.inputs, pair] = sub, inputs_of(sub, b.inputs)
     sub, X = shared[b.inputs, pair]
     return sub, X, targets_of(sub, b.task, materials), sub["repetition"].values
