@@ -206,42 +206,111 @@ class BaselineResult:
 
 
 def evaluate(features: xr.Dataset, baselines: list[Baseline], evaluation: Evaluation,
-             log=print) -> dict[str, BaselineResult]:
-    """Train and test every baseline on every seed's split by repetition."""
+             log=print, client=None) -> dict[str, BaselineResult]:
+    """Train and test every baseline on every seed's split by repetition: in this process, or
+    with a Dask ``client`` one task per (baseline, seed) on its workers. Every fit is seeded
+    and runs on one BLAS thread either way, so both give the same folds; the workers only run
+    them side by side (the full comparison's fits are hundreds of seconds of one core)."""
     from threadpoolctl import threadpool_limits
     from tqdm.auto import tqdm
 
     materials = sorted(set(features["material"].values.astype(str)))
-    results = {}
+    shared: dict = {}
+    prepared = {b.name: _prepared(b, features, materials, evaluation, shared)
+                for b in baselines}
     bar = tqdm(total=len(baselines) * len(evaluation.seeds), desc="baselines", unit="fit")
-    # One BLAS thread: on a shared machine, threads spin against other processes (the
-    # material MLP ran several times slower with the default thread count).
-    with threadpool_limits(1):
-        for b in baselines:
-            results[b.name] = _evaluate_one(b, features, materials, evaluation, bar.update)
-            log(f"  {b.name:24s} " + ", ".join(
-                f"{k} {v:.4g}" for k, v in results[b.name].summary.items()
-                if not k.endswith("_sd") and k != "n_seeds"))
+    if client is None:
+        # One BLAS thread: on a shared machine, threads spin against other processes (the
+        # material MLP ran several times slower with the default thread count).
+        with threadpool_limits(1):
+            done = {(b.name, seed): _fit_scored(b, *prepared[b.name][1:], seed, evaluation)
+                    for b in baselines for seed in _ticking(evaluation.seeds, bar)}
+    else:
+        done = _evaluate_on(client, baselines, prepared, evaluation, bar)
     bar.close()
+    results = {}
+    for b in baselines:
+        sub, _, y, _ = prepared[b.name]
+        pairs = [done[b.name, seed] for seed in evaluation.seeds]
+        results[b.name] = _result(b, [f for f, _ in pairs], [s for _, s in pairs], sub, y)
+        log(f"  {b.name:24s} " + ", ".join(
+            f"{k} {v:.4g}" for k, v in results[b.name].summary.items()
+            if not k.endswith("_sd") and k != "n_seeds"))
     return results
 
 
-def _evaluate_one(b: Baseline, features: xr.Dataset, materials: list[str],
-                  evaluation: Evaluation, tick) -> BaselineResult:
-    keep = np.ones(features.sizes["event"], dtype=bool)
-    if b.task == "two_material":
+def _ticking(seeds, bar):
+    for seed in seeds:
+        yield seed
+        bar.update()
+
+
+def _prepared(b: Baseline, features: xr.Dataset, materials: list[str], evaluation: Evaluation,
+              shared: dict) -> tuple:
+    """(the events ``b`` is scored on, its input matrix, targets, repetitions): the two-material
+    network sees only its pair's contacts. Read-outs of the same input on the same events share
+    one matrix (``shared``), so it is made, and sent to workers, once."""
+    pair = b.task == "two_material"
+    if pair:
         materials = list(evaluation.two_materials)
-        keep = np.isin(features["material"].values.astype(str), materials)
-    sub = features.isel(event=np.flatnonzero(keep))
-    X, y = inputs_of(sub, b.inputs), targets_of(sub, b.task, materials)
-    folds, scores = [], []
-    for seed in evaluation.seeds:
-        train, test = split_by_repetition(sub["repetition"].values, evaluation.test_fraction,
-                                          seed)
-        fold = fit_fold(b, X, y, train, test, seed)
-        folds.append(fold)
-        scores.append(score(b.task, y[test], fold.prediction))
-        tick()
+    if (b.inputs, pair) not in shared:
+        # the one input and the labels, not every matrix of the features, are copied
+        labels = [v for v in ("material", "distance_cm", "repetition") if v in features.data_vars]
+        sub = features[[b.inputs, *labels]] if b.inputs in features.data_vars else features
+        if pair:
+            keep = np.isin(features["material"].values.astype(str), materials)
+            sub = sub.isel(event=np.flatnonzero(keep))
+        shared[b.inputs, pair] = sub, inputs_of(sub, b.inputs)
+    sub, X = shared[b.inputs, pair]
+    return sub, X, targets_of(sub, b.task, materials), sub["repetition"].values
+
+
+def _fit_scored(b: Baseline, X, y, repetition, seed: int, evaluation: Evaluation
+                ) -> tuple[Fold, dict]:
+    """One baseline on one seed's split: its fold and its scores."""
+    train, test = split_by_repetition(repetition, evaluation.test_fraction, seed)
+    fold = fit_fold(b, X, y, train, test, seed)
+    return fold, score(b.task, y[test], fold.prediction)
+
+
+def _fit_task(b: Baseline, X, y, repetition, seed: int, evaluation: Evaluation):
+    """``_fit_scored`` on a Dask worker, on one BLAS thread as in this process."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(1):
+        return _fit_scored(b, X, y, repetition, seed, evaluation)
+
+
+def _evaluate_on(client, baselines: list[Baseline], prepared: dict, evaluation: Evaluation,
+                 bar) -> dict:
+    """Every (baseline, seed) fit as a task on ``client``'s workers; each distinct input
+    matrix is sent to the workers once."""
+    from distributed import as_completed
+
+    sent: dict = {}
+
+    def scattered(a: np.ndarray):
+        key = (id(a), a.shape)
+        if key not in sent:
+            sent[key] = client.scatter(a)
+        return sent[key]
+
+    futures = {}
+    for b in baselines:
+        _, X, y, repetition = prepared[b.name]
+        X_f = scattered(X)
+        for seed in evaluation.seeds:
+            futures[client.submit(_fit_task, b, X_f, y, repetition, seed, evaluation,
+                                  pure=False)] = (b.name, seed)
+    done = {}
+    for future in as_completed(futures):
+        done[futures[future]] = future.result()
+        bar.update()
+    return done
+
+
+def _result(b: Baseline, folds: list[Fold], scores: list[dict], sub: xr.Dataset, y
+            ) -> BaselineResult:
     summary = summarise(scores)
     summary["fit_s"] = float(np.mean([f.fit_s for f in folds]))
     summary["predict_us_per_event"] = float(1e6 * np.mean([f.predict_s_per_event

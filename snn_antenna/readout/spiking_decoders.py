@@ -255,8 +255,9 @@ class SpikingPlan:
     ``designs`` is a list of array variants, each ``{name, band, ...Band fields}``, run on the
     events of the first ``design_repetitions`` repetitions and decoded on the first split;
     ``cost_sample_events`` events are timed for the cost per event. ``workers``: Dask worker
-    processes for the bank's runs (0: one per core; 1: this process; ``--scheduler`` attaches
-    to a running cluster instead). ``tuned``: a ``TunedPlan`` table (empty: no tuned bank).
+    processes for the bank's runs and the read-outs' fits (0: one per core; 1: this process;
+    ``--scheduler`` attaches to a running cluster instead). ``tuned``: a ``TunedPlan`` table
+    (empty: no tuned bank).
     """
     bank: dict = field(default_factory=dict)
     designs: list = field(default_factory=list)

@@ -11,14 +11,15 @@ import numpy as np
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check
-from ...engine.cost import (bench_seconds, compile_seconds, engine_of, fit_seconds, max_workers,
+from ...engine.cost import (bench_seconds, compile_seconds, engine_of, max_workers,
                              stages_estimate)
 from ...evaluation import antenna_fit
 from ...evaluation import crossval as cv
 from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
 from ...readout import events
 from ...readout.spiking import SpikingBank
-from ...readout.spiking_decoders import Design, SpikingPlan
+from ...readout.spiking_decoders import (CODER_READOUTS, SPIKING_MLPS, SPIKING_SETS,
+                                          TUNED_READOUTS, Design, SpikingPlan)
 from ...sources.source import BenchSet
 from ..contract import COMMON, Plan, data_folder
 from ..sections import bench_section, evaluation_section, events_section
@@ -253,8 +254,6 @@ def estimate(parts: Parts):
     events = parts.bench.n_events
     per_repetition = events // max(1, parts.bench.repetitions)
     ev = parts.evaluation
-    n_bins = int(parts.processor.max_hz) + 1
-    fits = len(ev.baselines(n_bins))
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],
                bench_seconds(events, parts.bench.n_jobs))]
     bank = parts.bank
@@ -268,18 +267,48 @@ def estimate(parts: Parts):
                       engine_of(bank.target))] * -(-chunks // workers)
         stages.append(("stimulus.repetitions", parts.bench.repetitions, runs))
         stages += _more_banks(parts, events, per_repetition)
-        # the spiking read-outs: one per band and one of all, each on its inputs
-        fits += len(bank.bands) + 1
-    # every read-out fits on every split; a fit's iterations as the model selection's
-    # read-outs' (fit_seconds is per their summed iterations: material MLP, NMF, MLP)
-    per_fit = (ev.material_max_iter + ev.nmf_max_iter + ev.mlp_max_iter) / FITS_PER_SUM
-    stages.append(("evaluation.seeds", list(ev.seeds), [],
-                   fit_seconds(events, len(ev.seeds), fits * per_fit)))
+    stages.append(("evaluation.seeds", list(ev.seeds), [], readout_seconds(parts)))
     return stages_estimate("the bench set and its spiking read-out", stages)
 
 
-# the read-outs fit_seconds' constant was measured on (the model selection's per point)
-FITS_PER_SUM = 5
+# CPU seconds of one read-out's fit per training event (the mean over the 46 read-outs
+# ``readout_fits`` counts, NMF's filters apart), and of NMF's per filter and training event:
+# measured with the full profile's 48 read-outs (the two training-free ones ~0 s) on the split of seed 0 (8,959
+# training events), each fit on one BLAS thread, in CPU time (AMD EPYC Zen 5, AVX-512, 2
+# cores, load average 16-18): 114.6 s in all, NMF-n 1.47 s + 0.095 s per filter (NMF-3 1.46
+# s, NMF-72 8.47 s), the others 0.01-6.1 s each (the 300-epoch parametric material MLP the
+# longest, the 60-epoch material MLPs 1.3-3.1 s).
+READOUT_FIT_EVENT_S = 2.06e-4
+NMF_FILTER_EVENT_S = 1.06e-5
+
+
+def readout_fits(parts: Parts) -> tuple[int, int]:
+    """(read-outs fitted on each split, NMF filters among them): every FFT, parametric,
+    spiking MLP, tuned and coder read-out (not the two training-free spiking decoders, which
+    learn nothing), and the sum of ``nmf_dims``."""
+    ev = parts.evaluation
+    fits = len(ev.baselines(int(parts.processor.max_hz) + 1))
+    filters = sum(ev.nmf_dims) if "material" in ev.pipelines else 0
+    if parts.bank is not None:
+        fits += sum(set(SPIKING_SETS[inputs][0]) <= set(parts.bank.bands)
+                    for inputs, _, _ in SPIKING_MLPS.values())
+        tuned = parts.plan.tuned_plan()
+        if tuned is not None:
+            fits += len(TUNED_READOUTS) + (len(tuned.coders) * len(tuned.coder_sizes)
+                                           * (len(CODER_READOUTS) + 1))
+    return fits, filters
+
+
+def readout_seconds(parts: Parts) -> float:
+    """The read-outs' fits (``readout_fits``) on the training events of every split of
+    ``evaluation.seeds``, shared among the workers (``[spiking] workers``; in this process
+    without a spiking part)."""
+    ev = parts.evaluation
+    fits, filters = readout_fits(parts)
+    workers = (parts.plan.workers or max_workers()) if parts.bank is not None else 1
+    n_train = parts.bench.n_events * (1 - ev.test_fraction)
+    cpu = n_train * (fits * READOUT_FIT_EVENT_S + filters * NMF_FILTER_EVENT_S)
+    return len(ev.seeds) * cpu / max(1, min(workers, fits * len(ev.seeds)))
 
 
 def _more_banks(parts: Parts, events: int, per_repetition: int) -> list:
@@ -316,8 +345,10 @@ def _more_banks(parts: Parts, events: int, per_repetition: int) -> list:
         # each tuned bank's cost: the best of cost_repeats runs of the sample
         cost_runs = [(tuned.duration_s, dt_ms, n * plan.cost_sample_events, engine)
                      for n in sizes] * tuned.cost_repeats
-        curve_fits = fit_seconds(curve_events, 1, 2 * len(tuned.curve)
-                                 * parts.evaluation.mlp_max_iter / FITS_PER_SUM)
+        # per size the tuned bank's MLP and NMF-n's on the first split, and the FFT MLP once
+        curve_fits = (curve_events * (1 - parts.evaluation.test_fraction)
+                      * ((2 * len(tuned.curve) + 1) * READOUT_FIT_EVENT_S
+                         + sum(tuned.curve) * NMF_FILTER_EVENT_S))
         stages.append(("stimulus.repetitions", parts.bench.repetitions, every_event,
                        bench_seconds(calibration, parts.bench.n_jobs)))
         stages.append(("spiking.tuned.curve", tuned.curve, runs, curve_fits))

@@ -50,14 +50,18 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     for line in plan.left_out:
         log(f"      {line}")
     data, cmp, data_s = signal_stage(parts, stages, log, fresh)
-    extra = spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, scheduler)
-    log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
-        "repetition")
-    chosen, too_large = _fitting_nmf(parts.evaluation.baselines(cmp.features.sizes["freq_hz"]),
-                                     cmp.features, parts.evaluation)
-    if too_large:
-        log(f"      {too_large}")
-    cmp.results = cv.evaluate(cmp.features, chosen + extra, parts.evaluation, log)
+    # one set of workers for the spiking runs and the read-outs' fits (``[spiking] workers``;
+    # a spec without a spiking part fits in this process)
+    with executor(parts.plan.workers if parts.plan else 1, scheduler, log) as client:
+        extra = spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, client)
+        log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
+            "repetition")
+        chosen, too_large = _fitting_nmf(
+            parts.evaluation.baselines(cmp.features.sizes["freq_hz"]), cmp.features,
+            parts.evaluation)
+        if too_large:
+            log(f"      {too_large}")
+        cmp.results = cv.evaluate(cmp.features, chosen + extra, parts.evaluation, log, client)
     log(f"[{stages}/{stages}] report")
     summary = cmp.summary({"data_and_features_s": data_s,
                            "total_s": time.perf_counter() - t_start})
@@ -126,26 +130,25 @@ def left_out_by_position(everything, held) -> dict:
 
 
 def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
-                   scheduler) -> list:
-    """The bank over every event (cached) and the designs, on ``[spiking] workers`` or at
-    ``scheduler``; decoder inputs into ``cmp.features``, cost; the spiking decoders."""
+                  client) -> list:
+    """The bank over every event (cached) and the designs, on the Dask ``client``'s workers
+    (None: this process); decoder inputs into ``cmp.features``, cost; the spiking decoders."""
     bank = parts.bank
     if bank is None:
         return []
     log(f"{stage} spiking read-out: {bank.n_neurons} resonators per event "
         f"({', '.join(bank.bands)})"
         f", Brian2 {bank.target}, {bank.batch_events} events per chunk")
-    with executor(parts.plan.workers, scheduler, log) as client:
-        spikes = cached_features(data, bank, parts.bench, log, fresh, client)
-        cmp.features = decoder_inputs(cmp.features, spikes)
-        if parts.designs:
-            cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
-                                      run=partial(run_bank, client=client, progress=False),
-                                      repetitions=first_scored(
-                                          cmp.features, parts.plan.design_repetitions),
-                                      evaluation=parts.evaluation)
-        tuned = (tuned_stage(parts, data, cmp, log, fresh, client)
-                 if parts.plan.tuned_plan() else [])
+    spikes = cached_features(data, bank, parts.bench, log, fresh, client)
+    cmp.features = decoder_inputs(cmp.features, spikes)
+    if parts.designs:
+        cmp.designs = cv.run_designs(data, cmp.features, bank, parts.designs, log=log,
+                                  run=partial(run_bank, client=client, progress=False),
+                                  repetitions=first_scored(
+                                      cmp.features, parts.plan.design_repetitions),
+                                  evaluation=parts.evaluation)
+    tuned = (tuned_stage(parts, data, cmp, log, fresh, client)
+             if parts.plan.tuned_plan() else [])
     cmp.costs["spiking"] = run_cost(data, bank, parts.plan.cost_sample_events)
     neurons = neurons_per_input(spikes)
     neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
