@@ -311,6 +311,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.studies.gating_threshold.scenes.ThresholdSweep",
         "snn_antenna.studies.model_selection.plan.Selection",
         "snn_antenna.studies.model_selection.plan.Parts",
+        "snn_antenna.studies.model_selection.cost.PointCost",
         "snn_antenna.studies.quickstart.plan.Parts",
         "snn_antenna.studies.bank_tuning.plan.Parts",
         "snn_antenna.studies.bank_tuning.search.Scored",
