@@ -101,6 +101,13 @@ def studies_ran(out: str, tmp_path: Path) -> None:
     assert "the process's start and its report" in row["estimate_parts_s"]
 
 
+def lab_readouts_ran(out: str, tmp_path: Path) -> None:
+    rows = [line.split() for line in out.splitlines() if line.endswith(("meets", "MISSES"))]
+    tasks = {row[1] for row in rows}
+    assert tasks == {"material", "distance"}, out
+    assert any(row[0] == "mlp_parametric_material" for row in rows), out
+
+
 def sweep_ran(out: str, tmp_path: Path) -> None:
     record = cited(tmp_path / "bench.json", tmp_path)
     (grid,) = record["per_grid"].values()
@@ -124,6 +131,9 @@ SMALL_RUNS = {
                       "--set", "spiking.cost_sample_events=8"], coders_ran),
     "bench_events": (["--cost-only", "--cost-events", "4", "--sizes", "24",
                       "--json", "bench.json"], events_ran),
+    "bench_lab_readouts": (["--rate", "1000", "--work", "lab", "--set", "evaluation.seeds=[0]",
+                            "--set", "evaluation.nmf_dims=[3]", "--set", "spiking.workers=1"],
+                           lab_readouts_ran),
     "bench_stage_ceilings": (["--repetitions", "2", "--stages", "band_pass", "coded",
                               "--set", "evaluation.seeds=[0]",
                               "--set", "spiking.tuned.calibration_repetitions=2",
