@@ -36,6 +36,18 @@ def test_text_typed_into_a_table_is_caught(tmp_path):
     assert any("measured 3.5 ms" in p for p in problems)
 
 
+def test_a_list_of_labels_passes_and_a_number_typed_into_it_is_caught(tmp_path):
+    """A row whose values are listed by label ("I = 0.1: –, I = 0.15: [6.65](…)", a value
+    missing) cites each label from its source; a number typed among them is still caught."""
+    page, store = tmp_path / "results.md", tmp_path / "results"
+    shutil.copytree(SOURCES, store)
+    text = PAGE.read_text()
+    row = next(line for line in text.splitlines() if "I = 0.1: –, I = 0.15:" in line)
+    assert results.check_page(PAGE, SOURCES) == []
+    page.write_text(text.replace(row, row.replace("I = 0.1: –,", "I = 0.1: –, I = 9.5: –,"), 1))
+    assert any("I = 9.5" in p for p in results.check_page(page, store))
+
+
 def _checkout(tmp_path) -> Path:
     """A copy of the page, its sources and its folder's manifest, as another checkout has
     them (other inodes and times, the same content)."""
