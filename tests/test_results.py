@@ -447,10 +447,13 @@ def test_a_fragment_says_quick_or_full_and_shows_the_runs_figures(tmp_path):
     names = guides.run_figures("bank_tuning", summary, run)
     assert names == ["pareto_front.png"]                 # only the figures the guide reads
     guides.copy_figures("bank_tuning", names, run, store)
-    (store / "figures" / "bank_tuning" / "stale.png").write_bytes(b"old")
+    # a guide figure of an earlier run that this run did not draw goes; a file the command
+    # never writes there (a user's) stays
+    (store / "figures" / "bank_tuning" / "resonators_on_spectra.png").write_bytes(b"old")
+    (store / "figures" / "bank_tuning" / "mine.png").write_bytes(b"user's")
     guides.copy_figures("bank_tuning", names, run, store)
     assert sorted(p.name for p in (store / "figures" / "bank_tuning").iterdir()) == \
-        ["pareto_front.png"]
+        ["mine.png", "pareto_front.png"]
     text = guides.guide_fragment("bank_tuning", summary, names)
     assert "The full profile" in text and "ran in 13 min" in text
     assert "3 seeds, 24 trials, 12799 bench contacts" in text

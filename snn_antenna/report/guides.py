@@ -239,15 +239,17 @@ def stored_figures(study: str, summary: dict, store: Path) -> list[str]:
 
 
 def copy_figures(study: str, names: list[str], run_dir: Path, store: Path) -> None:
-    """Copy the run's guide figures ``names`` into ``store/figures/STUDY/``; a figure of an
-    earlier stored run that this run did not draw is removed (only a regular file the
-    results command wrote there: nothing else is followed or touched)."""
+    """Copy the run's guide figures ``names`` into ``store/figures/STUDY/``; a guide figure of
+    an earlier stored run that this run did not draw is removed (only a regular file named as
+    one of the study's ``GUIDE_FIGURES``, which only this command writes there: nothing else
+    is followed or touched)."""
     target = store / FIGURES / study
     target.mkdir(parents=True, exist_ok=True)
     for name in names:
         atomic_write(target / name, (run_dir / name).read_bytes())
     for entry in os.scandir(target):
         if entry.name.endswith(".png") and entry.name not in names \
+                and entry.name.removesuffix(".png") in GUIDE_FIGURES.get(study, {}) \
                 and entry.is_file(follow_symlinks=False):
             os.unlink(entry.path)
 
