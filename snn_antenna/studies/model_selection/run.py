@@ -55,8 +55,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         # first every point's calibration quantities; a candidate's predictions are then
         # read at its calibrated point alone (the choice never sees them), submitted as soon
         # as the candidate's last point is in so that the workers stay busy
-        calibrate = Batches(CalibratePoints(parts, fresh, quiet), per_run=1, client=client)
-        predict = Batches(PredictPoints(parts, fresh, quiet), per_run=1, client=client)
+        calibrate = Batches(PointsWork(calibration, parts, fresh, quiet), per_run=1, client=client)
+        predict = Batches(PointsWork(predictions, parts, fresh, quiet), per_run=1, client=client)
         pending = calibrate.submit(grid)
         points, predicting = [], []
         for i, ((physics, strength), run) in enumerate(zip(grid, pending), 1):
@@ -93,27 +93,16 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
 
 
 @dataclass(frozen=True)
-class CalibratePoints:
-    """``engine.batches.Batches`` work: grid points (mechanism, strength) → ``calibration``."""
+class PointsWork:
+    """``engine.batches.Batches`` work: grid points (mechanism, strength) → ``stage`` of each
+    (``calibration`` or ``predictions``, module functions, so the work pickles to a worker)."""
+    stage: Callable
     parts: Parts
     fresh: bool = False
     log: Callable = print
 
     def __call__(self, points: list) -> list:
-        return [calibration(self.parts, physics, strength, self.log, self.fresh)
-                for physics, strength in points]
-
-
-@dataclass(frozen=True)
-class PredictPoints:
-    """``engine.batches.Batches`` work: calibrated points (mechanism, strength) →
-    ``predictions``."""
-    parts: Parts
-    fresh: bool = False
-    log: Callable = print
-
-    def __call__(self, points: list) -> list:
-        return [predictions(self.parts, physics, strength, self.log, self.fresh)
+        return [self.stage(self.parts, physics, strength, self.log, self.fresh)
                 for physics, strength in points]
 
 
