@@ -153,6 +153,9 @@ def test_expected_warnings_stay_out_of_the_terminal_but_in_the_run_log(tmp_path)
     kept = (tmp_path / "run.log").read_text()
     assert "has NaN" in kept and "overflow encountered" in kept and "[1/2] mapping" in kept
     assert "something nobody expected" in kept
+    # each line the run says is timed from its start in the file (the terminal stays plain)
+    assert re.search(r"^\+ *\d+\.\d s  \[1/2\] mapping$", kept, re.M)
+    assert "[1/2] mapping" in lines
     # once the block is closed the filter is gone from Brian2's console handler
     assert not BrianLogger.console_handler.filters
 

@@ -12,6 +12,7 @@ import functools
 import logging
 import re
 import sys
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -52,7 +53,9 @@ class LogFile:
                 smap = accuracy.stability_map(...)
 
     Brian2's log messages and Python warnings (which Brian2 routes through ``logging``) are
-    written to the file as they come. A re-run appends, under a line naming its start.
+    written to the file as they come. A re-run appends, under a line naming its start. In the
+    file, each line the run says carries the seconds since that start (``+  72.5 s``), so a
+    run's stages can be timed after the fact (what the estimates are checked against).
     """
 
     def __init__(self, out_dir: str | Path, echo=print, name: str = "run.log"):
@@ -77,6 +80,7 @@ class LogFile:
         # never through a symlink, and an existing log keeps the mode its owner gave it
         self._file = open_append(self.path)
         self._started = True
+        self._t0 = time.monotonic()
         self._write(f"=== run started {_dt.datetime.now(_dt.UTC).isoformat()} "
                     f"({' '.join(sys.argv)})")
         # Python warnings through logging (as Brian2 sets up at import), re-armed in case
@@ -109,7 +113,10 @@ class LogFile:
     def __call__(self, *message) -> None:
         text = " ".join(str(m) for m in message)
         self.echo(text)
-        self._write(text)
+        if not getattr(self, "_started", True):
+            self._start()
+        t0 = getattr(self, "_t0", None)
+        self._write(text if t0 is None else f"+{time.monotonic() - t0:7.1f} s  {text}")
 
     def _write(self, text: str) -> None:
         if not getattr(self, "_started", True):
