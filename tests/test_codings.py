@@ -104,14 +104,14 @@ def test_an_estimate_follows_the_load_from_its_probes_to_now(tmp_path, monkeypat
     power = rates.SLOWDOWN_POWER
     assert rates.slowdown(0.5) == 1.0 and rates.slowdown(5.0) == pytest.approx(3.0 ** power)
     # no probe: from the load the table was measured at
-    monkeypatch.setattr(rates.os, "getloadavg", lambda: (rates.TABLE_LOAD, 0.0, 0.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: rates.TABLE_LOAD)
     factor, note = rates.load_factor()
     assert factor == pytest.approx(1.0) and f"table at {rates.TABLE_LOAD:.1f}" in note
     path = tmp_path / "rates" / f"{rates.probe_key()}.json"
     path.parent.mkdir()
     path.write_text(json.dumps({"rates": {}, "when": "2026-01-01 00:00 UTC",
                                 "load_average": 3.0}))
-    monkeypatch.setattr(rates.os, "getloadavg", lambda: (7.0, 0.0, 0.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: 7.0)
     factor, note = rates.load_factor()
     assert factor == pytest.approx((4.0 / 2.0) ** power) and "probe at 3.0" in note
     from snn_antenna.core import spec as specs
@@ -119,7 +119,32 @@ def test_an_estimate_follows_the_load_from_its_probes_to_now(tmp_path, monkeypat
 
     spec = specs.load("studies/tuning_sweep.toml", [], quick=True)
     busy = runner("tuning_sweep").plan(spec).estimate()
-    monkeypatch.setattr(rates.os, "getloadavg", lambda: (3.0, 0.0, 0.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: 3.0)
     calm = runner("tuning_sweep").plan(spec).estimate()
     assert busy.seconds == pytest.approx(2 ** power * calm.seconds)
     assert f"×{2 ** power:.2f}" in busy.rate.source
+
+
+def test_niced_work_does_not_count_against_an_ordinary_run(monkeypatch):
+    """The competing load is the load average times the ordinary (not niced) share of the
+    busy CPU time watched; a machine busy only with niced work is idle to a study."""
+    monkeypatch.setattr(rates.os, "getloadavg", lambda: (4.0, 0.0, 0.0))
+    monkeypatch.setattr(rates.time, "sleep", lambda s: None)
+
+    def watch(*splits):
+        ticks = iter(splits)
+        monkeypatch.setattr(rates, "_cpu_times", lambda: next(ticks))
+        rates._watched.clear()
+        return rates.competing_load()
+
+    assert watch((100.0, 100.0), (110.0, 130.0)) == pytest.approx(1.0)   # 10 of 40 ordinary
+    assert watch((100.0, 100.0), (100.0, 140.0)) == pytest.approx(0.0)   # all of it niced
+    assert watch((100.0, 100.0), (140.0, 100.0)) == pytest.approx(4.0)   # none niced
+    assert watch((100.0, 100.0), (100.0, 100.0)) == pytest.approx(4.0)   # nothing busy
+    assert watch(None) == pytest.approx(4.0)                             # no /proc/stat
+    # one estimate asks several times within a watch: the machine is watched once
+    assert rates.competing_load() == pytest.approx(4.0)
+    # the real /proc/stat of this machine gives a load between 0 and the load average
+    monkeypatch.undo()
+    rates._watched.clear()
+    assert 0.0 <= rates.competing_load() <= rates.os.getloadavg()[0] + 1.0

@@ -16,7 +16,7 @@ from snn_antenna.studies import runner
 def empty_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("SNN_ANTENNA_CACHE", str(tmp_path))
     # the load the table was measured at, through every estimate of a test
-    monkeypatch.setattr(rates.os, "getloadavg", lambda: (rates.TABLE_LOAD, 0.0, 0.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: rates.TABLE_LOAD)
     return tmp_path
 
 

@@ -85,7 +85,7 @@ def test_a_28_hour_scene_shows_its_estimate_and_needs_yes(tmp_path, capsys, monk
     from snn_antenna.engine import rates
 
     monkeypatch.setenv("SNN_ANTENNA_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(rates.os, "getloadavg", lambda: (rates.TABLE_LOAD, 0.0, 0.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: rates.TABLE_LOAD)
     line = refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / "o"),
                             "--set", "stimulus.duration_s=20000"], "stimulus.duration_s")
     assert "--yes" in line and " h" in line

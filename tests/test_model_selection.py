@@ -263,7 +263,7 @@ def test_predictions_at_calibrated_points_are_those_of_measuring_every_point(tri
 def test_the_estimate_is_the_sum_of_the_plans_parts(monkeypatch):
     """Every grid point's bench set and calibration, each candidate's predictions, shared by
     the workers; the workers' start once; the parts named in the line --check prints."""
-    monkeypatch.setattr(os, "getloadavg", lambda: (0.0, 0.0, 0.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: 0.0)
     monkeypatch.setattr(rates, "load_factor", lambda: (1.0, ""))
     parts = ms.plan(specs.load(SPEC)).parts
     points = sum(len(c.strengths) for c in parts.selection.candidates)
@@ -284,6 +284,6 @@ def test_the_estimate_is_the_sum_of_the_plans_parts(monkeypatch):
         pytest.approx(2 * (cost.bench - ms_cost.POINT_S))
     assert ms_cost.point_cost(more).calibration == pytest.approx(2 * cost.calibration)
     # at a load of 3, each worker is one of 3 + 2 processes sharing the cores
-    monkeypatch.setattr(os, "getloadavg", lambda: (3.0, 3.0, 3.0))
+    monkeypatch.setattr(rates, "competing_load", lambda: 3.0)
     assert ms_cost.estimate(parts, 2).seconds - start == pytest.approx(
         (work / 2) * rates.slowdown(4.0))

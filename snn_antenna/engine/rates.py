@@ -140,24 +140,64 @@ SLOWDOWN_POWER = 0.6
 
 
 def slowdown(load: float) -> float:
-    """How much slower a new process runs at ``load`` (the 1-minute load average) than on
-    an idle machine: the share of the cores each of the ``load`` + 1 runnable processes
-    would get, none more than one core, to the power ``SLOWDOWN_POWER`` (measured)."""
+    """How much slower a new process runs at ``load`` (``competing_load``) than on an idle
+    machine: the share of the cores each of the ``load`` + 1 runnable processes would get,
+    none more than one core, to the power ``SLOWDOWN_POWER`` (measured)."""
     return max(1.0, (float(load) + 1.0) / (os.cpu_count() or 1)) ** SLOWDOWN_POWER
+
+
+# How long ``competing_load`` watches the CPU's time split (a --check's cost)
+LOAD_SAMPLE_S = 0.3
+
+
+def _cpu_times() -> tuple[float, float] | None:
+    """(busy at nice 0 or below, busy niced) jiffies of all CPUs since boot, from
+    /proc/stat; None where there is none."""
+    try:
+        with open("/proc/stat") as stat:
+            fields = [float(v) for v in stat.readline().split()[1:8]]
+    except (OSError, ValueError):
+        return None
+    user, nice, system, _idle, _iowait, irq, softirq = fields
+    return user + system + irq + softirq, nice
+
+
+_watched: list = []    # [(monotonic time, competing load)] of the last watch
+
+
+def competing_load(sample_s: float = LOAD_SAMPLE_S) -> float:
+    """The load a new process of ordinary priority shares the cores with: the 1-minute load
+    average times the share of the CPU's busy time that runs at nice 0 or below, watched for
+    ``sample_s``. Processes under ``nice`` yield their cores to it (a nice-10 process weighs
+    a tenth of a nice-0 one), so a machine busy only with niced work runs a study as an idle
+    one would; the load average alone counts them all. One estimate asks several times:
+    a watch serves for ``LOAD_SAMPLE_S`` × 10."""
+    if _watched and time.monotonic() - _watched[0][0] < 10 * sample_s:
+        return _watched[0][1]
+    load = os.getloadavg()[0]
+    before = _cpu_times()
+    if before is not None:
+        time.sleep(sample_s)
+        ordinary, niced = (a - b for a, b in zip(_cpu_times(), before))
+        if ordinary + niced > 0:
+            load *= ordinary / (ordinary + niced)
+    _watched[:] = [(time.monotonic(), load)]
+    return load
 
 
 def load_factor() -> tuple[float, str]:
     """The factor from the load the rates were measured at (the stored probe's, else the
-    table's ``TABLE_LOAD``) to the machine's load now, and a line saying so."""
+    table's ``TABLE_LOAD``) to the load a run would compete with now (``competing_load``),
+    and a line saying so."""
     try:
         stored = json.loads(_path().read_text())
         then, what = float(stored["load_average"]), "probe"
     except (OSError, ValueError, KeyError, TypeError):
         then, what = TABLE_LOAD, "table"
-    now = os.getloadavg()[0]
+    now = competing_load()
     factor = slowdown(now) / slowdown(then)
-    return factor, (f"at load {now:.1f} ({what} at {then:.1f}, {os.cpu_count()} cores): "
-                    f"×{factor:.2f}")
+    return factor, (f"at load {now:.1f} (not niced; {what} at {then:.1f}, "
+                    f"{os.cpu_count()} cores): ×{factor:.2f}")
 
 
 def sources(table_: dict[str, dict[str, Rate]]) -> str:
@@ -397,7 +437,7 @@ def probe(log=print) -> dict[str, dict[str, Rate]]:
     make_folder(path.parent)
     atomic_write(path, json.dumps({
         "rates": measured, "when": dt.datetime.now(dt.UTC).strftime("%Y-%m-%d %H:%M UTC"),
-        "machine": machine(), "load_average": os.getloadavg()[0]}, indent=1) + "\n")
+        "machine": machine(), "load_average": competing_load()}, indent=1) + "\n")
     return rates()
 
 

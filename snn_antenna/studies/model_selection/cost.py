@@ -75,7 +75,7 @@ def point_cost(parts) -> PointCost:
 def _slowdown(workers: int) -> float:
     """Wall seconds per CPU second of each of ``workers`` processes started among the
     machine's load now."""
-    return rates.slowdown(os.getloadavg()[0] + workers - 1)
+    return rates.slowdown(rates.competing_load() + workers - 1)
 
 
 def wall_factor(workers: int) -> float:
@@ -108,7 +108,7 @@ def estimate(parts, workers: int) -> JobEstimate:
     seconds = [s[3] * factor for s in stages]
     what = (f"{points} grid points of {parts.bench.n_events:,} events on {workers} "
             f"worker(s), each ×{_slowdown(workers):.2g} slower at load "
-            f"{os.getloadavg()[0]:.1f}: bench sets and features {_short(seconds[0])}, "
+            f"{rates.competing_load():.1f} (not niced): bench sets and features {_short(seconds[0])}, "
             f"calibration read-outs {_short(seconds[1])}, predicted read-outs at {candidates} "
             f"calibrated points {_short(seconds[2])}"
             + (f", workers' start {_short(seconds[3])}" if workers > 1 else "")
