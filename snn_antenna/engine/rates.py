@@ -185,6 +185,22 @@ def competing_load(sample_s: float = LOAD_SAMPLE_S) -> float:
     return load
 
 
+def rates_load() -> float:
+    """The load the rates in use were measured at: the stored probe's, else the table's."""
+    try:
+        return float(json.loads(_path().read_text())["load_average"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return TABLE_LOAD
+
+
+def measured_at(seconds: float, load: float) -> float:
+    """``seconds`` of work measured at ``load``, in the terms of the rates in use (measured at
+    ``rates_load``): what ``load_factor`` then scales to the load now. A study's own constant
+    (a reference solver's CPU per neuron, a bench event's making) states the load it was
+    measured at through this."""
+    return seconds * slowdown(rates_load()) / slowdown(load)
+
+
 def load_factor() -> tuple[float, str]:
     """The factor from the load the rates were measured at (the stored probe's, else the
     table's ``TABLE_LOAD``) to the load a run would compete with now (``competing_load``),

@@ -4,10 +4,12 @@ every sweep's settings, checked before any simulation; its cost."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import check
+from ...engine import rates
 from ...engine.cost import engine_of, stages_estimate
 from ...engine.devices import DTYPES, RUNTIME_TARGETS, TARGETS, TuningStimuli
 from ...engine.devices import WARM_UP_MS as DEVICE_WARM_UP_MS
@@ -141,10 +143,20 @@ def plan(spec: dict) -> Plan:
 
 
 # CPU seconds of the exact reference (solve_ivp, rtol 1e-10, ``networks.reference``) per
-# neuron and simulated second: 16.2 s for the tuning scene (288 neurons x 2 s), 9.1 s for
-# the quickstart scene (24 x 16 s), 0.8 s for the bench (24 x 2 s) in the full profile's
-# log, AMD EPYC 2 cores (load 4-8); the tightest of the three, so the estimate errs long.
-REFERENCE_S_PER_NEURON_S = 0.03
+# neuron, simulated second and Hz of the neuron's preferred frequency: its steps follow the
+# oscillation. The full profile's log (AMD EPYC 2 cores, load 2): 16.6 s for the tuning scene
+# (288 neurons x 2 s, mean 15.9 Hz), 9.2 s for the quickstart scene (24 x 16 s), 4.2 s for
+# the low band's sample events (24 x 8 x 0.5 s, mean 22 Hz), 39 s and 73 s for the high and
+# rod bands' (twice 24 x 8 x 0.5 s, mean 190 and 218 Hz): 1.0e-3 to 1.8e-3; the highest.
+REFERENCE_S_PER_NEURON_S_HZ = 1.8e-3
+REFERENCE_LOAD = 2.0    # the load it was measured at (``rates.measured_at``)
+
+
+def _mean_hz(band_hz) -> float:
+    """The mean preferred frequency of neurons spaced evenly in log frequency over
+    ``band_hz``."""
+    lo, hi = (float(f) for f in band_hz)
+    return lo if hi <= lo else (hi - lo) / math.log(hi / lo)
 
 
 def _sampled(seconds: float, dt_ms: float, n: int, engine: str) -> list:
@@ -173,7 +185,7 @@ def estimate(parts: Parts):
     check_scene = check_scene if check_scene in scenes else scenes[0]
     # the convergence check: the check scene again, tighter (about twice the work)
     neuron_s += 2 * size.get(check_scene, array.n_neurons) * seconds[check_scene]
-    references = neuron_s * REFERENCE_S_PER_NEURON_S
+    references = neuron_s * _mean_hz(array.band_hz) * REFERENCE_S_PER_NEURON_S_HZ
     # the main sweep: one compiled run, a group per method and dt holding every scene's
     # neurons for the longest scene (engine.settings_runs); then per scene and method one
     # timed sample on the sweep's target, at its finest step (main_sweep)
@@ -209,7 +221,8 @@ def estimate(parts: Parts):
         calibrated = name in bands.calibrate
         # the exact reference of the sample events (again at the recalibrated Hz per k)
         band_references += ((2 if calibrated else 1) * events * band.n_neurons
-                            * bands.duration_s * REFERENCE_S_PER_NEURON_S)
+                            * bands.duration_s * _mean_hz(band.band_hz)
+                            * REFERENCE_S_PER_NEURON_S_HZ)
         # the small-signal setting, then every method at its candidate steps (at the band's
         # own Hz per k: a recalibration moves them little): one compiled run of them all
         # over the sample events (at two Hz per k); then the small-signal setting and each
@@ -240,6 +253,8 @@ def estimate(parts: Parts):
                           (bands.tuning_duration_s, chosen, tuned, "codings")]
     precision = parts.precision
     points = precision.n_k * len(precision.amplitudes) * precision.n_freqs
+    references = rates.measured_at(references, REFERENCE_LOAD)
+    band_references = rates.measured_at(band_references, REFERENCE_LOAD)
     return stages_estimate("the references, the method x dt sweep, the cost sweep, the "
                            "stability map, the bench bands and the precision grid", [
         ("reference.rtol", parts.reference.rtol, [], references),
