@@ -130,6 +130,7 @@ def test_niced_work_does_not_count_against_an_ordinary_run(monkeypatch):
     busy CPU time watched; a machine busy only with niced work is idle to a study."""
     monkeypatch.setattr(rates.os, "getloadavg", lambda: (4.0, 0.0, 0.0))
     monkeypatch.setattr(rates.time, "sleep", lambda s: None)
+    monkeypatch.setattr(rates, "_autogroups", lambda: False)
 
     def watch(*splits):
         ticks = iter(splits)
@@ -143,6 +144,13 @@ def test_niced_work_does_not_count_against_an_ordinary_run(monkeypatch):
     assert watch((100.0, 100.0), (100.0, 100.0)) == pytest.approx(4.0)   # nothing busy
     assert watch(None) == pytest.approx(4.0)                             # no /proc/stat
     # one estimate asks several times within a watch: the machine is watched once
+    assert rates.competing_load() == pytest.approx(4.0)
+    # where the kernel shares the CPU by session first, another session's niced work
+    # competes in full: the load average as it is
+    monkeypatch.setattr(rates, "_autogroups", lambda: True)
+    ticks = iter([(100.0, 100.0), (100.0, 140.0)])
+    monkeypatch.setattr(rates, "_cpu_times", lambda: next(ticks))
+    rates._watched.clear()
     assert rates.competing_load() == pytest.approx(4.0)
     # the real /proc/stat of this machine gives a load between 0 and the load average
     monkeypatch.undo()

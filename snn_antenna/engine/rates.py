@@ -165,17 +165,29 @@ def _cpu_times() -> tuple[float, float] | None:
 _watched: list = []    # [(monotonic time, competing load)] of the last watch
 
 
+def _autogroups() -> bool:
+    """Whether the kernel shares the CPU among sessions first (``sched_autogroup``): then
+    a process's nice weighs only against its own session's, and another session's niced
+    work competes in full."""
+    try:
+        with open("/proc/sys/kernel/sched_autogroup_enabled") as flag:
+            return flag.read().strip() == "1"
+    except OSError:
+        return False
+
+
 def competing_load(sample_s: float = LOAD_SAMPLE_S) -> float:
     """The load a new process of ordinary priority shares the cores with: the 1-minute load
     average times the share of the CPU's busy time that runs at nice 0 or below, watched for
     ``sample_s``. Processes under ``nice`` yield their cores to it (a nice-10 process weighs
     a tenth of a nice-0 one), so a machine busy only with niced work runs a study as an idle
-    one would; the load average alone counts them all. One estimate asks several times:
-    a watch serves for ``LOAD_SAMPLE_S`` × 10."""
+    one would; the load average alone counts them all. Where the kernel groups processes by
+    session (``_autogroups``), nice yields nothing across sessions: the load average, whole.
+    One estimate asks several times: a watch serves for ``LOAD_SAMPLE_S`` × 10."""
     if _watched and time.monotonic() - _watched[0][0] < 10 * sample_s:
         return _watched[0][1]
     load = os.getloadavg()[0]
-    before = _cpu_times()
+    before = None if _autogroups() else _cpu_times()
     if before is not None:
         time.sleep(sample_s)
         ordinary, niced = (a - b for a, b in zip(_cpu_times(), before))
