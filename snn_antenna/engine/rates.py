@@ -40,49 +40,47 @@ class Rate:
 
 
 # The rates of this machine class as its probe (``probe``, below) measured them, for a
-# machine without a probe of its own: AMD EPYC (Zen 5, AVX-512), 2 cores, shared, at a load
-# average of 12.9 (``TABLE_LOAD``; every estimate scales them to the load it runs at), probed
-# `python benchmarks/bench_studies.py --probe --profile quick` on 2026-11-29. Where a probe
-# of the same machine at load 15.1 measured otherwise, the value named in a comment.
-# neuron_steps_per_s: per ONE worker process (points x steps / wall time, compile excluded);
-# steps_per_s: time steps per second of ONE small network (tens of neurons, spike monitor),
-# where the per-step overhead rather than the neurons sets the pace.
+# machine without a probe of its own: AMD EPYC (Zen 5, AVX-512), 2 cores, as idle (the probe
+# ran in a session the scheduler weighed ten times the other work on the machine, all of it
+# niced; ``TABLE_LOAD`` is this machine's load average with nothing else running; every
+# estimate scales the rates from it to the load it meets), probed with
+# `SNN_ANTENNA_CACHE=/tmp/p python -c "from snn_antenna.engine import rates; rates.probe()"`
+# on 2026-11-29. neuron_steps_per_s: per ONE worker process (points x steps / wall time,
+# compile excluded); steps_per_s: time steps per second of ONE small network (tens of neurons,
+# spike monitor), where the per-step overhead rather than the neurons sets the pace.
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
 TABLE = {
     # standalone (the fused sweep and event engines, float64), not probed: `python
     # benchmarks/bench_sweep.py --sizes 1000000 --runtime-max 0 --naive-sample 1` measured
-    # 9.3e8 idle on one core and 3.6e8 on 10^5 points under heavy load; a third of the idle
-    # rate. codings: 2.9e8 in the probe at load 15.1 (2.3e7 at 12.9 was a noisy difference,
-    # 1.9e8 at load 0.75): taken between.
-    "neuron_steps_per_s": {"numpy": 2.8e7, "cython": 5.0e7, "standalone": 3.0e8,
-                           "codings": 1.0e8},
+    # 9.3e8 idle on one core
+    "neuron_steps_per_s": {"numpy": 9.6e7, "cython": 1.3e8, "standalone": 9.3e8,
+                           "codings": 1.7e8},
     # (codings, standalone: the compiled loop's own cost per step, about a microsecond; a
     # run's own cost is its binary's start, in run_s)
-    "steps_per_s": {"numpy": 8.0e3, "cython": 4.6e4, "standalone": 1.0e6, "codings": 1.0e6},
-    # a project compiled from scratch (the probe's codings project, in an empty cache: 24 s
-    # at load 12.9, 21 s at 15.1) and the offline array's network on cython (48 s, 44 s)
-    "compile_s": {"standalone": 22.0, "codings": 22.0, "cython": 46.0},
+    "steps_per_s": {"numpy": 2.3e4, "cython": 1.1e5, "standalone": 1.0e6, "codings": 1.0e6},
+    # a project compiled from scratch (the probe's codings project, in an empty cache) and
+    # the offline array's network on cython
+    "compile_s": {"standalone": 4.6, "codings": 4.6, "cython": 11.1},
     # a compiled project found on disk by a new process: its code generated again and its
-    # main file recompiled (18.5 s at load 15.1)
-    "rebuild_s": {"standalone": 17.0, "codings": 17.0},
+    # main file recompiled
+    "rebuild_s": {"standalone": 2.3, "codings": 2.3},
     # a run's own cost beside its steps: building the network and its code objects (runtime
-    # targets); the binary's start, its inputs written and its results read (compiled)
-    "run_s": {"numpy": 0.26, "cython": 0.30, "codings": 0.2, "standalone": 0.5},
+    # targets); the binary's start, its inputs written and its results read (compiled;
+    # standalone not probed: 0.5 s at load 12.9, scaled)
+    "run_s": {"numpy": 0.11, "cython": 0.15, "codings": 0.01, "standalone": 0.2},
     # Python's own work, seconds each: a study process's start (Python, Brian2, matplotlib
     # and the package imported) and its report; one window of a rate map through the contact
     # rule (``ContactDetector.detect``)
     # closed_loop_chunk: the exploration loop's Python per chunk of 10 ms (moving the robot,
-    # coding its samples, feeding them): the loop ran 6.5 s (numpy) and 12 s (cython) in 68 s
-    # and 67 s at load 21, about 3 s per simulated second beside Brian2's steps at load 12.9,
-    # 2 s by the whole full profile's run at load 16. report: the probe's six figures took
-    # 0.6 s, a study's whole report (its figures, pages, summary and stores) 6 to 11 s (the
-    # full tuning sweep's: 11 s at load 15)
-    "python_s": {"study_start": 10.2, "report": 6.0, "readout_window": 3.2e-4,
-                 "closed_loop_chunk": 0.02},
+    # coding its samples, feeding them): about 3 s per simulated second beside Brian2's steps
+    # at load 12.9, scaled. report: a study's whole report (its figures, pages, summary and
+    # stores) took 6 to 11 s at load 15, scaled (the probe's six figures alone: 0.3 s)
+    "python_s": {"study_start": 3.1, "report": 2.5, "readout_window": 1.5e-4,
+                 "closed_loop_chunk": 0.008},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 # the load average the table was measured at (its rates are scaled from it, ``load_factor``)
-TABLE_LOAD = 12.9
+TABLE_LOAD = 1.3
 
 
 def table() -> dict[str, dict[str, Rate]]:

@@ -98,9 +98,9 @@ def estimate(parts: Parts):
 LOOP_MODULE = "snn_antenna.networks.assembly"
 # A part of the loop on cython costs this many compiles of the offline array's network (its
 # synapses, monitors and operations are code objects too): the full profile in a new
-# environment took 722 s at load 15 to 19.5 (2 cores, niced), about 620 s of it compiling
-# its four parts, 11.5 of the probe's compiles at the table's load.
-LOOP_PART_COMPILES = 3.0
+# environment took 59 s at load 2 (2 cores), about 29 s of it compiling its four parts,
+# 0.65 of the probe's compile each.
+LOOP_PART_COMPILES = 0.65
 
 
 def loop_network(part: str) -> str:

@@ -237,8 +237,8 @@ def make_parts(spec: dict) -> Parts:
 
 def estimate(parts: Parts):
     """Every Brian2 run of the study: the sweep's codings, Fig. 9's, the gate's training and
-    the evaluation at its seed budget (``evaluation.max_seeds``), codings grouped as the
-    study groups them and shared among its workers."""
+    the evaluation at ``expected_seeds``, codings grouped as the study groups them and shared
+    among its workers."""
     sw, array, ev = parts.sweep, parts.array, parts.evaluation
     workers = sw.workers or max_workers()
     engine = codings_engine(sw.target or array.target)
@@ -269,14 +269,14 @@ def estimate(parts: Parts):
              codings(n_held * (n_th + 2 + len(ev.coders)), longest))])
     profiles = len(parts.held_out_speeds) + 2 + (
         2 if ev.other_terrain != parts.scene.terrain else 0)
-    scenes = ev.max_seeds * profiles
+    scenes = expected_seeds(ev) * profiles
     recall = [(sw.scene_s, parts.gate.dt_ms, (parts.gate.n_speed_neurons + 2) * scenes,
                engine_of(parts.gate.target))]
     windows = sw.scene_s / parts.readout.window_s   # each coding's rate map, read in Python
     n_sweep, n_fig9 = n_v * sw.n_scenes * n_th, len(LOW_HIGH_CM_S) * sw.n_scenes * 3
     n_evaluated = scenes * (n_th + 3)
-    return stages_estimate("the threshold sweep, Fig. 9, the gate and the evaluation (at "
-                           "its seed budget)", [
+    return stages_estimate(f"the threshold sweep, Fig. 9, the gate and the evaluation (at "
+                           f"{expected_seeds(ev)} seeds of its budget of {ev.max_seeds})", [
         ("sweep.n_scenes", sw.n_scenes, codings(n_sweep),
          readout_seconds(n_sweep, windows, workers)),
         ("sweep.n_scenes", sw.n_scenes, codings(n_fig9),
@@ -284,6 +284,13 @@ def estimate(parts: Parts):
         gate,
         ("evaluation.max_seeds", ev.max_seeds, codings(n_evaluated) + recall,
          readout_seconds(n_evaluated, windows, workers))])
+
+
+def expected_seeds(ev: EvaluationSettings) -> int:
+    """The seeds an evaluation is expected to run: its pilot's, and as many again (the
+    pilot's spread decides, up to ``max_seeds``; the full profile's run needed 8 after a
+    pilot of 5)."""
+    return min(ev.max_seeds, 2 * ev.pilot_seeds)
 
 
 def sweep_settings(spec: dict, parts: Parts | None = None) -> dict:
