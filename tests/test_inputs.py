@@ -80,12 +80,12 @@ def test_a_long_value_is_cut_in_the_message(tmp_path, capsys):
 
 
 def test_a_28_hour_scene_shows_its_estimate_and_needs_yes(tmp_path, capsys, monkeypatch):
-    # at the load the rates were measured at, with no probe: an idle machine runs this
-    # scene in under an hour, and a scene long enough for that would not fit in memory
+    # on a busy machine (a load of 13 on the table's rates, no probe) this scene takes over
+    # an hour, and a scene long enough for that on an idle one would not fit in memory
     from snn_antenna.engine import rates
 
     monkeypatch.setenv("SNN_ANTENNA_CACHE", str(tmp_path / "cache"))
-    monkeypatch.setattr(rates, "competing_load", lambda: rates.TABLE_LOAD)
+    monkeypatch.setattr(rates, "competing_load", lambda: 13.0)
     line = refused(capsys, ["run", QUICKSTART, "--quick", "--out", str(tmp_path / "o"),
                             "--set", "stimulus.duration_s=20000"], "stimulus.duration_s")
     assert "--yes" in line and " h" in line

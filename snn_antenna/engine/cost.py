@@ -116,9 +116,10 @@ def estimate(grid: Grid, sweep, chunk_points: int, workers: int) -> Estimate:
     # process imports (measured: 14 s from the cluster's start to its first chunk's work
     # beside the compile, tuning sweep at load 15)
     parts = {"neurons": neuron_steps / (rate.value * workers),
-             "chunks' steps and starts": per_chunk * -(-chunks // workers),
-             "the workers' start": table["python_s"]["study_start"].value}
-    seconds += parts["the workers' start"]
+             "chunks' steps and starts": per_chunk * -(-chunks // workers)}
+    if workers > 1:     # one worker: the sweep runs in the study's own process
+        parts["the workers' start"] = table["python_s"]["study_start"].value
+        seconds += parts["the workers' start"]
     build = None
     if sweep.engine == "standalone":
         # a chunk holds the grid's block (``group_size``, set by ``for_grid``) at most
@@ -281,18 +282,17 @@ def stages_estimate(what: str, stages: list[tuple]) -> JobEstimate:
 def gate_training_runs(gate, n_train: int, n_test: int, copies: int = 1) -> list:
     """The Brian2 run that trains a ``networks.gate.SpeedGate``: every epoch presents each
     training speed for ``present_s``, and ``curve_points + 1`` recall blocks present each test
-    speed (its learning curve)."""
+    speed (its learning curve); its steps cost ``GATE_GROUPS`` small networks' each."""
     presented = (gate.epochs * n_train + (gate.curve_points + 1) * n_test) * gate.present_s
-    run = (presented, gate.dt_ms, (gate.n_speed_neurons + 2) * copies, engine_of(gate.target),
-           Build("speed gate", gate.compiled()))
-    return [run] * GATE_GROUPS
+    return [(presented * GATE_GROUPS, gate.dt_ms, (gate.n_speed_neurons + 2) * copies,
+             engine_of(gate.target), Build("speed gate", gate.compiled()))]
 
 
 # The gate's network steps its groups, synapses and monitors each, every one at a small
-# network's per-step cost: the exploration study's training (43,200 and 64,800 steps at dt
-# 1 ms, numpy) took 34 s and 121 s at load 21 on 2 cores, 4 and 11 times one small
-# network's steps; 6 made the whole full profile's estimate 1.5 times its run at load 16.
-GATE_GROUPS = 4
+# network's per-step cost: its training took 3.6 s in the exploration's quick profile and
+# about 9 s in the gating study's full one (beside its Dask workers' codings), at this
+# machine's idle rates 1.9 and 4.6 times one small network's steps.
+GATE_GROUPS = 2.5
 
 
 # A bench set's cost: generating its contact events and extracting their features, per event

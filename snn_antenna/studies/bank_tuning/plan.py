@@ -8,7 +8,8 @@ from dataclasses import dataclass, field, replace
 from ...core import bounds
 from ...core import spec as specs
 from ...core.errors import SpecError, check, is_number
-from ...engine.cost import bench_seconds, stages_estimate
+from ...engine import rates
+from ...engine.cost import bench_seconds, max_workers, stages_estimate
 from ...evaluation import crossval as cv
 from ...readout import events
 from ...readout.band_tuning import Tuning
@@ -172,19 +173,23 @@ def plan(spec: dict) -> Plan:
 
 
 FIT_S_PER_CONTACT = 60.0 / 12800   # the read-outs' fits, per evaluated contact and split
+MEASURED_LOAD = 8.0                # the load the constants below were measured at
 
 
 def estimate(parts: Parts):
-    """The bench set, the tuning contacts, a bank run per trial and per front bank (on the
-    bench set). Measured on this project's 2-core machine under a load of ~8: a trial ~30 ms
-    per tuning contact with its inner MLPs (12 trials on 512 contacts: 4 min, compiles
-    included), a front bank ~6 ms per evaluated contact (400 contacts per 2.2 s chunk) and
-    ~30 s of compiling and MLPs, and the read-outs' fits per split 60 s on 12,800 contacts
-    (2 s for 2 splits of 256 contacts in the quick profile, load 14)."""
+    """The bench set, the tuning contacts, a bank run per trial (the trials shared among the
+    Dask workers) and per front bank (on the bench set). Measured on this project's 2-core
+    machine under a load of ~8: a trial ~30 ms per tuning contact with its inner MLPs (12
+    trials on 512 contacts: 4 min, compiles included), a front bank ~6 ms per evaluated
+    contact (400 contacts per 2.2 s chunk) and ~6 s of code generation and MLPs (the quick
+    profile's whole run took 25 s at an idle share), and the read-outs' fits per split 60 s
+    on 12,800 contacts (2 s for 2 splits of 256 contacts in the quick profile, load 14)."""
     n, tuning = parts.bench.n_events, parts.tuning_bench().n_events
-    search_s = parts.search.trials * (tuning * 0.03 + 5.0)
-    front_s = parts.search.front_limit * (n * 0.006 + 30.0) + (
+    workers = parts.bank.workers or max_workers()
+    search_s = parts.search.trials * (tuning * 0.03 + 5.0) / workers
+    front_s = parts.search.front_limit * (n * 0.006 + 6.0) + (
         FIT_S_PER_CONTACT * n * len(parts.evaluation.seeds))
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],
-               bench_seconds(n, parts.bench.n_jobs) + search_s + front_s)]
+               bench_seconds(n, parts.bench.n_jobs)
+               + rates.measured_at(search_s + front_s, MEASURED_LOAD))]
     return stages_estimate("the bench set, the search and its front", stages)

@@ -70,8 +70,9 @@ def plan(spec: dict) -> Plan:
 
 
 def estimate(parts: Parts):
-    """The gate's training, then the closed loop for ``loop.duration_s``: every part of the
-    network steps at the resonators' dt, each with its own groups (so its own per-step cost)."""
+    """The gate's training, then the closed loop for ``loop.duration_s``: one network whose
+    parts step together at the resonators' dt (a small network's per-step cost), each part
+    compiled on its own, and Python's work per chunk."""
     gate, loop, cfg = parts.configured["gate"], parts.loop, parts.configured
     speeds = parts.gate_training[0]
     resonators = cfg["resonators"]
@@ -84,8 +85,12 @@ def estimate(parts: Parts):
         return Build(loop_network(name), not cython
                      or runtime_cache.compiled(loop_network(name), LOOP_MODULE),
                      LOOP_PART_COMPILES)
+    # the parts step together, one network at the resonators' dt: its steps once, each
+    # part's build its own
+    first, *others = cfg
     loop_runs = [(float(loop.duration_s), resonators.dt_ms, resonators.n_neurons, engine,
-                  part_build(name)) for name in cfg]
+                  part_build(first))] + [(0.0, resonators.dt_ms, 0, engine, part_build(name))
+                                         for name in others]
     return stages_estimate("the gate's training and the closed loop", [
         ("network.gate", {"epochs": gate.epochs, "present_s": gate.present_s},
          gate_training_runs(gate, len(speeds), len(speeds))),
