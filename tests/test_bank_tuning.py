@@ -197,3 +197,55 @@ def test_the_marks_hold_only_when_every_bound_is_met():
     few = marks({**at, "n": 2}, 2.4, {**closer, "n": 2})      # too few splits to hold
     assert not few["accuracy_ratio_low"]["holds"]
     assert not few["distance_rmse_not_worse"]["holds"]
+
+
+def test_shared_counts_read_the_activitys_shape_apart_from_its_loudness():
+    from snn_antenna.readout.spiking_decoders import code_rows
+
+    rng = np.random.default_rng(1)
+    binned = rng.integers(0, 9, (5, 3, 4)).astype(float)
+    binned[0] = 0.0                                  # a silent event stays finite
+
+    def codes(b):
+        return {"counts": b.sum(axis=2), "latency_s": np.zeros((5, 3)),
+                "span_s": np.zeros((5, 3)), "binned_counts": b.reshape(5, -1),
+                "decay": np.zeros((5, 6))}
+
+    plain = code_rows(codes(binned), "spiking_tuned_bins", "counts")
+    assert np.array_equal(plain, binned.reshape(5, -1))
+    once, twice = (code_rows(codes(k * binned), "spiking_tuned_bins", "share")
+                   for k in (1.0, 2.0))
+    assert once.shape == (5, 13) and np.all(np.isfinite(once))
+    assert np.allclose(once[1:, :-1], twice[1:, :-1])             # the shape: loudness apart
+    assert np.all(twice[1:, -1] > once[1:, -1])                   # the loudness beside it
+    assert np.allclose(once[1:, :-1].sum(axis=1), 1.0)
+    with pytest.raises(SpecError) as refused:
+        code_rows(codes(binned), "spiking_tuned_bins", "peak")
+    assert refused.value.field == "scaling"
+
+
+def test_the_channels_take_the_searched_filter_order_and_the_space_bounds_it():
+    from snn_antenna.readout.spiking import LOW_BAND
+    from snn_antenna.studies.bank_tuning.plan import BankPlan
+    from snn_antenna.studies.bank_tuning.search import bank_of, start_params
+
+    plan = BankPlan(tuning={"n_resonators": 2, "per_channel": 1, "max_channels": 2,
+                            "coder": "analog", "coder_amplitude": 1.0,
+                            "coder_options": {"gain": 150.0}}, low_resonators=2)
+    counts = np.concatenate([_tones(150.0, 4), _tones(300.0, 4)])
+    labels = np.array(["a"] * 4 + ["b"] * 4)
+    params = start_params(plan)
+    assert params["filter_order"] == 8 and params["scaling"] == "counts"
+    bank = bank_of({**params, "filter_order": 6}, plan, counts, labels, (2000.0, 16, 10.0))
+    assert {k: b.filter_order for k, b in bank.bands.items() if k != "low"} == {
+        "ch00": 6, "ch01": 6}
+    assert bank.bands["low"].filter_order == LOW_BAND.filter_order
+    for bad in ([4, 9], [0, 4]):
+        with pytest.raises(SpecError) as refused:
+            check_space_entry("filter_order", bad)
+        assert refused.value.field == "space.filter_order"
+    check_space_entry("scaling", ["counts", "share"])
+    with pytest.raises(SpecError):
+        check_space_entry("scaling", ["spiking_tuned_bins"])
+    with pytest.raises(SpecError):
+        BankPlan(scaling="peak")

@@ -286,8 +286,10 @@ class SpikingBank:
         coded = []
         for band in self.bands.values():
             chain = band.chain(rate_hz, adc_bits, full_scale_g)
-            after_align = Pipeline(chain.steps[2:])
-            coded.append(after_align.fit(main).transform(main))
+            # one pass: these stages learn nothing from the samples (their fit checks the
+            # parameters), and a pipeline's fit already runs every stage but the last, so
+            # fit-then-transform filtered each band twice
+            coded.append(Pipeline(chain.steps[2:]).fit_transform(main))
         return np.stack(coded, axis=2).reshape(n_samples, -1)
 
 

@@ -59,6 +59,29 @@ TUNED_READOUTS = {
 }
 
 
+# How a tuned read-out sees the spike counts: as they are, or each event's counts as shares
+# of its total over the bank, with log(1 + total) beside them: the activity's shape apart from
+# its loudness, which varies with the impact and the distance (the FFT-MLP scales each
+# spectrum to its peak for the same reason). Latencies, spans and the decay code are left.
+SCALINGS = {"counts": "spike counts as they are",
+            "share": "each count as a share of the event's total, and log(1 + total)"}
+
+
+def code_rows(codes: dict, readout: str, scaling: str = "counts") -> np.ndarray:
+    """A tuned read-out's input rows (``TUNED_READOUTS``) from a bank's codes (``counts``,
+    ``latency_s``, ``span_s``, ``binned_counts`` flattened, ``decay``; one row per event),
+    the counts scaled by ``scaling`` (``SCALINGS``)."""
+    check(scaling in SCALINGS, "scaling", scaling, f"one of {sorted(SCALINGS)}")
+    parts, extra = dict(codes), []
+    if scaling == "share":
+        total = np.asarray(codes["counts"], dtype=float).sum(axis=1, keepdims=True)
+        for name in ("counts", "binned_counts"):
+            parts[name] = np.asarray(codes[name], dtype=float) / np.maximum(total, 1.0)
+        extra = [np.log1p(total)]
+    return np.hstack([parts[c] for c in TUNED_READOUTS[readout][0]] + extra).astype(
+        np.float32)
+
+
 def input_of(name: str) -> str:
     """The input set a spiking decoder reads (the training-free ones: the low band)."""
     if name in TUNED_READOUTS:

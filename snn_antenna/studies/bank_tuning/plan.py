@@ -14,7 +14,7 @@ from ...evaluation import crossval as cv
 from ...readout import events
 from ...readout.band_tuning import Tuning
 from ...readout.spiking import TARGETS
-from ...readout.spiking_decoders import TUNED_READOUTS
+from ...readout.spiking_decoders import SCALINGS, TUNED_READOUTS
 from ...sources.source import BenchSet
 from ..contract import COMMON, Plan
 from ..sections import bench_section, evaluation_section, events_section
@@ -37,8 +37,14 @@ SPACE_KEYS = {
     "coder_amplitude": ("float", "the coder's saturation"),
     "threshold_g": ("float", "the coder's dead zone (g)"),
     "low_resonators": ("count", "resonators of the low-mode band (0: none)"),
+    "filter_order": ("int", "order of each channel's Butterworth high- and low-pass"),
     "readout": ("choice", f"read-outs of the bank, out of {sorted(TUNED_READOUTS)}"),
+    "scaling": ("choice", f"scalings of the spike counts, out of {sorted(SCALINGS)}"),
 }
+# A choice key's accepted values, and the largest value of an integer key where one exists
+# (``spiking.Band`` takes filter orders 1-8)
+CHOICES = {"readout": tuple(TUNED_READOUTS), "scaling": tuple(SCALINGS)}
+MAX_VALUE = {"filter_order": 8}
 
 
 @dataclass
@@ -46,6 +52,8 @@ class BankPlan:
     """``[bank]``: the bank the search starts from (``tuning``: ``band_tuning.Tuning``
     fields; ``b``; ``readout``, a key of ``TUNED_READOUTS``) and how every bank runs.
 
+    ``scaling``: how the read-out sees the spike counts (``SCALINGS``); ``filter_order``:
+    each channel's Butterworth order.
     ``low_resonators`` resonators (0: none) read the antenna's low mode in a band of their
     own, spread in log over ``low_band_hz`` behind a ``low_lowpass_hz`` low-pass: the
     channels are placed where the *material* separates and never reach the low mode, whose
@@ -54,6 +62,8 @@ class BankPlan:
     b: float = 0.26
     readout: str = "spiking_tuned_bins"
     low_resonators: int = 0
+    scaling: str = "counts"
+    filter_order: int = 8
     low_band_hz: tuple = (7.0, 56.0)
     low_lowpass_hz: float = 60.0
     duration_s: float = 0.5
@@ -70,6 +80,8 @@ class BankPlan:
             self.base = Tuning(**specs.check_section({"tuning": self.tuning}, "tuning", Tuning))
         bounds.number("b", self.b, 0.0, 2.0, lo_open=True)
         bounds.choice("readout", self.readout, tuple(TUNED_READOUTS))
+        bounds.choice("scaling", self.scaling, tuple(SCALINGS))
+        bounds.integer("filter_order", self.filter_order, 1, MAX_VALUE["filter_order"])
         bounds.positive_seconds("duration_s", self.duration_s)
         lo, hi = bounds.pair("low_band_hz", self.low_band_hz, strict=True, unit=" in Hz")
         check(lo > 0, "low_band_hz", self.low_band_hz, "[low, high] in Hz, 0 < low < high")
@@ -126,7 +138,7 @@ def check_space_entry(key: str, value) -> None:
     kind, what = SPACE_KEYS[key]
     if kind == "choice":
         check(isinstance(value, list) and len(value) >= 1 and all(
-            v in TUNED_READOUTS for v in value), f"space.{key}", value,
+            isinstance(v, str) and v in CHOICES[key] for v in value), f"space.{key}", value,
             f"a list of {what}")
         return
     ok = (isinstance(value, list) and len(value) == 2 and all(is_number(v) for v in value)
@@ -135,7 +147,11 @@ def check_space_entry(key: str, value) -> None:
         ok = ok and all(isinstance(v, int) and v >= (kind == "int") for v in value)
     if kind == "log":
         ok = ok and value[0] > 0
+    top = MAX_VALUE.get(key)
+    if top is not None:
+        ok = ok and value[1] <= top
     check(ok, f"space.{key}", value, f"[low, high] of {what}" +
+          (f", at most {top}" if top is not None else "") +
           (", integers >= 1" if kind == "int" else ", integers >= 0" if kind == "count"
            else ", low > 0" if kind == "log" else ", 0 <= low <= high"))
 

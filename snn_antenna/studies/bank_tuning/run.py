@@ -22,7 +22,7 @@ from ...evaluation import signal as bench_signal
 from ...readout import baselines as bl
 from ...readout.events import extraction_cost
 from ...readout.spiking import recording_attrs
-from ...readout.spiking_decoders import TUNED_READOUTS, decay_code, mlp_baseline
+from ...readout.spiking_decoders import code_rows, decay_code, mlp_baseline
 from ...report import stats
 from ...report.page import Report
 from ...sources import bench
@@ -43,15 +43,15 @@ SCORED = "scored_contacts.json"
 RESULTS = "results.zarr"
 
 
-def spikes_matrix(spikes: xr.Dataset, ids, readout: str) -> np.ndarray:
-    """A read-out's input rows (``TUNED_READOUTS``' codes) from a bank's stored spikes."""
+def spikes_matrix(spikes: xr.Dataset, ids, readout: str, scaling: str) -> np.ndarray:
+    """A read-out's input rows (``spiking_decoders.code_rows``) from a bank's stored spikes."""
     sp = spikes.sel(event=ids)
     n = sp.sizes["event"]
-    parts = {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
+    codes = {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
              "span_s": sp["span_s"].values,
              "binned_counts": sp["binned_counts"].values.reshape(n, -1),
              "decay": decay_code(sp["binned_counts"].values)}
-    return np.hstack([parts[c] for c in TUNED_READOUTS[readout][0]]).astype(np.float32)
+    return code_rows(codes, readout, scaling)
 
 
 def interval(values, bounds=(0.0, np.inf)) -> dict:
@@ -172,7 +172,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
             name = f"trial_{t.number}"
             banks[name] = b
             spikes = cached_features(data, b, parts.bench, log, options.fresh, client)
-            X = spikes_matrix(spikes, ids, params["readout"])
+            X = spikes_matrix(spikes, ids, params["readout"], params["scaling"])
             feats[name] = (("event", f"{name}_feature"), X)
             chosen.append(mlp_baseline(name, "material", name, parts.evaluation,
                                        f"MLP 51 on trial {t.number}'s bank"))

@@ -33,7 +33,7 @@ from ...engine.events import run_bank
 from ...evaluation import crossval as cv
 from ...readout.band_tuning import coarsest_dt_ms, tune
 from ...readout.spiking import LOW_BAND, Band, SpikingBank, recording_attrs
-from ...readout.spiking_decoders import TUNED_READOUTS, decay_code, mlp_baseline
+from ...readout.spiking_decoders import code_rows, decay_code, mlp_baseline
 from .plan import SPACE_KEYS, BankPlan, Parts
 
 OBJECTIVES = ("accuracy", "neuron_steps_per_event")
@@ -79,7 +79,8 @@ def start_params(bank: BankPlan) -> dict:
             "quantile": float(t.quantile), "spread": float(t.spread), "b": float(bank.b),
             "gain": float(t.coder_options.get("gain", 150.0)),
             "coder_amplitude": float(t.coder_amplitude), "threshold_g": float(t.threshold_g),
-            "low_resonators": int(bank.low_resonators), "readout": bank.readout}
+            "low_resonators": int(bank.low_resonators), "readout": bank.readout,
+            "scaling": bank.scaling, "filter_order": int(bank.filter_order)}
 
 
 def suggest(trial, space: dict) -> dict:
@@ -114,6 +115,8 @@ def bank_of(params: dict, bank: BankPlan, counts, labels, attrs) -> SpikingBank:
                      threshold_g=params["threshold_g"], coder_options=options)
     n_samples = int(round(bank.duration_s * attrs[0]))
     bands = tune(counts[:, :n_samples], labels, *attrs, tuning)
+    order = int(params.get("filter_order", bank.filter_order))
+    bands = {k: replace(b, filter_order=order) for k, b in bands.items()}
     if params.get("low_resonators", 0) > 0:
         bands["low"] = low_band(int(params["low_resonators"]), bank, tuning)
     bands = {k: replace(b, b=float(params["b"])) for k, b in bands.items()}
@@ -141,13 +144,13 @@ def neuron_steps_per_event(bank: SpikingBank, rate_hz: float) -> float:
                      for b in bank.bands.values()))
 
 
-def readout_matrix(spikes, readout: str) -> np.ndarray:
-    """The read-out's input rows from ``SpikeFeatures`` (``TUNED_READOUTS``' codes)."""
+def readout_matrix(spikes, readout: str, scaling: str = "counts") -> np.ndarray:
+    """The read-out's input rows from ``SpikeFeatures`` (``spiking_decoders.code_rows``)."""
     n = len(spikes.counts)
-    parts = {"counts": spikes.counts, "latency_s": spikes.latency_s, "span_s": spikes.span_s,
+    codes = {"counts": spikes.counts, "latency_s": spikes.latency_s, "span_s": spikes.span_s,
              "binned_counts": spikes.binned_counts.reshape(n, -1),
              "decay": decay_code(spikes.binned_counts)}
-    return np.hstack([parts[c] for c in TUNED_READOUTS[readout][0]]).astype(np.float32)
+    return code_rows(codes, readout, scaling)
 
 
 def inner_accuracy(X, y, repetition, search, evaluation) -> list[float]:
@@ -193,11 +196,12 @@ def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client,
             raise optuna.TrialPruned() from None
         scored.add(counts)
         with threadpool_limits(1):
-            acc = inner_accuracy(readout_matrix(spikes, params["readout"]), y, repetition,
+            acc = inner_accuracy(readout_matrix(spikes, params["readout"], params["scaling"]),
+                                 y, repetition,
                                  search, parts.evaluation)
         trial.set_user_attr("inner_accuracy", acc)
         log(f"      trial {trial.number}: {b.n_neurons} resonators in {len(b.bands)} "
-            f"channels, {params['readout']}: accuracy {100 * np.mean(acc):.1f} %, "
+            f"channels, {params['readout']} ({params['scaling']}): accuracy {100 * np.mean(acc):.1f} %, "
             f"{cost:.0f} resonator-steps per contact")
         return float(np.mean(acc)), cost
 
