@@ -648,3 +648,16 @@ def test_every_benchmark_has_its_page_command_and_a_missing_section_is_planned_t
             assert step.command[1] == f"benchmarks/{step.name}.py", step
     sections = set(re.findall(r"^### `([\w.-]+)`$", PAGE.read_text(), re.M))
     assert sections and sections <= set(regenerate.PAGE_BENCHMARKS), sections
+
+
+def test_a_benchmark_section_opens_with_what_its_script_says_it_measures(tmp_path):
+    script = tmp_path / "bench_x.py"
+    script.write_text('"""Contacts per second of the x read-out:\nside by side.\n\nMore."""\n')
+    prov = results.machine_provenance(f"python {script} --json out.json")
+    assert prov["script_sha256"] == provenance.file_digest(script)
+    assert prov["script_summary"] == "Contacts per second of the x read-out: side by side."
+    lines = results.bench_section({"us": 2.5, "provenance": prov}, "bench_x", "x.json")
+    assert lines[:3] == ["### `bench_x`", "", prov["script_summary"]]
+    script.write_text(script.read_text() + "# changed\n")
+    assert results.machine_provenance(f"python {script}")["script_sha256"] != \
+        prov["script_sha256"]

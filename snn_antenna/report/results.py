@@ -417,7 +417,10 @@ def bench_section(record: dict, run: str, file: str) -> list[str]:
     extra = f"; load average {load[0]:.2f} (1 min)" if load else ""
     if prov.get("provenance_added"):
         extra += f" ({_text(prov['provenance_added'])})"
-    lines = [f"### `{run}`", "", *_source(run, file, prov, extra)]
+    lines = [f"### `{run}`", ""]
+    if isinstance(prov.get("script_summary"), str):     # what the script says it measures
+        lines += [_text(prov["script_summary"]), ""]
+    lines += _source(run, file, prov, extra)
     if isinstance(record.get("data"), dict):
         lines += bench_values(record["data"], run, "/data")
     elif "stdout" in record:
@@ -569,10 +572,26 @@ def read_runs(runs: list[Path], store: Path) -> list[tuple[Path, Path, dict]]:
     return list(cited.values())
 
 
+def _script_identity(script: Path) -> dict:
+    """A benchmark script's digest and what it measures (its docstring's first paragraph,
+    the line its section on the page opens with)."""
+    import ast
+
+    found = {"script_sha256": file_digest(script)}
+    try:
+        doc = ast.get_docstring(ast.parse(script.read_text()))
+    except (SyntaxError, UnicodeDecodeError):
+        doc = None
+    if doc:
+        found["script_summary"] = " ".join(doc.split("\n\n")[0].split())
+    return found
+
+
 def machine_provenance(command: str | None = None, **extra) -> dict:
     """What a benchmark's output records about how it was made: the command (this process's
-    own by default), the code (``code_identity``: version, source hash, commit; and the digest
-    of the script the command runs, ``script_sha256``), the machine, its load and the time. A benchmark writing JSON puts it under ``"provenance"``."""
+    own by default), the code (``code_identity``: version, source hash, commit; and of the
+    script the command runs, its digest and first paragraph: ``_script_identity``), the
+    machine, its load and the time. A benchmark writing JSON puts it under ``"provenance"``."""
     import datetime as _dt
 
     if command is None:
@@ -580,7 +599,7 @@ def machine_provenance(command: str | None = None, **extra) -> dict:
     scripts = [w for w in command.split() if w.endswith(".py") and Path(w).is_file()]
     return {
         **code_identity(),
-        **({"script_sha256": file_digest(scripts[0])} if scripts else {}),
+        **(_script_identity(Path(scripts[0])) if scripts else {}),
         "platform": platform.platform(),
         "python": sys.version.split()[0],
         "cpus": os.cpu_count(),
