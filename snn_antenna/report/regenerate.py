@@ -198,7 +198,7 @@ def plan(out: Path, runs: Path, quick: bool, keep: set[str],
     unknown = sorted(keep - known)
     if unknown:
         raise SpecError("--keep", ", ".join(unknown),
-                        f"a study or benchmark stored beside the page ({', '.join(sorted(known))})")
+                        f"a study or benchmark of the page ({', '.join(sorted(known))})")
     return studies, benches
 
 
