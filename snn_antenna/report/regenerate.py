@@ -51,16 +51,17 @@ OUTPUT_OPTIONS = ("--json", "--out")
 #: every script ``benchmarks/NAME.py``, in the order the page shows them, with the options of
 #: its page command (``python benchmarks/NAME.py OPTIONS``; ``{out}``: the JSON file it
 #: writes, none for a benchmark recorded from what it prints). Each is sized to finish in
-#: minutes on a 2-core machine and still measure what its script is for: the coders and the
-#: stage ceilings on the bench set's first repetitions (every material and site, a split per
-#: seed of the study), the live view with 0 and 1 open pages.
+#: minutes on a 2-core machine and still measure what its script is for, the size in its
+#: options and so on the page: the coders and the stage ceilings on the bench set's first
+#: repetitions (every material and site, a split per seed of the study: intervals with n),
+#: the bands on their 8 sample events cut to 0.25 s, the live view with 0 and 1 open pages.
 PAGE_BENCHMARKS = {
     "bench_array": "--seconds 2 --json {out}",
-    "bench_bands": "--cost-events 8 --json {out}",
+    "bench_bands": "--cost-events 8 --seconds 0.25 --json {out}",
     "bench_coders": "--repetitions 5 --out {out}",
     "bench_events": "--cost-only --sizes 24 48 --json {out}",
     "bench_lab_readouts": "--json {out}",
-    "bench_stage_ceilings": "--repetitions 10 --out {out}",
+    "bench_stage_ceilings": "--repetitions 30 --out {out}",
     "bench_stream": "--browsers 0,1 --repeats 1 --view-seconds 10 --baseline none",
     "bench_studies": "--json {out}",
     "bench_sweep": "--sizes 10000 100000 --runtime-max 0 --naive-sample 1 --workers "
