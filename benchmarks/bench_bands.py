@@ -74,7 +74,7 @@ def main(argv=None) -> int:
     if args.json:
         write_benchmark_json(args.json, {
             "events": int(data.sizes["event"]), "seconds_per_event": study.duration_s,
-            "target": args.target, "rows": rows, "load_average": os.getloadavg()})
+            "target": args.target, "settings": rows, "load_average": os.getloadavg()})
     return 0
 
 

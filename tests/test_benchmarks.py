@@ -49,10 +49,10 @@ def array_ran(out: str, tmp_path: Path) -> None:
 
 def bands_ran(out: str, tmp_path: Path) -> None:
     record = cited(tmp_path / "bench.json", tmp_path)
-    assert [r["role"] for r in record["rows"]] == [
+    assert [r["role"] for r in record["settings"]] == [
         "bank's own", "shipped", "map-accurate euler", "map-accurate rk4"]
-    assert record["rows"][0]["cost_of_own_setting"] == 1.0
-    assert all(r["band"] == "high" and r["cpu_ms_per_event"] > 0 for r in record["rows"])
+    assert record["settings"][0]["cost_of_own_setting"] == 1.0
+    assert all(r["band"] == "high" and r["cpu_ms_per_event"] > 0 for r in record["settings"])
     rows = [line for line in out.splitlines() if line.startswith("  ") and ": " in line]
     assert [row.split(":")[0].strip() for row in rows] == [
         "bank's own", "shipped", "map-accurate euler", "map-accurate rk4"]
