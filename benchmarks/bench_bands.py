@@ -2,6 +2,7 @@
 
     python benchmarks/bench_bands.py [--bands high rod] [--target cython]
     python benchmarks/bench_bands.py --bands high --materials wood --seconds 0.1   # a short run
+    ... [--json PATH]   (the rows with their provenance, for ``snn-antenna results``)
 
 For each band of the bench's spiking read-out (``evaluation.bands.BENCH_BANDS``), on the same
 8 sample bench events (4 materials × 10/30 cm, 0.5 s each): the bank's own setting
@@ -21,6 +22,12 @@ import os
 import sys
 
 from snn_antenna.evaluation import bands
+from snn_antenna.report.results import write_benchmark_json
+
+#: what a row of the JSON keeps of ``bands.measure``'s: the setting, its errors and its cost
+ROW_KEYS = ("band", "role", "method", "dt_ms", "hz_per_k", "k_dt_max", "accurate_k_dt",
+            "status", "spike_count_error", "rate_map_error", "cpu_ms_per_event",
+            "cost_of_own_setting", "events_timed")
 
 
 def main(argv=None) -> int:
@@ -31,12 +38,14 @@ def main(argv=None) -> int:
     ap.add_argument("--materials", nargs="+", metavar="NAME",
                     help="the sample events' materials (default: the study's four)")
     ap.add_argument("--seconds", type=float, help="seconds per event (default: the study's)")
+    ap.add_argument("--json", metavar="PATH", help="write the rows as JSON here")
     args = ap.parse_args(argv)
     study = bands.BandStudy(**{field: value for field, value in (
         ("materials", args.materials), ("duration_s", args.seconds)) if value is not None})
     data = bands.sample_data(study.materials, study.positions_cm, study.repetitions)
     print(f"# {data.sizes['event']} bench events, {study.duration_s} s each, target "
           f"{args.target}; load average {os.getloadavg()[0]:.1f}")
+    rows = []
     for name in args.bands:
         band, shipped = bands.BENCH_BANDS[name], bands.CHOSEN[name]
         events = bands.code_events(name, band, data, study.duration_s)
@@ -56,10 +65,16 @@ def main(argv=None) -> int:
             row = bands.measure(events, setting, refs[setting.hz_per_k], args.target,
                                 args.cost_events)
             base = base or row["cpu_ms_per_event"]
+            row = dict(row, role=role, cost_of_own_setting=row["cpu_ms_per_event"] / base)
+            rows.append({key: row[key] for key in ROW_KEYS if key in row})
             print(f"  {role + ': ' + setting.label():<34} {row['k_dt_max']:>9.3g} "
                   f"{row['spike_count_error']:>8.1%} {row['rate_map_error']:>9.1%} "
                   f"{row['cpu_ms_per_event']:>9.1f} {row['cpu_ms_per_event'] / base:>5.1f}x")
     print(f"\nload average {os.getloadavg()[0]:.1f}")
+    if args.json:
+        write_benchmark_json(args.json, {
+            "events": int(data.sizes["event"]), "seconds_per_event": study.duration_s,
+            "target": args.target, "settings": rows, "load_average": os.getloadavg()})
     return 0
 
 

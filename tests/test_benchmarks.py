@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from snn_antenna.report import results
+from snn_antenna.report import regenerate, results
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHMARKS = ROOT / "benchmarks"
@@ -48,6 +48,11 @@ def array_ran(out: str, tmp_path: Path) -> None:
 
 
 def bands_ran(out: str, tmp_path: Path) -> None:
+    record = cited(tmp_path / "bench.json", tmp_path)
+    assert [r["role"] for r in record["settings"]] == [
+        "bank's own", "shipped", "map-accurate euler", "map-accurate rk4"]
+    assert record["settings"][0]["cost_of_own_setting"] == 1.0
+    assert all(r["band"] == "high" and r["cpu_ms_per_event"] > 0 for r in record["settings"])
     rows = [line for line in out.splitlines() if line.startswith("  ") and ": " in line]
     assert [row.split(":")[0].strip() for row in rows] == [
         "bank's own", "shipped", "map-accurate euler", "map-accurate rk4"]
@@ -106,6 +111,9 @@ def lab_readouts_ran(out: str, tmp_path: Path) -> None:
     tasks = {row[1] for row in rows}
     assert tasks == {"material", "distance"}, out
     assert any(row[0] == "mlp_parametric_material" for row in rows), out
+    record = cited(tmp_path / "bench.json", tmp_path)     # the same rows, by task
+    assert len(record["material_accuracy"]) + len(record["distance_rmse_mm"]) == len(rows)
+    assert record["material_accuracy"]["mlp_parametric_material"]["mark"] in ("meets", "misses")
 
 
 def sweep_ran(out: str, tmp_path: Path) -> None:
@@ -123,7 +131,7 @@ SMALL_RUNS = {
     "bench_array": (["--seconds", "1", "--neurons", "4", "--python-seconds", "0.05",
                      "--json", "bench.json"], array_ran),
     "bench_bands": (["--bands", "high", "--cost-events", "1", "--materials", "wood",
-                     "--seconds", "0.1"], bands_ran),
+                     "--seconds", "0.1", "--json", "bench.json"], bands_ran),
     "bench_coders": (["--cost-only", "--repetitions", "1", "--out", "bench.json",
                       "--set", "spiking.tuned.calibration_repetitions=2",
                       "--set", "spiking.tuned.coder_sizes=[24]",
@@ -132,7 +140,8 @@ SMALL_RUNS = {
     "bench_events": (["--cost-only", "--cost-events", "4", "--sizes", "24",
                       "--json", "bench.json"], events_ran),
     "bench_lab_readouts": (["--rate", "1000", "--work", "lab", "--set", "evaluation.seeds=[0]",
-                            "--set", "evaluation.nmf_dims=[3]", "--set", "spiking.workers=1"],
+                            "--set", "evaluation.nmf_dims=[3]", "--set", "spiking.workers=1",
+                            "--json", "bench.json"],
                            lab_readouts_ran),
     "bench_stage_ceilings": (["--repetitions", "2", "--stages", "band_pass", "coded",
                               "--set", "evaluation.seeds=[0]",
@@ -152,13 +161,15 @@ def test_every_benchmark_has_a_small_run():
 
 @pytest.mark.parametrize("name", sorted(SMALL_RUNS))
 def test_a_benchmark_imports_and_takes_its_small_run_options(name, monkeypatch, capsys):
-    """Its imports resolve and its parser builds and knows every option of its small run."""
+    """Its imports resolve and its parser builds and knows every option of its small run and
+    of its results page command (``regenerate.PAGE_BENCHMARKS``)."""
     module = script(name, monkeypatch)
     with pytest.raises(SystemExit) as done:
         module.main(["--help"])
     assert done.value.code == 0
     usage = capsys.readouterr().out
-    options = [arg for arg in SMALL_RUNS[name][0] if arg.startswith("--")]
+    page = regenerate.PAGE_BENCHMARKS[name].split()
+    options = [arg for arg in SMALL_RUNS[name][0] + page if arg.startswith("--")]
     assert all(option in usage for option in options), (options, usage)
 
 

@@ -108,15 +108,48 @@ def test_a_page_edited_by_hand_is_refused_and_kept_and_so_are_the_users_files(
     assert (docs / "notes.md").read_text() == "mine"
     names = outputs.read_manifest(docs)["files"]
     assert sorted(names) == ["results", "results.md"]
-    # a source edited by hand is not written over, and stays listed as the command wrote it:
-    # restored, it is the toolkit's again
+    # a source edited by hand is refused, even by the command that copies nothing in (the
+    # page is made from it), and stays listed as the command wrote it: restored, it is the
+    # toolkit's again
     listed = outputs.read_manifest(docs)["identity"]["results"]
+    page = (docs / "results.md").read_text()
     source = docs / "results" / "tuning_sweep.json"
     source.write_text(source.read_text() + "\n")
-    assert main(command[1:]) == 0
+    assert main(command[1:]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "results" in err and "changed since" in err
     assert outputs.read_manifest(docs)["identity"]["results"] == listed
+    assert (docs / "results.md").read_text() == page
     source.write_text(source.read_text()[:-1])
     assert files.matches(docs / "results", listed)
+    assert main(command[1:]) == 0
+
+
+def test_a_file_of_the_users_in_the_sources_folder_is_refused_naming_it(tmp_path, monkeypatch,
+                                                                        capsys):
+    """``results/`` is the command's own folder, listed by its content: a file put there
+    makes it one the command cannot vouch for, so even the stored sources' command (which
+    copies nothing in) refuses in one line naming the file, and writes nothing; beside it,
+    in ``docs/``, the same file is the user's and left alone."""
+    text = PAGE.read_text()
+    command = shlex.split(re.search(r"```bash\n(snn-antenna results .*?)\n```", text).group(1))
+    docs = _checkout(tmp_path)
+    manifest = (docs / outputs.MANIFEST).read_text()
+    monkeypatch.chdir(tmp_path)
+    for foreign in (docs / "results" / "notes.txt",
+                    docs / "results" / "figures" / "quickstart" / "mine.png"):
+        foreign.write_text("mine")
+        assert main(command[1:]) == 2
+        err = capsys.readouterr().err.strip()
+        shown = foreign.relative_to(tmp_path).as_posix()
+        assert len(err.splitlines()) == 1 and repr(shown) in err, err
+        assert (docs / outputs.MANIFEST).read_text() == manifest
+        assert foreign.read_text() == "mine"
+        foreign.rename(docs / foreign.name)                  # moved beside the page: the user's
+        assert main(command[1:]) == 0
+        assert (docs / foreign.name).read_text() == "mine"
+        assert (docs / outputs.MANIFEST).read_text() == manifest
+        assert (docs / "results.md").read_text() == text
 
 
 def test_a_changed_source_or_a_changed_number_is_caught(tmp_path):
@@ -491,6 +524,8 @@ def _summary(code_sha256: str, quick=False) -> dict:
 
 
 def test_regenerate_reuses_what_this_code_made_and_runs_the_rest(tmp_path, monkeypatch):
+    """A study or benchmark made by this code (and a benchmark by this script, with its page
+    command's options) is reused, from the runs' folder first; the others run."""
     root = _fake_checkout(tmp_path)
     store, runs = root / "docs" / "results", tmp_path / "runs"
     here = provenance.code_hash()
@@ -498,12 +533,26 @@ def test_regenerate_reuses_what_this_code_made_and_runs_the_rest(tmp_path, monke
     (store / "gating_threshold.json").write_text(json.dumps(_summary("0" * 16)))
     (runs / "gating_threshold").mkdir(parents=True)         # a quick run: not the full profile
     (runs / "gating_threshold" / "summary.json").write_text(json.dumps(_summary(here, True)))
-    bench = {"us": 1.0, "provenance": {"code_sha256": "0" * 16,
-                                       "command": "python benchmarks/bench_x.py --json /tmp/a.json"}}
-    (store / "bench_x.json").write_text(json.dumps(bench))
-    printed = {"stdout": "t\n", "command": ".venv/bin/python benchmarks/bench_y.py",
-               "provenance": {"code_sha256": here, "command": ".venv/bin/python benchmarks/bench_y.py"}}
-    (store / "bench_y.json").write_text(json.dumps(printed))
+    (root / "benchmarks").mkdir()
+    for name in ("bench_x", "bench_y", "bench_z", "bench_w"):
+        (root / "benchmarks" / f"{name}.py").write_text(f"# {name}\n")
+    monkeypatch.setattr(regenerate, "PAGE_BENCHMARKS", {
+        "bench_x": "--n 2 --json {out}", "bench_y": "--n 1", "bench_z": "--out {out}",
+        "bench_w": "--n 3 --json {out}"})
+
+    def bench(name, command, code=here, script=True):
+        digest = provenance.file_digest(root / "benchmarks" / f"{name}.py")
+        return {"us": 1.0, "provenance": {"code_sha256": code, "command": command,
+                                          **({"script_sha256": digest} if script else {})}}
+    (store / "bench_x.json").write_text(json.dumps(          # other code
+        bench("bench_x", "python benchmarks/bench_x.py --n 2 --json /tmp/a.json", "0" * 16)))
+    (store / "bench_y.json").write_text(json.dumps(          # this code, the page's options
+        {**bench("bench_y", ".venv/bin/python benchmarks/bench_y.py --n 1"), "stdout": "t\n"}))
+    (runs / "bench").mkdir(parents=True)                      # this code's, from a killed run
+    (runs / "bench" / "bench_z.json").write_text(json.dumps(
+        bench("bench_z", "python benchmarks/bench_z.py --out out/z.json")))
+    (store / "bench_w.json").write_text(json.dumps(          # this code, other options
+        bench("bench_w", "python benchmarks/bench_w.py --n 1 --json /tmp/w.json")))
     studies, benches = regenerate.plan(root / "docs" / "results.md", runs, False, set(), root)
     assert [(s.name, s.command is None) for s in studies] == \
         [("quickstart", True), ("gating_threshold", False)]
@@ -511,10 +560,26 @@ def test_regenerate_reuses_what_this_code_made_and_runs_the_rest(tmp_path, monke
     run = studies[1].command
     assert run[-4:] == ["studies/gating_threshold.toml", "--yes", "--out",
                         str(runs / "gating_threshold")] and "--quick" not in run
-    x, y = benches
-    assert x.command[0] == sys.executable and x.command[1:] == \
-        ["benchmarks/bench_x.py", "--json", str(runs / "bench" / "bench_x.json")]
+    x, y, z, w = benches
+    assert x.command == [sys.executable, "benchmarks/bench_x.py", "--n", "2", "--json",
+                         str(runs / "bench" / "bench_x.json")] and not x.record
     assert y.command is None and y.output == store / "bench_y.json"      # this code's: reused
+    assert z.command is None and z.output == runs / "bench" / "bench_z.json"
+    assert w.command[-3:] == ["3", "--json", str(runs / "bench" / "bench_w.json")]
+    # the script changed since: run again
+    (root / "benchmarks" / "bench_y.py").write_text("# bench_y, changed\n")
+    _, benches = regenerate.plan(root / "docs" / "results.md", runs, False, set(), root)
+    assert benches[1].command == [sys.executable, "benchmarks/bench_y.py", "--n", "1"]
+    assert benches[1].record                           # no output file: recorded as printed
+    # a benchmark without its page command is refused before anything runs
+    (root / "benchmarks" / "bench_new.py").write_text("")
+    try:
+        regenerate.plan(root / "docs" / "results.md", runs, False, set(), root)
+    except SpecError as exc:
+        assert "bench_new" in str(exc) and "PAGE_BENCHMARKS" in str(exc)
+    else:
+        raise AssertionError("a benchmark without its page command was taken")
+    (root / "benchmarks" / "bench_new.py").unlink()
     # --keep takes a stored one as it is; a name that is not there is refused in one line
     studies, _ = regenerate.plan(root / "docs" / "results.md", runs, False,
                                  {"gating_threshold"}, root)
@@ -564,3 +629,35 @@ def test_the_regenerate_options_are_refused_without_it_and_runs_with_it(tmp_path
     assert "only with --regenerate" in capsys.readouterr().err
     assert main(["results", "--regenerate", str(tmp_path), "--out", str(tmp_path / "p.md")]) == 2
     assert "--regenerate" in capsys.readouterr().err
+
+
+def test_every_benchmark_has_its_page_command_and_a_missing_section_is_planned_to_run(tmp_path):
+    """Every script of ``benchmarks/`` has the command that makes its section; a benchmark the
+    page lacks (or stored from other code or another command) is one ``--regenerate`` runs,
+    and each section the page shows is one of them."""
+    scripts = sorted(p.stem for p in (ROOT / "benchmarks").glob("bench_*.py"))
+    assert sorted(regenerate.PAGE_BENCHMARKS) == scripts
+    assert all("{out}" in options or name == "bench_stream"    # it prints what it measures
+               for name, options in regenerate.PAGE_BENCHMARKS.items())
+    _, benches = regenerate.plan(PAGE, tmp_path / "runs", False, set(), ROOT)
+    assert [step.name for step in benches] == list(regenerate.PAGE_BENCHMARKS)
+    for step in benches:
+        stored = SOURCES / f"{step.name}.json"
+        assert step.command is not None or step.output == stored, step
+        if not stored.is_file():
+            assert step.command[1] == f"benchmarks/{step.name}.py", step
+    sections = set(re.findall(r"^### `([\w.-]+)`$", PAGE.read_text(), re.M))
+    assert sections and sections <= set(regenerate.PAGE_BENCHMARKS), sections
+
+
+def test_a_benchmark_section_opens_with_what_its_script_says_it_measures(tmp_path):
+    script = tmp_path / "bench_x.py"
+    script.write_text('"""Contacts per second of the x read-out:\nside by side.\n\nMore."""\n')
+    prov = results.machine_provenance(f"python {script} --json out.json")
+    assert prov["script_sha256"] == provenance.file_digest(script)
+    assert prov["script_summary"] == "Contacts per second of the x read-out: side by side."
+    lines = results.bench_section({"us": 2.5, "provenance": prov}, "bench_x", "x.json")
+    assert lines[:3] == ["### `bench_x`", "", prov["script_summary"]]
+    script.write_text(script.read_text() + "# changed\n")
+    assert results.machine_provenance(f"python {script}")["script_sha256"] != \
+        prov["script_sha256"]

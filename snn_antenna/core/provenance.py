@@ -40,6 +40,12 @@ def code_hash(*modules: str) -> str:
     return h.hexdigest()[:16]
 
 
+def file_digest(path) -> str:
+    """SHA-256 (16 hex digits) of one file's bytes: a script outside the package (a
+    benchmark's) that a record names beside :func:`code_hash`."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
 def import_closure(modules) -> list[Path]:
     """The source files of ``modules`` and of every package module they import, followed to
     any depth: ``import`` and ``from ... import`` statements anywhere in a module (a function's

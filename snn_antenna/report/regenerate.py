@@ -11,12 +11,18 @@ for (the full one; ``--quick-check`` for the quick profiles):
 3. otherwise a new run: ``snn-antenna run studies/STUDY.toml --yes --out RUNS/STUDY``, in a
    process of its own, one study at a time (a killed run resumes in its folder).
 
-For each benchmark stored beside the page (``docs/results/bench_*.json``) it reuses the stored
-output when this code made it, and otherwise runs the command that output records again (its
-provenance's command, with this interpreter, and its ``--json``/``--out`` file in
-``RUNS/bench``; a benchmark recorded from what it printed is recorded again,
-``results.record_benchmark``). ``--keep NAME`` keeps a stored study or benchmark as it is
-whatever code made it: its section still names its own commit and code hash.
+Every benchmark of ``benchmarks/`` has its page command in :data:`PAGE_BENCHMARKS` (a test
+fails on a script without one). For each, in this order, it takes an output made by this
+checkout's code and this script, with the page command's options:
+
+1. the output in ``RUNS/bench/NAME.json``, from an earlier regeneration;
+2. the output stored beside the page (``docs/results/NAME.json``);
+3. otherwise the page command runs (with this interpreter, its output in ``RUNS/bench``; a
+   benchmark without an output file is recorded from what it prints,
+   ``results.record_benchmark``).
+
+``--keep NAME`` keeps a stored study or benchmark as it is whatever code made it: its section
+still names its own commit and code hash.
 
 Then it writes the page from those runs and outputs (``results.make_page``): the page, its
 sources, the guides' figures and run times. ``--plan`` prints what it would reuse and run,
@@ -32,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..core.errors import SpecError
-from ..core.provenance import code_hash
+from ..core.provenance import code_hash, file_digest
 
 #: the studies in the order the page shows them (from a first look to the deepest study);
 #: a study not listed follows them, by name
@@ -41,6 +47,26 @@ PAGE_ORDER = ("quickstart", "tuning_sweep", "gating_threshold", "baseline_compar
 
 #: a benchmark's option naming the JSON file it writes
 OUTPUT_OPTIONS = ("--json", "--out")
+
+#: every script ``benchmarks/NAME.py``, in the order the page shows them, with the options of
+#: its page command (``python benchmarks/NAME.py OPTIONS``; ``{out}``: the JSON file it
+#: writes, none for a benchmark recorded from what it prints). Each is sized to finish in
+#: minutes on a 2-core machine and still measure what its script is for, the size in its
+#: options and so on the page: the coders and the stage ceilings on the bench set's first
+#: repetitions (every material and site, a split per seed of the study: intervals with n),
+#: the bands on their 8 sample events cut to 0.25 s, the live view with 0 and 1 open pages.
+PAGE_BENCHMARKS = {
+    "bench_array": "--seconds 2 --json {out}",
+    "bench_bands": "--cost-events 8 --seconds 0.25 --json {out}",
+    "bench_coders": "--repetitions 5 --out {out}",
+    "bench_events": "--cost-only --sizes 24 48 --json {out}",
+    "bench_lab_readouts": "--json {out}",
+    "bench_stage_ceilings": "--repetitions 30 --out {out}",
+    "bench_stream": "--browsers 0,1 --repeats 1 --view-seconds 10 --baseline none",
+    "bench_studies": "--json {out}",
+    "bench_sweep": "--sizes 10000 100000 --runtime-max 0 --naive-sample 1 --workers "
+                   "--json {out}",
+}
 
 
 @dataclass
@@ -103,39 +129,61 @@ def study_steps(root: Path, store: Path, runs: Path, quick: bool, keep: set[str]
     return steps
 
 
-def rerun_command(record: dict, output: Path) -> tuple[list[str], bool]:
-    """The command a stored benchmark output records, made to run again here: with this
+def page_command(name: str, output: Path) -> tuple[list[str], bool]:
+    """The page command of ``benchmarks/NAME.py`` (:data:`PAGE_BENCHMARKS`) with this
     interpreter, writing ``output``; and whether it is recorded from what it prints."""
-    text = record.get("provenance", {}).get("command") or record.get("command") or ""
-    argv = shlex.split(text)
-    if not argv:
-        raise SpecError("--regenerate", json.dumps(text), "a benchmark output that records "
-                                                          "its command")
-    if Path(argv[0]).name.startswith("python"):
-        argv[0] = sys.executable
+    options = PAGE_BENCHMARKS[name]
+    argv = [sys.executable, f"benchmarks/{name}.py",
+            *shlex.split(options.replace("{out}", shlex.quote(str(output))))]
+    return argv, "{out}" not in options
+
+
+def page_options(command: str, name: str) -> list[str] | None:
+    """The options a benchmark's recorded command gave its script, with the file it wrote
+    shown as ``{out}`` (so they compare with :data:`PAGE_BENCHMARKS`); ``None`` when the
+    command does not run ``benchmarks/NAME.py``."""
+    argv = shlex.split(command or "")
+    scripts = [i for i, arg in enumerate(argv) if Path(arg).as_posix().endswith(
+        f"benchmarks/{name}.py")]
+    if not scripts:
+        return None
+    options = argv[scripts[0] + 1:]
     for option in OUTPUT_OPTIONS:
-        if option in argv[:-1]:
-            argv[argv.index(option) + 1] = str(output)
-            return argv, False
-    if "stdout" in record:
-        return argv, True
-    raise SpecError("--regenerate", text, "a benchmark command with --json or --out, or one "
-                                          "recorded from what it printed")
+        if option in options[:-1]:
+            options[options.index(option) + 1] = "{out}"
+    return options
 
 
-def bench_steps(store: Path, runs: Path, keep: set[str]) -> list[Step]:
-    """What to do for each benchmark stored beside the page."""
+def _bench_made_here(record: dict | None, name: str, script: Path) -> bool:
+    """Made by this checkout's code and script, with the page command's options."""
+    prov = (record or {}).get("provenance", {})
+    return (_made_here(record) and script.is_file()
+            and prov.get("script_sha256") == file_digest(script)
+            and page_options(prov.get("command"), name) == shlex.split(PAGE_BENCHMARKS[name]))
+
+
+def bench_steps(root: Path, store: Path, runs: Path, keep: set[str]) -> list[Step]:
+    """What to do for each benchmark of ``root/benchmarks`` (:data:`PAGE_BENCHMARKS`)."""
+    scripts = sorted(p.stem for p in (root / "benchmarks").glob("bench_*.py"))
+    missing = [name for name in scripts if name not in PAGE_BENCHMARKS]
+    if missing:
+        raise SpecError("benchmarks", ", ".join(missing), "a benchmark with its page command "
+                        "in snn_antenna.report.regenerate.PAGE_BENCHMARKS")
     steps = []
-    for stored in sorted(store.glob("bench_*.json")):
-        name, record = stored.stem, _summary(stored) or {}
-        if name in keep:
+    for name in (n for n in PAGE_BENCHMARKS if n in scripts):
+        stored, fresh = store / f"{name}.json", runs / "bench" / f"{name}.json"
+        script = root / "benchmarks" / f"{name}.py"
+        if name in keep and stored.is_file():
             steps.append(Step(name, stored, None, "kept as stored (--keep)"))
-        elif _made_here(record):
-            steps.append(Step(name, stored, None, "made by this code, stored"))
+        elif _bench_made_here(_summary(fresh), name, script):
+            steps.append(Step(name, fresh, None, f"this code's page run in {runs}"))
+        elif _bench_made_here(_summary(stored), name, script):
+            steps.append(Step(name, stored, None, "this code's page run, stored"))
         else:
-            output = runs / "bench" / f"{name}.json"
-            command, printed = rerun_command(record, output)
-            steps.append(Step(name, output, command, "made by other code: running it again",
+            command, printed = page_command(name, fresh)
+            why = ("not on the page yet" if not stored.is_file() else
+                   "stored from other code or another command")
+            steps.append(Step(name, fresh, command, f"{why}: running its page command",
                               record=printed))
     return steps
 
@@ -146,12 +194,12 @@ def plan(out: Path, runs: Path, quick: bool, keep: set[str],
     root = Path.cwd() if root is None else root
     store = out.parent / "results"
     studies = study_steps(root, store, runs, quick, keep)
-    benches = bench_steps(store, runs, keep)
+    benches = bench_steps(root, store, runs, keep)
     known = {s.name for s in studies + benches}
     unknown = sorted(keep - known)
     if unknown:
         raise SpecError("--keep", ", ".join(unknown),
-                        f"a study or benchmark stored beside the page ({', '.join(sorted(known))})")
+                        f"a study or benchmark of the page ({', '.join(sorted(known))})")
     return studies, benches
 
 

@@ -40,6 +40,7 @@ import json
 import os
 import platform
 import re
+import stat
 import subprocess
 import sys
 import time
@@ -49,9 +50,9 @@ from typing import Any
 from ..core.bounds import out_path
 from ..core.commands import LIST, POSITIONALS, SWITCH, Command, Option
 from ..core.errors import SpecError
-from ..core.files import atomic_write
+from ..core.files import atomic_write, walk
 from ..core.outputs import output_folder
-from ..core.provenance import code_identity
+from ..core.provenance import code_identity, file_digest
 from . import guides
 from .regenerate import regenerate
 from .labels import readout_label
@@ -416,7 +417,10 @@ def bench_section(record: dict, run: str, file: str) -> list[str]:
     extra = f"; load average {load[0]:.2f} (1 min)" if load else ""
     if prov.get("provenance_added"):
         extra += f" ({_text(prov['provenance_added'])})"
-    lines = [f"### `{run}`", "", *_source(run, file, prov, extra)]
+    lines = [f"### `{run}`", ""]
+    if isinstance(prov.get("script_summary"), str):     # what the script says it measures
+        lines += [_text(prov["script_summary"]), ""]
+    lines += _source(run, file, prov, extra)
     if isinstance(record.get("data"), dict):
         lines += bench_values(record["data"], run, "/data")
     elif "stdout" in record:
@@ -568,16 +572,34 @@ def read_runs(runs: list[Path], store: Path) -> list[tuple[Path, Path, dict]]:
     return list(cited.values())
 
 
+def _script_identity(script: Path) -> dict:
+    """A benchmark script's digest and what it measures (its docstring's first paragraph,
+    the line its section on the page opens with)."""
+    import ast
+
+    found = {"script_sha256": file_digest(script)}
+    try:
+        doc = ast.get_docstring(ast.parse(script.read_text()))
+    except (SyntaxError, UnicodeDecodeError):
+        doc = None
+    if doc:
+        found["script_summary"] = " ".join(doc.split("\n\n")[0].split())
+    return found
+
+
 def machine_provenance(command: str | None = None, **extra) -> dict:
     """What a benchmark's output records about how it was made: the command (this process's
-    own by default), the code (``code_identity``: version, source hash, commit), the machine,
-    its load and the time. A benchmark writing JSON puts it under ``"provenance"``."""
+    own by default), the code (``code_identity``: version, source hash, commit; and of the
+    script the command runs, its digest and first paragraph: ``_script_identity``), the
+    machine, its load and the time. A benchmark writing JSON puts it under ``"provenance"``."""
     import datetime as _dt
 
     if command is None:
         command = " ".join(["python", *sys.argv])
+    scripts = [w for w in command.split() if w.endswith(".py") and Path(w).is_file()]
     return {
         **code_identity(),
+        **(_script_identity(Path(scripts[0])) if scripts else {}),
         "platform": platform.platform(),
         "python": sys.version.split()[0],
         "cpus": os.cpu_count(),
@@ -695,6 +717,20 @@ def _shown(path: Path) -> str:
     return Path(os.path.relpath(path.resolve())).as_posix()
 
 
+def _not_written_here(store: Path, known: set[Path]) -> list[str]:
+    """The files below ``store`` that the results command does not write there: not one of
+    ``known`` (this page's sources and guide fragments), nor a figure a guide shows
+    (``figures/STUDY/NAME.png`` of ``guides.GUIDE_FIGURES``)."""
+    found = []
+    for rel, st in walk(store):
+        parts = Path(rel).parts
+        figure = (len(parts) == 3 and parts[0] == guides.FIGURES and parts[2].endswith(".png")
+                  and parts[2].removesuffix(".png") in guides.GUIDE_FIGURES.get(parts[1], {}))
+        if not (stat.S_ISDIR(st.st_mode) or figure or store / rel in known):
+            found.append(rel)
+    return sorted(found)
+
+
 #: the one command that runs every study's full profile and every benchmark again (or reuses
 #: what matches this checkout's code) and writes the page (``report.regenerate``)
 REGENERATE = "snn-antenna results --regenerate"
@@ -738,8 +774,20 @@ def make_page(
     )
     pending = {path: text for path, text in fragments.items()
                if not path.is_file() or path.read_text() != text}
+    known = {t for t, _, _ in summaries + stored} | set(fragments)
     with output_folder(out.parent, STUDY, shared=True) as folder:
-        folder.check_writes([out.name] + ([store.name] if copies or pending else []))
+        # the page is made from results/, so it is checked even when nothing is copied in
+        if store.name in folder.changed or (os.path.lexists(store) and
+                                            store.name not in folder.listed):
+            foreign = _not_written_here(store, known)
+            if foreign:
+                raise SpecError(
+                    "results", _shown(store / foreign[0]),
+                    "a file the results command writes in results/ (the folder is its own, "
+                    "listed by content in the manifest beside it; this file is not one it "
+                    "writes): move it out of results/ (in docs/ itself your files are left "
+                    "alone)")
+        folder.check_writes([out.name, store.name])
         folder.claim()
         for target, file, summary in summaries:
             if file.resolve() != target.resolve():
@@ -822,9 +870,9 @@ COMMANDS = (
             ),
             Option(
                 "regenerate",
-                "run every study's full profile and every benchmark stored beside the page "
-                "again, reusing each whose code hash is this checkout's, then write the page "
-                "(run from the repository's checkout)",
+                "run every study's full profile and every benchmark of benchmarks/ (its page "
+                "command, regenerate.PAGE_BENCHMARKS) again, reusing each whose code hash is "
+                "this checkout's, then write the page (run from the repository's checkout)",
                 kind=SWITCH,
             ),
             Option(
