@@ -72,3 +72,17 @@ def test_the_command_takes_its_options(monkeypatch, capsys):
     usage = capsys.readouterr().out
     assert all(o in usage for o in ("--bracket", "--curve", "--target", "--set", "--out"))
 
+
+
+def test_the_line_through_noisy_couplings_meets_the_target_where_the_trend_does():
+    rng = np.random.default_rng(0)
+    xs = np.linspace(0.016, 0.022, 7)
+    points = {float(c): 0.9 + c + rng.normal(0, 0.003, 5) for c in xs}
+    points[0.05] = np.full(5, 0.5)                    # outside the fit's range: left out
+    root, slope = coupling.fitted_root(points, 0.919, (0.015, 0.023))
+    assert root == pytest.approx(0.019, abs=0.003) and slope > 0
+    with pytest.raises(SpecError, match="3 measured couplings"):
+        coupling.fitted_root(points, 0.919, (0.016, 0.0171))
+    falling = {c: 1.0 - a for c, a in points.items()}
+    with pytest.raises(SpecError, match="rises"):
+        coupling.fitted_root(falling, 0.08, (0.015, 0.023))

@@ -10,7 +10,9 @@ each coupling is the default contact physics (``current``) at ``physics_strength
 other read-outs take no part in the calibration). The accuracy rises with the coupling (a
 louder rod line is an easier material feature), so the coupling that meets the target is
 the root of mean accuracy − target, found with ``scipy.optimize.brentq`` on a bracket whose
-ends lie on either side of it. ``benchmarks/calibrate_rod_coupling.py`` is the command."""
+ends lie on either side of it (``calibrate``), or, where the splits' noise makes single
+crossings wander, where a line through the couplings measured near it meets the target
+(``fitted_root``). ``benchmarks/calibrate_rod_coupling.py`` is the command."""
 from __future__ import annotations
 
 from dataclasses import replace
@@ -38,6 +40,25 @@ def curve_rows(points: dict) -> list[dict]:
         rows.append({"coupling": c, "accuracy": iv.mean, "interval": [iv.low, iv.high],
                      "n": iv.n, "per_split": [float(a) for a in points[c]]})
     return rows
+
+
+def fitted_root(points: dict, target: float = PAPER_ACCURACY,
+                within: tuple[float, float] = (0.0, 1.0)) -> tuple[float, float]:
+    """(coupling, slope per unit coupling) where the least-squares line through the mean
+    accuracies of the couplings ``within`` meets ``target``. Near the target the split-to-split
+    noise of one coupling's mean (a few tenths of a point) exceeds the rise between close
+    couplings, so the line through several of them places the root where one crossing
+    (``calibrate``) cannot. Refused when fewer than three couplings lie ``within`` or the line
+    does not rise."""
+    lo, hi = within
+    xs = np.array(sorted(c for c in points if lo <= c <= hi))
+    check(len(xs) >= 3, "fit", [lo, hi], f"a range holding 3 measured couplings or more "
+                                        f"(it holds {len(xs)})")
+    ys = np.array([np.mean(points[c]) for c in xs])
+    slope, intercept = np.polyfit(xs, ys, 1)
+    check(slope > 0, "fit", [lo, hi], "a range where the accuracy rises with the coupling "
+                                      f"(its line falls: {slope:.3g} per unit)")
+    return float((target - intercept) / slope), float(slope)
 
 
 def accuracy(parts: Parts, coupling: float, log=print) -> np.ndarray:
@@ -87,4 +108,4 @@ def calibrate(parts: Parts, bracket: tuple[float, float], target: float = PAPER_
     return float(brentq(miss, lo, hi, xtol=xtol)), points
 
 
-__all__ = ["PAPER_ACCURACY", "curve_rows", "accuracy", "calibrate"]
+__all__ = ["PAPER_ACCURACY", "curve_rows", "fitted_root", "accuracy", "calibrate"]
