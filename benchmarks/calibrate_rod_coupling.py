@@ -64,7 +64,7 @@ def main(argv=None) -> dict:
         print(f"root (brentq): ROD_COUPLING = {root:.4f} (target {100 * args.target:.1f} %)")
     if fitted is not None:
         print(f"root (line through {args.fit[0]:g}-{args.fit[1]:g}): ROD_COUPLING = "
-              f"{fitted[0]:.4f}; slope {fitted[1] / 1000:.2f} points per 0.001")
+              f"{fitted[0]:.4f}; slope {fitted[1] / 10:.2f} points per 0.001")
     load = os.getloadavg()
     print(f"load average {load[0]:.1f}; {time.perf_counter() - t0:.0f} s")
     out = {"target": args.target, "source": "paper (docs/reference.md)",

@@ -86,3 +86,9 @@ def test_the_line_through_noisy_couplings_meets_the_target_where_the_trend_does(
     falling = {c: 1.0 - a for c, a in points.items()}
     with pytest.raises(SpecError, match="rises"):
         coupling.fitted_root(falling, 0.08, (0.015, 0.023))
+
+
+def test_the_constant_names_the_command_that_calibrates_it():
+    source = (ROOT / "snn_antenna" / "sources" / "antenna.py").read_text()
+    comment = source[:source.index("\nROD_COUPLING = ")].rsplit("\n\n", 1)[-1]
+    assert "benchmarks/calibrate_rod_coupling.py" in comment
