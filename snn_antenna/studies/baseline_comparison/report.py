@@ -70,7 +70,8 @@ def _calibrated(report: Report, cmp: Comparison, summary: dict) -> None:
         rows.append(Calibrated(
             f"{len(cmp.materials)} materials, full-spectrum MLP accuracy",
             100 * summary["material_accuracy"]["mlp_spectrum_material"]["mean"], 94.2, "%",
-            SOURCE, "ROD_COUPLING: how much of the rod's own mode reaches the tip"))
+            SOURCE, "ROD_COUPLING: how much of the rod's own mode reaches the tip "
+            "(benchmarks/calibrate_rod_coupling.py)"))
     report.calibrated(*rows)
 
 
