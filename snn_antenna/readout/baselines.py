@@ -164,7 +164,10 @@ class Mlp:
 #   test contacts to 8.8 mm (31 mm with Adam). The classifiers stay with Adam: L-BFGS fitted
 #   them too, and read the tuned bank's rate, latency and time bins together at 83 % where
 #   Adam reads 92 %.
-# Sets of SMALL_SET rows or more keep their MLPs as they are.
+# Sets of SMALL_SET rows or more keep their MLPs as they are. On the quick bench set two
+# regressors train on fewer (``snn-antenna run studies/baseline_comparison.toml --quick``):
+# the two-material network (its pair's ~220 contacts: 6.8 → 5.6 mm, 55 → 60 %) and the array
+# design low_8's distance MLP (~360: 7.0 → 4.3 mm).
 SMALL_SET = 512
 MIN_BATCHES_PER_EPOCH = 8
 MIN_BATCH = 8
