@@ -96,21 +96,33 @@ def test_the_full_spectrum_mlp_reads_the_spectrum_s_shape_not_its_loudness():
     assert np.array_equal(model.predict(X), model.predict(X * rng.uniform(0.2, 5.0, (120, 1))))
 
 
-def test_an_epoch_of_a_small_training_set_holds_several_batches():
-    """~80 training contacts: 64-row batches would make an epoch two updates; the batches
-    shrink so it holds at least MIN_BATCHES_PER_EPOCH, and a large set keeps its own."""
-    def batch(model):
-        return [v for k, v in model.get_params(deep=True).items()
-                if k.endswith("batch_size")]
-    small = bl.with_batches_for(bl.classifier_pipeline(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), 80)
-    assert batch(small) == [max(bl.MIN_BATCH, 80 // bl.MIN_BATCHES_PER_EPOCH)]
-    assert -(-80 // batch(small)[0]) >= bl.MIN_BATCHES_PER_EPOCH
-    tiny = bl.with_batches_for(bl.regressor_pipeline(bl.Mlp(), bl.DISTANCE_HIDDEN, 0), 20)
-    assert batch(tiny) == [bl.MIN_BATCH]
-    large = bl.with_batches_for(bl.classifier_pipeline(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), 640)
-    assert batch(large) == [64]
+def test_a_small_training_set_trains_its_classifiers_in_more_batches_and_regressors_by_lbfgs():
+    """~80 training contacts: 64-row batches would make a classifier's epoch two updates; the
+    batches shrink so it holds at least MIN_BATCHES_PER_EPOCH. A regressor is trained by
+    L-BFGS to convergence, and fits what Adam's epoch budget leaves unfitted. A large set
+    keeps its MLPs as they are."""
+    def params(model, name):
+        return [v for k, v in model.get_params(deep=True).items() if k.endswith(name)]
+    small = bl.sized_for(bl.classifier_pipeline(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), 80)
+    assert params(small, "batch_size") == [max(bl.MIN_BATCH, 80 // bl.MIN_BATCHES_PER_EPOCH)]
+    assert -(-80 // params(small, "batch_size")[0]) >= bl.MIN_BATCHES_PER_EPOCH
+    assert params(small, "solver") == ["adam"]
+    tiny = bl.sized_for(bl.classifier_pipeline(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), 20)
+    assert params(tiny, "batch_size") == [bl.MIN_BATCH]
+    regressor = bl.sized_for(bl.regressor_pipeline(bl.Mlp(), bl.DISTANCE_HIDDEN, 0), 80)
+    assert params(regressor, "solver") == ["lbfgs"]
+    assert params(regressor, "__max_iter") == [bl.LBFGS_MAX_ITER]
+    for build in (bl.classifier_pipeline, bl.regressor_pipeline):
+        large = bl.sized_for(build(bl.Mlp(), bl.MATERIAL_HIDDEN, 0), bl.SMALL_SET)
+        assert params(large, "batch_size") == [64] and params(large, "solver") == ["adam"]
     X = np.random.default_rng(0).normal(size=(80, 3))
     fold = cv.fit_fold(bl.Baseline("m", "material", "x", lambda seed: bl.classifier_pipeline(
         bl.Mlp(max_iter=2), bl.MATERIAL_HIDDEN, seed)), X, (X[:, 0] > 0).astype(int),
         np.arange(80) < 60, np.arange(80) >= 60, 0)
-    assert batch(fold.estimator) == [bl.MIN_BATCH]
+    assert params(fold.estimator, "batch_size") == [bl.MIN_BATCH]
+    # a smooth target on 60 contacts: a few Adam epochs leave it unfitted, L-BFGS fits it
+    y = 10 + 5 * np.tanh(X[:, 0]) + 3 * X[:, 1]
+    fold = cv.fit_fold(bl.Baseline("d", "distance", "x", lambda seed: bl.regressor_pipeline(
+        bl.Mlp(max_iter=20), bl.DISTANCE_HIDDEN, seed)), X, y,
+        np.arange(80) < 60, np.arange(80) >= 60, 0)
+    assert np.sqrt(np.mean((fold.prediction - y[60:]) ** 2)) < 0.4 * np.std(y)   # Adam: 1.07

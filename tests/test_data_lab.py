@@ -408,6 +408,16 @@ def test_a_bad_csv_value_is_named_by_its_file_line_past_blank_lines(tmp_path):
     assert "r1.csv line 68003 y" in err and "5x2" in err, err
 
 
+# Read-outs of the shipped comparison that read the lab's rod as well as one feature does
+# (material within 5 points of the decay time's read-out, distance within 2x the peak
+# frequency's rmse), on every profile, and on the quick profiles only (more training
+# contacts); every NMF size the split fits comes with them.
+MEETS = ("mlp_parametric_material", "mlp_spectrum_material", "linear_low_peak",
+         "mlp_parametric", "mlp_spectrum", "mlp_spectrum_sub10", "mlp_low_half",
+         "spiking_dominant", "spiking_mlp_distance_low")
+MEETS_QUICK = ("spiking_mlp_material", "spiking_mlp_material_rod")
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("rate, profile", [(1000.0, ["--quick"]), (2000.0, ["--quick"]),
                                            (2000.0, [])])
@@ -416,11 +426,29 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     """`run studies/baseline_comparison.toml --data DIR` (quick at the board's 1 kHz and at
     2 kHz, full at 2 kHz), with `--check` first, on the lab's rod (its four materials, four
     distances, ten repetitions): the check passes and so does the run, every statistic
-    finite; the material is read within 5 points of the one-feature decay read-out (by the
-    parametric, the full-spectrum and, quick, the two-band spiking MLPs) and the distance
-    within 2× the peak-frequency read-out's rmse (by the low peak's regression and the
-    training-free dominant resonator), on the same splits. ``benchmarks/bench_lab_readouts.py``
-    prints every read-out beside them."""
+    finite; on the same splits, every read-out family in ``MEETS`` reads the material within
+    5 points of the one-feature decay read-out, or the distance within 2× the peak-frequency
+    read-out's rmse. ``benchmarks/bench_lab_readouts.py`` prints every read-out beside them.
+
+    The read-outs left out, and why (measured with that script):
+    - the tuned bank's codes and the coders compared on it: their coder's level is set for
+      the bench's weak rod lines (threshold 3 mg, analog gain 150 per g), and on this rod the
+      channels' quiet noise (~2 mg rms) crosses the threshold while its impacts (50-750 mg in
+      a channel) hold the analog current at its ceiling through the whole window, before and
+      after the ringing: the spikes carry no decay (rate 0.78, latency 0.48 where the decay
+      reads 0.95, 2 kHz quick). With levels set from this rod's noise and peaks (threshold
+      7 mg, gain 5 per g) rate reads 0.97, time bins 0.92, latency 0.88;
+    - the high band's spiking MLP (0.83-0.88, quick; 0.77 full), not resolved: this rod's
+      high mode decays twice as fast as its low mode (rubber's rings 15 ms, under a period
+      at 44 Hz);
+    - the rate centroid, quick (11.9 mm against 10.8; full 5.7 against 12): at 18 cm, where
+      the low mode rings at 35 Hz, the band's top resonators (69-75 Hz) fire too and pull
+      the rate-weighted mean; the dominant resonator is not moved by them (9.7 mm);
+    - the spiking distance MLP on both bands (10.0 mm at 2 kHz quick, 17.1 at 1 kHz quick,
+      16.7 full, against 10.8, 10.4 and 12): the high band's inputs double those of the low
+      band's MLP, which meets, on 48-80 training contacts;
+    - on the full profile (5 of 10 repetitions held out to calibrate, 48 training
+      contacts), the spiking material MLPs (0.86-0.88 against 0.96)."""
     from snn_antenna.cli import main as cli
 
     sess = lab.session(rate, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
@@ -439,19 +467,13 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     summary = json.loads((tmp_path / "run" / "summary.json").read_text())
     assert summary["data"]["skipped"]["no_decay_fit"] <= 0.05 * source.n_events
     scores = lab.against_one_feature(tmp_path / "run", source)
-    best_material = max(scores[k][0] for k in scores if scores[k][2] == "material")
-    assert best_material >= scores["mlp_parametric_material"][1] - 0.05, scores
-    assert scores["mlp_parametric_material"][0] >= scores["mlp_parametric_material"][1] - 0.05
-    assert scores["linear_low_peak"][0] <= 2 * scores["linear_low_peak"][1], scores
-    # the full spectrum scaled to its peak, and (quick: 5 repetitions train) the spiking MLPs
-    # on both bands; the full profile holds 5 of the 10 repetitions out to calibrate, and on
-    # the 48 training contacts left the spiking MLPs read 0.86-0.88
-    spiking_mlps = ("spiking_mlp_material", "spiking_mlp_material_rod") if profile else ()
-    for name in ("mlp_spectrum_material", *spiking_mlps):
-        assert scores[name][0] >= scores[name][1] - 0.05, (name, scores)
-    # the training-free decoder inverts the fitted law, a silent low band read where the
-    # calibration contacts it stayed silent for were struck
-    assert scores["spiking_dominant"][0] <= 2 * scores["spiking_dominant"][1], scores
+    meets = [*MEETS, *(MEETS_QUICK if profile else ()),
+             *(name for name in scores if name.startswith("nmf_"))]
+    assert len(meets) > len(MEETS) and set(meets) <= set(scores), sorted(scores)
+    missed = {name: scores[name][:2] for name in meets if not (
+        scores[name][0] >= scores[name][1] - 0.05 if scores[name][2] == "material"
+        else scores[name][0] <= 2 * scores[name][1])}
+    assert not missed, (missed, scores)
     assert_reports_recorded_data(tmp_path / "run")
     assert any(line.startswith("fitted: a silent low band reads")
                for line in summary["data"]["fitted"]), summary["data"]["fitted"]

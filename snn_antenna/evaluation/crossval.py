@@ -42,7 +42,7 @@ from ..readout.baselines import (
     material_baselines,
     parametric_material_baseline,
     two_material_baseline,
-    with_batches_for,
+    sized_for,
 )
 from ..readout.spiking import SpikingBank, recording_attrs
 from ..readout.spiking_decoders import mlp_baseline
@@ -151,7 +151,7 @@ def targets_of(features: xr.Dataset, task: str, materials: list[str]) -> np.ndar
 
 
 def fit_fold(baseline: Baseline, X, y, train, test, seed) -> Fold:
-    est = with_batches_for(baseline.build(seed), int(np.count_nonzero(train)))
+    est = sized_for(baseline.build(seed), int(np.count_nonzero(train)))
     t0 = time.perf_counter()
     with warnings.catch_warnings():
         # A fixed epoch budget is the design (see Mlp); its end is not a failure.
