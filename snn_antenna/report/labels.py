@@ -12,7 +12,7 @@ READOUTS = {
     "linear_low_peak": "linear regression, low peak",
     "mlp_parametric": "MLP on 2 peaks (F, A)",
     "mlp_spectrum": "MLP, full spectrum",
-    "mlp_spectrum_sub10": "MLP, every 10th bin",
+    "mlp_spectrum_sub10": "MLP, spectrum in 10-bin bands",
     "mlp_low_half": "MLP, lower half of spectrum",
     "mlp_spectrum_material": "MLP 51, full spectrum",
     "mlp_parametric_material": "MLP 51 on 2 peaks (F, A, τ)",
