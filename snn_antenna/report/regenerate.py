@@ -62,7 +62,10 @@ PAGE_BENCHMARKS = {
     "bench_events": "--cost-only --sizes 24 48 --json {out}",
     "bench_lab_readouts": "--json {out}",
     "bench_stage_ceilings": "--repetitions 30 --out {out}",
-    "bench_stream": "--browsers 0,1 --repeats 1 --view-seconds 10 --baseline none",
+    # the whole robot network (gate, CPG, control beside the resonators), the heaviest the
+    # live page streams, with no page and with three open
+    "bench_stream": "--network networks/live_robot.toml --browsers 0,3 --repeats 1 "
+                    "--view-seconds 10 --baseline none",
     "bench_studies": "--json {out}",
     "bench_sweep": "--sizes 10000 100000 --runtime-max 0 --naive-sample 1 --workers "
                    "--json {out}",
