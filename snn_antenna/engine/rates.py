@@ -46,7 +46,8 @@ class Rate:
 # estimate scales the rates from it to the load it meets), probed with
 # `SNN_ANTENNA_CACHE=/tmp/p python -c "from snn_antenna.engine import rates; rates.probe()"`
 # on 2026-11-29; on the idle machine (load 1.8) the same probe measured each within 30 %
-# (compiles 3.2 and 11.0 s, a rebuild 1.2 s: the table errs long). neuron_steps_per_s: per ONE worker process (points x steps / wall time,
+# (compiles 3.2 and 11.0 s, a rebuild 1.2 s: the table errs long; its contact rule's 0.11 ms
+# per window is the table's). neuron_steps_per_s: per ONE worker process (points x steps / wall time,
 # compile excluded); steps_per_s: time steps per second of ONE small network (tens of neurons,
 # spike monitor), where the per-step overhead rather than the neurons sets the pace.
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
@@ -76,7 +77,7 @@ TABLE = {
     # coding its samples, feeding them): about 3 s per simulated second beside Brian2's steps
     # at load 12.9, scaled. report: a study's whole report (its figures, pages, summary and
     # stores) took 6 to 11 s at load 15, scaled (the probe's six figures alone: 0.3 s)
-    "python_s": {"study_start": 3.1, "report": 2.5, "readout_window": 1.5e-4,
+    "python_s": {"study_start": 3.1, "report": 2.5, "readout_window": 1.1e-4,
                  "closed_loop_chunk": 0.008},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
