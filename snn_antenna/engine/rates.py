@@ -74,11 +74,11 @@ TABLE = {
     # and the package imported) and its report; one window of a rate map through the contact
     # rule (``ContactDetector.detect``)
     # closed_loop_chunk: the exploration loop's Python per chunk of 10 ms (moving the robot,
-    # coding its samples, feeding them): about 3 s per simulated second beside Brian2's steps
-    # at load 12.9, scaled. report: a study's whole report (its figures, pages, summary and
-    # stores) took 6 to 11 s at load 15, scaled (the probe's six figures alone: 0.3 s)
-    "python_s": {"study_start": 3.1, "report": 2.5, "readout_window": 1.1e-4,
-                 "closed_loop_chunk": 0.008},
+    # coding its samples, feeding them): the full profile's loop ran 12 s in 3.5 s idle,
+    # steps included. report: a study's whole report (its figures, pages, summary and
+    # stores): 6 to 11 s at load 15, the quickstart's whole run 1.6 s idle
+    "python_s": {"study_start": 3.1, "report": 2.0, "readout_window": 1.1e-4,
+                 "closed_loop_chunk": 0.002},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 # the load average the table was measured at (its rates are scaled from it, ``load_factor``)
