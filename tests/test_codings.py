@@ -125,10 +125,12 @@ def test_an_estimate_follows_the_load_from_its_probes_to_now(tmp_path, monkeypat
     assert f"×{2 ** power:.2f}" in busy.rate.source
 
 
-def test_niced_work_does_not_count_against_an_ordinary_run(monkeypatch):
-    """The competing load is the load average times the ordinary (not niced) share of the
-    busy CPU time watched; a machine busy only with niced work is idle to a study."""
-    monkeypatch.setattr(rates.os, "getloadavg", lambda: (4.0, 0.0, 0.0))
+def test_the_competing_load_is_the_cpu_in_use_or_the_queue_of_a_saturated_machine(monkeypatch):
+    """The cores busy while watched (not the load average, which counts idle kernel
+    threads and trails a finished run); a saturated machine's queue (the load average);
+    niced work left out unless the kernel groups by session."""
+    monkeypatch.setattr(rates.os, "getloadavg", lambda: (6.0, 0.0, 0.0))
+    monkeypatch.setattr(rates.os, "cpu_count", lambda: 2)
     monkeypatch.setattr(rates.time, "sleep", lambda s: None)
     monkeypatch.setattr(rates, "_autogroups", lambda: False)
 
@@ -138,21 +140,23 @@ def test_niced_work_does_not_count_against_an_ordinary_run(monkeypatch):
         rates._watched.clear()
         return rates.competing_load()
 
-    assert watch((100.0, 100.0), (110.0, 130.0)) == pytest.approx(1.0)   # 10 of 40 ordinary
-    assert watch((100.0, 100.0), (100.0, 140.0)) == pytest.approx(0.0)   # all of it niced
-    assert watch((100.0, 100.0), (140.0, 100.0)) == pytest.approx(4.0)   # none niced
-    assert watch((100.0, 100.0), (100.0, 100.0)) == pytest.approx(4.0)   # nothing busy
-    assert watch(None) == pytest.approx(4.0)                             # no /proc/stat
-    # one estimate asks several times within a watch: the machine is watched once
-    assert rates.competing_load() == pytest.approx(4.0)
-    # where the kernel shares the CPU by session first, another session's niced work
-    # competes in full: the load average as it is
+    start = (100.0, 100.0, 100.0)
+    # a quarter of the CPU time busy at nice 0: half a core, whatever the load average
+    assert watch(start, (125.0, 100.0, 175.0)) == pytest.approx(0.5)
+    assert watch(start, (100.0, 100.0, 200.0)) == pytest.approx(0.0)       # idle
+    # saturated by ordinary work: the queue the load average counts
+    assert watch(start, (200.0, 100.0, 100.0)) == pytest.approx(6.0)
+    # saturated by niced work: it yields to an ordinary process
+    assert watch(start, (100.0, 200.0, 100.0)) == pytest.approx(0.0)
+    assert watch(start, (150.0, 150.0, 100.0)) == pytest.approx(3.0)
+    # where the kernel shares the CPU by session first, niced work competes in full
     monkeypatch.setattr(rates, "_autogroups", lambda: True)
-    ticks = iter([(100.0, 100.0), (100.0, 140.0)])
-    monkeypatch.setattr(rates, "_cpu_times", lambda: next(ticks))
-    rates._watched.clear()
-    assert rates.competing_load() == pytest.approx(4.0)
-    # the real /proc/stat of this machine gives a load between 0 and the load average
+    assert watch(start, (100.0, 200.0, 100.0)) == pytest.approx(6.0)
+    assert watch(None) == pytest.approx(6.0)                              # no /proc/stat
+    # one estimate asks several times within a watch: the machine is watched once
+    assert rates.competing_load() == pytest.approx(6.0)
+    # the real /proc/stat of this machine: between idle and its queue
     monkeypatch.undo()
     rates._watched.clear()
-    assert 0.0 <= rates.competing_load() <= rates.os.getloadavg()[0] + 1.0
+    assert 0.0 <= rates.competing_load() <= max(rates.os.getloadavg()[0],
+                                                 rates.os.cpu_count()) + 1.0

@@ -42,11 +42,12 @@ class Rate:
 # The rates of this machine class as its probe (``probe``, below) measured them, for a
 # machine without a probe of its own: AMD EPYC (Zen 5, AVX-512), 2 cores, as idle (the probe
 # ran in a session the scheduler weighed ten times the other work on the machine, all of it
-# niced; ``TABLE_LOAD`` is this machine's load average with nothing else running; every
-# estimate scales the rates from it to the load it meets), probed with
+# niced; ``TABLE_LOAD``: none competing, ``competing_load``; every estimate scales the rates
+# from it to the load it meets), probed with
 # `SNN_ANTENNA_CACHE=/tmp/p python -c "from snn_antenna.engine import rates; rates.probe()"`
 # on 2026-11-29; on the idle machine (load 1.8) the same probe measured each within 30 %
-# (compiles 3.2 and 11.0 s, a rebuild 1.2 s: the table errs long). neuron_steps_per_s: per ONE worker process (points x steps / wall time,
+# (compiles 3.2 and 11.0 s, a rebuild 1.2 s: the table errs long; its contact rule's 0.11 ms
+# per window is the table's). neuron_steps_per_s: per ONE worker process (points x steps / wall time,
 # compile excluded); steps_per_s: time steps per second of ONE small network (tens of neurons,
 # spike monitor), where the per-step overhead rather than the neurons sets the pace.
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
@@ -73,15 +74,16 @@ TABLE = {
     # and the package imported) and its report; one window of a rate map through the contact
     # rule (``ContactDetector.detect``)
     # closed_loop_chunk: the exploration loop's Python per chunk of 10 ms (moving the robot,
-    # coding its samples, feeding them): about 3 s per simulated second beside Brian2's steps
-    # at load 12.9, scaled. report: a study's whole report (its figures, pages, summary and
-    # stores) took 6 to 11 s at load 15, scaled (the probe's six figures alone: 0.3 s)
-    "python_s": {"study_start": 3.1, "report": 2.5, "readout_window": 1.5e-4,
-                 "closed_loop_chunk": 0.008},
+    # coding its samples, feeding them): the full profile's loop ran 12 s in 3.5 s idle,
+    # steps included. report: a study's whole report (its figures, pages, summary and
+    # stores): 6 to 11 s at load 15; the quickstart's whole quick run took 3.9 s idle, its
+    # process's start (2.9 s in the idle probe) included
+    "python_s": {"study_start": 3.1, "report": 1.0, "readout_window": 1.1e-4,
+                 "closed_loop_chunk": 0.002},
 }
 ENGINES = ("numpy", "cython", "standalone", "codings")   # the Brian2 engines
 # the load average the table was measured at (its rates are scaled from it, ``load_factor``)
-TABLE_LOAD = 1.3
+TABLE_LOAD = 0.0
 
 
 def table() -> dict[str, dict[str, Rate]]:
@@ -149,16 +151,16 @@ def slowdown(load: float) -> float:
 LOAD_SAMPLE_S = 0.3
 
 
-def _cpu_times() -> tuple[float, float] | None:
-    """(busy at nice 0 or below, busy niced) jiffies of all CPUs since boot, from
+def _cpu_times() -> tuple[float, float, float] | None:
+    """(busy at nice 0 or below, busy niced, idle) jiffies of all CPUs since boot, from
     /proc/stat; None where there is none."""
     try:
         with open("/proc/stat") as stat:
             fields = [float(v) for v in stat.readline().split()[1:8]]
     except (OSError, ValueError):
         return None
-    user, nice, system, _idle, _iowait, irq, softirq = fields
-    return user + system + irq + softirq, nice
+    user, nice, system, idle, iowait, irq, softirq = fields
+    return user + system + irq + softirq, nice, idle + iowait
 
 
 _watched: list = []    # [(monotonic time, competing load)] of the last watch
@@ -175,23 +177,33 @@ def _autogroups() -> bool:
         return False
 
 
+# Busier than this share of its cores, a machine's demand is its run queue (the load average)
+SATURATED = 0.9
+
+
 def competing_load(sample_s: float = LOAD_SAMPLE_S) -> float:
-    """The load a new process of ordinary priority shares the cores with: the 1-minute load
-    average times the share of the CPU's busy time that runs at nice 0 or below, watched for
-    ``sample_s``. Processes under ``nice`` yield their cores to it (a nice-10 process weighs
-    a tenth of a nice-0 one), so a machine busy only with niced work runs a study as an idle
-    one would; the load average alone counts them all. Where the kernel groups processes by
-    session (``_autogroups``), nice yields nothing across sessions: the load average, whole.
-    One estimate asks several times: a watch serves for ``LOAD_SAMPLE_S`` × 10."""
+    """The CPU demand a new process of ordinary priority shares the cores with, watched for
+    ``sample_s`` in /proc/stat: the cores busy, or on a machine busy beyond ``SATURATED`` of
+    them the 1-minute load average (its queue), whichever is more. The load average alone
+    counts tasks that wait without computing (a virtual machine's kernel threads keep it
+    near 1.5 on an idle 2-core machine) and trails a run that has just ended by a minute.
+    Processes under ``nice`` yield their cores to it (a nice-10 process weighs a tenth of a
+    nice-0 one): only the busy time at nice 0 or below counts, except where the kernel
+    groups processes by session (``_autogroups``), where nice yields nothing across
+    sessions. One estimate asks several times: a watch serves for ``LOAD_SAMPLE_S`` × 10."""
     if _watched and time.monotonic() - _watched[0][0] < 10 * sample_s:
         return _watched[0][1]
     load = os.getloadavg()[0]
-    before = None if _autogroups() else _cpu_times()
+    before = _cpu_times()
     if before is not None:
         time.sleep(sample_s)
-        ordinary, niced = (a - b for a, b in zip(_cpu_times(), before))
-        if ordinary + niced > 0:
-            load *= ordinary / (ordinary + niced)
+        ordinary, niced, idle = (a - b for a, b in zip(_cpu_times(), before))
+        cores = os.cpu_count() or 1
+        if ordinary + niced + idle > 0:
+            busy = cores * (ordinary + niced) / (ordinary + niced + idle)
+            load = busy if busy < SATURATED * cores else max(busy, load)
+            if not _autogroups() and ordinary + niced > 0:
+                load *= ordinary / (ordinary + niced)
     _watched[:] = [(time.monotonic(), load)]
     return load
 

@@ -319,6 +319,8 @@ def _more_banks(parts: Parts, events: int, per_repetition: int) -> list:
     here for the others)."""
     plan, bank = parts.plan, parts.bank
     engine = engine_of(bank.target)
+    # the designs', the tuned banks' and the curve's chunks run on the Dask workers
+    workers = plan.workers or max_workers()
     compiles = len(parts.designs)
     stages = []
     design_events = min(events, plan.design_repetitions * per_repetition)
@@ -326,7 +328,7 @@ def _more_banks(parts: Parts, events: int, per_repetition: int) -> list:
     for design in parts.designs:
         band = design.band_of(bank)
         design_runs.append((bank.duration_s, band.dt_ms or bank.dt_ms,
-                            band.n_neurons * design_events, engine))
+                            band.n_neurons * design_events / workers, engine))
     if design_runs:
         stages.append(("spiking.design_repetitions", plan.design_repetitions, design_runs))
     tuned = plan.tuned_plan()
@@ -337,8 +339,9 @@ def _more_banks(parts: Parts, events: int, per_repetition: int) -> list:
         calibration = tuned.calibration_repetitions * per_repetition
         sizes = [base.n_resonators] + [n for _ in tuned.coders for n in tuned.coder_sizes]
         curve_events = min(events, tuned.curve_repetitions * per_repetition)
-        every_event = [(tuned.duration_s, dt_ms, n * events, engine) for n in sizes]
-        runs = [(tuned.duration_s, dt_ms, n * curve_events, engine) for n in tuned.curve]
+        every_event = [(tuned.duration_s, dt_ms, n * events / workers, engine) for n in sizes]
+        runs = [(tuned.duration_s, dt_ms, n * curve_events / workers, engine)
+                for n in tuned.curve]
         # a bank's project is its size's (the channels' tuning is a run argument): one build
         # per distinct size, the cost samples' (one chunk of the sample) apart
         compiles += 2 * len(set(sizes) | set(tuned.curve)) - len(set(tuned.curve) - set(sizes))
