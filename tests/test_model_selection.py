@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -264,6 +265,9 @@ def test_the_estimate_is_the_sum_of_the_plans_parts(monkeypatch):
     """Every grid point's bench set and calibration, each candidate's predictions, shared by
     the workers; the workers' start once; the parts named in the line --check prints."""
     monkeypatch.setattr(rates, "competing_load", lambda: 0.0)
+    # no grid point's features on disk (a run on this machine may have left them)
+    monkeypatch.setattr(ms_cost.signal, "features_path",
+                        lambda *a: Path("/nonexistent/features.zarr"))
     monkeypatch.setattr(rates, "load_factor", lambda: (1.0, ""))
     parts = ms.plan(specs.load(SPEC)).parts
     points = sum(len(c.strengths) for c in parts.selection.candidates)
@@ -287,3 +291,19 @@ def test_the_estimate_is_the_sum_of_the_plans_parts(monkeypatch):
     monkeypatch.setattr(rates, "competing_load", lambda: 3.0)
     assert ms_cost.estimate(parts, 2).seconds - start == pytest.approx(
         (work / 2) * rates.slowdown(4.0))
+
+
+def test_a_point_whose_features_are_on_disk_costs_only_its_own_work(monkeypatch, tmp_path):
+    """A re-run finds its grid points' bench sets and features cached: the estimate charges
+    those points their own work, not the generation."""
+    monkeypatch.setattr(rates, "competing_load", lambda: 0.0)
+    monkeypatch.setattr(rates, "load_factor", lambda: (1.0, ""))
+    parts = ms.plan(specs.load(SPEC)).parts
+    points = sum(len(c.strengths) for c in parts.selection.candidates)
+    cost = ms_cost.point_cost(parts)
+    monkeypatch.setattr(ms_cost.signal, "features_path", lambda *a: tmp_path / "none.zarr")
+    cold = ms_cost.estimate(parts, 1).seconds
+    (tmp_path / "made.zarr").mkdir()
+    monkeypatch.setattr(ms_cost.signal, "features_path", lambda *a: tmp_path / "made.zarr")
+    warm = ms_cost.estimate(parts, 1).seconds
+    assert cold - warm == pytest.approx(points * (cost.bench - ms_cost.POINT_S))

@@ -20,14 +20,19 @@ from ..core.truth import bench_labels
 from ..sources import bench
 
 
+def features_path(bench_spec, processor: EventProcessor) -> Path:
+    """Where ``load_features`` caches the features of ``bench_spec``'s events: keyed by both
+    specs and the code that computes them (``bench.cache_key``)."""
+    key = bench.cache_key({"bench": bench_spec.key(), "events": asdict(processor)}, __name__)
+    return Path(bench_spec.cache_dir) / f"features-{key}.zarr"
+
+
 def load_features(bench_spec, processor: EventProcessor, log=print, fresh: bool = False
                   ) -> tuple[xr.Dataset, xr.Dataset]:
     """The bench data set of ``bench_spec`` (a ``bench.BenchSpec``) and its event features
-    with the events' labels joined; both cached on disk, keyed by their specs and the
-    code that computes them (``bench.cache_key``)."""
+    with the events' labels joined; both cached on disk (``features_path``)."""
     data = bench.load(bench_spec, log, fresh)
-    key = bench.cache_key({"bench": bench_spec.key(), "events": asdict(processor)}, __name__)
-    path = Path(bench_spec.cache_dir) / f"features-{key}.zarr"
+    path = features_path(bench_spec, processor)
     features = bench.cached(path, lambda: process(data, processor, bench_spec.n_jobs, log=log),
                             __name__, log, fresh)
     return data, with_labels(features, data)

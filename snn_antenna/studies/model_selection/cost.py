@@ -12,10 +12,11 @@ time is the CPU time shared among the workers times that slowdown.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from ...engine import rates
 from ...engine.cost import JobEstimate, stages_estimate, study_overhead_s
+from ...evaluation import signal
 from ...readout.baselines import NMFFilterBank
 
 # one contact event generated (``sources.bench.generate``) and processed (its window,
@@ -72,6 +73,12 @@ def point_cost(parts) -> PointCost:
         predictions=predictions)
 
 
+def cached_features(parts, physics: str, strength: float) -> bool:
+    """Whether the features of this grid point's bench set are cached (``signal``)."""
+    spec = replace(parts.bench, physics=physics, physics_strength=strength)
+    return signal.features_path(spec, parts.processor).exists()
+
+
 def _slowdown(workers: int) -> float:
     """Wall seconds per CPU second of each of ``workers`` processes started among the
     machine's load now."""
@@ -93,8 +100,11 @@ def estimate(parts, workers: int) -> JobEstimate:
     points = sum(len(c.strengths) for c in parts.selection.candidates)
     candidates = len(parts.selection.candidates)
     per_cpu = wall_factor(workers) / workers
+    # a point whose bench set's features are on disk reads them (its own work alone)
+    made = sum(cached_features(parts, c.physics, s) for c in parts.selection.candidates
+               for s in c.strengths)
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],
-               points * cost.bench * per_cpu),
+               ((points - made) * cost.bench + made * POINT_S) * per_cpu),
               ("evaluation.material_max_iter", parts.evaluation.material_max_iter, [],
                points * cost.calibration * per_cpu),
               ("evaluation.nmf_max_iter", parts.evaluation.nmf_max_iter, [],
