@@ -91,6 +91,44 @@ def test_tuned_bands_split_the_resonators_over_capped_channels():
             assert b.dt_ms == coarsest_dt_ms(b.band_hz[1], b.hz_per_k, tuning.max_k_dt)
 
 
+def test_graded_gains_share_a_channel_and_its_resonators():
+    freq, spectra, labels = two_class_spectra()
+    tuning = Tuning(n_resonators=24, per_channel=6, max_channels=4, coder="analog",
+                    coder_amplitude=1.0, gains=(20.0, 150.0, 1000.0))
+    bands = tuned_bands(*place_channels(freq, fisher_ratio(spectra, labels), tuning), tuning,
+                        RATE)
+    assert len(bands) == 12 and {b.n_neurons for b in bands.values()} == {2}
+    for j in range(4):
+        trio = [bands[f"ch{j:02d}g{i}"] for i in range(3)]
+        assert [b.coder_options["gain"] for b in trio] == [20.0, 150.0, 1000.0]
+        # one channel: the same filters and resonators, only the coder's gain differs
+        assert len({(b.highpass_hz, b.lowpass_hz, b.band_hz, b.dt_ms) for b in trio}) == 1
+
+
+def test_a_bank_codes_bands_that_share_their_filters_as_each_band_alone():
+    """The bank filters a channel once for all its gains: every column equals its band's
+    own chain run alone."""
+    from sklearn.pipeline import Pipeline
+
+    from snn_antenna.readout.spiking import SpikingBank, align_events
+
+    tuning = Tuning(n_resonators=6, per_channel=3, max_channels=2, coder="analog",
+                    coder_amplitude=1.0, gains=(20.0, 150.0, 1000.0))
+    bands = tuned_bands([120.0, 300.0], [115.0, 290.0], [125.0, 310.0], tuning, RATE)
+    bank = SpikingBank(bands={**bands, "low": LOW_BAND}, duration_s=0.5)
+    rng = np.random.default_rng(3)
+    t = np.arange(1000) / RATE
+    counts = 32768 + 40 * np.sin(2 * np.pi * 120 * t)[None, :, None] \
+        + 30 * rng.standard_normal((3, 1000, 2))
+    coded = bank.code(counts, RATE, 16, 18.0).reshape(1000, 3, len(bank.bands))
+    main = align_events(counts, 16, 18.0)          # a 22 mg line at 120 Hz, 16 mg of noise
+    for j, band in enumerate(bank.bands.values()):
+        alone = Pipeline(band.chain(RATE, 16, 18.0).steps[2:]).fit_transform(main)
+        assert np.array_equal(coded[:, :, j], alone), j
+    # the gains differ: a loud line saturates the high gain's current, not the low one's
+    assert np.abs(coded[:, :, 2]).max() == 1.0 > np.abs(coded[:, :, 0]).max()
+
+
 def test_coarsest_step_known_answers():
     # k = f / 27.49; the rod band's validated k·dt is 420 / 27.49 × 0.005 = 0.0764
     assert coarsest_dt_ms(420.0, 27.49, 0.0764) == 0.005
@@ -127,6 +165,12 @@ def test_order_8_keeps_the_low_mode_out_of_a_narrow_rod_channel():
 def test_tuned_plan_refuses_bad_settings_naming_the_field():
     with pytest.raises(SpecError, match="n_resonators"):
         Tuning(n_resonators=25)
+    with pytest.raises(SpecError, match="gains.*analog"):
+        Tuning(gains=(20.0, 150.0))               # the square-wave coder has no gain
+    with pytest.raises(SpecError, match="per_channel.*gains"):
+        Tuning(coder="analog", gains=(20.0, 150.0, 1000.0))    # 2 per channel, 3 gains
+    with pytest.raises(SpecError, match="gain"):
+        Tuning(coder="analog", per_channel=2, gains=(20.0, -1.0))
     with pytest.raises(SpecError, match="tuning.bogus"):
         TunedPlan(tuning={"bogus": 1})
     with pytest.raises(SpecError, match="curve"):

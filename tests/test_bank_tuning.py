@@ -200,19 +200,21 @@ def test_the_marks_hold_only_when_every_bound_is_met():
 
 
 def test_shared_counts_read_the_activitys_shape_apart_from_its_loudness():
-    from snn_antenna.readout.spiking_decoders import code_rows
+    from snn_antenna.readout.spiking_decoders import code_rows, codes_of
 
     rng = np.random.default_rng(1)
     binned = rng.integers(0, 9, (5, 3, 4)).astype(float)
     binned[0] = 0.0                                  # a silent event stays finite
 
     def codes(b):
-        return {"counts": b.sum(axis=2), "latency_s": np.zeros((5, 3)),
-                "span_s": np.zeros((5, 3)), "binned_counts": b.reshape(5, -1),
-                "decay": np.zeros((5, 6))}
+        return codes_of(b.sum(axis=2), np.zeros((5, 3)), np.zeros((5, 3)), b,
+                        [0.0, 0.05, 0.1, 0.2])
 
     plain = code_rows(codes(binned), "spiking_tuned_bins", "counts")
     assert np.array_equal(plain, binned.reshape(5, -1))
+    # the late read-out: the bins from LATE_S (0.1 s) on, the impact's ringing left out
+    late = code_rows(codes(binned), "spiking_tuned_late", "counts")
+    assert np.array_equal(late, binned[:, :, 2:].reshape(5, -1))
     once, twice = (code_rows(codes(k * binned), "spiking_tuned_bins", "share")
                    for k in (1.0, 2.0))
     assert once.shape == (5, 13) and np.all(np.isfinite(once))

@@ -62,6 +62,11 @@ class Tuning:
     spread: float = 0.03      # the channel's resonators span centre × (1 ± spread)
     coder: str = "square"     # each channel's coder (``preprocess.CODERS``) and its options
     coder_options: dict = field(default_factory=dict)
+    # Graded analog gains (per g): a channel's resonators split evenly among them, each share
+    # reading the channel coded at its gain, so the channel's loudness is a population code
+    # (a weak line drives the high-gain share; a loud one saturates it and drives the low-gain
+    # share in proportion); empty: every resonator reads the coder of ``coder_options``
+    gains: tuple = ()
 
     def __post_init__(self):
         bounds.declared(self)
@@ -89,6 +94,16 @@ class Tuning:
         bounds.number("hz_per_k", self.hz_per_k, 0.0, bounds.MAX_RATE_HZ, lo_open=True)
         check(isinstance(self.coder_options, dict), "coder_options", self.coder_options,
               "a table of the coder's own parameters, e.g. {levels = 6}")
+        check(isinstance(self.gains, (list, tuple)) and all(is_number(g) for g in self.gains),
+              "gains", self.gains, "a list of analog gains per g (empty: coder_options' gain)")
+        if self.gains:
+            check(self.coder == "analog", "gains", list(self.gains),
+                  f"graded gains of the analog coder only (coder is {self.coder!r})")
+            check(self.resonators_per_channel % len(self.gains) == 0, "per_channel",
+                  self.per_channel, f"resonators per channel a multiple of the "
+                                    f"{len(self.gains)} gains, which share them evenly")
+            for g in self.gains:
+                make_coder(self.coder, self.coder_amplitude, self.threshold_g, gain=float(g))
         try:
             make_coder(self.coder, self.coder_amplitude, self.threshold_g,
                        **self.coder_options)
@@ -160,23 +175,29 @@ def coarsest_dt_ms(top_hz: float, hz_per_k: float, max_k_dt: float) -> float:
 
 
 def tuned_bands(centres, low, high, tuning: Tuning, rate_hz: float) -> dict[str, Band]:
-    """One ``Band`` per channel, named ``ch00``, ``ch01``… in frequency order; a channel's
-    resonators stop at the highest frequency the rate carries (``MIN_SAMPLES_PER_CYCLE``
-    samples per cycle), so a channel centred at the top of ``range_hz`` never asks for more."""
+    """One ``Band`` per channel, named ``ch00``, ``ch01``… in frequency order (with graded
+    ``gains``, one per channel and gain: ``ch00g0``, ``ch00g1``…, sharing the channel's
+    filters); a channel's resonators stop at the highest frequency the rate carries
+    (``MIN_SAMPLES_PER_CYCLE`` samples per cycle), so a channel centred at the top of
+    ``range_hz`` never asks for more."""
     bands = {}
     top = rate_hz / MIN_SAMPLES_PER_CYCLE
+    codings = [("", dict(tuning.coder_options))] if not tuning.gains else [
+        (f"g{i}", {**tuning.coder_options, "gain": float(g)})
+        for i, g in enumerate(tuning.gains)]
+    per = tuning.resonators_per_channel // len(codings)
     for j, (c, lo, hi) in enumerate(zip(centres, low, high)):
-        per = tuning.resonators_per_channel
         c = min(float(c), top)
         span = (c * (1 - tuning.spread), min(c * (1 + tuning.spread), top)) if per > 1 \
             else (c, c)
-        bands[f"ch{j:02d}"] = Band(
-            n_neurons=per, band_hz=(float(span[0]), float(span[1])),
-            spacing="log", coder_amplitude=tuning.coder_amplitude,
-            threshold_g=tuning.threshold_g, lowpass_hz=float(min(hi, 0.45 * rate_hz)),
-            highpass_hz=float(lo), hz_per_k=tuning.hz_per_k, method=tuning.method,
-            dt_ms=coarsest_dt_ms(span[1], tuning.hz_per_k, tuning.max_k_dt),
-            filter_order=8, coder=tuning.coder, coder_options=dict(tuning.coder_options))
+        for suffix, options in codings:
+            bands[f"ch{j:02d}{suffix}"] = Band(
+                n_neurons=per, band_hz=(float(span[0]), float(span[1])),
+                spacing="log", coder_amplitude=tuning.coder_amplitude,
+                threshold_g=tuning.threshold_g, lowpass_hz=float(min(hi, 0.45 * rate_hz)),
+                highpass_hz=float(lo), hz_per_k=tuning.hz_per_k, method=tuning.method,
+                dt_ms=coarsest_dt_ms(span[1], tuning.hz_per_k, tuning.max_k_dt),
+                filter_order=8, coder=tuning.coder, coder_options=options)
     return bands
 
 

@@ -283,13 +283,18 @@ class SpikingBank:
         at once as columns (they filter along time only)."""
         n_samples = min(counts.shape[1], int(round(self.duration_s * rate_hz)))
         main = align_events(counts[:, :n_samples], adc_bits, full_scale_g)   # (samples, events)
-        coded = []
+        coded, conditioned = [], {}
         for band in self.bands.values():
             chain = band.chain(rate_hz, adc_bits, full_scale_g)
             # one pass: these stages learn nothing from the samples (their fit checks the
             # parameters), and a pipeline's fit already runs every stage but the last, so
-            # fit-then-transform filtered each band twice
-            coded.append(Pipeline(chain.steps[2:]).fit_transform(main))
+            # fit-then-transform filtered each band twice; bands that differ only in their
+            # coder (a channel's graded gains) share one filtering
+            filters = Pipeline(chain.steps[2:-1])
+            key = repr(filters.get_params(deep=True))
+            if key not in conditioned:
+                conditioned[key] = filters.fit_transform(main)
+            coded.append(chain.steps[-1][1].fit_transform(conditioned[key]))
         return np.stack(coded, axis=2).reshape(n_samples, -1)
 
 

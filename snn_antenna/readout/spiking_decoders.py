@@ -56,7 +56,14 @@ TUNED_READOUTS = {
                             "rate + decay: log ratio of successive time bins' counts"),
     "spiking_tuned_all": (("counts", "latency_s", "span_s", "binned_counts"),
                           "rate, latency, span and time bins"),
+    "spiking_tuned_late": (("late_binned_counts",),
+                           f"rate in the time bins from {1000 * 0.1:.0f} ms on (the lines "
+                           "after the impact)"),
 }
+# The impact is broadband: it rings every narrow channel at the channel's own frequency for a
+# few times 1 / bandwidth (~0.1 s for a 3 % channel at 110 Hz), whatever the material; from
+# then on only the lines the contact left ring in a channel. The late read-out counts those.
+LATE_S = 0.1
 
 
 # How a tuned read-out sees the spike counts: as they are, or each event's counts as shares
@@ -75,7 +82,7 @@ def code_rows(codes: dict, readout: str, scaling: str = "counts") -> np.ndarray:
     parts, extra = dict(codes), []
     if scaling == "share":
         total = np.asarray(codes["counts"], dtype=float).sum(axis=1, keepdims=True)
-        for name in ("counts", "binned_counts"):
+        for name in ("counts", "binned_counts", "late_binned_counts"):
             parts[name] = np.asarray(codes[name], dtype=float) / np.maximum(total, 1.0)
         extra = [np.log1p(total)]
     return np.hstack([parts[c] for c in TUNED_READOUTS[readout][0]] + extra).astype(
@@ -97,14 +104,24 @@ def decay_code(binned: np.ndarray) -> np.ndarray:
     return np.diff(logs, axis=2).reshape(len(logs), -1)
 
 
+def codes_of(counts, latency_s, span_s, binned, bin_starts_s) -> dict[str, np.ndarray]:
+    """Every code of a tuned bank's spikes (``counts``, ``latency_s``, ``span_s``: events ×
+    neurons; ``binned``: events × neurons × time bins starting at ``bin_starts_s``), one row
+    per event: what ``code_rows`` reads."""
+    binned = np.asarray(binned)
+    n = len(binned)
+    late = np.asarray(bin_starts_s) >= LATE_S - 1e-9
+    return {"counts": np.asarray(counts), "latency_s": np.asarray(latency_s),
+            "span_s": np.asarray(span_s), "binned_counts": binned.reshape(n, -1),
+            "late_binned_counts": binned[:, :, late].reshape(n, -1),
+            "decay": decay_code(binned)}
+
+
 def _codes(spikes: xr.Dataset, events) -> dict[str, np.ndarray]:
     """Every code of a tuned bank's ``spikes`` on ``events``, one row per event."""
     sp = spikes.sel(event=events)
-    n = sp.sizes["event"]
-    return {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
-            "span_s": sp["span_s"].values,
-            "binned_counts": sp["binned_counts"].values.reshape(n, -1),
-            "decay": decay_code(sp["binned_counts"].values)}
+    return codes_of(sp["counts"].values, sp["latency_s"].values, sp["span_s"].values,
+                    sp["binned_counts"].values, sp["bin_start_s"].values)
 
 
 def tuned_inputs(features: xr.Dataset, spikes: xr.Dataset) -> xr.Dataset:

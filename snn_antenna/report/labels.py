@@ -29,6 +29,7 @@ READOUTS = {
     "spiking_tuned_bins": "tuned bank: rate in time bins",
     "spiking_tuned_decay": "tuned bank: rate + decay",
     "spiking_tuned_all": "tuned bank: rate, latency, span, bins",
+    "spiking_tuned_late": "tuned bank: rate in the late time bins",
 }
 
 #: the stages of the input chain whose ceilings are measured (``evaluation.stage_ceilings``)

@@ -22,7 +22,7 @@ from ...evaluation import signal as bench_signal
 from ...readout import baselines as bl
 from ...readout.events import extraction_cost
 from ...readout.spiking import recording_attrs
-from ...readout.spiking_decoders import code_rows, decay_code, mlp_baseline
+from ...readout.spiking_decoders import code_rows, codes_of, mlp_baseline
 from ...report import stats
 from ...report.page import Report
 from ...sources import bench
@@ -46,11 +46,8 @@ RESULTS = "results.zarr"
 def spikes_matrix(spikes: xr.Dataset, ids, readout: str, scaling: str) -> np.ndarray:
     """A read-out's input rows (``spiking_decoders.code_rows``) from a bank's stored spikes."""
     sp = spikes.sel(event=ids)
-    n = sp.sizes["event"]
-    codes = {"counts": sp["counts"].values, "latency_s": sp["latency_s"].values,
-             "span_s": sp["span_s"].values,
-             "binned_counts": sp["binned_counts"].values.reshape(n, -1),
-             "decay": decay_code(sp["binned_counts"].values)}
+    codes = codes_of(sp["counts"].values, sp["latency_s"].values, sp["span_s"].values,
+                     sp["binned_counts"].values, sp["bin_start_s"].values)
     return code_rows(codes, readout, scaling)
 
 

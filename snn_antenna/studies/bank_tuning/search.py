@@ -33,7 +33,7 @@ from ...engine.events import run_bank
 from ...evaluation import crossval as cv
 from ...readout.band_tuning import coarsest_dt_ms, tune
 from ...readout.spiking import LOW_BAND, Band, SpikingBank, recording_attrs
-from ...readout.spiking_decoders import code_rows, decay_code, mlp_baseline
+from ...readout.spiking_decoders import code_rows, codes_of, mlp_baseline
 from .plan import SPACE_KEYS, BankPlan, Parts
 
 OBJECTIVES = ("accuracy", "neuron_steps_per_event")
@@ -74,10 +74,16 @@ def check_unseen(scored: Scored, evaluated_counts: np.ndarray) -> None:
 def start_params(bank: BankPlan) -> dict:
     """The starting bank as a point of the space (the search's first trial)."""
     t = bank.base
-    return {"channels": t.n_channels, "per_channel": t.resonators_per_channel,
+    return {"channels": t.n_channels,
+            "per_channel": t.resonators_per_channel // max(1, len(t.gains)),
             "range_low_hz": float(t.range_hz[0]), "range_high_hz": float(t.range_hz[1]),
             "quantile": float(t.quantile), "spread": float(t.spread), "b": float(bank.b),
-            "gain": float(t.coder_options.get("gain", 150.0)),
+            "gain": float(np.sqrt(t.gains[0] * t.gains[-1]) if t.gains
+                          else t.coder_options.get("gain", 150.0)),
+            "gain_levels": max(1, len(t.gains)),
+            "gain_ratio": float((t.gains[-1] / t.gains[0]) ** (1 / (len(t.gains) - 1)))
+                          if len(t.gains) > 1 else 7.0,
+            "max_k_dt": float(t.max_k_dt),
             "coder_amplitude": float(t.coder_amplitude), "threshold_g": float(t.threshold_g),
             "low_resonators": int(bank.low_resonators), "readout": bank.readout,
             "scaling": bank.scaling, "filter_order": int(bank.filter_order)}
@@ -108,8 +114,13 @@ def bank_of(params: dict, bank: BankPlan, counts, labels, attrs) -> SpikingBank:
     options = dict(t.coder_options)
     if t.coder == "analog":
         options["gain"] = float(params["gain"])
-    tuning = replace(t, n_resonators=params["channels"] * params["per_channel"],
-                     per_channel=params["per_channel"], max_channels=params["channels"],
+    levels = int(params["gain_levels"])
+    gains = tuple(options["gain"] * float(params["gain_ratio"]) ** (i - (levels - 1) / 2)
+                  for i in range(levels)) if levels > 1 else ()
+    per_channel = params["per_channel"] * levels
+    tuning = replace(t, n_resonators=params["channels"] * per_channel, gains=gains,
+                     max_k_dt=float(params["max_k_dt"]),
+                     per_channel=per_channel, max_channels=params["channels"],
                      range_hz=(lo, hi), quantile=params["quantile"], spread=params["spread"],
                      coder_amplitude=params["coder_amplitude"],
                      threshold_g=params["threshold_g"], coder_options=options)
@@ -144,12 +155,11 @@ def neuron_steps_per_event(bank: SpikingBank, rate_hz: float) -> float:
                      for b in bank.bands.values()))
 
 
-def readout_matrix(spikes, readout: str, scaling: str = "counts") -> np.ndarray:
-    """The read-out's input rows from ``SpikeFeatures`` (``spiking_decoders.code_rows``)."""
-    n = len(spikes.counts)
-    codes = {"counts": spikes.counts, "latency_s": spikes.latency_s, "span_s": spikes.span_s,
-             "binned_counts": spikes.binned_counts.reshape(n, -1),
-             "decay": decay_code(spikes.binned_counts)}
+def readout_matrix(spikes, readout: str, scaling: str, bin_edges_s) -> np.ndarray:
+    """The read-out's input rows from ``SpikeFeatures`` (``spiking_decoders.code_rows``) of
+    a bank with time bins at ``bin_edges_s``."""
+    codes = codes_of(spikes.counts, spikes.latency_s, spikes.span_s, spikes.binned_counts,
+                     [0.0, *bin_edges_s])
     return code_rows(codes, readout, scaling)
 
 
@@ -196,12 +206,13 @@ def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client,
             raise optuna.TrialPruned() from None
         scored.add(counts)
         with threadpool_limits(1):
-            acc = inner_accuracy(readout_matrix(spikes, params["readout"], params["scaling"]),
+            acc = inner_accuracy(readout_matrix(spikes, params["readout"], params["scaling"],
+                                                b.bin_edges_s),
                                  y, repetition,
                                  search, parts.evaluation)
         trial.set_user_attr("inner_accuracy", acc)
         log(f"      trial {trial.number}: {b.n_neurons} resonators in {len(b.bands)} "
-            f"channels, {params['readout']} ({params['scaling']}): accuracy {100 * np.mean(acc):.1f} %, "
+            f"bands, {params['readout']} ({params['scaling']}): accuracy {100 * np.mean(acc):.1f} %, "
             f"{cost:.0f} resonator-steps per contact")
         return float(np.mean(acc)), cost
 
