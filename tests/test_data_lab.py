@@ -559,6 +559,50 @@ def test_the_labs_antenna_is_fitted_from_its_calibration_labels_only(lab_set):
     assert antenna_fit.fit(scrambled, held, like, "x") == antenna_fit.fit(ds, held, like, "x")
 
 
+def test_the_tuned_coders_levels_are_fitted_on_the_calibration_recordings(lab_set):
+    """The tuned bank's coder threshold is the channels' quiet rms before the trigger and
+    its analog gain (the level coder's step) brings the channels' median peak to the
+    coder's range, both measured on the calibration contacts alone and named as fitted;
+    the lab's rod is louder and noisier in its channels than the bench's rod the typed
+    levels suit; on the generated bench set the typed levels stay."""
+    from snn_antenna.core import spec as specs
+    from snn_antenna.evaluation import antenna_fit
+    from snn_antenna.studies import baseline_comparison
+
+    study = Path(__file__).resolve().parents[1] / "studies" / "baseline_comparison.toml"
+    typed = specs.load(study, [], quick=True)
+    plan = baseline_comparison.plan({**typed, "data": str(lab_set.path)})
+    fit, tuned = plan.parts.antenna, plan.spec["spiking"]["tuned"]
+    threshold = tuned["tuning"]["threshold_g"]
+    assert threshold == pytest.approx(antenna_fit.NOISE_MULTIPLE * fit.coder_noise_g, rel=1e-4)
+    assert threshold > typed["spiking"]["tuned"]["tuning"]["threshold_g"]
+    for table in (tuned["tuning"], tuned["coders"]["analog"]):
+        assert table["coder_options"]["gain"] == pytest.approx(
+            table["coder_amplitude"] / (fit.coder_peak_g - threshold), rel=1e-4)
+        assert table["coder_options"]["gain"] < typed["spiking"]["tuned"]["coders"]["analog"][
+            "coder_options"]["gain"] / 10       # the typed gain holds these peaks at its ceiling
+    delta = tuned["coders"]["delta"]["coder_options"]
+    top = (2 ** (delta["levels"] - 1) - 1) * delta["step_g"]       # ratio 2
+    assert top == pytest.approx(fit.coder_peak_g - threshold, rel=1e-4)
+    for key in ("tuning.threshold_g", "tuning.coder_options.gain",
+                "coders.delta.coder_options.step_g", "coders.analog.coder_options.gain"):
+        assert any(line.startswith(f"fitted: spiking.tuned.{key} ") for line in
+                   plan.left_out), (key, plan.left_out)
+    assert [r for r in fit.rows() if "tuned channels" in r[0]]
+    # the scored contacts' recordings silenced: the same levels
+    ds = lab_set.dataset
+    held = np.isin(ds["repetition"].values, plan.parts.calibration_repetitions)
+    quiet = ds.copy()
+    counts = ds["counts"].values.copy()
+    counts[~held] = 2 ** (int(ds.attrs["adc_bits"]) - 1)
+    quiet["counts"] = (ds["counts"].dims, counts)
+    again = antenna_fit.fit_coder(fit, quiet, held, fit.applied(typed)[0])[0]
+    assert (again.coder_noise_g, again.coder_peak_g) == (fit.coder_noise_g, fit.coder_peak_g)
+    # the generated bench set: nothing fitted, the typed levels as they are
+    generated = baseline_comparison.plan(typed)
+    assert generated.spec["spiking"]["tuned"] == typed["spiking"]["tuned"]
+
+
 def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
                                                                              tmp_path):
     """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every

@@ -193,11 +193,15 @@ def fit_antenna(spec: dict, bench_spec) -> tuple[dict, list[int], object, list[s
     antenna = antenna_fit.fit(data, np.isin(data["repetition"].values, held), like,
                               str(bench_spec.path))
     spec, fitted = antenna.applied(spec)
+    antenna, spec, levels = antenna_fit.fit_coder(
+        antenna, data, np.isin(data["repetition"].values, held), spec)
+    fitted += levels
     spec["description"] = (
         "The paper's read-outs (linear regression on the low peak, MLPs on parametric features "
         "and on the FFT amplitude spectrum, NMF band-pass filters) and the spiking read-outs "
         f"on contacts a lab recorded with its own antenna ({bench_spec.path}): its frequency "
-        "law, mode split, decay-fit window and bands fitted on the labels of its calibration "
+        "law, mode split, decay-fit window, bands and the tuned bank's coder levels fitted on "
+        "the labels and recordings of its calibration "
         f"repetitions {held}, held out of every split; splits by repetition of the rest.")
     return spec, held, antenna, fitted
 
