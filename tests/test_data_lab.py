@@ -18,6 +18,7 @@ import lab_antenna as lab
 from snn_antenna.cli import main
 from snn_antenna.core.errors import SpecError
 from snn_antenna.data.inputs import stamp_frames
+from snn_antenna.readout.spiking import CentroidDistance
 from snn_antenna.sources import recorded
 
 REAL_CLOCK_NS = 1_795_000_000_123_456_789       # a stamp of late 2026, since 1970
@@ -601,6 +602,29 @@ def test_the_tuned_coders_levels_are_fitted_on_the_calibration_recordings(lab_se
     # the generated bench set: nothing fitted, the typed levels as they are
     generated = baseline_comparison.plan(typed)
     assert generated.spec["spiking"]["tuned"] == typed["spiking"]["tuned"]
+
+
+def test_the_rate_centroid_keeps_to_the_dominant_resonators_neighbourhood_when_that_fits():
+    """Contacts whose low mode drives the resonators around it and an overtone drives a few
+    at twice its frequency: the centroid over every resonator reads them off the law, the
+    neighbourhood fitted on the calibration contacts reads them on it; without the overtone
+    every resonator is kept (the wider on a tie)."""
+    from snn_antenna.evaluation import antenna_fit
+
+    hz = np.geomspace(9.6, 75.0, 24)
+    law = (np.log10(lab.FAR_HZ / lab.NEAR_HZ) / (lab.FAR_CM - lab.NEAR_CM),
+           np.log10(lab.NEAR_HZ) - np.log10(lab.FAR_HZ / lab.NEAR_HZ) / (lab.FAR_CM - lab.NEAR_CM)
+           * lab.NEAR_CM, 22.0)
+    distance = np.repeat([18.0, 22.0, 26.0], 5)
+    mode = lab.low_hz(distance)[:, None]
+    counts = 10 * np.exp(-np.log(hz[None, :] / mode) ** 2 / 0.01)
+    overtone = counts + 4 * np.exp(-np.log(hz[None, :] / (2 * mode)) ** 2 / 0.01)
+    around, line = antenna_fit.centroid_around(overtone, hz, distance, law)
+    assert around is not None and line.startswith("fitted: the rate centroid"), line
+    error = {a: np.abs(CentroidDistance(hz, law, a).fit(overtone).predict(overtone) - distance)
+             for a in (None, around)}
+    assert error[around].max() < 0.5 < error[None].min(), error
+    assert antenna_fit.centroid_around(counts, hz, distance, law)[0] is None
 
 
 def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,

@@ -46,7 +46,7 @@ from sklearn.pipeline import Pipeline
 from ..core.errors import SpecError, check
 from ..readout.band_tuning import Tuning, tune
 from ..readout.events import EventProcessor, SkippedEvent, main_axis_g
-from ..readout.spiking import align_events
+from ..readout.spiking import CentroidDistance, align_events
 from ..readout.spiking_decoders import TunedPlan
 
 MARGIN = 1.25                 # a fitted band reaches this factor beyond the modes' range
@@ -60,6 +60,8 @@ WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_
 # and the quantile of the channels' peaks the coder's range reaches
 NOISE_MULTIPLE = 1.0
 PEAK_QUANTILE = 0.5
+# the rate centroid's neighbourhoods tried (``readout.spiking.CentroidDistance.around``)
+CENTROID_AROUND = (None, 3.0, 2.0, 1.5, 1.25)
 
 
 @dataclass(frozen=True)
@@ -410,5 +412,25 @@ def channel_levels(counts: np.ndarray, bands: dict, rate_hz: float, adc_bits: in
     return float(np.median(quiet)), float(np.quantile(np.concatenate(peaks), PEAK_QUANTILE))
 
 
-__all__ = ["FittedAntenna", "fit", "fit_coder", "channel_levels", "MARGIN", "NOISE_MULTIPLE",
+def centroid_around(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
+                    ) -> tuple[float | None, str]:
+    """(the factor of ``CENTROID_AROUND`` whose rate centroid reads the distances
+    ``distance_cm`` of the calibration contacts with the least rmse from their low band's
+    spike ``counts`` (contacts × resonators tuned to ``neuron_hz``) through ``law``
+    (``readout.spiking.DominantNeuronDistance``), the wider on a tie; the line saying so)."""
+    distance_cm = np.asarray(distance_cm, dtype=float)
+    rmse = {}
+    for around in CENTROID_AROUND:
+        reader = CentroidDistance(neuron_hz, law, around).fit(counts)
+        rmse[around] = float(np.sqrt(np.mean((reader.predict(counts) - distance_cm) ** 2)))
+    best = min(CENTROID_AROUND, key=lambda a: rmse[a])       # min keeps the first on a tie
+    tried = ", ".join(f"{'all' if a is None else f'×{a:g}'} {10 * r:.1f} mm"
+                      for a, r in rmse.items())
+    return best, ("fitted: the rate centroid over the low-band resonators "
+                  + ("all" if best is None else f"within ×{best:g} of the dominant one")
+                  + f" (the least rmse on the {len(distance_cm)} calibration contacts: "
+                  + tried + ")")
+
+
+__all__ = ["FittedAntenna", "fit", "fit_coder", "centroid_around", "CENTROID_AROUND", "channel_levels", "MARGIN", "NOISE_MULTIPLE",
            "PEAK_QUANTILE"]
