@@ -46,7 +46,7 @@ from sklearn.pipeline import Pipeline
 from ..core.errors import SpecError, check
 from ..readout.band_tuning import Tuning, tune
 from ..readout.events import EventProcessor, SkippedEvent, main_axis_g
-from ..readout.spiking import CentroidDistance, align_events
+from ..readout.spiking import CentroidDistance, SpikingBank, align_events
 from ..readout.spiking_decoders import TunedPlan
 
 MARGIN = 1.25                 # a fitted band reaches this factor beyond the modes' range
@@ -60,6 +60,9 @@ WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_
 # and the quantile of the channels' peaks the coder's range reaches
 NOISE_MULTIPLE = 1.0
 PEAK_QUANTILE = 0.5
+# a hand-set band's threshold within its quiet level (below its rms before the trigger) is
+# raised to this multiple of that rms, above the rare noise peaks over a window
+BAND_NOISE_MULTIPLE = 5.0
 # the rate centroid's neighbourhoods tried (``readout.spiking.CentroidDistance.around``)
 CENTROID_AROUND = (None, 3.0, 2.0, 1.5, 1.25)
 
@@ -325,27 +328,30 @@ def _decay_window(base: EventProcessor, signals, distance, material, sites, low_
     return window, n_fitted / n_contacts, identified
 
 
-def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict
-              ) -> tuple[FittedAntenna, dict, list[str]]:
+def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict,
+              at_rate: dict | None = None) -> tuple[FittedAntenna, dict, list[str]]:
     """The tuned bank's coder levels from the contacts of ``data`` selected by
     ``calibration`` (see the module's docstring): ``antenna`` with the channels' quiet rms and
     peak quantile, ``spec`` (already fitted by ``FittedAntenna.applied``) with the threshold,
     analog gain and level step of ``[spiking.tuned]`` and of every coder compared in their
-    place, and one line per value replaced. A spec without a tuned bank comes back as is."""
+    place, and one line per value replaced. The channels are placed as ``at_rate`` (``spec``
+    fitted to the data's rate; None: ``spec``) places them. A spec without a tuned bank comes
+    back as is."""
     spiking = spec.get("spiking") if isinstance(spec.get("spiking"), dict) else {}
     if not isinstance(spiking.get("tuned"), dict) or not spiking["tuned"]:
         return antenna, spec, []
     spec = copy.deepcopy(spec)
     tuned = spec["spiking"]["tuned"]
-    plan = TunedPlan(**tuned)
+    plan = TunedPlan(**(at_rate or spec)["spiking"]["tuned"])
     rate, bits = float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"])
     full_scale = float(data.attrs["full_scale_g"])
     data = data.isel(event=np.flatnonzero(calibration))
     counts = data["counts"].values[:, :int(round(plan.duration_s * rate))]
     bands = tune(counts, data["material"].values.astype(str), rate, bits, full_scale,
                  plan.base)
-    noise, peak = channel_levels(counts, bands, rate, bits, full_scale,
-                                 int(round(float(data.attrs["pre_trigger_s"]) * rate)))
+    quiet, peaks = channel_levels(counts, bands, rate, bits, full_scale,
+                                  int(round(float(data.attrs["pre_trigger_s"]) * rate)))
+    noise, peak = float(np.median(quiet)), float(np.quantile(peaks, PEAK_QUANTILE))
     threshold = NOISE_MULTIPLE * noise
     where = antenna.source
     if not peak > 2 * threshold:
@@ -394,12 +400,39 @@ def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict
     return replace(antenna, coder_noise_g=noise, coder_peak_g=peak), spec, notes
 
 
+def fit_band_thresholds(data, calibration: np.ndarray, spec: dict, bank: SpikingBank,
+                        source: str) -> tuple[dict, list[str]]:
+    """``spec`` with the threshold of each hand-set band (``[spiking.bank.bands.NAME]``, as
+    ``bank`` holds them at the data's rate) whose typed threshold lies within the band's quiet
+    level (below its rms before the trigger on the contacts of ``data`` selected by
+    ``calibration``) raised to ``BAND_NOISE_MULTIPLE`` × that rms; and one line per value
+    replaced. The square-wave coder codes every sample beyond its threshold, so a threshold
+    within the quiet level keeps it coding noise after the ringing has gone, and the firing
+    spans carry no decay; a typed threshold above the quiet level stays as typed."""
+    rate, bits = float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"])
+    full_scale = float(data.attrs["full_scale_g"])
+    data = data.isel(event=np.flatnonzero(calibration))
+    counts = data["counts"].values[:, :int(round(bank.duration_s * rate))]
+    quiet, _ = channel_levels(counts, bank.bands, rate, bits, full_scale,
+                              int(round(float(data.attrs["pre_trigger_s"]) * rate)))
+    spec = copy.deepcopy(spec)
+    notes = []
+    for (name, band), rms in zip(bank.bands.items(), quiet):
+        table = spec["spiking"]["bank"]["bands"].get(name)
+        floor = BAND_NOISE_MULTIPLE * rms
+        if isinstance(table, dict) and band.threshold_g < rms:
+            notes.append(f"fitted: spiking.bank.bands.{name}.threshold_g {band.threshold_g:g} → "
+                         f"{floor:.6g} ({BAND_NOISE_MULTIPLE:g} × the band's rms before the "
+                         f"trigger, {1e3 * rms:.2f} mg, which the typed one lies within, on {source})")
+            table["threshold_g"] = round(floor, 6)
+    return spec, notes
+
+
 def channel_levels(counts: np.ndarray, bands: dict, rate_hz: float, adc_bits: int,
-                   full_scale_g: float, pre_samples: int) -> tuple[float, float]:
-    """(the median channel's rms over the first ``pre_samples`` samples, the
-    ``PEAK_QUANTILE`` of every contact's and channel's largest |value| after them) of the
-    contacts ``counts`` (events, samples, 2 axes) through each band's filters, as the bank
-    filters them before its coder (``SpikingBank.code``)."""
+                   full_scale_g: float, pre_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """(each band's rms over the first ``pre_samples`` samples, every contact's and band's
+    largest |value| after them) of the contacts ``counts`` (events, samples, 2 axes) through
+    each band's filters, as the bank filters them before its coder (``SpikingBank.code``)."""
     check(0 < pre_samples < counts.shape[1], "data.pre_trigger_s", pre_samples,
           "samples before the trigger, fewer than the window's")
     main = align_events(counts, adc_bits, full_scale_g)       # (samples, events)
@@ -409,7 +442,7 @@ def channel_levels(counts: np.ndarray, bands: dict, rate_hz: float, adc_bits: in
         filtered = Pipeline(chain.steps[2:-1]).fit_transform(main)   # no coder
         quiet.append(float(np.sqrt(np.mean(filtered[:pre_samples] ** 2))))
         peaks.append(np.abs(filtered[pre_samples:]).max(axis=0))
-    return float(np.median(quiet)), float(np.quantile(np.concatenate(peaks), PEAK_QUANTILE))
+    return np.asarray(quiet), np.concatenate(peaks)
 
 
 def centroid_around(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
@@ -432,5 +465,6 @@ def centroid_around(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
                   + tried + ")")
 
 
-__all__ = ["FittedAntenna", "fit", "fit_coder", "centroid_around", "CENTROID_AROUND", "channel_levels", "MARGIN", "NOISE_MULTIPLE",
-           "PEAK_QUANTILE"]
+__all__ = ["FittedAntenna", "fit", "fit_coder", "fit_band_thresholds", "centroid_around",
+           "channel_levels", "BAND_NOISE_MULTIPLE", "CENTROID_AROUND", "MARGIN",
+           "NOISE_MULTIPLE", "PEAK_QUANTILE"]
