@@ -423,7 +423,8 @@ def fit_band_thresholds(data, calibration: np.ndarray, spec: dict, bank: Spiking
         if isinstance(table, dict) and band.threshold_g < rms:
             notes.append(f"fitted: spiking.bank.bands.{name}.threshold_g {band.threshold_g:g} → "
                          f"{floor:.6g} ({BAND_NOISE_MULTIPLE:g} × the band's rms before the "
-                         f"trigger, {1e3 * rms:.2f} mg, which the typed one lies within, on {source})")
+                         f"trigger, {1e3 * rms:.2f} mg, which the typed one lies within, on "
+                         f"{source})")
             table["threshold_g"] = round(floor, 6)
     return spec, notes
 
