@@ -346,9 +346,11 @@ def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict,
     rate, bits = float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"])
     full_scale = float(data.attrs["full_scale_g"])
     data = data.isel(event=np.flatnonzero(calibration))
+    materials = data["material"].values.astype(str)
+    if len(set(materials)) < 2:     # no channels to place: the split checks refuse such sets
+        return antenna, spec, []
     counts = data["counts"].values[:, :int(round(plan.duration_s * rate))]
-    bands = tune(counts, data["material"].values.astype(str), rate, bits, full_scale,
-                 plan.base)
+    bands = tune(counts, materials, rate, bits, full_scale, plan.base)
     quiet, peaks = channel_levels(counts, bands, rate, bits, full_scale,
                                   int(round(float(data.attrs["pre_trigger_s"]) * rate)))
     noise, peak = float(np.median(quiet)), float(np.quantile(peaks, PEAK_QUANTILE))
