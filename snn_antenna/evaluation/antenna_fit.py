@@ -20,6 +20,8 @@ their labels, and reported as calibrated with that source:
   τ_low within a material and distance;
 - the bands of the hand-set bank (low: the low mode's range; high: the high mode's; rod:
   both) and the tuned bank's range: the modes' ranges widened by ``MARGIN``;
+- the hand-set bands' thresholds (``fit_band_thresholds``): a typed threshold within a band's
+  quiet level (its rms before the trigger) raised to ``BAND_NOISE_MULTIPLE`` × that level;
 - the tuned bank's coder levels (``fit_coder``): its channels placed on the calibration
   contacts as the study places them, each contact's main axis through every channel's
   filters; the threshold is ``NOISE_MULTIPLE`` × the median channel's rms over the
@@ -27,10 +29,14 @@ their labels, and reported as calibrated with that source:
   steps, the filters' start, the tails of earlier contacts), and the analog gain (or the
   level coder's step) brings the ``PEAK_QUANTILE`` quantile of the channels' peaks after
   the trigger to the coder's amplitude (its top level), so the ringing's decay stays within
-  the coder's range instead of holding it at its ceiling.
+  the coder's range instead of holding it at its ceiling;
+- the rate centroid's neighbourhood (``centroid_around``, from the calibration contacts'
+  spikes): of ``CENTROID_AROUND``, the factor around each contact's dominant low-band
+  resonator whose centroid reads their distances best through the fitted law (resonators an
+  overtone or the other mode drives otherwise pull the centroid off the low mode).
 
-Only the labels of the calibration contacts are read; every scored contact is read as a robot
-has it (its counts), and its labels serve the scoring alone.
+Only the calibration contacts' labels (and recordings) are fitted on; every scored contact is
+read as a robot has it (its counts), and its labels serve the scoring alone.
 """
 from __future__ import annotations
 
