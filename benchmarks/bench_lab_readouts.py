@@ -10,12 +10,14 @@ imported with ``snn-antenna data import`` and read out by ``studies/baseline_com
 (quick unless ``--full``). Each row: a read-out's mean score over the comparison's splits and
 the one-feature read-out's on the same training and test contacts (material: accuracy against
 the decay time's; distance: rmse in mm against the low peak frequency's), and whether it meets
-the mark (within 5 points; within 2x). ``--work`` keeps the import and the run to re-read.
+the mark (within 5 points; within 2x). ``--work`` keeps the import and the run to re-read;
+the import is made again when the lab's rod or the importer's code changes (``import_key``).
 """
 from __future__ import annotations
 
 import argparse
 import contextlib
+import hashlib
 import io
 import sys
 import time
@@ -34,21 +36,39 @@ from snn_antenna.sources import recorded  # noqa: E402
 ORIGIN_S = 2.5
 
 
-def imported(work: Path, rate_hz: float):
-    """The lab's session written and imported once per ``work`` folder."""
-    ds = work / "ds"
+# what the written and imported session depends on: the lab's rod, the files it is written
+# to, and the importer that reads them (the package's data layer and its recorded sources)
+IMPORT_CODE = (ROOT / "tests" / "lab_antenna.py", Path(__file__).resolve(),
+               *sorted((ROOT / "snn_antenna" / "data").glob("*.py")),
+               ROOT / "snn_antenna" / "sources" / "recorded.py")
+
+
+def import_key(rate_hz: float) -> str:
+    """The import's cache key: the rate and the bytes of every file of ``IMPORT_CODE``."""
+    digest = hashlib.sha256(f"{rate_hz!r}".encode())
+    for path in IMPORT_CODE:
+        digest.update(path.name.encode() + b"\0" + path.read_bytes())
+    return digest.hexdigest()[:16]
+
+
+def imported(work: Path, rate_hz: float) -> tuple[Path, object]:
+    """(the imported folder, its source): the lab's session written and imported once per
+    ``work`` folder and ``import_key`` (a changed rod or importer imports again)."""
+    folder = work / f"import-{import_key(rate_hz)}"
+    ds = folder / "ds"
     if not ds.exists():
         sess = lab.session(rate_hz, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
-        (work / "recs").mkdir(parents=True, exist_ok=True)
-        lab.counts_csv(work / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
+        (folder / "recs").mkdir(parents=True, exist_ok=True)
+        lab.counts_csv(folder / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                        rate_hz, origin_s=ORIGIN_S)
-        labels = lab.labels_csv(work / "labels.csv", sess, "r1", origin_s=ORIGIN_S)
+        labels = lab.labels_csv(folder / "labels.csv", sess, "r1", origin_s=ORIGIN_S)
         err = io.StringIO()
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
-            code = cli(["data", "import", str(work / "recs"), str(labels), "--out", str(ds)])
+            code = cli(["data", "import", str(folder / "recs"), str(labels), "--out",
+                        str(ds)])
         if code:
             sys.exit(err.getvalue())
-    return recorded.open_bench(ds)
+    return ds, recorded.open_bench(ds)
 
 
 #: the mark a read-out meets, as the JSON states it
@@ -83,11 +103,11 @@ def main(argv=None) -> int:
     p.add_argument("--json", metavar="PATH", help="write the rows as JSON here")
     args = p.parse_args(argv)
     work = args.work or Path(f"/tmp/lab_readouts_{int(args.rate)}")
-    source = imported(work, args.rate)
+    ds, source = imported(work, args.rate)
     run = work / ("run_full" if args.full else "run_quick")
     sets = [f"stimulus.cache_dir=\"{work / 'cache'}\"", "spiking.workers=1", *args.sets]
     command = ["run", str(ROOT / "studies" / "baseline_comparison.toml"), "--data",
-               str(work / "ds"), *([] if args.full else ["--quick"]), "--out", str(run),
+               str(ds), *([] if args.full else ["--quick"]), "--out", str(run),
                "--yes", "--force"]
     for s in sets:
         command += ["--set", s]

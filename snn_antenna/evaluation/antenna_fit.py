@@ -19,10 +19,24 @@ their labels, and reported as calibrated with that source:
   the one that fits a decay to the most calibration contacts, then with the least spread of
   τ_low within a material and distance;
 - the bands of the hand-set bank (low: the low mode's range; high: the high mode's; rod:
-  both) and the tuned bank's range: the modes' ranges widened by ``MARGIN``.
+  both) and the tuned bank's range: the modes' ranges widened by ``MARGIN``;
+- the hand-set bands' thresholds (``fit_band_thresholds``): a typed threshold within a band's
+  quiet level (its rms before the trigger) raised to ``BAND_NOISE_MULTIPLE`` × that level;
+- the tuned bank's coder levels (``fit_coder``): its channels placed on the calibration
+  contacts as the study places them, each contact's main axis through every channel's
+  filters; the threshold is ``NOISE_MULTIPLE`` × the median channel's rms over the
+  pre-trigger samples (what the coder sees before a contact: the sensor's noise, the ADC's
+  steps, the filters' start, the tails of earlier contacts), and the analog gain (or the
+  level coder's step) brings the ``PEAK_QUANTILE`` quantile of the channels' peaks after
+  the trigger to the coder's amplitude (its top level), so the ringing's decay stays within
+  the coder's range instead of holding it at its ceiling;
+- the rate centroid's neighbourhood (``centroid_around``, from the calibration contacts'
+  spikes): of ``CENTROID_AROUND``, the factor around each contact's dominant low-band
+  resonator whose centroid reads their distances best through the fitted law (resonators an
+  overtone or the other mode drives otherwise pull the centroid off the low mode).
 
-Only the labels of the calibration contacts are read; every scored contact is read as a robot
-has it (its counts), and its labels serve the scoring alone.
+Only the calibration contacts' labels (and recordings) are fitted on; every scored contact is
+read as a robot has it (its counts), and its labels serve the scoring alone.
 """
 from __future__ import annotations
 
@@ -33,9 +47,13 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 from scipy import stats
 from scipy.signal import find_peaks
+from sklearn.pipeline import Pipeline
 
-from ..core.errors import SpecError
+from ..core.errors import SpecError, check
+from ..readout.band_tuning import Tuning, tune
 from ..readout.events import EventProcessor, SkippedEvent, main_axis_g
+from ..readout.spiking import CentroidDistance, SpikingBank, align_events
+from ..readout.spiking_decoders import TunedPlan
 
 MARGIN = 1.25                 # a fitted band reaches this factor beyond the modes' range
 # the decay-fit windows tried (``readout.events.EventProcessor``'s fields of the same names)
@@ -44,6 +62,15 @@ EXTREME_MIN_FRACTIONS = (0.05, 0.1)
 END_FRACTIONS = (0.1, 0.03)
 ENVELOPE_FALLBACK = (False, True)
 WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_fraction")
+# the tuned bank's coder levels (``fit_coder``): the threshold over the channels' quiet rms,
+# and the quantile of the channels' peaks the coder's range reaches
+NOISE_MULTIPLE = 1.0
+PEAK_QUANTILE = 0.5
+# a hand-set band's threshold within its quiet level (below its rms before the trigger) is
+# raised to this multiple of that rms, above the rare noise peaks over a window
+BAND_NOISE_MULTIPLE = 5.0
+# the rate centroid's neighbourhoods tried (``readout.spiking.CentroidDistance.around``)
+CENTROID_AROUND = (None, 3.0, 2.0, 1.5, 1.25)
 
 
 @dataclass(frozen=True)
@@ -66,6 +93,8 @@ class FittedAntenna:
     n_contacts: int
     repetitions: tuple[int, ...]
     source: str
+    coder_noise_g: float | None = None     # the tuned channels' median pre-trigger rms
+    coder_peak_g: float | None = None      # the PEAK_QUANTILE of their peaks after it
 
     @property
     def low_range_hz(self) -> tuple[float, float]:
@@ -181,7 +210,14 @@ class FittedAntenna:
              "with the fitted split and window"),
             ("calibration contacts whose low peak is their distance's",
              f"{100 * self.low_identified_fraction:.1f}", "%",
-             "nearest (in log frequency) to the low mode of their own distance")]
+             "nearest (in log frequency) to the low mode of their own distance")] + ([] if (
+            self.coder_noise_g is None or self.coder_peak_g is None) else [
+            ("tuned channels' rms before the trigger (median channel)",
+             f"{1e3 * self.coder_noise_g:.2f}", "mg",
+             f"the coder's threshold: {NOISE_MULTIPLE:g} × this"),
+            (f"tuned channels' peak after the trigger (quantile {PEAK_QUANTILE:g})",
+             f"{1e3 * self.coder_peak_g:.1f}", "mg",
+             "reaches the coder's amplitude (analog gain; the level coder's top level)")])
 
 
 def _widened(lo: float, hi: float) -> tuple[float, float]:
@@ -298,4 +334,146 @@ def _decay_window(base: EventProcessor, signals, distance, material, sites, low_
     return window, n_fitted / n_contacts, identified
 
 
-__all__ = ["FittedAntenna", "fit", "MARGIN"]
+def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict,
+              at_rate: dict | None = None) -> tuple[FittedAntenna, dict, list[str]]:
+    """The tuned bank's coder levels from the contacts of ``data`` selected by
+    ``calibration`` (see the module's docstring): ``antenna`` with the channels' quiet rms and
+    peak quantile, ``spec`` (already fitted by ``FittedAntenna.applied``) with the threshold,
+    analog gain and level step of ``[spiking.tuned]`` and of every coder compared in their
+    place, and one line per value replaced. The channels are placed as ``at_rate`` (``spec``
+    fitted to the data's rate; None: ``spec``) places them. A spec without a tuned bank comes
+    back as is."""
+    spiking = spec.get("spiking") if isinstance(spec.get("spiking"), dict) else {}
+    if not isinstance(spiking.get("tuned"), dict) or not spiking["tuned"]:
+        return antenna, spec, []
+    spec = copy.deepcopy(spec)
+    tuned = spec["spiking"]["tuned"]
+    plan = TunedPlan(**(at_rate or spec)["spiking"]["tuned"])
+    rate, bits = float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"])
+    full_scale = float(data.attrs["full_scale_g"])
+    data = data.isel(event=np.flatnonzero(calibration))
+    materials = data["material"].values.astype(str)
+    if len(set(materials)) < 2:     # no channels to place: the split checks refuse such sets
+        return antenna, spec, []
+    counts = data["counts"].values[:, :int(round(plan.duration_s * rate))]
+    bands = tune(counts, materials, rate, bits, full_scale, plan.base)
+    quiet, peaks = channel_levels(counts, bands, rate, bits, full_scale,
+                                  int(round(float(data.attrs["pre_trigger_s"]) * rate)))
+    noise, peak = float(np.median(quiet)), float(np.quantile(peaks, PEAK_QUANTILE))
+    threshold = NOISE_MULTIPLE * noise
+    where = antenna.source
+    if not peak > 2 * threshold:
+        raise SpecError("data", where, f"calibration contacts whose tuned channels ring above "
+                                       f"their quiet level (the channels' peak quantile "
+                                       f"{PEAK_QUANTILE:g} is {1e3 * peak:.2f} mg, their "
+                                       f"threshold {1e3 * threshold:.2f} mg)")
+    why = {"threshold_g": f"{NOISE_MULTIPLE:g} × the tuned channels' median rms before the "
+                          f"trigger, {1e3 * noise:.2f} mg, on {where}",
+           "gain": f"the channels' peak quantile {PEAK_QUANTILE:g} after the trigger, "
+                   f"{1e3 * peak:.1f} mg, reaches the coder's amplitude, on {where}",
+           "step_g": f"the channels' peak quantile {PEAK_QUANTILE:g} after the trigger, "
+                     f"{1e3 * peak:.1f} mg, reaches the top level, on {where}"}
+    notes = []
+
+    def fitted(table: dict, label: str, inherited: Tuning):
+        coder = table.get("coder", inherited.coder)
+        amplitude = float(table.get("coder_amplitude", inherited.coder_amplitude))
+        if "threshold_g" in table or table is tuned["tuning"]:
+            notes.append(f"fitted: {label}.threshold_g {table.get('threshold_g', '(default)')}"
+                         f" → {threshold:.6g} ({why['threshold_g']})")
+            table["threshold_g"] = round(threshold, 6)
+        options = table.get("coder_options")
+        if not isinstance(options, dict):
+            return
+        key, value = None, None
+        if coder == "analog":
+            key, value = "gain", amplitude / (peak - threshold)
+        elif coder == "delta":
+            levels = int(options.get("levels", 4))
+            ratio = float(options.get("ratio", 2.0))
+            top = (levels - 1 if ratio == 1.0 else (ratio ** (levels - 1) - 1) / (ratio - 1))
+            if top > 0:
+                key, value = "step_g", (peak - threshold) / top
+        if key:
+            notes.append(f"fitted: {label}.coder_options.{key} {options.get(key, '(default)')}"
+                         f" → {value:.6g} ({why[key]})")
+            options[key] = round(value, 6)
+
+    tuned.setdefault("tuning", {})
+    fitted(tuned["tuning"], "spiking.tuned.tuning", plan.base)
+    for label, table in (tuned.get("coders") or {}).items():
+        if isinstance(table, dict):
+            fitted(table, f"spiking.tuned.coders.{label}", plan.base)
+    TunedPlan(**tuned)              # the fitted levels within the coders' own bounds
+    return replace(antenna, coder_noise_g=noise, coder_peak_g=peak), spec, notes
+
+
+def fit_band_thresholds(data, calibration: np.ndarray, spec: dict, bank: SpikingBank,
+                        source: str) -> tuple[dict, list[str]]:
+    """``spec`` with the threshold of each hand-set band (``[spiking.bank.bands.NAME]``, as
+    ``bank`` holds them at the data's rate) whose typed threshold lies within the band's quiet
+    level (below its rms before the trigger on the contacts of ``data`` selected by
+    ``calibration``) raised to ``BAND_NOISE_MULTIPLE`` × that rms; and one line per value
+    replaced. The square-wave coder codes every sample beyond its threshold, so a threshold
+    within the quiet level keeps it coding noise after the ringing has gone, and the firing
+    spans carry no decay; a typed threshold above the quiet level stays as typed."""
+    rate, bits = float(data.attrs["rate_hz"]), int(data.attrs["adc_bits"])
+    full_scale = float(data.attrs["full_scale_g"])
+    data = data.isel(event=np.flatnonzero(calibration))
+    counts = data["counts"].values[:, :int(round(bank.duration_s * rate))]
+    quiet, _ = channel_levels(counts, bank.bands, rate, bits, full_scale,
+                              int(round(float(data.attrs["pre_trigger_s"]) * rate)))
+    spec = copy.deepcopy(spec)
+    notes = []
+    for (name, band), rms in zip(bank.bands.items(), quiet):
+        table = spec["spiking"]["bank"]["bands"].get(name)
+        floor = BAND_NOISE_MULTIPLE * rms
+        if isinstance(table, dict) and band.threshold_g < rms:
+            notes.append(f"fitted: spiking.bank.bands.{name}.threshold_g {band.threshold_g:g} → "
+                         f"{floor:.6g} ({BAND_NOISE_MULTIPLE:g} × the band's rms before the "
+                         f"trigger, {1e3 * rms:.2f} mg, which the typed one lies within, on "
+                         f"{source})")
+            table["threshold_g"] = round(floor, 6)
+    return spec, notes
+
+
+def channel_levels(counts: np.ndarray, bands: dict, rate_hz: float, adc_bits: int,
+                   full_scale_g: float, pre_samples: int) -> tuple[np.ndarray, np.ndarray]:
+    """(each band's rms over the first ``pre_samples`` samples, every contact's and band's
+    largest |value| after them) of the contacts ``counts`` (events, samples, 2 axes) through
+    each band's filters, as the bank filters them before its coder (``SpikingBank.code``)."""
+    check(0 < pre_samples < counts.shape[1], "data.pre_trigger_s", pre_samples,
+          "samples before the trigger, fewer than the window's")
+    main = align_events(counts, adc_bits, full_scale_g)       # (samples, events)
+    quiet, peaks = [], []
+    for band in bands.values():
+        chain = band.chain(rate_hz, adc_bits, full_scale_g)
+        filtered = Pipeline(chain.steps[2:-1]).fit_transform(main)   # no coder
+        quiet.append(float(np.sqrt(np.mean(filtered[:pre_samples] ** 2))))
+        peaks.append(np.abs(filtered[pre_samples:]).max(axis=0))
+    return np.asarray(quiet), np.concatenate(peaks)
+
+
+def centroid_around(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
+                    ) -> tuple[float | None, str]:
+    """(the factor of ``CENTROID_AROUND`` whose rate centroid reads the distances
+    ``distance_cm`` of the calibration contacts with the least rmse from their low band's
+    spike ``counts`` (contacts × resonators tuned to ``neuron_hz``) through ``law``
+    (``readout.spiking.DominantNeuronDistance``), the wider on a tie; the line saying so)."""
+    distance_cm = np.asarray(distance_cm, dtype=float)
+    rmse = {}
+    for around in CENTROID_AROUND:
+        reader = CentroidDistance(neuron_hz, law, around).fit(counts)
+        rmse[around] = float(np.sqrt(np.mean((reader.predict(counts) - distance_cm) ** 2)))
+    best = min(CENTROID_AROUND, key=lambda a: rmse[a])       # min keeps the first on a tie
+    tried = ", ".join(f"{'all' if a is None else f'×{a:g}'} {10 * r:.1f} mm"
+                      for a, r in rmse.items())
+    return best, ("fitted: the rate centroid over the low-band resonators "
+                  + ("all" if best is None else f"within ×{best:g} of the dominant one")
+                  + f" (the least rmse on the {len(distance_cm)} calibration contacts: "
+                  + tried + ")")
+
+
+__all__ = ["FittedAntenna", "fit", "fit_coder", "fit_band_thresholds", "centroid_around",
+           "channel_levels", "BAND_NOISE_MULTIPLE", "CENTROID_AROUND", "MARGIN",
+           "NOISE_MULTIPLE", "PEAK_QUANTILE"]

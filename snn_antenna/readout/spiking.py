@@ -375,11 +375,27 @@ class CentroidDistance(DominantNeuronDistance):
     neurons' preferred frequencies (``readout.centroid_hz``), the quantity the resonators'
     k is tuned to (``neurons.DRIVEN_HZ_PER_K``); the most active neuron alone sits about a
     channel below the ringing frequency, because a resonator fires most for input somewhat
-    above its centroid."""
+    above its centroid. ``around``: the centroid of the neurons within this factor (> 1) of
+    each event's dominant neuron only, so neurons that a far component (another mode, an
+    overtone) drives do not pull it; None: of every neuron."""
+
+    def __init__(self, neuron_hz=None, law=None, around=None):
+        super().__init__(neuron_hz, law)
+        self.around = around
+
+    def fit(self, X, y=None):
+        check(self.around is None or (is_number(self.around) and self.around > 1), "around",
+              self.around, "None or a factor > 1 around the dominant neuron")
+        return super().fit(X, y)
 
     def predict(self, X):
-        rates = xr.DataArray(np.asarray(X, dtype=float), dims=("event", "neuron_hz"),
-                             coords={"neuron_hz": np.asarray(self.neuron_hz, dtype=float)})
+        X = np.asarray(X, dtype=float)
+        hz = np.asarray(self.neuron_hz, dtype=float)
+        if self.around is not None:
+            dominant = hz[np.argmax(X, axis=1)][:, None]
+            X = np.where((hz[None, :] <= dominant * self.around)
+                         & (hz[None, :] >= dominant / self.around), X, 0.0)
+        rates = xr.DataArray(X, dims=("event", "neuron_hz"), coords={"neuron_hz": hz})
         return _distance_from_hz(centroid_hz(rates).values, self.law)
 
 

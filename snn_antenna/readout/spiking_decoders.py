@@ -216,10 +216,13 @@ def neurons_per_input(spikes: xr.Dataset) -> dict:
             for name, (wanted, _) in _available(spikes).items()}
 
 
-def spiking_baselines(spikes: xr.Dataset, evaluation, law=None) -> list[bl.Baseline]:
+def spiking_baselines(spikes: xr.Dataset, evaluation, law=None, around=None
+                      ) -> list[bl.Baseline]:
     """Every spiking decoder the bank's bands allow (``evaluation``: the MLP settings of an
     ``evaluation.crossval.Evaluation``; ``law``: the low-mode law the training-free decoders
-    invert, see ``spiking.DominantNeuronDistance``; None: this project's antenna's)."""
+    invert, see ``spiking.DominantNeuronDistance``; None: this project's antenna's;
+    ``around``: the centroid's neighbourhood of the dominant neuron, see
+    ``spiking.CentroidDistance``)."""
     out = []
     bands = spikes["band"].values.astype(str)
     if "low" in set(bands):
@@ -229,7 +232,7 @@ def spiking_baselines(spikes: xr.Dataset, evaluation, law=None) -> list[bl.Basel
                                "dominant low-band resonator → inverse low-mode law "
                                "(Fig. 10E), no training"))
         out.append(bl.Baseline("spiking_centroid", "distance", "spiking_low_counts",
-                               lambda seed: CentroidDistance(low_hz, law),
+                               lambda seed: CentroidDistance(low_hz, law, around),
                                "rate-weighted centroid of the low band → inverse low-mode "
                                "law, no training"))
     available = _available(spikes)

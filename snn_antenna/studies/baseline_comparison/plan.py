@@ -179,7 +179,8 @@ def calibration_count(spec: dict) -> tuple[int, str]:
 def fit_antenna(spec: dict, bench_spec) -> tuple[dict, list[int], object, list[str]]:
     """(the spec with the fitted values, the calibration repetitions, the fitted antenna,
     one line per value fitted): the law, mode split, decay-fit window and bands of a recorded
-    set's antenna from the labels of its calibration repetitions (``antenna_fit``)."""
+    set's antenna from the labels of its calibration repetitions, the hand-set bands'
+    thresholds and the tuned bank's coder levels from their recordings (``antenna_fit``)."""
     n, field = calibration_count(spec)
     have = len(set(bench_spec.dataset["repetition"].values.tolist()))
     if field == "data" and have < n + 2:
@@ -193,11 +194,21 @@ def fit_antenna(spec: dict, bench_spec) -> tuple[dict, list[int], object, list[s
     antenna = antenna_fit.fit(data, np.isin(data["repetition"].values, held), like,
                               str(bench_spec.path))
     spec, fitted = antenna.applied(spec)
+    calibration = np.isin(data["repetition"].values, held)
+    at_rate, _ = fit_to_rate(spec, bench_spec.rate_hz)   # the bands as the run builds them
+    _, bank, _ = _spiking_part(at_rate, bench_spec.rate_hz)
+    if bank is not None:
+        spec, levels = antenna_fit.fit_band_thresholds(data, calibration, spec, bank,
+                                                       antenna.source)
+        fitted += levels
+    antenna, spec, levels = antenna_fit.fit_coder(antenna, data, calibration, spec, at_rate)
+    fitted += levels
     spec["description"] = (
         "The paper's read-outs (linear regression on the low peak, MLPs on parametric features "
         "and on the FFT amplitude spectrum, NMF band-pass filters) and the spiking read-outs "
         f"on contacts a lab recorded with its own antenna ({bench_spec.path}): its frequency "
-        "law, mode split, decay-fit window and bands fitted on the labels of its calibration "
+        "law, mode split, decay-fit window, bands, band thresholds and the tuned bank's coder "
+        "levels fitted on the labels and recordings of its calibration "
         f"repetitions {held}, held out of every split; splits by repetition of the rest.")
     return spec, held, antenna, fitted
 

@@ -13,6 +13,7 @@ from ...core.files import write_json
 from ...core.logfile import logged
 from ...engine.events import cached_features, run_bank, run_cost
 from ...engine.executor import executor
+from ...evaluation import antenna_fit
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...evaluation.comparison import Comparison
@@ -153,16 +154,18 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
     neurons = neurons_per_input(spikes)
     neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
     cmp.spiking = {**bank.description(), "neurons": neurons}
-    law = None
+    law, around = None, None
     if parts.antenna:
-        law, line = _law(parts, data, spikes, log)
-        cmp.data["fitted"].append(line)          # the report's and summary's fitted values
-    return spiking_baselines(spikes, parts.evaluation, law) + tuned
+        law, around, lines = _law(parts, data, spikes, log)
+        cmp.data["fitted"].extend(lines)          # the report's and summary's fitted values
+    return spiking_baselines(spikes, parts.evaluation, law, around) + tuned
 
 
-def _law(parts: Parts, data, spikes, log) -> tuple[tuple, str]:
+def _law(parts: Parts, data, spikes, log) -> tuple[tuple, float | None, list[str]]:
     """The fitted low-mode law the training-free decoders invert, with the distance a silent
-    low band reads, both from the calibration contacts, and the line saying so."""
+    low band reads, and the rate centroid's neighbourhood of the dominant resonator
+    (``antenna_fit.centroid_around``), both from the calibration contacts, and the lines
+    saying so."""
     events = spikes["event"].values
     held = spikes.sel(event=events[np.isin(data["repetition"].sel(event=events).values,
                                            parts.calibration_repetitions)])
@@ -170,5 +173,9 @@ def _law(parts: Parts, data, spikes, log) -> tuple[tuple, str]:
     silent = held["counts"].values[:, low].sum(axis=1) == 0
     distance = data["distance_cm"].sel(event=held["event"].values).values
     silent_cm, line = parts.antenna.silent_cm(silent, distance)
-    log(f"      {line}")
-    return (*parts.antenna.low_law, silent_cm), line
+    law = (*parts.antenna.low_law, silent_cm)
+    around, centroid_line = antenna_fit.centroid_around(
+        held["counts"].values[:, low], held["neuron_hz"].values[low], distance, law)
+    for text in (line, centroid_line):
+        log(f"      {text}")
+    return law, around, [line, centroid_line]
