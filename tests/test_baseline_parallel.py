@@ -5,7 +5,6 @@ import pytest
 import xarray as xr
 
 from snn_antenna.evaluation import crossval as cv
-from snn_antenna.readout import baselines as bl
 
 
 def _features(seed: int = 0) -> xr.Dataset:

@@ -208,7 +208,8 @@ OVERFLOW_JS = """() => {
     while (box && box !== root) {
       const style = overflowX(box), b = box.getBoundingClientRect();
       if (style === 'auto' || style === 'scroll') { verdict = 'scrolls'; break; }
-      if ((style === 'hidden' || style === 'clip') && (right > b.right + 1 || r.left < b.left - 1)) {
+      if ((style === 'hidden' || style === 'clip')
+          && (right > b.right + 1 || r.left < b.left - 1)) {
         verdict = 'cut'; break;
       }
       box = box.parentElement;

@@ -405,8 +405,6 @@ def test_resonator_array_run_refuses_bad_arguments_by_name():
 
 
 def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(tmp_path):
-    from snn_antenna.core import outputs
-
     from snn_antenna.core.files import make_folder, open_append
 
     out = tmp_path / "sweep"
@@ -423,8 +421,6 @@ def test_a_killed_run_leaves_a_folder_its_own_study_resumes_and_no_other_takes(t
 
 
 def test_a_refused_run_leaves_no_folder_behind(tmp_path):
-    from snn_antenna.core import outputs
-
     out = tmp_path / "new"
     with pytest.raises(SpecError):
         with claimed(out, "quickstart"):        # made, then refused before any write

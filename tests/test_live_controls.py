@@ -1,8 +1,8 @@
-"""The live controls (bridge/online/controls.py) and the input schedule (bridge/online/schedule.py):
-the one parser of control requests refuses every bad value with a SpecError naming field, value
-and range; changes are scheduled at window boundaries ahead of the coder, journaled in
-events.jsonl, and a replay that re-applies them finds what the live run found; the view's paint
-reports and its saved views (bridge/view/saved_view.py) read back."""
+"""The live controls (bridge/online/controls.py) and the input schedule
+(bridge/online/schedule.py): the one parser of control requests refuses every bad value with a
+SpecError naming field, value and range; changes are scheduled at window boundaries ahead of the
+coder, journaled in events.jsonl, and a replay that re-applies them finds what the live run found;
+the view's paint reports and its saved views (bridge/view/saved_view.py) read back."""
 import concurrent.futures
 import json
 import math
@@ -106,7 +106,7 @@ def test_a_request_applies_at_the_next_boundary_ahead_of_the_coder_and_calibrati
         schedule.submit(Change("th_g", 0.3), "replay", 1000)
 
 
-def test_the_schedule_applies_th_where_the_coder_reaches_its_sample_and_a_person_outranks_the_gate():
+def test_the_schedule_applies_th_where_the_coder_reaches_its_sample_a_person_outranks_the_gate():
     schedule = InputSchedule(0.04, BASE, 1000.0, n_calibration=0)
     schedule.submit(Change("th_g", 0.1), "gate", 0)
     schedule.submit(Change("th_g", 0.3), "page", 100)

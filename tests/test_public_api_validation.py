@@ -352,7 +352,8 @@ def _optional(tp) -> tuple[object, bool]:
     origin, args = typing.get_origin(tp), typing.get_args(tp)
     if origin in (typing.Union, types.UnionType) and type(None) in args:
         rest = [a for a in args if a is not type(None)]
-        return (rest[0] if len(rest) == 1 else typing.Union[tuple(rest)]), True
+        # a Union of the types left, built from a runtime tuple (no ``X | Y`` spelling)
+        return (rest[0] if len(rest) == 1 else typing.Union[tuple(rest)]), True  # noqa: UP007
     return tp, False
 
 

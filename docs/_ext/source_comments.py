@@ -19,14 +19,14 @@ import io
 import re
 import sys
 import tokenize
-from functools import lru_cache
+from functools import cache
 
 from plain_docstrings import _escape  # the same escaping as every docstring's text
 
 _CONSTANT = re.compile(r"^_?[A-Z][A-Z0-9_]*$")
 
 
-@lru_cache(maxsize=None)
+@cache
 def _source(module_name: str) -> tuple[str, dict[int, str]] | None:
     """A module's source and its comments by line (1-based), or None without source."""
     module = sys.modules.get(module_name)

@@ -100,7 +100,8 @@ def plan_import(recordings_dir, labels_path, options: inputs.Options,
     key = _key(streams, labels_hash["sha256"], settings)
     ds = _dataset(contacts, table, by_name, seg, key)
     meta = {"kind": recorded.KIND, "format_version": recorded.FORMAT_VERSION, "key": key,
-            "content_sha256": recorded.content_sha256(ds), "data": "bench", "package_version": __version__,
+            "content_sha256": recorded.content_sha256(ds), "data": "bench",
+            "package_version": __version__,
             "labels": {"file": Path(labels_path).name, **labels_hash},
             "recordings": [s.describe() for s in streams], "settings": settings,
             "clocks": [c.row() for c in clocks],

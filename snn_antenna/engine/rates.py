@@ -45,11 +45,11 @@ class Rate:
 # niced; ``TABLE_LOAD``: none competing, ``competing_load``; every estimate scales the rates
 # from it to the load it meets), probed with
 # `SNN_ANTENNA_CACHE=/tmp/p python -c "from snn_antenna.engine import rates; rates.probe()"`
-# on 2026-11-29; on the idle machine (load 1.8) the same probe measured each within 30 %
-# (compiles 3.2 and 11.0 s, a rebuild 1.2 s: the table errs long; its contact rule's 0.11 ms
-# per window is the table's). neuron_steps_per_s: per ONE worker process (points x steps / wall time,
-# compile excluded); steps_per_s: time steps per second of ONE small network (tens of neurons,
-# spike monitor), where the per-step overhead rather than the neurons sets the pace.
+# on 2026-11-29; on the idle machine (load 1.8) the same probe measured each within 30 % (compiles
+# 3.2 and 11.0 s, a rebuild 1.2 s: the table errs long; its contact rule's 0.11 ms per window is
+# the table's). neuron_steps_per_s: per ONE worker process (points x steps / wall time, compile
+# excluded); steps_per_s: time steps per second of ONE small network (tens of neurons, spike
+# monitor), where the per-step overhead rather than the neurons sets the pace.
 _WRITTEN = "engine/rates.py TABLE (measured once, see its comment)"
 TABLE = {
     # standalone (the fused sweep and event engines, float64), not probed: `python

@@ -144,13 +144,14 @@ class SpeedGate:
                 learning_expr: str = "0", learning: bool = True, clock=None, units=None):
         """The gate's Brian2 objects: speed population, read-out, plastic synapses, teacher.
 
-        ``speed_expr`` is the speed command seen by the speed population (``extra`` declares
-        what it refers to: by default a shared variable the closed loop writes). Returned as
-        a dict of named objects (``gate``: the group, when it is the gate's own; ``speed_population``, ``readout``, ``plastic``,
-        ``teacher``, ``teaching``); Th is ``decode(readout.r_read)``. ``learning=False``: recall
-        only, reduced to what recall uses (no teacher, no learning traces, synapses that only
-        transmit; the same recall, with fewer Brian2 calls per step). ``clock``: a Brian2 clock
-        of step ``dt_ms`` to share (by default one of its own for all the gate's objects:
+        ``speed_expr`` is the speed command seen by the speed population (``extra`` declares what
+        it refers to: by default a shared variable the closed loop writes). Returned as a dict of
+        named objects (``gate``: the group, when it is the gate's own; ``speed_population``,
+        ``readout``, ``plastic``, ``teacher``, ``teaching``); Th is ``decode(readout.r_read)``.
+        ``learning=False``: recall only, reduced to what recall uses (no teacher, no learning
+        traces, synapses that only transmit; the same recall, with fewer Brian2 calls per step).
+        ``clock``: a Brian2 clock of step ``dt_ms`` to share (by default one of its own for all the
+        gate's objects:
         Brian2's loop pays for every clock at every step of any). ``units``: the Subgroups
         ``speed_population`` and ``readout`` of a class-I group shared with other parts
         (``neurons.class1_units`` of ``unit_rows``), instead of a group of the gate's own.

@@ -226,13 +226,13 @@ def spectrum_regressor(mlp: Mlp, hidden, seed: int, select) -> TransformedTarget
     """``select``'s bins of each spectrum scaled to its own peak and centred, an MLP
     regressor, the target scaled. The bins keep one common scale: standardising each bin to
     unit variance lifts the bins where nothing rings (noise) to the weight of the ringing
-    ones, and the loudness every bin shares (impact, distance) hides where the peak sits.
-    Measured with the quick profile's 2 splits (20-5 MLP, 200 epochs): on the bench set
-    (``snn-antenna run studies/baseline_comparison.toml --quick``'s spectra, ~900 training
-    contacts) 9.2 → 4.2 mm (full spectrum), 12.1 → 6.8 (every 10th bin → 10-bin bands),
-    10.1 → 4.0 (lower half); on a lab's rod whose peak moves with distance (``tests/lab_antenna.py``, 2 kHz,
-    ~80 training contacts) 21.0 → 3.1 mm for the full spectrum, where the peak frequency's
-    one-feature read-out errs by 5.4 mm."""
+    ones, and the loudness every bin shares (impact, distance) hides where the peak sits. Measured
+    with the quick profile's 2 splits (20-5 MLP, 200 epochs): on the bench set (``snn-antenna run
+    studies/baseline_comparison.toml --quick``'s spectra, ~900 training contacts) 9.2 → 4.2 mm
+    (full spectrum), 12.1 → 6.8 (every 10th bin → 10-bin bands), 10.1 → 4.0 (lower half); on a
+    lab's rod whose peak moves with distance (``tests/lab_antenna.py``, 2 kHz, ~80 training
+    contacts) 21.0 → 3.1 mm for the full spectrum, where the peak frequency's one-feature read-out
+    errs by 5.4 mm."""
     return TransformedTargetRegressor(
         make_pipeline(select, FunctionTransformer(peak_scaled), StandardScaler(with_std=False),
                       mlp.regressor(hidden, seed)),

@@ -272,7 +272,7 @@ _UNITS = {("cm", "s"): "cm/s", ("mm", "s"): "mm/s", ("hz", "per", "k"): "Hz per 
 _WORDS = {"f1": "F1", "rmse": "RMSE", "mae": "MAE", "cpu": "CPU", "snn": "SNN", "svm": "SVM",
           "nmf": "NMF", "fwhm": "FWHM", "ci": "CI", "adc": "ADC", "id": "ID", "dt": "dt",
           "th": "Th", "hz": "Hz", "lda": "LDA", "pca": "PCA", "knn": "kNN", "ivp": "IVP",
-          "pom": "POM", "pvc": "PVC", "fft": "FFT", "mlp": "MLP"}   # materials: one spelling everywhere
+          "pom": "POM", "pvc": "PVC", "fft": "FFT", "mlp": "MLP"}   # one spelling everywhere
 _NAMES = {"cpu_s": "CPU time (s)", "wall_s": "wall time (s)", "compile_s": "compile time (s)",
           "k_dt": "k·dt", "n": "n", "p_value": "p value"}
 

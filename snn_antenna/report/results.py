@@ -762,7 +762,6 @@ def make_page(
         if any(target == other for other, _, _ in stored):
             raise SpecError("--bench", str(path), f"one output per benchmark ({target.stem})")
         stored.append((target, path, record))
-    copies = [(t, f) for t, f, _ in summaries + stored if f.resolve() != t.resolve()]
     runs_figures = {  # a run's folder gives its figures; a stored source keeps those stored
         target.stem: guides.run_figures(target.stem, summary, file.parent)
         if file.resolve() != target.resolve()
@@ -795,7 +794,7 @@ def make_page(
         for target, path, record in stored:
             if path.resolve() != target.resolve():
                 atomic_write(target, json.dumps(record, indent=1, default=float) + "\n")
-        for target, file, summary in summaries:
+        for target, file, _ in summaries:
             if file.resolve() != target.resolve():
                 guides.copy_figures(target.stem, runs_figures[target.stem], file.parent, store)
         for path, text in pending.items():

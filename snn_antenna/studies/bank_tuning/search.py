@@ -212,7 +212,8 @@ def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client,
                                  search, parts.evaluation)
         trial.set_user_attr("inner_accuracy", acc)
         log(f"      trial {trial.number}: {b.n_neurons} resonators in {len(b.bands)} "
-            f"bands, {params['readout']} ({params['scaling']}): accuracy {100 * np.mean(acc):.1f} %, "
+            f"bands, {params['readout']} ({params['scaling']}): "
+            f"accuracy {100 * np.mean(acc):.1f} %, "
             f"{cost:.0f} resonator-steps per contact")
         return float(np.mean(acc)), cost
 

@@ -284,10 +284,10 @@ def estimate(parts: Parts):
 
 # CPU seconds of one read-out's fit per training event (the mean over the 46 read-outs
 # ``readout_fits`` counts, NMF's filters apart), and of NMF's per filter and training event:
-# measured with the full profile's 48 read-outs (the two training-free ones ~0 s) on the split of seed 0 (8,959
-# training events), each fit on one BLAS thread, in CPU time (AMD EPYC Zen 5, AVX-512, 2
-# cores, load average 16-18): 114.6 s in all, NMF-n 1.47 s + 0.095 s per filter (NMF-3 1.46
-# s, NMF-72 8.47 s), the others 0.01-6.1 s each (the 300-epoch parametric material MLP the
+# measured with the full profile's 48 read-outs (the two training-free ones ~0 s) on the split of
+# seed 0 (8,959 training events), each fit on one BLAS thread, in CPU time (AMD EPYC Zen 5,
+# AVX-512, 2 cores, load average 16-18): 114.6 s in all, NMF-n 1.47 s + 0.095 s per filter (NMF-3
+# 1.46 s, NMF-72 8.47 s), the others 0.01-6.1 s each (the 300-epoch parametric material MLP the
 # longest, the 60-epoch material MLPs 1.3-3.1 s).
 READOUT_FIT_EVENT_S = 2.06e-4
 NMF_FILTER_EVENT_S = 1.06e-5

@@ -11,7 +11,6 @@ time is the CPU time shared among the workers times that slowdown.
 """
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, replace
 
 from ...engine import rates
@@ -118,7 +117,8 @@ def estimate(parts, workers: int) -> JobEstimate:
     seconds = [s[3] * factor for s in stages]
     what = (f"{points} grid points of {parts.bench.n_events:,} events on {workers} "
             f"worker(s), each ×{_slowdown(workers):.2g} slower at load "
-            f"{rates.competing_load():.1f} (not niced): bench sets and features {_short(seconds[0])}, "
+            f"{rates.competing_load():.1f} (not niced): bench sets and features "
+            f"{_short(seconds[0])}, "
             f"calibration read-outs {_short(seconds[1])}, predicted read-outs at {candidates} "
             f"calibrated points {_short(seconds[2])}"
             + (f", workers' start {_short(seconds[3])}" if workers > 1 else "")

@@ -16,7 +16,8 @@ Settings
 loop in this process (``engine.devices``): timing needs the machine to itself, and the knobs
 (method, target, dtype) are build settings rather than the numeric axes of a sweep grid.
 The spec is checked and the parts built in ``plan``; the stages run in ``run``; the page is
-written by ``report``. Finished runs are kept in ``OUT/runs.jsonl`` (``engine.runlog``): an interrupted run resumes.
+written by ``report``. Finished runs are kept in ``OUT/runs.jsonl`` (``engine.runlog``): an
+interrupted run resumes.
 """
 from __future__ import annotations
 
