@@ -226,6 +226,28 @@ def test_shared_counts_read_the_activitys_shape_apart_from_its_loudness():
     assert refused.value.field == "scaling"
 
 
+def test_a_searched_point_grades_each_channels_gains_and_coarsens_its_step():
+    from snn_antenna.studies.bank_tuning.plan import BankPlan
+    from snn_antenna.studies.bank_tuning.search import bank_of, start_params
+
+    plan = BankPlan(tuning={"n_resonators": 2, "per_channel": 1, "max_channels": 2,
+                            "coder": "analog", "coder_amplitude": 1.0,
+                            "coder_options": {"gain": 150.0}})
+    counts = np.concatenate([_tones(150.0, 4), _tones(300.0, 4)])
+    labels = np.array(["a"] * 4 + ["b"] * 4)
+    params = start_params(plan)
+    assert params["gain_levels"] == 1 and params["k_dt_factor"] == 1.0
+    start = bank_of(params, plan, counts, labels, (2000.0, 16, 10.0))
+    graded = bank_of({**params, "gain_levels": 3, "gain_ratio": 4.0, "k_dt_factor": 8.0},
+                     plan, counts, labels, (2000.0, 16, 10.0))
+    assert sorted(graded.bands) == ["ch00g0", "ch00g1", "ch00g2", "ch01g0", "ch01g1", "ch01g2"]
+    assert [graded.bands[f"ch00g{i}"].coder_options["gain"] for i in range(3)] == pytest.approx(
+        [37.5, 150.0, 600.0])
+    assert graded.n_neurons == 3 * start.n_neurons       # per_channel resonators per gain
+    for j in range(2):                                   # a coarser step for every channel
+        assert graded.bands[f"ch{j:02d}g0"].dt_ms > start.bands[f"ch{j:02d}"].dt_ms
+
+
 def test_the_channels_take_the_searched_filter_order_and_the_space_bounds_it():
     from snn_antenna.readout.spiking import LOW_BAND
     from snn_antenna.studies.bank_tuning.plan import BankPlan

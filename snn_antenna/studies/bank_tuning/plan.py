@@ -37,8 +37,9 @@ SPACE_KEYS = {
     "gain_levels": ("int", "graded analog gains per channel, spread in log around gain "
                            "(each with per_channel resonators)"),
     "gain_ratio": ("log", "the factor between a channel's successive graded gains"),
-    "max_k_dt": ("log", "the largest k·dt (model ms per step) of a channel's step: coarser "
-                        "steps cost less and move the resonators' tuning"),
+    "k_dt_factor": ("log", "a channel's step may reach this factor x the starting bank's "
+                           "largest k·dt (max_k_dt): coarser steps cost less and move the "
+                           "resonators' tuning"),
     "coder_amplitude": ("float", "the coder's saturation"),
     "threshold_g": ("float", "the coder's dead zone (g)"),
     "low_resonators": ("count", "resonators of the low-mode band (0: none)"),

@@ -83,7 +83,7 @@ def start_params(bank: BankPlan) -> dict:
             "gain_levels": max(1, len(t.gains)),
             "gain_ratio": float((t.gains[-1] / t.gains[0]) ** (1 / (len(t.gains) - 1)))
                           if len(t.gains) > 1 else 7.0,
-            "max_k_dt": float(t.max_k_dt),
+            "k_dt_factor": 1.0,
             "coder_amplitude": float(t.coder_amplitude), "threshold_g": float(t.threshold_g),
             "low_resonators": int(bank.low_resonators), "readout": bank.readout,
             "scaling": bank.scaling, "filter_order": int(bank.filter_order)}
@@ -119,7 +119,7 @@ def bank_of(params: dict, bank: BankPlan, counts, labels, attrs) -> SpikingBank:
                   for i in range(levels)) if levels > 1 else ()
     per_channel = params["per_channel"] * levels
     tuning = replace(t, n_resonators=params["channels"] * per_channel, gains=gains,
-                     max_k_dt=float(params["max_k_dt"]),
+                     max_k_dt=float(t.max_k_dt * params["k_dt_factor"]),
                      per_channel=per_channel, max_channels=params["channels"],
                      range_hz=(lo, hi), quantile=params["quantile"], spread=params["spread"],
                      coder_amplitude=params["coder_amplitude"],
