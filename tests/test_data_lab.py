@@ -422,11 +422,21 @@ MEETS = ("mlp_parametric_material", "mlp_spectrum_material", "linear_low_peak",
 MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "ceiling_square_24")
 
 
+# The rods the comparison reads (``lab_antenna.session``'s keys): the lab's, and another lab's
+# (``lab_antenna.OTHER_ROD``, another session's seed) that no fitted rule was chosen on; and
+# the families of ``MEETS`` / ``MEETS_QUICK`` that miss on the other rod (the test's docstring
+# says why).
+RODS = {"lab": {"seed": 9}, "other": {"seed": 33, **lab.OTHER_ROD}}
+MISSES_ON_OTHER = ("spiking_dominant", "spiking_tuned_all")
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("rate, profile", [(1000.0, ["--quick"]), (2000.0, ["--quick"]),
-                                           (2000.0, [])])
+@pytest.mark.parametrize("rate, profile, rod", [(1000.0, ["--quick"], "lab"),
+                                                (2000.0, ["--quick"], "lab"),
+                                                (2000.0, [], "lab"),
+                                                (2000.0, ["--quick"], "other")])
 def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp_path, rate,
-                                                                              profile):
+                                                                              profile, rod):
     """`run studies/baseline_comparison.toml --data DIR` (quick at the board's 1 kHz and at
     2 kHz, full at 2 kHz), with `--check` first, on the lab's rod (its four materials, four
     distances, ten repetitions): the check passes and so does the run, every statistic
@@ -460,10 +470,23 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     - on the full profile (5 of 10 repetitions held out to calibrate, 48 training
       contacts), the MLPs on many inputs: both bands' spiking MLP (0.9125, on the mark
       itself), the tuned bank's rate, latency, span and time bins together (0.87), and the
-      square-wave coder's ceiling (0.91)."""
+      square-wave coder's ceiling (0.91).
+
+    On another lab's rod (``lab_antenna.OTHER_ROD``: five materials, its first mode from 75 to
+    15 Hz, the second at 3.1 times it; seed 33, quick at 2 kHz), which none of the fitted
+    rules was chosen on, the same families meet but ``MISSES_ON_OTHER`` (against the decay
+    read-out's 0.95 and the peak read-out's 4.6 mm):
+    - the dominant resonator's distance (10.6 mm): the most active resonator sits about one
+      channel below the ringing (``readout.spiking.CentroidDistance``), 1.3 cm of either
+      rod's law, so it reads about 10 mm wherever it is scored and meets only where the peak
+      read-out is coarse (5-6 mm on the lab's rod); the centroid beside it meets (2.8 mm);
+    - the tuned bank's rate, latency, span and time bins together (0.875), whose latency code
+      misses alone (0.79), on 99 training contacts, as on the full profile above."""
     from snn_antenna.cli import main as cli
 
-    sess = lab.session(rate, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
+    antenna = RODS[rod]
+    sess = lab.session(rate, materials=tuple(antenna.get("decay_s", lab.DECAY_S)),
+                       repetitions=10, **antenna)
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    rate, origin_s=2.5)
@@ -481,6 +504,8 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     scores = lab.against_one_feature(tmp_path / "run", source)
     meets = [*MEETS, *(MEETS_QUICK if profile else ()),
              *(name for name in scores if name.startswith("nmf_"))]
+    if rod == "other":
+        meets = [name for name in meets if name not in MISSES_ON_OTHER]
     assert len(meets) > len(MEETS) and set(meets) <= set(scores), sorted(scores)
     missed = {name: scores[name][:2] for name in meets if not (
         scores[name][0] >= scores[name][1] - 0.05 if scores[name][2] == "material"
@@ -826,14 +851,13 @@ def test_peaks_that_never_move_give_no_statistic_rather_than_an_infinite_one():
     json.dumps(stats, allow_nan=False)
 
 
-def test_a_rod_whose_first_mode_does_not_move_has_no_law_and_is_refused(tmp_path, monkeypatch):
+def test_a_rod_whose_first_mode_does_not_move_has_no_law_and_is_refused(tmp_path):
     """Every distance ringing at one frequency: no law to invert, refused at the plan (so at
     `--check`) in one line naming the data set."""
     from snn_antenna.studies import baseline_comparison
 
-    monkeypatch.setattr(lab, "low_hz", lambda distance_cm: 30.0)
     sess = lab.session(1000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
-                       repetitions=3, seed=5)
+                       repetitions=3, seed=5, law_hz=(30.0, 30.0))
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    1000.0, 0.0)
