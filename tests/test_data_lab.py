@@ -692,6 +692,20 @@ def test_the_rate_centroid_keeps_to_the_dominant_resonators_neighbourhood_when_t
     assert antenna_fit.centroid_around(counts, hz, distance, law)[0] is None
 
 
+def test_the_neighbourhood_centres_on_the_resonator_driven_most_not_the_one_firing_most():
+    """A far contact of a long-ringing material: the low mode drives the low resonators a few
+    spikes each over its few cycles, a weak harmonic drives the top one on more spikes than
+    any of them (it has five times the cycles): the neighbourhood stays on the low mode."""
+    hz = np.geomspace(12.0, 93.8, 24)
+    law = (np.log10(15.0 / 75.0) / 24.0, np.log10(75.0) - np.log10(15.0 / 75.0) / 24.0 * 10,
+           22.0)
+    counts = np.zeros((1, 24))
+    counts[0, 1:6] = [6, 6, 6, 4, 2]            # 13-19 Hz: the 15 Hz mode at 34 cm
+    counts[0, -1] = 12                          # 94 Hz
+    read = CentroidDistance(hz, law, 2.0).fit(counts).predict(counts)[0]
+    assert read == pytest.approx(34.0, abs=2.0), read
+
+
 def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
                                                                              tmp_path):
     """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
