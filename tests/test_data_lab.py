@@ -485,7 +485,7 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     - the dominant resonator's distance (10.6 mm): the most active resonator sits about one
       channel below the ringing (``readout.spiking.CentroidDistance``), 1.3 cm of either
       rod's law, so it reads about 10 mm wherever it is scored and meets only where the peak
-      read-out is coarse (5-6 mm on the lab's rod); the centroid beside it meets (2.8 mm);
+      read-out is coarse (5-6 mm on the lab's rod); the centroid beside it meets (2.5 mm);
     - the tuned bank's rate, latency, span and time bins together (0.875), whose latency code
       misses alone (0.79), on 99 training contacts, as on the full profile above.
     Families near the mark trade places between sessions (a test contact is 2.5 points of the
