@@ -1,17 +1,20 @@
 """Every read-out of the baseline comparison on a lab's rod, beside the one-feature references.
 
-    python benchmarks/bench_lab_readouts.py [--rate 2000] [--full] 
-    ... [--work DIR] [--set KEY=VALUE ...] [--json PATH]
+    python benchmarks/bench_lab_readouts.py [--rate 2000] [--full] [--rod lab|other]
+    ... [--seed 9] [--work DIR] [--set KEY=VALUE ...] [--json PATH]
 
 The lab's rod of ``tests/lab_antenna.py`` (another antenna, written without the package's
 physics: its first mode falls with distance, its materials differ only in decay time), four
 materials at four distances, ten repetitions, recorded as ADC counts on a clock from 2.5 s,
 imported with ``snn-antenna data import`` and read out by ``studies/baseline_comparison.toml``
-(quick unless ``--full``). Each row: a read-out's mean score over the comparison's splits and
-the one-feature read-out's on the same training and test contacts (material: accuracy against
-the decay time's; distance: rmse in mm against the low peak frequency's), and whether it meets
-the mark (within 5 points; within 2x). ``--work`` keeps the import and the run to re-read;
-the import is made again when the lab's rod or the importer's code changes (``import_key``).
+(quick unless ``--full``). ``--rod other`` records another lab's rod instead
+(``lab_antenna.OTHER_ROD``: five materials, another frequency law and mode ratio) and
+``--seed`` another session: the rules fitted on the calibration contacts, read out of
+sample. Each row: a read-out's mean score over the comparison's splits and the one-feature
+read-out's on the same training and test contacts (material: accuracy against the decay
+time's; distance: rmse in mm against the low peak frequency's), and whether it meets the mark
+(within 5 points; within 2x). ``--work`` keeps the import and the run to re-read; the import
+is made again when the rod, the seed or the importer's code changes (``import_key``).
 """
 from __future__ import annotations
 
@@ -43,21 +46,30 @@ IMPORT_CODE = (ROOT / "tests" / "lab_antenna.py", Path(__file__).resolve(),
                ROOT / "snn_antenna" / "sources" / "recorded.py")
 
 
-def import_key(rate_hz: float) -> str:
-    """The import's cache key: the rate and the bytes of every file of ``IMPORT_CODE``."""
-    digest = hashlib.sha256(f"{rate_hz!r}".encode())
+#: the rods a session is recorded on (``lab_antenna.session``'s keys)
+RODS = {"lab": {}, "other": lab.OTHER_ROD}
+
+
+def import_key(rate_hz: float, rod: str = "lab", seed: int = 9) -> str:
+    """The import's cache key: the rate, rod and seed and the bytes of every file of
+    ``IMPORT_CODE``."""
+    digest = hashlib.sha256(f"{rate_hz!r} {rod} {seed}".encode())
     for path in IMPORT_CODE:
         digest.update(path.name.encode() + b"\0" + path.read_bytes())
     return digest.hexdigest()[:16]
 
 
-def imported(work: Path, rate_hz: float) -> tuple[Path, object]:
-    """(the imported folder, its source): the lab's session written and imported once per
-    ``work`` folder and ``import_key`` (a changed rod or importer imports again)."""
-    folder = work / f"import-{import_key(rate_hz)}"
+def imported(work: Path, rate_hz: float, rod: str = "lab", seed: int = 9
+             ) -> tuple[Path, object]:
+    """(the imported folder, its source): the session of ``rod`` (``RODS``) and ``seed``
+    written and imported once per ``work`` folder and ``import_key`` (a changed rod or
+    importer imports again)."""
+    folder = work / f"import-{import_key(rate_hz, rod, seed)}"
     ds = folder / "ds"
     if not ds.exists():
-        sess = lab.session(rate_hz, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
+        materials = tuple(RODS[rod].get("decay_s", lab.DECAY_S))
+        sess = lab.session(rate_hz, materials=materials, repetitions=10, seed=seed,
+                           **RODS[rod])
         (folder / "recs").mkdir(parents=True, exist_ok=True)
         lab.counts_csv(folder / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                        rate_hz, origin_s=ORIGIN_S)
@@ -98,12 +110,15 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--rate", type=float, default=2000.0)
     p.add_argument("--full", action="store_true", help="the full profile (default: quick)")
+    p.add_argument("--rod", choices=sorted(RODS), default="lab",
+                   help="the lab's rod, or another lab's (lab_antenna.OTHER_ROD)")
+    p.add_argument("--seed", type=int, default=9, help="the recorded session's seed")
     p.add_argument("--work", type=Path, default=None, help="folder for the import and run")
     p.add_argument("--set", action="append", default=[], dest="sets")
     p.add_argument("--json", metavar="PATH", help="write the rows as JSON here")
     args = p.parse_args(argv)
     work = args.work or Path(f"/tmp/lab_readouts_{int(args.rate)}")
-    ds, source = imported(work, args.rate)
+    ds, source = imported(work, args.rate, args.rod, args.seed)
     run = work / ("run_full" if args.full else "run_quick")
     sets = [f"stimulus.cache_dir=\"{work / 'cache'}\"", "spiking.workers=1", *args.sets]
     command = ["run", str(ROOT / "studies" / "baseline_comparison.toml"), "--data",
@@ -116,12 +131,14 @@ def main(argv=None) -> int:
     if code:
         return code
     wall = time.perf_counter() - started
-    print(f"# {args.rate:g} Hz, {'full' if args.full else 'quick'}, {wall:.0f} s")
+    print(f"# {args.rod} rod, seed {args.seed}, {args.rate:g} Hz, "
+          f"{'full' if args.full else 'quick'}, {wall:.0f} s")
     scores = lab.against_one_feature(run, source)
     print("\n".join(table(scores)))
     if args.json:   # per task, each read-out's row under its key (the page names it)
         tasks = {"material": "material_accuracy", "distance": "distance_rmse_mm"}
-        values = {"rate_hz": args.rate, "profile": "full" if args.full else "quick",
+        values = {"rate_hz": args.rate, "rod": args.rod, "seed": args.seed,
+                  "profile": "full" if args.full else "quick",
                   "settings": args.sets, "wall_s": wall, "marked": MARK,
                   **{key: {} for key in tasks.values()}}
         for name, (mine, reference, task) in sorted(scores.items()):

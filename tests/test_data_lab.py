@@ -422,11 +422,21 @@ MEETS = ("mlp_parametric_material", "mlp_spectrum_material", "linear_low_peak",
 MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "ceiling_square_24")
 
 
+# The rods the comparison reads (``lab_antenna.session``'s keys): the lab's, and another lab's
+# (``lab_antenna.OTHER_ROD``, another session's seed) that no fitted rule was chosen on; and
+# the families of ``MEETS`` / ``MEETS_QUICK`` that miss on the other rod (the test's docstring
+# says why).
+RODS = {"lab": {"seed": 9}, "other": {"seed": 33, **lab.OTHER_ROD}}
+MISSES_ON_OTHER = ("spiking_dominant", "spiking_tuned_all")
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("rate, profile", [(1000.0, ["--quick"]), (2000.0, ["--quick"]),
-                                           (2000.0, [])])
+@pytest.mark.parametrize("rate, profile, rod", [(1000.0, ["--quick"], "lab"),
+                                                (2000.0, ["--quick"], "lab"),
+                                                (2000.0, [], "lab"),
+                                                (2000.0, ["--quick"], "other")])
 def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp_path, rate,
-                                                                              profile):
+                                                                              profile, rod):
     """`run studies/baseline_comparison.toml --data DIR` (quick at the board's 1 kHz and at
     2 kHz, full at 2 kHz), with `--check` first, on the lab's rod (its four materials, four
     distances, ten repetitions): the check passes and so does the run, every statistic
@@ -453,17 +463,41 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
       low mode 12-60 Hz, the high one 44-222 Hz), so the high band's band-pass passes the low
       mode at the near positions and its square-wave coder follows the stronger mode's zero
       crossings, and its high mode decays twice as fast as the low one (rubber's rings 15 ms,
-      under a period at 44 Hz);
+      under a period at 44 Hz): at 26 and 34 cm rubber and wood leave it nearly silent
+      (a median of 0.5-7 spikes over its 24 resonators); it misses on the other rod below
+      too (0.81 and 0.79, sessions of seeds 33 and 34), and the bands' threshold at 3 or 8
+      times their quiet level instead of 5 leaves it lower there (0.76, 0.74);
     - the spiking distance MLP on both bands (11.8 mm, 10.0, 12.7 against 10.4, 10.9, 12.1):
       the high band's inputs, which carry that mix, double those of the low band's MLP,
-      which meets, on 48-80 training contacts;
+      which meets, on 48-80 training contacts; it meets on some sessions and settings and
+      misses on others (11.0 mm against 12.0 on this rod's session of seed 21; 12.5, 8.4, 8.5
+      against 9.2 on the other rod at 5, 3 and 8 times the quiet level): the MLP's spread,
+      not a rule's;
     - on the full profile (5 of 10 repetitions held out to calibrate, 48 training
       contacts), the MLPs on many inputs: both bands' spiking MLP (0.9125, on the mark
       itself), the tuned bank's rate, latency, span and time bins together (0.87), and the
-      square-wave coder's ceiling (0.91)."""
+      square-wave coder's ceiling (0.91).
+
+    On another lab's rod (``lab_antenna.OTHER_ROD``: five materials, its first mode from 75 to
+    15 Hz, the second at 3.1 times it; seed 33, quick at 2 kHz), which none of the fitted
+    rules was chosen on, the same families meet but ``MISSES_ON_OTHER`` (against the decay
+    read-out's 0.95 and the peak read-out's 4.6 mm):
+    - the dominant resonator's distance (10.6 mm): the most active resonator sits about one
+      channel below the ringing (``readout.spiking.CentroidDistance``), 1.3 cm of either
+      rod's law, so it reads about 10 mm wherever it is scored and meets only where the peak
+      read-out is coarse (5-6 mm on the lab's rod); the centroid beside it meets (2.5 mm);
+    - the tuned bank's rate, latency, span and time bins together (0.875), whose latency code
+      misses alone (0.79), on 99 training contacts, as on the full profile above.
+    Families near the mark trade places between sessions (a test contact is 2.5 points of the
+    40 per split): on the other rod's session of seed 34 both of these meet (9.6 mm against
+    the peak read-out's 5.4; 0.925 against the decay read-out's 0.925) and the tuned bank's
+    rate misses (0.850); on a session of the lab's rod of seed 21, every family of ``MEETS``
+    and ``MEETS_QUICK`` meets."""
     from snn_antenna.cli import main as cli
 
-    sess = lab.session(rate, materials=tuple(lab.DECAY_S), repetitions=10, seed=9)
+    antenna = RODS[rod]
+    sess = lab.session(rate, materials=tuple(antenna.get("decay_s", lab.DECAY_S)),
+                       repetitions=10, **antenna)
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    rate, origin_s=2.5)
@@ -481,6 +515,8 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     scores = lab.against_one_feature(tmp_path / "run", source)
     meets = [*MEETS, *(MEETS_QUICK if profile else ()),
              *(name for name in scores if name.startswith("nmf_"))]
+    if rod == "other":
+        meets = [name for name in meets if name not in MISSES_ON_OTHER]
     assert len(meets) > len(MEETS) and set(meets) <= set(scores), sorted(scores)
     missed = {name: scores[name][:2] for name in meets if not (
         scores[name][0] >= scores[name][1] - 0.05 if scores[name][2] == "material"
@@ -656,6 +692,20 @@ def test_the_rate_centroid_keeps_to_the_dominant_resonators_neighbourhood_when_t
     assert antenna_fit.centroid_around(counts, hz, distance, law)[0] is None
 
 
+def test_the_neighbourhood_centres_on_the_resonator_driven_most_not_the_one_firing_most():
+    """A far contact of a long-ringing material: the low mode drives the low resonators a few
+    spikes each over its few cycles, a weak harmonic drives the top one on more spikes than
+    any of them (it has five times the cycles): the neighbourhood stays on the low mode."""
+    hz = np.geomspace(12.0, 93.8, 24)
+    law = (np.log10(15.0 / 75.0) / 24.0, np.log10(75.0) - np.log10(15.0 / 75.0) / 24.0 * 10,
+           22.0)
+    counts = np.zeros((1, 24))
+    counts[0, 1:6] = [6, 6, 6, 4, 2]            # 13-19 Hz: the 15 Hz mode at 34 cm
+    counts[0, -1] = 12                          # 94 Hz
+    read = CentroidDistance(hz, law, 2.0).fit(counts).predict(counts)[0]
+    assert read == pytest.approx(34.0, abs=2.0), read
+
+
 def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
                                                                              tmp_path):
     """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
@@ -826,14 +876,13 @@ def test_peaks_that_never_move_give_no_statistic_rather_than_an_infinite_one():
     json.dumps(stats, allow_nan=False)
 
 
-def test_a_rod_whose_first_mode_does_not_move_has_no_law_and_is_refused(tmp_path, monkeypatch):
+def test_a_rod_whose_first_mode_does_not_move_has_no_law_and_is_refused(tmp_path):
     """Every distance ringing at one frequency: no law to invert, refused at the plan (so at
     `--check`) in one line naming the data set."""
     from snn_antenna.studies import baseline_comparison
 
-    monkeypatch.setattr(lab, "low_hz", lambda distance_cm: 30.0)
     sess = lab.session(1000.0, materials=("rubber", "wood"), distances_cm=(10.0, 30.0),
-                       repetitions=3, seed=5)
+                       repetitions=3, seed=5, law_hz=(30.0, 30.0))
     (tmp_path / "recs").mkdir()
     lab.counts_csv(tmp_path / "recs" / "r1.csv", lab.adc_counts(sess.g[:, :2], 10, 18.0),
                    1000.0, 0.0)

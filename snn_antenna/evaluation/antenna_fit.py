@@ -31,9 +31,10 @@ their labels, and reported as calibrated with that source:
   the trigger to the coder's amplitude (its top level), so the ringing's decay stays within
   the coder's range instead of holding it at its ceiling;
 - the rate centroid's neighbourhood (``centroid_around``, from the calibration contacts'
-  spikes): of ``CENTROID_AROUND``, the factor around each contact's dominant low-band
-  resonator whose centroid reads their distances best through the fitted law (resonators an
-  overtone or the other mode drives otherwise pull the centroid off the low mode).
+  spikes): of ``CENTROID_AROUND``, the factor around each contact's most driven low-band
+  resonator (spikes per cycle) whose centroid reads their distances best through the fitted
+  law (resonators an overtone or the other mode drives otherwise pull the centroid off the
+  low mode).
 
 Only the calibration contacts' labels (and recordings) are fitted on; every scored contact is
 read as a robot has it (its counts), and its labels serve the scoring alone.
@@ -469,7 +470,7 @@ def centroid_around(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
     tried = ", ".join(f"{'all' if a is None else f'×{a:g}'} {10 * r:.1f} mm"
                       for a, r in rmse.items())
     return best, ("fitted: the rate centroid over the low-band resonators "
-                  + ("all" if best is None else f"within ×{best:g} of the dominant one")
+                  + ("all" if best is None else f"within ×{best:g} of the most driven one")
                   + f" (the least rmse on the {len(distance_cm)} calibration contacts: "
                   + tried + ")")
 

@@ -376,8 +376,11 @@ class CentroidDistance(DominantNeuronDistance):
     k is tuned to (``neurons.DRIVEN_HZ_PER_K``); the most active neuron alone sits about a
     channel below the ringing frequency, because a resonator fires most for input somewhat
     above its centroid. ``around``: the centroid of the neurons within this factor (> 1) of
-    each event's dominant neuron only, so neurons that a far component (another mode, an
-    overtone) drives do not pull it; None: of every neuron."""
+    each event's most driven neuron only, so neurons that a far component (another mode, an
+    overtone) drives do not pull it; None: of every neuron. The most driven neuron is the
+    one that fired on the largest share of its own cycles (its count over its preferred
+    frequency): a resonator fires at most once per input cycle, so a high one that a weak
+    harmonic drives can outnumber in spikes the low ones the mode itself drives."""
 
     def __init__(self, neuron_hz=None, law=None, around=None):
         super().__init__(neuron_hz, law)
@@ -392,7 +395,7 @@ class CentroidDistance(DominantNeuronDistance):
         X = np.asarray(X, dtype=float)
         hz = np.asarray(self.neuron_hz, dtype=float)
         if self.around is not None:
-            dominant = hz[np.argmax(X, axis=1)][:, None]
+            dominant = hz[np.argmax(X / hz[None, :], axis=1)][:, None]
             X = np.where((hz[None, :] <= dominant * self.around)
                          & (hz[None, :] >= dominant / self.around), X, 0.0)
         rates = xr.DataArray(X, dims=("event", "neuron_hz"), coords={"neuron_hz": hz})
