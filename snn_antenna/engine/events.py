@@ -41,6 +41,7 @@ import numpy as np
 
 from ..core.errors import NumericalInstabilityError, check
 from ..networks import neurons
+from ..readout.events import extraction_cost
 from ..readout.spiking import SpikeFeatures, SpikingBank, recording_attrs
 from ..core.store import Output
 from .event_features import band_features, fused_features, spike_time_s
@@ -427,3 +428,21 @@ def run_cost(data, bank: SpikingBank, n_events: int) -> dict:
             "neuron_steps_per_event": f.neuron_steps / n_events,
             "ns_per_neuron_step": 1e9 * f.wall_s / f.neuron_steps,
             "events_measured": n_events, "target": bank.target}
+
+
+def best_costs(data, processor, sample_ids, banks: dict, repeats: int, log) -> dict:
+    """Wall time per event of the FFT pipeline's features (``processor``) and of each bank of
+    ``banks`` (name → bank), on the events ``sample_ids``, taken in turn ``repeats`` times in
+    this process: each the best of its runs (the least disturbed by other work on the
+    machine)."""
+    ids = np.asarray(sample_ids)
+    best: dict = {}
+    for _ in range(repeats):
+        runs = {"fft": extraction_cost(data, processor, ids)}
+        runs.update({k: run_cost(data, bank, len(ids)) for k, bank in banks.items()})
+        for k, c in runs.items():
+            if k not in best or c["features_us_per_event"] < best[k]["features_us_per_event"]:
+                best[k] = {**c, "best_of": repeats}
+    log("      cost per event (best of " + f"{repeats}): " + ", ".join(
+        f"{k} {c['features_us_per_event']:.0f} µs" for k, c in best.items()))
+    return best

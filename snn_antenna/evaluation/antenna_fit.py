@@ -48,12 +48,11 @@ from dataclasses import asdict, dataclass, fields, replace
 import numpy as np
 from scipy import stats
 from scipy.signal import find_peaks
-from sklearn.pipeline import Pipeline
 
 from ..core.errors import SpecError, check
 from ..readout.band_tuning import Tuning, tune
 from ..readout.events import EventProcessor, SkippedEvent, main_axis_g
-from ..readout.spiking import CentroidDistance, SpikingBank, align_events
+from ..readout.spiking import CentroidDistance, SpikingBank, align_events, band_filtered
 from ..readout.spiking_decoders import TunedPlan
 
 MARGIN = 1.25                 # a fitted band reaches this factor beyond the modes' range
@@ -447,9 +446,7 @@ def channel_levels(counts: np.ndarray, bands: dict, rate_hz: float, adc_bits: in
           "samples before the trigger, fewer than the window's")
     main = align_events(counts, adc_bits, full_scale_g)       # (samples, events)
     quiet, peaks = [], []
-    for band in bands.values():
-        chain = band.chain(rate_hz, adc_bits, full_scale_g)
-        filtered = Pipeline(chain.steps[2:-1]).fit_transform(main)   # no coder
+    for filtered in band_filtered(bands, main, rate_hz, adc_bits, full_scale_g):
         quiet.append(float(np.sqrt(np.mean(filtered[:pre_samples] ** 2))))
         peaks.append(np.abs(filtered[pre_samples:]).max(axis=0))
     return np.asarray(quiet), np.concatenate(peaks)

@@ -283,19 +283,28 @@ class SpikingBank:
         at once as columns (they filter along time only)."""
         n_samples = min(counts.shape[1], int(round(self.duration_s * rate_hz)))
         main = align_events(counts[:, :n_samples], adc_bits, full_scale_g)   # (samples, events)
-        coded, conditioned = [], {}
-        for band in self.bands.values():
-            chain = band.chain(rate_hz, adc_bits, full_scale_g)
-            # one pass: these stages learn nothing from the samples (their fit checks the
-            # parameters), and a pipeline's fit already runs every stage but the last, so
-            # fit-then-transform filtered each band twice; bands that differ only in their
-            # coder (a channel's graded gains) share one filtering
-            filters = Pipeline(chain.steps[2:-1])
-            key = repr(filters.get_params(deep=True))
-            if key not in conditioned:
-                conditioned[key] = filters.fit_transform(main)
-            coded.append(chain.steps[-1][1].fit_transform(conditioned[key]))
+        coded = [band.chain(rate_hz, adc_bits, full_scale_g).steps[-1][1].fit_transform(x)
+                 for band, x in zip(self.bands.values(),
+                                    band_filtered(self.bands, main, rate_hz, adc_bits,
+                                                  full_scale_g))]
         return np.stack(coded, axis=2).reshape(n_samples, -1)
+
+
+def band_filtered(bands: dict, main: np.ndarray, rate_hz: float, adc_bits: int,
+                  full_scale_g: float) -> list[np.ndarray]:
+    """Each band's signal after its chain's filters and centring, before its coder, from the
+    events' main axes ``main`` (samples, events; ``align_events``). One pass: these stages
+    learn nothing from the samples (their fit checks the parameters; a pipeline's fit runs
+    every stage but the last, so fit-then-transform would filter twice); bands whose filters
+    are the same (a channel's graded gains, which differ only in their coder) share it."""
+    out, done = [], {}
+    for band in bands.values():
+        filters = Pipeline(band.chain(rate_hz, adc_bits, full_scale_g).steps[2:-1])
+        key = repr(filters.get_params(deep=True))
+        if key not in done:
+            done[key] = filters.fit_transform(main)
+        out.append(done[key])
+    return out
 
 
 def coded_features(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: int,

@@ -15,12 +15,11 @@ from ...core import files
 from ...core.files import remove_entry
 from ...core.store import write_dataset
 from ...core.logfile import logged
-from ...engine.events import cached_features, run_cost
+from ...engine.events import best_costs, cached_features
 from ...engine.executor import executor
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...readout import baselines as bl
-from ...readout.events import extraction_cost
 from ...readout.spiking import recording_attrs
 from ...readout.spiking_decoders import code_rows, codes_of, mlp_baseline
 from ...report import stats
@@ -183,7 +182,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
                         if b.name == "mlp_spectrum")
     results = cv.evaluate(feats, [fft, fft_distance, *chosen], parts.evaluation, log)
     log("[5/5] cost per contact and report")
-    costs = best_costs(data, parts, ids, {"chosen": banks[best]}, log)
+    costs = best_costs(data, parts.processor, ids[:parts.bank.cost_sample_events],
+                       {"chosen": banks[best]}, parts.bank.cost_repeats, log)
     reference = results[fft.name].values("accuracy")
     rows = []
     for t in front:
@@ -231,19 +231,3 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     summary = report.write(summary, plan.spec, parts.bank.target)
     log(f"report in {out_dir}/report.html")
     return summary
-
-
-def best_costs(data, parts: Parts, ids, banks: dict, log) -> dict:
-    """Wall time per contact of the FFT pipeline's features and of each bank, on the same
-    ``cost_sample_events`` contacts, taken in turn ``cost_repeats`` times: each the best."""
-    sample = np.asarray(ids)[:parts.bank.cost_sample_events]
-    best: dict = {}
-    for _ in range(parts.bank.cost_repeats):
-        runs = {"fft": extraction_cost(data, parts.processor, sample)}
-        runs.update({k: run_cost(data, b, len(sample)) for k, b in banks.items()})
-        for k, c in runs.items():
-            if k not in best or c["features_us_per_event"] < best[k]["features_us_per_event"]:
-                best[k] = {**c, "best_of": parts.bank.cost_repeats}
-    log("      cost per contact (best of " + f"{parts.bank.cost_repeats}): " + ", ".join(
-        f"{k} {c['features_us_per_event']:.0f} µs" for k, c in best.items()))
-    return best

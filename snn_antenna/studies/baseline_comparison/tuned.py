@@ -17,11 +17,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from ...engine.events import cached_features, run_bank, run_cost
+from ...engine.events import best_costs as events_best_costs
+from ...engine.events import cached_features, run_bank
 from ...evaluation import crossval as cv
 from ...readout import baselines as bl
 from ...readout.band_tuning import tune
-from ...readout.events import extraction_cost
 from ...readout.spiking import coded_features, recording_attrs
 from ...readout.spiking_decoders import (
     CODER_KEYS,
@@ -137,21 +137,11 @@ def _same_coder(a, b) -> bool:
 
 
 def best_costs(data, parts, event_ids, banks: dict, repeats: int, log) -> dict:
-    """Wall time per event of the FFT pipeline's features and of each bank of ``banks``
-    (name → bank), on the same ``cost_sample_events`` events, taken in turn ``repeats``
-    times in this process: each the best of its runs (the least disturbed by other work on
-    the machine)."""
-    ids = np.asarray(event_ids)[:parts.plan.cost_sample_events]
-    best: dict = {}
-    for _ in range(repeats):
-        runs = {"fft": extraction_cost(data, parts.processor, ids)}
-        runs.update({k: run_cost(data, bank, len(ids)) for k, bank in banks.items()})
-        for k, c in runs.items():
-            if k not in best or c["features_us_per_event"] < best[k]["features_us_per_event"]:
-                best[k] = {**c, "best_of": repeats}
-    log("      cost per event (best of " + f"{repeats}): " + ", ".join(
-        f"{k} {c['features_us_per_event']:.0f} µs" for k, c in best.items()))
-    return best
+    """The FFT pipeline's and each bank's wall time per event (``engine.events.best_costs``)
+    on the study's first ``cost_sample_events`` events."""
+    return events_best_costs(data, parts.processor,
+                             np.asarray(event_ids)[:parts.plan.cost_sample_events], banks,
+                             repeats, log)
 
 
 def run_curve(data, features, plan: TunedPlan, bands: dict, parts, log, client) -> list[dict]:
