@@ -297,9 +297,17 @@ class AnalogCoder(SquareWaveCoder):
         bounds.number("gain", self.gain, 0.0, MAX_CODER_GAIN, lo_open=True, unit=" per g")
 
     def _step(self, X, threshold=None):
+        return np.clip(self.gain * self.dead_zone(X, threshold), -self.amplitude,
+                       self.amplitude)
+
+    def dead_zone(self, X, threshold=None):
+        """The signal less the threshold, with its sign: sign(x) · max(|x| − threshold, 0),
+        what the gain scales. Coders that differ only in their gain share it (a resonator
+        bank's graded gains: ``SpikingBank.inputs``)."""
         th = self.threshold if threshold is None else np.asarray(threshold, dtype=float)
-        drive = np.minimum(self.gain * np.maximum(np.abs(X) - th, 0.0), self.amplitude)
-        return np.sign(X) * drive
+        out = np.abs(X) - th
+        np.maximum(out, 0.0, out=out)
+        return np.copysign(out, X, out=out)
 
 
 # Bounds of the coders' own parameters: more levels than this resolve nothing the sensor's

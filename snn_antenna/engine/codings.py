@@ -87,14 +87,12 @@ def _one_run(array: ResonatorArray, coded: np.ndarray, rate_hz: float, window_s:
     if m < per_run:   # a short batch: padded with copies of its first column
         coded = np.concatenate([coded, np.repeat(coded[:, :1], per_run - m, axis=1)], axis=1)
     # each copy at rest for its first input sample, as neurons.simulate starts
-    levels, which = np.unique(coded[0], return_inverse=True)
-    rest = np.array([neurons.resting_state("resonator", array.b, float(I0))
-                     for I0 in levels])[which.ravel()]
+    v_rest, u_rest = neurons.resting_state("resonator", array.b, coded[0])
     group, n = proj["group"], array.n_neurons
     run_project(proj, {proj["drive"]: np.ascontiguousarray(coded),
                        group.k: np.tile(array.k, per_run),
                        group.b: np.full(per_run * n, float(array.b)),
-                       group.v: np.repeat(rest[:, 0], n), group.u: np.repeat(rest[:, 1], n)})
+                       group.v: np.repeat(v_rest, n), group.u: np.repeat(u_rest, n)})
     _check_stable(group, array, m * n, n_samples / rate_hz)
     spikes = proj["spikes"]
     spike_i = np.asarray(spikes.i[:], dtype=int)

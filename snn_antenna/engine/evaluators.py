@@ -154,10 +154,7 @@ class NeuronSweep:
 
     def initial_state(self, p: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """Rest for the first input sample (+I), as ``neurons.simulate`` starts."""
-        # each distinct (b, I) solved once; a complex key sorts far faster than rows
-        unique, inverse = np.unique(p["b"] + 1j * p["I"], return_inverse=True)
-        rest = np.array([neurons.resting_state(self.preset, z.real, z.imag) for z in unique])
-        return rest[inverse.ravel(), 0], rest[inverse.ravel(), 1]
+        return neurons.resting_state(self.preset, p["b"], p["I"])
 
 
 def _parameters(sweep, points: dict[str, np.ndarray], names) -> dict[str, np.ndarray]:

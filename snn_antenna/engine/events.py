@@ -31,10 +31,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import tempfile
 import time
 from dataclasses import asdict, dataclass, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -117,24 +119,26 @@ class EventSweep:
 
     @property
     def bytes_per_point(self) -> int:
-        """Memory a chunk holds per point: the coded inputs of its events, 8 bytes a sample."""
+        """Memory a chunk holds per point: the coded inputs of its events, 8 bytes a sample
+        (at most one column per band: ``SpikingBank.inputs``)."""
         return int(8 * self.n_samples * len(self.bank.bands) / self.bank.n_neurons) + 64
 
     def __call__(self, points: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         n = self.bank.n_neurons
         events = points["event"].reshape(-1, n)[:, 0].astype(int)
-        coded = self.bank.code(self.counts[events], self.rate_hz, self.adc_bits,
-                               self.full_scale_g)
+        inputs = self.bank.inputs(self.counts[events], self.rate_hz, self.adc_bits,
+                                  self.full_scale_g)
         n_bands = len(self.bank.bands)
         t0 = time.perf_counter()
         if self.bank.target == "standalone":
-            parts = self._standalone(coded)
+            parts = self._standalone(inputs)
         else:
+            coded = inputs.coded()
             parts = [band_features(*self._runtime(array,
                                                   np.ascontiguousarray(coded[:, j::n_bands])),
                                    len(events), array.n_neurons, self.duration_s,
                                    self.bank.bin_edges_s)
-                     for j, array in enumerate(self.bank.arrays().values())]
+                     for j, array in enumerate(self.arrays)]
         brian2_s = time.perf_counter() - t0
         counts, latency, span, binned = (np.concatenate([p[k] for p in parts], axis=1)
                                          for k in range(4))
@@ -143,6 +147,11 @@ class EventSweep:
         for b in range(binned.shape[2]):
             out[f"bin_{b}"] = binned[:, :, b].ravel()
         return out
+
+    @cached_property
+    def arrays(self) -> list:
+        """The bank's bands as resonator arrays (``SpikingBank.arrays``), in band order."""
+        return list(self.bank.arrays().values())
 
     @property
     def duration_s(self) -> float:
@@ -162,7 +171,7 @@ class EventSweep:
         """The compiled project's groups: (dt_ms, method, the bands it holds), one per step
         and method. A group's neurons are ordered event, band, the band's neuron."""
         groups: dict = {}
-        for j, array in enumerate(self.bank.arrays().values()):
+        for j, array in enumerate(self.arrays):
             groups.setdefault((float(array.dt_ms), array.method), []).append(j)
         return [(dt, method, tuple(bands)) for (dt, method), bands in groups.items()]
 
@@ -177,44 +186,64 @@ class EventSweep:
             out.append(n)
         return out
 
-    def _substeps(self, dt_ms: float, at_most: int | None = None) -> int:
-        """Model steps at dt ``dt_ms`` between the passes that read the input and take the
-        bin edges' counts (``at_most=None``): a divisor of the input sample's steps at which
-        every bin edge falls on a pass; or, ``at_most`` given, per call of the fused update
-        (a divisor of the former)."""
+    def _run_edges(self, dt_ms: float) -> list[int]:
+        """The steps of ``_edge_steps`` that fall within the run."""
         n_steps = round(self.duration_s * 1000.0 / dt_ms)
-        return tick_substeps(1000.0 / self.rate_hz, dt_ms, self.duration_s * 1000.0, at_most,
-                             [e for e in self._edge_steps(dt_ms) if e < n_steps])
+        return [e for e in self._edge_steps(dt_ms) if e < n_steps]
 
-    def _standalone(self, coded: np.ndarray) -> list[tuple[np.ndarray, ...]]:
+    def _substeps(self, dt_ms: float, at_most: int | None = None) -> int:
+        """Model steps at dt ``dt_ms`` between the passes that read the input
+        (``at_most=None``): a divisor of the input sample's steps; or, ``at_most`` given, per
+        call of the fused update: a divisor of the former at which every bin edge falls on
+        a call."""
+        run_ms = self.duration_s * 1000.0
+        if at_most is None:
+            return tick_substeps(1000.0 / self.rate_hz, dt_ms, run_ms)
+        return tick_substeps(1000.0 / self.rate_hz, dt_ms, run_ms, at_most,
+                             self._run_edges(dt_ms))
+
+    def _edge_every(self, dt_ms: float) -> int:
+        """Model steps between the passes that take the bin edges' counts: every edge within
+        the run falls on one (their greatest common divisor), a few passes per run where
+        the input is read once per sample. 0: no edge within the run, no pass."""
+        return math.gcd(*self._run_edges(dt_ms))
+
+    def _standalone(self, inputs) -> list[tuple[np.ndarray, ...]]:
         """Every band's (counts, latency, span, binned), each (events, band neurons[, bins]),
-        for the chunk's ``coded`` inputs (``SpikingBank.code``): one run of the compiled
+        for the chunk's ``inputs`` (``SpikingBank.inputs``): one run of the compiled
         project, padded to ``batch_events`` events."""
         size = self.bank.batch_events
-        arrays = list(self.bank.arrays().values())
+        arrays = self.arrays
         layout = self._layout()
+        column = tuple(int(c) for c in inputs.column)
         with vectorising_flags("float64"):
-            proj = project(self._structure(layout), lambda: self._build(arrays, layout))
-        per_event = coded.reshape(len(coded), -1, len(arrays))     # (samples, events, bands)
-        m = per_event.shape[1]
-        if m < size:  # a short chunk: padded with copies of its first event
-            per_event = np.concatenate(
-                [per_event, np.repeat(per_event[:, :1], size - m, axis=1)], axis=1)
+            proj = project(self._structure(layout, column),
+                           lambda: self._build(arrays, layout, column))
+        n_samples, m = inputs.columns[0].shape
         run_args = {}
         for g, (_, _, bands) in enumerate(layout):
             group = proj["groups"][g]
-            cols = np.ascontiguousarray(per_event[:, :, list(bands)].reshape(len(coded), -1))
+            used = _group_columns(column, bands)
+            cols = np.empty((n_samples, size, len(used)))   # the drive's layout: e·n + i
+            for i, c in enumerate(used):
+                cols[:, :m, i] = inputs.columns[c]
+            # a short chunk: padded with copies of its first event
+            cols[:, m:] = cols[:, :1]
+            cols = cols.reshape(n_samples, -1)
+
+            def per_neuron(values, bands=bands):
+                return np.tile(np.concatenate([np.full(arrays[j].n_neurons, values[j])
+                                               for j in bands]), size)
             k = np.tile(np.concatenate([arrays[j].k for j in bands]), size)
-            b = np.tile(np.concatenate([np.full(arrays[j].n_neurons, arrays[j].b)
-                                        for j in bands]), size)
+            b = per_neuron([a.b for a in arrays])
+            gain, clip = per_neuron(inputs.gain), per_neuron(inputs.clip)
             # at rest for each event's first input sample, as neurons.simulate starts
-            start = np.stack([b, cols[0][_input_columns(arrays, bands, size)]], axis=1)
-            levels, which = np.unique(start, axis=0, return_inverse=True)
-            rest = np.array([neurons.resting_state("resonator", bb, I0)
-                             for bb, I0 in levels])[which.ravel()]
+            first = np.clip(gain * cols[0][_input_columns(arrays, bands, size, column)],
+                            -clip, clip)
+            v, u = neurons.resting_state("resonator", b, first)
             run_args.update({proj["drives"][g]: cols, group.k: k, group.b: b,
-                             group.v: np.ascontiguousarray(rest[:, 0]),
-                             group.u: np.ascontiguousarray(rest[:, 1])})
+                             group.input_gain: gain, group.input_clip: clip,
+                             group.v: v, group.u: u})
         run_project(proj, run_args)
         parts = {}
         for g, (dt_ms, _, bands) in enumerate(layout):
@@ -236,16 +265,18 @@ class EventSweep:
                 parts[j] = split
         return [parts[j] for j in range(len(arrays))]
 
-    def _structure(self, layout) -> tuple:
-        """What the compiled project depends on; everything else is a run argument."""
-        arrays = list(self.bank.arrays().values())
+    def _structure(self, layout, column: tuple) -> tuple:
+        """What the compiled project depends on (``column``: each band's input column,
+        ``SpikingBank.inputs``); everything else is a run argument."""
+        arrays = self.arrays
         return ("events", neurons.PRESETS["resonator"].quadratic, self.n_samples,
                 float(self.rate_hz), self.bank.batch_events, self.bank.bin_edges_s,
                 tuple((dt, method, self._substeps(dt), self._substeps(dt, MAX_TICK_SUBSTEPS),
-                       tuple(arrays[j].n_neurons for j in bands))
+                       self._edge_every(dt), tuple(arrays[j].n_neurons for j in bands),
+                       tuple(column[j] for j in bands))
                       for dt, method, bands in layout))
 
-    def _build(self, arrays, layout) -> dict:
+    def _build(self, arrays, layout, column: tuple) -> dict:
         import brian2 as b2
 
         size, input_dt = self.bank.batch_events, (1000.0 / self.rate_hz) * b2.ms
@@ -254,21 +285,26 @@ class EventSweep:
         objects = {"groups": [], "drives": []}
         net = b2.Network()
         for g, (dt_ms, method, bands) in enumerate(layout):
-            columns = _input_columns(arrays, bands, size)
+            columns = _input_columns(arrays, bands, size, column)
             substeps = self._substeps(dt_ms, MAX_TICK_SUBSTEPS)
             every = self._substeps(dt_ms)   # steps between input passes
-            drive = b2.TimedArray(np.zeros((self.n_samples, size * len(bands))), dt=input_dt,
-                                  name=f"drive_{g}")
-            # per tick, by a pass of its own before the fused update: the tick's input
-            # sample, and each bin edge's count so far (the spikes before the edge, once the
-            # tick starting at it has begun). In the update's loop, the TimedArray's bounds
-            # checks (branches) and the edges' tests (a scalar boolean) would keep the
-            # compiler from vectorising it.
-            tick = "\n".join([*_next_sample(g, method), f"I_held = drive_{g}(t, input_index)"] + [
+            edge_every = self._edge_every(dt_ms)
+            drive = b2.TimedArray(
+                np.zeros((self.n_samples, size * len(_group_columns(column, bands)))),
+                dt=input_dt, name=f"drive_{g}")
+            # Passes of their own before the fused update: once per input sample, the
+            # sample, scaled and clipped per neuron (``BankInputs``); at the bin edges, each
+            # edge's count so far (the spikes before the edge, once the tick starting at it
+            # has begun). In the update's loop, the TimedArray's bounds checks (branches) and
+            # the edges' tests (a scalar boolean) would keep the compiler from vectorising it.
+            tick = "\n".join([*_next_sample(g, method),
+                              f"I_held = {_scaled(f'drive_{g}(t, input_index)')}"])
+            edges = "\n".join(
                 f"before_{e} = where(t_in_timesteps*{substeps} <= {step}, spike_count, "
-                f"before_{e})" for e, step in enumerate(self._edge_steps(dt_ms))])
+                f"before_{e})" for e, step in enumerate(self._edge_steps(dt_ms)))
             variables = "\n".join(
                 ["I_held : 1", "input_index : integer (constant)", "unstable : boolean",
+                 "input_gain : 1 (constant)", "input_clip : 1 (constant)",
                  *RECORDED, *(f"before_{e} : 1" for e in range(n_edges)),
                  *(("I_next : 1", "next_sample_t : second (shared)") if method == "rk4" else ())])
             group = b2.NeuronGroup(
@@ -282,6 +318,9 @@ class EventSweep:
             group.input_index = columns
             group.a, group.c, group.d = preset.a, preset.c, preset.d
             group.run_regularly(tick, dt=every * dt_ms * b2.ms, when="start", name=f"tick_{g}")
+            if edge_every:
+                group.run_regularly(edges, dt=edge_every * dt_ms * b2.ms, when="start",
+                                    name=f"edges_{g}")
             group.run_regularly(GUARD, dt=CHECK_EVERY_MS * b2.ms, name=f"guard_{g}")
             net.add(group)
             objects["groups"].append(group)
@@ -349,14 +388,30 @@ def _next_sample(g: int, method: str) -> tuple[str, ...]:
     if method != "rk4":
         return ()
     return ("next_sample_t = (floor(t*input_rate + 1e-6) + 1)/input_rate",
-            f"I_next = drive_{g}(next_sample_t, input_index)")
+            f"I_next = {_scaled(f'drive_{g}(next_sample_t, input_index)')}")
 
 
-def _input_columns(arrays, bands, events: int) -> np.ndarray:
+def _scaled(sample: str) -> str:
+    """A neuron's current from its column's ``sample``: scaled by its band's gain and
+    clipped at its band's level (``BankInputs``)."""
+    return f"clip(input_gain*{sample}, -input_clip, input_clip)"
+
+
+def _group_columns(column: tuple, bands) -> list[int]:
+    """The bank's input columns (``BankInputs.column``: each band's) that ``bands`` read, in
+    the order a group's drive holds them per event."""
+    return sorted({column[j] for j in bands})
+
+
+def _input_columns(arrays, bands, events: int, column: tuple) -> np.ndarray:
     """Each neuron's input column in a group holding ``bands`` of ``arrays`` for ``events``
-    events: neuron (event e, band j, its neuron r) reads column e · len(bands) + j."""
-    within = np.repeat(np.arange(len(bands)), [arrays[j].n_neurons for j in bands])
-    return (np.arange(events)[:, None] * len(bands) + within[None, :]).ravel()
+    events, ``column`` giving each band's column of the bank's inputs: neuron (event e,
+    band j, its neuron r) reads the group's column e · n + (band j's among the n the group
+    reads)."""
+    used = _group_columns(column, bands)
+    local = [used.index(column[j]) for j in bands]
+    within = np.repeat(local, [arrays[j].n_neurons for j in bands])
+    return (np.arange(events)[:, None] * len(used) + within[None, :]).ravel()
 
 
 def run_bank(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: int,

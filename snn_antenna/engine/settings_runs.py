@@ -94,10 +94,10 @@ def scene_drive(workload) -> SceneDrive:
     check(isinstance(workload, TuningWorkload), "workload", type(workload).__name__,
           "an ArrayWorkload or a TuningWorkload")
     first = workload.current[0][workload.input_of]
-    rest = np.array([neurons.resting_state("resonator", workload.b, float(I0)) for I0 in first])
+    v_rest, u_rest = neurons.resting_state("resonator", workload.b, first)
     return SceneDrive(workload.name, workload.current, float(workload.stimuli.rate_hz),
                       np.asarray(workload.k_of, float), np.asarray(workload.input_of),
-                      rest[:, 0], rest[:, 1], float(workload.b))
+                      v_rest, u_rest, float(workload.b))
 
 
 def check_interval_ms(drives) -> float:

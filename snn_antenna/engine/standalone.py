@@ -14,6 +14,7 @@ import math
 import os
 import re
 import sys
+import tempfile
 import warnings
 from contextlib import contextmanager
 from pathlib import Path
@@ -286,11 +287,46 @@ def _still_built() -> bool:
 
 def run_project(project: dict, run_args: dict) -> None:
     """One run of the compiled ``project`` with ``run_args`` (Brian2 ``device.run``): new
-    values of group variables and TimedArrays, no recompiling."""
-    device = project["device"]
-    device.run(run_args=run_args, with_output=False)
-    for name in device.run_args_arrays:  # this run's value files: not needed again
-        Path(device.project_dir, "static_arrays", name).unlink(missing_ok=True)
+    values of group variables (``group.name``) and TimedArrays, no recompiling.
+
+    Each array goes to the binary as its own file, in a temporary folder of this run (in
+    memory where the machine has ``/dev/shm``), and Brian2 is handed the ``name=file``
+    strings (its run arguments' documented list form). Given the arrays themselves, Brian2
+    names each file in the project's folder by an md5 digest of its bytes (so that runs
+    sharing a project never overwrite each other's values): hashing a chunk's inputs took
+    about as long as writing them, and writing them to disk several times longer than to
+    memory."""
+    shm = "/dev/shm" if os.path.isdir("/dev/shm") else None
+    with tempfile.TemporaryDirectory(prefix="snn_antenna_run_", dir=shm) as folder:
+        project["device"].run(run_args=_run_strings(run_args, Path(folder)),
+                              with_output=False)
+
+
+def _run_strings(run_args: dict, folder: Path) -> list[str]:
+    """Brian2's ``name=value`` run arguments for ``run_args``: a single value as itself, an
+    array as a file written in ``folder``, each checked against the project's variable (the
+    binary reads a file of another size as nothing, silently)."""
+    from brian2 import TimedArray
+    from brian2.units.fundamentalunits import fail_for_dimension_mismatch
+
+    strings = []
+    for key, value in run_args.items():
+        if isinstance(key, TimedArray):
+            name, dtype, shape = f"{key.name}.values", key.values.dtype, key.values.shape
+        else:
+            name, dtype, shape = f"{key.group_name}.{key.name}", key.dtype, key.shape
+        fail_for_dimension_mismatch(key.dim, value)
+        value = np.asarray(value, dtype=dtype)
+        if value.size == 1:
+            strings.append(f"{name}={value.item()!r}")
+            continue
+        if value.shape != tuple(shape) and not (value.ndim == 1 and value.size == shape[0]):
+            raise TypeError(f"run argument {name}: shape {value.shape}, the project's is "
+                            f"{tuple(shape)}")
+        path = folder / f"{name}.dat"
+        value.tofile(path)
+        strings.append(f"{name}={path}")
+    return strings
 
 
 # Grid points per element of the sweep's compiled group. With one point per element, the

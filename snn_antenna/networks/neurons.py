@@ -21,7 +21,6 @@ Presets (parameters from the paper, Patanè et al. 2012, and Izhikevich 2003):
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -197,18 +196,20 @@ def equations(preset: str | Preset = "resonator", input_expr: str = "I_ext",
 
 def resting_state(preset: str | Preset = "resonator", b: float | None = None,
                   current: float = 0.0) -> tuple[float, float]:
-    """The stable fixed point (v, u) for constant input ``current``.
+    """The stable fixed point (v, u) for constant input ``current``; ``b`` and ``current``
+    may be arrays of one shape (a population's), giving arrays.
 
     Where there is none (the neuron fires tonically), the reset point (c, b·c) is returned,
     so a run starts where the neuron would be right after a spike.
     """
     p = PRESETS[preset] if isinstance(preset, str) else preset
-    b = p.b if b is None else b
+    b = np.asarray(p.b if b is None else b, dtype=float)
     p2, p1, p0 = p.quadratic
-    disc = (p1 - b) ** 2 - 4 * p2 * (p0 + current)
-    if disc < 0:
-        return p.c, b * p.c
-    v = (-(p1 - b) - math.sqrt(disc)) / (2 * p2)  # the lower root is the stable one
+    disc = (p1 - b) ** 2 - 4 * p2 * (p0 + np.asarray(current, dtype=float))
+    # the lower root is the stable one
+    v = np.where(disc < 0, p.c, (-(p1 - b) - np.sqrt(np.maximum(disc, 0.0))) / (2 * p2))
+    if v.ndim == 0:
+        return float(v), float(b * v)
     return v, b * v
 
 
@@ -397,10 +398,10 @@ def simulate(preset: str = "resonator", current=None, dt_ms: float = 0.1, k=1.0,
     if index is not None:
         group.input_index = index
     first = current[0] if current.ndim == 1 else current[0][index]
-    rest = np.array([resting_state(preset_obj, b_i, float(I0))
-                     for b_i, I0 in zip(values["b"], np.broadcast_to(first, (n_neurons,)))])
-    group.v = rest[:, 0] if v0 is None else _broadcast("v0", v0, n_neurons)
-    group.u = rest[:, 1] if u0 is None else _broadcast("u0", u0, n_neurons)
+    v_rest, u_rest = resting_state(preset_obj, values["b"],
+                                   np.broadcast_to(first, (n_neurons,)))
+    group.v = v_rest if v0 is None else _broadcast("v0", v0, n_neurons)
+    group.u = u_rest if u0 is None else _broadcast("u0", u0, n_neurons)
 
     spikes = b2.SpikeMonitor(group, name="spikes")
     objects = [group, spikes]

@@ -278,16 +278,57 @@ class SpikingBank:
     def code(self, counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float
              ) -> np.ndarray:
         """Coded inputs (n_samples, n_events × n_bands), column e·n_bands + j for event e
-        through band j's chain. Each event is aligned on its own principal axis (what
+        through band j's chain (``inputs(...).coded()``)."""
+        return self.inputs(counts, rate_hz, adc_bits, full_scale_g).coded()
+
+    def inputs(self, counts: np.ndarray, rate_hz: float, adc_bits: int, full_scale_g: float
+               ) -> BankInputs:
+        """The bands' input currents as the columns they share and each band's gain and clip
+        on them (``BankInputs``). Each event is aligned on its own principal axis (what
         ``PCAAlign`` fitted on that event gives); the chain's later stages run on all events
-        at once as columns (they filter along time only)."""
+        at once as columns (they filter along time only). Bands whose chains differ only in
+        an analog coder's gain (a channel's graded gains) share one column: the filtered
+        signal's dead zone (``AnalogCoder.dead_zone``), which each band's gain scales and
+        its amplitude clips; any other coder's output is its band's own column, unscaled."""
         n_samples = min(counts.shape[1], int(round(self.duration_s * rate_hz)))
         main = align_events(counts[:, :n_samples], adc_bits, full_scale_g)   # (samples, events)
-        coded = [band.chain(rate_hz, adc_bits, full_scale_g).steps[-1][1].fit_transform(x)
-                 for band, x in zip(self.bands.values(),
-                                    band_filtered(self.bands, main, rate_hz, adc_bits,
-                                                  full_scale_g))]
-        return np.stack(coded, axis=2).reshape(n_samples, -1)
+        columns, keys, column, gain, clip = [], {}, [], [], []
+        for band, x in zip(self.bands.values(),
+                           band_filtered(self.bands, main, rate_hz, adc_bits, full_scale_g)):
+            coder = band.chain(rate_hz, adc_bits, full_scale_g).steps[-1][1].fit(x)
+            analog = isinstance(coder, CODERS["analog"])
+            params = {k: v for k, v in coder.get_params().items() if not analog or k not in
+                      ("gain", "amplitude")}
+            # band_filtered hands bands with the same filters one and the same array
+            key = (id(x), type(coder).__name__, repr(sorted(params.items())))
+            if not analog or key not in keys:
+                keys[key] = len(columns)
+                columns.append(coder.dead_zone(x) if analog else coder.transform(x))
+            column.append(keys[key])
+            # a coder's own output passes unclipped: twice its amplitude is never reached
+            gain.append(coder.gain if analog else 1.0)
+            clip.append(coder.amplitude * (1.0 if analog else 2.0))
+        return BankInputs(tuple(columns), np.array(column), np.array(gain), np.array(clip))
+
+
+@dataclass(frozen=True)
+class BankInputs:
+    """A bank's input currents for a chunk of events: ``columns``, each (samples, events),
+    and, per band, the ``column`` it reads, the ``gain`` that scales it and the ``clip``
+    level that bounds it: band j's current is clip(gain[j] · columns[column[j]], −clip[j],
+    clip[j]), which the compiled engine computes per neuron as it reads its sample, so a
+    channel's graded gains send one column, not one each."""
+    columns: tuple
+    column: np.ndarray
+    gain: np.ndarray
+    clip: np.ndarray
+
+    def coded(self) -> np.ndarray:
+        """Each band's current (samples, events × bands), column e·n_bands + j for event e
+        through band j."""
+        c = np.clip(self.gain * np.stack(self.columns, axis=2)[:, :, self.column], -self.clip,
+                    self.clip)
+        return c.reshape(len(c), -1)
 
 
 def band_filtered(bands: dict, main: np.ndarray, rate_hz: float, adc_bits: int,
@@ -299,10 +340,10 @@ def band_filtered(bands: dict, main: np.ndarray, rate_hz: float, adc_bits: int,
     are the same (a channel's graded gains, which differ only in their coder) share it."""
     out, done = [], {}
     for band in bands.values():
-        filters = Pipeline(band.chain(rate_hz, adc_bits, full_scale_g).steps[2:-1])
-        key = repr(filters.get_params(deep=True))
+        key = (band.lowpass_hz, band.highpass_hz, band.filter_order)  # what the filters take
         if key not in done:
-            done[key] = filters.fit_transform(main)
+            done[key] = Pipeline(band.chain(rate_hz, adc_bits, full_scale_g).steps[2:-1]
+                                 ).fit_transform(main)
         out.append(done[key])
     return out
 
