@@ -8,10 +8,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from snn_antenna.engine.events import run_bank
+from snn_antenna.engine.events import EventSweep, run_bank
 from snn_antenna.engine.standalone import tick_substeps
 from snn_antenna.readout.band_tuning import Tuning, tuned_bands
-from snn_antenna.readout.spiking import HIGH_BAND, LOW_BAND, Band, SpikingBank
+from snn_antenna.readout.spiking import HIGH_BAND, LOW_BAND, Band, BankInputs, SpikingBank
 from snn_antenna.sources import bench
 
 RATE, BITS, FULL_SCALE = 2000.0, 16, 10.0
@@ -24,10 +24,15 @@ ROD = Band(n_neurons=4, band_hz=(90.0, 420.0), coder_amplitude=0.2, threshold_g=
            lowpass_hz=500.0, highpass_hz=80.0, hz_per_k=27.49, method="rk2", dt_ms=0.005)
 CHANNELS = tuned_bands([330.0], [300.0], [360.0],
                        Tuning(n_resonators=2, per_channel=2, max_channels=1), RATE)
+# a channel read at three analog gains: one input column, each neuron scaling and clipping it
+GRADED = {f"graded_{name}": band for name, band in tuned_bands(
+    [120.0], [110.0], [130.0], Tuning(n_resonators=3, per_channel=3, max_channels=1,
+                                      coder="analog", coder_amplitude=1.0, threshold_g=0.002,
+                                      gains=(20.0, 150.0, 1000.0)), RATE).items()}
 # the high band at rk4, whose last stage reads the next input sample at a sample's last step
 HIGH = dataclasses.replace(HIGH_BAND, n_neurons=6)
 # (one chunk of 0.15 s: the runtime path's cost is per step; test_event_engine.py pads a chunk)
-BANK = SpikingBank(bands={"low": LOW_BAND, "high": HIGH, "rod": ROD, **CHANNELS},
+BANK = SpikingBank(bands={"low": LOW_BAND, "high": HIGH, "rod": ROD, **CHANNELS, **GRADED},
                    duration_s=0.15, batch_events=12, target="standalone",
                    bin_edges_s=(0.0752, *np.arange(0.08, 0.15, 0.0025)))
 
@@ -74,6 +79,32 @@ def test_rod_and_tuned_channels_give_the_runtime_paths_features(both):
     assert (fused.counts == runtime.counts).mean() >= 0.9
     assert abs(fused.counts.sum() / runtime.counts.sum() - 1) < 0.01
     assert agree(fused, runtime).mean() >= 0.6
+
+
+def test_graded_gains_read_one_column_as_each_band_its_own(both):
+    """The compiled engine sends a channel's graded gains one column and scales and clips it
+    per neuron: every feature equals that of each band's coded current sent as its own
+    column; against the runtime path, as for the rod band above (the compilers' rounding of
+    rk2 parts a train after some tens of spikes), first spikes and early bins equal."""
+    events = both[0].counts.shape[0]
+    counts = bench.generate(bench.BenchSpec(materials=("wood",), repetitions=1,
+                                            positions_cm=(10.0, 34.0), duration_s=0.2),
+                            log=lambda *_: None)["counts"].values[:, :300]
+    sweep = EventSweep(BANK, np.ascontiguousarray(counts), RATE, BITS, FULL_SCALE)
+    inputs = BANK.inputs(counts, RATE, BITS, FULL_SCALE)
+    assert len(inputs.columns) == len(BANK.bands) - 2
+    n = len(BANK.bands)
+    coded = inputs.coded().reshape(300, len(counts), n)
+    own = BankInputs(tuple(coded[:, :, j] for j in range(n)), np.arange(n), np.ones(n),
+                     np.full(n, 1e9))
+    shared, alone = sweep._standalone(inputs), sweep._standalone(own)
+    for j in range(n):
+        assert all(np.array_equal(a, b) for a, b in zip(shared[j], alone[j])), j
+    fused, runtime = (f.select(list(GRADED)) for f in both)
+    assert fused.counts.shape == (events, 3) and (fused.counts > 0).all()
+    assert (fused.counts[:, 2] >= fused.counts[:, 0]).all()   # the loudest gain fires most
+    assert np.array_equal(fused.latency_s, runtime.latency_s)
+    assert np.array_equal(fused.binned_counts[:, :, :2], runtime.binned_counts[:, :, :2])
 
 
 @settings(max_examples=200, deadline=None)

@@ -1,6 +1,8 @@
 """The Izhikevich neurons in Brian2: rest, tuning, agreement with an independent integrator."""
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 
 from snn_antenna.core.errors import NumericalInstabilityError, SpecError
 from snn_antenna.networks import neurons
@@ -37,6 +39,21 @@ def test_neurons_start_at_rest_and_stay_silent_without_input(preset):
     result = neurons.simulate(preset, np.zeros(5000), dt_ms=0.1, k=1.0, record_traces="v")
     assert result.spike_counts.sum() == 0
     assert np.ptp(result.traces["v"]) < 1e-6  # no transient from an arbitrary initial value
+
+
+@given(st.lists(st.tuples(st.floats(0.2, 0.3), st.floats(-5.0, 5.0)), min_size=1,
+                max_size=20))
+def test_resting_states_of_a_population_are_each_neurons_own(b_and_current):
+    """Arrays of b and current give each neuron's fixed point, the reset point where the
+    current leaves none (a tonically firing neuron)."""
+    b, current = (np.array(x) for x in zip(*b_and_current))
+    v, u = neurons.resting_state("resonator", b, current)
+    one = [neurons.resting_state("resonator", float(bb), float(i)) for bb, i in zip(b, current)]
+    assert np.array_equal(np.c_[v, u], np.array(one))
+    p = neurons.PRESETS["resonator"]
+    p2, p1, p0 = p.quadratic
+    fixed = np.abs(p2 * v * v + p1 * v + p0 - u + current) < 1e-9
+    assert np.all(fixed | ((v == p.c) & (u == b * p.c)))
 
 
 @pytest.mark.parametrize("preset,amplitude,freq", [("resonator", 0.3, 8.0),
