@@ -307,9 +307,11 @@ class EventSweep:
                  "input_gain : 1 (constant)", "input_clip : 1 (constant)",
                  *RECORDED, *(f"before_{e} : 1" for e in range(n_edges)),
                  *(("I_next : 1", "next_sample_t : second (shared)") if method == "rk4" else ())])
+            model = neurons.equations("resonator", HELD_INPUT[method == "rk4"], variables)
+            for name in ("a", "c", "d"):   # the preset's: read once per pass, not per neuron
+                model = model.replace(f"{name} : 1 (constant)", f"{name} : 1 (shared, constant)")
             group = b2.NeuronGroup(
-                len(columns), neurons.equations("resonator", HELD_INPUT[method == "rk4"],
-                                                variables),
+                len(columns), model,
                 method=FusedUpdater(method, substeps, "", fused_reset(*ON_SPIKE)
                                     .replace("SUBSTEPS", str(substeps))),
                 dt=substeps * dt_ms * b2.ms, name=f"band_{g}",
