@@ -243,6 +243,7 @@ NOT_CONFIGURED: dict[str, str] = {
         "snn_antenna.readout.closed_loop.RobotRecord",
         "snn_antenna.readout.contacts.ContactEstimate",
         "snn_antenna.readout.spiking.SpikeFeatures",
+        "snn_antenna.readout.spiking.BankInputs",
         "snn_antenna.report.page.Calibrated",
         "snn_antenna.report.page.Predicted",
         "snn_antenna.report.stats.Interval",
