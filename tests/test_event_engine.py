@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from snn_antenna.engine.events import EventSweep, run_bank
+from snn_antenna.engine.events import EventSweep, event_sweep, run_bank
 from snn_antenna.engine.sweep import run_sweep
 from snn_antenna.core.errors import NumericalInstabilityError
 from snn_antenna.readout.spiking import HIGH_BAND, LOW_BAND, SpikingBank
@@ -48,6 +48,17 @@ def test_compiled_engine_gives_the_runtime_paths_spike_counts(events, standalone
     assert list(standalone.band) == ["low"] * 24 + ["high"] * 24
     # each band integrates at its own dt: the high band takes twice the steps
     assert standalone.neuron_steps == pytest.approx(12 * 24 * 0.2 * (1e4 + 2e4))
+
+
+def test_a_block_in_memory_gives_the_stored_runs_features(events, standalone):
+    """What the cost measurement times (``EventSweep.block``: one run, no store) is what a
+    data set's run stores, event for event."""
+    sweep = event_sweep(dataclasses.replace(BANK, batch_events=12), events, RATE, BITS,
+                        FULL_SCALE)
+    block = sweep.block()
+    assert np.array_equal(block["count"].reshape(12, -1), standalone.counts)
+    assert np.array_equal(block["latency_s"].reshape(12, -1), standalone.latency_s)
+    assert sweep.neuron_steps == standalone.neuron_steps
 
 
 def test_an_interrupted_run_resumes_without_redoing_finished_chunks(events, standalone,

@@ -347,12 +347,24 @@ class EventSweep:
                 method=array.method, t_ms=1000.0 * self.duration_s,
                 safe_dt_ms=neurons.max_stable_dt_ms(k, array.method))
 
+    @property
+    def neuron_steps(self) -> float:
+        """Model steps of every neuron over every event."""
+        return sum(len(self.counts) * a.n_neurons * self.n_samples * (1000.0 / self.rate_hz)
+                   / a.dt_ms for a in self.arrays)
+
+    def block(self) -> dict[str, np.ndarray]:
+        """The features of every event in one run, in this process, no store: one chunk's
+        work (the bank's ``batch_events`` holding them all)."""
+        n = self.bank.n_neurons
+        return self({"event": np.repeat(np.arange(len(self.counts)), n),
+                     "neuron": np.tile(np.arange(n), len(self.counts))})
+
     def features(self, data) -> SpikeFeatures:
         """The store's results (event × neuron) as ``SpikeFeatures``."""
         arrays = self.bank.arrays()
         n_bins = len(self.bank.bin_edges_s) + 1
-        steps = sum(len(self.counts) * a.n_neurons * self.n_samples * (1000.0 / self.rate_hz)
-                    / a.dt_ms for a in arrays.values())
+        steps = self.neuron_steps
         names = np.concatenate([[name] * a.n_neurons for name, a in arrays.items()])
         return SpikeFeatures(
             data["count"].values.astype(np.int64), data["latency_s"].values,
@@ -416,16 +428,23 @@ def _input_columns(arrays, bands, events: int, column: tuple) -> np.ndarray:
     return (np.arange(events)[:, None] * len(used) + within[None, :]).ravel()
 
 
+def event_sweep(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: int,
+                full_scale_g: float) -> EventSweep:
+    """``bank`` over events ``counts`` (events, samples, 2 axes of ADC counts) cut to its
+    window, the recording's rate checked against its bands."""
+    bank.check_rate(rate_hz)
+    n_samples = min(counts.shape[1], int(round(bank.duration_s * rate_hz)))
+    return EventSweep(bank, np.ascontiguousarray(counts[:, :n_samples]), float(rate_hz),
+                      int(adc_bits), float(full_scale_g))
+
+
 def run_bank(bank: SpikingBank, counts: np.ndarray, rate_hz: float, adc_bits: int,
              full_scale_g: float, *, client=None, store_path=None, fresh: bool = False,
              progress: bool = True) -> SpikeFeatures:
     """Spiking features of events ``counts`` (events, samples, 2 axes of ADC counts): the
     sweep engine over event × neuron, in this process or on ``client``'s Dask workers, into
     the zarr store ``store_path`` (resumable; default: a temporary one)."""
-    bank.check_rate(rate_hz)
-    n_samples = min(counts.shape[1], int(round(bank.duration_s * rate_hz)))
-    sweep = EventSweep(bank, np.ascontiguousarray(counts[:, :n_samples]), float(rate_hz),
-                       int(adc_bits), float(full_scale_g))
+    sweep = event_sweep(bank, counts, rate_hz, adc_bits, full_scale_g)
     # a temporary store in memory where the machine has one: its files are written, read
     # back and removed within the call (on a disk, removing them took ~0.15 s a call)
     shm = "/dev/shm" if store_path is None and os.path.isdir("/dev/shm") else None
@@ -469,21 +488,25 @@ def _bank_fields(bank: SpikingBank) -> dict:
 
 def run_cost(data, bank: SpikingBank, n_events: int) -> dict:
     """Wall time (coding + Brian2) and neuron-steps per event, measured now on ``n_events``
-    events spread over the data set, in one chunk of exactly that many events in this
-    process (a larger chunk would pad the run with copies and charge them to the sample),
-    after a warm-up run on two of them (code generation, compiling)."""
+    events spread over the data set, as one block in memory (``EventSweep.block``: as the
+    FFT pipeline's ``extraction_cost`` times its features, from the ADC counts, without the
+    store a data set's run writes) of exactly that many events in this process (a larger
+    chunk would pad the run with copies and charge them to the sample), after a warm-up run
+    on two of them (code generation, compiling)."""
     ids = np.linspace(0, data.sizes["event"] - 1, n_events).astype(int)
     sample = data["counts"].values[ids]
-    one = replace(bank, batch_events=n_events)
     attrs = recording_attrs(data)
-    run_bank(one, sample[:2], *attrs, progress=False)
+    one = replace(bank, batch_events=n_events)   # the warm-up's run: the same project
+    event_sweep(one, sample[:2], *attrs).block()
+    sweep = event_sweep(one, sample, *attrs)
     t0 = time.perf_counter()
-    f = run_bank(one, sample, *attrs, progress=False)
+    out = sweep.block()
     total = time.perf_counter() - t0
+    simulation_s = float(out["brian2_s"].sum())
     return {"features_us_per_event": 1e6 * total / n_events,
-            "simulation_us_per_event": 1e6 * f.wall_s / n_events,
-            "neuron_steps_per_event": f.neuron_steps / n_events,
-            "ns_per_neuron_step": 1e9 * f.wall_s / f.neuron_steps,
+            "simulation_us_per_event": 1e6 * simulation_s / n_events,
+            "neuron_steps_per_event": sweep.neuron_steps / n_events,
+            "ns_per_neuron_step": 1e9 * simulation_s / sweep.neuron_steps,
             "events_measured": n_events, "target": bank.target}
 
 
