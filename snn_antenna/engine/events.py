@@ -307,11 +307,12 @@ class EventSweep:
                  "input_gain : 1 (constant)", "input_clip : 1 (constant)",
                  *RECORDED, *(f"before_{e} : 1" for e in range(n_edges)),
                  *(("I_next : 1", "next_sample_t : second (shared)") if method == "rk4" else ())])
-            model = neurons.equations("resonator", HELD_INPUT[method == "rk4"], variables)
-            for name in ("a", "c", "d"):   # the preset's: read once per pass, not per neuron
-                model = model.replace(f"{name} : 1 (constant)", f"{name} : 1 (shared, constant)")
+            # a, c and d stay per-neuron arrays, though one value: declared shared, Brian2
+            # pulls their products out of the loop in another order, the last bit of a step
+            # moves, and a train of a hundred spikes parts from the runtime path's
             group = b2.NeuronGroup(
-                len(columns), model,
+                len(columns), neurons.equations("resonator", HELD_INPUT[method == "rk4"],
+                                                variables),
                 method=FusedUpdater(method, substeps, "", fused_reset(*ON_SPIKE)
                                     .replace("SUBSTEPS", str(substeps))),
                 dt=substeps * dt_ms * b2.ms, name=f"band_{g}",
