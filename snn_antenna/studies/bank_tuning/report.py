@@ -50,6 +50,9 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                   (chosen["fft_mlp_distance_rmse_mm"]["low"],
                    chosen["fft_mlp_distance_rmse_mm"]["high"]),
                   chosen["fft_mlp_distance_rmse_mm"]["n"]))
+    read = chosen["distance_readout"]
+    report.text(f"The chosen bank's distance read-out ({read['name']}): {read['description']}, "
+                f"{read['inputs']} inputs per contact.")
     lead = first["accuracy_minus_fft_mlp"]
     report.text(
         f"The chosen bank's accuracy minus the FFT-MLP's, paired by split (Student t, "
