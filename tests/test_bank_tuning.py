@@ -353,3 +353,25 @@ def test_the_low_band_takes_its_own_b_and_coder_and_a_read_out_of_it_needs_one()
     with pytest.raises(SpecError) as refused:
         runner("bank_tuning").plan(spec)
     assert refused.value.field == "search.space.low_resonators"
+
+
+def test_the_low_band_summary_weighs_its_steps_against_the_channels_and_sees_it_fire():
+    from dataclasses import replace
+
+    from snn_antenna.studies.bank_tuning.run import low_band_summary
+    from snn_antenna.studies.bank_tuning.search import neuron_steps_per_event
+
+    bank = _bank()
+    bank = replace(bank, bands={**bank.bands, "low": Band(n_neurons=2, band_hz=(8.0, 50.0),
+                                                          dt_ms=0.1)})
+    band = ["a", "b", "low", "low"]
+    spikes = _spikes(np.zeros((4, 4, 3), dtype=int), band)
+    spikes["counts"] = (("event", "neuron"), np.array([[3, 1, 0, 0], [0, 0, 2, 0],
+                                                       [1, 1, 1, 4], [0, 0, 0, 0]]))
+    low = low_band_summary(spikes, np.arange(4), bank, 2000.0)
+    assert low["resonators"] == 2 and low["neuron_steps_per_event"] == 2 * 5000
+    assert low["channels_neuron_steps_per_event"] == neuron_steps_per_event(
+        bank, 2000.0) - 2 * 5000 == 2 * 50000
+    assert low["contacts_with_a_spike"] == 0.5                 # the channels' spikes apart
+    assert low["resonators_firing_per_contact"] == 0.75
+    assert low_band_summary(spikes, np.arange(4), _bank(), 2000.0) == {"resonators": 0}
