@@ -273,3 +273,105 @@ def test_the_channels_take_the_searched_filter_order_and_the_space_bounds_it():
         check_space_entry("scaling", ["spiking_tuned_bins"])
     with pytest.raises(SpecError):
         BankPlan(scaling="peak")
+
+
+def _spikes(binned: np.ndarray, band) -> "xr.Dataset":
+    import xarray as xr
+
+    n, m, k = binned.shape
+    return xr.Dataset({"binned_counts": (("event", "neuron", "time_bin"), binned)},
+                      coords={"event": np.arange(n), "band": ("neuron", np.asarray(band)),
+                              "bin_start_s": ("time_bin", np.linspace(0.0, 0.3, k))})
+
+
+def test_the_distance_read_out_rows_are_the_low_bands_binned_counts_only():
+    from snn_antenna.studies.bank_tuning.run import distance_matrix
+
+    rng = np.random.default_rng(2)
+    band = np.array(["ch00", "low", "ch01", "low", "low"])
+    binned = rng.integers(0, 9, (6, 5, 4))
+    rows = distance_matrix(_spikes(binned, band), np.arange(6), "spiking_low_peak_bins", None)
+    assert np.array_equal(rows, binned[:, [1, 3, 4]].reshape(6, -1))   # every bin, early too
+    loud_channels = binned.copy()
+    loud_channels[:, [0, 2]] += 50                  # the channels' code: not read
+    assert np.array_equal(rows, distance_matrix(_spikes(loud_channels, band), np.arange(6),
+                                                "spiking_low_peak_bins", None))
+    material = rng.normal(size=(6, 3)).astype(np.float32)
+    assert distance_matrix(_spikes(binned, band), np.arange(6), "spiking_bank_rows",
+                           material) is material
+    with pytest.raises(SpecError) as refused:        # a bank without a low band
+        distance_matrix(_spikes(binned, ["ch00"] * 5), np.arange(6),
+                        "spiking_low_peak_bins", None)
+    assert refused.value.field == "band"
+
+
+def test_the_low_band_read_out_sees_the_bins_shape_apart_from_their_loudness():
+    from snn_antenna.readout.spiking_decoders import distance_baseline
+
+    rng = np.random.default_rng(3)
+    X = rng.integers(0, 6, (200, 12)).astype(float)
+    X[:, 0] += 1.0
+    y = X[:, :6].argmax(axis=1) * 2.0 + 8.0          # where the peak sits, not how loud
+    evaluation = cv.Evaluation(mlp_max_iter=30, seeds=[0])
+    model = distance_baseline("d", "spiking_low_peak_bins", "d", evaluation).build(0)
+    model.fit(X, y)
+    assert np.allclose(model.predict(3.0 * X), model.predict(X), atol=1e-6)
+    plain = distance_baseline("d", "spiking_bank_rows", "d", evaluation).build(0).fit(X, y)
+    assert not np.allclose(plain.predict(3.0 * X), plain.predict(X), atol=1e-3)
+    with pytest.raises(SpecError) as refused:
+        distance_baseline("d", "spiking_low_counts", "d", evaluation)
+    assert refused.value.field == "distance_readout"
+
+
+def test_the_low_band_takes_its_own_b_and_coder_and_a_read_out_of_it_needs_one():
+    from snn_antenna.studies import runner
+    from snn_antenna.studies.bank_tuning.plan import BankPlan
+    from snn_antenna.studies.bank_tuning.search import bank_of, start_params
+
+    plan = BankPlan(tuning={"n_resonators": 2, "per_channel": 1, "max_channels": 2,
+                            "coder": "analog", "coder_amplitude": 1.0,
+                            "coder_options": {"gain": 150.0}}, b=0.2645,
+                    low_resonators=3, low_b=0.255, low_coder_amplitude=0.15,
+                    low_threshold_g=0.2, distance_readout="spiking_low_peak_bins")
+    counts = np.concatenate([_tones(150.0, 4), _tones(300.0, 4)])
+    labels = np.array(["a"] * 4 + ["b"] * 4)
+    bank = bank_of(start_params(plan), plan, counts, labels, (2000.0, 16, 10.0))
+    low = bank.bands["low"]
+    assert (low.b, low.coder, low.coder_amplitude, low.threshold_g) == (
+        0.255, "square", 0.15, 0.2)
+    assert {b.b for k, b in bank.bands.items() if k != "low"} == {0.2645}
+    for field, bad in (("low_b", 0.0), ("low_coder_amplitude", -1.0), ("low_threshold_g", -0.1),
+                       ("distance_readout", "spiking_tuned_late")):
+        with pytest.raises(SpecError) as refused:
+            BankPlan(**{field: bad})
+        assert refused.value.field == field
+    with pytest.raises(SpecError) as refused:
+        BankPlan(low_resonators=0, distance_readout="spiking_low_peak_bins")
+    assert refused.value.field == "low_resonators"
+    spec = specs.load(ROOT / "studies" / "bank_tuning.toml",
+                      ["search.space.low_resonators=[0, 8]"])
+    with pytest.raises(SpecError) as refused:
+        runner("bank_tuning").plan(spec)
+    assert refused.value.field == "search.space.low_resonators"
+
+
+def test_the_low_band_summary_weighs_its_steps_against_the_channels_and_sees_it_fire():
+    from dataclasses import replace
+
+    from snn_antenna.studies.bank_tuning.run import low_band_summary
+    from snn_antenna.studies.bank_tuning.search import neuron_steps_per_event
+
+    bank = _bank()
+    bank = replace(bank, bands={**bank.bands, "low": Band(n_neurons=2, band_hz=(8.0, 50.0),
+                                                          dt_ms=0.1)})
+    band = ["a", "b", "low", "low"]
+    spikes = _spikes(np.zeros((4, 4, 3), dtype=int), band)
+    spikes["counts"] = (("event", "neuron"), np.array([[3, 1, 0, 0], [0, 0, 2, 0],
+                                                       [1, 1, 1, 4], [0, 0, 0, 0]]))
+    low = low_band_summary(spikes, np.arange(4), bank, 2000.0)
+    assert low["resonators"] == 2 and low["neuron_steps_per_event"] == 2 * 5000
+    assert low["channels_neuron_steps_per_event"] == neuron_steps_per_event(
+        bank, 2000.0) - 2 * 5000 == 2 * 50000
+    assert low["contacts_with_a_spike"] == 0.5                 # the channels' spikes apart
+    assert low["resonators_firing_per_contact"] == 0.75
+    assert low_band_summary(spikes, np.arange(4), _bank(), 2000.0) == {"resonators": 0}

@@ -66,6 +66,47 @@ TUNED_READOUTS = {
 LATE_S = 0.1
 
 
+# Distance read-outs of a tuned bank, each an MLP 20-5 (the FFT-MLP's distance layers). The
+# contact's distance lives in the low mode's frequency, which the low-mode band reads (band
+# ``low``); the channels are placed where the material separates. ``spiking_low_peak_bins``:
+# the low band's counts in every time bin (the early ones too: a far contact's low mode rings
+# for only a few cycles), each event's row scaled to its largest count and centred, not
+# standardised per column (the FFT-MLP's spectrum scaling: standardising lifts the resonators
+# that stay silent to the weight of the driven ones). ``spiking_bank_rows``: the bank's
+# material read-out rows (every band, ``code_rows``), standardised per column.
+DISTANCE_READOUTS = {
+    "spiking_low_peak_bins": "MLP 20-5 on the low band's counts in time bins, scaled to their "
+                             "peak (as the FFT-MLP's spectrum)",
+    "spiking_bank_rows": "MLP 20-5 on the bank's material read-out rows",
+}
+# the distance read-outs that read the low band (a bank without one is refused for them)
+LOW_BAND_READOUTS = ("spiking_low_peak_bins",)
+
+
+def low_band_rows(binned, band) -> np.ndarray:
+    """The low band's spike counts in every time bin, one row per event (``binned``: events ×
+    neurons × time bins; ``band``: each neuron's band name), refused for a bank without one."""
+    band = np.asarray(band).astype(str)
+    check(bool(np.any(band == "low")), "band", sorted(set(band)),
+          "a bank with a low-mode band ('low') for the low band's read-out")
+    binned = np.asarray(binned)
+    return binned[:, band == "low"].reshape(len(binned), -1).astype(np.float32)
+
+
+def distance_baseline(name: str, readout: str, inputs: str, evaluation,
+                      description: str = "") -> bl.Baseline:
+    """The distance read-out ``readout`` (``DISTANCE_READOUTS``) on the input ``inputs``."""
+    check(readout in DISTANCE_READOUTS, "distance_readout", readout,
+          f"one of {sorted(DISTANCE_READOUTS)}")
+    if readout == "spiking_bank_rows":
+        return mlp_baseline(name, "distance", inputs, evaluation,
+                            description or DISTANCE_READOUTS[readout])
+    mlp = evaluation.mlp
+    return bl.Baseline(name, "distance", inputs, lambda seed: bl.spectrum_regressor(
+        mlp, bl.DISTANCE_HIDDEN, seed, bl.columns(slice(None))),
+        description or DISTANCE_READOUTS[readout])
+
+
 # How a tuned read-out sees the spike counts: as they are, or each event's counts as shares
 # of its total over the bank, with log(1 + total) beside them: the activity's shape apart from
 # its loudness, which varies with the impact and the distance (the FFT-MLP scales each

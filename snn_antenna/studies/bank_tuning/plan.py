@@ -14,7 +14,12 @@ from ...evaluation import crossval as cv
 from ...readout import events
 from ...readout.band_tuning import Tuning
 from ...readout.spiking import TARGETS
-from ...readout.spiking_decoders import SCALINGS, TUNED_READOUTS
+from ...readout.spiking_decoders import (
+    DISTANCE_READOUTS,
+    LOW_BAND_READOUTS,
+    SCALINGS,
+    TUNED_READOUTS,
+)
 from ...sources.source import BenchSet
 from ..contract import COMMON, Plan
 from ..sections import bench_section, evaluation_section, events_section
@@ -63,7 +68,12 @@ class BankPlan:
     ``low_resonators`` resonators (0: none) read the antenna's low mode in a band of their
     own, spread in log over ``low_band_hz`` behind a ``low_lowpass_hz`` low-pass: the
     channels are placed where the *material* separates and never reach the low mode, whose
-    frequency is where the contact's distance lives."""
+    frequency is where the contact's distance lives. The low band has its own b
+    (``low_b``) and square-wave coder (``low_coder_amplitude`` above ``low_threshold_g``):
+    at the channels' b a low resonator, once kicked, keeps firing near its own frequency
+    whatever drives it; a little below, it fires only while the low mode drives it near its
+    own, so which resonators fire in which time bin traces the mode's frequency.
+    ``distance_readout`` (``spiking_decoders.DISTANCE_READOUTS``) reads the distance."""
     tuning: dict = field(default_factory=dict)
     b: float = 0.26
     readout: str = "spiking_tuned_bins"
@@ -72,6 +82,10 @@ class BankPlan:
     filter_order: int = 8
     low_band_hz: tuple = (7.0, 56.0)
     low_lowpass_hz: float = 60.0
+    low_b: float = 0.26
+    low_coder_amplitude: float = 0.15
+    low_threshold_g: float = 0.2
+    distance_readout: str = "spiking_bank_rows"
     duration_s: float = 0.5
     bin_edges_s: tuple = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
     target: str = "standalone"
@@ -93,12 +107,20 @@ class BankPlan:
         check(lo > 0, "low_band_hz", self.low_band_hz, "[low, high] in Hz, 0 < low < high")
         bounds.number("low_lowpass_hz", self.low_lowpass_hz, hi, bounds.MAX_RATE_HZ,
                       unit=" Hz")
+        bounds.number("low_b", self.low_b, 0.0, 2.0, lo_open=True)
+        bounds.number("low_coder_amplitude", self.low_coder_amplitude, 0.0, lo_open=True)
+        bounds.number("low_threshold_g", self.low_threshold_g, 0.0, unit=" g")
+        bounds.choice("distance_readout", self.distance_readout, tuple(DISTANCE_READOUTS))
         bounds.choice("target", self.target, TARGETS)
         for name, lo in (("batch_events", 1), ("workers", 0), ("cost_sample_events", 2),
                          ("cost_repeats", 1), ("low_resonators", 0)):
             value = getattr(self, name)
             check(isinstance(value, int) and not isinstance(value, bool) and value >= lo,
                   name, value, f"an integer >= {lo}")
+        check(self.low_resonators >= 1 or self.distance_readout not in LOW_BAND_READOUTS,
+              "low_resonators", self.low_resonators,
+              f"an integer >= 1: distance_readout '{self.distance_readout}' reads the low "
+              "band")
 
 
 @dataclass
@@ -190,6 +212,11 @@ def plan(spec: dict) -> Plan:
         bank = BankPlan(**specs.check_section(spec, "bank", BankPlan))
     with specs.section("search"):
         search = SearchPlan(**specs.check_section(spec, "search", SearchPlan))
+    searched = search.space.get("low_resonators")
+    if bank.distance_readout in LOW_BAND_READOUTS and searched is not None:
+        check(searched[0] >= 1, "search.space.low_resonators", searched,
+              f"a range from 1 up: bank.distance_readout '{bank.distance_readout}' reads "
+              "the low band of every trial's bank")
     return Plan("bank_tuning", spec, Parts(bench_spec, processor, evaluation, bank, search),
                 estimate)
 

@@ -50,6 +50,16 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                   (chosen["fft_mlp_distance_rmse_mm"]["low"],
                    chosen["fft_mlp_distance_rmse_mm"]["high"]),
                   chosen["fft_mlp_distance_rmse_mm"]["n"]))
+    read = chosen["distance_readout"]
+    low = chosen["low_band"]
+    report.text(f"The chosen bank's distance read-out ({read['name']}): {read['description']}, "
+                f"{read['inputs']} inputs per contact." + (
+                    f" Its low band: {low['resonators']} resonators, "
+                    f"{low['neuron_steps_per_event']:.0f} resonator-steps per contact against "
+                    f"the channels' {low['channels_neuron_steps_per_event']:.0f}; it fired on "
+                    f"{100 * low['contacts_with_a_spike']:.1f} % of the evaluated contacts, "
+                    f"{low['resonators_firing_per_contact']:.1f} of its resonators per contact."
+                    if low["resonators"] else ""))
     lead = first["accuracy_minus_fft_mlp"]
     report.text(
         f"The chosen bank's accuracy minus the FFT-MLP's, paired by split (Student t, "

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +22,14 @@ from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...readout import baselines as bl
 from ...readout.spiking import recording_attrs
-from ...readout.spiking_decoders import code_rows, codes_of, mlp_baseline
+from ...readout.spiking_decoders import (
+    DISTANCE_READOUTS,
+    code_rows,
+    codes_of,
+    distance_baseline,
+    low_band_rows,
+    mlp_baseline,
+)
 from ...report import stats
 from ...report.page import Report
 from ...sources import bench
@@ -48,6 +56,31 @@ def spikes_matrix(spikes: xr.Dataset, ids, readout: str, scaling: str) -> np.nda
     codes = codes_of(sp["counts"].values, sp["latency_s"].values, sp["span_s"].values,
                      sp["binned_counts"].values, sp["bin_start_s"].values)
     return code_rows(codes, readout, scaling)
+
+
+def distance_matrix(spikes: xr.Dataset, ids, readout: str, material_rows: np.ndarray
+                    ) -> np.ndarray:
+    """The distance read-out's input rows (``DISTANCE_READOUTS``): the low band's counts in
+    every time bin, or the bank's material read-out rows ``material_rows``."""
+    if readout == "spiking_bank_rows":
+        return material_rows
+    sp = spikes.sel(event=ids)
+    return low_band_rows(sp["binned_counts"].values, sp["band"].values)
+
+
+def low_band_summary(spikes: xr.Dataset, ids, bank, rate_hz: float) -> dict:
+    """The chosen bank's low band: its resonator-steps per contact beside the channels', and
+    how it fired on the evaluated contacts (a band that stays silent reads no distance)."""
+    if "low" not in bank.bands:
+        return {"resonators": 0}
+    low = replace(bank, bands={"low": bank.bands["low"]})
+    steps = neuron_steps_per_event(low, rate_hz)
+    sp = spikes.sel(event=ids)
+    counts = sp["counts"].values[:, np.asarray(sp["band"].values).astype(str) == "low"]
+    return {"resonators": int(low.n_neurons), "neuron_steps_per_event": steps,
+            "channels_neuron_steps_per_event": neuron_steps_per_event(bank, rate_hz) - steps,
+            "contacts_with_a_spike": float(np.mean(counts.sum(axis=1) > 0)),
+            "resonators_firing_per_contact": float(np.mean((counts > 0).sum(axis=1)))}
 
 
 def interval(values, bounds=(0.0, np.inf)) -> dict:
@@ -161,7 +194,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         log(f"[4/5] the front's {len(front)} bank(s) within {budget:.0f} resonator-steps "
             f"per contact, on {len(ids)} evaluated contacts, "
             f"{len(parts.evaluation.seeds)} split(s) by repetition")
-        banks, chosen = {}, []
+        banks, chosen, distance_rows, low_band = {}, [], None, {}
         for t in front:
             params = {**start, **t.params}
             b = bank_of(params, parts.bank, counts, labels, attrs)
@@ -172,9 +205,14 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
             feats[name] = (("event", f"{name}_feature"), X)
             chosen.append(mlp_baseline(name, "material", name, parts.evaluation,
                                        f"MLP 51 on trial {t.number}'s bank"))
+            if distance_rows is None:      # the chosen bank (the front's first)
+                distance_rows = distance_matrix(spikes, ids, parts.bank.distance_readout, X)
+                low_band = low_band_summary(spikes, ids, b, attrs[0])
         best = f"trial_{front[0].number}"
-        chosen.append(mlp_baseline(f"{best}_distance", "distance", best, parts.evaluation,
-                                   "MLP 20-5 on the chosen bank"))
+        distance_input = f"{best}_distance"
+        feats[distance_input] = (("event", f"{distance_input}_feature"), distance_rows)
+        chosen.append(distance_baseline(distance_input, parts.bank.distance_readout,
+                                        distance_input, parts.evaluation))
     fft = bl.material_baselines([], parts.evaluation.material_mlp,
                                 parts.evaluation.nmf_max_iter)[0]
     fft_distance = next(b for b in bl.distance_baselines(feats.sizes["freq_hz"],
@@ -214,6 +252,10 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         "fft_mlp_accuracy": interval(reference, (0.0, 1.0)),
         "front": rows, "chosen": {
             "trial": front[0].number, "verdict": verdict,
+            "distance_readout": {"name": parts.bank.distance_readout,
+                                 "description": DISTANCE_READOUTS[parts.bank.distance_readout],
+                                 "inputs": int(distance_rows.shape[1])},
+            "low_band": low_band,
             "distance_rmse_mm": interval(rmse), "fft_mlp_distance_rmse_mm": interval(fft_rmse),
             "distance_rmse_minus_fft": interval(rmse - fft_rmse, None),
             "marks": marks(ratio, cost_ratio, interval(rmse - fft_rmse, None)),

@@ -3,8 +3,8 @@ read-out; every trial's bank run on the event engine over tuning contacts only.
 
 A trial's bank: ``band_tuning.tune`` places its channels from the tuning contacts' spectra
 and labels, with the trial's ``Tuning`` fields, and ``low_band`` adds the trial's
-``low_resonators`` on the antenna's low mode (distance); its resonators take the trial's b;
-it runs on
+``low_resonators`` on the antenna's low mode (distance, with its own b and coder); the
+channels' resonators take the trial's b; it runs on
 the event engine (``engine.events.run_bank``, on Dask workers when given a client) and is read
 by the trial's read-out (``TUNED_READOUTS``). Objectives: the mean accuracy of the material
 MLP (51 hidden) over splits by repetition of the tuning contacts (``inner_seeds``), and the
@@ -128,25 +128,26 @@ def bank_of(params: dict, bank: BankPlan, counts, labels, attrs) -> SpikingBank:
     bands = tune(counts[:, :n_samples], labels, *attrs, tuning)
     order = int(params.get("filter_order", bank.filter_order))
     bands = {k: replace(b, filter_order=order) for k, b in bands.items()}
+    bands = {k: replace(b, b=float(params["b"])) for k, b in bands.items()}
     if params.get("low_resonators", 0) > 0:
         bands["low"] = low_band(int(params["low_resonators"]), bank, tuning)
-    bands = {k: replace(b, b=float(params["b"])) for k, b in bands.items()}
     return SpikingBank(bands=bands, duration_s=bank.duration_s, target=bank.target,
                        batch_events=bank.batch_events, bin_edges_s=bank.bin_edges_s)
 
 
 def low_band(n: int, bank: BankPlan, tuning) -> Band:
     """``n`` resonators in log over ``bank.low_band_hz`` behind a low-pass (the antenna's
-    low mode, whose frequency carries the contact's distance), coded like the channels, at
-    the coarsest step their k·dt allows (``LOW_BAND``'s driven Hz per unit k)."""
+    low mode, whose frequency carries the contact's distance), with the low band's own b and
+    square-wave coder (``BankPlan``), at the coarsest step the channels' k·dt allows
+    (``LOW_BAND``'s driven Hz per unit k)."""
     lo, hi = (float(f) for f in bank.low_band_hz)
-    return Band(n_neurons=n, band_hz=(lo, hi), spacing="log",
-                coder_amplitude=tuning.coder_amplitude, threshold_g=tuning.threshold_g,
+    return Band(n_neurons=n, band_hz=(lo, hi), spacing="log", b=float(bank.low_b),
+                coder_amplitude=float(bank.low_coder_amplitude),
+                threshold_g=float(bank.low_threshold_g),
                 lowpass_hz=float(bank.low_lowpass_hz), highpass_hz=None,
                 hz_per_k=LOW_BAND.hz_per_k, method=tuning.method,
                 dt_ms=coarsest_dt_ms(hi, LOW_BAND.hz_per_k, tuning.max_k_dt),
-                filter_order=LOW_BAND.filter_order, coder=tuning.coder,
-                coder_options=dict(tuning.coder_options))
+                filter_order=LOW_BAND.filter_order, coder="square")
 
 
 def neuron_steps_per_event(bank: SpikingBank, rate_hz: float) -> float:
