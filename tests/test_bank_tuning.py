@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import xarray as xr
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -275,9 +276,7 @@ def test_the_channels_take_the_searched_filter_order_and_the_space_bounds_it():
         BankPlan(scaling="peak")
 
 
-def _spikes(binned: np.ndarray, band) -> "xr.Dataset":
-    import xarray as xr
-
+def _spikes(binned: np.ndarray, band) -> xr.Dataset:
     n, m, k = binned.shape
     return xr.Dataset({"binned_counts": (("event", "neuron", "time_bin"), binned)},
                       coords={"event": np.arange(n), "band": ("neuron", np.asarray(band)),
