@@ -109,6 +109,25 @@ def test_the_study_spec_and_its_quick_profile_plan():
         parts = runner("bank_tuning").plan(spec).parts
         assert parts.tuning_bench().seed != parts.bench.seed     # never the evaluated contacts
         assert parts.search.trials >= 1
+        seeds = {parts.bench.seed, parts.tuning_bench().seed, parts.refine_bench().seed}
+        assert len(seeds) == 3 and parts.search.refine_repetitions >= 2
+
+
+def test_the_second_stage_ranks_its_banks_by_the_refining_contacts():
+    from types import SimpleNamespace
+
+    from snn_antenna.studies.bank_tuning.run import refined_front
+
+    trials = [SimpleNamespace(number=n, values=(acc, steps))
+              for n, acc, steps in ((0, 0.80, 1e6), (1, 0.82, 2e6), (2, 0.81, 5e5))]
+    study = SimpleNamespace(trials=trials)
+    # the tuning contacts ranked 1, 2, 0; the refining contacts rank 2 first
+    refined = {1: [0.90, 0.88], 2: [0.93, 0.91], 0: [0.89, 0.89]}
+    assert [t.number for t in refined_front(study, refined, 2)] == [2, 0]
+    assert [t.number for t in refined_front(study, {1: [0.9], 0: [0.9]}, 5)] == [0, 1]
+    with pytest.raises(SpecError) as refused:
+        SearchPlan(refine_repetitions=1)
+    assert refused.value.field == "refine_repetitions"
 
 
 def _bank() -> SpikingBank:
@@ -156,9 +175,11 @@ def test_an_unknown_stage_is_refused():
 
 
 @pytest.mark.slow
-def test_the_study_refuses_a_planted_search_that_peeks(tmp_path, monkeypatch):
-    """The quick profile, with the search's tuning contacts swapped for the evaluated ones
-    (a search that peeks at every split): the run stops before reporting any number."""
+@pytest.mark.parametrize("stage", ["search", "second stage"])
+def test_the_study_refuses_a_planted_search_that_peeks(tmp_path, monkeypatch, stage):
+    """The quick profile (with its second stage), with the contacts of the search or of its
+    second stage alone swapped for the evaluated ones (a search that peeks at every split):
+    the run stops before reporting any number."""
     from snn_antenna.sources import bench
     from snn_antenna.studies import runner
     from snn_antenna.studies.contract import Options
@@ -170,8 +191,12 @@ def test_the_study_refuses_a_planted_search_that_peeks(tmp_path, monkeypatch):
     evaluated_spec = plan.parts.bench
     load = bench.load
 
+    swapped = (plan.parts.tuning_bench() if stage == "search" else
+               plan.parts.refine_bench()).seed
+    assert plan.parts.search.refine_repetitions >= 2
+
     def peeking(source, *args, **kwargs):
-        if getattr(source, "seed", None) != evaluated_spec.seed:
+        if getattr(source, "seed", None) == swapped:
             source = evaluated_spec
         return load(source, *args, **kwargs)
 

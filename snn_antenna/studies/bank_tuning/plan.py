@@ -130,7 +130,13 @@ class SearchPlan:
     site, generated with the study's seed + ``seed_offset``: never evaluated) by the mean
     accuracy over the splits by repetition of ``inner_seeds``; the front's ``front_limit``
     most accurate banks within ``cost_budget`` × the starting bank's neuron-steps per contact
-    are then scored on the bench set."""
+    are then scored on the bench set.
+
+    ``refine_repetitions`` > 0 adds a second stage: the ``refine_top`` most accurate banks
+    within the budget are scored again on as many repetitions of refining contacts (another
+    seed, ``seed_offset`` + 1: never evaluated either), and the front is ranked by that
+    score. A few hundred tuning contacts rank banks within about a point, which is what
+    separates the best ones; a second stage spends more contacts on those alone."""
     trials: int = 24
     repetitions: int = 4
     seed_offset: int = 1000
@@ -138,15 +144,19 @@ class SearchPlan:
     test_fraction: float = 0.3
     cost_budget: float = 1.0
     front_limit: int = 2
+    refine_repetitions: int = 0
+    refine_top: int = 4
     space: dict = field(default_factory=lambda: {"channels": [6, 16], "b": [0.2, 0.32]})
 
     def __post_init__(self):
         bounds.declared(self)
         for name, lo in (("trials", 1), ("repetitions", 2), ("seed_offset", 1),
-                         ("front_limit", 1)):
+                         ("front_limit", 1), ("refine_repetitions", 0), ("refine_top", 1)):
             value = getattr(self, name)
             check(isinstance(value, int) and not isinstance(value, bool) and value >= lo,
                   name, value, f"an integer >= {lo}")
+        check(self.refine_repetitions != 1, "refine_repetitions", self.refine_repetitions,
+              "0 (no second stage) or an integer >= 2 (splits by repetition)")
         check(isinstance(self.inner_seeds, list) and len(self.inner_seeds) >= 1 and all(
             isinstance(s, int) and s >= 0 for s in self.inner_seeds), "inner_seeds",
             self.inner_seeds, "a non-empty list of integer seeds >= 0")
@@ -199,6 +209,12 @@ class Parts:
         return replace(self.bench, seed=self.bench.seed + self.search.seed_offset,
                        repetitions=self.search.repetitions)
 
+    def refine_bench(self):
+        """The refining contacts' source (``SearchPlan.refine_repetitions``): the bench set's
+        spec with a seed of their own (never evaluated)."""
+        return replace(self.bench, seed=self.bench.seed + self.search.seed_offset + 1,
+                       repetitions=self.search.refine_repetitions)
+
 
 def plan(spec: dict) -> Plan:
     """Check the whole spec before any long work; build its parts."""
@@ -238,6 +254,8 @@ def estimate(parts: Parts):
     n, tuning = parts.bench.n_events, parts.tuning_bench().n_events
     workers = parts.bank.workers or max_workers()
     search_s = parts.search.trials * (tuning * 0.03 + 5.0) / workers
+    if parts.search.refine_repetitions:
+        search_s += parts.search.refine_top * (parts.refine_bench().n_events * 0.03 + 5.0)
     front_s = parts.search.front_limit * (n * 0.006 + 6.0) + (
         FIT_S_PER_CONTACT * n * len(parts.evaluation.seeds))
     stages = [("stimulus.repetitions", parts.bench.repetitions, [],

@@ -21,15 +21,20 @@ def _pct(iv: dict) -> tuple:
 def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> None:
     chosen = summary["chosen"]
     first = summary["front"][0]
+    within = (f"within {summary['budget_neuron_steps_per_event']:.0f} resonator-steps per "
+              f"contact (the starting bank's {summary['start_neuron_steps_per_event']:.0f} × "
+              "the budget)")
+    stage = (f"The front's banks {within} were then scored"
+             if not summary.get("refine_events") else
+             f"The most accurate banks {within} were scored again on "
+             f"{summary['refine_events']} refining contacts (another seed, never evaluated), "
+             "and the best of them by that score were then scored")
     report.text(
         f"{summary['trials']} trials of a seeded multi-objective TPE (Optuna) scored banks "
         f"on {summary['tuning_events']} tuning contacts (seed {summary['tuning_seed']}, "
         f"never evaluated), by the material MLP's accuracy over splits by repetition of "
-        f"them and by resonator-steps per contact. The front's banks within "
-        f"{summary['budget_neuron_steps_per_event']:.0f} resonator-steps per contact "
-        f"(the starting bank's {summary['start_neuron_steps_per_event']:.0f} × the budget) "
-        f"were then scored on {summary['events']} evaluated contacts, beside the "
-        "full-spectrum FFT-MLP on the same splits.")
+        f"them and by resonator-steps per contact. {stage} on {summary['events']} evaluated "
+        "contacts, beside the full-spectrum FFT-MLP on the same splits.")
     ratio = first["accuracy_to_fft_mlp"]
     report.predicted(
         Predicted("8 materials, chosen bank's accuracy", 100 * first["accuracy"]["mean"], "%",
@@ -78,11 +83,13 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
     report.table([{"trial": r["trial"], "resonators": r["resonators"],
                    "channels": r["channels"], "resonator-steps per contact":
                    r["neuron_steps_per_event"], "search accuracy %": 100 * r["search_accuracy"],
+                   **({} if r.get("refine_accuracy") is None else
+                      {"refining accuracy %": 100 * r["refine_accuracy"]}),
                    "accuracy %": 100 * r["accuracy"]["mean"],
                    "95 % interval": _pct(r["accuracy"]),
                    "÷ FFT-MLP": r["accuracy_to_fft_mlp"]["mean"],
                    "n": r["accuracy"]["n"], **r["params"]} for r in summary["front"]],
-                 "The front within the budget, scored on the evaluated contacts")
+                 "The banks within the budget scored on the evaluated contacts")
     report.figure(_front_figure(study, summary), "pareto_front",
                   "Every trial: accuracy on the tuning contacts' splits against resonator-"
                   "steps per contact; the Pareto front in colour, the starting bank ringed.")

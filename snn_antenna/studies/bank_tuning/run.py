@@ -41,12 +41,14 @@ from .search import (
     bank_of,
     check_unseen,
     neuron_steps_per_event,
+    refine,
     run_search,
     start_params,
 )
 
 STORAGE = "trials.journal"
 SCORED = "scored_contacts.json"
+REFINED = "refined_trials.json"
 RESULTS = "results.zarr"
 
 
@@ -132,6 +134,15 @@ def front_of(study, budget_steps: float, limit: int) -> list:
     return front[:limit] or done[:1]
 
 
+def refined_front(study, refined: dict, limit: int) -> list:
+    """The second stage's trials (``search.refine``: trial number → accuracies on the
+    refining contacts), most accurate there first, at most ``limit``."""
+    by_number = {t.number: t for t in study.trials}
+    order = sorted(refined, key=lambda n: (-float(np.mean(refined[n])),
+                                           by_number[n].values[1], n))
+    return [by_number[n] for n in order[:limit]]
+
+
 def trials_dataset(study, space: dict) -> xr.Dataset:
     """Every trial: its state, parameters and objectives (NaN where it has none)."""
     trials = study.trials
@@ -162,7 +173,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     out_dir, t_start = Path(out_dir), time.perf_counter()
     out_dir.mkdir(parents=True, exist_ok=True)
     if options.fresh:
-        for name in (STORAGE, SCORED):
+        for name in (STORAGE, SCORED, REFINED):
             remove_entry(out_dir / name)
     log(f"[1/5] {parts.bench.describe()}")
     data, everything = bench_signal.load_features(parts.bench, parts.processor, log,
@@ -183,15 +194,25 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
             study = run_search(parts, tuning, out_dir / STORAGE, scored, client, log)
         finally:
             storage.close()
-        check_unseen(scored, data["counts"].values[ids])
         attrs = recording_attrs(tuning)
         counts = tuning["counts"].values
         labels = np.asarray(tuning["material"].values.astype(str))
         start = start_params(parts.bank)
         start_bank = bank_of(start, parts.bank, counts, labels, attrs)
         budget = parts.search.cost_budget * neuron_steps_per_event(start_bank, attrs[0])
-        front = front_of(study, budget, parts.search.front_limit)
-        log(f"[4/5] the front's {len(front)} bank(s) within {budget:.0f} resonator-steps "
+        refined = {}
+        if parts.search.refine_repetitions:
+            refine_spec = parts.refine_bench()
+            log(f"      second stage: the {parts.search.refine_top} most accurate bank(s) "
+                f"within the budget on {refine_spec.n_events} refining contacts (seed "
+                f"{refine_spec.seed}), never evaluated")
+            refined = refine(study, parts, tuning, bench.load(refine_spec, log, options.fresh),
+                             budget, scored, out_dir / REFINED, client, log)
+            front = refined_front(study, refined, parts.search.front_limit)
+        else:
+            front = front_of(study, budget, parts.search.front_limit)
+        check_unseen(scored, data["counts"].values[ids])
+        log(f"[4/5] {len(front)} bank(s) within {budget:.0f} resonator-steps "
             f"per contact, on {len(ids)} evaluated contacts, "
             f"{len(parts.evaluation.seeds)} split(s) by repetition")
         banks, chosen, distance_rows, low_band = {}, [], None, {}
@@ -231,6 +252,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
                      "channels": len(banks[name].bands),
                      "neuron_steps_per_event": float(t.values[1]),
                      "search_accuracy": float(t.values[0]),
+                     "refine_accuracy": (float(np.mean(refined[t.number]))
+                                         if t.number in refined else None),
                      "accuracy": interval(acc, (0.0, 1.0)),
                      "accuracy_to_fft_mlp": interval(acc / reference),
                      # the lead as a paired difference (Student t, scipy.stats): its verdict
@@ -248,6 +271,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         "events": int(len(ids)), "tuning_events": int(tuning_spec.n_events),
         "tuning_seed": int(tuning_spec.seed), "seeds": list(parts.evaluation.seeds),
         "trials": len(study.trials), "budget_neuron_steps_per_event": budget,
+        "refine_events": (int(parts.refine_bench().n_events)
+                          if parts.search.refine_repetitions else 0),
         "start_neuron_steps_per_event": neuron_steps_per_event(start_bank, attrs[0]),
         "fft_mlp_accuracy": interval(reference, (0.0, 1.0)),
         "front": rows, "chosen": {

@@ -8,7 +8,9 @@ channels' resonators take the trial's b; it runs on
 the event engine (``engine.events.run_bank``, on Dask workers when given a client) and is read
 by the trial's read-out (``TUNED_READOUTS``). Objectives: the mean accuracy of the material
 MLP (51 hidden) over splits by repetition of the tuning contacts (``inner_seeds``), and the
-bank's resonator-steps per contact (its cost, known before it runs).
+bank's resonator-steps per contact (its cost, known before it runs). A second stage
+(``refine``) scores the most accurate banks within the cost budget again on more contacts of
+another seed, and the front the study evaluates is ranked by that score.
 
 Nothing evaluated enters the search: every contact a trial is scored on is registered
 (``Scored``: a digest of its samples), and ``check_unseen`` refuses a search that scored any
@@ -175,6 +177,55 @@ def inner_accuracy(X, y, repetition, search, evaluation) -> list[float]:
     return out
 
 
+def contact_labels(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A bench data set's counts, material labels (strings) and material indices."""
+    labels = np.asarray(data["material"].values.astype(str))
+    materials = sorted(set(labels))
+    return data["counts"].values, labels, np.array([materials.index(m) for m in labels])
+
+
+def bank_accuracy(b: SpikingBank, params: dict, data, parts: Parts, scored: Scored,
+                  client) -> list[float]:
+    """The material MLP's accuracy on each inner split by repetition of ``data`` (contacts
+    the search may see: registered in ``scored``), read by the point's read-out from bank
+    ``b``'s spikes."""
+    counts, _, y = contact_labels(data)
+    spikes = run_bank(b, counts, *recording_attrs(data), client=client, progress=False)
+    scored.add(counts)
+    with threadpool_limits(1):
+        return inner_accuracy(readout_matrix(spikes, params["readout"], params["scaling"],
+                                             b.bin_edges_s),
+                              y, data["repetition"].values, parts.search, parts.evaluation)
+
+
+def refine(study, parts: Parts, tuning, refining, budget_steps: float, scored: Scored,
+           path: Path, client, log) -> dict[int, list[float]]:
+    """The second stage (``SearchPlan.refine_repetitions``): the ``refine_top`` most accurate
+    trials within ``budget_steps`` resonator-steps per contact, each bank (its channels
+    placed from the tuning contacts, as in its trial) scored on ``refining`` contacts.
+    Kept in ``path`` (JSON, trial number → accuracies) after every bank: a resumed run
+    scores only the banks it has not."""
+    done = {int(k): v for k, v in json.loads(path.read_text()).items()} \
+        if path.is_file() else {}
+    trials = sorted((t for t in study.trials if t.state.name == "COMPLETE"
+                     and t.values[1] <= budget_steps),
+                    key=lambda t: (-t.values[0], t.values[1], t.number))
+    counts, labels, _ = contact_labels(tuning)
+    attrs = recording_attrs(tuning)
+    start = start_params(parts.bank)
+    out = {}
+    for t in trials[:parts.search.refine_top]:
+        if t.number not in done:
+            params = {**start, **t.params}
+            b = bank_of(params, parts.bank, counts, labels, attrs)
+            done[t.number] = bank_accuracy(b, params, refining, parts, scored, client)
+            write_json(path, {str(k): v for k, v in sorted(done.items())})
+        out[t.number] = done[t.number]
+        log(f"      trial {t.number}: accuracy {100 * t.values[0]:.1f} % on the tuning "
+            f"contacts, {100 * np.mean(out[t.number]):.1f} % on the refining contacts")
+    return out
+
+
 def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client, log):
     """The Optuna study of ``parts.search`` on ``tuning`` (the tuning contacts' data set),
     stored in ``storage_path`` (a journal file: an interrupted search resumes, a finished
@@ -187,11 +238,7 @@ def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client,
         directions=["maximize", "minimize"],
         sampler=optuna.samplers.TPESampler(seed=int(parts.bench.seed), n_startup_trials=6))
     attrs = recording_attrs(tuning)
-    counts = tuning["counts"].values
-    labels = np.asarray(tuning["material"].values.astype(str))
-    repetition = tuning["repetition"].values
-    materials = sorted(set(labels))
-    y = np.array([materials.index(m) for m in labels])
+    counts, labels, _ = contact_labels(tuning)
     start = start_params(bank)
 
     def objective(trial):
@@ -201,16 +248,10 @@ def run_search(parts: Parts, tuning, storage_path: Path, scored: Scored, client,
         trial.set_user_attr("resonators", b.n_neurons)
         trial.set_user_attr("neuron_hz", [float(f) for f in b.neuron_hz])
         try:
-            spikes = run_bank(b, counts, *attrs, client=client, progress=False)
+            acc = bank_accuracy(b, params, tuning, parts, scored, client)
         except NumericalInstabilityError as exc:    # a b or k·dt the step cannot carry
             trial.set_user_attr("failed", str(exc).splitlines()[0])
             raise optuna.TrialPruned() from None
-        scored.add(counts)
-        with threadpool_limits(1):
-            acc = inner_accuracy(readout_matrix(spikes, params["readout"], params["scaling"],
-                                                b.bin_edges_s),
-                                 y, repetition,
-                                 search, parts.evaluation)
         trial.set_user_attr("inner_accuracy", acc)
         log(f"      trial {trial.number}: {b.n_neurons} resonators in {len(b.bands)} "
             f"bands, {params['readout']} ({params['scaling']}): "
