@@ -706,6 +706,70 @@ def test_the_neighbourhood_centres_on_the_resonator_driven_most_not_the_one_firi
     assert read == pytest.approx(34.0, abs=2.0), read
 
 
+def test_the_dominant_resonators_bias_is_fitted_into_the_law_it_reads_through():
+    """Contacts whose most active resonator sits one channel below their low mode (a
+    resonator fires most for input somewhat above its own frequency): through the law as
+    fitted on the spectra they read about a channel's distance off; through the law with the
+    bias fitted on the calibration contacts they read within half a channel. Contacts that
+    left the low band silent do not enter the bias, and none driven leaves the law as is."""
+    from snn_antenna.evaluation import antenna_fit
+    from snn_antenna.readout.spiking import DominantNeuronDistance
+
+    hz = np.geomspace(9.6, 75.0, 24)
+    slope = np.log10(lab.FAR_HZ / lab.NEAR_HZ) / (lab.FAR_CM - lab.NEAR_CM)
+    law = (slope, np.log10(lab.NEAR_HZ) - slope * lab.NEAR_CM, 22.0)
+    distance = np.repeat([10.0, 14.0, 18.0, 22.0, 26.0, 30.0, 34.0], 3)
+    below = np.searchsorted(hz, lab.low_hz(distance)) - 2      # a channel below the mode
+    counts = np.zeros((len(distance), len(hz)))
+    counts[np.arange(len(distance)), below] = 9
+    counts[np.arange(len(distance)), below + 1] = 4
+    silent = np.vstack([counts, np.zeros((2, len(hz)))])
+    fitted, line = antenna_fit.dominant_bias(silent, hz, np.r_[distance, 10.0, 10.0], law)
+    assert line.startswith("fitted: the dominant resonator's bias") and "21 calibration" in line
+    assert fitted[0] == law[0] and fitted[2] == law[2] and fitted[1] < law[1]
+    step_cm = np.log10(hz[1] / hz[0]) / abs(slope)
+    error = {name: np.abs(DominantNeuronDistance(hz, at).fit(counts).predict(counts) - distance)
+             for name, at in (("as fitted", law), ("with its bias", fitted))}
+    assert np.sqrt(np.mean(error["as fitted"] ** 2)) > 0.9 * step_cm
+    assert error["with its bias"].max() < 0.5 * step_cm + 0.1, error
+    assert antenna_fit.dominant_bias(np.zeros((3, 24)), hz, [10.0, 20.0, 30.0], law)[0] == law
+
+
+def test_the_distance_mlps_penalty_is_chosen_on_the_calibration_repetitions_alone():
+    """Few contacts and many inputs, one of them the distance: the penalty chosen by reading
+    each calibration repetition with the MLP trained on the others reads new contacts better
+    than the typed one; one repetition leaves the typed penalty."""
+    from dataclasses import replace
+
+    from threadpoolctl import threadpool_limits
+
+    from snn_antenna.evaluation import antenna_fit
+    from snn_antenna.readout import baselines as bl
+
+    rng = np.random.default_rng(3)
+
+    def contacts(n):
+        d = rng.choice([10.0, 18.0, 26.0, 34.0], n)
+        return np.column_stack([d + rng.normal(0, 1.0, n), rng.normal(0, 1, (n, 40))]), d
+
+    X, d = contacts(48)
+    repetition = np.repeat([0, 1, 2], 16)
+    mlp = bl.Mlp(max_iter=200)
+    alpha, line = antenna_fit.distance_alpha(X, d, repetition, mlp, (8,), "the test's MLP")
+    assert alpha in antenna_fit.DISTANCE_ALPHAS and alpha > mlp.alpha, line
+    assert line.startswith(f"fitted: the test's MLP's L2 penalty {alpha:g} "), line
+    new, truth = contacts(200)
+
+    def rmse(a):
+        with threadpool_limits(1):
+            model = bl.sized_for(bl.regressor_pipeline(replace(mlp, alpha=a), (8,), 0),
+                                 len(d)).fit(X, d)
+        return float(np.sqrt(np.mean((model.predict(new) - truth) ** 2)))
+
+    assert rmse(alpha) < 0.7 * rmse(mlp.alpha), (alpha, rmse(alpha), rmse(mlp.alpha))
+    assert antenna_fit.distance_alpha(X, d, np.zeros(48), mlp, (8,))[0] == mlp.alpha
+
+
 def test_the_fft_comparison_on_the_labs_recordings_reads_as_one_feature_does(lab_set,
                                                                              tmp_path):
     """The comparison's FFT and parametric half on the lab's rod: the decay fits nearly every
