@@ -420,7 +420,9 @@ MEETS = ("mlp_parametric_material", "mlp_spectrum_material", "linear_low_peak",
          "spiking_mlp_material_rod", "spiking_tuned_rate", "spiking_tuned_bins",
          "spiking_tuned_decay", "coder_analog_24_bins", "coder_analog_24_decay",
          "ceiling_analog_24", "ceiling_delta_24")
-MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "ceiling_square_24")
+MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "ceiling_square_24",
+               "coder_square_24_bins", "coder_square_24_decay", "coder_delta_24_bins",
+               "coder_delta_24_decay")
 
 
 # The rods the comparison reads (``lab_antenna.session``'s keys): the lab's, and another lab's
@@ -456,11 +458,17 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     - the tuned bank's latency code (0.86, 0.88, 0.76): a channel's first spike marks the
       contact's onset and its frequency, not its decay; its firing span, beside it, ends on
       the coder's threshold, which the quiet level sets;
-    - the square-wave and level coders on the tuned channels (square 0.94, 0.91, 0.89 in time
-      bins, 0.89, 0.97, 0.87 with the decay; level 0.90, 0.94, 0.90 and 0.79, 0.94, 0.91): a
-      coder of the sign or of a few levels keeps of a channel's decay only when it falls
-      under the threshold, one crossing per channel; the analog current keeps it all (0.97,
-      0.98, 0.94 and 1.00, 0.97, 0.98);
+    - on the full profile, the square-wave and level coders on the tuned channels (square
+      0.89 in time bins, 0.87 with the decay; level 0.90 and 0.91): a coder of the sign or of
+      a few levels keeps of a channel's decay only when it falls under the threshold, and
+      the channels placed on the full profile's calibration contacts peak less than twice
+      the hand-set bands' multiple of their quiet rms above it, so these coders keep the
+      analog coder's threshold, within the offset a band-passed channel carries (at the
+      hand-set multiple anyway: square 0.81 and 0.85, level 0.89 and 0.94); on the quick
+      profiles they take that multiple and meet (square 0.95, 0.94, 0.93 in time bins, 0.98,
+      0.95, 0.96 with the decay, level 0.94, 1.00, 0.96 and 0.97, 1.00, 0.98 at 1 kHz, 2 kHz
+      and on the other rod; at the analog coder's threshold 0.94, 0.91, 0.79, 0.89, 0.97,
+      0.78, 0.90, 0.94, 0.90 and 0.79, 0.94, 0.90);
     - the high band's spiking MLP (0.86, 0.86, 0.93): this rod's modes' ranges overlap (the
       low mode 12-60 Hz, the high one 44-222 Hz), so the high band's band-pass passes the low
       mode at the near positions and its square-wave coder follows the stronger mode's zero
@@ -634,11 +642,18 @@ def test_the_tuned_coders_levels_are_fitted_on_the_calibration_recordings(lab_se
             table["coder_amplitude"] / (fit.coder_peak_g - threshold), rel=1e-4)
         assert table["coder_options"]["gain"] < typed["spiking"]["tuned"]["coders"]["analog"][
             "coder_options"]["gain"] / 10       # the typed gain holds these peaks at its ceiling
+    # the sign and level coders above the channels' offset and noise, as a hand-set band's
+    # square wave; the level coder's top level still at the channels' peak
+    quantised = antenna_fit.BAND_NOISE_MULTIPLE * fit.coder_noise_g
+    for name in ("square", "delta"):
+        assert tuned["coders"][name]["threshold_g"] == pytest.approx(quantised, rel=1e-4)
     delta = tuned["coders"]["delta"]["coder_options"]
     top = (2 ** (delta["levels"] - 1) - 1) * delta["step_g"]       # ratio 2
-    assert top == pytest.approx(fit.coder_peak_g - threshold, rel=1e-4)
-    for key in ("tuning.threshold_g", "tuning.coder_options.gain",
-                "coders.delta.coder_options.step_g", "coders.analog.coder_options.gain"):
+    assert top == pytest.approx(fit.coder_peak_g - quantised, rel=1e-4)
+    assert "threshold_g" not in tuned["coders"]["analog"]        # the tuning's, as fitted
+    for key in ("tuning.threshold_g", "tuning.coder_options.gain", "coders.square.threshold_g",
+                "coders.delta.threshold_g", "coders.delta.coder_options.step_g",
+                "coders.analog.coder_options.gain"):
         assert any(line.startswith(f"fitted: spiking.tuned.{key} ") for line in
                    plan.left_out), (key, plan.left_out)
     assert [r for r in fit.rows() if "tuned channels" in r[0]]

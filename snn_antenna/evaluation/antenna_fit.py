@@ -29,7 +29,9 @@ their labels, and reported as calibrated with that source:
   steps, the filters' start, the tails of earlier contacts), and the analog gain (or the
   level coder's step) brings the ``PEAK_QUANTILE`` quantile of the channels' peaks after
   the trigger to the coder's amplitude (its top level), so the ringing's decay stays within
-  the coder's range instead of holding it at its ceiling;
+  the coder's range instead of holding it at its ceiling; a sign or level coder
+  (``QUANTISED_CODERS``) takes ``BAND_NOISE_MULTIPLE`` × that rms as its threshold instead,
+  when the peak quantile lies at least twice as high;
 - the rate centroid's neighbourhood (``centroid_around``, from the calibration contacts'
   spikes): of ``CENTROID_AROUND``, the factor around each contact's most driven low-band
   resonator (spikes per cycle) whose centroid reads their distances best through the fitted
@@ -82,8 +84,14 @@ WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_
 NOISE_MULTIPLE = 1.0
 PEAK_QUANTILE = 0.5
 # a hand-set band's threshold within its quiet level (below its rms before the trigger) is
-# raised to this multiple of that rms, above the rare noise peaks over a window
+# raised to this multiple of that rms, above the rare noise peaks over a window; so is the
+# threshold of a sign or level coder on the tuned channels (``QUANTISED_CODERS``): a band-
+# passed channel carries an offset through the window besides its noise (the filters start
+# at rest on the window's first sample), and a coder that keeps only the signal's sign or a
+# few levels codes both at the analog coder's threshold, so its firing never ends with the
+# ringing
 BAND_NOISE_MULTIPLE = 5.0
+QUANTISED_CODERS = ("square", "delta")
 # the rate centroid's neighbourhoods tried (``readout.spiking.CentroidDistance.around``)
 CENTROID_AROUND = (None, 3.0, 2.0, 1.5, 1.25)
 # the spiking distance MLPs' L2 penalties tried (``readout.baselines.Mlp.alpha``)
@@ -389,28 +397,39 @@ def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict,
            "gain": f"the channels' peak quantile {PEAK_QUANTILE:g} after the trigger, "
                    f"{1e3 * peak:.1f} mg, reaches the coder's amplitude, on {where}",
            "step_g": f"the channels' peak quantile {PEAK_QUANTILE:g} after the trigger, "
-                     f"{1e3 * peak:.1f} mg, reaches the top level, on {where}"}
+                     f"{1e3 * peak:.1f} mg, reaches the top level, on {where}",
+           "quantised": f"{BAND_NOISE_MULTIPLE:g} × the tuned channels' median rms before the "
+                        f"trigger, {1e3 * noise:.2f} mg, as a hand-set band's square wave: a "
+                        f"sign or level coder at that rms codes the channel's offset and noise "
+                        f"after the ringing, on {where}"}
     notes = []
 
     def fitted(table: dict, label: str, inherited: Tuning):
         coder = table.get("coder", inherited.coder)
         amplitude = float(table.get("coder_amplitude", inherited.coder_amplitude))
-        if "threshold_g" in table or table is tuned["tuning"]:
+        level, reason = threshold, why["threshold_g"]
+        # a coder's range from its threshold to the channels' peak at least a factor of 2
+        # wide, as ``fit_coder`` asks of the analog coder's; narrower: the analog coder's
+        # threshold
+        quantised = coder in QUANTISED_CODERS and peak > 2 * BAND_NOISE_MULTIPLE * noise
+        if quantised:
+            level, reason = BAND_NOISE_MULTIPLE * noise, why["quantised"]
+        if "threshold_g" in table or table is tuned["tuning"] or quantised:
             notes.append(f"fitted: {label}.threshold_g {table.get('threshold_g', '(default)')}"
-                         f" → {threshold:.6g} ({why['threshold_g']})")
-            table["threshold_g"] = round(threshold, 6)
+                         f" → {level:.6g} ({reason})")
+            table["threshold_g"] = round(level, 6)
         options = table.get("coder_options")
         if not isinstance(options, dict):
             return
         key, value = None, None
         if coder == "analog":
-            key, value = "gain", amplitude / (peak - threshold)
+            key, value = "gain", amplitude / (peak - level)
         elif coder == "delta":
             levels = int(options.get("levels", 4))
             ratio = float(options.get("ratio", 2.0))
             top = (levels - 1 if ratio == 1.0 else (ratio ** (levels - 1) - 1) / (ratio - 1))
             if top > 0:
-                key, value = "step_g", (peak - threshold) / top
+                key, value = "step_g", (peak - level) / top
         if key:
             notes.append(f"fitted: {label}.coder_options.{key} {options.get(key, '(default)')}"
                          f" → {value:.6g} ({why[key]})")
@@ -549,4 +568,5 @@ def distance_alpha(X: np.ndarray, distance_cm, repetition, mlp: Mlp, hidden=DIST
 
 __all__ = ["FittedAntenna", "fit", "fit_coder", "fit_band_thresholds", "centroid_around",
            "channel_levels", "dominant_bias", "distance_alpha", "BAND_NOISE_MULTIPLE",
-           "CENTROID_AROUND", "DISTANCE_ALPHAS", "MARGIN", "NOISE_MULTIPLE", "PEAK_QUANTILE"]
+           "CENTROID_AROUND", "DISTANCE_ALPHAS", "MARGIN", "NOISE_MULTIPLE", "PEAK_QUANTILE",
+           "QUANTISED_CODERS"]
