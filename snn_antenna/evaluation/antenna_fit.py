@@ -29,12 +29,24 @@ their labels, and reported as calibrated with that source:
   steps, the filters' start, the tails of earlier contacts), and the analog gain (or the
   level coder's step) brings the ``PEAK_QUANTILE`` quantile of the channels' peaks after
   the trigger to the coder's amplitude (its top level), so the ringing's decay stays within
-  the coder's range instead of holding it at its ceiling;
+  the coder's range instead of holding it at its ceiling; a sign or level coder
+  (``QUANTISED_CODERS``) takes ``BAND_NOISE_MULTIPLE`` × that rms as its threshold instead,
+  when the peak quantile lies at least twice as high;
 - the rate centroid's neighbourhood (``centroid_around``, from the calibration contacts'
   spikes): of ``CENTROID_AROUND``, the factor around each contact's most driven low-band
   resonator (spikes per cycle) whose centroid reads their distances best through the fitted
   law (resonators an overtone or the other mode drives otherwise pull the centroid off the
-  low mode).
+  low mode);
+- the dominant resonator's bias (``dominant_bias``, from the calibration contacts' spikes):
+  the most active resonator sits below the ringing (a resonator fires most for input
+  somewhat above its own frequency), by a factor the law's intercept takes up, the median
+  over the calibration contacts of log10 of their dominant resonator's frequency against
+  the law's at their labelled distance;
+- the spiking distance MLPs' L2 penalty (``distance_alpha``, from the calibration contacts'
+  spikes): of ``DISTANCE_ALPHAS``, the one whose MLP reads the calibration contacts'
+  distances best, each repetition read by the MLP trained on the others (a few dozen
+  training contacts and a hundred or more inputs: the typed penalty leaves the fit to
+  whichever inputs happen to match the few labels).
 
 Only the calibration contacts' labels (and recordings) are fitted on; every scored contact is
 read as a robot has it (its counts), and its labels serve the scoring alone.
@@ -43,16 +55,21 @@ from __future__ import annotations
 
 import copy
 import itertools
+import warnings
 from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 from scipy import stats
 from scipy.signal import find_peaks
+from sklearn.exceptions import ConvergenceWarning
+from threadpoolctl import threadpool_limits
 
 from ..core.errors import SpecError, check
 from ..readout.band_tuning import Tuning, tune
+from ..readout.baselines import DISTANCE_HIDDEN, Mlp, regressor_pipeline, sized_for
 from ..readout.events import EventProcessor, SkippedEvent, main_axis_g
-from ..readout.spiking import CentroidDistance, SpikingBank, align_events, band_filtered
+from ..readout.spiking import (CentroidDistance, SpikingBank, align_events, band_filtered,
+                               dominant_of_counts)
 from ..readout.spiking_decoders import TunedPlan
 
 MARGIN = 1.25                 # a fitted band reaches this factor beyond the modes' range
@@ -67,10 +84,18 @@ WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_
 NOISE_MULTIPLE = 1.0
 PEAK_QUANTILE = 0.5
 # a hand-set band's threshold within its quiet level (below its rms before the trigger) is
-# raised to this multiple of that rms, above the rare noise peaks over a window
+# raised to this multiple of that rms, above the rare noise peaks over a window; so is the
+# threshold of a sign or level coder on the tuned channels (``QUANTISED_CODERS``): a band-
+# passed channel carries an offset through the window besides its noise (the filters start
+# at rest on the window's first sample), and a coder that keeps only the signal's sign or a
+# few levels codes both at the analog coder's threshold, so its firing never ends with the
+# ringing
 BAND_NOISE_MULTIPLE = 5.0
+QUANTISED_CODERS = ("square", "delta")
 # the rate centroid's neighbourhoods tried (``readout.spiking.CentroidDistance.around``)
 CENTROID_AROUND = (None, 3.0, 2.0, 1.5, 1.25)
+# the spiking distance MLPs' L2 penalties tried (``readout.baselines.Mlp.alpha``)
+DISTANCE_ALPHAS = (1e-4, 1e-3, 1e-2, 1e-1, 1.0, 10.0)
 
 
 @dataclass(frozen=True)
@@ -372,28 +397,39 @@ def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict,
            "gain": f"the channels' peak quantile {PEAK_QUANTILE:g} after the trigger, "
                    f"{1e3 * peak:.1f} mg, reaches the coder's amplitude, on {where}",
            "step_g": f"the channels' peak quantile {PEAK_QUANTILE:g} after the trigger, "
-                     f"{1e3 * peak:.1f} mg, reaches the top level, on {where}"}
+                     f"{1e3 * peak:.1f} mg, reaches the top level, on {where}",
+           "quantised": f"{BAND_NOISE_MULTIPLE:g} × the tuned channels' median rms before the "
+                        f"trigger, {1e3 * noise:.2f} mg, as a hand-set band's square wave: a "
+                        f"sign or level coder at that rms codes the channel's offset and noise "
+                        f"after the ringing, on {where}"}
     notes = []
 
     def fitted(table: dict, label: str, inherited: Tuning):
         coder = table.get("coder", inherited.coder)
         amplitude = float(table.get("coder_amplitude", inherited.coder_amplitude))
-        if "threshold_g" in table or table is tuned["tuning"]:
+        level, reason = threshold, why["threshold_g"]
+        # a coder's range from its threshold to the channels' peak at least a factor of 2
+        # wide, as ``fit_coder`` asks of the analog coder's; narrower: the analog coder's
+        # threshold
+        quantised = coder in QUANTISED_CODERS and peak > 2 * BAND_NOISE_MULTIPLE * noise
+        if quantised:
+            level, reason = BAND_NOISE_MULTIPLE * noise, why["quantised"]
+        if "threshold_g" in table or table is tuned["tuning"] or quantised:
             notes.append(f"fitted: {label}.threshold_g {table.get('threshold_g', '(default)')}"
-                         f" → {threshold:.6g} ({why['threshold_g']})")
-            table["threshold_g"] = round(threshold, 6)
+                         f" → {level:.6g} ({reason})")
+            table["threshold_g"] = round(level, 6)
         options = table.get("coder_options")
         if not isinstance(options, dict):
             return
         key, value = None, None
         if coder == "analog":
-            key, value = "gain", amplitude / (peak - threshold)
+            key, value = "gain", amplitude / (peak - level)
         elif coder == "delta":
             levels = int(options.get("levels", 4))
             ratio = float(options.get("ratio", 2.0))
             top = (levels - 1 if ratio == 1.0 else (ratio ** (levels - 1) - 1) / (ratio - 1))
             if top > 0:
-                key, value = "step_g", (peak - threshold) / top
+                key, value = "step_g", (peak - level) / top
         if key:
             notes.append(f"fitted: {label}.coder_options.{key} {options.get(key, '(default)')}"
                          f" → {value:.6g} ({why[key]})")
@@ -472,6 +508,65 @@ def centroid_around(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
                   + tried + ")")
 
 
+def dominant_bias(counts: np.ndarray, neuron_hz, distance_cm, law: tuple
+                  ) -> tuple[tuple, str]:
+    """(``law`` with its intercept moved by the dominant resonator's bias, the line saying
+    so): the median over the calibration contacts that drive the low band (``counts``:
+    contacts × resonators tuned to ``neuron_hz``) of log10 of their dominant resonator's
+    frequency (``readout.spiking.dominant_of_counts``) less the law's log10 F at their
+    labelled distance ``distance_cm``; ``law`` is (slope, intercept, silent distance) as
+    ``readout.spiking.DominantNeuronDistance`` takes it. No driven contact: ``law`` as is."""
+    hz = dominant_of_counts(counts, neuron_hz)
+    driven = hz > 0
+    slope, intercept, silent_cm = law
+    if not driven.any():
+        return law, ("fitted: the dominant resonator read through the law as it is (none of "
+                     f"the {len(hz)} calibration contacts drove the low band)")
+    distance_cm = np.asarray(distance_cm, dtype=float)[driven]
+    bias = float(np.median(np.log10(hz[driven]) - (slope * distance_cm + intercept)))
+    return (slope, intercept + bias, silent_cm), (
+        f"fitted: the dominant resonator's bias, its frequency × {10 ** bias:.3f} of the law's "
+        f"at the labelled distance (the median over the {int(driven.sum())} calibration "
+        "contacts that drove the low band), taken into the law it reads through")
+
+
+def distance_alpha(X: np.ndarray, distance_cm, repetition, mlp: Mlp, hidden=DISTANCE_HIDDEN,
+                   label: str = "the spiking distance MLP") -> tuple[float, str]:
+    """(the L2 penalty of ``DISTANCE_ALPHAS`` whose MLP (``mlp`` with that ``alpha``, layers
+    ``hidden``, as ``readout.baselines.regressor_pipeline`` builds it for this many contacts)
+    reads the calibration contacts' distances ``distance_cm`` from their inputs ``X`` with
+    the least rmse, each repetition of ``repetition`` read by the MLP trained on the others,
+    the smaller on a tie; the line saying so, naming ``label``). Fewer than two repetitions:
+    ``mlp``'s own penalty."""
+    X = np.asarray(X, dtype=float)
+    distance_cm = np.asarray(distance_cm, dtype=float)
+    repetition = np.asarray(repetition)
+    folds = sorted(set(repetition.tolist()))
+    if len(folds) < 2:
+        return mlp.alpha, (f"fitted: {label}'s L2 penalty as typed ({mlp.alpha:g}: the "
+                           "calibration contacts hold one repetition, none to read out)")
+    rmse = {}
+    for alpha in DISTANCE_ALPHAS:
+        errors = []
+        for r in folds:
+            train, test = repetition != r, repetition == r
+            model = sized_for(regressor_pipeline(replace(mlp, alpha=alpha), hidden, 0),
+                              int(train.sum()))
+            # one BLAS thread: a few dozen rows gain nothing from more, and lose to their
+            # start-up on a busy machine
+            with warnings.catch_warnings(), threadpool_limits(1):
+                warnings.simplefilter("ignore", ConvergenceWarning)
+                model.fit(X[train], distance_cm[train])
+            errors.append((model.predict(X[test]) - distance_cm[test]) ** 2)
+        rmse[alpha] = float(np.sqrt(np.mean(np.concatenate(errors))))
+    best = min(DISTANCE_ALPHAS, key=lambda a: rmse[a])       # min keeps the first on a tie
+    tried = ", ".join(f"{a:g} {10 * r:.1f} mm" for a, r in rmse.items())
+    return best, (f"fitted: {label}'s L2 penalty {best:g} (the least rmse on the "
+                  f"{len(distance_cm)} calibration contacts, each of their {len(folds)} "
+                  f"repetitions read by the MLP trained on the others: {tried})")
+
+
 __all__ = ["FittedAntenna", "fit", "fit_coder", "fit_band_thresholds", "centroid_around",
-           "channel_levels", "BAND_NOISE_MULTIPLE", "CENTROID_AROUND", "MARGIN",
-           "NOISE_MULTIPLE", "PEAK_QUANTILE"]
+           "channel_levels", "dominant_bias", "distance_alpha", "BAND_NOISE_MULTIPLE",
+           "CENTROID_AROUND", "DISTANCE_ALPHAS", "MARGIN", "NOISE_MULTIPLE", "PEAK_QUANTILE",
+           "QUANTISED_CODERS"]

@@ -257,19 +257,21 @@ def neurons_per_input(spikes: xr.Dataset) -> dict:
             for name, (wanted, _) in _available(spikes).items()}
 
 
-def spiking_baselines(spikes: xr.Dataset, evaluation, law=None, around=None
-                      ) -> list[bl.Baseline]:
+def spiking_baselines(spikes: xr.Dataset, evaluation, law=None, around=None,
+                      dominant_law=None, alphas: dict | None = None) -> list[bl.Baseline]:
     """Every spiking decoder the bank's bands allow (``evaluation``: the MLP settings of an
     ``evaluation.crossval.Evaluation``; ``law``: the low-mode law the training-free decoders
     invert, see ``spiking.DominantNeuronDistance``; None: this project's antenna's;
-    ``around``: the centroid's neighbourhood of the dominant neuron, see
-    ``spiking.CentroidDistance``)."""
+    ``dominant_law``: the dominant resonator's own (None: ``law``); ``around``: the
+    centroid's neighbourhood of the dominant neuron, see ``spiking.CentroidDistance``;
+    ``alphas``: an L2 penalty per MLP decoder's name in place of ``evaluation``'s)."""
     out = []
     bands = spikes["band"].values.astype(str)
     if "low" in set(bands):
         low_hz = spikes["neuron_hz"].values[bands == "low"]
         out.append(bl.Baseline("spiking_dominant", "distance", "spiking_low_counts",
-                               lambda seed: DominantNeuronDistance(low_hz, law),
+                               lambda seed: DominantNeuronDistance(
+                                   low_hz, law if dominant_law is None else dominant_law),
                                "dominant low-band resonator → inverse low-mode law "
                                "(Fig. 10E), no training"))
         out.append(bl.Baseline("spiking_centroid", "distance", "spiking_low_counts",
@@ -279,19 +281,22 @@ def spiking_baselines(spikes: xr.Dataset, evaluation, law=None, around=None
     available = _available(spikes)
     for name, (inputs, task, text) in SPIKING_MLPS.items():
         if inputs in available:
-            out.append(mlp_baseline(name, task, inputs, evaluation, text))
+            out.append(mlp_baseline(name, task, inputs, evaluation, text,
+                                    (alphas or {}).get(name)))
     return out
 
 
 def mlp_baseline(name: str, task: str, inputs: str, evaluation,
-                 description: str = "") -> bl.Baseline:
+                 description: str = "", alpha: float | None = None) -> bl.Baseline:
     """An MLP on spiking features: 20-5 for distance, 51 hidden for material (the FFT
-    pipelines' layers, with their epoch budgets)."""
+    pipelines' layers, with their epoch budgets); ``alpha``: its L2 penalty in place of
+    ``evaluation``'s (None: as set there)."""
     if task == "distance":
-        mlp = evaluation.mlp
+        mlp = evaluation.mlp if alpha is None else replace(evaluation.mlp, alpha=alpha)
         return bl.Baseline(name, task, inputs, lambda seed: bl.regressor_pipeline(
             mlp, bl.DISTANCE_HIDDEN, seed), description)
-    mlp = evaluation.material_mlp
+    mlp = evaluation.material_mlp if alpha is None else replace(evaluation.material_mlp,
+                                                                 alpha=alpha)
     return bl.Baseline(name, task, inputs, lambda seed: bl.classifier_pipeline(
         mlp, bl.MATERIAL_HIDDEN, seed), description)
 

@@ -8,6 +8,7 @@ from functools import partial
 from pathlib import Path
 
 import numpy as np
+import xarray as xr
 
 from ...core.files import write_json
 from ...core.logfile import logged
@@ -18,7 +19,8 @@ from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...evaluation.comparison import Comparison
 from ...readout import events
-from ...readout.spiking_decoders import decoder_inputs, neurons_per_input, spiking_baselines
+from ...readout.spiking_decoders import (SPIKING_MLPS, decoder_inputs, neurons_per_input,
+                                          spiking_baselines)
 from ...report.page import Report
 from ..contract import Options, Plan
 from .plan import Parts, first_scored
@@ -154,18 +156,20 @@ def spiking_stage(parts: Parts, data, cmp: Comparison, stage: str, log, fresh,
     neurons = neurons_per_input(spikes)
     neurons.update({b.name: cmp.tuned["neurons"] for b in tuned})
     cmp.spiking = {**bank.description(), "neurons": neurons}
-    law, around = None, None
+    fitted = {}
     if parts.antenna:
-        law, around, lines = _law(parts, data, spikes, log)
+        fitted, lines = _law(parts, data, spikes, log)
         cmp.data["fitted"].extend(lines)          # the report's and summary's fitted values
-    return spiking_baselines(spikes, parts.evaluation, law, around) + tuned
+    return spiking_baselines(spikes, parts.evaluation, **fitted) + tuned
 
 
-def _law(parts: Parts, data, spikes, log) -> tuple[tuple, float | None, list[str]]:
-    """The fitted low-mode law the training-free decoders invert, with the distance a silent
-    low band reads, and the rate centroid's neighbourhood of the dominant resonator
-    (``antenna_fit.centroid_around``), both from the calibration contacts, and the lines
-    saying so."""
+def _law(parts: Parts, data, spikes, log) -> tuple[dict, list[str]]:
+    """What the spiking decoders take from the calibration contacts, as
+    ``spiking_baselines``' keywords: the fitted low-mode law the training-free decoders
+    invert, with the distance a silent low band reads, the rate centroid's neighbourhood of
+    the dominant resonator (``antenna_fit.centroid_around``), the dominant resonator's law
+    with its bias (``antenna_fit.dominant_bias``) and the spiking distance MLPs' L2 penalties
+    (``antenna_fit.distance_alpha``); and the lines saying so."""
     events = spikes["event"].values
     held = spikes.sel(event=events[np.isin(data["repetition"].sel(event=events).values,
                                            parts.calibration_repetitions)])
@@ -176,6 +180,19 @@ def _law(parts: Parts, data, spikes, log) -> tuple[tuple, float | None, list[str
     law = (*parts.antenna.low_law, silent_cm)
     around, centroid_line = antenna_fit.centroid_around(
         held["counts"].values[:, low], held["neuron_hz"].values[low], distance, law)
-    for text in (line, centroid_line):
+    dominant_law, dominant_line = antenna_fit.dominant_bias(
+        held["counts"].values[:, low], held["neuron_hz"].values[low], distance, law)
+    lines = [line, centroid_line, dominant_line]
+    inputs = decoder_inputs(xr.Dataset(coords={"event": held["event"].values}), held)
+    repetition = data["repetition"].sel(event=held["event"].values).values
+    alphas = {}
+    for name, (input_set, task, _) in SPIKING_MLPS.items():
+        if task == "distance" and input_set in inputs.data_vars:
+            alphas[name], alpha_line = antenna_fit.distance_alpha(
+                inputs[input_set].values, distance, repetition, parts.evaluation.mlp,
+                label=name)
+            lines.append(alpha_line)
+    for text in lines:
         log(f"      {text}")
-    return law, around, [line, centroid_line]
+    return {"law": law, "around": around, "dominant_law": dominant_law,
+            "alphas": alphas}, lines
