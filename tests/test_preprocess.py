@@ -86,6 +86,26 @@ def test_centre_removes_offsets_without_a_start_transient():
     assert abs(y[0]) < 1e-12 and abs(y[2000:].mean()) < 0.1 and np.abs(y).max() < 1.2
 
 
+@pytest.mark.parametrize("offset_g", [0.05, -0.03])
+def test_a_band_pass_chain_leaves_no_standing_offset_from_its_first_sample(offset_g):
+    """A window that starts off its mean (the high-pass passes the step): the band-passed,
+    coded signal keeps no offset once the step has rung out; centred after the high-pass, it
+    kept minus the high-pass's first output for the whole window."""
+    rate = 2000.0
+    t = np.arange(1000) / rate
+    g = offset_g * (t < 0.01) + 0.002 * np.sin(2 * np.pi * 200.0 * t)
+    counts = np.stack([g, 0.0 * g], axis=1) / 18.0 * 2 ** 15 + 2 ** 15
+    chain = pp.make_chain(rate, 16, 18.0, lowpass_hz=260.0, lowpass_order=8,
+                          highpass_hz=150.0, coder="analog", coder_amplitude=1.0,
+                          coder_gain=100.0)
+    assert "centre" not in chain.named_steps
+    y = chain.fit_transform(counts)
+    late = y[int(0.2 * rate):]
+    assert abs(late.mean()) < 0.02 * np.abs(late).max()
+    # the low-pass-only chain is centred as before
+    assert "centre" in pp.make_chain(rate, 16, 18.0).named_steps
+
+
 def test_coder_codes_sign_and_silences_sub_threshold_samples():
     coder = pp.SquareWaveCoder(amplitude=0.2, threshold=0.5).fit([0.0])
     out = coder.transform(np.array([-2.0, -0.4, 0.0, 0.3, 0.6, 9.0]))

@@ -84,19 +84,21 @@ def window_spectrum(x: np.ndarray, rate_hz: float, max_hz: float) -> np.ndarray:
 def chain_stages(bank: SpikingBank, x: np.ndarray, rate_hz: float, adc_bits: int,
                  full_scale_g: float) -> dict[str, np.ndarray]:
     """(samples, events) of one axis in g → each channel's signal after the chain's
-    band-pass, centring and coder: name → (samples, events, channels). The chain's own
-    stages (``Band.chain`` after its g conversion and alignment), run in order."""
+    band-pass, centring (a chain without a high-pass is centred; ``make_chain``) and coder:
+    name → (samples, events, channels). The chain's own stages (``Band.chain`` after its g
+    conversion and alignment), run in order."""
     out: dict[str, list] = {"band_pass": [], "centred": [], "coded": []}
     for band in bank.bands.values():
+        stages = dict(band.chain(rate_hz, adc_bits, full_scale_g).steps[2:])
         y = x
-        for name, step in band.chain(rate_hz, adc_bits, full_scale_g).steps[2:]:
-            if name == "centre":          # the filters before it make the band-pass
-                out["band_pass"].append(y)
-            y = step.fit(y).transform(y)
-            if name == "centre":
-                out["centred"].append(y)
-            elif name == "coder":
-                out["coded"].append(y)
+        for name in ("lowpass", "highpass"):
+            if name in stages:
+                y = stages[name].fit(y).transform(y)
+        out["band_pass"].append(y)
+        if "centre" in stages:
+            y = stages["centre"].fit(y).transform(y)
+        out["centred"].append(y)
+        out["coded"].append(stages["coder"].fit(y).transform(y))
     return {k: np.stack(v, axis=2) for k, v in out.items()}
 
 
