@@ -95,16 +95,22 @@ def test_a_host_stall_longer_than_the_no_data_timeout_loses_nothing(tmp_path):
     link = PtyLink(tmp_path / "tty")
     recorder = start_record(link.path, tmp_path / "rec", "--no-data-timeout", 1)
     box = {}
-    writer = threading.Thread(target=lambda: box.update(log=emulator.run(link, peer_timeout_s=30)),
-                              daemon=True)
+
+    def write():
+        try:
+            box["log"] = emulator.run(link, peer_timeout_s=30)
+        except BaseException as exc:      # reported below, not lost with the thread
+            box["error"] = exc
+
+    writer = threading.Thread(target=write, daemon=True)
     try:
         writer.start()
         time.sleep(1.5)
         os.kill(recorder.pid, signal.SIGSTOP)
         time.sleep(3.0)
         os.kill(recorder.pid, signal.SIGCONT)
-        writer.join(60)
-        assert "log" in box, "the emulator did not finish"
+        writer.join(120)
+        assert "log" in box, f"the emulator did not finish: {box.get('error', 'still writing')!r}"
         link.drain()
         assert recorder.poll() is None, recorder.communicate()[1]
         status, err = finish_record(recorder)
