@@ -363,10 +363,10 @@ class EventSweep:
 
     def features(self, data) -> SpikeFeatures:
         """The store's results (event × neuron) as ``SpikeFeatures``."""
-        arrays = self.bank.arrays()
         n_bins = len(self.bank.bin_edges_s) + 1
         steps = self.neuron_steps
-        names = np.concatenate([[name] * a.n_neurons for name, a in arrays.items()])
+        names = np.concatenate([[name] * a.n_neurons
+                                for name, a in zip(self.bank.bands, self.arrays)])
         return SpikeFeatures(
             data["count"].values.astype(np.int64), data["latency_s"].values,
             data["span_s"].values, self.bank.neuron_hz, names,

@@ -41,6 +41,7 @@ from .search import (
     bank_of,
     check_unseen,
     neuron_steps_per_event,
+    most_accurate,
     refine,
     run_search,
     start_params,
@@ -129,8 +130,7 @@ def front_of(study, budget_steps: float, limit: int) -> list:
     """The Pareto front's trials within the cost budget, most accurate first, at most
     ``limit``; the starting bank (trial 0) when none is within it."""
     done = [t for t in study.trials if t.state.name == "COMPLETE"]
-    front = sorted((t for t in study.best_trials if t.values[1] <= budget_steps),
-                   key=lambda t: (-t.values[0], t.values[1], t.number))
+    front = most_accurate(t for t in study.best_trials if t.values[1] <= budget_steps)
     return front[:limit] or done[:1]
 
 

@@ -177,6 +177,11 @@ def inner_accuracy(X, y, repetition, search, evaluation) -> list[float]:
     return out
 
 
+def most_accurate(trials) -> list:
+    """``trials`` by their accuracy on the tuning contacts, the cheaper first on a tie."""
+    return sorted(trials, key=lambda t: (-t.values[0], t.values[1], t.number))
+
+
 def contact_labels(data) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A bench data set's counts, material labels (strings) and material indices."""
     labels = np.asarray(data["material"].values.astype(str))
@@ -207,9 +212,8 @@ def refine(study, parts: Parts, tuning, refining, budget_steps: float, scored: S
     scores only the banks it has not."""
     done = {int(k): v for k, v in json.loads(path.read_text()).items()} \
         if path.is_file() else {}
-    trials = sorted((t for t in study.trials if t.state.name == "COMPLETE"
-                     and t.values[1] <= budget_steps),
-                    key=lambda t: (-t.values[0], t.values[1], t.number))
+    trials = most_accurate(t for t in study.trials if t.state.name == "COMPLETE"
+                           and t.values[1] <= budget_steps)
     counts, labels, _ = contact_labels(tuning)
     attrs = recording_attrs(tuning)
     start = start_params(parts.bank)
