@@ -309,22 +309,22 @@ def _spikes(binned: np.ndarray, band) -> xr.Dataset:
 
 
 def test_the_distance_read_out_rows_are_the_low_bands_binned_counts_only():
-    from snn_antenna.studies.bank_tuning.run import distance_matrix
+    from snn_antenna.readout.bank_design import distance_rows
 
     rng = np.random.default_rng(2)
     band = np.array(["ch00", "low", "ch01", "low", "low"])
     binned = rng.integers(0, 9, (6, 5, 4))
-    rows = distance_matrix(_spikes(binned, band), np.arange(6), "spiking_low_peak_bins", None)
+    rows = distance_rows(_spikes(binned, band), np.arange(6), "spiking_low_peak_bins", None)
     assert np.array_equal(rows, binned[:, [1, 3, 4]].reshape(6, -1))   # every bin, early too
     loud_channels = binned.copy()
     loud_channels[:, [0, 2]] += 50                  # the channels' code: not read
-    assert np.array_equal(rows, distance_matrix(_spikes(loud_channels, band), np.arange(6),
+    assert np.array_equal(rows, distance_rows(_spikes(loud_channels, band), np.arange(6),
                                                 "spiking_low_peak_bins", None))
     material = rng.normal(size=(6, 3)).astype(np.float32)
-    assert distance_matrix(_spikes(binned, band), np.arange(6), "spiking_bank_rows",
+    assert distance_rows(_spikes(binned, band), np.arange(6), "spiking_bank_rows",
                            material) is material
     with pytest.raises(SpecError) as refused:        # a bank without a low band
-        distance_matrix(_spikes(binned, ["ch00"] * 5), np.arange(6),
+        distance_rows(_spikes(binned, ["ch00"] * 5), np.arange(6),
                         "spiking_low_peak_bins", None)
     assert refused.value.field == "band"
 
@@ -399,3 +399,58 @@ def test_the_low_band_summary_weighs_its_steps_against_the_channels_and_sees_it_
     assert low["contacts_with_a_spike"] == 0.5                 # the channels' spikes apart
     assert low["resonators_firing_per_contact"] == 0.75
     assert low_band_summary(spikes, np.arange(4), _bank(), 2000.0) == {"resonators": 0}
+
+
+def test_the_chosen_bank_file_places_the_trials_bank_again_from_the_same_contacts(tmp_path):
+    """The study writes the chosen trial as its design, point and placement; the file, read
+    back as a study includes it, places the very bank the study scored (every band's fields),
+    and a point that lost a key is refused naming the keys it needs."""
+    from snn_antenna.readout.bank_design import ChosenBank, bank_of, start_params, write_chosen
+    from snn_antenna.studies.bank_tuning.plan import BankPlan, Parts
+    from snn_antenna.studies.bank_tuning.run import chosen_of
+
+    plan = BankPlan(tuning={"n_resonators": 2, "per_channel": 1, "max_channels": 2,
+                            "coder": "analog", "coder_amplitude": 1.0,
+                            "coder_options": {"gain": 150.0}}, low_resonators=2,
+                    distance_readout="spiking_low_peak_bins")
+    counts = np.concatenate([_tones(150.0, 4), _tones(300.0, 4)])
+    labels = np.array(["a"] * 4 + ["b"] * 4)
+    attrs = (2000.0, 16, 10.0)
+    point = {**start_params(plan), "gain_levels": 3, "gain_ratio": 4.0, "b": 0.27,
+             "filter_order": 6}
+    scored = bank_of(point, plan, counts, labels, attrs)
+    iv = {"mean": 0.9, "low": 0.85, "high": 0.95, "n": 5}
+    summary = {"events": 40, "seeds": [0, 1], "fft_mlp_accuracy": iv,
+               "front": [{"trial": 7, "resonators": scored.n_neurons, "channels": 2,
+                          "neuron_steps_per_event": 1e5, "search_accuracy": 0.8,
+                          "refine_accuracy": None, "accuracy": iv,
+                          "accuracy_to_fft_mlp": {**iv, "low": None}}]}
+    parts = Parts(None, None, None, plan, SearchPlan(seed_offset=1000, repetitions=4))
+    write_chosen(tmp_path / "chosen_bank.toml", chosen_of(parts, point, 7, summary), "a bank")
+    (tmp_path / "study.toml").write_text('chosen_bank = "chosen_bank.toml"\n')
+    table = specs.load(tmp_path / "study.toml")["chosen_bank"]
+    chosen = ChosenBank(**table)
+    assert chosen.trial == 7 and chosen.placement == {"seed_offset": 1000, "repetitions": 4}
+    assert chosen.measured["front"][0]["accuracy_to_fft_mlp"] == {"mean": 0.9, "high": 0.95,
+                                                                  "n": 5}
+    again = chosen.bank(counts, labels, attrs)
+    assert again == scored and again.n_neurons == 3 * 2 + 2
+    with pytest.raises(SpecError) as refused:
+        ChosenBank(**{**table, "point": {k: v for k, v in table["point"].items()
+                                         if k != "gain_ratio"}})
+    assert refused.value.field == "point" and "gain_ratio" in refused.value.accepted
+
+
+def test_the_baseline_comparison_places_the_chosen_bank_on_the_bank_tuning_contacts():
+    """The comparison's placement contacts for the shipped chosen bank are the bank-tuning
+    study's tuning contacts (same bench spec, seed and repetitions), never its evaluated
+    ones."""
+    from snn_antenna.studies import runner
+    from snn_antenna.studies.baseline_comparison.chosen import placement_spec
+
+    tuning = runner("bank_tuning").plan(specs.load(ROOT / "studies" / "bank_tuning.toml"))
+    comparison = runner("baseline_comparison").plan(
+        specs.load(ROOT / "studies" / "baseline_comparison.toml"))
+    spec = placement_spec(comparison.parts)
+    assert spec.key() == tuning.parts.tuning_bench().key()
+    assert spec.seed != comparison.parts.bench.seed

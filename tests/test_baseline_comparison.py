@@ -32,6 +32,13 @@ TINY = ["stimulus.materials=['wood','aluminium','brass']",
         "spiking.tuned.duration_s=0.3", "spiking.tuned.bin_edges_s=[0.1,0.2]",
         "spiking.tuned.coder_sizes=[4]", "spiking.tuned.cost_repeats=1"]
 
+# The shipped chosen bank at a few resonators (its design and point otherwise), on numpy
+CHOSEN_SMALL = ["chosen_bank.placement.repetitions=2", "chosen_bank.point.channels=2",
+                "chosen_bank.point.per_channel=1", "chosen_bank.point.gain_levels=1",
+                "chosen_bank.point.low_resonators=4", "chosen_bank.design.target=numpy",
+                "chosen_bank.design.duration_s=0.3", "chosen_bank.design.bin_edges_s=[0.1,0.2]"]
+TINY += CHOSEN_SMALL
+
 
 @pytest.fixture(scope="module")
 def fft_run(tmp_path_factory):
@@ -39,9 +46,51 @@ def fft_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("baseline_fft")
     spec = specs.load(SPEC, [o for o in TINY if not o.startswith("spiking.")]
                       + [f"stimulus.cache_dir={out / 'cache'}"])
+    del spec["spiking"], spec["chosen_bank"]
+    summary = study.run(study.plan(spec), out / "report", log=lambda *_: None)
+    return out / "report", summary
+
+
+@pytest.fixture(scope="module")
+def chosen_run(tmp_path_factory):
+    """The FFT half of the study with the chosen bank beside it."""
+    out = tmp_path_factory.mktemp("baseline_chosen")
+    spec = specs.load(SPEC, [o for o in TINY if not o.startswith("spiking.")]
+                      + [f"stimulus.cache_dir={out / 'cache'}"])
     del spec["spiking"]
     summary = study.run(study.plan(spec), out / "report", log=lambda *_: None)
     return out / "report", summary
+
+
+def test_the_chosen_bank_is_scored_beside_the_fft_on_the_same_splits(chosen_run):
+    """The chosen bank's accuracy and distance, their ratio and difference to the FFT
+    pipeline's, are the ones its predictions give split by split; placed on contacts of
+    another seed; its section, table and figure are in the report."""
+    out, summary = chosen_run
+    c = summary["chosen_bank"]
+    preds = json.loads((out / "predictions.json").read_text())
+
+    def per_split(name, score):
+        return np.array([score(np.array(f["true"]), np.array(f["predicted"]))
+                         for f in preds["folds"][name]])
+    accuracy = lambda t, p: np.mean(t == p)                       # noqa: E731
+    rmse = lambda t, p: 10 * np.sqrt(np.mean((t - p) ** 2))       # noqa: E731 (cm -> mm)
+    acc = per_split("spiking_chosen", accuracy)
+    fft = per_split("mlp_spectrum_material", accuracy)
+    assert c["accuracy"]["mean"] == pytest.approx(acc.mean())
+    assert c["accuracy_to_fft_mlp"]["mean"] == pytest.approx(np.mean(acc / fft))
+    assert c["accuracy_minus_fft_mlp"]["mean"] == pytest.approx(np.mean(acc - fft))
+    d = per_split("spiking_chosen_distance", rmse)
+    d_fft = per_split("mlp_spectrum", rmse)
+    assert c["distance_rmse_mm"]["mean"] == pytest.approx(d.mean(), rel=1e-6)
+    assert c["distance_rmse_minus_fft_mlp"]["mean"] == pytest.approx(np.mean(d - d_fft),
+                                                                       rel=1e-6)
+    assert c["placement"]["seed"] != summary["provenance"]["spec"]["seed"]
+    assert c["resonators"] == 2 + 4 and c["cost"]["ratio_to_fft"] > 0
+    assert "spiking_chosen" in summary["cost_us_per_event"]
+    page = (out / "report.html").read_text()
+    assert "The chosen bank beside the FFT" in page and 'alt="chosen_bank_on_spectra"' in page
+    assert (out / "chosen_bank_on_spectra.png").is_file()
 
 
 @pytest.fixture(params=["fft_run", pytest.param("tiny_run", marks=pytest.mark.slow)])

@@ -78,6 +78,11 @@ class Case:
     skip: tuple[str, ...] = ()       # fields that take an object built elsewhere
 
 
+def _start_point() -> dict:
+    from snn_antenna.readout.bank_design import BankDesign, start_params
+    return start_params(BankDesign())
+
+
 CONFIGURED: dict[str, Case] = {
     # sources and the signals they make
     "snn_antenna.core.signals.Recording": Case(lambda: {"samples": _signal(), "rate_hz": 1e3}),
@@ -114,6 +119,8 @@ CONFIGURED: dict[str, Case] = {
     "snn_antenna.networks.gate.GateTraining": Case(),
     # read-outs
     "snn_antenna.readout.band_tuning.Tuning": Case(),
+    "snn_antenna.readout.bank_design.BankDesign": Case(),
+    "snn_antenna.readout.bank_design.ChosenBank": Case(lambda: {"point": _start_point()}),
     "snn_antenna.readout.baselines.NMFFilterBank": Case(
         make=lambda cls, kw: cls(**kw).fit(np.abs(_signal(20, 12)))),
     "snn_antenna.readout.baselines.Mlp": Case(),
@@ -455,6 +462,9 @@ OUT_OF_RANGE = [
     ("readout.contacts.EpisodeTracker", None, "neuron_hz", [float("nan"), 8.0]),
     ("readout.spiking_decoders.SpikingPlan", {}, "workers", -1),
     ("studies.bank_tuning.plan.BankPlan", {}, "readout", "spiking_tuned_loudness"),
+    ("readout.bank_design.BankDesign", {}, "low_resonators", -1),
+    ("readout.bank_design.ChosenBank", None, "placement", {"seed_offset": 0,
+                                                          "repetitions": 10}),
     ("studies.bank_tuning.plan.SearchPlan", {}, "trials", 0),
     ("sources.antenna.Material", None, "poisson", 0.7),
     ("sources.stimuli.Contact", {"t_s": 1.0, "distance_cm": 10.0}, "material", "granite"),

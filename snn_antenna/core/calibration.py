@@ -78,6 +78,19 @@ def resolve(tree, where: str = ""):
     return tree
 
 
+def referenced(tree):
+    """``tree`` with every number equal to a table value written as its ``"calibrated:NAME"``
+    text (``resolve``'s inverse), so a spec a run writes names the constants it used rather
+    than copying them."""
+    if isinstance(tree, dict):
+        return {k: referenced(v) for k, v in tree.items()}
+    if isinstance(tree, list):
+        return [referenced(v) for v in tree]
+    if isinstance(tree, float):
+        return next((REFERENCE + c.name for c in TABLE.values() if c.value == tree), tree)
+    return tree
+
+
 def _constant(name: str) -> Constant:
     try:
         return TABLE[name]

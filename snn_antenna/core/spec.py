@@ -1,6 +1,6 @@
 """Declarative specs: TOML files that name a study, its network, stimulus and settings.
 
-A study spec (``studies/*.toml``) may include a network or stimulus spec by path
+A study spec (``studies/*.toml``) may include a network, stimulus or chosen-bank spec by path
 (``network = "../networks/resonator_array.toml"``, resolved relative to the including file);
 the included table takes that key's place. ``--set key.sub=value`` overrides any field after
 includes (values are read as TOML, so ``--set network.band_hz=[5,40]`` works; a bare word is
@@ -26,7 +26,7 @@ from .bounds import beyond_limits, declared_types, describe_type, nested, out_pa
 from .bounds import seed as checked_seed
 from .errors import NumericalInstabilityError, SpecError, shown
 
-INCLUDABLE = ("network", "stimulus")
+INCLUDABLE = ("network", "stimulus", "chosen_bank")
 
 
 def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -> dict:
@@ -35,13 +35,13 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
     path = Path(out_path("spec", path))
     if not path.is_file():
         raise SpecError("spec", str(path), "the path of an existing TOML spec file")
-    spec = _read(path)
+    spec = read_table(path)
     for key in INCLUDABLE:
         if isinstance(spec.get(key), str):
             included = (path.parent / out_path(key, spec[key])).resolve()
             if not included.is_file():
                 raise SpecError(key, spec[key], f"a TOML file path relative to {path.parent}")
-            spec[key] = _read(included, key)
+            spec[key] = read_table(included, key)
     quick_overrides = spec.pop("quick", {})
     if quick:
         for dotted, value in _flatten(quick_overrides):
@@ -53,7 +53,8 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
     return spec
 
 
-def _read(path: Path, field: str = "spec") -> dict:
+def read_table(path: Path, field: str = "spec") -> dict:
+    """A TOML file's table, refused by ``field``'s name when it is not TOML."""
     try:
         with open(path, "rb") as f:
             table = tomllib.load(f)

@@ -28,6 +28,8 @@ from ..readout.spiking_decoders import (
 
 LABELS = READOUTS      # the read-outs' names, shared with the results page
 FULL_SPECTRUM = "mlp_spectrum_material"    # the material read-out the others are held to
+# the chosen bank's material and distance read-outs (studies/baseline_comparison/chosen.py)
+CHOSEN = ("spiking_chosen", "spiking_chosen_distance")
 
 
 def label(name: str) -> str:
@@ -68,6 +70,9 @@ class Comparison:
     designs: list = field(default_factory=list)
     tuned: dict | None = None      # the tuned bank: channels, calibration, curve
     coders: dict | None = None     # the coders compared: their settings, sizes and costs
+    chosen: dict | None = None     # the chosen bank (bank tuning's): placement, point, costs
+    # the chosen bank's SpikingBank and the contacts that placed it (its figure), not stored
+    chosen_bank: tuple | None = None
 
     @property
     def materials(self) -> list[str]:
@@ -102,6 +107,28 @@ class Comparison:
         }
         if self.spiking is not None:
             out["spiking"] = self._spiking_summary(dist, mat)
+        if self.chosen is not None:
+            out["chosen_bank"] = {**self.chosen, **self.against_fft_paired(CHOSEN)}
+        return out
+
+    def against_fft_paired(self, names: tuple[str, str]) -> dict:
+        """A material and a distance read-out against the FFT's on the same splits (paired
+        by split: the accuracy's ratio and difference, the rmse's difference; each with its
+        interval, n and verdict)."""
+        material, distance = (self.results.get(n) for n in names)
+        fft, fft_distance = self.results.get(FULL_SPECTRUM), self.results.get("mlp_spectrum")
+        out = {}
+        if material is not None and fft is not None:
+            acc, ref = material.values("accuracy"), fft.values("accuracy")
+            out["accuracy"] = _interval(acc, (0.0, 1.0))
+            out["fft_mlp_accuracy"] = _interval(ref, (0.0, 1.0))
+            out["accuracy_to_fft_mlp"] = _interval(acc / ref)
+            out["accuracy_minus_fft_mlp"] = _difference(acc, ref)
+        if distance is not None and fft_distance is not None:
+            rmse, ref = distance.values("rmse_mm"), fft_distance.values("rmse_mm")
+            out["distance_rmse_mm"] = _interval(rmse, (0.0, np.inf))
+            out["fft_mlp_distance_rmse_mm"] = _interval(ref, (0.0, np.inf))
+            out["distance_rmse_minus_fft_mlp"] = _difference(rmse, ref)
         return out
 
     def _spiking_summary(self, dist: dict, mat: dict) -> dict:
@@ -111,8 +138,9 @@ class Comparison:
             "material_accuracy": {k: _mean_sd(v, "accuracy") for k, v in mat.items()
                                   if k.startswith("spiking_")},
             "against_fft": self.against_fft(),
-            # the default read-out's (the tuned bank's) when there is one
-            "cost": self.costs.get("spiking_tuned") or self.costs.get("spiking"),
+            # the default read-out's (the chosen bank's, else the tuned bank's) when there is one
+            "cost": (self.costs.get(CHOSEN[0]) or self.costs.get("spiking_tuned")
+                     or self.costs.get("spiking")),
             "cost_hand_set_bank": self.costs.get("spiking"), **self.spiking,
             "designs": list(self.designs), "tuned": self.tuned,
             "coders": self.coder_table()}
@@ -167,6 +195,8 @@ class Comparison:
             kind = "spiking" if k.startswith("spiking_") else "fft"
             if k in TUNED_READOUTS:      # its own bank, charged whole
                 kind = "spiking_tuned"
+            if k in CHOSEN:              # the chosen bank, charged whole
+                kind = CHOSEN[0]
             costs = self.costs
             if k.startswith("coder_"):   # a compared coder's bank, charged whole
                 costs, kind = (self.coders or {}).get("costs", {}), k.rsplit("_", 1)[0]

@@ -9,6 +9,8 @@ import numpy as np
 from .comparison import cost_items, label
 from .confusion import confusion
 from .signal import PAPER_SIGNAL
+from ..readout.band_tuning import log_spectra
+from ..readout.spiking import recording_attrs
 from ..readout.spiking_decoders import TRAINING_FREE
 from ..report.figures import legend_outside
 
@@ -230,4 +232,28 @@ def tuned_curve(summary):
     cost.set_ylim(bottom=0)
     legend_outside(ax)
     legend_outside(cost)
+    return fig
+
+
+def bank_on_spectra(data, bank, max_hz: float):
+    """Mean log amplitude spectrum of ``data``'s contacts per material over the window a
+    bank reads (its ``duration_s``), up to ``max_hz``; shaded: the bank's channels; ticks:
+    its resonators' preferred frequencies."""
+    plt = _plt()
+    attrs = recording_attrs(data)
+    n = int(round(bank.duration_s * attrs[0]))
+    freq, spectra = log_spectra(data["counts"].values[:, :n], *attrs)
+    labels = data["material"].values.astype(str)
+    fig, ax = plt.subplots(figsize=(8, 4))
+    keep = freq <= max_hz
+    for i, m in enumerate(sorted(set(labels))):
+        ax.plot(freq[keep], spectra[labels == m][:, keep].mean(axis=0), lw=0.8,
+                color=f"C{i}", label=m)
+    for b in bank.bands.values():
+        ax.axvspan(b.highpass_hz or 0.0, b.lowpass_hz, color="0.85", zorder=0)
+    lo = ax.get_ylim()[0]
+    ax.plot(bank.neuron_hz, np.full(len(bank.neuron_hz), lo), "|", color="k", ms=14)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("log amplitude")
+    ax.legend(fontsize=7, ncol=4)
     return fig

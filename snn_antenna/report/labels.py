@@ -30,6 +30,8 @@ READOUTS = {
     "spiking_tuned_decay": "tuned bank: rate + decay",
     "spiking_tuned_all": "tuned bank: rate, latency, span, bins",
     "spiking_tuned_late": "tuned bank: rate in the late time bins",
+    "spiking_chosen": "chosen bank (bank tuning): its read-out",
+    "spiking_chosen_distance": "chosen bank (bank tuning): its low band",
 }
 
 #: the stages of the input chain whose ceilings are measured (``evaluation.stage_ceilings``)

@@ -12,14 +12,8 @@ from ...engine import rates
 from ...engine.cost import bench_seconds, max_workers, stages_estimate
 from ...evaluation import crossval as cv
 from ...readout import events
-from ...readout.band_tuning import Tuning
-from ...readout.spiking import TARGETS
-from ...readout.spiking_decoders import (
-    DISTANCE_READOUTS,
-    LOW_BAND_READOUTS,
-    SCALINGS,
-    TUNED_READOUTS,
-)
+from ...readout.bank_design import BankDesign
+from ...readout.spiking_decoders import LOW_BAND_READOUTS, SCALINGS, TUNED_READOUTS
 from ...sources.source import BenchSet
 from ..contract import COMMON, Plan
 from ..sections import bench_section, evaluation_section, events_section
@@ -59,68 +53,21 @@ MAX_VALUE = {"filter_order": 8}
 
 
 @dataclass
-class BankPlan:
-    """``[bank]``: the bank the search starts from (``tuning``: ``band_tuning.Tuning``
-    fields; ``b``; ``readout``, a key of ``TUNED_READOUTS``) and how every bank runs.
-
-    ``scaling``: how the read-out sees the spike counts (``SCALINGS``); ``filter_order``:
-    each channel's Butterworth order.
-    ``low_resonators`` resonators (0: none) read the antenna's low mode in a band of their
-    own, spread in log over ``low_band_hz`` behind a ``low_lowpass_hz`` low-pass: the
-    channels are placed where the *material* separates and never reach the low mode, whose
-    frequency is where the contact's distance lives. The low band has its own b
-    (``low_b``) and square-wave coder (``low_coder_amplitude`` above ``low_threshold_g``):
-    at the channels' b a low resonator, once kicked, keeps firing near its own frequency
-    whatever drives it; a little below, it fires only while the low mode drives it near its
-    own, so which resonators fire in which time bin traces the mode's frequency.
-    ``distance_readout`` (``spiking_decoders.DISTANCE_READOUTS``) reads the distance."""
-    tuning: dict = field(default_factory=dict)
-    b: float = 0.26
-    readout: str = "spiking_tuned_bins"
-    low_resonators: int = 0
-    scaling: str = "counts"
-    filter_order: int = 8
-    low_band_hz: tuple = (7.0, 56.0)
-    low_lowpass_hz: float = 60.0
-    low_b: float = 0.26
-    low_coder_amplitude: float = 0.15
-    low_threshold_g: float = 0.2
-    distance_readout: str = "spiking_bank_rows"
-    duration_s: float = 0.5
-    bin_edges_s: tuple = (0.075, 0.1, 0.15, 0.2, 0.3, 0.4)
-    target: str = "standalone"
-    batch_events: int = 400
-    workers: int = 1             # Dask worker processes (0: one per core; 1: this process)
+class BankPlan(BankDesign):
+    """``[bank]``: the bank the search starts from (``bank_design.BankDesign``: its
+    channels' tuning, b, read-out and low band) and how the study runs banks: on
+    ``workers`` Dask worker processes (0: one per core; 1: this process), their cost per
+    contact the best of ``cost_repeats`` runs on ``cost_sample_events`` contacts."""
+    workers: int = 1
     cost_sample_events: int = 200
     cost_repeats: int = 3
 
     def __post_init__(self):
-        bounds.declared(self)
-        with specs.section("tuning"):
-            self.base = Tuning(**specs.check_section({"tuning": self.tuning}, "tuning", Tuning))
-        bounds.number("b", self.b, 0.0, 2.0, lo_open=True)
-        bounds.choice("readout", self.readout, tuple(TUNED_READOUTS))
-        bounds.choice("scaling", self.scaling, tuple(SCALINGS))
-        bounds.integer("filter_order", self.filter_order, 1, MAX_VALUE["filter_order"])
-        bounds.positive_seconds("duration_s", self.duration_s)
-        lo, hi = bounds.pair("low_band_hz", self.low_band_hz, strict=True, unit=" in Hz")
-        check(lo > 0, "low_band_hz", self.low_band_hz, "[low, high] in Hz, 0 < low < high")
-        bounds.number("low_lowpass_hz", self.low_lowpass_hz, hi, bounds.MAX_RATE_HZ,
-                      unit=" Hz")
-        bounds.number("low_b", self.low_b, 0.0, 2.0, lo_open=True)
-        bounds.number("low_coder_amplitude", self.low_coder_amplitude, 0.0, lo_open=True)
-        bounds.number("low_threshold_g", self.low_threshold_g, 0.0, unit=" g")
-        bounds.choice("distance_readout", self.distance_readout, tuple(DISTANCE_READOUTS))
-        bounds.choice("target", self.target, TARGETS)
-        for name, lo in (("batch_events", 1), ("workers", 0), ("cost_sample_events", 2),
-                         ("cost_repeats", 1), ("low_resonators", 0)):
+        super().__post_init__()
+        for name, lo in (("workers", 0), ("cost_sample_events", 2), ("cost_repeats", 1)):
             value = getattr(self, name)
             check(isinstance(value, int) and not isinstance(value, bool) and value >= lo,
                   name, value, f"an integer >= {lo}")
-        check(self.low_resonators >= 1 or self.distance_readout not in LOW_BAND_READOUTS,
-              "low_resonators", self.low_resonators,
-              f"an integer >= 1: distance_readout '{self.distance_readout}' reads the low "
-              "band")
 
 
 @dataclass

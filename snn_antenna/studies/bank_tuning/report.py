@@ -2,10 +2,7 @@
 bench set beside the FFT-MLP, the chosen bank and where its resonators sit on the spectra."""
 from __future__ import annotations
 
-import numpy as np
-
-from ...readout.band_tuning import log_spectra
-from ...readout.spiking import recording_attrs
+from ...evaluation.comparison_figures import bank_on_spectra
 from ...report.page import Predicted, Report
 
 QUICK_NOTE = ("Quick profile: a few trials on a few hundred tuning contacts, the front scored "
@@ -93,7 +90,7 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
     report.figure(_front_figure(study, summary), "pareto_front",
                   "Every trial: accuracy on the tuning contacts' splits against resonator-"
                   "steps per contact; the Pareto front in colour, the starting bank ringed.")
-    report.figure(_spectra_figure(tuning, bank, parts), "resonators_on_spectra",
+    report.figure(bank_on_spectra(tuning, bank, parts.processor.max_hz), "resonators_on_spectra",
                   "Mean log amplitude spectrum of the tuning contacts per material (the "
                   "window each bank reads); shaded: the chosen bank's channels; ticks: its "
                   "resonators' preferred frequencies.")
@@ -114,26 +111,4 @@ def _front_figure(study, summary):
     ax.axvline(summary["budget_neuron_steps_per_event"], color="k", ls=":", lw=1)
     ax.set_xlabel("resonator-steps per contact")
     ax.set_ylabel("accuracy on tuning contacts (%)")
-    return fig
-
-
-def _spectra_figure(tuning, bank, parts):
-    import matplotlib.pyplot as plt
-
-    attrs = recording_attrs(tuning)
-    n = int(round(bank.duration_s * attrs[0]))
-    freq, spectra = log_spectra(tuning["counts"].values[:, :n], *attrs)
-    labels = tuning["material"].values.astype(str)
-    fig, ax = plt.subplots(figsize=(8, 4))
-    keep = freq <= parts.processor.max_hz
-    for i, m in enumerate(sorted(set(labels))):
-        ax.plot(freq[keep], spectra[labels == m][:, keep].mean(axis=0), lw=0.8,
-                color=f"C{i}", label=m)
-    for b in bank.bands.values():
-        ax.axvspan(b.highpass_hz or 0.0, b.lowpass_hz, color="0.85", zorder=0)
-    lo = ax.get_ylim()[0]
-    ax.plot(bank.neuron_hz, np.full(len(bank.neuron_hz), lo), "|", color="k", ms=14)
-    ax.set_xlabel("frequency (Hz)")
-    ax.set_ylabel("log amplitude")
-    ax.legend(fontsize=7, ncol=4)
     return fig

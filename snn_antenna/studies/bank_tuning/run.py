@@ -14,6 +14,7 @@ import xarray as xr
 
 from ...core import files
 from ...core.files import remove_entry
+from ...core.provenance import code_identity, git_commit
 from ...core.store import write_dataset
 from ...core.logfile import logged
 from ...engine.events import best_costs, cached_features
@@ -21,15 +22,9 @@ from ...engine.executor import executor
 from ...evaluation import crossval as cv
 from ...evaluation import signal as bench_signal
 from ...readout import baselines as bl
+from ...readout.bank_design import ChosenBank, distance_rows, material_rows, write_chosen
 from ...readout.spiking import recording_attrs
-from ...readout.spiking_decoders import (
-    DISTANCE_READOUTS,
-    code_rows,
-    codes_of,
-    distance_baseline,
-    low_band_rows,
-    mlp_baseline,
-)
+from ...readout.spiking_decoders import DISTANCE_READOUTS, distance_baseline, mlp_baseline
 from ...report import stats
 from ...report.page import Report
 from ...sources import bench
@@ -48,27 +43,10 @@ from .search import (
 )
 
 STORAGE = "trials.journal"
+CHOSEN = "chosen_bank.toml"
 SCORED = "scored_contacts.json"
 REFINED = "refined_trials.json"
 RESULTS = "results.zarr"
-
-
-def spikes_matrix(spikes: xr.Dataset, ids, readout: str, scaling: str) -> np.ndarray:
-    """A read-out's input rows (``spiking_decoders.code_rows``) from a bank's stored spikes."""
-    sp = spikes.sel(event=ids)
-    codes = codes_of(sp["counts"].values, sp["latency_s"].values, sp["span_s"].values,
-                     sp["binned_counts"].values, sp["bin_start_s"].values)
-    return code_rows(codes, readout, scaling)
-
-
-def distance_matrix(spikes: xr.Dataset, ids, readout: str, material_rows: np.ndarray
-                    ) -> np.ndarray:
-    """The distance read-out's input rows (``DISTANCE_READOUTS``): the low band's counts in
-    every time bin, or the bank's material read-out rows ``material_rows``."""
-    if readout == "spiking_bank_rows":
-        return material_rows
-    sp = spikes.sel(event=ids)
-    return low_band_rows(sp["binned_counts"].values, sp["band"].values)
 
 
 def low_band_summary(spikes: xr.Dataset, ids, bank, rate_hz: float) -> dict:
@@ -167,6 +145,36 @@ def trials_dataset(study, space: dict) -> xr.Dataset:
     return xr.Dataset(data, coords={"trial": [t.number for t in trials]})
 
 
+CHOSEN_HEADER = """The resonator bank the bank-tuning study chose: its design, the trial's point of
+the search space and the contacts that placed its channels (readout.bank_design.ChosenBank).
+Written by `snn-antenna run studies/bank_tuning.toml`; a study includes it by path
+(chosen_bank = "../networks/chosen_bank.toml") and places the same channels from the same
+contacts. `measured` is that run's record: its front, scored on the bench set's splits."""
+
+
+def chosen_of(parts: Parts, point: dict, trial: int, summary: dict) -> ChosenBank:
+    """The chosen bank as its file holds it: the starting bank's design, the trial's point,
+    the tuning contacts that placed its channels and what this run measured on the front."""
+    def shown(iv: dict) -> dict:
+        return {k: iv[k] for k in ("mean", "low", "high", "n") if iv.get(k) is not None}
+    front = [{"trial": r["trial"], "resonators": r["resonators"], "channels": r["channels"],
+              "neuron_steps_per_event": r["neuron_steps_per_event"],
+              "search_accuracy": r["search_accuracy"],
+              **({} if r["refine_accuracy"] is None
+                 else {"refine_accuracy": r["refine_accuracy"]}),
+              "accuracy": shown(r["accuracy"]),
+              "accuracy_to_fft_mlp": shown(r["accuracy_to_fft_mlp"])}
+             for r in summary["front"]]
+    return ChosenBank(
+        design=parts.bank.fields(), point=point, trial=int(trial),
+        placement={"seed_offset": parts.search.seed_offset,
+                   "repetitions": parts.search.repetitions},
+        measured={"commit": git_commit() or "unknown",
+                  "code_sha256": code_identity()["code_sha256"],
+                  "events": summary["events"], "seeds": summary["seeds"],
+                  "fft_mlp_accuracy": shown(summary["fft_mlp_accuracy"]), "front": front})
+
+
 @logged
 def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     parts: Parts = plan.parts
@@ -215,23 +223,23 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         log(f"[4/5] {len(front)} bank(s) within {budget:.0f} resonator-steps "
             f"per contact, on {len(ids)} evaluated contacts, "
             f"{len(parts.evaluation.seeds)} split(s) by repetition")
-        banks, chosen, distance_rows, low_band = {}, [], None, {}
+        banks, chosen, distance_X, low_band = {}, [], None, {}
         for t in front:
             params = {**start, **t.params}
             b = bank_of(params, parts.bank, counts, labels, attrs)
             name = f"trial_{t.number}"
             banks[name] = b
             spikes = cached_features(data, b, parts.bench, log, options.fresh, client)
-            X = spikes_matrix(spikes, ids, params["readout"], params["scaling"])
+            X = material_rows(spikes, ids, params["readout"], params["scaling"])
             feats[name] = (("event", f"{name}_feature"), X)
             chosen.append(mlp_baseline(name, "material", name, parts.evaluation,
                                        f"MLP 51 on trial {t.number}'s bank"))
-            if distance_rows is None:      # the chosen bank (the front's first)
-                distance_rows = distance_matrix(spikes, ids, parts.bank.distance_readout, X)
+            if distance_X is None:      # the chosen bank (the front's first)
+                distance_X = distance_rows(spikes, ids, parts.bank.distance_readout, X)
                 low_band = low_band_summary(spikes, ids, b, attrs[0])
         best = f"trial_{front[0].number}"
         distance_input = f"{best}_distance"
-        feats[distance_input] = (("event", f"{distance_input}_feature"), distance_rows)
+        feats[distance_input] = (("event", f"{distance_input}_feature"), distance_X)
         chosen.append(distance_baseline(distance_input, parts.bank.distance_readout,
                                         distance_input, parts.evaluation))
     fft = bl.material_baselines([], parts.evaluation.material_mlp,
@@ -279,7 +287,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
             "trial": front[0].number, "verdict": verdict,
             "distance_readout": {"name": parts.bank.distance_readout,
                                  "description": DISTANCE_READOUTS[parts.bank.distance_readout],
-                                 "inputs": int(distance_rows.shape[1])},
+                                 "inputs": int(distance_X.shape[1])},
             "low_band": low_band,
             "distance_rmse_mm": interval(rmse), "fft_mlp_distance_rmse_mm": interval(fft_rmse),
             "distance_rmse_minus_fft": interval(rmse - fft_rmse, None),
@@ -292,6 +300,8 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
                   "load_average": list(os.getloadavg())},
         "total_s": time.perf_counter() - t_start}
     write_dataset(trials_dataset(study, parts.search.space), out_dir / RESULTS)
+    write_chosen(out_dir / CHOSEN, chosen_of(parts, {**start, **front[0].params},
+                                             front[0].number, summary), CHOSEN_HEADER)
     report = Report(out_dir, "Bank tuning: a resonator bank searched for the material",
                     quick=options.quick, quick_note=QUICK_NOTE)
     write_report(report, summary, study, tuning, chosen_bank, parts)

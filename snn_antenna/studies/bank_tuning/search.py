@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,10 +32,10 @@ from ...core.errors import NumericalInstabilityError, SpecError
 from ...core.files import write_json
 from ...engine.events import run_bank
 from ...evaluation import crossval as cv
-from ...readout.band_tuning import coarsest_dt_ms, tune
-from ...readout.spiking import LOW_BAND, Band, SpikingBank, recording_attrs
+from ...readout.bank_design import bank_of, neuron_steps_per_event, start_params
+from ...readout.spiking import SpikingBank, recording_attrs
 from ...readout.spiking_decoders import code_rows, codes_of, mlp_baseline
-from .plan import SPACE_KEYS, BankPlan, Parts
+from .plan import SPACE_KEYS, Parts
 
 OBJECTIVES = ("accuracy", "neuron_steps_per_event")
 
@@ -73,24 +72,6 @@ def check_unseen(scored: Scored, evaluated_counts: np.ndarray) -> None:
                         "reported accuracy comes from contacts it never saw")
 
 
-def start_params(bank: BankPlan) -> dict:
-    """The starting bank as a point of the space (the search's first trial)."""
-    t = bank.base
-    return {"channels": t.n_channels,
-            "per_channel": t.resonators_per_channel // max(1, len(t.gains)),
-            "range_low_hz": float(t.range_hz[0]), "range_high_hz": float(t.range_hz[1]),
-            "quantile": float(t.quantile), "spread": float(t.spread), "b": float(bank.b),
-            "gain": float(np.sqrt(t.gains[0] * t.gains[-1]) if t.gains
-                          else t.coder_options.get("gain", 150.0)),
-            "gain_levels": max(1, len(t.gains)),
-            "gain_ratio": float((t.gains[-1] / t.gains[0]) ** (1 / (len(t.gains) - 1)))
-                          if len(t.gains) > 1 else 7.0,
-            "k_dt_factor": 1.0,
-            "coder_amplitude": float(t.coder_amplitude), "threshold_g": float(t.threshold_g),
-            "low_resonators": int(bank.low_resonators), "readout": bank.readout,
-            "scaling": bank.scaling, "filter_order": int(bank.filter_order)}
-
-
 def suggest(trial, space: dict) -> dict:
     """The trial's point: the space's keys suggested, the others left to the start."""
     params = {}
@@ -104,58 +85,6 @@ def suggest(trial, space: dict) -> dict:
             params[key] = trial.suggest_float(key, float(value[0]), float(value[1]),
                                               log=kind == "log")
     return params
-
-
-def bank_of(params: dict, bank: BankPlan, counts, labels, attrs) -> SpikingBank:
-    """The bank of a point of the space, its channels placed from ``counts`` and ``labels``
-    (tuning contacts)."""
-    t = bank.base
-    lo, hi = params["range_low_hz"], params["range_high_hz"]
-    if hi <= lo:
-        raise SpecError("range_high_hz", hi, f"above range_low_hz {lo:g} Hz")
-    options = dict(t.coder_options)
-    if t.coder == "analog":
-        options["gain"] = float(params["gain"])
-    levels = int(params["gain_levels"])
-    gains = tuple(options["gain"] * float(params["gain_ratio"]) ** (i - (levels - 1) / 2)
-                  for i in range(levels)) if levels > 1 else ()
-    per_channel = params["per_channel"] * levels
-    tuning = replace(t, n_resonators=params["channels"] * per_channel, gains=gains,
-                     max_k_dt=float(t.max_k_dt * params["k_dt_factor"]),
-                     per_channel=per_channel, max_channels=params["channels"],
-                     range_hz=(lo, hi), quantile=params["quantile"], spread=params["spread"],
-                     coder_amplitude=params["coder_amplitude"],
-                     threshold_g=params["threshold_g"], coder_options=options)
-    n_samples = int(round(bank.duration_s * attrs[0]))
-    bands = tune(counts[:, :n_samples], labels, *attrs, tuning)
-    order = int(params.get("filter_order", bank.filter_order))
-    bands = {k: replace(b, filter_order=order) for k, b in bands.items()}
-    bands = {k: replace(b, b=float(params["b"])) for k, b in bands.items()}
-    if params.get("low_resonators", 0) > 0:
-        bands["low"] = low_band(int(params["low_resonators"]), bank, tuning)
-    return SpikingBank(bands=bands, duration_s=bank.duration_s, target=bank.target,
-                       batch_events=bank.batch_events, bin_edges_s=bank.bin_edges_s)
-
-
-def low_band(n: int, bank: BankPlan, tuning) -> Band:
-    """``n`` resonators in log over ``bank.low_band_hz`` behind a low-pass (the antenna's
-    low mode, whose frequency carries the contact's distance), with the low band's own b and
-    square-wave coder (``BankPlan``), at the coarsest step the channels' k·dt allows
-    (``LOW_BAND``'s driven Hz per unit k)."""
-    lo, hi = (float(f) for f in bank.low_band_hz)
-    return Band(n_neurons=n, band_hz=(lo, hi), spacing="log", b=float(bank.low_b),
-                coder_amplitude=float(bank.low_coder_amplitude),
-                threshold_g=float(bank.low_threshold_g),
-                lowpass_hz=float(bank.low_lowpass_hz), highpass_hz=None,
-                hz_per_k=LOW_BAND.hz_per_k, method=tuning.method,
-                dt_ms=coarsest_dt_ms(hi, LOW_BAND.hz_per_k, tuning.max_k_dt),
-                filter_order=LOW_BAND.filter_order, coder="square")
-
-
-def neuron_steps_per_event(bank: SpikingBank, rate_hz: float) -> float:
-    """Resonator-steps a contact costs the bank: each channel's resonators × its steps."""
-    return float(sum(b.n_neurons * round(bank.duration_s * 1000.0 / (b.dt_ms or bank.dt_ms))
-                     for b in bank.bands.values()))
 
 
 def readout_matrix(spikes, readout: str, scaling: str, bin_edges_s) -> np.ndarray:

@@ -17,6 +17,7 @@ from ...evaluation import antenna_fit
 from ...evaluation import crossval as cv
 from ...networks.resonators import MIN_SAMPLES_PER_CYCLE
 from ...readout import events
+from ...readout.bank_design import ChosenBank
 from ...readout.spiking import SpikingBank
 from ...readout.spiking_decoders import (CODER_READOUTS, SPIKING_MLPS, SPIKING_SETS,
                                           TUNED_READOUTS, Design, SpikingPlan)
@@ -26,7 +27,7 @@ from ..sections import bench_section, evaluation_section, events_section
 
 # recorded repetitions that fit the lab's antenna when the spec names none (no tuned bank)
 RECORDED_CALIBRATION_REPETITIONS = 1
-SECTIONS = ("stimulus", "events", "evaluation", "spiking", "data")
+SECTIONS = ("stimulus", "events", "evaluation", "spiking", "chosen_bank", "data")
 OPTIONS = (*COMMON, "fresh", "scheduler", "data")
 
 
@@ -44,6 +45,8 @@ class Parts:
     calibration_repetitions: list[int] = field(default_factory=list)
     antenna: antenna_fit.FittedAntenna | None = None    # recorded data: fitted from its labels
     fitted: list[str] = field(default_factory=list)     # one line per spec value it replaced
+    # the bank-tuning study's chosen bank (``chosen_bank``), placed on generated contacts
+    chosen: ChosenBank | None = None
 
 
 def fit_to_rate(spec: dict, rate_hz: float) -> tuple[dict, list[str]]:
@@ -140,6 +143,22 @@ def _spiking_part(spec: dict, rate_hz: float) -> tuple:
         return (plan, *plan.build(rate_hz))
 
 
+def _chosen_part(spec: dict, recorded: bool) -> tuple[ChosenBank | None, list[str]]:
+    """The chosen bank (``chosen_bank``, checked), or None and the line that says why it is
+    left out: on recorded data, whose antenna is not the one its design was searched for
+    (its channels' range and gains are this project's rods'; the tuned bank of
+    ``[spiking.tuned]`` is placed on the lab's own calibration contacts instead)."""
+    if spec.get("chosen_bank") is None:
+        return None, []
+    with specs.section("chosen_bank"):
+        chosen = ChosenBank(**specs.check_section(spec, "chosen_bank", ChosenBank))
+    if recorded:
+        return None, ["left out: the chosen bank (chosen_bank), searched for this project's "
+                      "antenna and placed on contacts generated for it; the tuned bank "
+                      "([spiking.tuned]) is placed on the recorded calibration contacts"]
+    return chosen, []
+
+
 def plan(spec: dict) -> Plan:
     """Check the whole spec before any long work; build its parts. On recorded data the
     lab's antenna is fitted first, on the labels of the calibration repetitions
@@ -159,8 +178,10 @@ def plan(spec: dict) -> Plan:
         raise SpecError("evaluation.two_materials", list(evaluation.two_materials),
                         f"two of the {'recorded' if recorded else 'generated'} set's materials "
                         f"{list(bench_spec.materials)} for the two-material network")
+    chosen, why = _chosen_part(spec, recorded)
+    left_out += why
     parts = Parts(bench_spec, processor, evaluation, *_spiking_part(spec, bench_spec.rate_hz),
-                  calibration_repetitions=held, antenna=antenna, fitted=fitted)
+                  calibration_repetitions=held, antenna=antenna, fitted=fitted, chosen=chosen)
     check_splits(parts)
     # the fitted values first: --check prints them with what the rate leaves out
     return Plan("baseline_comparison", spec, parts, estimate, fitted + left_out)

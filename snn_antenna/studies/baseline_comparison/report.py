@@ -115,6 +115,7 @@ def _predicted(report: Report, cmp: Comparison, summary: dict) -> None:
         cm = confusion(results["mlp_spectrum_material"], len(cmp.materials))
         pred += [Predicted(r.quantity, r.value, r.unit, r.paper, SOURCE, r.interval, r.n,
                            r.note) for r in error_rates(cm, cmp.materials)]
+    pred += _chosen_predicted(summary)
     for name, row in (summary.get("spiking") or {}).get("against_fft", {}).items():
         pred.append(_measured(f"{len(cmp.materials)} materials, {label(name)}",
                               results[name].values("accuracy"),
@@ -149,8 +150,9 @@ def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> 
                 else spec.get("description", ""))
     cut = [line for line in summary.get("left_out", []) if not line.startswith("fitted:")]
     if cut:
-        report.table([{"what the data's rate cannot carry": line} for line in cut],
-                     f"Left out or clipped at the data's {summary['data']['rate_hz']:g} Hz")
+        report.table([{"left out or clipped": line} for line in cut],
+                     "Parts of the spec the data cannot carry (its rate: "
+                     f"{summary['data']['rate_hz']:g} Hz)")
     if recorded:
         _write_recorded(report, cmp, recorded)
     else:
@@ -203,6 +205,8 @@ def write_report(report: Report, spec: dict, summary: dict, cmp: Comparison) -> 
     _write_materials(report, summary, cmp)
     if "spiking" in summary:
         _write_spiking(report, summary)
+    if "chosen_bank" in summary:
+        _write_chosen(report, summary, cmp)
     report.figure(figures.pareto(summary), "pareto_cost_accuracy",
                   "Accuracy vs cost per event (feature extraction + decoder, wall time measured "
                   "in this run) of every pipeline; the line joins the Pareto front; numbers "
@@ -377,3 +381,102 @@ def _write_spiking(report: Report, summary: dict) -> None:
     if summary["spiking"].get("designs"):
         report.table(design_rows(summary["spiking"]["designs"]), "Array designs (one band "
                      "changed at a time, first split, events of the first repetitions only)")
+
+
+CHOSEN_SOURCE = "this run (chosen bank and FFT-MLP on the same splits)"
+
+
+def _iv(row: dict, scale: float = 1.0):
+    return None if row.get("low") is None else (scale * row["low"], scale * row["high"])
+
+
+def _chosen_predicted(summary: dict) -> list[Predicted]:
+    """The chosen bank's accuracy ratio to the FFT-MLP (paired by split, with its verdict)
+    and its distance rmse beside the full-spectrum MLP's."""
+    c = summary.get("chosen_bank") or {}
+    out = []
+    if "accuracy_to_fft_mlp" in c:
+        ratio, lead = c["accuracy_to_fft_mlp"], c["accuracy_minus_fft_mlp"]
+        out.append(Predicted("chosen bank's material accuracy ÷ FFT-MLP's", ratio["mean"], "",
+                             None, CHOSEN_SOURCE, _iv(ratio), ratio["n"],
+                             f"accuracy − FFT-MLP's, paired by split: "
+                             f"{lead.get('verdict', 'no interval (one split)')}"))
+    if "distance_rmse_mm" in c:
+        rmse, diff = c["distance_rmse_mm"], c["distance_rmse_minus_fft_mlp"]
+        out.append(Predicted("distance rmse, chosen bank's low band", rmse["mean"], "mm", None,
+                             CHOSEN_SOURCE, _iv(rmse), rmse["n"],
+                             f"− full-spectrum MLP's, paired by split: "
+                             f"{diff.get('verdict', 'no interval (one split)')}"))
+    return out
+
+
+def chosen_rows(c: dict) -> list[dict]:
+    """The chosen bank against the FFT pipeline in this run: accuracy, distance and cost."""
+    rows = []
+    for what, mine, ref, diff, scale, unit in (
+            ("material accuracy", "accuracy", "fft_mlp_accuracy", "accuracy_minus_fft_mlp",
+             100.0, "%"),
+            ("distance rmse", "distance_rmse_mm", "fft_mlp_distance_rmse_mm",
+             "distance_rmse_minus_fft_mlp", 1.0, "mm")):
+        if mine in c:
+            rows.append({"quantity": f"{what} ({unit})", "chosen bank": scale * c[mine]["mean"],
+                         "95 % interval": _iv(c[mine], scale),
+                         "FFT pipeline": scale * c[ref]["mean"],
+                         "chosen − FFT (paired)": scale * c[diff]["mean"],
+                         "its 95 % interval": _iv(c[diff], scale), "n": c[diff]["n"],
+                         "verdict": c[diff].get("verdict", "no interval")})
+    cost = c["cost"]
+    rows.append({"quantity": "cost per contact (µs)",
+                 "chosen bank": cost["chosen"]["features_us_per_event"],
+                 "FFT pipeline": cost["fft"]["features_us_per_event"],
+                 "chosen − FFT (paired)": None, "n": cost["fft"]["best_of"],
+                 "verdict": f"ratio {cost['ratio_to_fft']:.2f} (best of "
+                            f"{cost['fft']['best_of']} runs taken in turn)"})
+    return rows
+
+
+def front_rows(measured: dict) -> list[dict]:
+    """The bank-tuning run's front, as its chosen_bank.toml records it."""
+    return [{"trial": r["trial"], "resonators": r["resonators"], "channels": r["channels"],
+             "resonator-steps per contact": r["neuron_steps_per_event"],
+             "search accuracy %": 100 * r["search_accuracy"],
+             **({"refining accuracy %": 100 * r["refine_accuracy"]}
+                if "refine_accuracy" in r else {}),
+             "accuracy %": 100 * r["accuracy"]["mean"], "95 % interval": _iv(r["accuracy"], 100),
+             "÷ FFT-MLP": r["accuracy_to_fft_mlp"]["mean"],
+             "its interval": _iv(r["accuracy_to_fft_mlp"]), "n": r["accuracy"]["n"]}
+            for r in measured.get("front", [])]
+
+
+def _write_chosen(report: Report, summary: dict, cmp: Comparison) -> None:
+    c = summary["chosen_bank"]
+    report.heading("The chosen bank beside the FFT")
+    placement, measured = c["placement"], c["measured"]
+    report.text(
+        f"The bank the bank-tuning study chose (chosen_bank: trial {c['trial']} of its search, "
+        f"commit {measured.get('commit', 'unknown')[:12]}): {c['resonators']} resonators in "
+        f"{c['bands']} bands, {c['neuron_steps_per_event']:.0f} resonator-steps per contact; "
+        f"the material read by an MLP 51 on its {label(c['readout'])} codes ({c['scaling']}), "
+        f"the distance by {c['distance_readout']}. Its channels were placed again here from "
+        f"the contacts that placed them in that study: {placement['events']} contacts "
+        f"generated like the bench set with seed {placement['seed']}, never evaluated. It is "
+        "scored on this run's contacts and splits, beside the FFT pipeline.")
+    report.table(chosen_rows(c), "The chosen bank and the FFT pipeline (full-spectrum MLP 51 "
+                 "for the material, MLP 20-5 for the distance) on the same splits, paired by "
+                 "split (Student t); the cost per contact measured in this run on this machine "
+                 "(a measurement, not a result).")
+    rows = front_rows(measured)
+    if rows:
+        report.table(rows, "The front of the bank-tuning run that chose it, as its "
+                     "chosen_bank.toml records it: each bank scored there on "
+                     f"{measured.get('events', '?')} evaluated contacts of the bench set "
+                     f"(splits of seeds {measured.get('seeds', '?')}), the first row chosen by "
+                     "the search's own contacts; that run's predictions, not this run's.")
+    if cmp.chosen_bank is not None:
+        bank, placing = cmp.chosen_bank
+        report.figure(figures.bank_on_spectra(placing, bank, float(cmp.features["freq_hz"]
+                                                                    .values.max())),
+                      "chosen_bank_on_spectra",
+                      "Mean log amplitude spectrum per material of the contacts that placed "
+                      "the chosen bank (the window it reads); shaded: its channels; ticks: "
+                      "its resonators' preferred frequencies.")

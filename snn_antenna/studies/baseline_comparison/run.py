@@ -25,6 +25,7 @@ from ...report.page import Report
 from ..contract import Options, Plan
 from .plan import Parts, first_scored
 from .report import QUICK_NOTE, RECORDED_QUICK_NOTE, write_report
+from .chosen import chosen_stage
 from .tuned import tuned_stage
 
 # Events timed for the FFT's cost per event when the spec has no [spiking] section.
@@ -49,7 +50,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     spec, parts, quick = plan.spec, plan.parts, options.quick
     fresh, scheduler = options.fresh, options.scheduler
     out_dir, t_start = Path(out_dir), time.perf_counter()
-    stages = 5 if parts.bank is not None else 4
+    stages = 5 if parts.bank is not None or parts.chosen is not None else 4
     for line in plan.left_out:
         log(f"      {line}")
     data, cmp, data_s = signal_stage(parts, stages, log, fresh)
@@ -57,6 +58,10 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
     # a spec without a spiking part fits in this process)
     with executor(parts.plan.workers if parts.plan else 1, scheduler, log) as client:
         extra = spiking_stage(parts, data, cmp, f"[3/{stages}]", log, fresh, client)
+        if parts.chosen is not None:
+            if parts.bank is None:
+                log(f"[3/{stages}] the chosen bank")
+            extra += chosen_stage(parts, data, cmp, log, fresh, client)
         log(f"[{stages - 1}/{stages}] baselines on {len(parts.evaluation.seeds)} split(s) by "
             "repetition")
         chosen, too_large = _fitting_nmf(
