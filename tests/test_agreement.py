@@ -59,3 +59,18 @@ def test_the_script_exits_1_when_a_quantity_differs(tmp_path, capsys):
     assert script.main([str(old), str(new)]) == 1
     assert "differ" in capsys.readouterr().out
     assert script.main([str(old), str(same)]) == 0
+
+
+def test_the_script_pairs_two_runs_per_seed_values_over_the_seeds_both_ran(tmp_path, capsys):
+    spec = importlib.util.spec_from_file_location("compare_runs",
+                                                  ROOT / "benchmarks" / "compare_runs.py")
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    old, new = tmp_path / "old.json", tmp_path / "new.json"
+    old.write_text(json.dumps({"f1_per_seed": {"gated": [0.80, 0.90, 0.70, 0.85, 0.75]}}))
+    # the new run ran one seed more; each shared seed 0.02 to 0.04 better
+    new.write_text(json.dumps({"f1_per_seed": {"gated": [0.83, 0.92, 0.74, 0.87, 0.78,
+                                                         0.10]}}))
+    assert script.main([str(old), str(new), "--paired", "f1_per_seed.gated"]) == 0
+    out = capsys.readouterr().out
+    assert "new − old +0.0280" in out and "n = 5" in out and "resolved above zero" in out

@@ -299,8 +299,30 @@ def estimate(parts: Parts):
                       engine_of(bank.target))] * -(-chunks // workers)
         stages.append(("stimulus.repetitions", parts.bench.repetitions, runs))
         stages += _more_banks(parts, events, per_repetition)
+    if parts.chosen is not None:
+        stages += _chosen_stages(parts, events)
     stages.append(("evaluation.seeds", list(ev.seeds), [], readout_seconds(parts)))
     return stages_estimate("the bench set and its spiking read-out", stages)
+
+
+def _chosen_stages(parts: Parts, events: int) -> list:
+    """The chosen bank: its placement contacts (generated), its bank over every event (one
+    project: a compile) and its cost sample, on the spiking part's workers; its two
+    read-outs' fits are counted with the others (``readout_fits``)."""
+    chosen, point = parts.chosen, parts.chosen.point
+    design = chosen.bank_design
+    engine = engine_of(design.target)
+    workers = (parts.plan.workers if parts.plan else 1) or max_workers()
+    channels = point["channels"] * point["per_channel"] * point["gain_levels"]
+    # the channels' step: the largest k·dt the design allows at the top of their range
+    dt_ms = min(0.1, design.base.max_k_dt * point["k_dt_factor"] * design.base.hz_per_k
+                / point["range_high_hz"])
+    runs = [(design.duration_s, dt_ms, channels * events / workers, engine),
+            (design.duration_s, 0.1, point["low_resonators"] * events / workers, engine)]
+    placing = chosen.placement["repetitions"] * parts.bench.n_events // max(
+        1, parts.bench.repetitions)
+    return [("chosen_bank.placement.repetitions", chosen.placement["repetitions"], runs,
+             bench_seconds(placing, parts.bench.n_jobs) + 2 * compile_seconds(engine))]
 
 
 # CPU seconds of one read-out's fit per training event (the mean over the 46 read-outs
@@ -319,7 +341,7 @@ def readout_fits(parts: Parts) -> tuple[int, int]:
     spiking MLP, tuned and coder read-out (not the two training-free spiking decoders, which
     learn nothing), and the sum of ``nmf_dims``."""
     ev = parts.evaluation
-    fits = len(ev.baselines(int(parts.processor.max_hz) + 1))
+    fits = len(ev.baselines(int(parts.processor.max_hz) + 1)) + 2 * (parts.chosen is not None)
     filters = sum(ev.nmf_dims) if "material" in ev.pipelines else 0
     if parts.bank is not None:
         fits += sum(set(SPIKING_SETS[inputs][0]) <= set(parts.bank.bands)
