@@ -236,24 +236,33 @@ def tuned_curve(summary):
 
 
 def bank_on_spectra(data, bank, max_hz: float):
-    """Mean log amplitude spectrum of ``data``'s contacts per material over the window a
-    bank reads (its ``duration_s``), up to ``max_hz``; shaded: the bank's channels; ticks:
-    its resonators' preferred frequencies."""
+    """Top: mean log amplitude spectrum of ``data``'s contacts per material over the window
+    a bank reads (its ``duration_s``), up to ``max_hz``. Below: one row per band of the bank
+    (a channel, or one gain of a graded channel): its pass band as a bar, its resonators'
+    preferred frequencies as ticks."""
     plt = _plt()
     attrs = recording_attrs(data)
     n = int(round(bank.duration_s * attrs[0]))
     freq, spectra = log_spectra(data["counts"].values[:, :n], *attrs)
     labels = data["material"].values.astype(str)
-    fig, ax = plt.subplots(figsize=(8, 4))
+    rows = len(bank.bands)
+    fig, (ax, lanes) = plt.subplots(2, 1, sharex=True, figsize=(8, 4.5 + 0.06 * rows),
+                                    gridspec_kw={"height_ratios": [3, 1 + 0.04 * rows]})
     keep = freq <= max_hz
     for i, m in enumerate(sorted(set(labels))):
         ax.plot(freq[keep], spectra[labels == m][:, keep].mean(axis=0), lw=0.8,
                 color=f"C{i}", label=m)
-    for b in bank.bands.values():
-        ax.axvspan(b.highpass_hz or 0.0, b.lowpass_hz, color="0.85", zorder=0)
-    lo = ax.get_ylim()[0]
-    ax.plot(bank.neuron_hz, np.full(len(bank.neuron_hz), lo), "|", color="k", ms=14)
-    ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel("log amplitude")
     ax.legend(fontsize=7, ncol=4)
+    for row, (name, array) in enumerate(bank.arrays().items()):
+        band = bank.bands[name]
+        lanes.plot([band.highpass_hz or 0.0, band.lowpass_hz], [row, row], color="0.75",
+                   lw=3, solid_capstyle="butt")
+        lanes.plot(array.neuron_hz, np.full(len(array.neuron_hz), row), "|", color="k",
+                   ms=6)
+    lanes.set_ylim(rows - 0.5, -0.5)
+    lanes.set_yticks([])
+    lanes.set_ylabel(f"{rows} bands")
+    lanes.set_xlabel("frequency (Hz)")
+    fig.tight_layout()
     return fig
