@@ -71,6 +71,9 @@ GUIDE_FIGURES: dict[str, dict[str, str]] = {
         "name which materials are taken for which.",
         "tuned_curve": "How the tuned bank's accuracy grows with its size, beside the FFT "
         "read-out on the same splits: where the curves meet, more resonators buy nothing.",
+        "chosen_bank_on_spectra": "Each row below is one of the chosen bank's bands: its bar "
+        "should cover a line where the materials' spectra above differ, its ticks (the "
+        "resonators) sit inside it.",
     },
     "model_selection": {
         "model_selection": "A candidate whose predictions sit on the paper's values and "
@@ -89,8 +92,9 @@ GUIDE_FIGURES: dict[str, dict[str, str]] = {
     "bank_tuning": {
         "pareto_front": "Up is more accurate, left is cheaper; the coloured front is what the "
         "tuning offers, the ringed point where it started.",
-        "resonators_on_spectra": "The shaded channels should cover where the materials' "
-        "spectra differ; a resonator outside them reads nothing that tells them apart.",
+        "resonators_on_spectra": "Each row below is one of the chosen bank's bands: its bar "
+        "should cover a line where the materials' spectra above differ; a resonator outside "
+        "every bar reads nothing that tells them apart.",
     },
 }
 

@@ -91,9 +91,10 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                   "Every trial: accuracy on the tuning contacts' splits against resonator-"
                   "steps per contact; the Pareto front in colour, the starting bank ringed.")
     report.figure(bank_on_spectra(tuning, bank, parts.processor.max_hz), "resonators_on_spectra",
-                  "Mean log amplitude spectrum of the tuning contacts per material (the "
-                  "window each bank reads); shaded: the chosen bank's channels; ticks: its "
-                  "resonators' preferred frequencies.")
+                  "Top: mean log amplitude spectrum of the tuning contacts per material (the "
+                  "window each bank reads). Below: one row per band of the chosen bank (a "
+                  "channel at one of its gains, and the low band): its pass band as a bar, "
+                  "its resonators' preferred frequencies as ticks.")
 
 
 def _front_figure(study, summary):

@@ -477,6 +477,7 @@ def _write_chosen(report: Report, summary: dict, cmp: Comparison) -> None:
         report.figure(figures.bank_on_spectra(placing, bank, float(cmp.features["freq_hz"]
                                                                     .values.max())),
                       "chosen_bank_on_spectra",
-                      "Mean log amplitude spectrum per material of the contacts that placed "
-                      "the chosen bank (the window it reads); shaded: its channels; ticks: "
-                      "its resonators' preferred frequencies.")
+                      "Top: mean log amplitude spectrum per material of the contacts that "
+                      "placed the chosen bank (the window it reads). Below: one row per band "
+                      "of the bank (a channel at one of its gains, and the low band): its pass "
+                      "band as a bar, its resonators' preferred frequencies as ticks.")
