@@ -41,10 +41,11 @@ STAGE_TEXT = {
     "ideal_2_axes": "channels by ideal band-pass, both axes",
     "ideal_main_axis": "channels by ideal band-pass, principal axis",
     "band_pass": "after the chain's band-pass (Butterworth)",
-    "centred": "after the centring",
+    "centred": "after the centring (a band-pass chain has none: as band_pass)",
     "coded": "after the coder",
     "coded_statistics": "after the coder, read as the coder table's ceiling",
-    "centred_2_axes": "after the centring, both axes (a bank per axis)",
+    "centred_2_axes": "after the band-pass (and centring, where the chain has it), both axes "
+                      "(a bank per axis)",
     "coded_2_axes": "after the coder, both axes (a bank per axis)",
 }
 
