@@ -11,6 +11,8 @@ from snn_antenna.core import spec as specs
 from snn_antenna.readout.spiking_decoders import (TRAINING_FREE, coder_baselines,
                                                   spiking_baselines, tuned_baselines)
 
+from snn_antenna.studies.baseline_comparison.chosen import chosen_baselines
+
 plan_module = importlib.import_module("snn_antenna.studies.baseline_comparison.plan")
 SPEC = "studies/baseline_comparison.toml"
 
@@ -28,7 +30,8 @@ def test_every_fitted_read_out_is_counted(quick):
     ev, tuned = parts.evaluation, parts.plan.tuned_plan()
     chosen = (ev.baselines(int(parts.processor.max_hz) + 1)
               + spiking_baselines(_spikes(parts.bank), ev) + tuned_baselines(ev)
-              + coder_baselines(tuned.coders, tuned.coder_sizes, ev))
+              + coder_baselines(tuned.coders, tuned.coder_sizes, ev)
+              + chosen_baselines(parts.chosen, ev))
     learning = [b for b in chosen if b.name not in TRAINING_FREE]
     assert plan_module.readout_fits(parts) == (len(learning), sum(ev.nmf_dims))
 

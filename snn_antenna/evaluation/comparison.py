@@ -28,7 +28,7 @@ from ..readout.spiking_decoders import (
 
 LABELS = READOUTS      # the read-outs' names, shared with the results page
 FULL_SPECTRUM = "mlp_spectrum_material"    # the material read-out the others are held to
-# the chosen bank's material and distance read-outs (studies/baseline_comparison/chosen.py)
+# the chosen bank's material and distance read-outs (the baseline comparison's chosen bank)
 CHOSEN = ("spiking_chosen", "spiking_chosen_distance")
 
 

@@ -71,7 +71,14 @@ def chosen_stage(parts, data, cmp, log, fresh: bool, client) -> list:
                  "ratio_to_fft": costs[MATERIAL]["features_us_per_event"]
                  / costs["fft"]["features_us_per_event"]}}
     cmp.chosen_bank = (bank, placing)
-    return [mlp_baseline(MATERIAL, "material", MATERIAL, parts.evaluation,
-                         f"MLP 51 on the chosen bank's {point['readout']} codes"),
-            distance_baseline(DISTANCE, design.distance_readout, DISTANCE, parts.evaluation,
-                              DISTANCE_READOUTS[design.distance_readout])]
+    return chosen_baselines(chosen, parts.evaluation)
+
+
+def chosen_baselines(chosen, evaluation) -> list:
+    """The chosen bank's read-outs: the material by an MLP 51 on its read-out's codes, the
+    distance by its distance read-out."""
+    readout, distance = chosen.point["readout"], chosen.bank_design.distance_readout
+    return [mlp_baseline(MATERIAL, "material", MATERIAL, evaluation,
+                         f"MLP 51 on the chosen bank's {readout} codes"),
+            distance_baseline(DISTANCE, distance, DISTANCE, evaluation,
+                              DISTANCE_READOUTS[distance])]

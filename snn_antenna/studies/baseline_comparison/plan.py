@@ -154,8 +154,8 @@ def _chosen_part(spec: dict, recorded: bool) -> tuple[ChosenBank | None, list[st
         chosen = ChosenBank(**specs.check_section(spec, "chosen_bank", ChosenBank))
     if recorded:
         return None, ["left out: the chosen bank (chosen_bank), searched for this project's "
-                      "antenna and placed on contacts generated for it; the tuned bank "
-                      "([spiking.tuned]) is placed on the recorded calibration contacts"]
+                      "antenna and placed on its contacts; the tuned bank ([spiking.tuned]) is "
+                      "placed on the recorded calibration contacts"]
     return chosen, []
 
 
