@@ -421,7 +421,7 @@ def test_the_chosen_bank_file_places_the_trials_bank_again_from_the_same_contact
     scored = bank_of(point, plan, counts, labels, attrs)
     iv = {"mean": 0.9, "low": 0.85, "high": 0.95, "n": 5}
     summary = {"events": 40, "seeds": [0, 1], "fft_mlp_accuracy": iv,
-               "front": [{"trial": 7, "resonators": scored.n_neurons, "channels": 2,
+               "front": [{"trial": 7, "resonators": scored.n_neurons, "bands": 2,
                           "neuron_steps_per_event": 1e5, "search_accuracy": 0.8,
                           "refine_accuracy": None, "accuracy": iv,
                           "accuracy_to_fft_mlp": {**iv, "low": None}}]}

@@ -78,7 +78,7 @@ def write_report(report: Report, summary: dict, study, tuning, bank, parts) -> N
                  "Wall time per contact on this machine, taken in turn (load average "
                  f"{costs['load_average'][0]:.1f}): a measurement of this run, not a result")
     report.table([{"trial": r["trial"], "resonators": r["resonators"],
-                   "channels": r["channels"], "resonator-steps per contact":
+                   "bands": r["bands"], "resonator-steps per contact":
                    r["neuron_steps_per_event"], "search accuracy %": 100 * r["search_accuracy"],
                    **({} if r.get("refine_accuracy") is None else
                       {"refining accuracy %": 100 * r["refine_accuracy"]}),

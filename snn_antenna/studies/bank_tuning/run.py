@@ -157,7 +157,7 @@ def chosen_of(parts: Parts, point: dict, trial: int, summary: dict) -> ChosenBan
     the tuning contacts that placed its channels and what this run measured on the front."""
     def shown(iv: dict) -> dict:
         return {k: iv[k] for k in ("mean", "low", "high", "n") if iv.get(k) is not None}
-    front = [{"trial": r["trial"], "resonators": r["resonators"], "channels": r["channels"],
+    front = [{"trial": r["trial"], "resonators": r["resonators"], "bands": r["bands"],
               "neuron_steps_per_event": r["neuron_steps_per_event"],
               "search_accuracy": r["search_accuracy"],
               **({} if r["refine_accuracy"] is None
@@ -257,7 +257,7 @@ def run(plan: Plan, out_dir, options: Options = Options(), log=print) -> dict:
         name = f"trial_{t.number}"
         acc = results[name].values("accuracy")
         rows.append({"trial": t.number, "resonators": banks[name].n_neurons,
-                     "channels": len(banks[name].bands),
+                     "bands": len(banks[name].bands),
                      "neuron_steps_per_event": float(t.values[1]),
                      "search_accuracy": float(t.values[0]),
                      "refine_accuracy": (float(np.mean(refined[t.number]))

@@ -313,11 +313,11 @@ def _chosen_stages(parts: Parts, events: int) -> list:
     design = chosen.bank_design
     engine = engine_of(design.target)
     workers = (parts.plan.workers if parts.plan else 1) or max_workers()
-    channels = point["channels"] * point["per_channel"] * point["gain_levels"]
+    channel_resonators = point["channels"] * point["per_channel"] * point["gain_levels"]
     # the channels' step: the largest k·dt the design allows at the top of their range
     dt_ms = min(0.1, design.base.max_k_dt * point["k_dt_factor"] * design.base.hz_per_k
                 / point["range_high_hz"])
-    runs = [(design.duration_s, dt_ms, channels * events / workers, engine),
+    runs = [(design.duration_s, dt_ms, channel_resonators * events / workers, engine),
             (design.duration_s, 0.1, point["low_resonators"] * events / workers, engine)]
     placing = chosen.placement["repetitions"] * parts.bench.n_events // max(
         1, parts.bench.repetitions)

@@ -437,7 +437,7 @@ def chosen_rows(c: dict) -> list[dict]:
 
 def front_rows(measured: dict) -> list[dict]:
     """The bank-tuning run's front, as its chosen_bank.toml records it."""
-    return [{"trial": r["trial"], "resonators": r["resonators"], "channels": r["channels"],
+    return [{"trial": r["trial"], "resonators": r["resonators"], "bands": r["bands"],
              "resonator-steps per contact": r["neuron_steps_per_event"],
              "search accuracy %": 100 * r["search_accuracy"],
              **({"refining accuracy %": 100 * r["refine_accuracy"]}
