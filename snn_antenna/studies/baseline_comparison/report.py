@@ -435,17 +435,25 @@ def chosen_rows(c: dict) -> list[dict]:
     return rows
 
 
+FRONT_PERCENT = ("search_accuracy", "refine_accuracy", "accuracy")
+
+
 def front_rows(measured: dict) -> list[dict]:
-    """The bank-tuning run's front, as its chosen_bank.toml records it."""
-    return [{"trial": r["trial"], "resonators": r["resonators"], "bands": r["bands"],
-             "resonator-steps per contact": r["neuron_steps_per_event"],
-             "search accuracy %": 100 * r["search_accuracy"],
-             **({"refining accuracy %": 100 * r["refine_accuracy"]}
-                if "refine_accuracy" in r else {}),
-             "accuracy %": 100 * r["accuracy"]["mean"], "95 % interval": _iv(r["accuracy"], 100),
-             "÷ FFT-MLP": r["accuracy_to_fft_mlp"]["mean"],
-             "its interval": _iv(r["accuracy_to_fft_mlp"]), "n": r["accuracy"]["n"]}
-            for r in measured.get("front", [])]
+    """The bank-tuning run's front as its chosen_bank.toml records it: every field of each
+    row, accuracies in %, an interval as its mean and its [low, high]."""
+    rows = []
+    for r in measured.get("front", []):
+        row = {}
+        for key, value in r.items():
+            scale = 100.0 if key in FRONT_PERCENT else 1.0
+            name = f"{key} %" if key in FRONT_PERCENT else key
+            if isinstance(value, dict):
+                row[name] = scale * value["mean"] if "mean" in value else None
+                row[f"{key} interval"] = _iv(value, scale)
+            else:
+                row[name] = scale * value if isinstance(value, float) else value
+        rows.append(row)
+    return rows
 
 
 def _write_chosen(report: Report, summary: dict, cmp: Comparison) -> None:
