@@ -89,8 +89,8 @@ WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_
 # quiet rms lies about four times above the noise, and the analog coder codes the ringing
 # down to there. (A threshold of 3 or 5 times the noise alone, with the sign and level coders
 # and the hand-set bands at 5 times it, read the material no better on the lab rod at 1 and
-# 2 kHz, quick and full, and on the other rod's sessions of seeds 33 and 34:
-# ``benchmarks/bench_lab_readouts.py``.)
+# 2 kHz, quick and full, and on the other rod's sessions of seeds 33 and 34, with the gain at
+# the median peak: ``benchmarks/bench_lab_readouts.py``.)
 NOISE_MULTIPLE = 1.0
 # The analog gain (the level coder's top level) brings this quantile of the channels' peaks
 # to the coder's amplitude: all but the loudest 5 % of a channel's contacts ring within the
