@@ -80,16 +80,35 @@ END_FRACTIONS = (0.1, 0.03)
 ENVELOPE_FALLBACK = (False, True)
 WINDOW_KEYS = ("edge_sigmas", "extreme_min_fraction", "envelope_fallback", "end_fraction")
 # the tuned bank's coder levels (``fit_coder``): the threshold over the channels' quiet rms,
-# and the quantile of the channels' peaks the coder's range reaches
+# and the quantile of the channels' peaks the coder's range reaches. The quiet rms is the
+# sensor's noise and the filters' start: a channel's filters start at rest on the window's
+# first sample, which lies off the window's mean (the ringing after the trigger sets it), and
+# that step rings down through the samples before the trigger. On the lab rod's calibration
+# contacts (``tests/lab_antenna.py``) the channels' median quiet rms is 5.6 mg, their noise
+# alone (the same samples less their mean, run end to end through the filters) 1.4 mg: one
+# quiet rms lies about four times above the noise, and the analog coder codes the ringing
+# down to there. (A threshold of 3 or 5 times the noise alone, with the sign and level coders
+# and the hand-set bands at 5 times it, read the material no better on the lab rod at 1 and
+# 2 kHz, quick and full, and on the other rod's sessions of seeds 33 and 34, with the gain at
+# the median peak: ``benchmarks/bench_lab_readouts.py``.)
 NOISE_MULTIPLE = 1.0
-PEAK_QUANTILE = 0.5
+# The analog gain (the level coder's top level) brings this quantile of the channels' peaks
+# to the coder's amplitude: all but the loudest 5 % of a channel's contacts ring within the
+# coder's range, so their amplitude and its decay reach the resonators rather than the
+# coder's ceiling. On the lab rod's full profile the median peak (0.5) held the tuned bank's
+# rate at 0.89 and its latency code at 0.80 (0.75: 0.91, 0.88; 0.9: 0.95, 0.88); 0.95 reads
+# 0.95 and 0.92; the largest peak (1.0), one contact's, leaves the others in a small part of
+# the range (rate 0.85). Quick at 1 and 2 kHz the rate and latency code meet at 0.9 and 0.95
+# alike, not at 0.5 (latency) or 1.0 (rate).
+PEAK_QUANTILE = 0.95
 # a hand-set band's threshold within its quiet level (below its rms before the trigger) is
 # raised to this multiple of that rms, above the rare noise peaks over a window; so is the
-# threshold of a sign or level coder on the tuned channels (``QUANTISED_CODERS``): a band-
-# passed channel carries an offset through the window besides its noise (the filters start
-# at rest on the window's first sample), and a coder that keeps only the signal's sign or a
-# few levels codes both at the analog coder's threshold, so its firing never ends with the
-# ringing
+# threshold of a sign or level coder on the tuned channels (``QUANTISED_CODERS``): a coder
+# that keeps only the signal's sign or a few levels codes the noise as fully as the ringing
+# at the analog coder's threshold, so its firing ends on the noise's late peaks rather than
+# with the ringing (on the lab rod's six lowest channels, the median contact's last sample
+# beyond one quiet rms lies 160-190 ms after the trigger for rubber, at the window's end
+# for aluminium; beyond 5 quiet rms, 28 mg, 60-140 ms and 280-450 ms)
 BAND_NOISE_MULTIPLE = 5.0
 QUANTISED_CODERS = ("square", "delta")
 # the rate centroid's neighbourhoods tried (``readout.spiking.CentroidDistance.around``)
@@ -400,8 +419,8 @@ def fit_coder(antenna: FittedAntenna, data, calibration: np.ndarray, spec: dict,
                      f"{1e3 * peak:.1f} mg, reaches the top level, on {where}",
            "quantised": f"{BAND_NOISE_MULTIPLE:g} × the tuned channels' median rms before the "
                         f"trigger, {1e3 * noise:.2f} mg, as a hand-set band's square wave: a "
-                        f"sign or level coder at that rms codes the channel's offset and noise "
-                        f"after the ringing, on {where}"}
+                        f"sign or level coder at that rms codes the channel's noise after the "
+                        f"ringing, on {where}"}
     notes = []
 
     def fitted(table: dict, label: str, inherited: Tuning):
