@@ -250,3 +250,29 @@ def test_bad_spec_keys_and_materials_are_refused_before_work(tmp_path, capsys):
         study.plan(specs.load(SPEC, ["spiking.tuned.tuning.n_resonators=7"]))
     assert main(["run", SPEC, "--out", str(tmp_path), "--set", "events.split_hz=5000"]) == 2
     assert "events.split_hz" in capsys.readouterr().err
+
+
+def test_the_chosen_bank_is_held_to_nmf_with_as_many_filters_as_its_own_resonators():
+    """Against the FFT, a read-out is paired with NMF-n at its own number of resonators: the
+    chosen bank's are its whole bank's, not the hand-set band its name would map to."""
+    from types import SimpleNamespace
+
+    from snn_antenna.evaluation.comparison import Comparison
+
+    def result(task, accuracy):
+        return SimpleNamespace(baseline=SimpleNamespace(task=task),
+                               values=lambda key: np.array(accuracy))
+    results = {"mlp_spectrum_material": result("material", [0.9, 0.92]),
+               "spiking_chosen": result("material", [0.95, 0.96]),
+               "spiking_mlp_material_high": result("material", [0.5, 0.52]),
+               "nmf_24": result("material", [0.7, 0.72]),
+               "nmf_6": result("material", [0.6, 0.61])}
+    cmp = Comparison(None, {}, results, {}, {}, {},
+                     spiking={"neurons": {"spiking_high": 24, "spiking_low": 24}},
+                     chosen={"resonators": 6})
+    rows = cmp.against_fft()
+    assert rows["spiking_chosen"]["neurons"] == 6
+    assert rows["spiking_chosen"]["nmf_same_n"] == pytest.approx(0.605)
+    assert rows["spiking_mlp_material_high"]["neurons"] == 24
+    assert rows["spiking_chosen"]["fraction_of_fft_mlp"] == pytest.approx(
+        np.mean([0.95 / 0.9, 0.96 / 0.92]))

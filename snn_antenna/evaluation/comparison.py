@@ -217,7 +217,10 @@ class Comparison:
             if not (name.startswith("spiking_") and r.baseline.task == "material") or not fft:
                 continue
             acc = r.values("accuracy")
-            row = {"input": input_of(name), "neurons": neurons.get(input_of(name)),
+            chosen = name in CHOSEN and self.chosen is not None     # its own bank, whole
+            row = {"input": name if chosen else input_of(name),
+                   "neurons": self.chosen["resonators"] if chosen
+                   else neurons.get(input_of(name)),
                    "accuracy": float(acc.mean())}
             ratio = acc / fft.values("accuracy")
             row["fraction_of_fft_mlp"] = float(ratio.mean())
