@@ -439,6 +439,10 @@ def test_the_chosen_bank_file_places_the_trials_bank_again_from_the_same_contact
         ChosenBank(**{**table, "point": {k: v for k, v in table["point"].items()
                                          if k != "gain_ratio"}})
     assert refused.value.field == "point" and "gain_ratio" in refused.value.accepted
+    for key, bad in (("channels", 2.5), ("gain_levels", 0), ("filter_order", 9), ("b", -0.2)):
+        with pytest.raises(SpecError) as refused:
+            ChosenBank(**{**table, "point": {**table["point"], key: bad}})
+        assert refused.value.field == f"point.{key}", (key, refused.value.field)
 
 
 def test_the_baseline_comparison_places_the_chosen_bank_on_the_bank_tuning_contacts():

@@ -123,8 +123,10 @@ def start_params(design: BankDesign) -> dict:
             "scaling": design.scaling, "filter_order": int(design.filter_order)}
 
 
-# A point's keys: every one ``bank_of`` reads
+# A point's keys: every one ``bank_of`` reads; those that count, with their least value
 POINT_KEYS = tuple(start_params(BankDesign()))
+POINT_INTEGERS = {"channels": 1, "per_channel": 1, "gain_levels": 1, "low_resonators": 0,
+                  "filter_order": 1}
 
 
 def bank_of(params: dict, design: BankDesign, counts, labels, attrs) -> SpikingBank:
@@ -222,10 +224,10 @@ class ChosenBank:
             for key in ("readout", "scaling"):
                 bounds.choice(key, self.point[key], tuple(TUNED_READOUTS if key == "readout"
                                                           else SCALINGS))
-            for key in POINT_KEYS:
-                if key not in ("readout", "scaling"):
-                    bounds.number(key, self.point[key], 0.0, lo_open=key not in (
-                        "low_resonators", "threshold_g"))
+            for key, lo in POINT_INTEGERS.items():
+                bounds.integer(key, self.point[key], lo, 8 if key == "filter_order" else 10**6)
+            for key in set(POINT_KEYS) - set(POINT_INTEGERS) - {"readout", "scaling"}:
+                bounds.number(key, self.point[key], 0.0, lo_open=key != "threshold_g")
         with specs.section("placement"):
             check(isinstance(self.placement, dict)
                   and set(self.placement) == {"seed_offset", "repetitions"}, "placement",
