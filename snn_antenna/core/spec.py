@@ -35,13 +35,13 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
     path = Path(out_path("spec", path))
     if not path.is_file():
         raise SpecError("spec", str(path), "the path of an existing TOML spec file")
-    spec = read_table(path)
+    spec = _read(path)
     for key in INCLUDABLE:
         if isinstance(spec.get(key), str):
             included = (path.parent / out_path(key, spec[key])).resolve()
             if not included.is_file():
                 raise SpecError(key, spec[key], f"a TOML file path relative to {path.parent}")
-            spec[key] = read_table(included, key)
+            spec[key] = _read(included, key)
     quick_overrides = spec.pop("quick", {})
     if quick:
         for dotted, value in _flatten(quick_overrides):
@@ -53,7 +53,7 @@ def load(path: str | Path, overrides: Iterable[str] = (), quick: bool = False) -
     return spec
 
 
-def read_table(path: Path, field: str = "spec") -> dict:
+def _read(path: Path, field: str = "spec") -> dict:
     """A TOML file's table, refused by ``field``'s name when it is not TOML."""
     try:
         with open(path, "rb") as f:

@@ -100,7 +100,7 @@ class BankDesign:
               f"an integer >= 1: distance_readout '{self.distance_readout}' reads the low "
               "band")
 
-    def fields(self) -> dict:
+    def design_fields(self) -> dict:
         """The design's own fields (``BankDesign``'s, not a subclass's), as a spec table."""
         return {f.name: getattr(self, f.name) for f in fields(BankDesign)}
 
@@ -262,9 +262,3 @@ def write_chosen(path: Path, chosen: ChosenBank, header: str) -> None:
     table = chosen.table()
     table["design"] = calibration.referenced(table["design"])
     atomic_write(path, comment + tomli_w.dumps(table))
-
-
-def read_chosen(path: Path) -> ChosenBank:
-    """A ``chosen_bank.toml``, checked."""
-    table = specs.read_table(Path(path), "chosen_bank")
-    return ChosenBank(**specs.check_section({"chosen_bank": table}, "chosen_bank", ChosenBank))

@@ -166,7 +166,7 @@ def chosen_of(parts: Parts, point: dict, trial: int, summary: dict) -> ChosenBan
               "accuracy_to_fft_mlp": shown(r["accuracy_to_fft_mlp"])}
              for r in summary["front"]]
     return ChosenBank(
-        design=parts.bank.fields(), point=point, trial=int(trial),
+        design=parts.bank.design_fields(), point=point, trial=int(trial),
         placement={"seed_offset": parts.search.seed_offset,
                    "repetitions": parts.search.repetitions},
         measured={"commit": git_commit() or "unknown",
